@@ -1,0 +1,213 @@
+"""Run directory: run.json, monitors/*.csv, energy.csv, fields.xdmf (+ .h5), plots/*.png.
+
+run.json is written first with "status": "running" and rewritten with "finished" (or
+"failed") at the end, so a half-written directory never looks like a finished run.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+MONITOR_COLUMNS = ["t", "ux", "uy", "uz", "vx", "vy", "vz", "ax", "ay", "az"]
+FREEFIELD_COLUMNS = ["ux_ff", "uy_ff", "uz_ff", "vx_ff", "vy_ff", "vz_ff"]
+ENERGY_COLUMNS = ["t", "kinetic", "strain", "external_work", "damping_work", "balance"]
+
+
+def _write_json(path: Path, data: dict) -> None:
+    """Writes JSON through a temporary file so a reader never sees half a file."""
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=_json_default))
+    os.replace(tmp, path)
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+class RunWriter:
+    """Collects samples during a run and writes the run directory.
+
+    Args:
+        out_dir: directory of the run; a previous finished run there is moved to
+            `<out_dir>.previous` (one generation is kept) rather than mixed with the new one.
+        simulation: the prepared `pyfem.solver.Simulation`.
+    """
+
+    def __init__(self, out_dir, simulation):
+        self.out_dir = Path(out_dir)
+        self.simulation = simulation
+        self.scene = simulation.scene
+        self.times: list[float] = []
+        self.monitor_samples: list[np.ndarray] = []  # each (n_monitors, 9)
+        self.energy_samples: list[list[float]] = []
+        self.xdmf = None
+        self.show_progress = sys.stderr.isatty()
+        interval = self.scene["output"]["xdmf_interval"]
+        self.xdmf_every = (max(1, round(interval / self.scene["output"]["interval"]))
+                           if interval and interval > 0 else 0)
+        self._sample_count = 0
+
+    # -- life cycle ---------------------------------------------------------------------
+    def start(self) -> None:
+        """Creates the directory and marks the run as running."""
+        if (self.out_dir / "run.json").exists():
+            previous = self.out_dir.with_name(self.out_dir.name + ".previous")
+            if previous.exists():
+                shutil.rmtree(previous)
+            shutil.move(str(self.out_dir), str(previous))
+            print(f"note: the earlier run in {self.out_dir} was moved to {previous}", file=sys.stderr)
+        (self.out_dir / "monitors").mkdir(parents=True, exist_ok=True)
+        (self.out_dir / "plots").mkdir(exist_ok=True)
+        self._summary = self._base_summary()
+        self._summary["status"] = "running"
+        _write_json(self.out_dir / "run.json", self._summary)
+        if self.xdmf_every:
+            self._open_fields()
+
+    def fail(self, t: float, why: str) -> None:
+        """Marks the run as failed at time t (s)."""
+        self._summary.update(status="failed", failed_at=t, failure=why)
+        self._close_fields()
+        _write_json(self.out_dir / "run.json", self._summary)
+
+    def sample(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray, energy: dict) -> None:
+        """Records monitors and energy at time t; writes fields every xdmf interval."""
+        sim = self.simulation
+        self.times.append(t)
+        if sim.monitor_nodes is not None:
+            values = np.empty((len(sim.monitor_names), 9))
+            for k, field in enumerate((u, v, a)):
+                nodal = field.reshape(-1, 3)[sim.monitor_nodes]  # (m, k, 3)
+                values[:, 3 * k:3 * k + 3] = np.einsum("mk,mkc->mc", sim.monitor_weights, nodal)
+            self.monitor_samples.append(values)
+        self.energy_samples.append([t] + [energy[name] for name in ENERGY_COLUMNS[1:]])
+        if self.xdmf_every and self._sample_count % self.xdmf_every == 0:
+            self._write_fields(t, u, v)
+        self._sample_count += 1
+
+    def finish(self, wall_seconds: float, loop_seconds: float) -> dict:
+        """Writes monitors, energy, plots and the final run.json; returns the summary."""
+        self._close_fields()
+        times = np.array(self.times)
+        energy = np.array(self.energy_samples)
+        summary = self._summary
+        summary["status"] = "finished"
+        summary["wall_seconds"] = wall_seconds
+        summary["loop_seconds"] = loop_seconds
+        summary["seconds_per_step"] = loop_seconds / max(1, self.simulation.n_steps)
+        summary["energy"] = self._energy_summary(energy)
+        np.savetxt(self.out_dir / "energy.csv", energy, delimiter=",", header=",".join(ENERGY_COLUMNS),
+                   comments="")
+        summary["monitors"] = self._write_monitors(times)
+        from pyfem import plots
+
+        plots.energy(self.out_dir / "plots" / "energy.png", energy, ENERGY_COLUMNS)
+        for name in self.simulation.monitor_names:
+            plots.monitor(self.out_dir / "plots" / f"monitor_{name}.png", self.out_dir / "monitors" / f"{name}.csv")
+        _write_json(self.out_dir / "run.json", summary)
+        return summary
+
+    # -- pieces -------------------------------------------------------------------------
+    def _base_summary(self) -> dict:
+        sim = self.simulation
+        ts = sim.time_step
+        return {
+            "title": self.scene["title"],
+            "scene": self.scene.to_json(),
+            "effects": list(self.scene.effects),
+            "cells": sim.model.n_cells,
+            "nodes": len(sim.mass),
+            "dofs": 3 * len(sim.mass),
+            "dt": ts.dt,
+            "dt_critical": ts.critical,
+            "dt_reason": ts.reason,
+            "omega_max": ts.omega_max,
+            "steps": sim.n_steps,
+            "rayleigh": {"alpha": sim.alpha, "beta": sim.beta},
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        }
+
+    @staticmethod
+    def _energy_summary(energy: np.ndarray) -> dict:
+        """Final energies and the balance error relative to the largest energy in play."""
+        columns = {name: energy[:, i] for i, name in enumerate(ENERGY_COLUMNS)}
+        scale = max(np.max(np.abs(columns["external_work"])), np.max(columns["kinetic"] + columns["strain"]),
+                    np.max(np.abs(columns["damping_work"])), 1e-300)
+        final = {name: float(columns[name][-1]) for name in ENERGY_COLUMNS[1:]}
+        final["balance_error"] = float(np.max(np.abs(columns["balance"])) / scale)
+        final["reference_energy"] = float(scale)
+        return final
+
+    def _write_monitors(self, times: np.ndarray) -> dict:
+        """monitors/NAME.csv (+ exact free field columns when a wave is on); returns peaks per monitor."""
+        sim = self.simulation
+        peaks = {}
+        if sim.monitor_nodes is None:
+            return peaks
+        samples = np.array(self.monitor_samples)  # (nt, m, 9)
+        freefield = None
+        if sim.freefield is not None:
+            points = np.array([m["point"] for m in self.scene["monitor"]], dtype=float)
+            freefield = np.concatenate([sim.freefield.displacement(points, times),
+                                        sim.freefield.velocity(points, times)], axis=2)  # (nt, m, 6)
+        for j, name in enumerate(sim.monitor_names):
+            columns = [times[:, None], samples[:, j, :]]
+            header = list(MONITOR_COLUMNS)
+            if freefield is not None:
+                columns.append(freefield[:, j, :])
+                header += FREEFIELD_COLUMNS
+            np.savetxt(self.out_dir / "monitors" / f"{name}.csv", np.hstack(columns), delimiter=",",
+                       header=",".join(header), comments="", fmt="%.10e")
+            u, vel, acc = samples[:, j, 0:3], samples[:, j, 3:6], samples[:, j, 6:9]
+            peak = {"displacement": float(np.max(np.linalg.norm(u, axis=1))),
+                    "velocity": float(np.max(np.linalg.norm(vel, axis=1))),
+                    "acceleration": float(np.max(np.linalg.norm(acc, axis=1)))}
+            if freefield is not None:
+                reference = freefield[:, j, 0:3]
+                norm = np.linalg.norm(reference)
+                peak["freefield_error"] = float(np.linalg.norm(u - reference) / norm) if norm > 0 else math.nan
+            peaks[name] = peak
+        return peaks
+
+    def _open_fields(self) -> None:
+        from dolfinx import fem, io
+
+        model = self.simulation.model
+        self.xdmf = io.XDMFFile(model.mesh.comm, str(self.out_dir / "fields.xdmf"), "w")
+        self.xdmf.write_mesh(model.mesh)
+        # XDMF holds fields on the mesh's own (Q1) geometry; Q2 fields are interpolated to Q1.
+        self._u_fn = fem.Function(model.V, name="displacement")
+        self._v_fn = fem.Function(model.V, name="velocity")
+        if model.V.ufl_element().degree() != 1:
+            output_space = fem.VectorFunctionSpace(model.mesh, ("Lagrange", 1))
+            self._u_out = fem.Function(output_space, name="displacement")
+            self._v_out = fem.Function(output_space, name="velocity")
+        else:
+            self._u_out, self._v_out = self._u_fn, self._v_fn
+
+    def _write_fields(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
+        fields = self.scene["output"]["fields"]
+        for name, values, fn, out in (("displacement", u, self._u_fn, self._u_out),
+                                      ("velocity", v, self._v_fn, self._v_out)):
+            if name not in fields:
+                continue
+            fn.x.array[:] = values
+            if out is not fn:
+                out.interpolate(fn)
+            self.xdmf.write_function(out, t)
+
+    def _close_fields(self) -> None:
+        if self.xdmf is not None:
+            self.xdmf.close()
+            self.xdmf = None

@@ -1,0 +1,72 @@
+"""Plots of a run: monitor histories (against the exact free field when there is one) and energy."""
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; no display on these machines
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def _read_csv(path):
+    with open(path) as stream:
+        header = stream.readline().strip().split(",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return {name: data[:, i] for i, name in enumerate(header)}
+
+
+def monitor(png_path, csv_path) -> None:
+    """Displacement, velocity and acceleration components of one monitor against time.
+
+    Args:
+        png_path: output image.
+        csv_path: monitors/NAME.csv of a run (m, m/s, m/s^2); free-field columns, when
+            present, are drawn dashed.
+    """
+    columns = _read_csv(csv_path)
+    t = columns["t"]
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    for ax, (quantity, unit, factor) in zip(axes, (("u", "mm", 1e3), ("v", "mm/s", 1e3), ("a", "m/s$^2$", 1.0))):
+        for component, colour in zip("xyz", ("C0", "C1", "C2")):
+            ax.plot(t, factor * columns[f"{quantity}{component}"], colour, lw=1.2, label=f"{quantity}{component}")
+            reference = columns.get(f"{quantity}{component}_ff")
+            if reference is not None:
+                ax.plot(t, factor * reference, colour, ls="--", lw=0.9, label=f"{quantity}{component} free field")
+        ax.set_ylabel(f"{quantity} ({unit})")
+        ax.grid(alpha=0.3)
+    axes[0].legend(ncol=3, fontsize=7)
+    axes[-1].set_xlabel("t (s)")
+    axes[0].set_title(f"monitor {png_path.stem.removeprefix('monitor_')}")
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+
+
+def energy(png_path, energy_rows: np.ndarray, columns: list[str]) -> None:
+    """Energy balance of a run: kinetic + strain against input work minus damping.
+
+    Args:
+        png_path: output image.
+        energy_rows: (nt, len(columns)) in J, first column t in s.
+        columns: names of the columns.
+    """
+    data = {name: energy_rows[:, i] for i, name in enumerate(columns)}
+    t = data["t"]
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    ax = axes[0]
+    ax.plot(t, data["kinetic"], label="kinetic")
+    ax.plot(t, data["strain"], label="strain (incl. boundary springs)")
+    ax.plot(t, data["kinetic"] + data["strain"], "k", label="stored")
+    ax.plot(t, data["external_work"], "--", label="input work")
+    ax.plot(t, data["damping_work"], ":", label="dissipated (dashpots, Rayleigh)")
+    ax.set_ylabel("energy (J)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    scale = max(np.max(np.abs(data["external_work"])), np.max(data["kinetic"] + data["strain"]), 1e-300)
+    axes[1].plot(t, data["balance"] / scale)
+    axes[1].set_ylabel("balance error / max energy")
+    axes[1].set_xlabel("t (s)")
+    axes[1].grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,302 @@
+"""Builds the explicit kernel from a scene and runs it in chunks of one output interval.
+
+Data flow (DESIGN section 2): scene -> model (gmsh -> dolfinx operators) -> boundary
+springs/dashpots and seismic input forces -> C++ Stepper (many steps per call) -> outputs.
+Python owns orchestration and I/O; nothing in Python runs once per time step.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from pyfem.scene import Scene, SceneError, rayleigh_coefficients
+
+# Memory traffic assumed by the time estimate before a measurement exists (bytes/s).
+_ASSUMED_BANDWIDTH = 5.0e9
+# A "fixed" boundary holds its nodes by a mass this many times their own: their acceleration
+# is ~1e-20 of a free node's, i.e. zero in double precision, with no change to the kernel.
+_FIXED_MASS_FACTOR = 1.0e20
+
+
+@dataclass
+class TimeStep:
+    """The time step and how it was chosen.
+
+    Attributes:
+        dt: step used (s).
+        critical: stability limit of central differences with the damping correction (s).
+        omega_max: highest circular frequency used for the limit (rad/s).
+        reason: a sentence for the plan and run.json.
+        steps_per_output: steps between two monitor samples.
+    """
+
+    dt: float
+    critical: float
+    omega_max: float
+    reason: str
+    steps_per_output: int
+
+
+@dataclass
+class Simulation:
+    """Everything assembled for a run, before the time loop."""
+
+    scene: Scene
+    model: object
+    stiffness: sp.bsr_matrix  # elastic stiffness plus boundary springs
+    mass: np.ndarray
+    alpha: float
+    beta: float
+    time_step: TimeStep
+    dashpot_nodes: np.ndarray
+    dashpot_matrices: np.ndarray
+    freefield: object = None
+    input_arrays: dict | None = None
+    monitor_names: list = field(default_factory=list)
+    monitor_nodes: np.ndarray | None = None
+    monitor_weights: np.ndarray | None = None
+    n_steps: int = 0
+
+
+def damping_coefficients(scene: Scene) -> tuple[float, float]:
+    """Rayleigh coefficients (alpha in 1/s, beta in s) of the scene, (0, 0) when damping is off."""
+    if "damping" not in scene.effects:
+        return 0.0, 0.0
+    damping = scene["damping"]
+    if damping.get("ratio") is not None:
+        f1, f2 = damping["frequencies"]
+        return rayleigh_coefficients(damping["ratio"], f1, f2)
+    return float(damping.get("alpha") or 0.0), float(damping.get("beta") or 0.0)
+
+
+def add_block_diagonal(matrix: sp.bsr_matrix, nodes: np.ndarray, blocks: np.ndarray) -> sp.bsr_matrix:
+    """Returns matrix + the 3x3 blocks on the diagonal of the given nodes.
+
+    The diagonal blocks already exist in an assembled stiffness pattern, so the sum keeps
+    the pattern of `matrix`.
+    """
+    if len(nodes) == 0:
+        return matrix
+    n = matrix.shape[0] // 3
+    order = np.argsort(nodes)
+    extra = sp.bsr_matrix((blocks[order], nodes[order].astype(np.int32),
+                           np.searchsorted(nodes[order], np.arange(n + 1))),
+                          shape=matrix.shape, blocksize=(3, 3))
+    total = (matrix + extra).tobsr(blocksize=(3, 3))
+    total.sort_indices()
+    return total
+
+
+def bsr_arrays(matrix: sp.bsr_matrix):
+    """(indptr int64, indices int32, blocks (nnzb,3,3)) as the kernel expects them."""
+    return (np.ascontiguousarray(matrix.indptr, dtype=np.int64),
+            np.ascontiguousarray(matrix.indices, dtype=np.int32),
+            np.ascontiguousarray(matrix.data, dtype=np.float64))
+
+
+def choose_time_step(scene: Scene, stiffness: sp.bsr_matrix, mass: np.ndarray, beta: float) -> TimeStep:
+    """Stable step of central differences for M^-1 K, with stiffness-proportional damping.
+
+    omega_max^2 is bounded above by Gershgorin row sums of M^-1 K (guaranteed); power
+    iteration sharpens it (an estimate from below, so it is raised by 5 % before use and
+    never exceeds the bound). With damping ratio xi = beta omega/2 at omega_max the limit is
+    dt_crit = (2/omega)(sqrt(1 + xi^2) - xi). Mass-proportional damping and dashpots are
+    implicit and do not restrict the step.
+    """
+    from pyfem import _kernels
+
+    indptr, indices, blocks = bsr_arrays(stiffness)
+    omega2_bound = _kernels.gershgorin_bound(indptr, indices, blocks, mass)
+    how = "Gershgorin bound"
+    omega2 = omega2_bound
+    if scene["time"].get("power_iteration", True):
+        omega2_power = _kernels.power_iteration(indptr, indices, blocks, mass, 300, 1)
+        if 1.05 * omega2_power < omega2_bound:
+            omega2 = 1.05 * omega2_power
+            how = f"power iteration (+5 %), {math.sqrt(omega2_bound / omega2):.2f}x sharper than Gershgorin"
+    omega = math.sqrt(omega2)
+    xi = 0.5 * beta * omega
+    critical = (2.0 / omega) * (math.sqrt(1.0 + xi * xi) - xi)
+    interval = scene["output"]["interval"]
+    user_dt = scene["time"].get("dt")
+    if user_dt is not None:
+        if user_dt > critical:
+            raise SceneError("time.dt", user_dt,
+                             f"a step at most the stable step {critical:.6g} s "
+                             f"(omega_max {omega:.6g} rad/s from the {how})")
+        dt_wanted = user_dt
+        reason = f"user dt; stable limit {critical:.4g} s from the {how}"
+    else:
+        dt_wanted = scene["time"]["safety"] * critical
+        reason = (f"{scene['time']['safety']:g} x critical {critical:.4g} s "
+                  f"(omega_max {omega:.4g} rad/s, {how}" + (f", damping ratio {xi:.3g} at omega_max" if xi else "")
+                  + ")")
+    steps_per_output = max(1, math.ceil(interval / dt_wanted * (1 - 1e-12)))
+    dt = interval / steps_per_output
+    if user_dt is not None and abs(dt - user_dt) > 1e-12 * user_dt:
+        reason += f"; reduced from {user_dt:.6g} s to divide the output interval {interval:g} s"
+    else:
+        reason += f"; {steps_per_output} steps per output interval {interval:g} s"
+    return TimeStep(dt=dt, critical=critical, omega_max=omega, reason=reason, steps_per_output=steps_per_output)
+
+
+def boundary_operators(scene: Scene, model):
+    """Boundary springs (added to K), dashpots (implicit in the kernel) and held nodes.
+
+    Returns:
+        (spring_nodes, spring_blocks, dashpot_nodes, dashpot_blocks, fixed_nodes)
+    """
+    from pyfem.seismic.forces import boundary_springs_and_dashpots
+
+    boundary = scene["boundary"]
+    empty_nodes = np.zeros(0, dtype=np.int32)
+    empty_blocks = np.zeros((0, 3, 3))
+    kind = boundary["type"]
+    if kind == "free":
+        return empty_nodes, empty_blocks, empty_nodes, empty_blocks, empty_nodes
+    if kind == "fixed":
+        fixed = np.unique(np.concatenate([face.nodes for face in model.faces])).astype(np.int32)
+        return empty_nodes, empty_blocks, empty_nodes, empty_blocks, fixed
+    spring_nodes, springs, dashpot_nodes, dashpots = boundary_springs_and_dashpots(
+        model.faces, len(model.mass), kind, boundary["alpha_N"], boundary["alpha_T"])
+    return spring_nodes, springs, dashpot_nodes, dashpots, empty_nodes
+
+
+def prepare(scene: Scene) -> Simulation:
+    """Builds the model and every operator the kernel needs (no time stepping)."""
+    from pyfem.operators import build_model
+
+    model = build_model(scene)
+    mass = np.array(model.mass, dtype=np.float64)
+    spring_nodes, springs, dashpot_nodes, dashpots, fixed_nodes = boundary_operators(scene, model)
+    stiffness = add_block_diagonal(model.stiffness, spring_nodes, springs)
+    if len(fixed_nodes):
+        mass[fixed_nodes] *= _FIXED_MASS_FACTOR
+    alpha, beta = damping_coefficients(scene)
+    time_step = choose_time_step(scene, stiffness, mass, beta)
+    n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
+    # Whole output intervals: the last sample lands on or just after the duration.
+    n_steps = time_step.steps_per_output * math.ceil(n_steps / time_step.steps_per_output)
+    simulation = Simulation(scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
+                            time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
+                            n_steps=n_steps)
+    if "seismic_input" in scene.effects:
+        from pyfem.seismic.setup import seismic_input_from_scene
+
+        simulation.freefield, simulation.input_arrays = seismic_input_from_scene(scene, model, time_step.dt)
+        if scene["boundary"]["type"] in ("fixed", "free"):
+            simulation.input_arrays = None  # no boundary to carry the input: the comparison runs of the study
+    monitors = scene.get("monitor", [])
+    if monitors:
+        points = np.array([m["point"] for m in monitors], dtype=np.float64)
+        try:
+            simulation.monitor_nodes, simulation.monitor_weights = model.point_weights(points)
+        except ValueError as error:
+            raise SceneError("monitor", [m["point"] for m in monitors], f"points inside the mesh ({error})")
+        simulation.monitor_names = [m["name"] for m in monitors]
+    return simulation
+
+
+def make_stepper(simulation: Simulation):
+    """The C++ stepper with the force providers the scene calls for, and nothing else."""
+    from pyfem import _kernels
+
+    indptr, indices, blocks = bsr_arrays(simulation.stiffness)
+    stepper = _kernels.Stepper(indptr, indices, blocks, simulation.mass, simulation.time_step.dt,
+                               simulation.alpha, simulation.beta)
+    if len(simulation.dashpot_nodes):
+        stepper.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
+                             np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
+    if simulation.input_arrays is not None:
+        a = simulation.input_arrays
+        stepper.add_seismic_input(_kernels.SeismicInput(
+            a["table_t0"], a["table_dt"], a["g"], a["dg"], a["ddg"], a["node_ptr"], a["nodes"],
+            a["table"], a["tau"], a["P"], a["Q"]))
+    return stepper
+
+
+def memory_estimate(simulation: Simulation) -> int:
+    """Bytes the kernel holds during the run: stiffness (BSR), state and scratch vectors, input tables."""
+    k = simulation.stiffness
+    n_dofs = k.shape[0]
+    total = k.data.nbytes + k.indices.nbytes + k.indptr.nbytes + 5 * 8 * n_dofs + simulation.mass.nbytes
+    if simulation.input_arrays is not None:
+        total += sum(v.nbytes for v in simulation.input_arrays.values() if isinstance(v, np.ndarray))
+    total += simulation.dashpot_matrices.nbytes * 2
+    return int(total)
+
+
+def bytes_per_step(simulation: Simulation) -> int:
+    """Bytes moved per step by the dominant kernel passes (matrix once, vectors a few times)."""
+    k = simulation.stiffness
+    return int(k.data.nbytes + k.indices.nbytes + k.indptr.nbytes + 12 * 8 * k.shape[0])
+
+
+def plan(scene: Scene) -> dict:
+    """What a run of the scene would do, without running it: effects, sizes, dt, memory and time.
+
+    The time estimate comes from timing a few kernel steps on the real matrices.
+    """
+    simulation = prepare(scene)
+    stepper = make_stepper(simulation)
+    n = simulation.stiffness.shape[0]
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    trial_steps = 20
+    start = time.perf_counter()
+    stepper.run(u, v, a, trial_steps, 0.0)
+    per_step = (time.perf_counter() - start) / trial_steps
+    model = simulation.model
+    ts = simulation.time_step
+    return {
+        "title": scene["title"],
+        "effects on": ", ".join(scene.effects) or "none (free vibration)",
+        "mesh": f"{scene['mesh']['builder']}, Q{scene['mesh']['order']}, {model.n_cells} cells",
+        "nodes": len(simulation.mass),
+        "dofs": n,
+        "boundary": scene["boundary"]["type"],
+        "dt": f"{ts.dt:.6g} s ({ts.reason})",
+        "steps": simulation.n_steps,
+        "memory": f"{memory_estimate(simulation) / 2**20:.1f} MiB",
+        "time per step": f"{per_step * 1e3:.3f} ms (measured over {trial_steps} steps)",
+        "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion",
+    }
+
+
+def run(scene: Scene, out_dir) -> dict:
+    """Runs the scene and writes run.json, monitors/, fields.xdmf and plots/ into out_dir.
+
+    Returns:
+        The run summary (also written to run.json).
+    """
+    from pyfem.output import RunWriter
+
+    wall_start = time.perf_counter()
+    simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
+    writer = RunWriter(out_dir, simulation)
+    writer.start()
+    stepper = make_stepper(simulation)
+    n = simulation.stiffness.shape[0]
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    t = 0.0
+    stepper.reset_energy(u, v, a, t)
+    writer.sample(t, u, v, a, stepper.energy())
+    ts = simulation.time_step
+    n_outputs = simulation.n_steps // ts.steps_per_output
+    loop_start = time.perf_counter()
+    from tqdm import tqdm
+
+    with tqdm(total=n_outputs, desc=scene["title"][:30], unit="out", leave=False,
+              disable=not writer.show_progress) as progress:
+        for _ in range(n_outputs):
+            t = stepper.run(u, v, a, ts.steps_per_output, t)
+            if not np.isfinite(u).all():
+                writer.fail(t, "non-finite displacement")
+                raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+            writer.sample(t, u, v, a, stepper.energy())
+            progress.update()
+    loop_seconds = time.perf_counter() - loop_start
+    return writer.finish(wall_seconds=time.perf_counter() - wall_start, loop_seconds=loop_seconds)
