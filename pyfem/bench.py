@@ -1,0 +1,189 @@
+"""Benchmark: time per step of the C++ kernel against a petsc4py loop and against memory bandwidth.
+
+All numbers come from one run on one machine, so they are comparable as ratios:
+- the same assembled stiffness (dolfinx, Q1 box) stepped by the kernel (1 and 2 threads)
+  and by a petsc4py loop doing the same velocity-Verlet update with MatMult (BAIJ, bs 3)
+  and vector operations;
+- a STREAM-like triad measured in the same run gives the bandwidth bound: the bytes the
+  kernel's format must move per step divided by the triad bandwidth.
+
+Usage:
+    /usr/bin/python3 -m pyfem bench [--sizes 30000 200000 700000] [--steps 50] [--out bench.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import time
+
+import numpy as np
+
+
+def _box_scene(target_dofs: int):
+    """A homogeneous Q1 box scene with about target_dofs degrees of freedom."""
+    from pyfem.scene import parse_scene
+
+    n = max(2, round((target_dofs / 3.0) ** (1.0 / 3.0)) - 1)  # elements per side
+    return parse_scene({
+        "title": f"bench {target_dofs}",
+        "mesh": {"builder": "box", "size": [float(n), float(n), float(n)], "h": 1.0, "order": 1},
+        "materials": {"rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}},
+        "time": {"duration": 1.0},
+        "boundary": {"type": "free"},
+        "output": {"xdmf_interval": 0.0},
+    })
+
+
+def stream_triad_bandwidth(n: int = 20_000_000, repeats: int = 5, threads: int = 1) -> float:
+    """Best bandwidth (bytes/s) of a[i] = b[i] + s c[i] over `repeats` (24 bytes per element)."""
+    from pyfem import _kernels
+
+    a = np.zeros(n)
+    b = np.ones(n)
+    c = np.full(n, 2.0)
+    _kernels.set_num_threads(threads)
+    best = math.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        _kernels.stream_triad(a, b, c, 3.0)
+        best = min(best, time.perf_counter() - start)
+    return 24.0 * n / best
+
+
+def kernel_seconds_per_step(stiffness, mass, dt: float, steps: int, threads: int) -> float:
+    """Best of three: seconds per step of the C++ stepper on the given matrix."""
+    from pyfem import _kernels
+    from pyfem.solver import bsr_arrays
+
+    _kernels.set_num_threads(threads)
+    indptr, indices, blocks = bsr_arrays(stiffness)
+    stepper = _kernels.Stepper(indptr, indices, blocks, mass, dt, 0.0, 0.0)
+    n = stiffness.shape[0]
+    rng = np.random.default_rng(0)
+    u, v, a = 1e-6 * rng.standard_normal(n), np.zeros(n), np.zeros(n)
+    stepper.run(u, v, a, 2, 0.0)  # warm-up: first touch of the scratch arrays
+    best = math.inf
+    for _ in range(3):
+        start = time.perf_counter()
+        stepper.run(u, v, a, steps, 0.0)
+        best = min(best, (time.perf_counter() - start) / steps)
+    return best
+
+
+def petsc_seconds_per_step(stiffness, mass, dt: float, steps: int) -> tuple[float, np.ndarray]:
+    """Best of three: seconds per step of the same undamped velocity-Verlet loop in petsc4py.
+
+    Returns:
+        (seconds per step, final displacement) -- the displacement checks that both loops
+        computed the same thing.
+    """
+    from petsc4py import PETSc
+
+    n = stiffness.shape[0]
+    matrix = PETSc.Mat().createBAIJ(size=(n, n), bsize=3,
+                                    csr=(stiffness.indptr.astype(PETSc.IntType),
+                                         stiffness.indices.astype(PETSc.IntType),
+                                         stiffness.data.reshape(-1)), comm=PETSc.COMM_SELF)
+    matrix.assemble()
+    inverse_mass = PETSc.Vec().createWithArray(np.repeat(1.0 / mass, 3), comm=PETSc.COMM_SELF)
+    rng = np.random.default_rng(0)
+    u0 = 1e-6 * rng.standard_normal(n)
+    best = math.inf
+    for _ in range(3):
+        u = PETSc.Vec().createWithArray(u0.copy(), comm=PETSc.COMM_SELF)
+        v = u.duplicate()
+        a = u.duplicate()
+        f = u.duplicate()
+        v.set(0.0)
+        a.set(0.0)
+        start = time.perf_counter()
+        for _ in range(steps):
+            v.axpy(0.5 * dt, a)           # v_half
+            u.axpy(dt, v)                 # u_{n+1}
+            matrix.mult(u, f)             # K u
+            a.pointwiseMult(f, inverse_mass)
+            a.scale(-1.0)                 # a = -M^-1 K u
+            v.axpy(0.5 * dt, a)           # v_{n+1}
+        best = min(best, (time.perf_counter() - start) / steps)
+    return best, u.getArray().copy()
+
+
+def bytes_moved_per_step(stiffness) -> int:
+    """Bytes the kernel must move per step: the BSR matrix once and the vectors of both passes.
+
+    pass A reads v, a, u and writes v, u (5 vectors); pass B reads u, v, f, mass/3 and writes
+    v, a (about 6 vectors): 11 vectors of 8 bytes per dof.
+    """
+    return int(stiffness.data.nbytes + stiffness.indices.nbytes + stiffness.indptr.nbytes
+               + 11 * 8 * stiffness.shape[0])
+
+
+def main(argv=None) -> dict:
+    """Runs the benchmark and prints a markdown table; returns the results."""
+    parser = argparse.ArgumentParser(prog="pyfem bench", description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[30_000, 200_000, 700_000])
+    parser.add_argument("--steps", type=int, default=50)
+    parser.add_argument("--out", default="bench.json")
+    args = parser.parse_args(argv)
+
+    from pyfem import _kernels
+    from pyfem.operators import build_model
+    from pyfem.solver import choose_time_step
+
+    rows = []
+    bandwidth = {threads: stream_triad_bandwidth(threads=threads) for threads in (1, 2)}
+    for target in args.sizes:
+        scene = _box_scene(target)
+        model = build_model(scene)
+        stiffness = model.stiffness
+        mass = np.ascontiguousarray(model.mass, dtype=np.float64)
+        dt = choose_time_step(scene, stiffness, mass, 0.0).dt
+        petsc_time, petsc_u = petsc_seconds_per_step(stiffness, mass, dt, args.steps)
+        # Same loop in the kernel from the same start: the displacements must agree.
+        from pyfem.solver import bsr_arrays
+
+        indptr, indices, blocks = bsr_arrays(stiffness)
+        check = _kernels.Stepper(indptr, indices, blocks, mass, dt, 0.0, 0.0)
+        n = stiffness.shape[0]
+        u = 1e-6 * np.random.default_rng(0).standard_normal(n)
+        v, a = np.zeros(n), np.zeros(n)
+        check.run(u, v, a, args.steps, 0.0)
+        agreement = float(np.linalg.norm(u - petsc_u) / np.linalg.norm(petsc_u))
+        moved = bytes_moved_per_step(stiffness)
+        for threads in (1, 2):
+            seconds = kernel_seconds_per_step(stiffness, mass, dt, args.steps, threads)
+            bound = moved / bandwidth[threads]
+            rows.append({
+                "dofs": n, "threads": threads, "kernel_ms": 1e3 * seconds, "petsc_ms": 1e3 * petsc_time,
+                "speedup_vs_petsc": petsc_time / seconds, "bandwidth_bound_ms": 1e3 * bound,
+                "fraction_of_bandwidth": bound / seconds, "bytes_per_step": moved,
+                "triad_GBps": bandwidth[threads] / 1e9, "kernel_vs_petsc_rel_diff": agreement,
+                "ns_per_dof": 1e9 * seconds / n,
+            })
+    _kernels.set_num_threads(2)
+    result = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.node()} {platform.processor()}",
+              "cpu_count": __import__("os").cpu_count(), "rows": rows}
+    with open(args.out, "w") as stream:
+        json.dump(result, stream, indent=2)
+    print(markdown_table(result))
+    return result
+
+
+def markdown_table(result: dict) -> str:
+    """The README's benchmark table."""
+    lines = [f"Measured {result['date']} on {result['machine']} ({result['cpu_count']} cores), "
+             f"Q1 box, one run; petsc4py loop is serial BAIJ MatMult + VecAXPY/PointwiseMult.", "",
+             "| dofs | threads | kernel ms/step | petsc4py ms/step | speed-up | bandwidth bound ms | "
+             "fraction of bound | ns/dof | triad GB/s |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in result["rows"]:
+        lines.append(f"| {r['dofs']} | {r['threads']} | {r['kernel_ms']:.3f} | {r['petsc_ms']:.3f} | "
+                     f"{r['speedup_vs_petsc']:.2f}x | {r['bandwidth_bound_ms']:.3f} | "
+                     f"{100 * r['fraction_of_bandwidth']:.0f} % | {r['ns_per_dof']:.2f} | {r['triad_GBps']:.1f} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,185 @@
+"""The command line: ``/usr/bin/python3 -m pyfem COMMAND ...`` from the repository root.
+
+Commands:
+    run SCENE.toml [--out DIR] [--set key.path=value ...]
+        Validate the scene, then run it; results go to DIR
+        (default ``runs/<scene file stem>``).
+    check SCENE.toml [--set key.path=value ...]
+        Validate the scene and print the plan (effects on, mesh size, dofs,
+        time step and why, steps, memory and time estimates) without running.
+    bench [ARGS ...]
+        Benchmarks; ARGS go to ``pyfem.bench.main`` unchanged.
+
+A scene error (or a missing scene, mesh or record file) prints ``error: ...``
+on stderr and exits with status 2, with no traceback; nothing is written.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+from pyfem import __version__
+from pyfem.scene import Scene, SceneError, load_scene
+
+EXIT_USAGE = 2  # argparse's own status for bad arguments; a bad scene is one too
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python3 -m pyfem",
+        description="3D explicit seismic analysis of deep caverns in layered rock.")
+    parser.add_argument("--version", action="version", version=f"pyfem {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    overrides_help = "override a scene key, e.g. --set mesh.h=2.5 --set monitor.0.point=[1,2,3]"
+    run = commands.add_parser("run", help="validate and run a scene")
+    run.add_argument("scene", type=Path, help="scene file (TOML)")
+    run.add_argument("--out", type=Path, default=None,
+                     help="run directory (default: runs/<scene file stem>)")
+    run.add_argument("--set", dest="overrides", action="append", default=[],
+                     metavar="KEY=VALUE", help=overrides_help)
+
+    check = commands.add_parser("check", help="validate a scene and print the plan")
+    check.add_argument("scene", type=Path, help="scene file (TOML)")
+    check.add_argument("--set", dest="overrides", action="append", default=[],
+                       metavar="KEY=VALUE", help=overrides_help)
+
+    commands.add_parser("bench", help="benchmarks (arguments go to pyfem.bench)",
+                        add_help=False)
+    return parser
+
+
+def default_out_dir(scene_path: Path) -> Path:
+    """The run directory used when ``--out`` is not given: ``runs/<stem>``."""
+    return Path("runs") / Path(scene_path).stem
+
+
+def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]) -> int:
+    """Validate fully and hand over to ``pyfem.solver.run``, which creates `out_dir` only
+    after the model and the time step are known to be good."""
+    scene = load_scene(scene_path, overrides)
+    from pyfem import solver  # heavy (dolfinx, kernels): only when running
+
+    out_dir = default_out_dir(scene_path) if out_dir is None else out_dir
+    summary = solver.run(scene, out_dir)
+    energy = summary["energy"]
+    print(f"run finished in {summary['wall_seconds']:.1f} s: {summary['steps']} steps of "
+          f"{summary['dt']:.4g} s, {summary['dofs']} dofs; energy balance error "
+          f"{energy['balance_error']:.2e}")
+    for name, peak in summary["monitors"].items():
+        line = f"  {name}: peak |u| {peak['displacement']:.4g} m, |a| {peak['acceleration']:.4g} m/s^2"
+        if "freefield_error" in peak:
+            line += f", error against the free field {100 * peak['freefield_error']:.2f} %"
+        print(line)
+    print(f"outputs: {out_dir}/ (run.json, monitors/, plots/, fields.xdmf for ParaView)")
+    return 0
+
+
+def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
+    """Validate the scene and print the solver's plan for it."""
+    scene = load_scene(scene_path, overrides)
+    from pyfem import solver  # heavy (dolfinx, kernels): only after validation
+
+    plan = solver.plan(scene)
+    print(f"scene: {scene.source}")
+    if not any("effects" in str(key) for key in plan):
+        print(describe_scene(scene))
+    print(format_plan(plan))
+    return 0
+
+
+def command_bench(argv: Sequence[str]) -> int:
+    """Pass `argv` to ``pyfem.bench.main``; its return value is the exit status."""
+    from pyfem import bench
+
+    status = bench.main(list(argv))
+    return 0 if status is None else int(status)
+
+
+def describe_scene(scene: Scene) -> str:
+    """Title, source and effects of a validated scene, one per line."""
+    effects = ", ".join(scene.effects) if scene.effects else "none (free vibration)"
+    return "\n".join([
+        f"scene:    {scene.source}",
+        f"title:    {scene['title']}",
+        f"effects:  {effects}",
+    ])
+
+
+def format_plan(plan: dict, indent: int = 0) -> str:
+    """A plan or summary dict as aligned ``key: value`` lines (nested dicts indented).
+
+    Keys ending in ``bytes`` are shown in KiB/MiB/GiB, keys ending in
+    ``seconds`` in s/min/h; floats with 4 significant digits.
+    """
+    lines = []
+    width = max((len(str(k)) for k in plan), default=0) + 1
+    pad = " " * indent
+    for key, value in plan.items():
+        label = f"{str(key).replace('_', ' ')}:"
+        if isinstance(value, dict):
+            lines.append(f"{pad}{label}")
+            lines.append(format_plan(value, indent + 2))
+        else:
+            lines.append(f"{pad}{label:<{width + 1}} {_format_value(str(key), value)}")
+    return "\n".join(line for line in lines if line)
+
+
+def _format_value(key: str, value: Any) -> str:
+    if isinstance(value, bool) or value is None:
+        return str(value).lower() if value is not None else "-"
+    if isinstance(value, (int, float)) and key.endswith("bytes"):
+        size = float(value)
+        for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+            if size < 1024.0 or unit == "TiB":
+                return f"{size:.4g} {unit}"
+            size /= 1024.0
+    if isinstance(value, (int, float)) and key.endswith("seconds"):
+        if value >= 3600:
+            return f"{value / 3600:.3g} h"
+        if value >= 60:
+            return f"{value / 60:.3g} min"
+        return f"{value:.3g} s"
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, (list, tuple)):
+        return ", ".join(_format_value(key, v) for v in value) if value else "-"
+    if isinstance(value, (int, str)):
+        return str(value)
+    try:
+        return json.dumps(value)
+    except TypeError:
+        return str(value)
+
+
+def _scene_error_text(error: SceneError) -> str:
+    message = str(error)
+    if error.source and not message.startswith(error.source):
+        message = f"{error.source}: {message}"
+    return message
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python3 -m pyfem``; returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "bench":
+        # bench owns its arguments; argparse would reject its options.
+        return command_bench(argv[1:])
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "run":
+            return command_run(args.scene, args.out, args.overrides)
+        return command_check(args.scene, args.overrides)
+    except SceneError as error:
+        print(f"error: {_scene_error_text(error)}", file=sys.stderr)
+        return EXIT_USAGE
+    except FileNotFoundError as error:
+        name = error.filename if error.filename is not None else str(error)
+        print(f"error: no such file: {name}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130

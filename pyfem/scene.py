@@ -1,0 +1,919 @@
+"""Scene files (TOML) -> validated, fully defaulted settings.
+
+A scene says what to model and which physical effects to simulate. This module
+reads it, applies command-line overrides, checks every key against one
+declarative schema (`SCHEMA` below) and returns a `Scene`: a plain nested dict
+in which every key of the schema is present (optional settings that were not
+given are ``None``), except the optional effect tables (``wave``, ``damping``,
+``initial_stress``, ``contact``, ``contact.deterioration``) and the two motion
+kinds (``wave.motion.ricker`` / ``wave.motion.record``): those are present only
+when the scene gives them, because their presence is what switches an effect on.
+
+Units are SI (m, kg, s, Pa); angles are in degrees; z points up.
+
+Any problem is a `SceneError` that names the dotted key, the value found and
+what is allowed, e.g.::
+
+    scene key 'materials.rock.nu' = 0.6: Poisson's ratio must lie in (-1, 0.5)
+"""
+from __future__ import annotations
+
+import copy
+import difflib
+import json
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+EFFECT_ORDER = ("seismic_input", "damping", "initial_stress", "contact", "deterioration")
+"""Every effect a scene can switch on, in the order `Scene.effects` lists them."""
+
+MATERIAL_PRESETS = {
+    # DESIGN Table 1; densities are not in the paper (DESIGN section 3 fixes them).
+    "sandstone": dict(E=8.0e9, nu=0.24, rho=2600.0, cohesion=1.10e6,
+                      friction_angle=42.0, tensile_strength=1.95e6),
+    "non_sandstone": dict(E=2.0e9, nu=0.30, rho=2400.0, cohesion=0.35e6,
+                          friction_angle=26.0, tensile_strength=0.25e6),
+    "concrete": dict(E=28.0e9, nu=0.167, rho=2500.0, cohesion=1.80e6,
+                     friction_angle=46.0, tensile_strength=1.27e6),
+}
+"""Materials of the paper's Table 1, selectable with ``preset = "NAME"``."""
+
+BOX_REGION = "rock"
+"""The single region (cell tag name) of the ``box`` mesh builder."""
+
+OUTPUT_FIELDS = ("displacement", "velocity", "acceleration", "stress", "strain", "damage")
+"""Field names ``output.fields`` may list."""
+
+_FILENAME_SAFE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
+
+
+class SceneError(ValueError):
+    """A scene key with a missing, unknown, mistyped or out-of-range value.
+
+    Attributes:
+        key: Dotted path of the offending key (``"materials.rock.nu"``,
+            ``"monitor.0.point"``); ``None`` when the problem is not one key
+            (a file that is not TOML).
+        value: The value found (``None`` when missing).
+        allowed: What would have been accepted, in words.
+        source: The scene file (or ``"<dict>"``), set by `load_scene`/`parse_scene`.
+    """
+
+    def __init__(self, key: str | None, value: Any, allowed: str, message: str | None = None):
+        self.key = key
+        self.value = value
+        self.allowed = allowed
+        self.source: str | None = None
+        if message is None:
+            message = f"scene key '{key}' = {_show(value)}: {allowed}"
+        super().__init__(message)
+
+
+def _show(value: Any) -> str:
+    """A value as it would be written in TOML (strings double-quoted)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if value is None:
+        return "null"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {_show(v)}" for k, v in value.items()) + "}"
+    return repr(value)
+
+
+def _missing(key: str, allowed: str) -> SceneError:
+    return SceneError(key, None, allowed, f"scene key '{key}' is missing: {allowed}")
+
+
+# ---------------------------------------------------------------------------
+# Schema vocabulary: each spec checks one value and says what it allows.
+# ---------------------------------------------------------------------------
+
+REQUIRED = object()
+"""Default marking a key the scene must give."""
+
+
+def _is_number(value: Any) -> bool:
+    # bool is an int in Python but never a number in a scene.
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A real interval written as in mathematics: ``"(0, inf)"``, ``"[0, 1)"``."""
+
+    text: str
+
+    def bounds(self) -> tuple[float, float, bool, bool]:
+        lo_text, hi_text = self.text[1:-1].split(",")
+        return float(lo_text), float(hi_text), self.text[0] == "(", self.text[-1] == ")"
+
+    def contains(self, x: float) -> bool:
+        lo, hi, lo_open, hi_open = self.bounds()
+        if not math.isfinite(x):
+            return False
+        above = x > lo if lo_open else x >= lo
+        below = x < hi if hi_open else x <= hi
+        return above and below
+
+    def condition(self) -> str:
+        """The interval as a condition: ``"> 0"``, ``"in [0, 1)"``, ``""`` for all reals."""
+        lo, hi, lo_open, hi_open = self.bounds()
+        if math.isinf(lo) and math.isinf(hi):
+            return ""
+        if math.isinf(hi):
+            return f"{'>' if lo_open else '>='} {lo:g}"
+        if math.isinf(lo):
+            return f"{'<' if hi_open else '<='} {hi:g}"
+        return f"in {self.text}"
+
+    def words(self) -> str:
+        condition = self.condition()
+        if not condition:
+            return "be a finite number"
+        if condition.startswith("in "):
+            return "lie " + condition
+        return "be a number " + condition
+
+
+ANY_REAL = "(-inf, inf)"
+POSITIVE = "(0, inf)"
+NON_NEGATIVE = "[0, inf)"
+
+
+@dataclass(frozen=True)
+class Number:
+    """A real number (int or float in TOML; never a bool), stored as float."""
+
+    description: str
+    interval: str = ANY_REAL
+    default: Any = REQUIRED
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.description} must {Interval(self.interval).words()}"
+
+    def check(self, value: Any, key: str) -> float:
+        if not _is_number(value) or not Interval(self.interval).contains(float(value)):
+            raise SceneError(key, value, self.allowed)
+        return float(value)
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One of a fixed set of strings or integers (types must match exactly)."""
+
+    description: str
+    options: tuple
+    default: Any = REQUIRED
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.description} must be one of " + ", ".join(_show(o) for o in self.options)
+
+    def check(self, value: Any, key: str) -> Any:
+        for option in self.options:
+            if type(value) is type(option) and value == option:
+                return value
+        raise SceneError(key, value, self.allowed)
+
+
+@dataclass(frozen=True)
+class Text:
+    """A string; with ``filename_safe``, letters, digits, ``_ . -`` only."""
+
+    description: str
+    default: Any = REQUIRED
+    filename_safe: bool = False
+
+    @property
+    def allowed(self) -> str:
+        if self.filename_safe:
+            return f"{self.description} must be a non-empty name of letters, digits, '_', '.', '-'"
+        return f"{self.description} must be a non-empty string"
+
+    def check(self, value: Any, key: str) -> str:
+        if not isinstance(value, str) or not value:
+            raise SceneError(key, value, self.allowed)
+        if self.filename_safe and not _FILENAME_SAFE.match(value):
+            raise SceneError(key, value, self.allowed)
+        return value
+
+
+@dataclass(frozen=True)
+class FilePath(Text):
+    """A path to an existing file; resolved by `_resolve_files` after the schema pass."""
+
+
+@dataclass(frozen=True)
+class Flag:
+    """A TOML boolean."""
+
+    description: str
+    default: Any = REQUIRED
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.description} must be true or false"
+
+    def check(self, value: Any, key: str) -> bool:
+        if not isinstance(value, bool):
+            raise SceneError(key, value, self.allowed)
+        return value
+
+
+@dataclass(frozen=True)
+class Vector:
+    """A fixed-length array of real numbers, each in `interval`."""
+
+    description: str
+    length: int
+    interval: str = ANY_REAL
+    default: Any = REQUIRED
+    increasing: bool = False
+
+    @property
+    def allowed(self) -> str:
+        text = f"{self.description} must be {self.length} numbers"
+        condition = Interval(self.interval).condition()
+        if condition:
+            text += ", each " + condition
+        if self.increasing:
+            text += ", increasing"
+        return text
+
+    def check(self, value: Any, key: str) -> list[float]:
+        interval = Interval(self.interval)
+        if (not isinstance(value, list) or len(value) != self.length
+                or not all(_is_number(x) and interval.contains(float(x)) for x in value)):
+            raise SceneError(key, value, self.allowed)
+        numbers = [float(x) for x in value]
+        if self.increasing and any(b <= a for a, b in zip(numbers, numbers[1:])):
+            raise SceneError(key, value, self.allowed)
+        return numbers
+
+
+@dataclass(frozen=True)
+class TextList:
+    """An array of strings, optionally from a fixed set, optionally non-empty."""
+
+    description: str
+    default: Any = REQUIRED
+    options: tuple | None = None
+    non_empty: bool = False
+
+    @property
+    def allowed(self) -> str:
+        text = f"{self.description} must be {'a non-empty' if self.non_empty else 'an'} array of strings"
+        if self.options:
+            text += " from " + ", ".join(_show(o) for o in self.options)
+        return text
+
+    def check(self, value: Any, key: str) -> list[str]:
+        if (not isinstance(value, list) or (self.non_empty and not value)
+                or not all(isinstance(x, str) and x for x in value)):
+            raise SceneError(key, value, self.allowed)
+        if self.options is not None:
+            for index, item in enumerate(value):
+                if item not in self.options:
+                    raise SceneError(f"{key}.{index}", item, self.allowed)
+        if len(set(value)) != len(value):
+            raise SceneError(key, value, self.allowed + " without repeats")
+        return list(value)
+
+
+@dataclass(frozen=True)
+class FreeTable:
+    """A table passed through unchecked (checked by whoever reads it)."""
+
+    description: str
+    default: Any = None
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.description} must be a table"
+
+    def check(self, value: Any, key: str) -> dict:
+        if not isinstance(value, dict):
+            raise SceneError(key, value, self.allowed)
+        return copy.deepcopy(value)
+
+
+@dataclass(frozen=True)
+class Table:
+    """A TOML table with a fixed set of keys.
+
+    Attributes:
+        fields: Key -> spec of each allowed key.
+        description: What the table is, for messages.
+        presence: ``"filled"``: absent means all defaults; ``"optional"``: absent
+            means left out of the scene (an effect off); ``"required"``.
+        shorthand: If set, a plain string ``s`` stands for ``{shorthand = s}``.
+    """
+
+    fields: dict
+    description: str
+    presence: str = "filled"
+    shorthand: str | None = None
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.description} must be a table with keys " + ", ".join(self.fields)
+
+    def check(self, value: Any, key: str) -> dict:
+        if self.shorthand is not None and isinstance(value, str):
+            value = {self.shorthand: value}
+        if not isinstance(value, dict):
+            raise SceneError(key, value, self.allowed)
+        prefix = f"{key}." if key else ""
+        for name in value:
+            if name not in self.fields:
+                raise _unknown_key(prefix + str(name), value[name],
+                                   [prefix + valid for valid in self.fields])
+        result = {}
+        for name, spec in self.fields.items():
+            given = value.get(name)  # None (from to_json) counts as absent
+            if given is not None:
+                result[name] = spec.check(given, prefix + name)
+            elif isinstance(spec, Table):
+                if spec.presence == "required":
+                    raise _missing(prefix + name, spec.allowed)
+                if spec.presence == "filled":
+                    result[name] = spec.check({}, prefix + name)
+            elif spec.default is REQUIRED:
+                raise _missing(prefix + name, spec.allowed)
+            else:
+                result[name] = copy.deepcopy(spec.default)
+        return result
+
+
+@dataclass(frozen=True)
+class TableMap:
+    """A table of named sub-tables, e.g. ``[materials.NAME]``."""
+
+    entry: Table
+    description: str
+    default: Any = REQUIRED
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.description} must be a table of named tables (at least one)"
+
+    def check(self, value: Any, key: str) -> dict:
+        if not isinstance(value, dict) or not value:
+            raise SceneError(key, value, self.allowed)
+        result = {}
+        for name, sub in value.items():
+            if not _FILENAME_SAFE.match(name):
+                raise SceneError(f"{key}.{name}", sub,
+                                 "names must be letters, digits, '_', '.', '-'")
+            result[name] = self.entry.check(sub, f"{key}.{name}")
+        return result
+
+
+@dataclass(frozen=True)
+class TableList:
+    """An array of tables, e.g. ``[[monitor]]``; entries named by key ``name`` are unique."""
+
+    entry: Table
+    description: str
+    default: Any = field(default_factory=list)
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.description} must be an array of tables ([[...]])"
+
+    def check(self, value: Any, key: str) -> list[dict]:
+        if not isinstance(value, list):
+            raise SceneError(key, value, self.allowed)
+        result = [self.entry.check(item, f"{key}.{index}") for index, item in enumerate(value)]
+        seen: dict[str, int] = {}
+        for index, item in enumerate(result):
+            name = item.get("name")
+            if name is None:
+                continue
+            if name in seen:
+                raise SceneError(f"{key}.{index}.name", name,
+                                 f"names must be unique; {key}.{seen[name]} has this name already")
+            seen[name] = index
+        return result
+
+
+def _unknown_key(key: str, value: Any, candidates: Sequence[str]) -> SceneError:
+    close = difflib.get_close_matches(key, candidates, n=1, cutoff=0.6)
+    if not close:
+        # A key in the wrong table: look for the same leaf name anywhere.
+        leaf = key.rsplit(".", 1)[-1]
+        close = [k for k in _all_schema_keys() if k.rsplit(".", 1)[-1] == leaf][:1]
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    allowed = "valid keys here: " + ", ".join(candidates)
+    return SceneError(key, value, allowed, f"unknown scene key '{key}'{hint}")
+
+
+# ---------------------------------------------------------------------------
+# The schema: every scene key, its type, range and default (DESIGN section 4).
+# ---------------------------------------------------------------------------
+
+_MATERIAL = Table({
+    "preset": Choice("material preset (DESIGN Table 1)", tuple(MATERIAL_PRESETS), default=None),
+    "E": Number("Young's modulus E (Pa)", POSITIVE, default=None),  # required unless preset
+    "nu": Number("Poisson's ratio", "(-1, 0.5)", default=None),
+    "rho": Number("density (kg/m^3)", POSITIVE, default=None),
+    "cohesion": Number("cohesion (Pa)", NON_NEGATIVE, default=None),
+    "friction_angle": Number("friction angle (deg)", "[0, 90)", default=None),
+    "tensile_strength": Number("tensile strength (Pa)", NON_NEGATIVE, default=None),
+}, "a material")
+
+_WAVE_TYPE = Choice("wave type", ("P", "SV", "SH"))
+
+SCHEMA = Table({
+    "title": Text("title", default="untitled"),
+    "mesh": Table({
+        "builder": Choice("mesh builder", ("box", "layered_cavern", "file"), default="box"),
+        "origin": Vector("min corner (m)", 3, default=[0.0, 0.0, 0.0]),
+        "size": Vector("box size (m)", 3, POSITIVE, default=None),   # required for box
+        "h": Number("target element size (m)", POSITIVE, default=None),  # required for box
+        "order": Choice("element order", (1, 2), default=1),
+        "file": FilePath("mesh file", default=None),                 # required for file
+        "parameters": FreeTable("builder parameters (layered_cavern, file)"),
+    }, "[mesh]"),
+    "materials": TableMap(_MATERIAL, "[materials.NAME]"),
+    "time": Table({
+        "duration": Number("duration (s)", POSITIVE),
+        "safety": Number("safety factor on the critical step", "(0, 1]", default=0.8),
+        "dt": Number("fixed time step (s)", POSITIVE, default=None),
+        "power_iteration": Flag("sharpen the critical step by power iteration", default=True),
+    }, "[time]"),
+    "wave": Table({
+        "type": Choice("wave type", ("P", "SV", "SH"), default=None),  # or [[wave.component]]
+        "angle": Number("incidence angle from vertical (deg)", "[0, 90)", default=None),
+        "azimuth": Number("azimuth (deg)", default=None),
+        "scale": Number("motion scale factor", default=1.0),
+        "surface": Number("z of the free surface (m)", default=None),
+        "medium": Text("half-space material name", default=None),
+        "reference_point": Vector("reference point (m)", 3, default=None),
+        "component": TableList(Table({
+            "type": _WAVE_TYPE,
+            "scale": Number("component scale factor", default=1.0),
+            "angle": Number("incidence angle from vertical (deg)", "[0, 90)", default=0.0),
+            "azimuth": Number("azimuth (deg)", default=0.0),
+        }, "a wave component"), "[[wave.component]]"),
+        "motion": Table({
+            "ricker": Table({
+                "f0": Number("Ricker peak frequency (Hz)", POSITIVE),
+                "amplitude": Number("Ricker displacement amplitude (m)"),
+                "t0": Number("Ricker centre time (s)", NON_NEGATIVE, default=None),  # 1.5/f0
+            }, "a Ricker wavelet", presence="optional"),
+            "record": Table({
+                "file": FilePath("accelerogram file"),
+                "units": Choice("record units", ("g", "m/s2", "cm/s2")),
+                "dt": Number("sample step of a one-column record (s)", POSITIVE, default=None),
+                "pga": Number("target peak ground acceleration (g)", POSITIVE, default=None),
+                "window": Vector("time window [start, end] (s)", 2, NON_NEGATIVE,
+                                 default=None, increasing=True),
+                "band": Vector("band-pass [f_low, f_high] (Hz)", 2, POSITIVE,
+                               default=[0.1, 25.0], increasing=True),
+                "format": Choice("record format", ("auto", "plain", "at2"), default="auto"),
+            }, "an accelerogram", presence="optional", shorthand="file"),
+        }, "[wave.motion]", presence="required"),
+    }, "[wave]", presence="optional"),
+    "boundary": Table({
+        "type": Choice("boundary type", ("viscoelastic", "viscous", "fixed", "free"),
+                       default="viscoelastic"),
+        "alpha_N": Number("normal spring factor alpha_N", POSITIVE, default=4.0 / 3.0),
+        "alpha_T": Number("tangential spring factor alpha_T", POSITIVE, default=2.0 / 3.0),
+        "centre": Vector("scattering centre (m)", 3, default=None),   # default model centre
+    }, "[boundary]"),
+    "monitor": TableList(Table({
+        "name": Text("monitor name", filename_safe=True),
+        "point": Vector("monitor point (m)", 3),
+    }, "a monitor"), "[[monitor]]"),
+    "output": Table({
+        "interval": Number("monitor sample interval (s)", POSITIVE, default=0.01),
+        "xdmf_interval": Number("field output interval (s; 0: no fields)", NON_NEGATIVE,
+                                default=0.1),
+        "fields": TextList("output fields", default=["displacement", "velocity"],
+                           options=OUTPUT_FIELDS),
+    }, "[output]"),
+    "damping": Table({
+        "ratio": Number("damping ratio", "[0, 1)", default=None),
+        "frequencies": Vector("frequencies [f1, f2] (Hz)", 2, POSITIVE,
+                              default=None, increasing=True),
+        "alpha": Number("mass-proportional coefficient alpha (1/s)", NON_NEGATIVE, default=None),
+        "beta": Number("stiffness-proportional coefficient beta (s)", NON_NEGATIVE, default=None),
+    }, "[damping]", presence="optional"),
+    "initial_stress": Table({
+        "surface": Number("z of the ground surface (m)"),
+        "rho": Number("overburden density (kg/m^3)", POSITIVE),
+        "k": Vector("stress ratios [k_x, k_y, k_z]", 3, POSITIVE, default=[1.0, 1.0, 1.0]),
+    }, "[initial_stress]", presence="optional"),
+    "contact": Table({
+        "interfaces": TextList("interface names", non_empty=True),
+        "cohesion": Number("interface cohesion (Pa)", NON_NEGATIVE),
+        "friction_angle": Number("static friction angle (deg)", "[0, 90)"),
+        "dynamic_friction_angle": Number("dynamic friction angle (deg)", "[0, 90)",
+                                         default=None),  # = friction_angle
+        "tensile_strength": Number("interface tensile strength (Pa)", NON_NEGATIVE,
+                                   default=None),        # = cohesion
+        "deterioration": Table({
+            "R0": Number("residual factor R0", "(0, 1]", default=0.75),
+            "lambda": Number("decay rate lambda", NON_NEGATIVE, default=5.0),
+            "m": Number("velocity factor m", POSITIVE, default=0.883),
+            "n": Number("velocity offset n (m/s)", POSITIVE, default=0.02),
+            "p": Number("velocity exponent p", NON_NEGATIVE, default=0.032),
+        }, "[contact.deterioration]", presence="optional"),
+    }, "[contact]", presence="optional"),
+    "pair_monitor": TableList(Table({
+        "name": Text("pair monitor name", filename_safe=True),
+        "point": Vector("pair monitor point (m)", 3),
+    }, "a pair monitor"), "[[pair_monitor]]"),
+}, "the scene")
+"""The whole scene vocabulary. Conditional rules live in `_check_rules`."""
+
+
+def _all_schema_keys(spec: Any = SCHEMA, prefix: str = "") -> list[str]:
+    keys = []
+    fields = getattr(spec, "fields", None)
+    if fields is None and hasattr(spec, "entry"):
+        fields = spec.entry.fields
+        prefix += "0." if isinstance(spec, TableList) else "NAME."
+    for name, sub in (fields or {}).items():
+        keys.append(prefix + name)
+        keys.extend(_all_schema_keys(sub, prefix + name + "."))
+    return keys
+
+
+# ---------------------------------------------------------------------------
+# The validated scene.
+# ---------------------------------------------------------------------------
+
+class Scene(dict):
+    """Validated, fully defaulted settings of one scene (a plain nested dict).
+
+    Attributes:
+        source: The scene file path (``"<dict>"`` for `parse_scene` without one).
+        effects: Names of the effects that are on, in `EFFECT_ORDER`.
+    """
+
+    def __init__(self, settings: dict, source: str):
+        super().__init__(settings)
+        self.source = source
+        present = {
+            "seismic_input": "wave" in self,
+            "damping": "damping" in self,
+            "initial_stress": "initial_stress" in self,
+            "contact": "contact" in self,
+            "deterioration": "deterioration" in self.get("contact", {}),
+        }
+        self.effects = tuple(name for name in EFFECT_ORDER if present[name])
+
+    def to_json(self) -> dict:
+        """The settings as a JSON-serialisable dict (`parse_scene` accepts it back)."""
+        return json.loads(json.dumps(dict(self)))
+
+    def model_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lo, hi) corners of the model (m) for builder ``box``; ``None`` otherwise."""
+        mesh = self["mesh"]
+        if mesh["builder"] != "box":
+            return None
+        lo = np.asarray(mesh["origin"], dtype=float)
+        return lo, lo + np.asarray(mesh["size"], dtype=float)
+
+    def wave_components(self) -> list[dict]:
+        """Incident plane waves as a list of {type, scale, angle, azimuth} (deg).
+
+        One entry built from the top-level ``wave`` keys when no
+        ``[[wave.component]]`` is given. ``scale`` is the component's own factor;
+        ``wave.scale`` multiplies the motion g(t) shared by all of them.
+        Empty when seismic input is off.
+        """
+        wave = self.get("wave")
+        if wave is None:
+            return []
+        if wave["component"]:
+            return copy.deepcopy(wave["component"])
+        return [dict(type=wave["type"], scale=1.0, angle=wave["angle"], azimuth=wave["azimuth"])]
+
+
+def rayleigh_coefficients(ratio: float, f1: float, f2: float) -> tuple[float, float]:
+    """Rayleigh damping C = alpha M + beta K with damping ratio `ratio` at f1 and f2.
+
+    The modal damping ratio is xi(f) = alpha / (4 pi f) + beta pi f; it equals
+    `ratio` at both frequencies and is below it between them.
+
+    Args:
+        ratio: Target damping ratio (-).
+        f1: Lower frequency (Hz), > 0.
+        f2: Upper frequency (Hz), > f1.
+
+    Returns:
+        (alpha in 1/s, beta in s).
+    """
+    alpha = 4.0 * math.pi * ratio * f1 * f2 / (f1 + f2)
+    beta = ratio / (math.pi * (f1 + f2))
+    return alpha, beta
+
+
+# ---------------------------------------------------------------------------
+# Conditional rules: what one table cannot say about itself.
+# ---------------------------------------------------------------------------
+
+def _check_rules(settings: dict, base_dirs: Sequence[Path]) -> None:
+    """Apply the cross-key rules and derived defaults in place."""
+    _check_mesh(settings)
+    _check_materials(settings)
+    _check_time(settings)
+    if "wave" in settings:
+        _check_wave(settings)
+    _check_boundary(settings)
+    if "damping" in settings:
+        _check_damping(settings["damping"])
+    if "contact" in settings:
+        contact = settings["contact"]
+        if contact["dynamic_friction_angle"] is None:
+            contact["dynamic_friction_angle"] = contact["friction_angle"]
+        if contact["tensile_strength"] is None:
+            contact["tensile_strength"] = contact["cohesion"]
+    elif settings["pair_monitor"]:
+        raise SceneError("pair_monitor", settings["pair_monitor"],
+                         "pair monitors need a [contact] table")
+    _check_points_inside(settings)
+    _resolve_files(settings, base_dirs)
+
+
+def _check_mesh(settings: dict) -> None:
+    mesh = settings["mesh"]
+    builder_rules = {
+        "box": ("size", "h"),
+        "file": ("file",),
+        "layered_cavern": (),
+    }
+    for name in builder_rules[mesh["builder"]]:
+        if mesh[name] is None:
+            spec = SCHEMA.fields["mesh"].fields[name]
+            raise _missing(f"mesh.{name}", f"{spec.allowed} (required by builder "
+                                           f"{_show(mesh['builder'])})")
+    if mesh["builder"] == "box" and mesh["parameters"] is not None:
+        raise SceneError("mesh.parameters", mesh["parameters"],
+                         "builder \"box\" takes no parameters (use size, h)")
+
+
+def _check_materials(settings: dict) -> None:
+    if settings["mesh"]["builder"] == "box":
+        allowed = f"builder \"box\" has the single region \"{BOX_REGION}\""
+        for name in settings["materials"]:
+            if name != BOX_REGION:
+                explain = allowed + f"; define [materials.{BOX_REGION}] only"
+                raise SceneError(f"materials.{name}", name, explain,
+                                 f"scene key 'materials.{name}': no region \"{name}\" "
+                                 f"in the mesh; {explain}")
+        if BOX_REGION not in settings["materials"]:
+            raise _missing(f"materials.{BOX_REGION}", allowed)
+    for name, material in settings["materials"].items():
+        preset = MATERIAL_PRESETS.get(material["preset"], {})
+        for key, value in preset.items():
+            if material[key] is None:  # explicit keys override the preset
+                material[key] = value
+        for key in ("E", "nu", "rho"):
+            if material[key] is None:
+                spec = _MATERIAL.fields[key]
+                raise _missing(f"materials.{name}.{key}",
+                               f"{spec.allowed} (or give preset = one of "
+                               + ", ".join(_show(p) for p in MATERIAL_PRESETS) + ")")
+
+
+def _check_time(settings: dict) -> None:
+    time = settings["time"]
+    if time["dt"] is not None and time["dt"] >= time["duration"]:
+        raise SceneError("time.dt", time["dt"],
+                         f"fixed time step must be shorter than time.duration = {time['duration']:g} s")
+
+
+def _check_wave(settings: dict) -> None:
+    wave = settings["wave"]
+    if wave["component"]:
+        for name in ("type", "angle", "azimuth"):
+            if wave[name] is not None:
+                raise SceneError(f"wave.{name}", wave[name],
+                                 f"give wave.{name} inside each [[wave.component]], "
+                                 "not at the top level as well")
+    else:
+        if wave["type"] is None:
+            raise _missing("wave.type", _WAVE_TYPE.allowed + " (or give [[wave.component]])")
+        wave["angle"] = 0.0 if wave["angle"] is None else wave["angle"]
+        wave["azimuth"] = 0.0 if wave["azimuth"] is None else wave["azimuth"]
+
+    motion = wave["motion"]
+    kinds = [kind for kind in ("ricker", "record") if kind in motion]
+    if len(kinds) != 1:
+        raise SceneError("wave.motion", kinds,
+                         "give exactly one of wave.motion.ricker or wave.motion.record")
+    if "ricker" in motion and motion["ricker"]["t0"] is None:
+        motion["ricker"]["t0"] = 1.5 / motion["ricker"]["f0"]
+
+    materials = settings["materials"]
+    if wave["medium"] is None:
+        if len(materials) != 1:
+            raise _missing("wave.medium", "half-space material name is required when there is "
+                           "more than one material: one of " + ", ".join(materials))
+        wave["medium"] = next(iter(materials))
+    elif wave["medium"] not in materials:
+        raise SceneError("wave.medium", wave["medium"],
+                         "must name a material of [materials]: " + ", ".join(materials))
+
+
+def _check_boundary(settings: dict) -> None:
+    bounds = Scene.model_bounds(settings)  # works on the plain dict too
+    if settings["boundary"]["centre"] is None and bounds is not None:
+        settings["boundary"]["centre"] = list(0.5 * (bounds[0] + bounds[1]))
+
+
+def _check_damping(damping: dict) -> None:
+    """Fill alpha and beta; a ratio given at two frequencies is converted to them."""
+    by_ratio = damping["ratio"] is not None or damping["frequencies"] is not None
+    by_coefficients = damping["alpha"] is not None or damping["beta"] is not None
+    if by_ratio:
+        for name in ("ratio", "frequencies"):
+            if damping[name] is None:
+                spec = SCHEMA.fields["damping"].fields[name]
+                raise _missing(f"damping.{name}", spec.allowed)
+        derived = rayleigh_coefficients(damping["ratio"], *damping["frequencies"])
+        given = (damping["alpha"], damping["beta"])
+        # alpha/beta next to a ratio are accepted only as the values derived from
+        # it (a scene written back by Scene.to_json has both).
+        if by_coefficients and not all(g is not None and math.isclose(g, d, rel_tol=1e-12)
+                                       for g, d in zip(given, derived)):
+            raise SceneError("damping", {k: v for k, v in damping.items() if v is not None},
+                             "give either ratio and frequencies, or alpha and/or beta, not both")
+        damping["alpha"], damping["beta"] = derived
+    elif by_coefficients:
+        damping["alpha"] = damping["alpha"] or 0.0
+        damping["beta"] = damping["beta"] or 0.0
+    else:
+        raise _missing("damping.ratio", "[damping] needs ratio and frequencies, "
+                       "or alpha and/or beta")
+
+
+def _check_points_inside(settings: dict) -> None:
+    bounds = Scene.model_bounds(settings)
+    if bounds is None:
+        return
+    lo, hi = bounds
+    tolerance = 1e-9 * (hi - lo)
+    inside = f"must lie inside the box [{', '.join(f'{x:g}' for x in lo)}] - " \
+             f"[{', '.join(f'{x:g}' for x in hi)}]"
+    for table in ("monitor", "pair_monitor"):
+        for index, entry in enumerate(settings[table]):
+            point = np.asarray(entry["point"])
+            if np.any(point < lo - tolerance) or np.any(point > hi + tolerance):
+                raise SceneError(f"{table}.{index}.point", entry["point"], inside)
+    top = hi[2] - tolerance[2]
+    for key in ("wave", "initial_stress"):
+        surface = settings.get(key, {}).get("surface")
+        if surface is not None and surface < top:
+            raise SceneError(f"{key}.surface", surface,
+                             f"the surface must not lie below the top of the box (z = {hi[2]:g})")
+
+
+def _resolve_files(settings: dict, base_dirs: Sequence[Path]) -> None:
+    """Replace relative file paths by existing absolute ones.
+
+    A relative path is looked up next to the scene file first, then in the
+    current directory (the repository root, where the CLI is run from).
+    """
+    entries = [("mesh.file", settings["mesh"], "file")]
+    record = settings.get("wave", {}).get("motion", {}).get("record")
+    if record is not None:
+        entries.append(("wave.motion.record.file", record, "file"))
+    for key, table, name in entries:
+        if table[name] is None:
+            continue
+        given = Path(table[name]).expanduser()
+        candidates = [given] if given.is_absolute() else [d / given for d in base_dirs]
+        found = next((c for c in candidates if c.is_file()), None)
+        if found is None:
+            raise SceneError(key, table[name], "no such file (looked in "
+                             + ", ".join(str(c) for c in candidates) + ")")
+        table[name] = str(found.resolve())
+
+
+# ---------------------------------------------------------------------------
+# Overrides and entry points.
+# ---------------------------------------------------------------------------
+
+_OVERRIDE_SYNTAX = "an override must read key.path=value (e.g. mesh.h=2.5, monitor.0.point=[1,2,3])"
+
+
+def _parse_override(text: str) -> tuple[list[str], Any]:
+    key, equals, value_text = text.partition("=")
+    key = key.strip()
+    parts = key.split(".")
+    if not equals or not key or any(not p.strip() for p in parts):
+        raise SceneError(key or text, text, _OVERRIDE_SYNTAX,
+                         f"bad override {_show(text)}: {_OVERRIDE_SYNTAX}")
+    value_text = value_text.strip()
+    try:
+        value = tomllib.loads(f"value = {value_text}")["value"]
+    except tomllib.TOMLDecodeError:
+        value = value_text  # a bare word: the string itself
+    return [p.strip() for p in parts], value
+
+
+def apply_overrides(raw: dict, overrides: Iterable[str]) -> dict:
+    """A copy of the raw scene with ``key.path=value`` overrides applied.
+
+    Values are read as TOML values when they parse as one (numbers, booleans,
+    arrays, inline tables, quoted strings), otherwise as plain strings. A
+    numeric path part indexes an array (``monitor.0.point=[1,2,3]``). Missing
+    tables on the way are created (an override can switch an effect on).
+
+    Raises:
+        SceneError: bad syntax, or a path through a value that is not a table/array.
+    """
+    raw = copy.deepcopy(raw)
+    for text in overrides:
+        parts, value = _parse_override(text)
+        node: Any = raw
+        for depth, part in enumerate(parts):
+            here = ".".join(parts[:depth + 1])
+            last = depth == len(parts) - 1
+            if isinstance(node, list):
+                if not part.isdigit() or int(part) >= len(node):
+                    raise SceneError(here, text, f"index must be 0..{len(node) - 1} "
+                                                 f"for an array of {len(node)}")
+                if last:
+                    node[int(part)] = value
+                else:
+                    node = node[int(part)]
+            elif isinstance(node, dict):
+                if last:
+                    node[part] = value
+                else:
+                    node = node.setdefault(part, {})
+            else:
+                parent = ".".join(parts[:depth])
+                raise SceneError(parent, node, f"'{parent}' is not a table; cannot set {here}")
+    return raw
+
+
+def parse_scene(data: dict, source: str = "<dict>", overrides: Iterable[str] = (),
+                base_dir: str | Path | None = None) -> Scene:
+    """Validate a scene given as a dict (as read from TOML).
+
+    Args:
+        data: The raw scene. ``None`` values count as absent keys.
+        source: Where it came from, for messages and `Scene.source`.
+        overrides: ``"key.path=value"`` strings applied before validation.
+        base_dir: Directory relative file paths are looked up in first
+            (then the current directory). Default: the current directory.
+
+    Returns:
+        The validated `Scene`.
+
+    Raises:
+        SceneError: naming the first offending key.
+    """
+    base_dirs = [Path.cwd()] if base_dir is None else [Path(base_dir), Path.cwd()]
+    try:
+        raw = apply_overrides(data, overrides)
+        settings = SCHEMA.check(raw, "")
+        _check_rules(settings, base_dirs)
+    except SceneError as error:
+        error.source = str(source)
+        raise
+    return Scene(settings, str(source))
+
+
+def load_scene(path: str | Path, overrides: Iterable[str] = ()) -> Scene:
+    """Read, override and validate a scene file.
+
+    Args:
+        path: The TOML scene file.
+        overrides: ``"key.path=value"`` strings (see `apply_overrides`).
+
+    Returns:
+        The validated `Scene` with ``source`` = `path`.
+
+    Raises:
+        FileNotFoundError: the scene file does not exist.
+        SceneError: the file is not TOML (message names file and line), or a key is wrong.
+    """
+    path = Path(path)
+    with open(path, "rb") as stream:
+        text = stream.read()
+    try:
+        data = tomllib.loads(text.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+        scene_error = SceneError(None, None, "valid TOML", f"{path}: not valid TOML: {error}")
+        scene_error.source = str(path)
+        raise scene_error from None
+    return parse_scene(data, source=str(path), overrides=overrides, base_dir=path.parent)

@@ -1,0 +1,127 @@
+"""Command line: a bad scene is a one-line error with exit status 2 and writes nothing."""
+import os
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+import pyfem
+from pyfem import cli
+
+REPO = Path(__file__).resolve().parents[1]
+PYTHON = "/usr/bin/python3"
+
+GOOD_SCENE = """
+title = "cli test"
+[mesh]
+size = [20.0, 10.0, 20.0]
+h = 5.0
+[materials.rock]
+preset = "sandstone"
+[time]
+duration = 0.1
+[[monitor]]
+name = "centre"
+point = [10.0, 5.0, 10.0]
+"""
+
+
+def run_pyfem(*args, cwd):
+    """Run `python3 -m pyfem ARGS` in `cwd` with the repository importable."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    return subprocess.run([PYTHON, "-m", "pyfem", *map(str, args)], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture
+def bad_scene(tmp_path):
+    """A scene whose only fault is Poisson's ratio 0.5."""
+    path = tmp_path / "bad.toml"
+    path.write_text(GOOD_SCENE.replace('preset = "sandstone"', 'preset = "sandstone"\nnu = 0.5'))
+    return path
+
+
+def assert_clean_error(result, *words):
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("error: ")
+    assert "Traceback" not in result.stderr and "Traceback" not in result.stdout
+    for word in words:
+        assert word in result.stderr
+
+
+def test_check_bad_scene_exits_2_naming_the_key(bad_scene, tmp_path):
+    result = run_pyfem("check", bad_scene, cwd=tmp_path)
+    assert_clean_error(result, "materials.rock.nu", "(-1, 0.5)", str(bad_scene))
+
+
+def test_check_bad_override_exits_2(tmp_path):
+    scene = tmp_path / "good.toml"
+    scene.write_text(GOOD_SCENE)
+    result = run_pyfem("check", scene, "--set", "mesh.hh=2", cwd=tmp_path)
+    assert_clean_error(result, "mesh.hh", "did you mean 'mesh.h'")
+
+
+def test_check_missing_scene_file_exits_2(tmp_path):
+    result = run_pyfem("check", tmp_path / "nowhere.toml", cwd=tmp_path)
+    assert_clean_error(result, "nowhere.toml")
+
+
+def test_check_invalid_toml_exits_2_with_line(tmp_path):
+    scene = tmp_path / "broken.toml"
+    scene.write_text('title = "x"\n[mesh\n')
+    result = run_pyfem("check", scene, cwd=tmp_path)
+    assert_clean_error(result, "broken.toml", "line 2")
+
+
+def test_run_bad_scene_creates_no_out_dir(bad_scene, tmp_path):
+    out = tmp_path / "out"
+    explicit = run_pyfem("run", bad_scene, "--out", out, cwd=tmp_path)
+    assert_clean_error(explicit, "materials.rock.nu")
+    assert not out.exists()
+    by_default = run_pyfem("run", bad_scene, cwd=tmp_path)  # would be runs/bad
+    assert_clean_error(by_default, "materials.rock.nu")
+    assert not (tmp_path / "runs").exists()
+
+
+def test_run_bad_override_creates_no_out_dir(tmp_path):
+    scene = tmp_path / "good.toml"
+    scene.write_text(GOOD_SCENE)
+    out = tmp_path / "out"
+    result = run_pyfem("run", scene, "--out", out, "--set", "monitor.0.point=[10, 5, 99]", cwd=tmp_path)
+    assert_clean_error(result, "monitor.0.point", "inside the box")
+    assert not out.exists()
+
+
+def test_default_out_dir_is_runs_slash_stem():
+    assert cli.default_out_dir(Path("workflows/scenes/default.toml")) == Path("runs/default")
+
+
+def test_bench_passes_arguments_through(monkeypatch):
+    received = []
+    fake_bench = types.ModuleType("pyfem.bench")
+    fake_bench.main = lambda argv: received.append(argv) or 3
+    monkeypatch.setitem(sys.modules, "pyfem.bench", fake_bench)
+    monkeypatch.setattr(pyfem, "bench", fake_bench, raising=False)
+    assert cli.main(["bench", "--dofs", "1000", "--threads=2"]) == 3
+    assert received == [["--dofs", "1000", "--threads=2"]]
+
+
+def test_format_plan_prints_every_key_readably():
+    text = cli.format_plan({
+        "effects_on": ["seismic_input", "damping"],
+        "dofs": 15129,
+        "dt": 0.000812345,
+        "dt_reason": "0.8 x critical (power iteration)",
+        "memory_bytes": 3 * 1024 ** 2,
+        "time_estimate_seconds": 125.0,
+        "mesh": {"cells": 4096, "order": 1},
+    })
+    lines = text.splitlines()
+    assert len(lines) == 9  # six plain keys, then "mesh:" and its two entries
+    assert "effects on:" in text and "seismic_input, damping" in text
+    assert "0.0008123" in text
+    assert "3 MiB" in text
+    assert "2.08 min" in text
+    assert any(line.startswith("  cells:") and line.endswith("4096") for line in lines)
