@@ -1,0 +1,285 @@
+"""Accelerogram reading and processing (pyfem/seismic/records.py).
+
+Readers: the same numbers written as plain (one and two columns) and PEER AT2 read
+back identically; units are exact factors; the El Centro files have their known
+size, step and PGA. Processing: exact PGA, start and end at rest, the triple
+(a, v, d) satisfies the integration rule (checked with an independent trapezoid
+integration and with the kernel's cubic Hermite reconstruction), the band-pass
+keeps in-band and removes out-of-band sinusoids as its response says, and the
+processed El Centro stays close to the raw record.
+"""
+import pathlib
+import warnings
+
+import numpy as np
+import pytest
+import scipy.integrate
+import scipy.signal
+
+from conftest import ROUNDOFF, rel_error
+from pyfem.seismic import records
+from pyfem.seismic.records import (STANDARD_GRAVITY, as_waveform, bandpass_filter, plot_record,
+                                   process_record, read_record)
+
+DATA = pathlib.Path(__file__).resolve().parents[1] / "data"
+ELCENTRO = DATA / "elcentro_1940_ns.txt"
+ELCENTRO_AT2 = DATA / "RSN6_IMPVALL.I_I-ELC180.AT2"
+
+
+def synthetic_values(n=123, seed=7):
+    """Values as they would be printed in a file (7 significant digits), in g."""
+    rng = np.random.default_rng(seed)
+    return np.array([float(f"{value:.7E}") for value in 0.3 * rng.standard_normal(n)])
+
+
+def write_at2(path, values, dt):
+    lines = ["PEER NGA STRONG MOTION DATABASE RECORD", "Synthetic, test",
+             "ACCELERATION TIME SERIES IN UNITS OF G",
+             f"NPTS= {len(values):6d}, DT= {dt:9.4f} SEC"]
+    for start in range(0, len(values), 5):
+        lines.append("".join(f"{value:15.7E}" for value in values[start:start + 5]))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_plain(path, values, dt=None, two_columns=False, header="# Units: g\n"):
+    text = header
+    if dt is not None and not two_columns:
+        text += f"# Time step: dt = {dt} s\n"
+    for k, value in enumerate(values):
+        text += f"{k * dt:.4f}, {value:.7E}\n" if two_columns else f"{value:.7E}\n"
+    path.write_text(text)
+
+
+@pytest.fixture(scope="module")
+def elcentro_processed():
+    record = read_record(ELCENTRO)
+    return record, process_record(record, window=(0.0, 20.0), pga=0.32, table_dt=0.005)
+
+
+# --- readers --------------------------------------------------------------------------------
+
+def test_plain_one_column_two_columns_and_at2_give_the_same_series(tmp_path):
+    values, dt = synthetic_values(), 0.01
+    write_at2(tmp_path / "record.AT2", values, dt)
+    write_plain(tmp_path / "one.txt", values, dt)
+    write_plain(tmp_path / "two.csv", values, dt, two_columns=True)
+    at2 = read_record(tmp_path / "record.AT2")
+    one_column = read_record(tmp_path / "one.txt")
+    two_columns = read_record(tmp_path / "two.csv", format="plain")
+    expected = STANDARD_GRAVITY * values
+    for record in (at2, one_column, two_columns):
+        np.testing.assert_array_equal(record.acceleration, expected)
+        assert abs(record.dt - dt) <= 1e-15
+        np.testing.assert_allclose(record.t, dt * np.arange(len(values)), rtol=0, atol=1e-12)
+        assert record.units == "g"
+    # "auto" told the AT2 file by its header as well, whatever its name.
+    (tmp_path / "record.dat").write_text((tmp_path / "record.AT2").read_text())
+    np.testing.assert_array_equal(read_record(tmp_path / "record.dat").acceleration, expected)
+
+
+def test_units_conversion_is_exact(tmp_path):
+    values, dt = synthetic_values(), 0.02
+    write_plain(tmp_path / "record.txt", values, header="")
+    factors = {"g": 9.80665, "m/s2": 1.0, "m/s^2": 1.0, "cm/s2": 0.01, "gal": 0.01}
+    for units, factor in factors.items():
+        record = read_record(tmp_path / "record.txt", units=units, dt=dt)
+        np.testing.assert_array_equal(record.acceleration, values * factor)
+    assert len(factors) == 5
+
+
+def test_elcentro_plain_file():
+    record = read_record(ELCENTRO)
+    assert len(record.acceleration) == 1559
+    assert record.dt == 0.02
+    assert record.t[-1] == pytest.approx(31.16, abs=1e-12)
+    pga_g = np.abs(record.acceleration).max() / STANDARD_GRAVITY
+    assert abs(pga_g - 0.319) < 0.001
+    assert np.argmax(np.abs(record.acceleration)) * record.dt == pytest.approx(2.02, abs=1e-12)
+
+
+def test_elcentro_at2_file():
+    record = read_record(ELCENTRO_AT2)
+    assert len(record.acceleration) == 5372
+    assert record.dt == 0.01
+    assert record.acceleration[0] == pytest.approx(0.9984852e-3 * STANDARD_GRAVITY, rel=1e-15)
+    assert record.acceleration[-1] == pytest.approx(-0.1790158e-3 * STANDARD_GRAVITY, rel=1e-15)
+
+
+@pytest.mark.parametrize("content, kwargs, expected_words", [
+    ("# no step here\n0.1\n0.2\n0.3\n", {}, ["missing time step", "dt"]),
+    ("# Time step: dt = 0.02 s\n0.1\n0.2\nabc\n0.3\n", {}, ["line 4", "expected numbers", "abc"]),
+    ("# Time step: dt = 0.02 s\n0.1\n0.2 0.3 0.4\n", {}, ["line 3", "2 columns"]),
+    ("0.0 0.1\n0.02 0.2\n0.05 0.3\n0.06 0.1\n", {}, ["uniformly spaced", "sample 3"]),
+    ("# Time step: dt = 0.02 s\n0.1\n0.2\n", {"units": "furlongs"}, ["units='furlongs'", "allowed"]),
+    ("# Units: cm/s^2\n# dt = 0.02 s\n0.1\n0.2\n", {"units": "g"}, ["line 1", "declares units", "cm/s2"]),
+    ("# Time step: dt = 0.02 s\n0.1\n0.2\n", {"dt": 0.01}, ["dt = 0.01", "header says dt = 0.02"]),
+])
+def test_bad_plain_files_raise_value_error_naming_the_problem(tmp_path, content, kwargs, expected_words):
+    path = tmp_path / "bad.txt"
+    path.write_text(content)
+    with pytest.raises(ValueError) as error:
+        read_record(path, **kwargs)
+    message = str(error.value)
+    for word in expected_words:
+        assert word in message, message
+    assert str(path) in message
+
+
+def test_bad_at2_files_raise_value_error_naming_the_problem(tmp_path):
+    values = synthetic_values(12)
+    write_at2(tmp_path / "good.AT2", values, 0.01)
+    lines = (tmp_path / "good.AT2").read_text().splitlines()
+    cases = {
+        "count.AT2": (lines[:3] + [lines[3].replace("12", "13")] + lines[4:], ["NPTS = 13", "12 values"]),
+        "header.AT2": (lines[:3] + ["no counts here"] + lines[4:], ["line 4", "NPTS"]),
+        "value.AT2": (lines[:5] + ["  0.1  x.y"] + lines[6:], ["line 6", "'x.y'"]),
+    }
+    for name, (content, expected_words) in cases.items():
+        (tmp_path / name).write_text("\n".join(content) + "\n")
+        with pytest.raises(ValueError) as error:
+            read_record(tmp_path / name)
+        for word in [str(tmp_path / name)] + expected_words:
+            assert word in str(error.value), str(error.value)
+    with pytest.raises(ValueError, match="format='seg2'"):
+        read_record(tmp_path / "good.AT2", format="seg2")
+
+
+# --- processing -----------------------------------------------------------------------------
+
+def test_processed_elcentro_has_the_target_pga_exactly(elcentro_processed):
+    _, processed = elcentro_processed
+    target = 0.32 * STANDARD_GRAVITY
+    assert abs(np.abs(processed.acceleration).max() - target) <= 1e-12 * target
+    assert abs(processed.pga_g - 0.32) <= 1e-12
+    assert processed.dt == 0.005
+    np.testing.assert_allclose(np.diff(processed.t), 0.005, rtol=1e-9)
+    # the window [0, 20] s follows the precursor pad
+    assert processed.t[-1] == pytest.approx(processed.record_start + 20.0, abs=1e-9)
+
+
+def test_processed_elcentro_starts_and_ends_at_rest(elcentro_processed):
+    _, processed = elcentro_processed
+    a, v, d = processed.acceleration, processed.velocity, processed.displacement
+    residual_velocity = abs(v[-1]) / np.abs(v).max()
+    residual_displacement = abs(d[-1]) / np.abs(d).max()
+    # reached: about 1e-15 and 1e-14 (the end conditions are imposed in the discrete rule)
+    assert residual_velocity < 1e-10 and residual_displacement < 1e-10
+    assert residual_velocity == pytest.approx(processed.residual_velocity, abs=1e-16)
+    assert residual_displacement == pytest.approx(processed.residual_displacement, abs=1e-16)
+    assert abs(a[-1]) < 1e-12 * np.abs(a).max()
+    assert v[0] == 0.0 and d[0] == 0.0 and abs(a[0]) < 1e-12 * np.abs(a).max()
+    # plausible amplitudes for El Centro N-S at 0.32 g: peak velocity ~ 0.36 m/s, displacement 0.1-0.2 m
+    assert 0.3 < np.abs(v).max() < 0.45
+    assert 0.08 < np.abs(d).max() < 0.25
+
+
+def test_processed_triple_satisfies_the_integration_rule(elcentro_processed):
+    _, processed = elcentro_processed
+    a, v, d, dt = processed.acceleration, processed.velocity, processed.displacement, processed.dt
+    velocity_trapezoid = scipy.integrate.cumulative_trapezoid(a, dx=dt, initial=0.0)
+    assert rel_error(v, velocity_trapezoid) < ROUNDOFF
+    displacement_trapezoid = scipy.integrate.cumulative_trapezoid(v, dx=dt, initial=0.0)
+    # The rule is exact for piecewise-linear a; it differs from the trapezoid rule on v by
+    # exactly dt^2/12 (a_0 - a_k) (telescoping sum of the per-step differences).
+    assert rel_error(d, displacement_trapezoid + dt * dt / 12.0 * (a[0] - a)) < ROUNDOFF
+    assert np.abs(d - displacement_trapezoid).max() <= dt * dt / 12.0 * np.abs(a).max() * (1 + ROUNDOFF)
+    assert rel_error(d, displacement_trapezoid) < 1e-4
+
+
+def test_waveform_tables_are_consistent_with_cubic_hermite_interpolation(elcentro_processed):
+    _, processed = elcentro_processed
+    t0, dt, g, dg, ddg = as_waveform(processed)
+    assert t0 == 0.0 and dt == processed.dt
+    assert all(table.flags.c_contiguous and table.dtype == np.float64 for table in (g, dg, ddg))
+    np.testing.assert_array_equal(g, processed.displacement)
+    # Second derivative of the cubic Hermite interpolant of (g, g') on [t_k, t_k+1] at both ends:
+    # it must be the tabulated g'' (the displacement is the exact integral of piecewise-linear g'').
+    step = g[1:] - g[:-1]
+    left = (6.0 * step - dt * (4.0 * dg[:-1] + 2.0 * dg[1:])) / dt**2
+    right = (-6.0 * step + dt * (2.0 * dg[:-1] + 4.0 * dg[1:])) / dt**2
+    peak = np.abs(ddg).max()
+    assert np.abs(left - ddg[:-1]).max() < 1e-9 * peak  # cancellation in g differences: reached 3e-12
+    assert np.abs(right - ddg[1:]).max() < 1e-9 * peak
+
+
+def test_processed_elcentro_stays_close_to_the_raw_record(elcentro_processed):
+    record, processed = elcentro_processed
+    onset = int(round(processed.record_start / processed.dt))
+    on_record_grid = processed.acceleration[onset::4][:1001]
+    raw = processed.scale_factor * record.acceleration[:1001]
+    interior = slice(50, 951)  # outside the 1-s tapers
+    assert rel_error(on_record_grid[interior], raw[interior]) < 0.05  # reached: 0.019
+    assert processed.scale_factor == pytest.approx(0.32 / 0.31882, rel=0.01)
+
+
+def _amplitudes(t, values, frequencies):
+    columns = [np.ones_like(t)]
+    for frequency in frequencies:
+        columns += [np.sin(2 * np.pi * frequency * t), np.cos(2 * np.pi * frequency * t)]
+    coefficients = np.linalg.lstsq(np.column_stack(columns), values, rcond=None)[0]
+    return np.hypot(coefficients[1::2], coefficients[2::2])
+
+
+def test_bandpass_filter_follows_its_response():
+    dt, frequencies = 0.005, np.array([0.02, 2.0, 40.0])
+    t = dt * np.arange(int(400.0 / dt))
+    signal = np.sin(2 * np.pi * frequencies[:, None] * t).sum(axis=0)
+    filtered = bandpass_filter(signal, dt, band=(0.1, 25.0))
+    interior = (t > 150.0) & (t < 250.0)  # away from the zero-padded ends
+    amplitudes = _amplitudes(t[interior], filtered[interior], frequencies)
+    sos = scipy.signal.butter(4, (0.1, 25.0), btype="bandpass", fs=1 / dt, output="sos")
+    response = np.abs(scipy.signal.sosfreqz(sos, worN=frequencies, fs=1 / dt)[1]) ** 2  # forward and backward
+    np.testing.assert_allclose(amplitudes, response, rtol=1e-3, atol=1e-6)
+    assert amplitudes[0] < 0.05 and amplitudes[2] < 0.05 and abs(amplitudes[1] - 1.0) < 0.02
+
+
+def test_process_record_removes_out_of_band_sinusoids():
+    dt, frequencies = 0.005, np.array([0.02, 2.0, 40.0])
+    t = dt * np.arange(int(400.0 / dt))
+    signal = np.sin(2 * np.pi * frequencies[:, None] * t).sum(axis=0)
+    record = records.Record(t=t, acceleration=signal, dt=dt, source="synthetic", units="m/s2")
+    processed = process_record(record, band=(0.1, 25.0), pad=0.0)
+    interior = (processed.t > 100.0) & (processed.t < 300.0)
+    amplitudes = _amplitudes(processed.t[interior], processed.acceleration[interior], frequencies)
+    assert amplitudes[0] < 0.05 and amplitudes[2] < 0.05  # > 95 % reduction
+    assert abs(amplitudes[1] - 1.0) < 0.02  # in band: < 2 % change
+    assert processed.residual_velocity < 1e-10 and processed.residual_displacement < 1e-10
+
+
+def test_resampling_downwards_and_the_nyquist_warning():
+    record = read_record(ELCENTRO_AT2)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        processed = process_record(record, window=(0.0, 20.0), table_dt=0.02, pga=0.32)
+    assert any("0.8 x Nyquist" in str(warning.message) for warning in caught)
+    assert processed.band == (0.1, pytest.approx(20.0))
+    assert processed.dt == 0.02
+    assert processed.t[-1] == pytest.approx(processed.record_start + 20.0, abs=1e-9)
+    velocity = scipy.integrate.cumulative_trapezoid(processed.acceleration, dx=0.02, initial=0.0)
+    assert rel_error(processed.velocity, velocity) < ROUNDOFF
+    assert processed.residual_velocity < 1e-10 and processed.residual_displacement < 1e-10
+
+
+@pytest.mark.parametrize("kwargs, parameter", [
+    ({"pga": -0.3}, "pga=-0.3"),
+    ({"window": (0.0, 40.0)}, "window=(0.0, 40.0)"),
+    ({"window": (5.0, 2.0)}, "window=(5.0, 2.0)"),
+    ({"taper": 0.7}, "taper=0.7"),
+    ({"band": (2.0, 1.0)}, "band=(2.0, 1.0)"),
+    ({"table_dt": 0.02 / np.pi}, "table_dt="),
+    ({"pad": -1.0}, "pad=-1.0"),
+])
+def test_bad_processing_parameters_raise_value_error(kwargs, parameter):
+    record = read_record(ELCENTRO)
+    with pytest.raises(ValueError) as error:
+        process_record(record, **kwargs)
+    assert parameter in str(error.value)
+
+
+def test_plot_record_writes_a_png(tmp_path, elcentro_processed):
+    record, processed = elcentro_processed
+    for name, raw in (("processed.png", None), ("with_raw.png", record)):
+        path = tmp_path / name
+        plot_record(processed, path, raw=raw)
+        content = path.read_bytes()
+        assert content[:8] == b"\x89PNG\r\n\x1a\n" and len(content) > 10_000
