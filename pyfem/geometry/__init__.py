@@ -1,0 +1,11 @@
+"""Gmsh geometry builders.
+
+Each builder fills the current gmsh model with a mesh whose physical volumes
+are regions and whose physical surfaces are named boundaries or interfaces;
+`pyfem.mesh.create_mesh` turns it into a dolfinx mesh. `gmsh_session` starts
+and stops gmsh around a builder.
+"""
+from pyfem.geometry.box import BOX_FACES, BOX_REGION, build_box, elements_per_direction, gmsh_session
+from pyfem.geometry.file import load_msh
+
+__all__ = ["BOX_FACES", "BOX_REGION", "build_box", "elements_per_direction", "gmsh_session", "load_msh"]

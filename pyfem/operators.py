@@ -1,0 +1,395 @@
+"""Assembled operators of the explicit model: lumped mass, stiffness, boundary faces.
+
+dolfinx assembles everything once, before the time loop:
+- mass: row-sum lumped mass, M_i = int rho phi_i dx (one value per node);
+- stiffness: K_ij = int sigma(phi_j) : eps(phi_i) dx of linear isotropic
+  elasticity, no boundary conditions, as a scipy BSR matrix with 3x3 blocks;
+- faces: per named outer boundary, the lumped facet integrals of 1, n,
+  rho c_p, rho c_s and G that the viscoelastic boundary (DESIGN section 3)
+  and the seismic input forces need.
+
+Numbering (docs/ARCHITECTURE.md): a node is a dof block of
+VectorFunctionSpace(mesh, ("Lagrange", order)); dof = 3 * node + component.
+"""
+from __future__ import annotations
+
+import dataclasses
+import typing
+
+import numpy as np
+import scipy.sparse
+import ufl
+from dolfinx import fem, geometry
+from dolfinx import mesh as dolfinx_mesh
+from dolfinx.fem import petsc as fem_petsc
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from pyfem.geometry import BOX_FACES
+from pyfem.mesh import create_mesh
+
+SPACE_DIMENSION = 3
+SUPPORTED_ORDERS = (1, 2)
+
+
+@dataclasses.dataclass
+class BoundaryFace:
+    """Lumped facet data of one named outer boundary (per face node).
+
+    Attributes:
+        name: physical surface name (box: xmin, xmax, ymin, ymax, zmin, zmax).
+        nodes: (k,) int32 nodes of the face with nonzero lumped area.
+        area: (k,) lumped area int phi_i ds (m^2).
+        normal: (k, 3) unit outward normal, normalised int phi_i n ds (-).
+        rho_cp: (k,) int phi_i rho c_p ds (kg/s), P-wave dashpot per unit velocity.
+        rho_cs: (k,) int phi_i rho c_s ds (kg/s), S-wave dashpot per unit velocity.
+        shear_modulus: (k,) int phi_i G ds (N/m = Pa m^2).
+        plane_distance: (k,) |n . (x_node - centre)| (m), R of the viscoelastic boundary.
+    """
+
+    name: str
+    nodes: np.ndarray
+    area: np.ndarray
+    normal: np.ndarray
+    rho_cp: np.ndarray
+    rho_cs: np.ndarray
+    shear_modulus: np.ndarray
+    plane_distance: np.ndarray
+
+
+@dataclasses.dataclass
+class Model:
+    """Mesh, function space and assembled operators of a scene (docs/ARCHITECTURE.md "Model").
+
+    Attributes:
+        mesh: dolfinx mesh.
+        V: vector Lagrange space of order 1 (Q1) or 2 (Q2), block size 3.
+        cell_tags, facet_tags: dolfinx MeshTags of regions and named surfaces.
+        regions: region name -> cell tag.
+        boundaries: boundary/interface name -> facet tag.
+        node_coords: (n_nodes, 3) node coordinates (m).
+        mass: (n_nodes,) row-sum lumped mass (kg), > 0.
+        stiffness: (3 n_nodes, 3 n_nodes) BSR matrix with (3, 3) blocks (N/m).
+        faces: one BoundaryFace per named outer boundary.
+    """
+
+    mesh: dolfinx_mesh.Mesh
+    V: fem.FunctionSpace
+    cell_tags: typing.Any
+    facet_tags: typing.Any
+    regions: dict[str, int]
+    boundaries: dict[str, int]
+    node_coords: np.ndarray
+    mass: np.ndarray
+    stiffness: scipy.sparse.bsr_matrix
+    faces: list[BoundaryFace]
+    _materials: typing.Optional["CellMaterials"] = dataclasses.field(default=None, repr=False, compare=False)
+    _cell_locator: typing.Any = dataclasses.field(default=None, repr=False, compare=False)
+
+    @property
+    def n_cells(self) -> int:
+        """Number of cells owned by this rank."""
+        return self.mesh.topology.index_map(self.mesh.topology.dim).size_local
+
+    @property
+    def n_nodes(self) -> int:
+        """Number of nodes (owned + ghost) on this rank."""
+        return self.node_coords.shape[0]
+
+    @property
+    def n_dofs(self) -> int:
+        """Number of dofs (owned + ghost) on this rank: 3 per node."""
+        return SPACE_DIMENSION * self.n_nodes
+
+    @property
+    def order(self) -> int:
+        """Polynomial order of the Lagrange space (1: Q1, 2: Q2)."""
+        return self.V.ufl_element().degree()
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) corners of the axis-aligned bounding box of the whole mesh (m)."""
+        comm = self.mesh.comm
+        lo = comm.allreduce(self.node_coords.min(axis=0), op=MPI.MIN)
+        hi = comm.allreduce(self.node_coords.max(axis=0), op=MPI.MAX)
+        return lo, hi
+
+    def volume_of_region(self, name: str) -> float:
+        """Volume of region `name` (m^3), summed over all ranks."""
+        if name not in self.regions:
+            raise ValueError(f"region {name!r}: unknown; regions are {sorted(self.regions)}")
+        indicator = self._materials.indicator
+        region_cells = self.cell_tags.indices[self.cell_tags.values == self.regions[name]]
+        indicator.x.array[:] = 0.0
+        indicator.x.array[self._materials.dof_of_cell[region_cells]] = 1.0
+        local = fem.assemble_scalar(fem.form(indicator * ufl.dx(domain=self.mesh)))
+        return self.mesh.comm.allreduce(local, op=MPI.SUM)
+
+    def point_weights(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Interpolation weights of nodal values at arbitrary points.
+
+        value(p_j) = sum_k weights[j, k] * value[nodes[j, k]] for any nodal
+        field (exact for every field in the space: trilinear for Q1,
+        triquadratic for Q2).
+
+        Args:
+            points: (m, 3) coordinates (m); each inside the mesh on this rank.
+
+        Returns:
+            nodes (m, k) int32 and weights (m, k) float64, k = 8 (Q1) or 27 (Q2).
+        """
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim == 1:
+            points = points.reshape(1, -1)
+        if points.ndim != 2 or points.shape[1] != SPACE_DIMENSION:
+            raise ValueError(f"points: shape {points.shape} given; expected (m, 3) coordinates (m)")
+        cells = self._containing_cells(points)
+        basix_element = self.V.element.basix_element
+        geometry_dofmap = self.mesh.geometry.dofmap
+        geometry_x = self.mesh.geometry.x
+        coordinate_map = self.mesh.geometry.cmap
+        n_basis = basix_element.dim
+        nodes = np.empty((points.shape[0], n_basis), dtype=np.int32)
+        weights = np.empty((points.shape[0], n_basis), dtype=np.float64)
+        for j, (point, cell) in enumerate(zip(points, cells)):
+            cell_geometry = geometry_x[geometry_dofmap.links(cell)]
+            reference_point = coordinate_map.pull_back(point.reshape(1, -1), cell_geometry)
+            weights[j] = basix_element.tabulate(0, reference_point)[0, 0, :, 0]
+            nodes[j] = self.V.dofmap.cell_dofs(cell)
+        return nodes, weights
+
+    def _containing_cells(self, points: np.ndarray) -> np.ndarray:
+        """One cell containing each point, or ValueError naming the first point outside."""
+        if self._cell_locator is None:
+            self._cell_locator = geometry.BoundingBoxTree(self.mesh, self.mesh.topology.dim)
+        candidates = geometry.compute_collisions(self._cell_locator, points)
+        colliding = geometry.compute_colliding_cells(self.mesh, candidates, points)
+        cells = np.empty(points.shape[0], dtype=np.int32)
+        for j, point in enumerate(points):
+            found = colliding.links(j)
+            if len(found) == 0:
+                lo, hi = self.bounds
+                raise ValueError(
+                    f"point {list(point)} is outside the mesh (on this rank); mesh bounds {list(lo)} to {list(hi)} (m)")
+            cells[j] = found[0]
+        return cells
+
+
+@dataclasses.dataclass
+class CellMaterials:
+    """Cellwise-constant (DG0) material fields built from scene["materials"].
+
+    Attributes:
+        rho: density (kg/m^3).
+        lame_lambda: Lame's first parameter (Pa).
+        shear_modulus: G = mu (Pa).
+        rho_cp: rho * c_p, P-wave impedance (kg/(m^2 s)).
+        rho_cs: rho * c_s, S-wave impedance (kg/(m^2 s)).
+        indicator: scratch DG0 function for region integrals.
+        dof_of_cell: (n_cells_local,) DG0 dof of each local cell.
+    """
+
+    rho: fem.Function
+    lame_lambda: fem.Function
+    shear_modulus: fem.Function
+    rho_cp: fem.Function
+    rho_cs: fem.Function
+    indicator: fem.Function
+    dof_of_cell: np.ndarray
+
+
+def lame_parameters(E: float, nu: float) -> tuple[float, float]:
+    """Lame's lambda and the shear modulus G (Pa) from Young's modulus E (Pa) and Poisson's ratio nu (-)."""
+    lame_lambda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    shear_modulus = E / (2.0 * (1.0 + nu))
+    return lame_lambda, shear_modulus
+
+
+def build_model(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> Model:
+    """Mesh the scene and assemble its lumped mass, stiffness and boundary faces.
+
+    Args:
+        scene: validated scene; uses [mesh], [materials] and [boundary].centre.
+        comm: MPI communicator (the stiffness is assembled for one rank only).
+
+    Returns:
+        The Model of docs/ARCHITECTURE.md.
+    """
+    order = scene["mesh"].get("order", 1)
+    if order not in SUPPORTED_ORDERS:
+        raise ValueError(f"mesh.order = {order!r}: allowed are {SUPPORTED_ORDERS} (Q1, Q2)")
+    if comm.size > 1:
+        # getValuesCSR returns owned rows with global columns; the kernel's
+        # owned + ghost numbering needs a local renumbering not written yet.
+        raise NotImplementedError(f"build_model: runs on one MPI rank for now (communicator has {comm.size})")
+    mesh, cell_tags, facet_tags, regions, boundaries = create_mesh(scene, comm)
+    V = fem.VectorFunctionSpace(mesh, ("Lagrange", order))
+    materials = _cell_materials(mesh, cell_tags, regions, scene["materials"])
+    quadrature = {"quadrature_degree": 2 * order}
+
+    node_coords = V.tabulate_dof_coordinates().astype(np.float64, copy=True)
+    mass = lumped_mass(V, materials.rho, quadrature)
+    stiffness = elastic_stiffness(V, materials.lame_lambda, materials.shear_modulus, quadrature)
+
+    centre = scene.get("boundary", {}).get("centre")
+    if centre is None:
+        centre = 0.5 * (node_coords.min(axis=0) + node_coords.max(axis=0))
+    centre = np.asarray(centre, dtype=np.float64)
+    if centre.shape != (SPACE_DIMENSION,):
+        raise ValueError(f"boundary.centre = {scene['boundary']['centre']!r}: expected [x, y, z] (m)")
+    face_names = _outer_face_names(scene, mesh, facet_tags, boundaries)
+    faces = [
+        boundary_face(name, V, facet_tags, boundaries[name], materials, node_coords, centre, quadrature)
+        for name in face_names
+    ]
+    return Model(mesh=mesh, V=V, cell_tags=cell_tags, facet_tags=facet_tags, regions=regions,
+                 boundaries=boundaries, node_coords=node_coords, mass=mass, stiffness=stiffness,
+                 faces=faces, _materials=materials)
+
+
+def _cell_materials(mesh, cell_tags, regions: dict[str, int], material_tables: typing.Mapping) -> CellMaterials:
+    """DG0 fields of rho, lambda, G, rho c_p, rho c_s, constant per region."""
+    Q = fem.FunctionSpace(mesh, ("DG", 0))
+    n_cells = mesh.topology.index_map(mesh.topology.dim).size_local + mesh.topology.index_map(
+        mesh.topology.dim).num_ghosts
+    dof_of_cell = Q.dofmap.list.array.reshape(n_cells, -1)[:, 0].astype(np.int32)
+    fields = {name: fem.Function(Q, name=name) for name in ("rho", "lame_lambda", "shear_modulus", "rho_cp", "rho_cs")}
+    covered = np.zeros(n_cells, dtype=bool)
+    for region, tag in regions.items():
+        table = material_tables[region]
+        E, nu, rho = (_material_value(table, region, key) for key in ("E", "nu", "rho"))
+        if not E > 0.0:
+            raise ValueError(f"materials.{region}.E = {E!r}: must be > 0 (Pa)")
+        if not -1.0 < nu < 0.5:
+            raise ValueError(f"materials.{region}.nu = {nu!r}: must be in (-1, 0.5)")
+        if not rho > 0.0:
+            raise ValueError(f"materials.{region}.rho = {rho!r}: must be > 0 (kg/m^3)")
+        lame_lambda, shear_modulus = lame_parameters(E, nu)
+        c_p = np.sqrt((lame_lambda + 2.0 * shear_modulus) / rho)
+        c_s = np.sqrt(shear_modulus / rho)
+        values = {"rho": rho, "lame_lambda": lame_lambda, "shear_modulus": shear_modulus,
+                  "rho_cp": rho * c_p, "rho_cs": rho * c_s}
+        region_cells = cell_tags.indices[cell_tags.values == tag]
+        covered[region_cells] = True
+        for key, value in values.items():
+            fields[key].x.array[dof_of_cell[region_cells]] = value
+    if not np.all(covered):
+        raise ValueError(f"mesh: {np.count_nonzero(~covered)} cells belong to no region (physical volume)")
+    return CellMaterials(indicator=fem.Function(Q), dof_of_cell=dof_of_cell, **fields)
+
+
+def _material_value(table: typing.Mapping, region: str, key: str) -> float:
+    if key not in table:
+        raise ValueError(f"materials.{region}.{key}: missing (needed: E in Pa, nu, rho in kg/m^3)")
+    return float(table[key])
+
+
+def lumped_mass(V: fem.FunctionSpace, rho: fem.Function, quadrature: dict) -> np.ndarray:
+    """Row-sum lumped mass M_i = int rho phi_i dx per node (kg).
+
+    Raises:
+        ValueError: if a node gets a lumped mass <= 0 (e.g. serendipity elements).
+    """
+    test = ufl.TestFunction(V)
+    ones = fem.Constant(V.mesh, np.ones(SPACE_DIMENSION, dtype=PETSc.ScalarType))
+    per_dof = assemble_nodal_vector(rho * ufl.inner(ones, test) * ufl.dx(metadata=quadrature), V)
+    # The vector form puts the same row sum on each component; keep one.
+    mass = per_dof[:, 0].copy()
+    if not np.allclose(per_dof, mass[:, None], rtol=1e-12, atol=0.0):
+        raise RuntimeError("lumped mass differs between components of a node")
+    if not np.all(mass > 0.0):
+        worst = int(np.argmin(mass))
+        raise ValueError(f"lumped mass of node {worst} is {mass[worst]:.6g} kg: row-sum lumping needs every mass > 0")
+    return mass
+
+
+def elastic_stiffness(V: fem.FunctionSpace, lame_lambda: fem.Function, shear_modulus: fem.Function,
+                      quadrature: dict) -> scipy.sparse.bsr_matrix:
+    """Stiffness of linear isotropic elasticity, no boundary conditions, as BSR (3, 3) blocks (N/m).
+
+    K_ij = int (2 G eps(phi_j) + lambda tr(eps(phi_j)) I) : eps(phi_i) dx.
+    """
+    trial, test = ufl.TrialFunction(V), ufl.TestFunction(V)
+
+    def strain(u):
+        return ufl.sym(ufl.grad(u))
+
+    stress = 2.0 * shear_modulus * strain(trial) + lame_lambda * ufl.tr(strain(trial)) * ufl.Identity(SPACE_DIMENSION)
+    form = fem.form(ufl.inner(stress, strain(test)) * ufl.dx(metadata=quadrature))
+    matrix = fem_petsc.assemble_matrix(form)
+    matrix.assemble()
+    indptr, indices, data = matrix.getValuesCSR()
+    n_dofs = matrix.getSize()[0]
+    matrix.destroy()
+    csr = scipy.sparse.csr_matrix((data, indices, indptr), shape=(n_dofs, n_dofs))
+    csr.sort_indices()  # a no-op when PETSc already returned sorted rows
+    bsr = csr.tobsr(blocksize=(SPACE_DIMENSION, SPACE_DIMENSION))
+    bsr.sort_indices()
+    if bsr.nnz != csr.nnz:
+        raise RuntimeError(f"stiffness pattern is not 3x3 blocked ({csr.nnz} entries, {bsr.nnz} in blocks)")
+    return bsr
+
+
+def assemble_nodal_vector(linear_form: ufl.Form, V: fem.FunctionSpace) -> np.ndarray:
+    """Assemble a linear form on the vector space V; returns (n_nodes, 3) owned + ghost values."""
+    vector = fem_petsc.assemble_vector(fem.form(linear_form))
+    vector.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    with vector.localForm() as local:
+        values = local.array.copy()
+    vector.destroy()
+    return values.reshape(-1, SPACE_DIMENSION)
+
+
+def boundary_face(name: str, V: fem.FunctionSpace, facet_tags, tag: int, materials: CellMaterials,
+                  node_coords: np.ndarray, centre: np.ndarray, quadrature: dict) -> BoundaryFace:
+    """Lumped facet integrals over the facets of `facet_tags` equal to `tag`.
+
+    DG0 material fields on an exterior facet take the value of the one cell
+    adjacent to it.
+    """
+    mesh = V.mesh
+    facets = facet_tags.indices[facet_tags.values == tag]
+    # A meshtags holding only this face, always with marker 1, keeps the form
+    # signature the same for every face, so the forms compile once.
+    face_marker = 1
+    face_tags = dolfinx_mesh.meshtags(mesh, mesh.topology.dim - 1, facets.astype(np.int32),
+                                      np.full(len(facets), face_marker, dtype=np.int32))
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=face_tags, subdomain_id=face_marker, metadata=quadrature)
+    test = ufl.TestFunction(V)
+    outward_normal = ufl.FacetNormal(mesh)
+    # One vector form carries three scalar integrals: component 0: 1, 1: rho c_p, 2: rho c_s.
+    scalars = assemble_nodal_vector(
+        ufl.inner(ufl.as_vector((1.0, materials.rho_cp, materials.rho_cs)), test) * ds, V)
+    shear = assemble_nodal_vector(materials.shear_modulus * test[0] * ds, V)[:, 0]
+    normal_integral = assemble_nodal_vector(ufl.inner(outward_normal, test) * ds, V)
+
+    area = scalars[:, 0]
+    nodes = np.flatnonzero(area != 0.0).astype(np.int32)
+    if np.any(area[nodes] < 0.0):
+        raise ValueError(f"boundary {name!r}: negative lumped facet area at nodes {nodes[area[nodes] < 0.0][:5]}")
+    normal = normal_integral[nodes]
+    normal_length = np.linalg.norm(normal, axis=1)
+    if np.any(normal_length <= 0.0):
+        raise ValueError(f"boundary {name!r}: a node has no defined normal (facets cancel out)")
+    normal = normal / normal_length[:, None]
+    plane_distance = np.abs(np.einsum("ij,ij->i", normal, node_coords[nodes] - centre))
+    return BoundaryFace(name=name, nodes=nodes, area=area[nodes].copy(), normal=normal,
+                        rho_cp=scalars[nodes, 1].copy(), rho_cs=scalars[nodes, 2].copy(),
+                        shear_modulus=shear[nodes].copy(), plane_distance=plane_distance)
+
+
+def _outer_face_names(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[str, int]) -> list[str]:
+    """Named surfaces that are outer boundaries: the six box faces, or for a
+    file every physical surface whose facets all lie on the exterior."""
+    if scene["mesh"]["builder"] == "box":
+        return list(BOX_FACES)
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    exterior = dolfinx_mesh.exterior_facet_indices(mesh.topology)
+    names = []
+    for name, tag in boundaries.items():
+        facets = facet_tags.indices[facet_tags.values == tag]
+        if len(facets) > 0 and np.all(np.isin(facets, exterior)):
+            names.append(name)
+    return names
