@@ -1,0 +1,349 @@
+// Python module pyfem._kernels: the only file that includes pybind11. Every array is checked
+// for type, dtype, shape and C-contiguity; nothing is converted, so borrowed arrays are the
+// caller's own objects (kept alive with keep_alive) and in-place arrays cannot be copies.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bsr.hpp"
+#include "parallel.hpp"
+#include "seismic_input.hpp"
+#include "stable_step.hpp"
+#include "stepper.hpp"
+
+namespace py = pybind11;
+using namespace cavern;
+
+namespace {
+
+constexpr py::ssize_t kAny = -1;
+
+std::string shape_text(const std::vector<py::ssize_t>& shape) {
+  std::ostringstream text;
+  text << "(";
+  for (std::size_t k = 0; k < shape.size(); ++k) {
+    if (k) text << ", ";
+    if (shape[k] == kAny)
+      text << "any";
+    else
+      text << shape[k];
+  }
+  if (shape.size() == 1) text << ",";
+  text << ")";
+  return text.str();
+}
+
+template <typename T>
+const char* dtype_name() {
+  if constexpr (std::is_same_v<T, double>) return "float64";
+  if constexpr (std::is_same_v<T, std::int32_t>) return "int32";
+  if constexpr (std::is_same_v<T, std::int64_t>) return "int64";
+}
+
+/// The numpy array `object` as array_t<T> after checking dtype, shape (kAny: any extent),
+/// C-contiguity and, when `writeable`, writeability. Raises ValueError naming `name`.
+template <typename T>
+py::array_t<T> checked_array(const py::object& object, const char* name,
+                             const std::vector<py::ssize_t>& shape, bool writeable = false) {
+  const std::string expected = std::string(dtype_name<T>()) + " array of shape " +
+                               shape_text(shape) + ", C-contiguous" +
+                               (writeable ? ", writeable" : "");
+  if (!py::isinstance<py::array>(object))
+    throw py::value_error(std::string(name) + ": expected a numpy " + expected + "; got " +
+                          std::string(py::str(py::type::of(object).attr("__name__"))));
+  auto array = py::reinterpret_borrow<py::array>(object);
+  std::vector<py::ssize_t> got(array.shape(), array.shape() + array.ndim());
+  bool shape_ok = static_cast<std::size_t>(array.ndim()) == shape.size();
+  for (std::size_t k = 0; shape_ok && k < shape.size(); ++k)
+    shape_ok = shape[k] == kAny || shape[k] == got[k];
+  const bool dtype_ok = py::isinstance<py::array_t<T>>(array);
+  const bool contiguous = (array.flags() & py::array::c_style) != 0;
+  if (!dtype_ok || !shape_ok || !contiguous || (writeable && !array.writeable())) {
+    std::string problem = !dtype_ok     ? "dtype"
+                          : !shape_ok   ? "shape"
+                          : !contiguous ? "layout"
+                                        : "flags";
+    throw py::value_error(std::string(name) + ": expected " + expected + "; got " +
+                          std::string(py::str(array.dtype())) + " array of shape " +
+                          shape_text(got) + (contiguous ? "" : ", not C-contiguous") +
+                          (array.writeable() ? "" : ", read-only") + " (wrong " + problem + ")");
+  }
+  return py::reinterpret_borrow<py::array_t<T>>(array);
+}
+
+/// Checks the block CSR arrays against each other and returns a view on them.
+BlockCsrView checked_block_csr(const py::object& indptr_object, const py::object& indices_object,
+                               const py::object& blocks_object, std::int64_t n_nodes) {
+  auto indptr = checked_array<std::int64_t>(indptr_object, "indptr", {n_nodes + 1});
+  auto indices = checked_array<std::int32_t>(indices_object, "indices", {kAny});
+  const py::ssize_t nnzb = indices.shape(0);
+  auto blocks = checked_array<double>(blocks_object, "blocks", {nnzb, 3, 3});
+  const std::int64_t* row_start = indptr.data();
+  if (row_start[0] != 0)
+    throw py::value_error("indptr[0] must be 0, got " + std::to_string(row_start[0]));
+  for (std::int64_t i = 0; i < n_nodes; ++i)
+    if (row_start[i + 1] < row_start[i])
+      throw py::value_error("indptr must be non-decreasing; indptr[" + std::to_string(i + 1) +
+                            "] = " + std::to_string(row_start[i + 1]) + " < " +
+                            std::to_string(row_start[i]));
+  if (row_start[n_nodes] != nnzb)
+    throw py::value_error("indptr[-1] = " + std::to_string(row_start[n_nodes]) +
+                          " must equal len(indices) = " + std::to_string(nnzb));
+  const std::int32_t* column = indices.data();
+  for (py::ssize_t k = 0; k < nnzb; ++k)
+    if (column[k] < 0 || column[k] >= n_nodes)
+      throw py::value_error("indices[" + std::to_string(k) + "] = " + std::to_string(column[k]) +
+                            " is not a block column in [0, " + std::to_string(n_nodes) + ")");
+  BlockCsrView view;
+  view.n_block_rows = n_nodes;
+  view.indptr = row_start;
+  view.indices = column;
+  view.blocks = blocks.data();
+  return view;
+}
+
+std::int64_t node_count(const py::object& mass_object) {
+  auto mass = checked_array<double>(mass_object, "mass", {kAny});
+  return mass.shape(0);
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_kernels, m) {
+  m.doc() =
+      "Explicit time-stepping kernels (C++/OpenMP) of the cavern program: block-CSR stiffness, "
+      "velocity-Verlet stepper, seismic input forces, critical-step estimates.";
+
+  py::class_<ForceProvider, std::shared_ptr<ForceProvider>>(m, "ForceProvider",
+                                                            "Base of the force providers.");
+
+  py::class_<SeismicInput, ForceProvider, std::shared_ptr<SeismicInput>>(
+      m, "SeismicInput",
+      R"(Equivalent nodal forces of the seismic free field (paper Eq. 6).
+
+f_node(t) = sum over entries e of the node: P_e g_{table_e}(t - tau_e) + Q_e g'_{table_e}(t - tau_e)
+g by cubic Hermite interpolation of (g, dg), g' of (dg, ddg), at s = (t - tau - table_t0)/table_dt;
+zero before the table start, held at the last samples after its end.
+
+Args:
+    table_t0: time of the first table sample (s).
+    table_dt: table sample spacing (s), > 0.
+    g, dg, ddg: float64 (n_tables, n_samples): g (m or normalised), g' (1/s), g'' (1/s^2). Borrowed.
+    node_ptr: int64 (n_input_nodes + 1,) entry ranges per input node. Borrowed.
+    nodes: int32 (n_input_nodes,) node of each input node. Borrowed.
+    table: int32 (n_entries,) waveform table of each entry. Borrowed.
+    tau: float64 (n_entries,) delay (s). Borrowed.
+    P: float64 (n_entries, 3) force per unit g (N/m). Borrowed.
+    Q: float64 (n_entries, 3) force per unit g' (N s/m). Borrowed.
+Borrowed arrays are kept alive by this object and must not be modified while it is in use.)")
+      .def(py::init([](double table_t0, double table_dt, const py::object& g_object,
+                       const py::object& dg_object, const py::object& ddg_object,
+                       const py::object& node_ptr_object, const py::object& nodes_object,
+                       const py::object& table_object, const py::object& tau_object,
+                       const py::object& P_object, const py::object& Q_object) {
+             auto g = checked_array<double>(g_object, "g", {kAny, kAny});
+             auto dg = checked_array<double>(dg_object, "dg", {g.shape(0), g.shape(1)});
+             auto ddg = checked_array<double>(ddg_object, "ddg", {g.shape(0), g.shape(1)});
+             auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
+             auto node_ptr =
+                 checked_array<std::int64_t>(node_ptr_object, "node_ptr", {nodes.shape(0) + 1});
+             auto table = checked_array<std::int32_t>(table_object, "table", {kAny});
+             const py::ssize_t n_entries = table.shape(0);
+             auto tau = checked_array<double>(tau_object, "tau", {n_entries});
+             auto P = checked_array<double>(P_object, "P", {n_entries, 3});
+             auto Q = checked_array<double>(Q_object, "Q", {n_entries, 3});
+             WaveformTables tables{table_t0, table_dt,  g.shape(0), g.shape(1),
+                                   g.data(), dg.data(), ddg.data()};
+             InputEntries entries{nodes.shape(0), n_entries,  node_ptr.data(), nodes.data(),
+                                  table.data(),   tau.data(), P.data(),        Q.data()};
+             return std::make_shared<SeismicInput>(tables, entries);
+           }),
+           py::arg("table_t0"), py::arg("table_dt"), py::arg("g"), py::arg("dg"), py::arg("ddg"),
+           py::arg("node_ptr"), py::arg("nodes"), py::arg("table"), py::arg("tau"), py::arg("P"),
+           py::arg("Q"), py::keep_alive<1, 4>(), py::keep_alive<1, 5>(), py::keep_alive<1, 6>(),
+           py::keep_alive<1, 7>(), py::keep_alive<1, 8>(), py::keep_alive<1, 9>(),
+           py::keep_alive<1, 10>(), py::keep_alive<1, 11>(), py::keep_alive<1, 12>())
+      .def(
+          "forces",
+          [](const SeismicInput& input, double t) {
+            py::array_t<double> out(
+                {static_cast<py::ssize_t>(input.n_input_nodes()), static_cast<py::ssize_t>(3)});
+            input.forces(t, out.mutable_data());
+            return out;
+          },
+          py::arg("t"),
+          "Forces (N) of every input node at time t (s): new float64 array (n_input_nodes, 3).")
+      .def_property_readonly("n_input_nodes", &SeismicInput::n_input_nodes);
+
+  py::class_<Stepper>(m, "Stepper", R"(Velocity-Verlet central difference with lumped mass.
+
+Per step: v_half = v + dt/2 a; u += dt v_half; f = f_ext(t_{n+1});
+r = f - K (u + beta v_half); (M (1 + dt/2 alpha) I + dt/2 C) v = M v_half + dt/2 r;
+a = (r - (alpha M + C) v) / M.
+
+Args:
+    indptr: int64 (n_nodes + 1,) block-row pointers of K. Borrowed.
+    indices: int32 (nnzb,) block columns. Borrowed.
+    blocks: float64 (nnzb, 3, 3) blocks of K (N/m), symmetric K. Borrowed.
+    mass: float64 (n_nodes,) lumped nodal mass (kg), > 0. Borrowed.
+    dt: time step (s).
+    alpha: mass-proportional Rayleigh coefficient (1/s), implicit.
+    beta: stiffness-proportional Rayleigh coefficient (s), explicit on v_half.
+Borrowed arrays are kept alive by this object and must not be modified while it is in use.)")
+      .def(
+          py::init([](const py::object& indptr, const py::object& indices, const py::object& blocks,
+                      const py::object& mass, double dt, double alpha, double beta) {
+            const std::int64_t n_nodes = node_count(mass);
+            const BlockCsrView K = checked_block_csr(indptr, indices, blocks, n_nodes);
+            auto mass_array = checked_array<double>(mass, "mass", {n_nodes});
+            return std::make_unique<Stepper>(K, mass_array.data(),
+                                             StepperParameters{dt, alpha, beta});
+          }),
+          py::arg("indptr"), py::arg("indices"), py::arg("blocks"), py::arg("mass"), py::arg("dt"),
+          py::arg("alpha") = 0.0, py::arg("beta") = 0.0, py::keep_alive<1, 2>(),
+          py::keep_alive<1, 3>(), py::keep_alive<1, 4>(), py::keep_alive<1, 5>())
+      .def(
+          "set_dashpots",
+          [](Stepper& stepper, const py::object& nodes_object, const py::object& C_object) {
+            auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
+            auto C = checked_array<double>(C_object, "C", {nodes.shape(0), 3, 3});
+            stepper.set_dashpots(nodes.data(), nodes.shape(0), C.data());
+          },
+          py::arg("nodes"), py::arg("C"),
+          R"(Implicit per-node dashpots, replacing any previous set.
+
+Args:
+    nodes: int32 (k,) nodes; a node listed twice gets the sum. Copied.
+    C: float64 (k, 3, 3) symmetric positive semi-definite dashpot matrices (N s/m). Copied.)")
+      .def(
+          "add_seismic_input",
+          [](Stepper& stepper, std::shared_ptr<SeismicInput> input) {
+            stepper.add_provider(std::move(input));
+          },
+          py::arg("input"), py::keep_alive<1, 2>(),
+          "Adds a SeismicInput force provider (borrowed, kept alive). ValueError names a node "
+          "outside the model.")
+      .def(
+          "run",
+          [](Stepper& stepper, const py::object& u_object, const py::object& v_object,
+             const py::object& a_object, std::int64_t n_steps, double t0) {
+            const py::ssize_t n_dofs = stepper.n_dofs();
+            auto u = checked_array<double>(u_object, "u", {n_dofs}, true);
+            auto v = checked_array<double>(v_object, "v", {n_dofs}, true);
+            auto a = checked_array<double>(a_object, "a", {n_dofs}, true);
+            if (n_steps < 0)
+              throw py::value_error("n_steps must be >= 0, got " + std::to_string(n_steps));
+            double* u_data = u.mutable_data();
+            double* v_data = v.mutable_data();
+            double* a_data = a.mutable_data();
+            if (u_data == v_data || u_data == a_data || v_data == a_data)
+              throw py::value_error("u, v and a must be three different arrays");
+            py::gil_scoped_release release;
+            return stepper.run(u_data, v_data, a_data, n_steps, t0);
+          },
+          py::arg("u").noconvert(), py::arg("v").noconvert(), py::arg("a").noconvert(),
+          py::arg("n_steps"), py::arg("t0"),
+          R"(Advances the state n_steps steps from t0 and returns the end time (s).
+
+Args:
+    u, v, a: float64 (3 n_nodes,) displacement (m), velocity (m/s), acceleration (m/s^2) at t0,
+        dof = 3 node + component. Modified in place (no conversion is ever made).
+    n_steps: number of steps.
+    t0: time of the given state (s).
+The GIL is released while stepping.)")
+      .def(
+          "energy",
+          [](const Stepper& stepper) {
+            const EnergyReport report = stepper.energy();
+            py::dict result;
+            result["kinetic"] = report.kinetic;
+            result["strain"] = report.strain;
+            result["total"] = report.total;
+            result["initial"] = report.initial;
+            result["external_work"] = report.external_work;
+            result["damping_work"] = report.damping_work;
+            result["balance"] = report.balance;
+            py::dict provider_work;
+            for (std::size_t k = 0; k < report.provider_work.size(); ++k)
+              provider_work[py::str(report.provider_names[k] + "_" + std::to_string(k))] =
+                  report.provider_work[k];
+            result["provider_work"] = provider_work;
+            return result;
+          },
+          R"(Energy account (J) of the current state: dict with kinetic (1/2 v.Mv), strain (1/2 u.Ku),
+total (H_n = kinetic + strain - dt^2/8 a.Ma + dt^2/4 F.a), initial (H_0), external_work,
+damping_work (dissipated), balance = H_n - H_0 - external_work + damping_work (zero to round-off
+for linear problems) and provider_work {name_index: work} (sums to external_work).)")
+      .def(
+          "reset_energy",
+          [](Stepper& stepper, const py::object& u_object, const py::object& v_object,
+             const py::object& a_object, double t0) {
+            const py::ssize_t n_dofs = stepper.n_dofs();
+            auto u = checked_array<double>(u_object, "u", {n_dofs});
+            auto v = checked_array<double>(v_object, "v", {n_dofs});
+            auto a = checked_array<double>(a_object, "a", {n_dofs});
+            stepper.reset_energy(u.data(), v.data(), a.data(), t0);
+          },
+          py::arg("u"), py::arg("v"), py::arg("a"), py::arg("t0"),
+          "Sets H_0 from the state (u, v, a) at t0 (read only) and zeroes the accumulated work.")
+      .def_property_readonly("dt", &Stepper::dt, "Time step (s).")
+      .def_property_readonly("n_nodes", &Stepper::n_nodes)
+      .def_property_readonly("n_dofs", &Stepper::n_dofs);
+
+  m.def(
+      "gershgorin_bound",
+      [](const py::object& indptr, const py::object& indices, const py::object& blocks,
+         const py::object& mass_object) {
+        const std::int64_t n_nodes = node_count(mass_object);
+        const BlockCsrView K = checked_block_csr(indptr, indices, blocks, n_nodes);
+        auto mass = checked_array<double>(mass_object, "mass", {n_nodes});
+        return gershgorin_bound(K, mass.data());
+      },
+      py::arg("indptr"), py::arg("indices"), py::arg("blocks"), py::arg("mass"),
+      "Upper bound of omega_max^2 (1/s^2) of M^-1 K: max over dof rows of (1/m) sum |K_rc|.");
+
+  m.def(
+      "power_iteration",
+      [](const py::object& indptr, const py::object& indices, const py::object& blocks,
+         const py::object& mass_object, int iterations, std::uint64_t seed) {
+        const std::int64_t n_nodes = node_count(mass_object);
+        const BlockCsrView K = checked_block_csr(indptr, indices, blocks, n_nodes);
+        auto mass = checked_array<double>(mass_object, "mass", {n_nodes});
+        if (iterations < 1)
+          throw py::value_error("iterations must be >= 1, got " + std::to_string(iterations));
+        py::gil_scoped_release release;
+        return power_iteration(K, mass.data(), iterations, seed);
+      },
+      py::arg("indptr"), py::arg("indices"), py::arg("blocks"), py::arg("mass"),
+      py::arg("iterations") = 50, py::arg("seed") = 1,
+      "Estimate (from below) of omega_max^2 (1/s^2): Rayleigh quotient of power iteration on "
+      "M^-1/2 K M^-1/2.");
+
+  m.def(
+      "set_num_threads",
+      [](int n) {
+        if (n < 1) throw py::value_error("n must be >= 1, got " + std::to_string(n));
+        set_num_threads(n);
+      },
+      py::arg("n"), "Number of OpenMP threads for later kernel calls.");
+  m.def("max_threads", &max_threads, "Number of OpenMP threads a kernel call would use now.");
+  m.def(
+      "stream_triad",
+      [](const py::object& a_object, const py::object& b_object, const py::object& c_object,
+         double s) {
+        auto a = checked_array<double>(a_object, "a", {kAny}, true);
+        const py::ssize_t n = a.shape(0);
+        auto b = checked_array<double>(b_object, "b", {n});
+        auto c = checked_array<double>(c_object, "c", {n});
+        double* a_data = a.mutable_data();
+        py::gil_scoped_release release;
+        stream_triad(a_data, b.data(), c.data(), s, n);
+      },
+      py::arg("a").noconvert(), py::arg("b"), py::arg("c"), py::arg("s"),
+      "Bandwidth probe a = b + s c (a modified in place; float64 1-D, same length).");
+}

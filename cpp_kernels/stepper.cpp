@@ -1,0 +1,282 @@
+#include "stepper.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace cavern {
+
+namespace {
+
+// Inverse of a 3x3 matrix by cofactors; returns the determinant.
+double invert_3x3(const double* A, double* inverse) {
+  const double c00 = A[4] * A[8] - A[5] * A[7];
+  const double c01 = A[5] * A[6] - A[3] * A[8];
+  const double c02 = A[3] * A[7] - A[4] * A[6];
+  const double determinant = A[0] * c00 + A[1] * c01 + A[2] * c02;
+  const double s = 1.0 / determinant;
+  inverse[0] = c00 * s;
+  inverse[1] = (A[2] * A[7] - A[1] * A[8]) * s;
+  inverse[2] = (A[1] * A[5] - A[2] * A[4]) * s;
+  inverse[3] = c01 * s;
+  inverse[4] = (A[0] * A[8] - A[2] * A[6]) * s;
+  inverse[5] = (A[2] * A[3] - A[0] * A[5]) * s;
+  inverse[6] = c02 * s;
+  inverse[7] = (A[1] * A[6] - A[0] * A[7]) * s;
+  inverse[8] = (A[0] * A[4] - A[1] * A[3]) * s;
+  return determinant;
+}
+
+inline void multiply_3x3(const double* A, const double* x, double* y) {
+  y[0] = A[0] * x[0] + A[1] * x[1] + A[2] * x[2];
+  y[1] = A[3] * x[0] + A[4] * x[1] + A[5] * x[2];
+  y[2] = A[6] * x[0] + A[7] * x[1] + A[8] * x[2];
+}
+
+}  // namespace
+
+Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
+                 const StepperParameters& parameters)
+    : stiffness_(stiffness), mass_(mass), parameters_(parameters) {
+  if (!(std::isfinite(parameters.dt) && parameters.dt > 0.0))
+    throw std::invalid_argument("dt must be finite and > 0, got " + std::to_string(parameters.dt));
+  if (!(std::isfinite(parameters.alpha) && parameters.alpha >= 0.0))
+    throw std::invalid_argument("alpha must be finite and >= 0, got " +
+                                std::to_string(parameters.alpha));
+  if (!(std::isfinite(parameters.beta) && parameters.beta >= 0.0))
+    throw std::invalid_argument("beta must be finite and >= 0, got " +
+                                std::to_string(parameters.beta));
+  for (std::int64_t i = 0; i < stiffness.n_block_rows; ++i)
+    if (!(mass[i] > 0.0 && std::isfinite(mass[i])))
+      throw std::invalid_argument("mass[" + std::to_string(i) + "] = " + std::to_string(mass[i]) +
+                                  " must be finite and > 0");
+  external_force_.assign(n_dofs(), 0.0);
+  if (parameters.beta != 0.0) v_half_.assign(n_dofs(), 0.0);
+}
+
+void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
+  std::vector<std::int32_t> slot(n_nodes(), -1);
+  std::vector<double> summed_C;
+  for (std::int64_t k = 0; k < count; ++k) {
+    const std::int32_t node = nodes[k];
+    if (node < 0 || node >= n_nodes())
+      throw std::invalid_argument("dashpot nodes[" + std::to_string(k) +
+                                  "] = " + std::to_string(node) + " is not a node in [0, " +
+                                  std::to_string(n_nodes()) + ")");
+    if (slot[node] < 0) {
+      slot[node] = static_cast<std::int32_t>(summed_C.size() / 9);
+      summed_C.resize(summed_C.size() + 9, 0.0);
+    }
+    double* target = summed_C.data() + 9 * slot[node];
+    for (int c = 0; c < 9; ++c) target[c] += C[9 * k + c];
+  }
+
+  const double half_dt = 0.5 * parameters_.dt;
+  std::vector<double> inverse(summed_C.size());
+  for (std::int64_t node = 0; node < n_nodes(); ++node) {
+    if (slot[node] < 0) continue;
+    const double* Ci = summed_C.data() + 9 * slot[node];
+    double scale = 0.0;
+    for (int c = 0; c < 9; ++c) scale = std::max(scale, std::abs(Ci[c]));
+    for (int r = 0; r < 3; ++r)
+      for (int c = r + 1; c < 3; ++c)
+        if (std::abs(Ci[3 * r + c] - Ci[3 * c + r]) > 1e-10 * scale)
+          throw std::invalid_argument("dashpot C at node " + std::to_string(node) +
+                                      " is not symmetric");
+    double A[9];
+    const double diagonal = mass_[node] * (1.0 + half_dt * parameters_.alpha);
+    for (int c = 0; c < 9; ++c) A[c] = half_dt * Ci[c];
+    A[0] += diagonal;
+    A[4] += diagonal;
+    A[8] += diagonal;
+    // (M (1 + dt/2 alpha) I + dt/2 C) is positive definite iff C is not too negative.
+    const double minor2 = A[0] * A[4] - A[1] * A[3];
+    const double determinant = invert_3x3(A, inverse.data() + 9 * slot[node]);
+    if (!(A[0] > 0.0 && minor2 > 0.0 && determinant > 0.0))
+      throw std::invalid_argument("dashpot C at node " + std::to_string(node) +
+                                  " is not positive semi-definite");
+  }
+
+  if (count == 0) slot.clear();  // no dashpots: pass B skips the slot look-up
+  dashpot_slot_ = std::move(slot);
+  dashpot_C_ = std::move(summed_C);
+  dashpot_inverse_ = std::move(inverse);
+}
+
+void Stepper::add_provider(std::shared_ptr<ForceProvider> provider) {
+  provider->check_nodes(n_nodes());
+  providers_.push_back(std::move(provider));
+  // A provider added mid-run has done no work so far and applied no force at the last step.
+  provider_work_.push_back(0.0);
+  provider_power_.push_back(0.0);
+}
+
+template <bool kStiffnessDamping>
+void Stepper::pass_b(double* u, double* v, double* a) {
+  const BlockCsrView K = stiffness_;
+  const double* mass = mass_;
+  const double dt = parameters_.dt;
+  const double half_dt = 0.5 * dt;
+  const double alpha = parameters_.alpha;
+  const double beta = parameters_.beta;
+  const double* v_half = v_half_.data();
+  double* f = external_force_.data();
+  const std::int32_t* dashpot_slot = dashpot_slot_.empty() ? nullptr : dashpot_slot_.data();
+  const double* dashpot_C = dashpot_C_.data();
+  const double* dashpot_inverse = dashpot_inverse_.data();
+
+  double vMv = 0.0, uKu = 0.0, aMa = 0.0, Fa = 0.0, external_power = 0.0, damping_power = 0.0;
+#pragma omp parallel for schedule(static) \
+    reduction(+ : vMv, uKu, aMa, Fa, external_power, damping_power)
+  for (std::int64_t i = 0; i < K.n_block_rows; ++i) {
+    double Ku[3], Kv[3] = {0.0, 0.0, 0.0};
+    if constexpr (kStiffnessDamping)
+      block_row_product_dual(K, i, u, v_half, Ku, Kv);
+    else
+      block_row_product(K, i, u, Ku);
+
+    const double m = mass[i];
+    double* fi = f + 3 * i;
+    double* vi = v + 3 * i;
+    double* ai = a + 3 * i;
+    const double* ui = u + 3 * i;
+    double r[3], rhs[3], v_next[3], implicit_damping[3];
+    for (int c = 0; c < 3; ++c) {
+      r[c] = fi[c] - Ku[c] - beta * Kv[c];
+      rhs[c] = m * vi[c] + half_dt * r[c];
+    }
+    const std::int32_t slot = dashpot_slot ? dashpot_slot[i] : -1;
+    if (slot < 0) {
+      const double inverse = 1.0 / (m * (1.0 + half_dt * alpha));
+      for (int c = 0; c < 3; ++c) {
+        v_next[c] = rhs[c] * inverse;
+        implicit_damping[c] = alpha * m * v_next[c];
+      }
+    } else {
+      multiply_3x3(dashpot_inverse + 9 * slot, rhs, v_next);
+      multiply_3x3(dashpot_C + 9 * slot, v_next, implicit_damping);
+      for (int c = 0; c < 3; ++c) implicit_damping[c] += alpha * m * v_next[c];
+    }
+    for (int c = 0; c < 3; ++c) {
+      const double a_next = (r[c] - implicit_damping[c]) / m;
+      const double damping_force = implicit_damping[c] + beta * Kv[c];
+      const double non_stiffness_force = fi[c] - damping_force;
+      vMv += m * v_next[c] * v_next[c];
+      uKu += ui[c] * Ku[c];
+      aMa += m * a_next * a_next;
+      Fa += non_stiffness_force * a_next;
+      external_power += fi[c] * v_next[c];
+      damping_power += damping_force * v_next[c];
+      vi[c] = v_next[c];
+      ai[c] = a_next;
+      fi[c] = 0.0;  // ready for the providers of the next step
+    }
+  }
+  twice_kinetic_ = vMv;
+  twice_strain_ = uKu;
+  acceleration_term_ = -dt * dt / 8.0 * aMa + dt * dt / 4.0 * Fa;
+  external_power_ = external_power;
+  damping_power_ = damping_power;
+}
+
+void Stepper::accumulate_work(const double* v) {
+  const double half_dt = 0.5 * parameters_.dt;
+  for (std::size_t k = 0; k < providers_.size(); ++k) {
+    const double power = providers_[k]->power(v);
+    provider_work_[k] += half_dt * (provider_power_[k] + power);
+    provider_power_[k] = power;
+  }
+}
+
+double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, double t0) {
+  if (!energy_started_) reset_energy(u, v, a, t0);
+  const std::int64_t n = n_dofs();
+  const double dt = parameters_.dt;
+  const double half_dt = 0.5 * dt;
+  const bool stiffness_damping = parameters_.beta != 0.0;
+  double* v_half = v_half_.data();
+  double* f = external_force_.data();
+
+  for (std::int64_t step = 0; step < n_steps; ++step) {
+    // Multiplying, not accumulating, keeps t free of drift over many steps.
+    const double t_next = t0 + static_cast<double>(step + 1) * dt;
+
+#pragma omp parallel for schedule(static)
+    for (std::int64_t d = 0; d < n; ++d) {
+      const double velocity_half = v[d] + half_dt * a[d];
+      v[d] = velocity_half;
+      u[d] += dt * velocity_half;
+      if (stiffness_damping) v_half[d] = velocity_half;
+    }
+
+    for (auto& provider : providers_) provider->add_forces(t_next, u, v, f);
+
+    const double previous_external_power = external_power_;
+    const double previous_damping_power = damping_power_;
+    if (stiffness_damping)
+      pass_b<true>(u, v, a);
+    else
+      pass_b<false>(u, v, a);
+    external_work_ += half_dt * (previous_external_power + external_power_);
+    damping_work_ += half_dt * (previous_damping_power + damping_power_);
+    accumulate_work(v);
+  }
+  return t0 + static_cast<double>(n_steps) * dt;
+}
+
+void Stepper::reset_energy(const double* u, const double* v, const double* a, double t0) {
+  const std::int64_t n = n_dofs();
+  std::vector<double> Ku(n);
+  spmv(stiffness_, u, Ku.data());
+  double* f = external_force_.data();
+  std::fill(external_force_.begin(), external_force_.end(), 0.0);
+  for (auto& provider : providers_) provider->add_forces(t0, u, v, f);
+
+  double vMv = 0.0, uKu = 0.0, aMa = 0.0, Fa = 0.0, external_power = 0.0, damping_power = 0.0;
+#pragma omp parallel for schedule(static) \
+    reduction(+ : vMv, uKu, aMa, Fa, external_power, damping_power)
+  for (std::int64_t d = 0; d < n; ++d) {
+    const double m = mass_[d / 3];
+    // The non-stiffness force that a_0 implies: M a_0 = F_0 - K u_0.
+    const double non_stiffness_force = m * a[d] + Ku[d];
+    vMv += m * v[d] * v[d];
+    uKu += u[d] * Ku[d];
+    aMa += m * a[d] * a[d];
+    Fa += non_stiffness_force * a[d];
+    external_power += f[d] * v[d];
+    damping_power += (f[d] - non_stiffness_force) * v[d];
+  }
+  std::fill(external_force_.begin(), external_force_.end(), 0.0);
+
+  const double dt = parameters_.dt;
+  twice_kinetic_ = vMv;
+  twice_strain_ = uKu;
+  acceleration_term_ = -dt * dt / 8.0 * aMa + dt * dt / 4.0 * Fa;
+  initial_energy_ = 0.5 * vMv + 0.5 * uKu + acceleration_term_;
+  external_power_ = external_power;
+  damping_power_ = damping_power;
+  external_work_ = 0.0;
+  damping_work_ = 0.0;
+  for (std::size_t k = 0; k < providers_.size(); ++k) {
+    provider_power_[k] = providers_[k]->power(v);
+    provider_work_[k] = 0.0;
+  }
+  energy_started_ = true;
+}
+
+EnergyReport Stepper::energy() const {
+  EnergyReport report;
+  report.kinetic = 0.5 * twice_kinetic_;
+  report.strain = 0.5 * twice_strain_;
+  report.total = report.kinetic + report.strain + acceleration_term_;
+  report.initial = initial_energy_;
+  report.external_work = external_work_;
+  report.damping_work = damping_work_;
+  report.balance = report.total - report.initial - report.external_work + report.damping_work;
+  for (const auto& provider : providers_) report.provider_names.push_back(provider->name());
+  report.provider_work = provider_work_;
+  return report;
+}
+
+}  // namespace cavern

@@ -1,0 +1,111 @@
+// Explicit central-difference time stepping in velocity-Verlet form with implicit per-node
+// damping, force providers and an exact discrete energy balance (DESIGN sec. 3).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "bsr.hpp"
+#include "force_provider.hpp"
+
+namespace cavern {
+
+struct StepperParameters {
+  double dt = 0.0;     // time step (s)
+  double alpha = 0.0;  // mass-proportional Rayleigh coefficient (1/s), implicit per node
+  double beta = 0.0;   // stiffness-proportional Rayleigh coefficient (s), explicit on v_{n+1/2}
+};
+
+/// Energy terms of the current state (J). balance = total - initial - external_work +
+/// damping_work is zero to round-off for a linear problem with symmetric K.
+struct EnergyReport {
+  double kinetic = 0.0;        // 1/2 v.Mv
+  double strain = 0.0;         // 1/2 u.Ku
+  double total = 0.0;          // H_n
+  double initial = 0.0;        // H_0
+  double external_work = 0.0;  // trapezoid integral of f_ext . v
+  double damping_work = 0.0;   // trapezoid integral of d . v (dissipated)
+  double balance = 0.0;
+  std::vector<std::string> provider_names;
+  std::vector<double> provider_work;  // each provider's share of external_work
+};
+
+/// Velocity-Verlet central difference for M a + d(v) + K u = f_ext(t), lumped M.
+/// Per step, from (u_n, v_n, a_n) at t_n:
+///   pass A (per dof):  v_{n+1/2} = v_n + dt/2 a_n,  u_{n+1} = u_n + dt v_{n+1/2}
+///   providers:         f = f_ext(t_{n+1})
+///   pass B (per node, fused with the SpMV):
+///     r = f - K (u_{n+1} + beta v_{n+1/2})
+///     (M (1 + dt/2 alpha) I + dt/2 C_i) v_{n+1} = M v_{n+1/2} + dt/2 r
+///     a_{n+1} = (r - (alpha M + C_i) v_{n+1}) / M
+/// Energy (leapfrog M (v_{n+1/2} - v_{n-1/2}) = dt (F_n - K u_n) with F the non-stiffness force
+/// f_ext - d, d = (alpha M + C) v_n + beta K v_{n-1/2}):
+///   E_{n+1/2} = 1/2 v_{n+1/2}.M v_{n+1/2} + 1/2 u_n.K u_{n+1} grows by dt F_n.v_n, so
+///   H_n = E_{n+1/2} - dt/2 F_n.v_n = 1/2 v.Mv + 1/2 u.Ku - dt^2/8 a.Ma + dt^2/4 F.a
+///   obeys H_{n+1} - H_n = dt/2 (F_n.v_n + F_{n+1}.v_{n+1}) exactly (K symmetric).
+/// The stiffness, mass and providers are borrowed; u, v, a are modified in place.
+class Stepper {
+ public:
+  /// Throws std::invalid_argument for a non-positive mass or dt, or negative alpha, beta.
+  Stepper(const BlockCsrView& stiffness, const double* mass, const StepperParameters& parameters);
+
+  /// Implicit 3x3 dashpots C (k, 3, 3) at nodes (k); replaces any previous set. A node listed
+  /// twice gets the sum of its dashpots. Precomputes (M(1 + dt/2 alpha) I + dt/2 C)^-1.
+  void set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C);
+
+  /// Adds a force provider (shared: the caller may keep and query it).
+  void add_provider(std::shared_ptr<ForceProvider> provider);
+
+  /// Advances (u, v, a) (3 n_nodes each, in place) by n_steps from t0; returns t0 + n_steps dt.
+  /// Starts the energy account from this state if reset_energy was never called.
+  double run(double* u, double* v, double* a, std::int64_t n_steps, double t0);
+
+  /// Sets H_0 from the state (u, v, a) at t0 and zeroes the accumulated work. H_0 uses
+  /// F_0 = M a_0 + K u_0 (exact for any a_0); the damping power at t0 is (f_ext(t0) - F_0).v_0,
+  /// which is the damping force's power whenever a_0 came from this scheme.
+  void reset_energy(const double* u, const double* v, const double* a, double t0);
+
+  EnergyReport energy() const;
+
+  double dt() const { return parameters_.dt; }
+  std::int64_t n_nodes() const { return stiffness_.n_block_rows; }
+  std::int64_t n_dofs() const { return 3 * stiffness_.n_block_rows; }
+
+ private:
+  template <bool kStiffnessDamping>
+  void pass_b(double* u, double* v, double* a);
+  void accumulate_work(const double* v);
+
+  BlockCsrView stiffness_;
+  const double* mass_;
+  StepperParameters parameters_;
+
+  // Dashpots: slot of each node (-1: none), C and the inverse of the implicit 3x3 system.
+  std::vector<std::int32_t> dashpot_slot_;
+  std::vector<double> dashpot_C_;        // (k, 9)
+  std::vector<double> dashpot_inverse_;  // (k, 9)
+
+  std::vector<std::shared_ptr<ForceProvider>> providers_;
+
+  // Scratch, allocated once: external forces (zeroed again by pass B as it reads them) and,
+  // for beta != 0, a copy of v_{n+1/2} that pass B reads while overwriting v.
+  std::vector<double> external_force_;
+  std::vector<double> v_half_;
+
+  // Energy account.
+  bool energy_started_ = false;
+  double initial_energy_ = 0.0;
+  double twice_kinetic_ = 0.0;      // v.Mv
+  double twice_strain_ = 0.0;       // u.Ku
+  double acceleration_term_ = 0.0;  // -dt^2/8 a.Ma + dt^2/4 F.a
+  double external_work_ = 0.0;
+  double damping_work_ = 0.0;
+  double external_power_ = 0.0;  // f_ext.v at the current step
+  double damping_power_ = 0.0;   // d.v at the current step
+  std::vector<double> provider_work_;
+  std::vector<double> provider_power_;
+};
+
+}  // namespace cavern
