@@ -181,33 +181,36 @@ class RunWriter:
         return peaks
 
     def _open_fields(self) -> None:
-        from dolfinx import fem, io
+        """One temporal XDMF collection holding every field per time (ParaView, meshio read it).
+
+        Fields are written at the cell vertices (the Q1 geometry): for Q2 the vertex values
+        are the Q2 nodal values there, so nothing is interpolated.
+        """
+        import meshio
 
         model = self.simulation.model
-        self.xdmf = io.XDMFFile(model.mesh.comm, str(self.out_dir / "fields.xdmf"), "w")
-        self.xdmf.write_mesh(model.mesh)
-        # XDMF holds fields on the mesh's own (Q1) geometry; Q2 fields are interpolated to Q1.
-        self._u_fn = fem.Function(model.V, name="displacement")
-        self._v_fn = fem.Function(model.V, name="velocity")
-        if model.V.ufl_element().degree() != 1:
-            output_space = fem.VectorFunctionSpace(model.mesh, ("Lagrange", 1))
-            self._u_out = fem.Function(output_space, name="displacement")
-            self._v_out = fem.Function(output_space, name="velocity")
-        else:
-            self._u_out, self._v_out = self._u_fn, self._v_fn
+        dofs_per_cell = model.V.dofmap.dof_layout.num_dofs
+        cell_nodes = model.V.dofmap.list.array.reshape(-1, dofs_per_cell)[:, :8]  # vertices come first
+        self._field_nodes, compact = np.unique(cell_nodes, return_inverse=True)
+        # dolfinx numbers hexahedron vertices lexicographically; VTK/XDMF goes round each face.
+        hexahedra = compact.reshape(-1, 8)[:, [0, 1, 3, 2, 4, 5, 7, 6]]
+        import h5py
+
+        self.xdmf = meshio.xdmf.TimeSeriesWriter(str(self.out_dir / "fields.xdmf"))
+        # meshio's __enter__ opens the .h5 in the working directory; the XDMF refers to it by
+        # name only, so it must sit beside the .xdmf: open it there ourselves.
+        self.xdmf.h5_filename = "fields.h5"
+        self.xdmf.h5_file = h5py.File(self.out_dir / "fields.h5", "w")
+        self.xdmf.write_points_cells(model.node_coords[self._field_nodes], [("hexahedron", hexahedra)])
 
     def _write_fields(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
-        fields = self.scene["output"]["fields"]
-        for name, values, fn, out in (("displacement", u, self._u_fn, self._u_out),
-                                      ("velocity", v, self._v_fn, self._v_out)):
-            if name not in fields:
-                continue
-            fn.x.array[:] = values
-            if out is not fn:
-                out.interpolate(fn)
-            self.xdmf.write_function(out, t)
+        point_data = {}
+        for name, values in (("displacement", u), ("velocity", v)):
+            if name in self.scene["output"]["fields"]:
+                point_data[name] = values.reshape(-1, 3)[self._field_nodes]
+        self.xdmf.write_data(t, point_data=point_data)
 
     def _close_fields(self) -> None:
         if self.xdmf is not None:
-            self.xdmf.close()
+            self.xdmf.__exit__(None, None, None)
             self.xdmf = None

@@ -187,7 +187,7 @@ def prepare(scene: Scene) -> Simulation:
     if "seismic_input" in scene.effects:
         from pyfem.seismic.setup import seismic_input_from_scene
 
-        simulation.freefield, simulation.input_arrays = seismic_input_from_scene(scene, model, time_step.dt)
+        simulation.freefield, simulation.input_arrays = seismic_input_from_scene(scene, model)
         if scene["boundary"]["type"] in ("fixed", "free"):
             simulation.input_arrays = None  # no boundary to carry the input: the comparison runs of the study
     monitors = scene.get("monitor", [])
