@@ -120,8 +120,8 @@ def bytes_moved_per_step(stiffness) -> int:
                + 11 * 8 * stiffness.shape[0])
 
 
-def main(argv=None) -> dict:
-    """Runs the benchmark and prints a markdown table; returns the results."""
+def main(argv=None) -> int:
+    """Runs the benchmark, writes the results as JSON and prints a markdown table; returns 0."""
     parser = argparse.ArgumentParser(prog="pyfem bench", description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[30_000, 200_000, 700_000])
     parser.add_argument("--steps", type=int, default=50)
@@ -168,7 +168,7 @@ def main(argv=None) -> dict:
     with open(args.out, "w") as stream:
         json.dump(result, stream, indent=2)
     print(markdown_table(result))
-    return result
+    return 0
 
 
 def markdown_table(result: dict) -> str:
