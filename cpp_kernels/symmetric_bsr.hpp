@@ -1,0 +1,222 @@
+// Symmetric 3x3 block CSR: only the blocks on and above the diagonal are stored.
+//
+// The stiffness matrix is symmetric, so half of its blocks carry no information. The
+// explicit step is bound by streaming the matrix from memory; storing the upper triangle
+// moves about half the bytes per product, at the price of scattered writes y_j += B^T x_i
+// that stay in cache (the vectors are small next to the matrix).
+#pragma once
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "bsr.hpp"
+
+namespace cavern {
+
+/// Owned upper-triangular block storage of a symmetric matrix given as a full BlockCsrView.
+/// Row i holds its diagonal block first, then the blocks of columns j > i (sorted).
+/// K x = U x + (strict U)^T x.
+class SymmetricBlockCsr {
+ public:
+  /// Copies the blocks with column >= row from K (which must hold every diagonal block).
+  explicit SymmetricBlockCsr(const BlockCsrView& K) : n_(K.n_block_rows) {
+    indptr_.assign(n_ + 1, 0);
+    for (std::int64_t i = 0; i < n_; ++i) {
+      bool has_diagonal = false;
+      for (std::int64_t k = K.indptr[i]; k < K.indptr[i + 1]; ++k) {
+        if (K.indices[k] == i) has_diagonal = true;
+        if (K.indices[k] >= i) ++indptr_[i + 1];
+      }
+      if (!has_diagonal)
+        throw std::invalid_argument("stiffness block row " + std::to_string(i) +
+                                    " has no diagonal block");
+    }
+    for (std::int64_t i = 0; i < n_; ++i) indptr_[i + 1] += indptr_[i];
+    indices_.resize(indptr_[n_]);
+    blocks_.resize(9 * indptr_[n_]);
+    for (std::int64_t i = 0; i < n_; ++i) {
+      std::int64_t next = indptr_[i] + 1;  // slot indptr_[i] is the diagonal
+      for (std::int64_t k = K.indptr[i]; k < K.indptr[i + 1]; ++k) {
+        const std::int32_t j = K.indices[k];
+        if (j < i) continue;
+        const std::int64_t slot = (j == i) ? indptr_[i] : next++;
+        indices_[slot] = j;
+        std::copy(K.blocks + 9 * k, K.blocks + 9 * k + 9, blocks_.data() + 9 * slot);
+      }
+      // Columns after the diagonal in increasing order keep the scattered writes local.
+      sort_row(i);
+    }
+  }
+
+  std::int64_t n_block_rows() const { return n_; }
+  std::int64_t n_blocks() const { return indptr_[n_]; }
+  /// Bytes streamed per product: blocks, column indices and row pointers.
+  std::int64_t bytes() const {
+    return static_cast<std::int64_t>(blocks_.size() * sizeof(double) +
+                                     indices_.size() * sizeof(std::int32_t) +
+                                     indptr_.size() * sizeof(std::int64_t));
+  }
+
+  /// y = K x (x, y: 3 n values; y is overwritten). OpenMP over row ranges.
+  void multiply(const double* x, double* y) const { product<1>(x, nullptr, y, nullptr); }
+
+  /// y1 = K x1 and y2 = K x2 reading each stored block once.
+  void multiply_dual(const double* x1, const double* x2, double* y1, double* y2) const {
+    product<2>(x1, x2, y1, y2);
+  }
+
+ private:
+  void sort_row(std::int64_t i) {
+    const std::int64_t begin = indptr_[i] + 1, end = indptr_[i + 1];
+    std::vector<std::int64_t> order(end - begin);
+    for (std::int64_t k = 0; k < end - begin; ++k) order[k] = begin + k;
+    std::sort(order.begin(), order.end(),
+              [&](std::int64_t a, std::int64_t b) { return indices_[a] < indices_[b]; });
+    std::vector<std::int32_t> indices(order.size());
+    std::vector<double> blocks(9 * order.size());
+    for (std::size_t k = 0; k < order.size(); ++k) {
+      indices[k] = indices_[order[k]];
+      std::copy(blocks_.data() + 9 * order[k], blocks_.data() + 9 * order[k] + 9,
+                blocks.data() + 9 * k);
+    }
+    std::copy(indices.begin(), indices.end(), indices_.begin() + begin);
+    std::copy(blocks.begin(), blocks.end(), blocks_.begin() + 9 * begin);
+  }
+
+  // Row ranges with about equal numbers of blocks, and for each range the columns beyond
+  // it that its rows write to (held in a per-thread spill buffer, added after a barrier).
+  void partition(int threads) const {
+    if (threads == partition_threads_) return;
+    row_start_.assign(threads + 1, n_);
+    row_start_[0] = 0;
+    const std::int64_t total = n_blocks();
+    std::int64_t row = 0;
+    for (int t = 1; t < threads; ++t) {
+      const std::int64_t target = total * t / threads;
+      while (row < n_ && indptr_[row] < target) ++row;
+      row_start_[t] = row;
+    }
+    spill_end_.assign(threads, 0);
+    spill_.assign(threads, {});
+    for (int t = 0; t < threads; ++t) {
+      std::int64_t last = row_start_[t + 1];
+      for (std::int64_t i = row_start_[t]; i < row_start_[t + 1]; ++i)
+        if (indptr_[i + 1] > indptr_[i]) last = std::max<std::int64_t>(last, indices_[indptr_[i + 1] - 1] + 1);
+      spill_end_[t] = last;
+      spill_[t].assign(3 * (last - row_start_[t + 1]), 0.0);
+    }
+    partition_threads_ = threads;
+  }
+
+  template <int kVectors>
+  void product(const double* x1, const double* x2, double* y1, double* y2) const {
+    const int threads = omp_get_max_threads();
+    partition(threads);
+    // Two vectors share one spill buffer layout: the second half holds vector 2.
+    if (kVectors == 2)
+      for (int t = 0; t < threads; ++t) spill_[t].resize(6 * (spill_end_[t] - row_start_[t + 1]));
+#pragma omp parallel num_threads(threads)
+    {
+      // A smaller team than asked (nested parallelism) falls back to one thread doing all rows.
+      const int team = omp_get_num_threads();
+      const int t = omp_get_thread_num();
+      if (team == threads) {
+        rows<kVectors>(t, x1, x2, y1, y2);
+#pragma omp barrier
+        add_spills<kVectors>(t, y1, y2);
+      } else if (t == 0) {
+        for (int s = 0; s < threads; ++s) rows<kVectors>(s, x1, x2, y1, y2);
+        for (int s = 0; s < threads; ++s) add_spills<kVectors>(s, y1, y2);
+      }
+    }
+  }
+
+  template <int kVectors>
+  void rows(int t, const double* x1, const double* x2, double* y1, double* y2) const {
+    const std::int64_t r0 = row_start_[t], r1 = row_start_[t + 1];
+    const std::int64_t spill_size = 3 * (spill_end_[t] - r1);
+    double* spill1 = spill_[t].data();
+    double* spill2 = spill1 + spill_size;
+    std::fill(y1 + 3 * r0, y1 + 3 * r1, 0.0);
+    if (kVectors == 2) std::fill(y2 + 3 * r0, y2 + 3 * r1, 0.0);
+    std::fill(spill_[t].begin(), spill_[t].end(), 0.0);
+    for (std::int64_t i = r0; i < r1; ++i) {
+      const double* xi = x1 + 3 * i;
+      const double* wi = (kVectors == 2) ? x2 + 3 * i : nullptr;
+      const double* d = blocks_.data() + 9 * indptr_[i];
+      double a0 = y1[3 * i] + d[0] * xi[0] + d[1] * xi[1] + d[2] * xi[2];
+      double a1 = y1[3 * i + 1] + d[3] * xi[0] + d[4] * xi[1] + d[5] * xi[2];
+      double a2 = y1[3 * i + 2] + d[6] * xi[0] + d[7] * xi[1] + d[8] * xi[2];
+      double b0 = 0.0, b1 = 0.0, b2 = 0.0;
+      if constexpr (kVectors == 2) {
+        b0 = y2[3 * i] + d[0] * wi[0] + d[1] * wi[1] + d[2] * wi[2];
+        b1 = y2[3 * i + 1] + d[3] * wi[0] + d[4] * wi[1] + d[5] * wi[2];
+        b2 = y2[3 * i + 2] + d[6] * wi[0] + d[7] * wi[1] + d[8] * wi[2];
+      }
+      for (std::int64_t k = indptr_[i] + 1; k < indptr_[i + 1]; ++k) {
+        const double* b = blocks_.data() + 9 * k;
+        const std::int64_t j = indices_[k];
+        const double* xj = x1 + 3 * j;
+        a0 += b[0] * xj[0] + b[1] * xj[1] + b[2] * xj[2];
+        a1 += b[3] * xj[0] + b[4] * xj[1] + b[5] * xj[2];
+        a2 += b[6] * xj[0] + b[7] * xj[1] + b[8] * xj[2];
+        // The transposed block sends row i's values to row j.
+        double* target = (j < r1) ? y1 + 3 * j : spill1 + 3 * (j - r1);
+        target[0] += b[0] * xi[0] + b[3] * xi[1] + b[6] * xi[2];
+        target[1] += b[1] * xi[0] + b[4] * xi[1] + b[7] * xi[2];
+        target[2] += b[2] * xi[0] + b[5] * xi[1] + b[8] * xi[2];
+        if constexpr (kVectors == 2) {
+          const double* wj = x2 + 3 * j;
+          b0 += b[0] * wj[0] + b[1] * wj[1] + b[2] * wj[2];
+          b1 += b[3] * wj[0] + b[4] * wj[1] + b[5] * wj[2];
+          b2 += b[6] * wj[0] + b[7] * wj[1] + b[8] * wj[2];
+          double* target2 = (j < r1) ? y2 + 3 * j : spill2 + 3 * (j - r1);
+          target2[0] += b[0] * wi[0] + b[3] * wi[1] + b[6] * wi[2];
+          target2[1] += b[1] * wi[0] + b[4] * wi[1] + b[7] * wi[2];
+          target2[2] += b[2] * wi[0] + b[5] * wi[1] + b[8] * wi[2];
+        }
+      }
+      y1[3 * i] = a0;
+      y1[3 * i + 1] = a1;
+      y1[3 * i + 2] = a2;
+      if constexpr (kVectors == 2) {
+        y2[3 * i] = b0;
+        y2[3 * i + 1] = b1;
+        y2[3 * i + 2] = b2;
+      }
+    }
+  }
+
+  // Thread t adds what the row ranges before it wrote beyond themselves into its rows.
+  template <int kVectors>
+  void add_spills(int t, double* y1, double* y2) const {
+    const std::int64_t r0 = row_start_[t], r1 = row_start_[t + 1];
+    for (int s = 0; s < t; ++s) {
+      const std::int64_t begin = std::max(r0, row_start_[s + 1]);
+      const std::int64_t end = std::min(r1, spill_end_[s]);
+      const std::int64_t spill_size = 3 * (spill_end_[s] - row_start_[s + 1]);
+      const double* spill1 = spill_[s].data() - 3 * row_start_[s + 1];
+      for (std::int64_t d = 3 * begin; d < 3 * end; ++d) y1[d] += spill1[d];
+      if constexpr (kVectors == 2) {
+        const double* spill2 = spill1 + spill_size;
+        for (std::int64_t d = 3 * begin; d < 3 * end; ++d) y2[d] += spill2[d];
+      }
+    }
+  }
+
+  std::int64_t n_;
+  std::vector<std::int64_t> indptr_;
+  std::vector<std::int32_t> indices_;
+  std::vector<double> blocks_;
+  mutable int partition_threads_ = 0;
+  mutable std::vector<std::int64_t> row_start_;
+  mutable std::vector<std::int64_t> spill_end_;
+  mutable std::vector<std::vector<double>> spill_;
+};
+
+}  // namespace cavern

@@ -1,0 +1,68 @@
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <cmath>
+#include <vector>
+
+#include "bsr.hpp"
+#include "random_system.hpp"
+#include "symmetric_bsr.hpp"
+
+using namespace cavern;
+using namespace cavern::testing;
+
+namespace {
+
+double relative_difference(const std::vector<double>& a, const std::vector<double>& b) {
+  double difference = 0.0, norm = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    difference = std::max(difference, std::abs(a[k] - b[k]));
+    norm = std::max(norm, std::abs(b[k]));
+  }
+  return difference / norm;
+}
+
+std::vector<double> random_vector(std::int64_t n, unsigned seed) {
+  std::mt19937_64 generator(seed);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  std::vector<double> x(n);
+  for (double& value : x) value = uniform(generator);
+  return x;
+}
+
+}  // namespace
+
+// The symmetric product equals the full block product for 1, 2 and 3 threads (the spill
+// buffers of lower row ranges must reach the rows of higher ones).
+TEST(SymmetricBlockCsr, EqualsFullProductForAnyThreadCount) {
+  const BlockSystem system = random_spd_system(400, 6, 7);
+  const SymmetricBlockCsr upper(system.view());
+  EXPECT_LT(upper.n_blocks(), system.view().n_blocks());
+  const auto x = random_vector(system.n_dofs(), 1);
+  const auto w = random_vector(system.n_dofs(), 2);
+  std::vector<double> full(system.n_dofs()), full_w(system.n_dofs());
+  spmv(system.view(), x.data(), full.data());
+  spmv(system.view(), w.data(), full_w.data());
+  int checks = 0;
+  const int saved = omp_get_max_threads();
+  for (int threads : {1, 2, 3}) {
+    omp_set_num_threads(threads);
+    std::vector<double> y(system.n_dofs(), 99.0), y1(system.n_dofs(), 99.0), y2(system.n_dofs(), 99.0);
+    upper.multiply(x.data(), y.data());
+    upper.multiply_dual(x.data(), w.data(), y1.data(), y2.data());
+    EXPECT_LT(relative_difference(y, full), 1e-13) << threads << " threads";
+    EXPECT_LT(relative_difference(y1, full), 1e-13) << threads << " threads";
+    EXPECT_LT(relative_difference(y2, full_w), 1e-13) << threads << " threads";
+    checks += 3;
+  }
+  omp_set_num_threads(saved);
+  EXPECT_EQ(checks, 9);
+}
+
+TEST(SymmetricBlockCsr, MissingDiagonalBlockIsAnError) {
+  BlockSystem system = random_spd_system(5, 2, 3);
+  // Drop row 0's diagonal by pointing it at column 1.
+  for (std::int64_t k = system.indptr[0]; k < system.indptr[1]; ++k)
+    if (system.indices[k] == 0) system.indices[k] = 4;
+  EXPECT_THROW(SymmetricBlockCsr upper(system.view()), std::invalid_argument);
+}
