@@ -5,12 +5,14 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "bsr.hpp"
+#include "contact.hpp"
 #include "parallel.hpp"
 #include "seismic_input.hpp"
 #include "stable_step.hpp"
@@ -180,6 +182,157 @@ Borrowed arrays are kept alive by this object and must not be modified while it 
           "Forces (N) of every input node at time t (s): new float64 array (n_input_nodes, 3).")
       .def_property_readonly("n_input_nodes", &SeismicInput::n_input_nodes);
 
+  py::class_<ContactPairs, std::shared_ptr<ContactPairs>>(
+      m, "ContactPairs",
+      R"(Interlayer contact node pairs (paper Sec. 3, Eqs. 12-20; Liu & Sharan 1995).
+
+Pair p joins node i = pairs[p, 0] and node j = pairs[p, 1] (the paper's i') at the same place on
+the two sides of an interface. Each step, after the stepper's velocity update without contact,
+the force R (on i; -R on j) that keeps the pair stuck is
+    R_stick = W [n n^T Delta_pred + P_t (Delta_pred - Delta_{n+1})] / dt^2,
+    W^-1 = Atilde_i^-1 + Atilde_j^-1  (W = M_i M_j / (M_i + M_j) I without damping),
+Delta = u_j - u_i, Delta_pred its prediction at n+2 without contact. With the total force
+F = F0 + R, N = -n.F (compression > 0), T = P_t F:
+    tension: stick while the bond is intact and -N <= t_s D A, else separate (F = 0) for good;
+    compression: stick while |T| <= mu_s N D + (bond intact: c D A), else slip with
+    |T| = mu_d N D (bond lost for good). A separated pair carries nothing until its gap closes.
+D = 1, or D(t) = eta(t) gamma(dv_t) after set_deterioration (Eqs. 8-11).
+States: 0 bonded, 1 stick (bond lost), 2 sliding, 3 separated.
+
+Args:
+    pairs: int32 (n_pairs, 2) node indices (i, j). Copied.
+    area: float64 (n_pairs,) lumped interface area of the pair (m^2), > 0. Copied.
+    normal: float64 (n_pairs, 3) unit normal from side i towards side j. Copied.
+    static_force: float64 (n_pairs, 3) F0 = A sigma0 n, the static force of side j on node i (N);
+        node j gets -F0. Copied.
+    cohesion: c (Pa), >= 0.
+    tensile_strength: t_s (Pa), >= 0.
+    friction_static: mu_s = tan(static friction angle), >= 0.
+    friction_dynamic: mu_d = tan(dynamic friction angle), >= 0.)")
+      .def(
+          py::init([](const py::object& pairs_object, const py::object& area_object,
+                      const py::object& normal_object, const py::object& static_force_object,
+                      double cohesion, double tensile_strength, double friction_static,
+                      double friction_dynamic) {
+            auto pairs = checked_array<std::int32_t>(pairs_object, "pairs", {kAny, 2});
+            const py::ssize_t n_pairs = pairs.shape(0);
+            auto area = checked_array<double>(area_object, "area", {n_pairs});
+            auto normal = checked_array<double>(normal_object, "normal", {n_pairs, 3});
+            auto static_force =
+                checked_array<double>(static_force_object, "static_force", {n_pairs, 3});
+            ContactGeometry geometry{n_pairs, pairs.data(), area.data(), normal.data(),
+                                     static_force.data()};
+            ContactStrength strength{cohesion, tensile_strength, friction_static, friction_dynamic};
+            return std::make_shared<ContactPairs>(geometry, strength);
+          }),
+          py::arg("pairs"), py::arg("area"), py::arg("normal"), py::arg("static_force"),
+          py::arg("cohesion"), py::arg("tensile_strength"), py::arg("friction_static"),
+          py::arg("friction_dynamic"))
+      .def(
+          "set_deterioration",
+          [](ContactPairs& contact, double R0, double lam, double duration, double m_, double n_,
+             double p_) {
+            contact.set_deterioration(DeteriorationParameters{R0, lam, duration, m_, n_, p_});
+          },
+          py::arg("R0"), py::arg("lam"), py::arg("duration"), py::arg("m"), py::arg("n"),
+          py::arg("p"),
+          R"(Switches the deterioration D(t) = eta(t) gamma(dv_t) on (Eqs. 8-11):
+eta = R0 + (1 - R0) exp(-lam t / duration), gamma = m (|dv_t| + n)^(-p), t the stepper time (s)
+clamped at 0, dv_t = |P_t (v_j - v_i)| (m/s) at the previous step (after its contact force).
+
+Args:
+    R0: limit of eta, in (0, 1].  lam: decay rate, >= 0.  duration: t_s (s), > 0.
+    m: > 0.  n: slip-rate offset (m/s), > 0.  p: exponent, >= 0.)")
+      .def(
+          "state",
+          [](const ContactPairs& contact) {
+            const auto& state = contact.state();
+            py::array_t<std::int8_t> out(static_cast<py::ssize_t>(state.size()));
+            std::copy(state.begin(), state.end(), out.mutable_data());
+            return out;
+          },
+          "State of each pair: new int8 array (n_pairs,): 0 bonded, 1 stick, 2 sliding, "
+          "3 separated.")
+      .def(
+          "bond_intact",
+          [](const ContactPairs& contact) {
+            const auto& bond = contact.bond_intact();
+            py::array_t<bool> out(static_cast<py::ssize_t>(bond.size()));
+            bool* data = out.mutable_data();
+            for (std::size_t p = 0; p < bond.size(); ++p) data[p] = bond[p] != 0;
+            return out;
+          },
+          "Whether cohesion and tensile strength are intact: new bool array (n_pairs,).")
+      .def(
+          "normal_force",
+          [](const ContactPairs& contact) {
+            const auto& N = contact.normal_force();
+            py::array_t<double> out(static_cast<py::ssize_t>(N.size()));
+            std::copy(N.begin(), N.end(), out.mutable_data());
+            return out;
+          },
+          "Total (static + dynamic) normal force N = -n.F on node i (N), compression positive: "
+          "new float64 array (n_pairs,).")
+      .def(
+          "tangential_force",
+          [](const ContactPairs& contact) {
+            const auto& T = contact.tangential_force();
+            py::array_t<double> out(
+                {static_cast<py::ssize_t>(contact.n_pairs()), static_cast<py::ssize_t>(3)});
+            std::copy(T.begin(), T.end(), out.mutable_data());
+            return out;
+          },
+          "Total tangential force T = P_t F on node i (N): new float64 array (n_pairs, 3).")
+      .def(
+          "contact_force",
+          [](const ContactPairs& contact) {
+            const auto& R = contact.contact_force();
+            py::array_t<double> out(
+                {static_cast<py::ssize_t>(contact.n_pairs()), static_cast<py::ssize_t>(3)});
+            std::copy(R.begin(), R.end(), out.mutable_data());
+            return out;
+          },
+          "Dynamic contact force R on node i of the last step (N; node j got -R), the total "
+          "force being F0 + R: new float64 array (n_pairs, 3).")
+      .def(
+          "deterioration",
+          [](const ContactPairs& contact) {
+            const auto& D = contact.deterioration();
+            py::array_t<double> out(static_cast<py::ssize_t>(D.size()));
+            std::copy(D.begin(), D.end(), out.mutable_data());
+            return out;
+          },
+          "Deterioration coefficient D of the last step (1 before any step or when off): new "
+          "float64 array (n_pairs,).")
+      .def(
+          "relative_displacement",
+          [](const ContactPairs& contact, const py::object& u_object) {
+            auto u = checked_array<double>(u_object, "u", {kAny});
+            const auto& nodes = contact.unique_nodes();
+            const py::ssize_t needed = nodes.empty() ? 0 : 3 * (nodes.back() + 1);
+            if (u.shape(0) % 3 != 0 || u.shape(0) < needed)
+              throw py::value_error(
+                  "u: expected float64 array of shape (3 n_nodes,) with "
+                  "3 n_nodes >= " +
+                  std::to_string(needed) + "; got length " + std::to_string(u.shape(0)));
+            py::array_t<double> out(
+                {static_cast<py::ssize_t>(contact.n_pairs()), static_cast<py::ssize_t>(3)});
+            contact.relative_displacement(u.data(), out.mutable_data());
+            return out;
+          },
+          py::arg("u"),
+          "Delta = u_j - u_i (m) of every pair from the displacement u (3 n_nodes,) (read only): "
+          "new float64 array (n_pairs, 3). Normal gap n.Delta (> 0 open), slip P_t Delta.")
+      .def(
+          "state_counts",
+          [](const ContactPairs& contact) {
+            py::array_t<std::int64_t> out(static_cast<py::ssize_t>(4));
+            contact.state_counts(out.mutable_data());
+            return out;
+          },
+          "Number of pairs in each state 0..3: new int64 array (4,).")
+      .def_property_readonly("n_pairs", &ContactPairs::n_pairs);
+
   py::class_<Stepper>(m, "Stepper", R"(Velocity-Verlet central difference with lumped mass.
 
 Per step: v_half = v + dt/2 a; u += dt v_half; f = f_ext(t_{n+1});
@@ -229,6 +382,15 @@ Args:
           "Adds a SeismicInput force provider (borrowed, kept alive). ValueError names a node "
           "outside the model.")
       .def(
+          "add_contact",
+          [](Stepper& stepper, std::shared_ptr<ContactPairs> contact) {
+            stepper.set_contact(std::move(contact));
+          },
+          py::arg("contact"), py::keep_alive<1, 2>(),
+          "Attaches the interlayer ContactPairs (shared: query it during the run; kept alive). "
+          "One per Stepper. ValueError names a pair node outside the model or a pair joining a "
+          "node to itself. Without it contact costs nothing.")
+      .def(
           "run",
           [](Stepper& stepper, const py::object& u_object, const py::object& v_object,
              const py::object& a_object, std::int64_t n_steps, double t0) {
@@ -267,6 +429,8 @@ The GIL is released while stepping.)")
             result["initial"] = report.initial;
             result["external_work"] = report.external_work;
             result["damping_work"] = report.damping_work;
+            result["contact_work"] = report.contact_work;
+            result["friction_dissipation"] = report.friction_dissipation;
             result["balance"] = report.balance;
             py::dict provider_work;
             for (std::size_t k = 0; k < report.provider_work.size(); ++k)
@@ -277,8 +441,10 @@ The GIL is released while stepping.)")
           },
           R"(Energy account (J) of the current state: dict with kinetic (1/2 v.Mv), strain (1/2 u.Ku),
 total (H_n = kinetic + strain - dt^2/8 a.Ma + dt^2/4 F.a), initial (H_0), external_work,
-damping_work (dissipated), balance = H_n - H_0 - external_work + damping_work (zero to round-off
-for linear problems) and provider_work {name_index: work} (sums to external_work).)")
+damping_work (dissipated), contact_work (work of the dynamic contact forces R on the mesh,
+trapezoid), friction_dissipation (>= 0, work of the slip forces over the slip),
+balance = H_n - H_0 - external_work + damping_work - contact_work (zero to round-off for linear
+problems) and provider_work {name_index: work} (sums to external_work).)")
       .def(
           "reset_energy",
           [](Stepper& stepper, const py::object& u_object, const py::object& v_object,

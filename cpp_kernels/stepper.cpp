@@ -104,6 +104,80 @@ void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const 
   dashpot_inverse_ = std::move(inverse);
 }
 
+void Stepper::set_contact(std::shared_ptr<ContactPairs> contact) {
+  if (contact_)
+    throw std::invalid_argument(
+        "contact: this Stepper already has a ContactPairs; pass all "
+        "pairs in one ContactPairs");
+  contact->check_nodes(n_nodes());
+  contact_ = std::move(contact);
+  contact_scratch_.assign(6 * contact_->unique_nodes().size(), 0.0);
+  // The pairs start carrying their static force only: no dynamic contact force, no power.
+  contact_power_ = 0.0;
+}
+
+ImplicitNodeOperators Stepper::implicit_operators() const {
+  ImplicitNodeOperators operators;
+  operators.dt = parameters_.dt;
+  operators.alpha = parameters_.alpha;
+  operators.mass = mass_;
+  operators.dashpot_slot = dashpot_slot_.empty() ? nullptr : dashpot_slot_.data();
+  operators.dashpot_C = dashpot_C_.data();
+  operators.dashpot_inverse = dashpot_inverse_.data();
+  return operators;
+}
+
+void Stepper::contact_post_pass(double t, const double* u, double* v, double* a) {
+  const std::vector<std::int32_t>& nodes = contact_->unique_nodes();
+  const std::size_t n_pair_nodes = nodes.size();
+  double* before = contact_scratch_.data();
+  for (std::size_t k = 0; k < n_pair_nodes; ++k)
+    for (int c = 0; c < 3; ++c) {
+      before[6 * k + c] = v[3 * nodes[k] + c];
+      before[6 * k + 3 + c] = a[3 * nodes[k] + c];
+    }
+
+  const ImplicitNodeOperators operators = implicit_operators();
+  const ContactStepResult result = contact_->correct(t, operators, u, v, a);
+
+  // Pass B summed the pair nodes' energy terms without contact: add after minus before. The
+  // external force f is not kept by pass B; M a = f - K u - d gives it back (d = implicit damping
+  // + beta K v_{n+1/2}, unchanged stiffness part), and F = f + R - d = M a + K u.
+  const double beta = parameters_.beta;
+  double d_vMv = 0.0, d_aMa = 0.0, d_Fa = 0.0, d_external = 0.0, d_damping = 0.0;
+  for (std::size_t k = 0; k < n_pair_nodes; ++k) {
+    const std::int64_t node = nodes[k];
+    const double m = mass_[node];
+    double Ku[3], Kv[3] = {0.0, 0.0, 0.0}, damping[9], d_before[3], d_after[3];
+    block_row_product(stiffness_, node, u, Ku);
+    if (beta != 0.0) block_row_product(stiffness_, node, v_half_.data(), Kv);
+    operators.damping(node, damping);
+    const double* v_before = before + 6 * k;
+    const double* a_before = before + 6 * k + 3;
+    const double* v_after = v + 3 * node;
+    const double* a_after = a + 3 * node;
+    multiply_3x3(damping, v_before, d_before);
+    multiply_3x3(damping, v_after, d_after);
+    for (int c = 0; c < 3; ++c) {
+      d_before[c] += beta * Kv[c];
+      d_after[c] += beta * Kv[c];
+      const double f = m * a_before[c] + Ku[c] + d_before[c];
+      d_vMv += m * (v_after[c] * v_after[c] - v_before[c] * v_before[c]);
+      d_aMa += m * (a_after[c] * a_after[c] - a_before[c] * a_before[c]);
+      d_Fa += (m * a_after[c] + Ku[c]) * a_after[c] - (m * a_before[c] + Ku[c]) * a_before[c];
+      d_external += f * (v_after[c] - v_before[c]);
+      d_damping += d_after[c] * v_after[c] - d_before[c] * v_before[c];
+    }
+  }
+  const double dt = parameters_.dt;
+  twice_kinetic_ += d_vMv;
+  acceleration_term_ += -dt * dt / 8.0 * d_aMa + dt * dt / 4.0 * d_Fa;
+  external_power_ += d_external;
+  damping_power_ += d_damping;
+  contact_power_ = result.contact_power;
+  friction_dissipation_ += result.friction_dissipation;
+}
+
 void Stepper::add_provider(std::shared_ptr<ForceProvider> provider) {
   provider->check_nodes(n_nodes());
   providers_.push_back(std::move(provider));
@@ -214,12 +288,15 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
 
     const double previous_external_power = external_power_;
     const double previous_damping_power = damping_power_;
+    const double previous_contact_power = contact_power_;
     if (stiffness_damping)
       pass_b<true>(u, v, a);
     else
       pass_b<false>(u, v, a);
+    if (contact_) contact_post_pass(t_next, u, v, a);
     external_work_ += half_dt * (previous_external_power + external_power_);
     damping_work_ += half_dt * (previous_damping_power + damping_power_);
+    contact_work_ += half_dt * (previous_contact_power + contact_power_);
     accumulate_work(v);
   }
   return t0 + static_cast<double>(n_steps) * dt;
@@ -232,6 +309,14 @@ void Stepper::reset_energy(const double* u, const double* v, const double* a, do
   double* f = external_force_.data();
   std::fill(external_force_.begin(), external_force_.end(), 0.0);
   for (auto& provider : providers_) provider->add_forces(t0, u, v, f);
+  // The contact force of the last step is part of F_0 = M a_0 + K u_0, not damping.
+  std::vector<double> contact_force;
+  if (contact_) {
+    contact_force.assign(n, 0.0);
+    contact_->add_last_forces(contact_force.data());
+    contact_->observe_velocity(v);
+  }
+  const double* contact_f = contact_ ? contact_force.data() : nullptr;
 
   double vMv = 0.0, uKu = 0.0, aMa = 0.0, Fa = 0.0, external_power = 0.0, damping_power = 0.0;
 #pragma omp parallel for schedule(static) \
@@ -245,7 +330,8 @@ void Stepper::reset_energy(const double* u, const double* v, const double* a, do
     aMa += m * a[d] * a[d];
     Fa += non_stiffness_force * a[d];
     external_power += f[d] * v[d];
-    damping_power += (f[d] - non_stiffness_force) * v[d];
+    const double contact = contact_f ? contact_f[d] : 0.0;
+    damping_power += (f[d] + contact - non_stiffness_force) * v[d];
   }
   std::fill(external_force_.begin(), external_force_.end(), 0.0);
 
@@ -258,6 +344,9 @@ void Stepper::reset_energy(const double* u, const double* v, const double* a, do
   damping_power_ = damping_power;
   external_work_ = 0.0;
   damping_work_ = 0.0;
+  contact_power_ = contact_ ? contact_->contact_power(v) : 0.0;
+  contact_work_ = 0.0;
+  friction_dissipation_ = 0.0;
   for (std::size_t k = 0; k < providers_.size(); ++k) {
     provider_power_[k] = providers_[k]->power(v);
     provider_work_[k] = 0.0;
@@ -273,7 +362,10 @@ EnergyReport Stepper::energy() const {
   report.initial = initial_energy_;
   report.external_work = external_work_;
   report.damping_work = damping_work_;
-  report.balance = report.total - report.initial - report.external_work + report.damping_work;
+  report.contact_work = contact_work_;
+  report.friction_dissipation = friction_dissipation_;
+  report.balance = report.total - report.initial - report.external_work + report.damping_work -
+                   report.contact_work;
   for (const auto& provider : providers_) report.provider_names.push_back(provider->name());
   report.provider_work = provider_work_;
   return report;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "bsr.hpp"
+#include "contact.hpp"
 #include "force_provider.hpp"
 
 namespace cavern {
@@ -19,7 +20,7 @@ struct StepperParameters {
 };
 
 /// Energy terms of the current state (J). balance = total - initial - external_work +
-/// damping_work is zero to round-off for a linear problem with symmetric K.
+/// damping_work - contact_work is zero to round-off for a linear problem with symmetric K.
 struct EnergyReport {
   double kinetic = 0.0;        // 1/2 v.Mv
   double strain = 0.0;         // 1/2 u.Ku
@@ -27,6 +28,9 @@ struct EnergyReport {
   double initial = 0.0;        // H_0
   double external_work = 0.0;  // trapezoid integral of f_ext . v
   double damping_work = 0.0;   // trapezoid integral of d . v (dissipated)
+  double contact_work =
+      0.0;  // trapezoid integral of sum_pairs R.(v_i - v_j) (work done on the mesh)
+  double friction_dissipation = 0.0;  // sum over slipping steps of T.(slip increment), >= 0
   double balance = 0.0;
   std::vector<std::string> provider_names;
   std::vector<double> provider_work;  // each provider's share of external_work
@@ -45,6 +49,10 @@ struct EnergyReport {
 ///   E_{n+1/2} = 1/2 v_{n+1/2}.M v_{n+1/2} + 1/2 u_n.K u_{n+1} grows by dt F_n.v_n, so
 ///   H_n = E_{n+1/2} - dt/2 F_n.v_n = 1/2 v.Mv + 1/2 u.Ku - dt^2/8 a.Ma + dt^2/4 F.a
 ///   obeys H_{n+1} - H_n = dt/2 (F_n.v_n + F_{n+1}.v_{n+1}) exactly (K symmetric).
+/// Contact (optional, after pass B): ContactPairs::correct adds R to r of the pair nodes and
+/// updates their v_{n+1}, a_{n+1}; R is then one more non-stiffness force in F (H_n and the
+/// trapezoid work contact_work), and the pass-B energy sums of the pair nodes are corrected by
+/// the difference of their contributions after and before the correction.
 /// The stiffness, mass and providers are borrowed; u, v, a are modified in place.
 class Stepper {
  public:
@@ -57,6 +65,10 @@ class Stepper {
 
   /// Adds a force provider (shared: the caller may keep and query it).
   void add_provider(std::shared_ptr<ForceProvider> provider);
+
+  /// Attaches the interlayer contact pairs (shared). Throws std::invalid_argument for a pair node
+  /// outside the model, a pair joining a node to itself, or a second ContactPairs.
+  void set_contact(std::shared_ptr<ContactPairs> contact);
 
   /// Advances (u, v, a) (3 n_nodes each, in place) by n_steps from t0; returns t0 + n_steps dt.
   /// Starts the energy account from this state if reset_energy was never called.
@@ -77,6 +89,8 @@ class Stepper {
   template <bool kStiffnessDamping>
   void pass_b(double* u, double* v, double* a);
   void accumulate_work(const double* v);
+  void contact_post_pass(double t, const double* u, double* v, double* a);
+  ImplicitNodeOperators implicit_operators() const;
 
   BlockCsrView stiffness_;
   const double* mass_;
@@ -88,6 +102,8 @@ class Stepper {
   std::vector<double> dashpot_inverse_;  // (k, 9)
 
   std::vector<std::shared_ptr<ForceProvider>> providers_;
+  std::shared_ptr<ContactPairs> contact_;  // null: no contact, no cost
+  std::vector<double> contact_scratch_;    // (unique pair nodes, 6): v, a before the correction
 
   // Scratch, allocated once: external forces (zeroed again by pass B as it reads them) and,
   // for beta != 0, a copy of v_{n+1/2} that pass B reads while overwriting v.
@@ -104,6 +120,9 @@ class Stepper {
   double damping_work_ = 0.0;
   double external_power_ = 0.0;  // f_ext.v at the current step
   double damping_power_ = 0.0;   // d.v at the current step
+  double contact_work_ = 0.0;
+  double contact_power_ = 0.0;  // sum_pairs R.(v_i - v_j) at the current step
+  double friction_dissipation_ = 0.0;
   std::vector<double> provider_work_;
   std::vector<double> provider_power_;
 };

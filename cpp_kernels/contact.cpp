@@ -1,0 +1,352 @@
+#include "contact.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace cavern {
+
+namespace {
+
+double invert_3x3(const double* A, double* inverse) {
+  const double c00 = A[4] * A[8] - A[5] * A[7];
+  const double c01 = A[5] * A[6] - A[3] * A[8];
+  const double c02 = A[3] * A[7] - A[4] * A[6];
+  const double determinant = A[0] * c00 + A[1] * c01 + A[2] * c02;
+  const double s = 1.0 / determinant;
+  inverse[0] = c00 * s;
+  inverse[1] = (A[2] * A[7] - A[1] * A[8]) * s;
+  inverse[2] = (A[1] * A[5] - A[2] * A[4]) * s;
+  inverse[3] = c01 * s;
+  inverse[4] = (A[0] * A[8] - A[2] * A[6]) * s;
+  inverse[5] = (A[2] * A[3] - A[0] * A[5]) * s;
+  inverse[6] = c02 * s;
+  inverse[7] = (A[1] * A[6] - A[0] * A[7]) * s;
+  inverse[8] = (A[0] * A[4] - A[1] * A[3]) * s;
+  return determinant;
+}
+
+inline void multiply_3x3(const double* A, const double* x, double* y) {
+  y[0] = A[0] * x[0] + A[1] * x[1] + A[2] * x[2];
+  y[1] = A[3] * x[0] + A[4] * x[1] + A[5] * x[2];
+  y[2] = A[6] * x[0] + A[7] * x[1] + A[8] * x[2];
+}
+
+inline double dot(const double* x, const double* y) {
+  return x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+}
+
+// Tangential part P_t x = x - n (n.x).
+inline void tangential_part(const double* n, const double* x, double* out) {
+  const double normal_component = dot(n, x);
+  for (int c = 0; c < 3; ++c) out[c] = x[c] - normal_component * n[c];
+}
+
+void require_finite(const double* values, std::int64_t count, const char* name) {
+  for (std::int64_t k = 0; k < count; ++k)
+    if (!std::isfinite(values[k]))
+      throw std::invalid_argument(std::string(name) + " has a non-finite value at flat index " +
+                                  std::to_string(k));
+}
+
+}  // namespace
+
+void ImplicitNodeOperators::inverse(std::int64_t node, double out[9]) const {
+  const std::int32_t slot = dashpot_slot ? dashpot_slot[node] : -1;
+  if (slot >= 0) {
+    std::copy(dashpot_inverse + 9 * slot, dashpot_inverse + 9 * slot + 9, out);
+    return;
+  }
+  // The same arithmetic as the stepper's pass B, so that a bonded pair is exact to round-off.
+  const double diagonal = 1.0 / (mass[node] * (1.0 + 0.5 * dt * alpha));
+  std::fill(out, out + 9, 0.0);
+  out[0] = out[4] = out[8] = diagonal;
+}
+
+void ImplicitNodeOperators::damping(std::int64_t node, double out[9]) const {
+  const std::int32_t slot = dashpot_slot ? dashpot_slot[node] : -1;
+  if (slot >= 0)
+    std::copy(dashpot_C + 9 * slot, dashpot_C + 9 * slot + 9, out);
+  else
+    std::fill(out, out + 9, 0.0);
+  const double mass_damping = alpha * mass[node];
+  out[0] += mass_damping;
+  out[4] += mass_damping;
+  out[8] += mass_damping;
+}
+
+ContactPairs::ContactPairs(const ContactGeometry& geometry, const ContactStrength& strength)
+    : n_pairs_(geometry.n_pairs), strength_(strength) {
+  if (n_pairs_ < 0)
+    throw std::invalid_argument("n_pairs must be >= 0, got " + std::to_string(n_pairs_));
+  auto require_strength = [](double value, const char* name) {
+    if (!(std::isfinite(value) && value >= 0.0))
+      throw std::invalid_argument(std::string(name) + " = " + std::to_string(value) +
+                                  " must be finite and >= 0");
+  };
+  require_strength(strength.cohesion, "cohesion");
+  require_strength(strength.tensile_strength, "tensile_strength");
+  require_strength(strength.friction_static, "friction_static");
+  require_strength(strength.friction_dynamic, "friction_dynamic");
+
+  pairs_.assign(geometry.pairs, geometry.pairs + 2 * n_pairs_);
+  area_.assign(geometry.area, geometry.area + n_pairs_);
+  normal_.assign(geometry.normal, geometry.normal + 3 * n_pairs_);
+  static_force_.assign(geometry.static_force, geometry.static_force + 3 * n_pairs_);
+  require_finite(normal_.data(), 3 * n_pairs_, "normal");
+  require_finite(static_force_.data(), 3 * n_pairs_, "static_force");
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    if (!(std::isfinite(area_[p]) && area_[p] > 0.0))
+      throw std::invalid_argument("area[" + std::to_string(p) + "] = " + std::to_string(area_[p]) +
+                                  " must be finite and > 0 (m^2)");
+    double* n = normal_.data() + 3 * p;
+    const double length = std::sqrt(dot(n, n));
+    if (std::abs(length - 1.0) > 1e-6)
+      throw std::invalid_argument("normal[" + std::to_string(p) + "] has length " +
+                                  std::to_string(length) + "; it must be a unit vector");
+    for (int c = 0; c < 3; ++c) n[c] /= length;  // exactly unit for the projections
+  }
+
+  unique_nodes_ = pairs_;
+  std::sort(unique_nodes_.begin(), unique_nodes_.end());
+  unique_nodes_.erase(std::unique(unique_nodes_.begin(), unique_nodes_.end()), unique_nodes_.end());
+  slot_.resize(2 * n_pairs_);
+  for (std::int64_t k = 0; k < 2 * n_pairs_; ++k)
+    slot_[k] = static_cast<std::int32_t>(
+        std::lower_bound(unique_nodes_.begin(), unique_nodes_.end(), pairs_[k]) -
+        unique_nodes_.begin());
+  node_force_.assign(3 * unique_nodes_.size(), 0.0);
+
+  state_.assign(n_pairs_, kBonded);
+  bond_intact_.assign(n_pairs_, 1);
+  contact_force_.assign(3 * n_pairs_, 0.0);
+  deterioration_.assign(n_pairs_, 1.0);
+  slip_rate_.assign(n_pairs_, 0.0);
+  // Before any step the pairs carry the static force.
+  normal_force_.resize(n_pairs_);
+  tangential_force_.resize(3 * n_pairs_);
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    const double* n = normal_.data() + 3 * p;
+    const double* F0 = static_force_.data() + 3 * p;
+    normal_force_[p] = -dot(n, F0);
+    tangential_part(n, F0, tangential_force_.data() + 3 * p);
+  }
+}
+
+void ContactPairs::set_deterioration(const DeteriorationParameters& parameters) {
+  check_deterioration(parameters);
+  deterioration_parameters_ = parameters;
+  deterioration_on_ = true;
+}
+
+void ContactPairs::check_nodes(std::int64_t n_nodes) const {
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    for (int side = 0; side < 2; ++side) {
+      const std::int32_t node = pairs_[2 * p + side];
+      if (node < 0 || node >= n_nodes)
+        throw std::invalid_argument("pairs[" + std::to_string(p) + ", " + std::to_string(side) +
+                                    "] = " + std::to_string(node) +
+                                    " is not a node of the Stepper in [0, " +
+                                    std::to_string(n_nodes) + ")");
+    }
+    if (pairs_[2 * p] == pairs_[2 * p + 1])
+      throw std::invalid_argument("pairs[" + std::to_string(p) + "] joins node " +
+                                  std::to_string(pairs_[2 * p]) +
+                                  " to itself; the two nodes of a pair must differ");
+  }
+}
+
+ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& operators,
+                                        const double* u, double* v, double* a) {
+  const double dt = operators.dt;
+  const double dt2 = dt * dt;
+  std::fill(node_force_.begin(), node_force_.end(), 0.0);
+  ContactStepResult result;
+
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
+    const double* n = normal_.data() + 3 * p;
+    const double* F0 = static_force_.data() + 3 * p;
+    const double area = area_[p];
+
+    double inverse_i[9], inverse_j[9], W_inverse[9], W[9];
+    operators.inverse(i, inverse_i);
+    operators.inverse(j, inverse_j);
+    for (int c = 0; c < 9; ++c) W_inverse[c] = inverse_i[c] + inverse_j[c];
+    invert_3x3(W_inverse, W);
+
+    // Relative displacement now and predicted at n+2 without contact force.
+    double delta[3], delta_pred[3];
+    for (int c = 0; c < 3; ++c) {
+      delta[c] = u[3 * j + c] - u[3 * i + c];
+      delta_pred[c] =
+          delta[c] + dt * (v[3 * j + c] - v[3 * i + c]) + 0.5 * dt2 * (a[3 * j + c] - a[3 * i + c]);
+    }
+    const double D = deterioration_on_
+                         ? cavern::deterioration(deterioration_parameters_, t, slip_rate_[p])
+                         : 1.0;
+
+    std::int8_t state = state_[p];
+    bool bond = bond_intact_[p] != 0;
+    double R[3];
+    bool slipping = false;
+    bool separated = false;
+
+    if (state == kSeparated) {
+      // Gap at n+2 if the pair keeps carrying nothing (R = -F0).
+      double W_inverse_F0[3];
+      multiply_3x3(W_inverse, F0, W_inverse_F0);
+      double open_gap = 0.0;
+      for (int c = 0; c < 3; ++c) open_gap += n[c] * (delta_pred[c] + dt2 * W_inverse_F0[c]);
+      separated = open_gap > 0.0;
+    }
+
+    if (!separated) {
+      // Stick (Eq. 17): close the normal gap, keep the tangential relative displacement.
+      double tangential_delta[3], target[3], R_stick[3];
+      tangential_part(n, delta, tangential_delta);
+      for (int c = 0; c < 3; ++c) target[c] = (delta_pred[c] - tangential_delta[c]) / dt2;
+      multiply_3x3(W, target, R_stick);
+
+      double F[3], T[3];
+      for (int c = 0; c < 3; ++c) F[c] = F0[c] + R_stick[c];
+      const double N = -dot(n, F);
+      tangential_part(n, F, T);
+      const double T_magnitude = std::sqrt(dot(T, T));
+
+      if (N < 0.0) {
+        // Tension (Eq. 18, P_N = t_s D A): only an intact bond holds it.
+        if (bond && -N <= strength_.tensile_strength * D * area) {
+          std::copy(R_stick, R_stick + 3, R);
+          state = kBonded;
+        } else {
+          separated = true;
+        }
+      } else {
+        const double limit =
+            strength_.friction_static * N * D + (bond ? strength_.cohesion * D * area : 0.0);
+        if (T_magnitude <= limit) {
+          std::copy(R_stick, R_stick + 3, R);
+          state = bond ? kBonded : kStick;
+        } else {
+          // Slip (Eq. 20): dynamic friction along the stick direction; never more than the
+          // force that stops the slip (mu_d > mu_s would otherwise reverse it).
+          slipping = true;
+          state = kSliding;
+          bond = false;
+          const double slip_force = std::min(strength_.friction_dynamic * N * D, T_magnitude);
+          double R_tangential[3], F0_tangential[3], W_inverse_R[3], W_inverse_n[3];
+          tangential_part(n, F0, F0_tangential);
+          for (int c = 0; c < 3; ++c)
+            R_tangential[c] = slip_force * T[c] / T_magnitude - F0_tangential[c];
+          // Normal R that closes the gap at n+2 given the tangential R (exact with 3x3 W).
+          multiply_3x3(W_inverse, R_tangential, W_inverse_R);
+          multiply_3x3(W_inverse, n, W_inverse_n);
+          const double R_normal =
+              (dot(n, delta_pred) - dt2 * dot(n, W_inverse_R)) / (dt2 * dot(n, W_inverse_n));
+          for (int c = 0; c < 3; ++c) R[c] = R_normal * n[c] + R_tangential[c];
+        }
+      }
+    }
+
+    if (separated) {
+      // Open (Eq. 19): the total force vanishes, so the dynamic force cancels the static one.
+      state = kSeparated;
+      bond = false;
+      for (int c = 0; c < 3; ++c) R[c] = -F0[c];
+    }
+
+    // Total force after the decision.
+    double F[3], T[3];
+    for (int c = 0; c < 3; ++c) F[c] = F0[c] + R[c];
+    tangential_part(n, F, T);
+
+    if (slipping) {
+      // Work of the slip force over the slip increment it drives, Delta_{n+2} - Delta_{n+1}
+      // (= dt times the relative v_{n+3/2}: the force held over the leapfrog step).
+      double W_inverse_R[3], slip_increment[3], delta_next[3];
+      multiply_3x3(W_inverse, R, W_inverse_R);
+      for (int c = 0; c < 3; ++c) delta_next[c] = delta_pred[c] - dt2 * W_inverse_R[c] - delta[c];
+      tangential_part(n, delta_next, slip_increment);
+      result.friction_dissipation += dot(T, slip_increment);
+    }
+
+    // Apply R to i and -R to j: dv = dt/2 Atilde^-1 R, da = (R - (alpha M + C) dv)/M.
+    for (int side = 0; side < 2; ++side) {
+      const std::int64_t node = side == 0 ? i : j;
+      const double sign = side == 0 ? 1.0 : -1.0;
+      const double* node_inverse = side == 0 ? inverse_i : inverse_j;
+      double force[3], dv[3], damping[9], damping_dv[3];
+      for (int c = 0; c < 3; ++c) force[c] = sign * R[c];
+      multiply_3x3(node_inverse, force, dv);
+      for (int c = 0; c < 3; ++c) dv[c] *= 0.5 * dt;
+      operators.damping(node, damping);
+      multiply_3x3(damping, dv, damping_dv);
+      const double m = operators.mass[node];
+      double* node_force = node_force_.data() + 3 * slot_[2 * p + side];
+      for (int c = 0; c < 3; ++c) {
+        v[3 * node + c] += dv[c];
+        a[3 * node + c] += (force[c] - damping_dv[c]) / m;
+        node_force[c] += force[c];
+      }
+    }
+
+    state_[p] = state;
+    bond_intact_[p] = bond ? 1 : 0;
+    for (int c = 0; c < 3; ++c) {
+      contact_force_[3 * p + c] = R[c];
+      tangential_force_[3 * p + c] = T[c];
+    }
+    normal_force_[p] = -dot(n, F);
+    deterioration_[p] = D;
+  }
+
+  result.contact_power = contact_power(v);
+  observe_velocity(v);
+  return result;
+}
+
+void ContactPairs::observe_velocity(const double* v) {
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
+    double relative[3], tangential[3];
+    for (int c = 0; c < 3; ++c) relative[c] = v[3 * j + c] - v[3 * i + c];
+    tangential_part(normal_.data() + 3 * p, relative, tangential);
+    slip_rate_[p] = std::sqrt(dot(tangential, tangential));
+  }
+}
+
+double ContactPairs::contact_power(const double* v) const {
+  double power = 0.0;
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
+    const double* R = contact_force_.data() + 3 * p;
+    for (int c = 0; c < 3; ++c) power += R[c] * (v[3 * i + c] - v[3 * j + c]);
+  }
+  return power;
+}
+
+void ContactPairs::add_last_forces(double* f) const {
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
+    for (int c = 0; c < 3; ++c) {
+      f[3 * i + c] += contact_force_[3 * p + c];
+      f[3 * j + c] -= contact_force_[3 * p + c];
+    }
+  }
+}
+
+void ContactPairs::relative_displacement(const double* u, double* out) const {
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
+    for (int c = 0; c < 3; ++c) out[3 * p + c] = u[3 * j + c] - u[3 * i + c];
+  }
+}
+
+void ContactPairs::state_counts(std::int64_t counts[4]) const {
+  std::fill(counts, counts + 4, 0);
+  for (std::int8_t s : state_) ++counts[s];
+}
+
+}  // namespace cavern

@@ -1,0 +1,283 @@
+// Interlayer contact (contact.hpp, deterioration.hpp) inside the stepper: exact answers only.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "contact.hpp"
+#include "deterioration.hpp"
+#include "random_system.hpp"
+#include "seismic_input.hpp"
+#include "stable_step.hpp"
+#include "stepper.hpp"
+
+using namespace cavern;
+using namespace cavern::testing;
+
+namespace {
+
+double max_abs_difference(const std::vector<double>& x, const std::vector<double>& y) {
+  double difference = 0.0;
+  for (std::size_t k = 0; k < x.size(); ++k)
+    difference = std::max(difference, std::abs(x[k] - y[k]));
+  return difference;
+}
+
+double max_abs(const std::vector<double>& x) {
+  double value = 0.0;
+  for (double v : x) value = std::max(value, std::abs(v));
+  return value;
+}
+
+std::shared_ptr<ContactPairs> single_pair(std::int32_t i, std::int32_t j, const double n[3],
+                                          const double F0[3], double area,
+                                          const ContactStrength& strength) {
+  const std::int32_t pairs[2] = {i, j};
+  return std::make_shared<ContactPairs>(ContactGeometry{1, pairs, &area, n, F0}, strength);
+}
+
+// A constant force f on one node from t = -1 on (a two-sample table held after its end).
+struct ConstantForce {
+  std::vector<double> g = {1.0, 1.0}, dg = {0.0, 0.0}, ddg = {0.0, 0.0};
+  std::vector<std::int64_t> node_ptr = {0, 1};
+  std::vector<std::int32_t> nodes, table = {0};
+  std::vector<double> tau = {0.0}, P, Q = {0.0, 0.0, 0.0};
+  ConstantForce(std::int32_t node, double fx, double fy, double fz) : nodes{node}, P{fx, fy, fz} {}
+  std::shared_ptr<SeismicInput> make() const {
+    return std::make_shared<SeismicInput>(
+        WaveformTables{-1.0, 1.0, 1, 2, g.data(), dg.data(), ddg.data()},
+        InputEntries{1, 1, node_ptr.data(), nodes.data(), table.data(), tau.data(), P.data(),
+                     Q.data()});
+  }
+};
+
+// Two nodes, no stiffness.
+BlockSystem free_pair(double mass_i, double mass_j) {
+  BlockSystem system;
+  system.n_nodes = 2;
+  system.indptr = {0, 0, 0};
+  system.mass = {mass_i, mass_j};
+  return system;
+}
+
+}  // namespace
+
+TEST(Contact, BondedPairReproducesTheMergedSystemWithDampingAndA3x3Dashpot) {
+  // Merged random system; node p is split into p and p' = n: its diagonal block halved on each
+  // side, each coupling block moved to p' or kept at p, its mass divided 30/70.
+  const std::int64_t n = 20, p = 6;
+  const BlockSystem merged = random_spd_system(n, 3, 17);
+  BlockSystem split;
+  split.n_nodes = n + 1;
+  const std::int64_t nd = 3 * n, sd = 3 * (n + 1);
+  split.dense.assign(sd * sd, 0.0);
+  std::vector<char> pattern((n + 1) * (n + 1), 0);
+  std::mt19937_64 generator(3);
+  std::vector<std::int64_t> side(n, p);  // the split-side of the coupling of p with node k
+  for (std::int64_t k = 0; k < n; ++k) side[k] = (generator() % 2) ? p : n;
+  for (std::int64_t a = 0; a < n; ++a)
+    for (std::int64_t b = 0; b < n; ++b) {
+      bool present = false;
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) present |= merged.dense[(3 * a + r) * nd + 3 * b + c] != 0.0;
+      if (!present) continue;
+      auto put = [&](std::int64_t A, std::int64_t B, double scale) {
+        pattern[A * (n + 1) + B] = 1;
+        for (int r = 0; r < 3; ++r)
+          for (int c = 0; c < 3; ++c)
+            split.dense[(3 * A + r) * sd + 3 * B + c] +=
+                scale * merged.dense[(3 * a + r) * nd + 3 * b + c];
+      };
+      if (a == p && b == p) {
+        put(p, p, 0.5);
+        put(n, n, 0.5);
+      } else if (a == p) {
+        put(side[b], b, 1.0);
+      } else if (b == p) {
+        put(a, side[a], 1.0);
+      } else {
+        put(a, b, 1.0);
+      }
+    }
+  compress(split, pattern);
+  split.mass = merged.mass;
+  split.mass.push_back(0.7 * merged.mass[p]);
+  split.mass[p] *= 0.3;
+
+  const double dt = 0.5 * 2.0 / std::sqrt(gershgorin_bound(merged.view(), merged.mass.data()));
+  const double alpha = 0.4;
+  Stepper merged_stepper(merged.view(), merged.mass.data(), {dt, alpha, 0.0});
+  Stepper split_stepper(split.view(), split.mass.data(), {dt, alpha, 0.0});
+  const double C[9] = {3.0, 1.0, -0.5, 1.0, 2.0, 0.3, -0.5, 0.3, 4.0};
+  const std::int32_t merged_node = p, split_node = n;
+  merged_stepper.set_dashpots(&merged_node, 1, C);
+  split_stepper.set_dashpots(&split_node, 1, C);
+  const double normal[3] = {0.0, 0.6, 0.8}, F0[3] = {1.0, -30.0, -40.0};
+  auto contact = single_pair(p, n, normal, F0, 1.0, {1e9, 1e9, 0.5, 0.4});
+  split_stepper.set_contact(contact);
+
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  std::vector<double> u(3 * n), v(3 * n), a(3 * n, 0.0);
+  for (double& x : u) x = 0.1 * uniform(generator);
+  for (double& x : v) x = uniform(generator);
+  std::vector<double> us(u), vs(v), as(a);
+  for (int c = 0; c < 3; ++c) {
+    us.push_back(u[3 * p + c]);
+    vs.push_back(v[3 * p + c]);
+    as.push_back(0.0);
+  }
+  merged_stepper.run(u.data(), v.data(), a.data(), 200, 0.0);
+  split_stepper.run(us.data(), vs.data(), as.data(), 200, 0.0);
+
+  int checks = 0;
+  for (const auto& [merged_state, split_state] :
+       {std::pair{&u, &us}, std::pair{&v, &vs}, std::pair{&a, &as}}) {
+    std::vector<double> split_on_merged(split_state->begin(), split_state->begin() + 3 * n);
+    std::vector<double> copy_node(split_state->begin() + 3 * n, split_state->end());
+    std::vector<double> merged_p(merged_state->begin() + 3 * p, merged_state->begin() + 3 * p + 3);
+    const double scale = max_abs(*merged_state);
+    EXPECT_GT(scale, 1e-5);
+    EXPECT_LT(max_abs_difference(split_on_merged, *merged_state), 1e-12 * scale);
+    EXPECT_LT(max_abs_difference(copy_node, merged_p), 1e-12 * scale);
+    ++checks;
+  }
+  EXPECT_EQ(checks, 3);
+  EXPECT_EQ(contact->state()[0], kBonded);
+  const EnergyReport report = split_stepper.energy();
+  const double scale =
+      std::max({std::abs(report.total), std::abs(report.initial), report.damping_work});
+  EXPECT_LT(std::abs(report.balance), 1e-12 * scale);
+}
+
+TEST(Contact, StuckPairKeepsItsTangentialOffsetAndClosedGapWithCoupledDashpots) {
+  // Delta_{n+2} = Delta_pred - dt^2 (Atilde_i^-1 + Atilde_j^-1) R: with full 3x3 dashpots on both
+  // nodes the stick force must still close the gap and freeze the tangential offset exactly.
+  BlockSystem system = free_pair(1.5, 0.5);
+  const double dt = 0.01, alpha = 2.0;
+  Stepper stepper(system.view(), system.mass.data(), {dt, alpha, 0.0});
+  const std::int32_t nodes[2] = {0, 1};
+  const double C[18] = {30, 5, -8, 5, 20, 3, -8, 3, 40, 10, -2, 1, -2, 15, 4, 1, 4, 25};
+  stepper.set_dashpots(nodes, 2, C);
+  const double normal[3] = {0.48, 0.6, 0.64}, F0[3] = {-4.8, -6.0, -6.4};
+  auto contact = single_pair(0, 1, normal, F0, 1.0, {1e6, 1e6, 0.5, 0.4});
+  stepper.set_contact(contact);
+  const ConstantForce force(1, 3.0, -1.0, 2.0);  // borrowed by the SeismicInput: keep alive
+  stepper.add_provider(force.make());
+  // A tangential offset, zero gap and different velocities: the first step moves the pair
+  // freely (its force acts on u_2); from then on the gap is closed and the offset frozen.
+  std::vector<double> u = {0, 0, 0, 0.006, -0.0048, 0.0}, v = {0.1, 0.2, -0.3, -0.5, 0.4, 0.9},
+                      a(6, 0.0);
+  double t = stepper.run(u.data(), v.data(), a.data(), 1, 0.0);
+  double delta_1[3], tangential_1[3];
+  contact->relative_displacement(u.data(), delta_1);
+  const double gap_1 = delta_1[0] * normal[0] + delta_1[1] * normal[1] + delta_1[2] * normal[2];
+  for (int c = 0; c < 3; ++c) tangential_1[c] = delta_1[c] - gap_1 * normal[c];
+  EXPECT_GT(std::abs(gap_1), 1e-3);
+  int checks = 0;
+  for (int step = 1; step < 50; ++step) {
+    t = stepper.run(u.data(), v.data(), a.data(), 1, t);
+    double delta[3];
+    contact->relative_displacement(u.data(), delta);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(delta[c], tangential_1[c], 1e-15) << "step " << step;
+    ++checks;
+  }
+  EXPECT_EQ(checks, 49);
+  EXPECT_EQ(contact->state()[0], kBonded);
+}
+
+TEST(Contact, SlidingPairTransmitsDynamicFrictionAndDissipates) {
+  BlockSystem system = free_pair(1.0, 2.0);
+  const double dt = 1e-3, N0 = 50.0, mu_d = 0.3;
+  Stepper stepper(system.view(), system.mass.data(), {dt, 0.0, 0.0});
+  const double normal[3] = {0.0, 0.0, 1.0}, F0[3] = {0.0, 0.0, -N0};
+  auto contact = single_pair(0, 1, normal, F0, 1.0, {1.0, 1.0, 0.5, mu_d});
+  stepper.set_contact(contact);
+  const ConstantForce force(1, 200.0, 0.0, 0.0);  // borrowed by the SeismicInput: keep alive
+  stepper.add_provider(force.make());
+  std::vector<double> u(6, 0.0), v(6, 0.0), a(6, 0.0);
+  double t = 0.0, previous_dissipation = 0.0;
+  for (int step = 0; step < 500; ++step) {
+    t = stepper.run(u.data(), v.data(), a.data(), 1, t);
+    ASSERT_EQ(contact->state()[0], kSliding) << "step " << step;
+    const double* T = contact->tangential_force().data();
+    EXPECT_NEAR(std::hypot(T[0], T[1], T[2]), mu_d * N0, 1e-12 * N0);
+    EXPECT_NEAR(contact->normal_force()[0], N0, 1e-12 * N0);
+    const EnergyReport report = stepper.energy();
+    EXPECT_GE(report.friction_dissipation, previous_dissipation);
+    previous_dissipation = report.friction_dissipation;
+    EXPECT_LT(std::abs(report.balance), 1e-12 * report.external_work);
+  }
+  // Node 0 (1 kg) is dragged by mu_d N0 = 15 N from the first step on; starting from a_0 = 0,
+  // velocity Verlet gives v_n = 15 (t_n - dt/2).
+  EXPECT_NEAR(v[0], mu_d * N0 / 1.0 * (t - 0.5 * dt), 1e-12);
+  EXPECT_FALSE(contact->bond_intact()[0]);
+  EXPECT_GT(previous_dissipation, 0.0);
+}
+
+TEST(Contact, SeparatedPairCarriesNothingAndClosesWithoutInterpenetration) {
+  // Node 1 thrown away from node 0 along n, then pulled back by a constant force.
+  BlockSystem system = free_pair(3.0, 1.0);
+  const double dt = 1e-3;
+  Stepper stepper(system.view(), system.mass.data(), {dt, 0.0, 0.0});
+  const double normal[3] = {0.0, 1.0, 0.0}, F0[3] = {0.0, -2.0, 0.0};
+  auto contact = single_pair(0, 1, normal, F0, 1.0, {1.0, 1.0, 0.5, 0.4});
+  stepper.set_contact(contact);
+  const ConstantForce force(1, 0.0, -10.0, 0.0);  // borrowed by the SeismicInput: keep alive
+  stepper.add_provider(force.make());
+  std::vector<double> u(6, 0.0), v = {0, 0, 0, 0, 2.0, 0}, a(6, 0.0);
+  double t = 0.0, min_gap = 0.0, max_gap = 0.0;
+  int open_steps = 0, closed_after_open = 0;
+  for (int step = 0; step < 2000; ++step) {
+    t = stepper.run(u.data(), v.data(), a.data(), 1, t);
+    const double gap = u[4] - u[1];
+    min_gap = std::min(min_gap, gap);
+    max_gap = std::max(max_gap, gap);
+    if (contact->state()[0] == kSeparated) {
+      ++open_steps;
+      EXPECT_EQ(contact->normal_force()[0], 0.0);
+    } else if (open_steps > 0) {
+      ++closed_after_open;
+      EXPECT_GE(contact->normal_force()[0], 0.0);
+    }
+  }
+  EXPECT_GT(open_steps, 100);
+  EXPECT_GT(closed_after_open, 100);
+  EXPECT_GT(max_gap, 0.05);
+  EXPECT_GT(min_gap, -1e-14 * max_gap);
+  const EnergyReport report = stepper.energy();
+  const double scale = std::max(
+      {std::abs(report.initial), std::abs(report.external_work), std::abs(report.contact_work)});
+  EXPECT_LT(std::abs(report.balance), 1e-12 * scale);
+  // The plastic impact of the closing pair lost kinetic energy: contact work is negative.
+  EXPECT_LT(report.contact_work, 0.0);
+}
+
+TEST(Deterioration, PaperValuesFollowEqs9To11) {
+  const DeteriorationParameters paper{0.75, 5.0, 20.0, 0.883, 0.02, 0.032};
+  EXPECT_DOUBLE_EQ(wear_factor(paper, 0.0), 1.0);
+  EXPECT_NEAR(wear_factor(paper, 20.0), 0.75 + 0.25 * std::exp(-5.0), 1e-15);
+  EXPECT_NEAR(wear_factor(paper, -3.0), 1.0, 1e-15);  // before the earthquake: undamaged
+  // gamma(0) = 0.883 * 0.02^-0.032 = 1.0010...; gamma falls with the slip rate.
+  EXPECT_NEAR(slip_rate_factor(paper, 0.0), 0.883 * std::pow(0.02, -0.032), 1e-15);
+  EXPECT_NEAR(slip_rate_factor(paper, -0.5), 0.883 * std::pow(0.52, -0.032), 1e-15);
+  EXPECT_NEAR(deterioration(paper, 20.0, 0.5),
+              wear_factor(paper, 20.0) * slip_rate_factor(paper, 0.5), 1e-15);
+  DeteriorationParameters bad = paper;
+  bad.n = 0.0;
+  EXPECT_THROW(check_deterioration(bad), std::invalid_argument);
+}
+
+TEST(Contact, RejectsBadPairs) {
+  BlockSystem system = free_pair(1.0, 1.0);
+  Stepper stepper(system.view(), system.mass.data(), {0.01, 0.0, 0.0});
+  const double normal[3] = {0.0, 0.0, 1.0}, F0[3] = {0.0, 0.0, 0.0};
+  EXPECT_THROW(stepper.set_contact(single_pair(0, 2, normal, F0, 1.0, {})), std::invalid_argument);
+  EXPECT_THROW(stepper.set_contact(single_pair(1, 1, normal, F0, 1.0, {})), std::invalid_argument);
+  const double long_normal[3] = {0.0, 0.0, 1.1};
+  EXPECT_THROW(single_pair(0, 1, long_normal, F0, 1.0, {}), std::invalid_argument);
+  EXPECT_THROW(single_pair(0, 1, normal, F0, -1.0, {}), std::invalid_argument);
+  EXPECT_THROW(single_pair(0, 1, normal, F0, 1.0, {-1.0, 0.0, 0.0, 0.0}), std::invalid_argument);
+}
