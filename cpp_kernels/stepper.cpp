@@ -1,5 +1,7 @@
 #include "stepper.hpp"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -53,6 +55,12 @@ Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
                                   " must be finite and > 0");
   external_force_.assign(n_dofs(), 0.0);
   if (parameters.beta != 0.0) v_half_.assign(n_dofs(), 0.0);
+  threaded_ = stiffness.n_block_rows >= kMinRowsForThreads;
+  if (parameters.symmetric_storage) {
+    symmetric_ = std::make_unique<SymmetricBlockCsr>(stiffness);
+    Ku_.assign(n_dofs(), 0.0);
+    if (parameters.beta != 0.0) Kv_.assign(n_dofs(), 0.0);
+  }
 }
 
 void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
@@ -149,8 +157,16 @@ void Stepper::contact_post_pass(double t, const double* u, double* v, double* a)
     const std::int64_t node = nodes[k];
     const double m = mass_[node];
     double Ku[3], Kv[3] = {0.0, 0.0, 0.0}, damping[9], d_before[3], d_after[3];
-    block_row_product(stiffness_, node, u, Ku);
-    if (beta != 0.0) block_row_product(stiffness_, node, v_half_.data(), Kv);
+    if (symmetric_) {
+      // The same K u and K v_half pass B used (exactly symmetric storage).
+      for (int c = 0; c < 3; ++c) {
+        Ku[c] = Ku_[3 * node + c];
+        if (beta != 0.0) Kv[c] = Kv_[3 * node + c];
+      }
+    } else {
+      block_row_product(stiffness_, node, u, Ku);
+      if (beta != 0.0) block_row_product(stiffness_, node, v_half_.data(), Kv);
+    }
     operators.damping(node, damping);
     const double* v_before = before + 6 * k;
     const double* a_before = before + 6 * k + 3;
@@ -186,8 +202,16 @@ void Stepper::add_provider(std::shared_ptr<ForceProvider> provider) {
   provider_power_.push_back(0.0);
 }
 
-template <bool kStiffnessDamping>
+template <bool kStiffnessDamping, bool kSymmetric>
 void Stepper::pass_b(double* u, double* v, double* a) {
+  if constexpr (kSymmetric) {
+    const int threads = threaded_ ? omp_get_max_threads() : 1;
+    if constexpr (kStiffnessDamping)
+      symmetric_->multiply_dual(u, v_half_.data(), Ku_.data(), Kv_.data(), threads);
+    else
+      symmetric_->multiply(u, Ku_.data(), threads);
+  }
+  const bool threaded = threaded_;
   const BlockCsrView K = stiffness_;
   const double* mass = mass_;
   const double dt = parameters_.dt;
@@ -201,14 +225,20 @@ void Stepper::pass_b(double* u, double* v, double* a) {
   const double* dashpot_inverse = dashpot_inverse_.data();
 
   double vMv = 0.0, uKu = 0.0, aMa = 0.0, Fa = 0.0, external_power = 0.0, damping_power = 0.0;
-#pragma omp parallel for schedule(static) \
+#pragma omp parallel for schedule(static) if (threaded) \
     reduction(+ : vMv, uKu, aMa, Fa, external_power, damping_power)
   for (std::int64_t i = 0; i < K.n_block_rows; ++i) {
     double Ku[3], Kv[3] = {0.0, 0.0, 0.0};
-    if constexpr (kStiffnessDamping)
+    if constexpr (kSymmetric) {
+      for (int c = 0; c < 3; ++c) {
+        Ku[c] = Ku_[3 * i + c];
+        if constexpr (kStiffnessDamping) Kv[c] = Kv_[3 * i + c];
+      }
+    } else if constexpr (kStiffnessDamping) {
       block_row_product_dual(K, i, u, v_half, Ku, Kv);
-    else
+    } else {
       block_row_product(K, i, u, Ku);
+    }
 
     const double m = mass[i];
     double* fi = f + 3 * i;
@@ -276,7 +306,7 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
     // Multiplying, not accumulating, keeps t free of drift over many steps.
     const double t_next = t0 + static_cast<double>(step + 1) * dt;
 
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (threaded_)
     for (std::int64_t d = 0; d < n; ++d) {
       const double velocity_half = v[d] + half_dt * a[d];
       v[d] = velocity_half;
@@ -289,10 +319,17 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
     const double previous_external_power = external_power_;
     const double previous_damping_power = damping_power_;
     const double previous_contact_power = contact_power_;
-    if (stiffness_damping)
-      pass_b<true>(u, v, a);
-    else
-      pass_b<false>(u, v, a);
+    if (symmetric_) {
+      if (stiffness_damping)
+        pass_b<true, true>(u, v, a);
+      else
+        pass_b<false, true>(u, v, a);
+    } else {
+      if (stiffness_damping)
+        pass_b<true, false>(u, v, a);
+      else
+        pass_b<false, false>(u, v, a);
+    }
     if (contact_) contact_post_pass(t_next, u, v, a);
     external_work_ += half_dt * (previous_external_power + external_power_);
     damping_work_ += half_dt * (previous_damping_power + damping_power_);

@@ -10,6 +10,7 @@
 #include "bsr.hpp"
 #include "contact.hpp"
 #include "force_provider.hpp"
+#include "symmetric_bsr.hpp"
 
 namespace cavern {
 
@@ -17,7 +18,14 @@ struct StepperParameters {
   double dt = 0.0;     // time step (s)
   double alpha = 0.0;  // mass-proportional Rayleigh coefficient (1/s), implicit per node
   double beta = 0.0;   // stiffness-proportional Rayleigh coefficient (s), explicit on v_{n+1/2}
+  // true: the stepper keeps the upper triangle of K (about half the bytes streamed per step)
+  // and pass B reads K u from a buffer; false: pass B is fused with the full block-CSR product.
+  bool symmetric_storage = true;
 };
+
+/// Below this many block rows a loop runs on one thread: the two barriers a step costs more
+/// than the work they share (measured: tiny systems ran 80x slower on two busy cores).
+constexpr std::int64_t kMinRowsForThreads = 4096;
 
 /// Energy terms of the current state (J). balance = total - initial - external_work +
 /// damping_work - contact_work is zero to round-off for a linear problem with symmetric K.
@@ -86,13 +94,16 @@ class Stepper {
   std::int64_t n_dofs() const { return 3 * stiffness_.n_block_rows; }
 
  private:
-  template <bool kStiffnessDamping>
+  template <bool kStiffnessDamping, bool kSymmetric>
   void pass_b(double* u, double* v, double* a);
   void accumulate_work(const double* v);
   void contact_post_pass(double t, const double* u, double* v, double* a);
   ImplicitNodeOperators implicit_operators() const;
 
   BlockCsrView stiffness_;
+  std::unique_ptr<SymmetricBlockCsr> symmetric_;  // owned upper triangle, when symmetric_storage
+  std::vector<double> Ku_, Kv_;                   // K u_{n+1}, K v_{n+1/2} for the symmetric path
+  bool threaded_ = true;                          // n_nodes >= kMinRowsForThreads
   const double* mass_;
   StepperParameters parameters_;
 

@@ -23,30 +23,28 @@ namespace cavern {
 /// K x = U x + (strict U)^T x.
 class SymmetricBlockCsr {
  public:
-  /// Copies the blocks with column >= row from K (which must hold every diagonal block).
+  /// Copies the blocks with column >= row from K; a row without a diagonal block (a node
+  /// held by nothing but its mass) gets a zero one, so every row starts with its diagonal.
   explicit SymmetricBlockCsr(const BlockCsrView& K) : n_(K.n_block_rows) {
     indptr_.assign(n_ + 1, 0);
     for (std::int64_t i = 0; i < n_; ++i) {
-      bool has_diagonal = false;
-      for (std::int64_t k = K.indptr[i]; k < K.indptr[i + 1]; ++k) {
-        if (K.indices[k] == i) has_diagonal = true;
-        if (K.indices[k] >= i) ++indptr_[i + 1];
-      }
-      if (!has_diagonal)
-        throw std::invalid_argument("stiffness block row " + std::to_string(i) +
-                                    " has no diagonal block");
+      indptr_[i + 1] = 1;  // the diagonal
+      for (std::int64_t k = K.indptr[i]; k < K.indptr[i + 1]; ++k)
+        if (K.indices[k] > i) ++indptr_[i + 1];
     }
     for (std::int64_t i = 0; i < n_; ++i) indptr_[i + 1] += indptr_[i];
     indices_.resize(indptr_[n_]);
-    blocks_.resize(9 * indptr_[n_]);
+    blocks_.assign(9 * indptr_[n_], 0.0);
     for (std::int64_t i = 0; i < n_; ++i) {
+      indices_[indptr_[i]] = static_cast<std::int32_t>(i);
       std::int64_t next = indptr_[i] + 1;  // slot indptr_[i] is the diagonal
       for (std::int64_t k = K.indptr[i]; k < K.indptr[i + 1]; ++k) {
         const std::int32_t j = K.indices[k];
         if (j < i) continue;
         const std::int64_t slot = (j == i) ? indptr_[i] : next++;
         indices_[slot] = j;
-        std::copy(K.blocks + 9 * k, K.blocks + 9 * k + 9, blocks_.data() + 9 * slot);
+        // A repeated block (duplicate column) adds, as it does in the full product.
+        for (int c = 0; c < 9; ++c) blocks_[9 * slot + c] += K.blocks[9 * k + c];
       }
       // Columns after the diagonal in increasing order keep the scattered writes local.
       sort_row(i);
@@ -62,12 +60,16 @@ class SymmetricBlockCsr {
                                      indptr_.size() * sizeof(std::int64_t));
   }
 
-  /// y = K x (x, y: 3 n values; y is overwritten). OpenMP over row ranges.
-  void multiply(const double* x, double* y) const { product<1>(x, nullptr, y, nullptr); }
+  /// y = K x (x, y: 3 n values; y is overwritten). OpenMP over `threads` row ranges
+  /// (0: as many as OpenMP would use now).
+  void multiply(const double* x, double* y, int threads = 0) const {
+    product<1>(x, nullptr, y, nullptr, threads);
+  }
 
   /// y1 = K x1 and y2 = K x2 reading each stored block once.
-  void multiply_dual(const double* x1, const double* x2, double* y1, double* y2) const {
-    product<2>(x1, x2, y1, y2);
+  void multiply_dual(const double* x1, const double* x2, double* y1, double* y2,
+                     int threads = 0) const {
+    product<2>(x1, x2, y1, y2, threads);
   }
 
  private:
@@ -114,8 +116,8 @@ class SymmetricBlockCsr {
   }
 
   template <int kVectors>
-  void product(const double* x1, const double* x2, double* y1, double* y2) const {
-    const int threads = omp_get_max_threads();
+  void product(const double* x1, const double* x2, double* y1, double* y2, int threads) const {
+    if (threads <= 0) threads = omp_get_max_threads();
     partition(threads);
     // Two vectors share one spill buffer layout: the second half holds vector 2.
     if (kVectors == 2)

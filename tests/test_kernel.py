@@ -199,9 +199,15 @@ def discrete_energy(K, mass, dt, u, v, a, non_stiffness_force):
 
 
 def largest_eigenvalue(K, mass):
-    """omega_max^2 of M^-1 K by a dense symmetric eigensolver."""
+    """omega_max^2 of M^-1 K: dense symmetric eigensolver for small systems, Lanczos above."""
     scale = 1 / np.sqrt(np.repeat(mass, 3))
-    return scipy.linalg.eigvalsh(scale[:, None] * K.toarray() * scale[None, :])[-1]
+    if K.shape[0] <= 3000:
+        return scipy.linalg.eigvalsh(scale[:, None] * K.toarray() * scale[None, :])[-1]
+    from scipy import sparse
+    from scipy.sparse.linalg import eigsh
+
+    symmetric = sparse.diags(scale) @ K @ sparse.diags(scale)
+    return eigsh(symmetric, k=1, which="LA", tol=1e-10)[0][0]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -222,8 +228,8 @@ def damped_forced_case(seed=3, n_nodes=300):
     return K, mass, dt, alpha, beta, dashpots, input_spec, u0, v0, a0
 
 
-def make_stepper(K, mass, dt, alpha, beta, dashpots, input_spec):
-    stepper = _kernels.Stepper(*bsr_arrays(K), mass, dt, alpha, beta)
+def make_stepper(K, mass, dt, alpha, beta, dashpots, input_spec, symmetric_storage=True):
+    stepper = _kernels.Stepper(*bsr_arrays(K), mass, dt, alpha, beta, symmetric_storage)
     if dashpots is not None:
         stepper.set_dashpots(*dashpots)
     if input_spec is not None:
@@ -231,9 +237,12 @@ def make_stepper(K, mass, dt, alpha, beta, dashpots, input_spec):
     return stepper
 
 
-def test_stepper_equals_numpy_reference_to_roundoff():
-    K, mass, dt, alpha, beta, dashpots, input_spec, u0, v0, a0 = damped_forced_case()
-    stepper = make_stepper(K, mass, dt, alpha, beta, dashpots, input_spec)
+@pytest.mark.parametrize("symmetric_storage", [True, False], ids=["upper-triangle", "full-fused"])
+@pytest.mark.parametrize("n_nodes", [300, 6000], ids=["one-thread", "threaded"])
+def test_stepper_equals_numpy_reference_to_roundoff(symmetric_storage, n_nodes):
+    """Both storage formats, below and above the size at which the loops go parallel."""
+    K, mass, dt, alpha, beta, dashpots, input_spec, u0, v0, a0 = damped_forced_case(n_nodes=n_nodes)
+    stepper = make_stepper(K, mass, dt, alpha, beta, dashpots, input_spec, symmetric_storage)
     u, v, a = u0.copy(), v0.copy(), a0.copy()
     t_end = stepper.run(u, v, a, 100, 0.0)
     u_ref, v_ref, a_ref, _, _ = reference_run(K, mass, dt, alpha, beta, dashpots, input_spec,
@@ -288,9 +297,10 @@ def test_central_difference_converges_at_order_two():
 # Energy
 
 
-def test_energy_balance_is_zero_to_roundoff_with_input_and_damping():
+@pytest.mark.parametrize("symmetric_storage", [True, False], ids=["upper-triangle", "full-fused"])
+def test_energy_balance_is_zero_to_roundoff_with_input_and_damping(symmetric_storage):
     K, mass, dt, alpha, beta, dashpots, input_spec, u0, v0, a0 = damped_forced_case(seed=11, n_nodes=120)
-    stepper = make_stepper(K, mass, dt, alpha, beta, dashpots, input_spec)
+    stepper = make_stepper(K, mass, dt, alpha, beta, dashpots, input_spec, symmetric_storage)
     u, v, a = u0.copy(), v0.copy(), a0.copy()
     stepper.reset_energy(u, v, a, 0.0)
     H0 = discrete_energy(K, mass, dt, u0, v0, a0, np.repeat(mass, 3) * a0 + K @ u0)

@@ -59,10 +59,16 @@ TEST(SymmetricBlockCsr, EqualsFullProductForAnyThreadCount) {
   EXPECT_EQ(checks, 9);
 }
 
-TEST(SymmetricBlockCsr, MissingDiagonalBlockIsAnError) {
-  BlockSystem system = random_spd_system(5, 2, 3);
-  // Drop row 0's diagonal by pointing it at column 1.
-  for (std::int64_t k = system.indptr[0]; k < system.indptr[1]; ++k)
-    if (system.indices[k] == 0) system.indices[k] = 4;
-  EXPECT_THROW(SymmetricBlockCsr upper(system.view()), std::invalid_argument);
+// A node coupled to nothing (no blocks at all in its row) gets a zero diagonal block.
+TEST(SymmetricBlockCsr, RowWithoutBlocksGivesZero) {
+  const std::vector<std::int64_t> indptr = {0, 1, 1, 2};
+  const std::vector<std::int32_t> indices = {0, 2};
+  const std::vector<double> blocks = {2, 0, 0, 0, 2, 0, 0, 0, 2, 3, 0, 0, 0, 3, 0, 0, 0, 3};
+  const SymmetricBlockCsr upper(BlockCsrView{3, indptr.data(), indices.data(), blocks.data()});
+  EXPECT_EQ(upper.n_blocks(), 3);
+  const std::vector<double> x = {1, 1, 1, 5, 5, 5, 1, 1, 1};
+  std::vector<double> y(9, 99.0);
+  upper.multiply(x.data(), y.data(), 1);
+  const std::vector<double> expected = {2, 2, 2, 0, 0, 0, 3, 3, 3};
+  EXPECT_EQ(y, expected);
 }
