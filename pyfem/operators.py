@@ -26,7 +26,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from pyfem.geometry import BOX_FACES
-from pyfem.mesh import create_mesh
+from pyfem.mesh import create_mesh_with_interfaces
 
 SPACE_DIMENSION = 3
 SUPPORTED_ORDERS = (1, 2)
@@ -71,6 +71,8 @@ class Model:
         mass: (n_nodes,) row-sum lumped mass (kg), > 0.
         stiffness: (3 n_nodes, 3 n_nodes) BSR matrix with (3, 3) blocks (N/m).
         faces: one BoundaryFace per named outer boundary.
+        interface_tags: split interface name -> (facet tag of side i, of side j); empty without contact.
+        pairs: contact node pairs of the split interfaces (pyfem.interfaces.NodePairs), or None.
     """
 
     mesh: dolfinx_mesh.Mesh
@@ -83,6 +85,8 @@ class Model:
     mass: np.ndarray
     stiffness: scipy.sparse.bsr_matrix
     faces: list[BoundaryFace]
+    interface_tags: dict = dataclasses.field(default_factory=dict)
+    pairs: typing.Any = None
     _materials: typing.Optional["CellMaterials"] = dataclasses.field(default=None, repr=False, compare=False)
     _cell_locator: typing.Any = dataclasses.field(default=None, repr=False, compare=False)
 
@@ -222,7 +226,7 @@ def build_model(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> Model
         # getValuesCSR returns owned rows with global columns; the kernel's
         # owned + ghost numbering needs a local renumbering not written yet.
         raise NotImplementedError(f"build_model: runs on one MPI rank for now (communicator has {comm.size})")
-    mesh, cell_tags, facet_tags, regions, boundaries = create_mesh(scene, comm)
+    mesh, cell_tags, facet_tags, regions, boundaries, interface_tags = create_mesh_with_interfaces(scene, comm)
     V = fem.VectorFunctionSpace(mesh, ("Lagrange", order))
     materials = _cell_materials(mesh, cell_tags, regions, scene["materials"])
     quadrature = {"quadrature_degree": 2 * order}
@@ -237,14 +241,19 @@ def build_model(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> Model
     centre = np.asarray(centre, dtype=np.float64)
     if centre.shape != (SPACE_DIMENSION,):
         raise ValueError(f"boundary.centre = {scene['boundary']['centre']!r}: expected [x, y, z] (m)")
-    face_names = _outer_face_names(scene, mesh, facet_tags, boundaries)
+    face_names = _outer_face_names(scene, mesh, facet_tags, boundaries, interface_tags)
     faces = [
         boundary_face(name, V, facet_tags, boundaries[name], materials, node_coords, centre, quadrature)
         for name in face_names
     ]
+    pairs = None
+    if interface_tags:
+        from pyfem.interfaces import interface_pairs
+
+        pairs = interface_pairs(V, facet_tags, interface_tags, mass, node_coords, quadrature)
     return Model(mesh=mesh, V=V, cell_tags=cell_tags, facet_tags=facet_tags, regions=regions,
                  boundaries=boundaries, node_coords=node_coords, mass=mass, stiffness=stiffness,
-                 faces=faces, _materials=materials)
+                 faces=faces, interface_tags=interface_tags, pairs=pairs, _materials=materials)
 
 
 def _cell_materials(mesh, cell_tags, regions: dict[str, int], material_tables: typing.Mapping) -> CellMaterials:
@@ -379,9 +388,11 @@ def boundary_face(name: str, V: fem.FunctionSpace, facet_tags, tag: int, materia
                         shear_modulus=shear[nodes].copy(), plane_distance=plane_distance)
 
 
-def _outer_face_names(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[str, int]) -> list[str]:
+def _outer_face_names(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[str, int],
+                      interface_tags: typing.Mapping = ()) -> list[str]:
     """Named surfaces that are outer boundaries: the six box faces, or for a
-    file every physical surface whose facets all lie on the exterior."""
+    file every physical surface whose facets all lie on the exterior (a split
+    interface is exterior to each side but is not an outer boundary)."""
     if scene["mesh"]["builder"] == "box":
         return list(BOX_FACES)
     tdim = mesh.topology.dim
@@ -389,6 +400,8 @@ def _outer_face_names(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[
     exterior = dolfinx_mesh.exterior_facet_indices(mesh.topology)
     names = []
     for name, tag in boundaries.items():
+        if name in interface_tags:
+            continue
         facets = facet_tags.indices[facet_tags.values == tag]
         if len(facets) > 0 and np.all(np.isin(facets, exterior)):
             names.append(name)

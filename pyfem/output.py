@@ -1,4 +1,5 @@
-"""Run directory: run.json, monitors/*.csv, energy.csv, fields.xdmf (+ .h5), plots/*.png.
+"""Run directory: run.json, monitors/*.csv, energy.csv, fields.xdmf (+ .h5), plots/*.png,
+and with contact pairs/*.csv (pair monitors) and the pair-state counts over time.
 
 run.json is written first with "status": "running" and rewritten with "finished" (or
 "failed") at the end, so a half-written directory never looks like a finished run.
@@ -18,6 +19,9 @@ import numpy as np
 MONITOR_COLUMNS = ["t", "ux", "uy", "uz", "vx", "vy", "vz", "ax", "ay", "az"]
 FREEFIELD_COLUMNS = ["ux_ff", "uy_ff", "uz_ff", "vx_ff", "vy_ff", "vz_ff"]
 ENERGY_COLUMNS = ["t", "kinetic", "strain", "external_work", "damping_work", "balance"]
+CONTACT_ENERGY_COLUMNS = ["contact_work", "friction_dissipation"]
+PAIR_COLUMNS = ["t", "dux", "duy", "duz", "slip", "gap", "N", "T", "D", "state"]
+PAIR_STATES = ("bonded", "stick", "sliding", "separated")  # kernel state codes 0..3
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -51,6 +55,10 @@ class RunWriter:
         self.times: list[float] = []
         self.monitor_samples: list[np.ndarray] = []  # each (n_monitors, 9)
         self.energy_samples: list[list[float]] = []
+        self.contact_on = simulation.contact_arrays is not None
+        self.energy_columns = ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if self.contact_on else [])
+        self.pair_samples: list[np.ndarray] = []        # each (n_pair_monitors, 9)
+        self.state_count_samples: list[np.ndarray] = []  # each (4,)
         self.xdmf = None
         self.show_progress = sys.stderr.isatty()
         interval = self.scene["output"]["xdmf_interval"]
@@ -68,6 +76,8 @@ class RunWriter:
             shutil.move(str(self.out_dir), str(previous))
             print(f"note: the earlier run in {self.out_dir} was moved to {previous}", file=sys.stderr)
         (self.out_dir / "monitors").mkdir(parents=True, exist_ok=True)
+        if self.contact_on:
+            (self.out_dir / "pairs").mkdir(exist_ok=True)
         (self.out_dir / "plots").mkdir(exist_ok=True)
         self._summary = self._base_summary()
         self._summary["status"] = "running"
@@ -91,10 +101,26 @@ class RunWriter:
                 nodal = field.reshape(-1, 3)[sim.monitor_nodes]  # (m, k, 3)
                 values[:, 3 * k:3 * k + 3] = np.einsum("mk,mkc->mc", sim.monitor_weights, nodal)
             self.monitor_samples.append(values)
-        self.energy_samples.append([t] + [energy[name] for name in ENERGY_COLUMNS[1:]])
+        self.energy_samples.append([t] + [energy[name] for name in self.energy_columns[1:]])
+        contact = sim.contact_pairs
+        if contact is not None:
+            self.state_count_samples.append(np.asarray(contact.state_counts(), dtype=np.int64).copy())
+            if len(sim.pair_monitor_names):
+                self.pair_samples.append(self._pair_values(u)[sim.pair_monitor_pairs])
         if self.xdmf_every and self._sample_count % self.xdmf_every == 0:
             self._write_fields(t, u, v)
         self._sample_count += 1
+
+    def _pair_values(self, u: np.ndarray) -> np.ndarray:
+        """(n_pairs, 9): dux, duy, duz, slip, gap (m), N, T (N), D (-), state of every pair."""
+        contact = self.simulation.contact_pairs
+        normal = self.simulation.contact_arrays["normal"]
+        delta = np.asarray(contact.relative_displacement(u))
+        gap = np.einsum("pc,pc->p", delta, normal)
+        slip = np.linalg.norm(delta - gap[:, None] * normal, axis=1)
+        tangential = np.linalg.norm(np.asarray(contact.tangential_force()), axis=1)
+        return np.column_stack([delta, slip, gap, np.asarray(contact.normal_force()), tangential,
+                                np.asarray(contact.deterioration()), np.asarray(contact.state(), dtype=float)])
 
     def finish(self, wall_seconds: float, loop_seconds: float) -> dict:
         """Writes monitors, energy, plots and the final run.json; returns the summary."""
@@ -106,13 +132,21 @@ class RunWriter:
         summary["wall_seconds"] = wall_seconds
         summary["loop_seconds"] = loop_seconds
         summary["seconds_per_step"] = loop_seconds / max(1, self.simulation.n_steps)
-        summary["energy"] = self._energy_summary(energy)
-        np.savetxt(self.out_dir / "energy.csv", energy, delimiter=",", header=",".join(ENERGY_COLUMNS),
+        summary["energy"] = self._energy_summary(energy, self.energy_columns)
+        np.savetxt(self.out_dir / "energy.csv", energy, delimiter=",", header=",".join(self.energy_columns),
                    comments="")
         summary["monitors"] = self._write_monitors(times)
         from pyfem import plots
 
-        plots.energy(self.out_dir / "plots" / "energy.png", energy, ENERGY_COLUMNS)
+        if self.contact_on:
+            summary["pairs"] = self._write_pairs(times)
+            counts = np.array(self.state_count_samples).reshape(-1, len(PAIR_STATES))
+            summary["pair_states"] = {"t": times.tolist(),
+                                      **{name: counts[:, k].tolist() for k, name in enumerate(PAIR_STATES)}}
+            summary["pair_states_final"] = {name: int(counts[-1, k]) for k, name in enumerate(PAIR_STATES)}
+            summary["n_pairs"] = int(len(self.simulation.contact_arrays["area"]))
+            plots.pair_states(self.out_dir / "plots" / "pair_states.png", times, counts, PAIR_STATES)
+        plots.energy(self.out_dir / "plots" / "energy.png", energy, self.energy_columns)
         for name in self.simulation.monitor_names:
             plots.monitor(self.out_dir / "plots" / f"monitor_{name}.png", self.out_dir / "monitors" / f"{name}.csv")
         _write_json(self.out_dir / "run.json", summary)
@@ -139,12 +173,15 @@ class RunWriter:
         }
 
     @staticmethod
-    def _energy_summary(energy: np.ndarray) -> dict:
+    def _energy_summary(energy: np.ndarray, names: list[str] = ENERGY_COLUMNS) -> dict:
         """Final energies and the balance error relative to the largest energy in play."""
-        columns = {name: energy[:, i] for i, name in enumerate(ENERGY_COLUMNS)}
+        columns = {name: energy[:, i] for i, name in enumerate(names)}
         scale = max(np.max(np.abs(columns["external_work"])), np.max(columns["kinetic"] + columns["strain"]),
                     np.max(np.abs(columns["damping_work"])), 1e-300)
-        final = {name: float(columns[name][-1]) for name in ENERGY_COLUMNS[1:]}
+        if "contact_work" in columns:
+            scale = max(scale, np.max(np.abs(columns["contact_work"])),
+                        np.max(np.abs(columns["friction_dissipation"])))
+        final = {name: float(columns[name][-1]) for name in names[1:]}
         final["balance_error"] = float(np.max(np.abs(columns["balance"])) / scale)
         final["reference_energy"] = float(scale)
         return final
@@ -180,6 +217,38 @@ class RunWriter:
             peaks[name] = peak
         return peaks
 
+    def _write_pairs(self, times: np.ndarray) -> dict:
+        """pairs/NAME.csv per pair monitor; returns the peaks and final values per pair monitor."""
+        sim = self.simulation
+        peaks = {}
+        if not sim.pair_monitor_names:
+            return peaks
+        samples = np.array(self.pair_samples)  # (nt, m, 9)
+        pairs = sim.model.pairs
+        for j, name in enumerate(sim.pair_monitor_names):
+            np.savetxt(self.out_dir / "pairs" / f"{name}.csv", np.hstack([times[:, None], samples[:, j, :]]),
+                       delimiter=",", header=",".join(PAIR_COLUMNS), comments="", fmt="%.10e")
+            index = int(sim.pair_monitor_pairs[j])
+            values = samples[:, j, :]
+            peaks[name] = {
+                "pair": index,
+                "interface": pairs.names[int(pairs.interface[index])],
+                "point": pairs.coords[index].tolist(),
+                "max_relative_displacement": float(np.max(np.linalg.norm(values[:, 0:3], axis=1))),
+                "max_slip": float(np.max(values[:, 3])),
+                "residual_slip": float(values[-1, 3]),
+                "max_gap": float(np.max(values[:, 4])),
+                "max_N": float(np.max(values[:, 5])),
+                "max_T": float(np.max(values[:, 6])),
+                "min_D": float(np.min(values[:, 7])),
+                "final_state": PAIR_STATES[int(values[-1, 8])],
+            }
+        from pyfem import plots
+
+        for name in sim.pair_monitor_names:
+            plots.pair_monitor(self.out_dir / "plots" / f"pair_{name}.png", self.out_dir / "pairs" / f"{name}.csv")
+        return peaks
+
     def _open_fields(self) -> None:
         """One temporal XDMF collection holding every field per time (ParaView, meshio read it).
 
@@ -208,6 +277,16 @@ class RunWriter:
         for name, values in (("displacement", u), ("velocity", v)):
             if name in self.scene["output"]["fields"]:
                 point_data[name] = values.reshape(-1, 3)[self._field_nodes]
+        if self.simulation.contact_pairs is not None:
+            # Interface fields on both nodes of every pair, 0 elsewhere.
+            values = self._pair_values(u)
+            nodes = self.simulation.contact_arrays["pairs"]
+            n_nodes = len(self.simulation.mass)
+            for name, column in (("pair_state", 8), ("pair_slip", 3), ("pair_D", 7)):
+                nodal = np.zeros(n_nodes)
+                nodal[nodes[:, 0]] = values[:, column]
+                nodal[nodes[:, 1]] = values[:, column]
+                point_data[name] = nodal[self._field_nodes]
         self.xdmf.write_data(t, point_data=point_data)
 
     def _close_fields(self) -> None:

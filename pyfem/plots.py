@@ -1,4 +1,5 @@
-"""Plots of a run: monitor histories (against the exact free field when there is one) and energy."""
+"""Plots of a run: monitor histories (against the exact free field when there is one), energy,
+and with contact the pair-state counts and pair monitors."""
 from __future__ import annotations
 
 import matplotlib
@@ -67,6 +68,57 @@ def energy(png_path, energy_rows: np.ndarray, columns: list[str]) -> None:
     axes[1].set_ylabel("balance error / max energy")
     axes[1].set_xlabel("t (s)")
     axes[1].grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+
+
+def pair_states(png_path, times: np.ndarray, counts: np.ndarray, names) -> None:
+    """Number of contact pairs in each state against time.
+
+    Args:
+        png_path: output image.
+        times: (nt,) sample times (s).
+        counts: (nt, 4) pairs bonded, stick, sliding, separated.
+        names: the four state names.
+    """
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for k, name in enumerate(names):
+        ax.plot(times, counts[:, k], label=name)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("pairs")
+    ax.set_title("interface pair states")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+
+
+def pair_monitor(png_path, csv_path) -> None:
+    """Slip, gap, forces and deterioration of one monitored pair against time.
+
+    Args:
+        png_path: output image.
+        csv_path: pairs/NAME.csv of a run (m, N, -).
+    """
+    columns = _read_csv(csv_path)
+    t = columns["t"]
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    axes[0].plot(t, 1e3 * columns["slip"], label="slip |P_t Delta|")
+    axes[0].plot(t, 1e3 * columns["gap"], label="gap n.Delta")
+    axes[0].set_ylabel("mm")
+    axes[1].plot(t, columns["N"], label="N (compression +)")
+    axes[1].plot(t, columns["T"], label="|T|")
+    axes[1].set_ylabel("N")
+    axes[2].plot(t, columns["D"], label="D")
+    axes[2].plot(t, columns["state"] / 3.0, ":", label="state / 3")
+    axes[2].set_ylabel("-")
+    axes[-1].set_xlabel("t (s)")
+    for ax in axes:
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0].set_title(f"pair monitor {png_path.stem.removeprefix('pair_')}")
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
     plt.close(fig)

@@ -444,6 +444,10 @@ SCHEMA = Table({
         "h": Number("target element size (m)", POSITIVE, default=None),  # required for box
         "order": Choice("element order", (1, 2), default=1),
         "file": FilePath("mesh file", default=None),                 # required for file
+        "layers": TableList(Table({
+            "material": Text("layer material (a [materials] table)"),
+            "thickness": Number("layer thickness (m)", POSITIVE),
+        }, "a layer"), "[[mesh.layers]] (box, bottom up)", default=None),
         "parameters": FreeTable("builder parameters (layered_cavern, file)"),
     }, "[mesh]"),
     "materials": TableMap(_MATERIAL, "[materials.NAME]"),
@@ -639,6 +643,13 @@ def _check_rules(settings: dict, base_dirs: Sequence[Path]) -> None:
         _check_damping(settings["damping"])
     if "contact" in settings:
         contact = settings["contact"]
+        if settings["mesh"]["builder"] == "box" and settings["mesh"]["layers"]:
+            known = layer_interface_names(settings)
+            for index, name in enumerate(contact["interfaces"]):
+                if name not in known:
+                    raise SceneError(f"contact.interfaces.{index}", name,
+                                     "must name an interface of the layered box: "
+                                     + ", ".join(known))
         if contact["dynamic_friction_angle"] is None:
             contact["dynamic_friction_angle"] = contact["friction_angle"]
         if contact["tensile_strength"] is None:
@@ -662,13 +673,18 @@ def _check_mesh(settings: dict) -> None:
             spec = SCHEMA.fields["mesh"].fields[name]
             raise _missing(f"mesh.{name}", f"{spec.allowed} (required by builder "
                                            f"{_show(mesh['builder'])})")
+    if mesh["builder"] != "box" and mesh["layers"] is not None:
+        raise SceneError("mesh.layers", mesh["layers"], "layers are a setting of builder \"box\" only")
     if mesh["builder"] == "box" and mesh["parameters"] is not None:
         raise SceneError("mesh.parameters", mesh["parameters"],
                          "builder \"box\" takes no parameters (use size, h)")
 
 
 def _check_materials(settings: dict) -> None:
-    if settings["mesh"]["builder"] == "box":
+    mesh = settings["mesh"]
+    if mesh["builder"] == "box" and mesh["layers"]:
+        _check_layers(settings)
+    elif mesh["builder"] == "box":
         allowed = f"builder \"box\" has the single region \"{BOX_REGION}\""
         for name in settings["materials"]:
             if name != BOX_REGION:
@@ -689,6 +705,32 @@ def _check_materials(settings: dict) -> None:
                 raise _missing(f"materials.{name}.{key}",
                                f"{spec.allowed} (or give preset = one of "
                                + ", ".join(_show(p) for p in MATERIAL_PRESETS) + ")")
+
+
+def _check_layers(settings: dict) -> None:
+    """A layered box: each layer names a material table, every table is used, thicknesses sum to size z."""
+    mesh = settings["mesh"]
+    layers = mesh["layers"]
+    materials = settings["materials"]
+    for index, layer in enumerate(layers):
+        if layer["material"] not in materials:
+            raise SceneError(f"mesh.layers.{index}.material", layer["material"],
+                             "must name a [materials] table: " + ", ".join(materials))
+    used = {layer["material"] for layer in layers}
+    for name in materials:
+        if name not in used:
+            raise SceneError(f"materials.{name}", name, "every material of a layered box must be "
+                             "the material of a layer (regions are named by material)")
+    total = sum(layer["thickness"] for layer in layers)
+    if mesh["size"] is not None and not math.isclose(total, mesh["size"][2], rel_tol=1e-9):
+        raise SceneError("mesh.layers", [layer["thickness"] for layer in layers],
+                         f"layer thicknesses must sum to mesh.size z = {mesh['size'][2]:g} m (they sum to {total:g})")
+
+
+def layer_interface_names(scene: dict) -> list[str]:
+    """Names of the interfaces of a layered box, bottom up ("interface_1", ...); empty otherwise."""
+    layers = scene["mesh"].get("layers") or []
+    return [f"interface_{k}" for k in range(1, len(layers))]
 
 
 def _check_time(settings: dict) -> None:

@@ -60,6 +60,50 @@ class Simulation:
     monitor_nodes: np.ndarray | None = None
     monitor_weights: np.ndarray | None = None
     n_steps: int = 0
+    contact_arrays: dict | None = None   # ContactPairs arguments (see contact_arguments)
+    contact_pairs: object = None         # the kernel's ContactPairs, set by make_stepper
+    pair_monitor_names: list = field(default_factory=list)
+    pair_monitor_pairs: np.ndarray | None = None  # (m,) pair index of each pair monitor
+
+
+def earthquake_duration(scene: Scene) -> float:
+    """t_s of the deterioration law (s): the record window's length, else time.duration."""
+    record = (scene.get("wave") or {}).get("motion", {}).get("record")
+    if record is not None and record.get("window") is not None:
+        start, end = record["window"]
+        return float(end - start)
+    return float(scene["time"]["duration"])
+
+
+def contact_arguments(scene: Scene, model) -> dict:
+    """The arrays and strengths of the kernel's ContactPairs for the scene's [contact] table.
+
+    Static forces come from [initial_stress] (zero without it): F = A sigma0(x) n.
+
+    Returns:
+        dict with pairs, area, normal, static_force, cohesion, tensile_strength,
+        friction_static, friction_dynamic and deterioration (R0, lam, duration, m, n, p) or None.
+    """
+    from pyfem.initial_stress import pair_static_forces, stress_field_from_scene
+
+    contact = scene["contact"]
+    pairs = model.pairs
+    arguments = {
+        "pairs": np.ascontiguousarray(pairs.nodes, dtype=np.int32),
+        "area": np.ascontiguousarray(pairs.area, dtype=np.float64),
+        "normal": np.ascontiguousarray(pairs.normal, dtype=np.float64),
+        "static_force": pair_static_forces(pairs.coords, pairs.area, pairs.normal, stress_field_from_scene(scene)),
+        "cohesion": float(contact["cohesion"]),
+        "tensile_strength": float(contact["tensile_strength"]),
+        "friction_static": math.tan(math.radians(contact["friction_angle"])),
+        "friction_dynamic": math.tan(math.radians(contact["dynamic_friction_angle"])),
+        "deterioration": None,
+    }
+    deterioration = contact.get("deterioration")
+    if deterioration is not None:
+        arguments["deterioration"] = (deterioration["R0"], deterioration["lambda"], earthquake_duration(scene),
+                                      deterioration["m"], deterioration["n"], deterioration["p"])
+    return arguments
 
 
 def damping_coefficients(scene: Scene) -> tuple[float, float]:
@@ -198,7 +242,28 @@ def prepare(scene: Scene) -> Simulation:
         except ValueError as error:
             raise SceneError("monitor", [m["point"] for m in monitors], f"points inside the mesh ({error})")
         simulation.monitor_names = [m["name"] for m in monitors]
+    if "contact" in scene.effects:
+        simulation.contact_arrays = contact_arguments(scene, model)
+        pair_monitors = scene.get("pair_monitor", [])
+        simulation.pair_monitor_names = [m["name"] for m in pair_monitors]
+        simulation.pair_monitor_pairs = np.array([model.pairs.nearest(m["point"]) for m in pair_monitors],
+                                                 dtype=np.int64)
     return simulation
+
+
+def make_contact_pairs(arrays: dict):
+    """The kernel's ContactPairs from `contact_arguments` (deterioration set when given)."""
+    from pyfem import _kernels
+
+    if not hasattr(_kernels, "ContactPairs"):
+        raise RuntimeError("this build of pyfem._kernels has no ContactPairs: rebuild the kernel "
+                           "(cmake --build build) to run scenes with [contact]")
+    contact = _kernels.ContactPairs(arrays["pairs"], arrays["area"], arrays["normal"], arrays["static_force"],
+                                    arrays["cohesion"], arrays["tensile_strength"], arrays["friction_static"],
+                                    arrays["friction_dynamic"])
+    if arrays["deterioration"] is not None:
+        contact.set_deterioration(*arrays["deterioration"])
+    return contact
 
 
 def make_stepper(simulation: Simulation):
@@ -216,6 +281,9 @@ def make_stepper(simulation: Simulation):
         stepper.add_seismic_input(_kernels.SeismicInput(
             a["table_t0"], a["table_dt"], a["g"], a["dg"], a["ddg"], a["node_ptr"], a["nodes"],
             a["table"], a["tau"], a["P"], a["Q"]))
+    if simulation.contact_arrays is not None:
+        simulation.contact_pairs = make_contact_pairs(simulation.contact_arrays)
+        stepper.add_contact(simulation.contact_pairs)
     return stepper
 
 
@@ -227,6 +295,10 @@ def memory_estimate(simulation: Simulation) -> int:
     if simulation.input_arrays is not None:
         total += sum(v.nbytes for v in simulation.input_arrays.values() if isinstance(v, np.ndarray))
     total += simulation.dashpot_matrices.nbytes * 2
+    if simulation.contact_arrays is not None:
+        n_pairs = len(simulation.contact_arrays["area"])
+        total += sum(v.nbytes for v in simulation.contact_arrays.values() if isinstance(v, np.ndarray))
+        total += n_pairs * (3 * 3 * 8 + 8)  # kernel state per pair: forces, D, state (estimate)
     return int(total)
 
 
@@ -257,6 +329,7 @@ def plan(scene: Scene) -> dict:
         "mesh": f"{scene['mesh']['builder']}, Q{scene['mesh']['order']}, {model.n_cells} cells",
         "nodes": len(simulation.mass),
         "dofs": n,
+        **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
         "boundary": scene["boundary"]["type"],
         "dt": f"{ts.dt:.6g} s ({ts.reason})",
         "steps": simulation.n_steps,
