@@ -37,6 +37,10 @@ from pyfem.seismic.waveforms import WaveformTables, hilbert_pair, hilbert_respon
 E_Z = np.array([0.0, 0.0, 1.0])
 
 
+class ReferencePointWarning(UserWarning):
+    """A user-given reference point makes the start of the input motion miss the model."""
+
+
 @dataclass(frozen=True)
 class IncidentWave:
     """One incident plane wave travelling upward.
@@ -362,6 +366,44 @@ class FreeField:
         stress = self.lam * trace[..., None, None] * np.eye(3) + 2.0 * self.mu * strain
         return {"tau": np.stack(taus, axis=1), "table": np.stack(tables, axis=1).astype(np.int32),
                 "amplitude": np.stack(amplitudes, axis=1), "strain": strain, "stress": stress}
+
+    def start_cut(self, x) -> dict:
+        """How much of the input motion a negative delay cuts off at the points x.
+
+        The kernel starts at t = 0 from rest and evaluates a component at g(t - tau): a
+        point with tau < 0 never sees g on [t0, t0 - tau] (t0 the first table time).
+        Delays are linear in x, so for a box the corners tell the whole story; for other
+        meshes pass the boundary nodes.
+
+        Args:
+            x: (m, 3) points, m.
+
+        Returns:
+            dict: "delay" the most negative delay over points and components, s (0 if none
+            is negative); "point" (3,) where it occurs, m; "component" its name;
+            "fraction" max |g| over the cut part of the input divided by max |g|
+            (0 when nothing is cut).
+        """
+        x = np.asarray(x, dtype=float)
+        taus = np.column_stack([x @ c.slowness + c.delay_offset for c in self.components])
+        row, column = np.unravel_index(np.argmin(taus), taus.shape)
+        delay = min(float(taus[row, column]), 0.0)
+        result = {"delay": delay, "point": x[row].copy(), "component": self.components[column].name,
+                  "fraction": 0.0}
+        if delay < 0.0:
+            t = self.tables
+            g = t.g[0]
+            peak = np.abs(g).max()
+            times = t.t0 + t.dt * np.arange(len(g))
+            cut = times <= t.t0 - delay
+            if self.exact_waveform is not None:
+                # The exact function: sample the cut interval finely (a short cut may hold no table sample).
+                samples = np.linspace(t.t0, t.t0 - delay, 201)
+                cut_peak = np.abs(self.exact_waveform(samples)[0]).max()
+            else:
+                cut_peak = np.abs(g[cut]).max() if np.any(cut) else abs(g[0])
+            result["fraction"] = float(cut_peak / peak) if peak > 0.0 else 0.0
+        return result
 
     def _waveform_values(self, table, t):
         """(g, g', g'') of each slot: t (nt, m) delayed times, table (m,) ids."""

@@ -2,9 +2,12 @@
 from __future__ import annotations
 
 import math
+import warnings
+
+import numpy as np
 
 from pyfem.seismic.forces import equivalent_input_forces
-from pyfem.seismic.freefield import FreeField
+from pyfem.seismic.freefield import FreeField, ReferencePointWarning
 from pyfem.seismic.waveforms import WaveformTables, ricker
 
 # Samples per period of the Ricker centre frequency in its table: cubic Hermite with exact
@@ -12,6 +15,10 @@ from pyfem.seismic.waveforms import WaveformTables, ricker
 _RICKER_SAMPLES_PER_PERIOD = 100
 # Table step of a processed record (s): 25 Hz content is interpolated to ~1e-4.
 _RECORD_TABLE_DT = 0.002
+# Part of the input peak that may be cut off by a user's reference point without a warning:
+# a Ricker wavelet starts at ~1e-6 of its peak and a processed record at rest, so anything
+# larger was put there by a negative delay.
+CUT_WARNING_LEVEL = 1.0e-3
 
 
 def input_waveform(scene):
@@ -57,10 +64,45 @@ def seismic_input_from_scene(scene, model):
     wave = scene["wave"]
     medium = scene["materials"][wave["medium"]]
     waveform, table_grid, _ = input_waveform(scene)
-    freefield = FreeField(scene.wave_components(), medium["E"], medium["nu"], medium["rho"],
+    components = scene.wave_components()
+    for component in components:
+        # wave.scale multiplies the motion g(t) that all components share.
+        component["scale"] = component.get("scale", 1.0) * wave.get("scale", 1.0)
+    freefield = FreeField(components, medium["E"], medium["nu"], medium["rho"],
                           surface=wave.get("surface"), waveform=waveform, table_grid=table_grid,
                           reference_point=wave.get("reference_point"), model_bounds=model.bounds)
+    if wave.get("reference_point") is not None:
+        boundary_nodes = np.unique(np.concatenate([face.nodes for face in model.faces])) if model.faces else \
+            np.arange(len(model.node_coords))
+        warn_if_start_is_cut(freefield, model.node_coords[boundary_nodes], wave["reference_point"])
     boundary = scene["boundary"]
     arrays = equivalent_input_forces(model.faces, model.node_coords, freefield, boundary["type"],
                                      boundary["alpha_N"], boundary["alpha_T"])
     return freefield, arrays
+
+
+def warn_if_start_is_cut(freefield, points, reference_point, level=CUT_WARNING_LEVEL):
+    """Warns (ReferencePointWarning) when a reference point cuts off the start of the input.
+
+    A node with a negative delay tau starts at g(-tau) instead of at rest: the part of the
+    motion before -tau never enters the model, and the jump at t = 0 is a spurious pulse.
+
+    Args:
+        freefield: FreeField of the scene.
+        points: (m, 3) boundary node coordinates, m (where the input forces act).
+        reference_point: the user's wave.reference_point (3,), m, named in the message.
+        level: cut fraction of the input peak above which to warn.
+
+    Returns:
+        The `FreeField.start_cut` dict (delay s, point m, component, fraction).
+    """
+    cut = freefield.start_cut(points)
+    if cut["delay"] < 0.0 and cut["fraction"] > level:
+        x = ", ".join(f"{v:.6g}" for v in np.round(cut["point"], 6) + 0.0)  # no "-0" or "1e-15"
+        warnings.warn(
+            f"wave.reference_point = {list(reference_point)} cuts off the start of the input motion: "
+            f"the {cut['component']} wave has a delay of {cut['delay']:.4g} s at the boundary node ({x}), "
+            f"so the first {-cut['delay']:.4g} s of g(t) never enter the model there, up to "
+            f"{100 * cut['fraction']:.3g} % of the input peak; omit wave.reference_point (default: the point "
+            "the wavefront reaches first) or move it to that point", ReferencePointWarning, stacklevel=3)
+    return cut

@@ -1,0 +1,177 @@
+"""Settings for an error budget, read from the accuracy-versus-cost study.
+
+The study (workflows/accuracy_cost.py) runs a homogeneous box under an oblique SV
+Ricker pulse over element order, elements per shortest wavelength, time-step safety
+and boundary type, and writes one row per run to workflows/results/accuracy_cost.csv:
+the relative L2 error of the monitors against the exact free field and the seconds
+the run took. This module turns that table into advice:
+
+* `recommend(error_budget)`: the cheapest measured settings whose error is within the
+  budget;
+* `element_size_for(scene, error_budget)`: the element size and order a scene needs,
+  from the shortest shear wavelength of its materials and its wave's frequency content.
+
+Errors transfer between scenes through the elements per shortest wavelength (the
+dispersion error of a given element depends on h / wavelength); seconds do not
+transfer, but their ratios do for a given order (cost ~ dofs x steps).
+"""
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "accuracy_cost.csv"
+# The highest frequency with energy in a Ricker wavelet, in units of its peak frequency f0:
+# the amplitude spectrum (f/f0)^2 exp(-(f/f0)^2) at 2.5 f0 is 3 % of its peak at f0.
+RICKER_MAX_FREQUENCY_FACTOR = 2.5
+# The study's measure of cost (the time loop; model setup is a fixed cost that does not
+# grow with the duration).
+COST_COLUMN = "loop_seconds"
+
+_FLOAT_COLUMNS = ("h", "elements_per_wavelength", "safety", "dt", "error", "wall_seconds", "loop_seconds")
+_INT_COLUMNS = ("order", "steps", "dofs")
+
+
+def read_results(results_csv=DEFAULT_RESULTS) -> list[dict]:
+    """Rows of the study's CSV with numbers converted.
+
+    Args:
+        results_csv: path of the CSV (columns order, elements_per_wavelength, safety,
+            boundary, error, loop_seconds at least; others are kept as text or numbers).
+
+    Returns:
+        list of dicts, one per run.
+
+    Raises:
+        FileNotFoundError: no such file (run workflows/accuracy_cost.py first).
+        ValueError: a required column is missing.
+    """
+    path = Path(results_csv)
+    with open(path, newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    required = {"order", "elements_per_wavelength", "safety", "boundary", "error", COST_COLUMN}
+    missing = required - set(rows[0] if rows else {})
+    if missing:
+        raise ValueError(f"results_csv = {str(path)!r}: columns {sorted(missing)} missing; "
+                         f"allowed is the CSV written by workflows/accuracy_cost.py")
+    for row in rows:
+        for key in _FLOAT_COLUMNS:
+            if key in row and row[key] != "":
+                row[key] = float(row[key])
+        for key in _INT_COLUMNS:
+            if key in row and row[key] != "":
+                row[key] = int(float(row[key]))
+    return rows
+
+
+def pareto_front(rows: list[dict], cost=COST_COLUMN) -> list[dict]:
+    """Runs no other run beats in both error and cost, cheapest first.
+
+    Args:
+        rows: study rows with "error" and the cost column.
+        cost: name of the cost column (s).
+
+    Returns:
+        The Pareto-optimal rows sorted by increasing cost (and so decreasing error). Runs
+        with error >= 1 (no better than no motion at all, e.g. a fixed box without input)
+        are never on the front.
+    """
+    front = []
+    for row in sorted((r for r in rows if r["error"] < 1.0), key=lambda r: (r[cost], r["error"])):
+        if not front or row["error"] < front[-1]["error"]:
+            front.append(row)
+    return front
+
+
+def recommend(error_budget: float, results_csv=DEFAULT_RESULTS) -> dict:
+    """The cheapest settings of the study whose measured error is within the budget.
+
+    Args:
+        error_budget: largest acceptable relative L2 error of the displacement (e.g. 0.05).
+        results_csv: the study's CSV.
+
+    Returns:
+        dict: order (1 or 2), elements_per_wavelength (elements per shortest shear
+        wavelength), safety (fraction of the critical time step), boundary, error (the
+        measured one), seconds (measured cost, s, of the study's run), and "runs" (how
+        many runs of the study met the budget).
+
+    Raises:
+        ValueError: the budget is not a positive number, or no run of the study meets it
+            (the message gives the smallest error measured).
+    """
+    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
+        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+    rows = read_results(results_csv)
+    meeting = [r for r in rows if r["error"] <= error_budget]
+    if not meeting:
+        best = min(rows, key=lambda r: r["error"])
+        raise ValueError(f"error_budget = {error_budget!r}: no run of the study reached it (smallest error "
+                         f"{best['error']:.3g} with Q{best['order']}, {best['elements_per_wavelength']:.3g} "
+                         f"elements per wavelength); allowed is a budget >= {best['error']:.3g} "
+                         "or a finer study")
+    best = min(meeting, key=lambda r: (r[COST_COLUMN], r["error"]))
+    return {"order": best["order"], "elements_per_wavelength": best["elements_per_wavelength"],
+            "safety": best["safety"], "boundary": best["boundary"], "error": best["error"],
+            "seconds": best[COST_COLUMN], "runs": len(meeting)}
+
+
+def highest_frequency(scene) -> float:
+    """Highest frequency (Hz) the scene's wave carries: 2.5 f0 for a Ricker, band[1] for a record."""
+    motion = scene["wave"]["motion"]
+    if motion.get("ricker") is not None:
+        return RICKER_MAX_FREQUENCY_FACTOR * float(motion["ricker"]["f0"])
+    return float(motion["record"]["band"][1])
+
+
+def slowest_shear_speed(scene) -> float:
+    """Smallest shear wave speed sqrt(G / rho) (m/s) over the scene's materials."""
+    speeds = []
+    for name, material in scene["materials"].items():
+        E, nu, rho = material.get("E"), material.get("nu"), material.get("rho")
+        if E is None or nu is None or rho is None:
+            continue
+        speeds.append(math.sqrt(E / (2.0 * (1.0 + nu)) / rho))
+    if not speeds:
+        raise ValueError("scene materials: allowed is at least one material with E, nu and rho")
+    return min(speeds)
+
+
+def element_size_for(scene, error_budget: float, results_csv=DEFAULT_RESULTS) -> dict:
+    """Element size and order a scene needs to keep its wave-propagation error within a budget.
+
+    The shortest wavelength is the slowest shear speed of the materials over the highest
+    frequency of the wave (Ricker: 2.5 f0; record: the band-pass high corner, band[1]);
+    the study says how many elements per wavelength the budget needs, and at what order.
+
+    Args:
+        scene: validated Scene with a [wave] table.
+        error_budget: largest acceptable relative error (e.g. 0.05).
+        results_csv: the study's CSV.
+
+    Returns:
+        dict: h (largest element size, m), order, elements_per_wavelength,
+        shortest_wavelength (m), highest_frequency (Hz), shear_speed (m/s, slowest),
+        safety, boundary, expected_error (measured in the study), and "text", one
+        sentence for ``pyfem check``.
+
+    Raises:
+        ValueError: the scene has no wave, or the study cannot meet the budget.
+    """
+    if scene.get("wave") is None:
+        raise ValueError("scene has no [wave]: allowed is a scene with seismic input (its frequency content "
+                         "sets the shortest wavelength)")
+    advice = recommend(error_budget, results_csv)
+    frequency = highest_frequency(scene)
+    speed = slowest_shear_speed(scene)
+    wavelength = speed / frequency
+    h = wavelength / advice["elements_per_wavelength"]
+    text = (f"for a {100 * error_budget:g} % error: Q{advice['order']} elements of at most h = {h:.3g} m "
+            f"({advice['elements_per_wavelength']:.3g} per shortest wavelength {wavelength:.4g} m = "
+            f"{speed:.4g} m/s / {frequency:.3g} Hz), time.safety = {advice['safety']:g} "
+            f"(study error {100 * advice['error']:.2g} %)")
+    return {"h": h, "order": advice["order"], "elements_per_wavelength": advice["elements_per_wavelength"],
+            "shortest_wavelength": wavelength, "highest_frequency": frequency, "shear_speed": speed,
+            "safety": advice["safety"], "boundary": advice["boundary"], "expected_error": advice["error"],
+            "text": text}

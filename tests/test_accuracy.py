@@ -1,0 +1,144 @@
+"""pyfem.accuracy: settings for an error budget from the accuracy-versus-cost study's CSV.
+
+A small synthetic CSV with a known answer: which run is the cheapest within each budget,
+which runs are on the Pareto front, and the element size a scene then needs
+(h = slowest c_s / highest frequency / elements per wavelength, worked by hand).
+"""
+import csv
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pyfem import accuracy
+from pyfem.scene import parse_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+COLUMNS = ["order", "h", "elements_per_wavelength", "safety", "boundary", "dt", "steps", "dofs", "error",
+           "wall_seconds", "loop_seconds", "pareto"]
+# (order, elements per wavelength, safety, boundary, error, loop seconds)
+RUNS = [
+    (1, 4.5, 0.9, "viscoelastic", 0.070, 0.1),
+    (1, 8.9, 0.9, "viscoelastic", 0.015, 0.3),
+    (1, 8.9, 0.3, "viscoelastic", 0.014, 0.9),
+    (1, 17.8, 0.9, "viscoelastic", 0.004, 2.0),
+    (2, 2.2, 0.9, "viscoelastic", 0.030, 0.2),   # cheapest within 5 %
+    (2, 4.5, 0.9, "viscous", 0.0009, 1.0),      # cheapest within 1 %
+    (2, 4.5, 0.6, "viscoelastic", 0.0008, 1.5),
+    (1, 4.5, 0.6, "fixed", 1.0, 0.05),          # cheapest of all, but no accuracy: never chosen
+]
+
+
+@pytest.fixture
+def results_csv(tmp_path):
+    path = tmp_path / "accuracy_cost.csv"
+    with open(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=COLUMNS)
+        writer.writeheader()
+        for order, epw, safety, boundary, error, seconds in RUNS:
+            writer.writerow({"order": order, "h": 89.1 / epw, "elements_per_wavelength": epw,
+                             "safety": safety, "boundary": boundary, "dt": 1e-3, "steps": 100, "dofs": 1000, "error": error,
+                             "wall_seconds": seconds + 1.0, "loop_seconds": seconds, "pareto": 0})
+    return path
+
+
+def test_recommend_picks_the_cheapest_run_within_the_budget(results_csv):
+    five = accuracy.recommend(0.05, results_csv)
+    assert (five["order"], five["elements_per_wavelength"], five["safety"], five["boundary"]) == \
+        (2, 2.2, 0.9, "viscoelastic")
+    assert five["error"] == 0.030 and five["seconds"] == 0.2 and five["runs"] == 6
+    one = accuracy.recommend(0.01, results_csv)
+    assert (one["order"], one["elements_per_wavelength"], one["safety"], one["boundary"]) == \
+        (2, 4.5, 0.9, "viscous")
+    assert one["runs"] == 3
+    loose = accuracy.recommend(0.08, results_csv)  # now the cheap Q1 run qualifies; the fixed box never does
+    assert (loose["order"], loose["elements_per_wavelength"], loose["boundary"]) == (1, 4.5, "viscoelastic")
+
+
+def test_recommend_says_what_the_study_cannot_reach(results_csv):
+    with pytest.raises(ValueError, match=r"error_budget = 0.0001.*smallest error 0.0008"):
+        accuracy.recommend(1e-4, results_csv)
+    with pytest.raises(ValueError, match="error_budget"):
+        accuracy.recommend(-0.05, results_csv)
+
+
+def test_pareto_front(results_csv):
+    rows = accuracy.read_results(results_csv)
+    front = accuracy.pareto_front(rows)
+    keys = [(r["order"], r["elements_per_wavelength"], r["safety"]) for r in front]
+    # 0.1 s 7 %, 0.2 s 3 %, 0.3 s 1.5 %, 0.9 s 1.4 %, 1.0 s 0.09 %, 1.5 s 0.08 %; Q1 at 17.8
+    # (2 s, 0.4 %) is beaten by Q2 at 4.5 (1 s, 0.09 %), the fixed box (error 1) is never on it.
+    assert keys == [(1, 4.5, 0.9), (2, 2.2, 0.9), (1, 8.9, 0.9), (1, 8.9, 0.3), (2, 4.5, 0.9), (2, 4.5, 0.6)]
+    costs = [r["loop_seconds"] for r in front]
+    errors = [r["error"] for r in front]
+    assert costs == sorted(costs) and errors == sorted(errors, reverse=True)
+
+
+def _scene(motion, materials):
+    return parse_scene({
+        "mesh": {"builder": "box", "size": [100.0, 100.0, 100.0], "h": 10.0},
+        "materials": materials,
+        "time": {"duration": 1.0},
+        "wave": {"type": "SV", "motion": motion},
+    })
+
+
+def test_element_size_for_a_ricker_scene(results_csv):
+    """c_s = sqrt(8e9 / (2 x 1.24) / 2600) = 1113.9 m/s; f_max = 2.5 x 4 Hz = 10 Hz; 5 % -> Q2 at 2.2."""
+    scene = _scene({"ricker": {"f0": 4.0, "amplitude": 1e-3}},
+                   {"rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}})
+    advice = accuracy.element_size_for(scene, 0.05, results_csv)
+    c_s = math.sqrt(8.0e9 / 2.48 / 2600.0)
+    assert advice["highest_frequency"] == 10.0
+    assert advice["shear_speed"] == pytest.approx(c_s, rel=1e-12)
+    assert advice["h"] == pytest.approx(c_s / 10.0 / 2.2, rel=1e-12)
+    assert advice["order"] == 2 and advice["safety"] == 0.9
+    assert f"h = {c_s / 22.0:.3g} m" in advice["text"] and "Q2" in advice["text"]
+
+
+def test_element_size_for_a_record_uses_the_band_and_the_slowest_material(results_csv):
+    """Two materials: the softer sets c_s = sqrt(2e9 / 2.6 / 2400) = 566 m/s; the record's band[1] = 8 Hz."""
+    # The rule reads only the materials and the wave's frequency content: a plain dict will do.
+    scene = {"materials": {"hard": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0},
+                           "soft": {"E": 2.0e9, "nu": 0.3, "rho": 2400.0}},
+             "wave": {"motion": {"record": {"band": [0.1, 8.0]}, "ricker": None}}}
+    advice = accuracy.element_size_for(scene, 0.01, results_csv)
+    c_s = math.sqrt(2.0e9 / 2.6 / 2400.0)
+    assert advice["shear_speed"] == pytest.approx(c_s, rel=1e-12)
+    assert advice["highest_frequency"] == 8.0
+    assert advice["h"] == pytest.approx(c_s / 8.0 / 4.5, rel=1e-12) and advice["order"] == 2
+
+
+def test_element_size_for_needs_a_wave(results_csv):
+    scene = {"materials": {"rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}}}
+    with pytest.raises(ValueError, match=r"\[wave\]"):
+        accuracy.element_size_for(scene, 0.05, results_csv)
+
+
+def test_the_studys_own_results_give_advice():
+    """The study's committed CSV exists and meets the 5 % budget (run workflows/accuracy_cost.py)."""
+    advice = accuracy.recommend(0.05)
+    assert advice["error"] <= 0.05 and advice["order"] in (1, 2)
+
+
+@pytest.mark.slow
+def test_quick_study_runs_and_writes_its_outputs(tmp_path):
+    """The real workflow, --quick, into a temporary directory: CSV, markdown and plot, readable advice."""
+    result = subprocess.run([sys.executable, "workflows/accuracy_cost.py", "--quick", "--out", str(tmp_path)],
+                            cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    rows = accuracy.read_results(tmp_path / "accuracy_cost.csv")
+    assert len(rows) == 10
+    absorbing = [r for r in rows if r["boundary"] != "fixed"]
+    # Finer meshes are more accurate, for each order and step.
+    for order in (1, 2):
+        for safety in (0.6, 0.9):
+            errors = [r["error"] for r in sorted(absorbing, key=lambda r: r["h"], reverse=True)
+                      if r["order"] == order and r["safety"] == safety]
+            assert len(errors) == 2 and errors[1] < 0.5 * errors[0], errors
+    assert all(r["error"] == pytest.approx(1.0) for r in rows if r["boundary"] == "fixed")
+    assert accuracy.recommend(0.05, tmp_path / "accuracy_cost.csv")["error"] <= 0.05
+    assert "## Conclusion" in (tmp_path / "accuracy_cost.md").read_text()
+    assert (tmp_path / "accuracy_cost.png").stat().st_size > 10000
