@@ -3,16 +3,23 @@
 The scene's [mesh] table picks a builder from `pyfem.geometry`; the physical
 groups of the gmsh model become dolfinx MeshTags and their names the keys of
 `regions` (volumes) and `boundaries` (surfaces).
+
+With a [contact] table, the interfaces it names are split before dolfinx sees
+the mesh (`pyfem.interfaces.split_interfaces`): the cells on one side of each
+interface get their own copies of the interface nodes, so the two sides meet
+only through node pairs. Without [contact] the gmsh model goes through
+`gmshio.model_to_mesh` unchanged.
 """
 from __future__ import annotations
 
 import typing
 
 import gmsh
+import numpy as np
 from dolfinx.io import gmshio
 from mpi4py import MPI
 
-from pyfem.geometry import build_box, gmsh_session, load_msh
+from pyfem.geometry import build_box, build_layered_box, build_layered_cavern, gmsh_session, load_msh
 
 # gmsh element type numbers of the volume elements accepted as cells.
 GMSH_HEXAHEDRON_8 = 5
@@ -26,13 +33,26 @@ def create_mesh(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD):
 
     Args:
         scene: validated scene; uses scene["mesh"] (builder, origin, size, h,
-            file) and the names of scene["materials"].
+            layers, file), the names of scene["materials"] and, when present,
+            scene["contact"]["interfaces"] (split into node pairs).
         comm: MPI communicator of the mesh.
 
     Returns:
         (mesh, cell_tags, facet_tags, regions, boundaries) where regions maps
         a region name to its cell tag and boundaries maps a surface name to its
-        facet tag.
+        facet tag (for a split interface: the facets of side i).
+    """
+    return create_mesh_with_interfaces(scene, comm)[:5]
+
+
+def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD):
+    """`create_mesh` plus the facet tags of both sides of every split interface.
+
+    Returns:
+        (mesh, cell_tags, facet_tags, regions, boundaries, interface_tags) with
+        interface_tags: name -> (tag of the side-i facets, tag of the side-j
+        facets) for every interface in scene["contact"]["interfaces"]; empty
+        without [contact]. The side rule is `pyfem.interfaces.split_interfaces`'s.
     """
     mesh_settings = scene["mesh"]
     builder = mesh_settings.get("builder")
@@ -40,19 +60,76 @@ def create_mesh(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD):
     model_facts = None
     with gmsh_session("pyfem"):
         if comm.rank == model_rank:
-            if builder == "box":
+            if builder == "box" and mesh_settings.get("layers"):
+                build_layered_box(mesh_settings["origin"], mesh_settings["size"], mesh_settings["h"],
+                                  mesh_settings["layers"])
+            elif builder == "box":
                 build_box(mesh_settings["origin"], mesh_settings["size"], mesh_settings["h"])
+            elif builder == "layered_cavern":
+                build_layered_cavern(mesh_settings.get("parameters") or {})
             elif builder == "file":
                 load_msh(mesh_settings["file"])
             else:
-                raise ValueError(f"mesh.builder = {builder!r}: allowed here are 'box' and 'file'")
+                raise ValueError(f"mesh.builder = {builder!r}: allowed here are 'box', 'layered_cavern' and 'file'")
             model_facts = _physical_groups_and_cell_types()
         model_facts = comm.bcast(model_facts, root=model_rank)
         regions, boundaries, cell_types = model_facts
         _check_cell_types(cell_types)
         _check_regions_match_materials(regions, scene["materials"])
-        mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, model_rank, gdim=3)
-    return mesh, cell_tags, facet_tags, regions, boundaries
+        interface_names = list((scene.get("contact") or {}).get("interfaces") or [])
+        if not interface_names:
+            mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, model_rank, gdim=3)
+            return mesh, cell_tags, facet_tags, regions, boundaries, {}
+        missing = [name for name in interface_names if name not in boundaries]
+        if missing:
+            from pyfem.scene import SceneError
+
+            raise SceneError("contact.interfaces", interface_names,
+                             f"names of physical surfaces of the mesh; {missing} not found "
+                             f"(surfaces: {sorted(boundaries)})")
+        from pyfem.interfaces import split_interfaces
+
+        arrays = None
+        if comm.rank == model_rank:
+            arrays = _model_arrays()
+        mesh, cell_tags, facet_tags, interface_tags = split_interfaces(
+            arrays, {name: boundaries[name] for name in interface_names}, comm, model_rank)
+    return mesh, cell_tags, facet_tags, regions, boundaries, interface_tags
+
+
+def _model_arrays() -> dict:
+    """Nodes, hexahedra and tagged quadrilaterals of the current gmsh model as arrays.
+
+    Returns:
+        dict with x (n, 3) node coordinates (m), cells (c, 8) int64 gmsh-ordered
+        node indices (0-based rows of x), cell_values (c,) physical volume tags,
+        facets (f, 4) int64 node indices of the quadrilaterals of the physical
+        surfaces, facet_values (f,) their physical surface tags.
+    """
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    x = coords.reshape(-1, 3)
+    # gmsh node tags need not be contiguous: index them through a lookup table.
+    index_of_tag = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
+    index_of_tag[tags.astype(np.int64)] = np.arange(len(tags))
+    blocks = {3: ([], []), 2: ([], [])}
+    for dim in (3, 2):
+        for _, tag in gmsh.model.getPhysicalGroups(dim):
+            for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+                element_types, _, element_nodes = gmsh.model.mesh.getElements(dim, entity)
+                for element_type, nodes in zip(element_types, element_nodes):
+                    n_nodes = gmsh.model.mesh.getElementProperties(element_type)[3]
+                    topology = index_of_tag[np.asarray(nodes, dtype=np.int64).reshape(-1, n_nodes)]
+                    blocks[dim][0].append(topology)
+                    blocks[dim][1].append(np.full(len(topology), tag, dtype=np.int32))
+    cells, cell_values = np.concatenate(blocks[3][0]), np.concatenate(blocks[3][1])
+    if blocks[2][0]:
+        facets, facet_values = np.concatenate(blocks[2][0]), np.concatenate(blocks[2][1])
+    else:
+        facets, facet_values = np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int32)
+    if facets.shape[1] != 4:
+        raise ValueError(f"mesh: physical surfaces must be made of 4-node quadrilaterals (found {facets.shape[1]} nodes)")
+    return {"x": x.copy(), "cells": cells, "cell_values": cell_values, "facets": facets,
+            "facet_values": facet_values}
 
 
 def _physical_groups_and_cell_types() -> tuple[dict[str, int], dict[str, int], list[tuple[int, str]]]:
