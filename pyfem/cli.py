@@ -88,7 +88,23 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     if not any("effects" in str(key) for key in plan):
         print(describe_scene(scene))
     print(format_plan(plan))
+    if "seismic_input" in scene.effects:
+        print(mesh_advice(scene))
     return 0
+
+
+def mesh_advice(scene: Scene) -> str:
+    """What the accuracy-versus-cost study says this scene's waves need (h, order) for 5 % and 1 %."""
+    from pyfem.accuracy import element_size_for
+
+    lines = [f"mesh advice (workflows/accuracy_cost.py; scene h = {scene['mesh'].get('h')}, "
+             f"order {scene['mesh']['order']}):"]
+    for budget in (0.05, 0.01):
+        try:
+            lines.append(f"  {element_size_for(scene, budget)['text']}")
+        except (ValueError, FileNotFoundError) as error:
+            lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
+    return "\n".join(lines)
 
 
 def command_bench(argv: Sequence[str]) -> int:
