@@ -15,7 +15,8 @@ test: setup
 	ctest --test-dir build --output-on-failure
 	$(PYTHON) -m pytest -q
 
-test-slow: setup
+test-slow:
+	@bash scripts/setup.sh --with-paraview
 	$(PYTHON) -m pytest -q -m slow
 
 bench: setup

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Installs what the project needs from Debian's archive (quiet and quick when present),
 # then builds the C++ kernel module into pyfem/ (incremental: rebuilds only what changed).
+#   scripts/setup.sh                  what runs and the default test tier need
+#   scripts/setup.sh --with-paraview  also ParaView's Python and a virtual X server (slow tier)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -9,6 +11,9 @@ packages=(
   python3-dolfinx-real python3-petsc4py python3-mpi4py python3-gmsh python3-meshio
   python3-numpy python3-scipy python3-matplotlib python3-h5py python3-tqdm python3-pytest
 )
+if [ "${1:-}" = "--with-paraview" ]; then
+  packages+=(paraview python3-paraview xvfb)
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
