@@ -135,13 +135,13 @@ def bytes_moved_per_step(stiffness, symmetric_storage: bool = True) -> int:
     the diagonal and the blocks above it (72 + 4 bytes each) and adds the K u buffer
     (written, then read: 2 vectors).
     """
-    n_block_rows = stiffness.shape[0] // 3
+    from pyfem.solver import upper_triangle_blocks
+
     if not symmetric_storage:
         return int(stiffness.data.nbytes + stiffness.indices.nbytes + stiffness.indptr.nbytes
                    + 11 * 8 * stiffness.shape[0])
-    rows = np.repeat(np.arange(n_block_rows), np.diff(stiffness.indptr))
-    upper_blocks = int(np.count_nonzero(stiffness.indices > rows)) + n_block_rows
-    return int(upper_blocks * (72 + 4) + 8 * (n_block_rows + 1) + 13 * 8 * stiffness.shape[0])
+    return int(upper_triangle_blocks(stiffness) * (72 + 4) + 8 * (stiffness.shape[0] // 3 + 1)
+               + 13 * 8 * stiffness.shape[0])
 
 
 def main(argv=None) -> int:

@@ -287,11 +287,20 @@ def make_stepper(simulation: Simulation):
     return stepper
 
 
+def upper_triangle_blocks(stiffness: sp.bsr_matrix) -> int:
+    """Blocks the kernel's symmetric storage keeps: the diagonal and those above it."""
+    n_block_rows = stiffness.shape[0] // 3
+    rows = np.repeat(np.arange(n_block_rows), np.diff(stiffness.indptr))
+    return int(np.count_nonzero(stiffness.indices > rows)) + n_block_rows
+
+
 def memory_estimate(simulation: Simulation) -> int:
-    """Bytes the kernel holds during the run: stiffness (BSR), state and scratch vectors, input tables."""
+    """Bytes held during the run: stiffness (BSR, and the kernel's upper-triangle copy), state and
+    scratch vectors, input tables, contact pairs."""
     k = simulation.stiffness
     n_dofs = k.shape[0]
-    total = k.data.nbytes + k.indices.nbytes + k.indptr.nbytes + 5 * 8 * n_dofs + simulation.mass.nbytes
+    total = k.data.nbytes + k.indices.nbytes + k.indptr.nbytes + 6 * 8 * n_dofs + simulation.mass.nbytes
+    total += upper_triangle_blocks(k) * (72 + 4) + 8 * (n_dofs // 3 + 1)
     if simulation.input_arrays is not None:
         total += sum(v.nbytes for v in simulation.input_arrays.values() if isinstance(v, np.ndarray))
     total += simulation.dashpot_matrices.nbytes * 2
@@ -300,12 +309,6 @@ def memory_estimate(simulation: Simulation) -> int:
         total += sum(v.nbytes for v in simulation.contact_arrays.values() if isinstance(v, np.ndarray))
         total += n_pairs * (3 * 3 * 8 + 8)  # kernel state per pair: forces, D, state (estimate)
     return int(total)
-
-
-def bytes_per_step(simulation: Simulation) -> int:
-    """Bytes moved per step by the dominant kernel passes (matrix once, vectors a few times)."""
-    k = simulation.stiffness
-    return int(k.data.nbytes + k.indices.nbytes + k.indptr.nbytes + 12 * 8 * k.shape[0])
 
 
 def plan(scene: Scene) -> dict:
