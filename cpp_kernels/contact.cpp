@@ -5,33 +5,11 @@
 #include <stdexcept>
 #include <string>
 
+#include "small_matrix.hpp"
+
 namespace cavern {
 
 namespace {
-
-double invert_3x3(const double* A, double* inverse) {
-  const double c00 = A[4] * A[8] - A[5] * A[7];
-  const double c01 = A[5] * A[6] - A[3] * A[8];
-  const double c02 = A[3] * A[7] - A[4] * A[6];
-  const double determinant = A[0] * c00 + A[1] * c01 + A[2] * c02;
-  const double s = 1.0 / determinant;
-  inverse[0] = c00 * s;
-  inverse[1] = (A[2] * A[7] - A[1] * A[8]) * s;
-  inverse[2] = (A[1] * A[5] - A[2] * A[4]) * s;
-  inverse[3] = c01 * s;
-  inverse[4] = (A[0] * A[8] - A[2] * A[6]) * s;
-  inverse[5] = (A[2] * A[3] - A[0] * A[5]) * s;
-  inverse[6] = c02 * s;
-  inverse[7] = (A[1] * A[6] - A[0] * A[7]) * s;
-  inverse[8] = (A[0] * A[4] - A[1] * A[3]) * s;
-  return determinant;
-}
-
-inline void multiply_3x3(const double* A, const double* x, double* y) {
-  y[0] = A[0] * x[0] + A[1] * x[1] + A[2] * x[2];
-  y[1] = A[3] * x[0] + A[4] * x[1] + A[5] * x[2];
-  y[2] = A[6] * x[0] + A[7] * x[1] + A[8] * x[2];
-}
 
 inline double dot(const double* x, const double* y) {
   return x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
