@@ -11,11 +11,6 @@
 
 namespace cavern {
 
-namespace {
-
-// Inverse of a 3x3 matrix by cofactors; returns the determinant.
-}  // namespace
-
 Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
                  const StepperParameters& parameters)
     : stiffness_(stiffness), mass_(mass), parameters_(parameters) {
