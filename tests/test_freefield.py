@@ -346,3 +346,22 @@ def test_bad_boundary_type_names_the_parameter():
         boundary_springs_and_dashpots(faces, len(grid), "absorbing")
     with pytest.raises(ValueError, match="boundary_type"):
         equivalent_input_forces(faces, grid, input_field(), "rigid")
+
+
+GRAZING_ANGLES = [85.0, 89.0, 89.9, 89.99]
+
+
+@pytest.mark.parametrize("wave_type", ["P", "SV", "SH"])
+@pytest.mark.parametrize("angle", GRAZING_ANGLES)
+def test_grazing_incidence_stays_finite_and_traction_free(wave_type, angle):
+    """No angle in [0, 90) may crash or give NaN: near-grazing waves keep a finite, traction-free field."""
+    waveform = WaveformTables.from_function(wavelet, *TABLE_GRID)
+    field = free_field(wave_type, angle, waveform=waveform)
+    x = surface_points()
+    t = np.linspace(0.0, 2.0, 401)
+    displacement = field.displacement(x, t)
+    stress = field.stress(x, t)
+    assert np.isfinite(displacement).all() and np.isfinite(stress).all()
+    assert np.abs(displacement).max() > 0.0
+    scale = incident_stress_scale(field, x, t)
+    assert np.abs(stress[..., :, 2]).max() <= 1e-8 * scale
