@@ -25,20 +25,24 @@ DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" 
 # The highest frequency with energy in a Ricker wavelet, in units of its peak frequency f0:
 # the amplitude spectrum (f/f0)^2 exp(-(f/f0)^2) at 2.5 f0 is 3 % of its peak at f0.
 RICKER_MAX_FREQUENCY_FACTOR = 2.5
-# The study's measure of cost (the time loop; model setup is a fixed cost that does not
-# grow with the duration).
-COST_COLUMN = "loop_seconds"
+# The study's measure of cost: seconds of the time loop (model setup is a fixed cost that does
+# not grow with the duration) scaled to one reference volume, because the study's box grows
+# with the element size (its monitors keep three elements from every face).
+COST_COLUMN = "loop_seconds_per_reference_volume"
 
-_FLOAT_COLUMNS = ("h", "elements_per_wavelength", "safety", "dt", "error", "wall_seconds", "loop_seconds")
+_FLOAT_COLUMNS = ("h", "elements_per_wavelength", "safety", "dt", "error", "wall_seconds", "loop_seconds",
+                  "box_volume", COST_COLUMN)
 _INT_COLUMNS = ("order", "steps", "dofs")
 
 
-def read_results(results_csv=DEFAULT_RESULTS) -> list[dict]:
+def read_results(results_csv=DEFAULT_RESULTS, cost_column=COST_COLUMN) -> list[dict]:
     """Rows of the study's CSV with numbers converted.
 
     Args:
         results_csv: path of the CSV (columns order, elements_per_wavelength, safety,
-            boundary, error, loop_seconds at least; others are kept as text or numbers).
+            boundary, error and the cost column at least; others are kept as text or numbers).
+        cost_column: the cost column that must be present (the workflow reads older CSVs with
+            "loop_seconds" and adds the normalised cost itself).
 
     Returns:
         list of dicts, one per run.
@@ -50,7 +54,7 @@ def read_results(results_csv=DEFAULT_RESULTS) -> list[dict]:
     path = Path(results_csv)
     with open(path, newline="") as stream:
         rows = list(csv.DictReader(stream))
-    required = {"order", "elements_per_wavelength", "safety", "boundary", "error", COST_COLUMN}
+    required = {"order", "elements_per_wavelength", "safety", "boundary", "error", cost_column}
     missing = required - set(rows[0] if rows else {})
     if missing:
         raise ValueError(f"results_csv = {str(path)!r}: columns {sorted(missing)} missing; "

@@ -17,7 +17,7 @@ from pyfem.scene import parse_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 COLUMNS = ["order", "h", "elements_per_wavelength", "safety", "boundary", "dt", "steps", "dofs", "error",
-           "wall_seconds", "loop_seconds", "pareto"]
+           "wall_seconds", "loop_seconds", accuracy.COST_COLUMN, "pareto"]
 # (order, elements per wavelength, safety, boundary, error, loop seconds)
 RUNS = [
     (1, 4.5, 0.9, "viscoelastic", 0.070, 0.1),
@@ -40,7 +40,8 @@ def results_csv(tmp_path):
         for order, epw, safety, boundary, error, seconds in RUNS:
             writer.writerow({"order": order, "h": 89.1 / epw, "elements_per_wavelength": epw,
                              "safety": safety, "boundary": boundary, "dt": 1e-3, "steps": 100, "dofs": 1000, "error": error,
-                             "wall_seconds": seconds + 1.0, "loop_seconds": seconds, "pareto": 0})
+                             "wall_seconds": seconds + 1.0, "loop_seconds": 2.0 * seconds,
+                             accuracy.COST_COLUMN: seconds, "pareto": 0})
     return path
 
 
@@ -71,7 +72,7 @@ def test_pareto_front(results_csv):
     # 0.1 s 7 %, 0.2 s 3 %, 0.3 s 1.5 %, 0.9 s 1.4 %, 1.0 s 0.09 %, 1.5 s 0.08 %; Q1 at 17.8
     # (2 s, 0.4 %) is beaten by Q2 at 4.5 (1 s, 0.09 %), the fixed box (error 1) is never on it.
     assert keys == [(1, 4.5, 0.9), (2, 2.2, 0.9), (1, 8.9, 0.9), (1, 8.9, 0.3), (2, 4.5, 0.9), (2, 4.5, 0.6)]
-    costs = [r["loop_seconds"] for r in front]
+    costs = [r[accuracy.COST_COLUMN] for r in front]
     errors = [r["error"] for r in front]
     assert costs == sorted(costs) and errors == sorted(errors, reverse=True)
 

@@ -1,26 +1,29 @@
 """Accuracy versus cost: what each digit of accuracy costs in wall time.
 
-The problem has an exact answer: a homogeneous box, 120 m x 120 m x 200 m, under a free
-surface 50 m above its top, hit by an SV Ricker pulse (f0 = 5 Hz, content up to
-2.5 f0 = 12.5 Hz) incident at 30 degrees. With the total free field applied on its
-faces, the box must move as the analytical half-space free field; the error of a run is
-the relative L2 error of the displacement at three monitors on the box's axis (60 m from
-every face) over the whole pulse (incident, reflected SV and reflected P).
+The problem has an exact answer: a homogeneous box under a free surface, hit by an SV
+Ricker pulse (f0 = 5 Hz, content up to 2.5 f0 = 12.5 Hz) incident at 30 degrees. With the
+total free field applied on its faces, the box must move as the analytical half-space free
+field; the error of a run is the relative L2 error of the displacement at three monitors on
+the box's vertical axis, 40 m apart, 130 m and more below the free surface, over the whole
+pulse (incident, reflected SV and reflected P). The monitors are at least 60 m and three
+elements from every face: the box is 120 x 120 x 200 m for h <= 20 m and grows with h above.
 
 Knobs, one run per combination:
   * element order: Q1 (8-node) and Q2 (27-node, lumped: spectral-element like);
   * elements per shortest shear wavelength (lambda = 1114 m/s / 12.5 Hz = 89 m), four
     levels per order, from sizes that divide the box (the monitors stay on nodes). The
-    monitors are 60 m (0.7 wavelength) from the faces: nearer, the faces' exact input pins
-    the solution on coarse meshes (at 40 m, Q2 at 2 elements per wavelength measured a
-    0.3 % error, one element from the faces) and the error no longer measures propagation;
+    monitors are >= 60 m (0.7 wavelength) and >= 3 elements from the faces: nearer, the
+    faces' exact input pins the solution on coarse meshes (one element from the faces, Q2
+    at 2.2 elements per wavelength "measured" 0.3-0.9 %) and the error no longer measures
+    propagation;
   * time step as a fraction ("safety") of the critical step: 0.3, 0.6, 0.9;
   * boundary: viscoelastic (springs + dashpots, the paper's), viscous (dashpots only)
     and fixed. A fixed face cannot carry the free-field input in this program (the
     input is a force through the boundary's springs and dashpots), so a fixed box stays
     at rest: error 100 %. It is run once per mesh as the control that shows why the
     absorbing input boundary is needed.
-Cost: the seconds of the time loop (run.json loop_seconds; the model setup, a fixed
+Cost: the seconds of the time loop per 120 x 120 x 200 m of model (run.json loop_seconds
+scaled by the box's volume, since the box grows with h; the model setup, a fixed
 cost of a few seconds, is in wall_seconds and in the CSV too), measured in this session
 on this machine: compare ratios, not absolute values.
 
@@ -58,9 +61,13 @@ E, NU, RHO = 8.0e9, 0.24, 2600.0
 SHEAR_SPEED = math.sqrt(E / (2 * (1 + NU)) / RHO)        # 1114 m/s
 F0 = 5.0                                                  # Ricker peak frequency (Hz)
 SHORTEST_WAVELENGTH = SHEAR_SPEED / (2.5 * F0)            # 89 m
-BOX = (120.0, 120.0, 200.0)                               # m
-SURFACE = BOX[2] + 50.0                                   # z of the free surface (m)
-MONITORS = [(60.0, 60.0, z) for z in (60.0, 100.0, 140.0)]
+# The monitors keep at least MONITOR_CLEARANCE metres and MONITOR_CLEARANCE_ELEMENTS
+# elements from every face (faces carry the exact field: nearer monitors are pinned to it,
+# and a 120 m box with 40 m elements once "measured" 0.9 % for Q2 at 2.2 elements per
+# wavelength). The box grows with h for that; the monitors, 40 m apart on the box's axis,
+# and the free surface 130 m above the highest monitor keep the same relative geometry.
+MONITOR_CLEARANCE, MONITOR_CLEARANCE_ELEMENTS = 60.0, 3
+MONITOR_SPACING, SURFACE_ABOVE_MONITORS = 40.0, 130.0   # m (above the largest box top: 120 m)
 WAVE = {"type": "SV", "angle": 30.0, "azimuth": 0.0}
 # Monitor sampling: 20 samples per period at f0, 8 at 2.5 f0. The time step divides the
 # interval, so the interval must exceed the largest step tried (0.9 x critical is ~5 ms
@@ -80,20 +87,40 @@ RESULTS_CSV = ROOT / "workflows" / "results" / "accuracy_cost.csv"
 REPORT_MD = ROOT / "docs" / "accuracy_cost.md"
 REPORT_PNG = ROOT / "docs" / "accuracy_cost.png"
 COLUMNS = ["order", "h", "elements_per_wavelength", "safety", "boundary", "dt", "steps", "dofs", "error",
-           "wall_seconds", "loop_seconds"]
+           "wall_seconds", "loop_seconds", "box_volume", COST_COLUMN]
+# Cost is compared per this volume (m^3): the box of every level with h <= 20 m.
+REFERENCE_VOLUME = 120.0 * 120.0 * 200.0
+
+
+def add_normalised_cost(row):
+    """Adds the box volume and the loop seconds scaled to REFERENCE_VOLUME to a result row."""
+    size, _, _ = box_geometry(row["h"])
+    row["box_volume"] = size[0] * size[1] * size[2]
+    row[COST_COLUMN] = row["loop_seconds"] * REFERENCE_VOLUME / row["box_volume"]
+    return row
 
 
 # ----------------------------------------------------------------------------- step 1: one run
+def box_geometry(h):
+    """(box size, monitor points, surface z) for element size h (m): clearance whole elements."""
+    margin = h * math.ceil(max(MONITOR_CLEARANCE, MONITOR_CLEARANCE_ELEMENTS * h) / h - 1e-9)
+    size = (2 * margin, 2 * margin, 2 * margin + 2 * MONITOR_SPACING)
+    monitors = [(margin, margin, margin + k * MONITOR_SPACING) for k in range(3)]
+    surface = monitors[-1][2] + SURFACE_ABOVE_MONITORS
+    return size, monitors, surface
+
+
 def box_scene(order, h, safety, boundary):
     """The study's scene for one combination of knobs."""
+    size, monitors, surface = box_geometry(h)
     return parse_scene({
         "title": f"accuracy-cost Q{order} h={h:g} safety={safety:g} {boundary}",
-        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": list(BOX), "h": h, "order": order},
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": list(size), "h": h, "order": order},
         "materials": {"rock": {"E": E, "nu": NU, "rho": RHO}},
         "time": {"duration": DURATION, "safety": safety},
-        "wave": {**WAVE, "surface": SURFACE, "motion": {"ricker": {"f0": F0, "amplitude": 1.0e-3}}},
+        "wave": {**WAVE, "surface": surface, "motion": {"ricker": {"f0": F0, "amplitude": 1.0e-3}}},
         "boundary": {"type": boundary},
-        "monitor": [{"name": f"m{k}", "point": list(p)} for k, p in enumerate(MONITORS)],
+        "monitor": [{"name": f"m{k}", "point": list(p)} for k, p in enumerate(monitors)],
         "output": {"interval": INTERVAL, "xdmf_interval": 0.0},
     })
 
@@ -103,15 +130,16 @@ def run_one(order, h, safety, boundary, work_dir):
     out = Path(work_dir) / f"q{order}_h{h:.4g}_s{safety:g}_{boundary}"
     summary = solver.run(box_scene(order, h, safety, boundary), out)
     computed, exact = [], []
-    for k in range(len(MONITORS)):
+    for k in range(3):
         data = np.genfromtxt(out / "monitors" / f"m{k}.csv", delimiter=",", names=True)
         computed.append(np.column_stack([data["ux"], data["uy"], data["uz"]]))
         exact.append(np.column_stack([data["ux_ff"], data["uy_ff"], data["uz_ff"]]))
     computed, exact = np.array(computed), np.array(exact)
     error = float(np.linalg.norm(computed - exact) / np.linalg.norm(exact))
-    return {"order": order, "h": h, "elements_per_wavelength": SHORTEST_WAVELENGTH / h, "safety": safety,
-            "boundary": boundary, "dt": summary["dt"], "steps": summary["steps"], "dofs": summary["dofs"],
-            "error": error, "wall_seconds": summary["wall_seconds"], "loop_seconds": summary["loop_seconds"]}
+    return add_normalised_cost({
+        "order": order, "h": h, "elements_per_wavelength": SHORTEST_WAVELENGTH / h, "safety": safety,
+        "boundary": boundary, "dt": summary["dt"], "steps": summary["steps"], "dofs": summary["dofs"],
+        "error": error, "wall_seconds": summary["wall_seconds"], "loop_seconds": summary["loop_seconds"]})
 
 
 # ----------------------------------------------------------------------------- step 2: the sweep
@@ -204,11 +232,13 @@ def write_report(rows, path, png_name, quick, study_seconds):
         "",
         f"Generated by `workflows/accuracy_cost.py{' --quick' if quick else ''}`; do not edit by hand.",
         "",
-        "Problem: homogeneous box 120 x 120 x 200 m (E 8 GPa, nu 0.24, rho 2600 kg/m^3, c_s 1114 m/s) "
-        "under a free surface 50 m above its top; SV Ricker pulse (f0 = 5 Hz) incident at 30 deg. "
+        "Problem: homogeneous box (E 8 GPa, nu 0.24, rho 2600 kg/m^3, c_s 1114 m/s) under a free surface "
+        "130 m above the highest monitor; SV Ricker pulse (f0 = 5 Hz) incident at 30 deg. "
         f"Shortest wavelength {SHORTEST_WAVELENGTH:.1f} m (c_s / 2.5 f0). Error: relative L2 error of the "
-        "displacement at three monitors (60 m from every face) against the exact free field, over "
-        f"{DURATION:g} s. Cost: seconds of the time loop (`loop_seconds`), measured in one session on a "
+        "displacement at three monitors (at least 60 m and 3 elements from every face: 120 x 120 x 200 m "
+        "for h <= 20 m, 240 x 240 x 320 m for h = 40 m) against the exact free field, over "
+        f"{DURATION:g} s. Cost: seconds of the time loop (`loop_seconds`) scaled to a 120 x 120 x 200 m "
+        "model (the box grows with h), measured in one session on a "
         f"2-core machine shared with other jobs: compare ratios. Study: {len(rows)} runs, "
         f"{study_seconds / 60:.1f} min of wall time in all.",
         "",
@@ -221,10 +251,11 @@ def write_report(rows, path, png_name, quick, study_seconds):
         best = cheapest_within(rows, budget)
         advice = describe(best) if best else "no run of the study reached it"
         lines.append(f"- **{100 * budget:g} %**: {advice}.")
-    header = "| order | el./wavelength | h (m) | safety | boundary | dofs | steps | dt (s) | error | loop s | wall s |"
-    lines += ["", "## Pareto front (no run is both cheaper and more accurate)", "", header, "|---" * 11 + "|"]
+    header = ("| order | el./wavelength | h (m) | safety | boundary | dofs | steps | dt (s) | error | loop s | "
+              "loop s per reference volume | wall s |")
+    lines += ["", "## Pareto front (no run is both cheaper and more accurate)", "", header, "|---" * 12 + "|"]
     lines += [table_row(r) for r in front]
-    lines += ["", "## All runs", "", header, "|---" * 11 + "|"]
+    lines += ["", "## All runs", "", header, "|---" * 12 + "|"]
     order = sorted(rows, key=lambda r: (r["boundary"] == "fixed", r["order"], -r["h"], r["boundary"], r["safety"]))
     lines += [table_row(r) for r in order]
     lines += ["", "## Conclusion", ""] + conclusion(rows)
@@ -235,7 +266,7 @@ def write_report(rows, path, png_name, quick, study_seconds):
 def table_row(r):
     return (f"| Q{r['order']} | {r['elements_per_wavelength']:.3g} | {r['h']:.4g} | {r['safety']:g} | "
             f"{r['boundary']} | {r['dofs']} | {r['steps']} | {r['dt']:.3g} | {r['error']:.2e} | "
-            f"{r['loop_seconds']:.2f} | {r['wall_seconds']:.2f} |")
+            f"{r['loop_seconds']:.2f} | {r[COST_COLUMN]:.3g} | {r['wall_seconds']:.2f} |")
 
 
 def conclusion(rows):
@@ -293,12 +324,11 @@ def conclusion(rows):
     text.append("- Pareto front: " + "; ".join(f"Q{r['order']} {r['elements_per_wavelength']:.3g} el./wl, "
                                               f"safety {r['safety']:g}, {r['boundary']} ({r['error']:.1e}, "
                                               f"{r[COST_COLUMN]:.2g} s)" for r in front) + ".")
-    text.append("- Caveat: the monitors are 60 m (0.7 shortest wavelength) from the faces, which carry the "
-                "exact field; dispersion error grows with the distance a wave travels inside the mesh, so "
-                "where the region of interest lies several wavelengths from the faces expect proportionally "
-                "larger errors on the coarse levels (in a box 80 m wide, monitors 40 m from the faces, Q1 at "
-                "4.5 elements per wavelength measured 4.2 % instead of 7 %, Q2 at 2.2 measured 0.29 % "
-                "instead of 0.8 %): take the next finer level of the table for large models.")
+    text.append("- Caveat: the monitors are at least 60 m (0.7 shortest wavelength) and 3 elements from the "
+                "faces, which carry the exact field; dispersion error grows with the distance a wave travels "
+                "inside the mesh, so where the region of interest lies several wavelengths from the faces "
+                "expect proportionally larger errors on the coarse levels: take the next finer level of the "
+                "table for large models.")
     text.append("- `pyfem.accuracy.element_size_for(scene, budget)` turns these into an element size for "
                 "a scene: h = (slowest c_s / highest frequency) / elements per wavelength.")
     return text
@@ -319,8 +349,9 @@ def main(argv=None):
     if args.report_only:
         from pyfem.accuracy import read_results
 
-        rows = read_results(csv_path)
+        rows = [add_normalised_cost(r) for r in read_results(csv_path, cost_column="loop_seconds")]
         seconds = sum(r["wall_seconds"] for r in rows)  # the runs' own; the sweep adds file reading
+        write_csv(rows, csv_path)
         write_plot(rows, png_path)
         write_report(rows, md_path, png_path.name, args.quick, seconds)
         print(f"rebuilt {md_path} and {png_path} from {csv_path}")
