@@ -487,6 +487,9 @@ SCHEMA = Table({
                 "band": Vector("band-pass [f_low, f_high] (Hz)", 2, POSITIVE,
                                default=[0.1, 25.0], increasing=True),
                 "format": Choice("record format", ("auto", "plain", "at2"), default="auto"),
+                # None: keep the zero-phase filter's precursor where it exceeds 1e-3 of the peak
+                # (seconds before the window start); 0: start at the window (more baseline correction).
+                "lead_in": Number("seconds kept before the window start (s)", NON_NEGATIVE, default=None),
             }, "an accelerogram", presence="optional", shorthand="file"),
         }, "[wave.motion]", presence="required"),
     }, "[wave]", presence="optional"),

@@ -283,3 +283,25 @@ def test_plot_record_writes_a_png(tmp_path, elcentro_processed):
         plot_record(processed, path, raw=raw)
         content = path.read_bytes()
         assert content[:8] == b"\x89PNG\r\n\x1a\n" and len(content) > 10_000
+
+
+def test_scene_lead_in_sets_the_seconds_kept_before_the_window():
+    """wave.motion.record.lead_in reaches the processing: the motion starts lead_in s before the window."""
+    from pyfem.scene import parse_scene
+    from pyfem.seismic.setup import input_waveform
+
+    checks = 0
+    for lead_in in (0.0, 1.0):
+        scene = parse_scene({
+            "mesh": {"size": [10.0, 10.0, 10.0], "h": 5.0},
+            "materials": {"rock": {"E": 8e9, "nu": 0.24, "rho": 2600.0}},
+            "time": {"duration": 1.0},
+            "wave": {"type": "SV", "surface": 20.0, "motion": {"record": {
+                "file": str(DATA / "elcentro_1940_ns.txt"), "units": "g", "pga": 0.32, "window": [0.0, 20.0],
+                "band": [0.1, 3.0], "lead_in": lead_in}}}})
+        _, _, processed = input_waveform(scene)
+        assert processed.record_start == pytest.approx(lead_in, abs=1e-9)
+        assert processed.t[-1] == pytest.approx(20.0 + lead_in, abs=0.01)
+        assert abs(processed.residual_displacement) < 1e-10
+        checks += 1
+    assert checks == 2

@@ -46,7 +46,7 @@ def input_waveform(scene):
     spec = motion["record"]
     record = read_record(spec["file"], units=spec["units"], dt=spec.get("dt"), format=spec["format"])
     processed = process_record(record, window=spec.get("window"), band=tuple(spec["band"]), pga=spec.get("pga"),
-                               table_dt=_RECORD_TABLE_DT)
+                               table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"))
     t0, dt, g, dg, ddg = as_waveform(processed)
     return WaveformTables(t0=t0, dt=dt, g=g[None, :], dg=dg[None, :], ddg=ddg[None, :]), None, processed
 
