@@ -162,6 +162,62 @@ class Model:
             nodes[j] = self.V.dofmap.cell_dofs(cell)
         return nodes, weights
 
+    def point_gradient_weights(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Weights of the gradient of a nodal field at arbitrary points.
+
+        For a vector field with nodal values U (n_nodes, 3),
+        dU_i/dx_l (p_j) = sum_k U[nodes[j, k], i] * gradients[j, k, l]: the basis
+        gradients at the point's reference coordinates X, mapped by the inverse
+        Jacobian, dphi/dx = dphi/dX J^-1 with J = dx/dX = sum_a x_a (x) dphi_a/dX.
+        J is built from the space's own nodes, which is exact for any geometry the
+        space contains (the Q1 geometry of these meshes, for Q1 and Q2).
+        The gradient is that of the containing cell (the strain of a Q1/Q2 field
+        jumps across cell faces; a point on a face gets one of its cells).
+
+        Args:
+            points: (m, 3) coordinates (m); each inside the mesh on this rank.
+
+        Returns:
+            nodes (m, k) int32, gradients (m, k, 3) float64 (1/m), and cells (m,) int32
+            (the local cell each point was evaluated in), k = 8 (Q1) or 27 (Q2).
+        """
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim == 1:
+            points = points.reshape(1, -1)
+        if points.ndim != 2 or points.shape[1] != SPACE_DIMENSION:
+            raise ValueError(f"points: shape {points.shape} given; expected (m, 3) coordinates (m)")
+        cells = self._containing_cells(points)
+        basix_element = self.V.element.basix_element
+        geometry_dofmap = self.mesh.geometry.dofmap
+        geometry_x = self.mesh.geometry.x
+        coordinate_map = self.mesh.geometry.cmap
+        n_basis = basix_element.dim
+        nodes = np.empty((points.shape[0], n_basis), dtype=np.int32)
+        gradients = np.empty((points.shape[0], n_basis, SPACE_DIMENSION), dtype=np.float64)
+        for j, (point, cell) in enumerate(zip(points, cells)):
+            cell_geometry = geometry_x[geometry_dofmap.links(cell)]
+            reference_point = coordinate_map.pull_back(point.reshape(1, -1), cell_geometry)
+            # tabulate(1, X): [value, d/dX, d/dY, d/dZ] x points x basis x value size.
+            reference_gradients = basix_element.tabulate(1, reference_point)[1:, 0, :, 0].T   # (k, 3)
+            cell_nodes = self.V.dofmap.cell_dofs(cell)
+            jacobian = self.node_coords[cell_nodes].T @ reference_gradients                  # (3, 3) dx/dX
+            gradients[j] = reference_gradients @ np.linalg.inv(jacobian)
+            nodes[j] = cell_nodes
+        return nodes, gradients, cells
+
+    def region_of_cells(self, cells: np.ndarray) -> list[str]:
+        """Region name (scene material) of each local cell; ValueError for an untagged cell."""
+        tag_of_region = {tag: name for name, tag in self.regions.items()}
+        order = np.argsort(self.cell_tags.indices)
+        sorted_cells = self.cell_tags.indices[order]
+        names = []
+        for cell in np.atleast_1d(cells):
+            position = np.searchsorted(sorted_cells, cell)
+            if position >= len(sorted_cells) or sorted_cells[position] != cell:
+                raise ValueError(f"cell {cell} has no region tag")
+            names.append(tag_of_region[int(self.cell_tags.values[order[position]])])
+        return names
+
     def _containing_cells(self, points: np.ndarray) -> np.ndarray:
         """One cell containing each point, or ValueError naming the first point outside."""
         if self._cell_locator is None:

@@ -18,6 +18,10 @@ import numpy as np
 
 MONITOR_COLUMNS = ["t", "ux", "uy", "uz", "vx", "vy", "vz", "ax", "ay", "az"]
 FREEFIELD_COLUMNS = ["ux_ff", "uy_ff", "uz_ff", "vx_ff", "vy_ff", "vz_ff"]
+# Stress at the monitor (Pa, tension positive): total = initial (geostatic) + dynamic, its
+# largest principal value s1, and s1 of the dynamic increment alone.
+STRESS_COLUMNS = ["sxx", "syy", "szz", "sxy", "syz", "sxz", "s1", "s1_dynamic"]
+_VOIGT = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
 ENERGY_COLUMNS = ["t", "kinetic", "strain", "external_work", "damping_work", "balance"]
 CONTACT_ENERGY_COLUMNS = ["contact_work", "friction_dissipation"]
 PAIR_COLUMNS = ["t", "dux", "duy", "duz", "slip", "gap", "N", "T", "D", "state"]
@@ -39,6 +43,19 @@ def _json_default(value):
     return str(value)
 
 
+def max_principal(voigt: np.ndarray) -> np.ndarray:
+    """Largest principal value of symmetric tensors given as (n, 6) [xx, yy, zz, xy, yz, xz] (Pa).
+
+    Tension positive (the largest eigenvalue), the paper's "maximum principal stress".
+    """
+    voigt = np.asarray(voigt, dtype=float).reshape(-1, 6)
+    tensor = np.empty((len(voigt), 3, 3))
+    for k, (i, j) in enumerate(_VOIGT):
+        tensor[:, i, j] = voigt[:, k]
+        tensor[:, j, i] = voigt[:, k]
+    return np.linalg.eigvalsh(tensor)[:, -1]
+
+
 class RunWriter:
     """Collects samples during a run and writes the run directory.
 
@@ -53,7 +70,7 @@ class RunWriter:
         self.simulation = simulation
         self.scene = simulation.scene
         self.times: list[float] = []
-        self.monitor_samples: list[np.ndarray] = []  # each (n_monitors, 9)
+        self.monitor_samples: list[np.ndarray] = []  # each (n_monitors, 9 or 15 with the dynamic stress)
         self.energy_samples: list[list[float]] = []
         self.contact_on = simulation.contact_arrays is not None
         self.energy_columns = ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if self.contact_on else [])
@@ -96,10 +113,14 @@ class RunWriter:
         sim = self.simulation
         self.times.append(t)
         if sim.monitor_nodes is not None:
-            values = np.empty((len(sim.monitor_names), 9))
+            with_stress = sim.monitor_stress is not None
+            values = np.empty((len(sim.monitor_names), 15 if with_stress else 9))
             for k, field in enumerate((u, v, a)):
                 nodal = field.reshape(-1, 3)[sim.monitor_nodes]  # (m, k, 3)
                 values[:, 3 * k:3 * k + 3] = np.einsum("mk,mkc->mc", sim.monitor_weights, nodal)
+            if with_stress:
+                stress = sim.monitor_stress.dynamic_stress(u)
+                values[:, 9:15] = np.stack([stress[:, i, j] for i, j in _VOIGT], axis=1)
             self.monitor_samples.append(values)
         self.energy_samples.append([t] + [energy[name] for name in self.energy_columns[1:]])
         contact = sim.contact_pairs
@@ -192,18 +213,26 @@ class RunWriter:
         peaks = {}
         if sim.monitor_nodes is None:
             return peaks
-        samples = np.array(self.monitor_samples)  # (nt, m, 9)
+        samples = np.array(self.monitor_samples)  # (nt, m, 9 or 15)
+        stress = sim.monitor_stress
         freefield = None
         if sim.freefield is not None:
             points = np.array([m["point"] for m in self.scene["monitor"]], dtype=float)
             freefield = np.concatenate([sim.freefield.displacement(points, times),
                                         sim.freefield.velocity(points, times)], axis=2)  # (nt, m, 6)
         for j, name in enumerate(sim.monitor_names):
-            columns = [times[:, None], samples[:, j, :]]
+            columns = [times[:, None], samples[:, j, :9]]
             header = list(MONITOR_COLUMNS)
             if freefield is not None:
                 columns.append(freefield[:, j, :])
                 header += FREEFIELD_COLUMNS
+            if stress is not None:
+                dynamic = samples[:, j, 9:15]
+                total = dynamic + np.array([stress.static[j, a, b] for a, b in _VOIGT])[None, :]
+                s1 = max_principal(total)
+                s1_dynamic = max_principal(dynamic)
+                columns += [total, s1[:, None], s1_dynamic[:, None]]
+                header += STRESS_COLUMNS
             np.savetxt(self.out_dir / "monitors" / f"{name}.csv", np.hstack(columns), delimiter=",",
                        header=",".join(header), comments="", fmt="%.10e")
             u, vel, acc = samples[:, j, 0:3], samples[:, j, 3:6], samples[:, j, 6:9]
@@ -214,6 +243,12 @@ class RunWriter:
                 reference = freefield[:, j, 0:3]
                 norm = np.linalg.norm(reference)
                 peak["freefield_error"] = float(np.linalg.norm(u - reference) / norm) if norm > 0 else math.nan
+            if stress is not None:
+                peak["region"] = stress.regions[j]
+                peak["s1_max"] = float(np.max(s1))
+                peak["s1_max_time"] = float(times[int(np.argmax(s1))])
+                peak["s1_initial"] = float(s1[0])
+                peak["s1_dynamic_max"] = float(np.max(s1_dynamic))
             peaks[name] = peak
         return peaks
 

@@ -59,11 +59,64 @@ class Simulation:
     monitor_names: list = field(default_factory=list)
     monitor_nodes: np.ndarray | None = None
     monitor_weights: np.ndarray | None = None
+    monitor_stress: "MonitorStress | None" = None
     n_steps: int = 0
     contact_arrays: dict | None = None   # ContactPairs arguments (see contact_arguments)
     contact_pairs: object = None         # the kernel's ContactPairs, set by make_stepper
     pair_monitor_names: list = field(default_factory=list)
     pair_monitor_pairs: np.ndarray | None = None  # (m,) pair index of each pair monitor
+
+
+@dataclass
+class MonitorStress:
+    """What the stress at the monitor points needs: sigma = C(x) : eps(u)(x) + sigma0(x).
+
+    Attributes:
+        nodes: (m, k) nodes of the cell containing each monitor.
+        gradients: (m, k, 3) gradient weights (1/m), see `Model.point_gradient_weights`.
+        lame_lambda: (m,) Lame's lambda of the containing cell's material (Pa).
+        shear_modulus: (m,) G of that material (Pa).
+        regions: region (material) name of each containing cell.
+        static: (m, 3, 3) initial stress at the points (Pa, compression negative); zero
+            without [initial_stress].
+    """
+
+    nodes: np.ndarray
+    gradients: np.ndarray
+    lame_lambda: np.ndarray
+    shear_modulus: np.ndarray
+    regions: list
+    static: np.ndarray
+
+    def dynamic_stress(self, u: np.ndarray) -> np.ndarray:
+        """(m, 3, 3) stress of the displacement increment u (dofs, m) at the monitors (Pa)."""
+        nodal = u.reshape(-1, 3)[self.nodes]                                   # (m, k, 3)
+        gradient = np.einsum("mki,mkl->mil", nodal, self.gradients)            # du_i/dx_l
+        strain = 0.5 * (gradient + gradient.transpose(0, 2, 1))
+        trace = np.trace(strain, axis1=1, axis2=2)
+        return (self.lame_lambda[:, None, None] * trace[:, None, None] * np.eye(3)
+                + 2.0 * self.shear_modulus[:, None, None] * strain)
+
+
+def monitor_stress_operator(scene: Scene, model, points: np.ndarray) -> MonitorStress:
+    """Gradient weights, materials and initial stress at the monitor points.
+
+    Args:
+        scene: validated scene ([materials], optional [initial_stress]).
+        model: pyfem.operators.Model.
+        points: (m, 3) monitor points (m).
+    """
+    from pyfem.initial_stress import stress_field_from_scene
+    from pyfem.operators import lame_parameters
+
+    nodes, gradients, cells = model.point_gradient_weights(points)
+    regions = model.region_of_cells(cells)
+    lame = np.array([lame_parameters(scene["materials"][name]["E"], scene["materials"][name]["nu"])
+                     for name in regions], dtype=np.float64).reshape(-1, 2)
+    field = stress_field_from_scene(scene)
+    static = np.zeros((len(points), 3, 3)) if field is None else np.asarray(field(points), dtype=np.float64)
+    return MonitorStress(nodes=nodes, gradients=gradients, lame_lambda=lame[:, 0], shear_modulus=lame[:, 1],
+                         regions=regions, static=static)
 
 
 def earthquake_duration(scene: Scene) -> float:
@@ -242,6 +295,7 @@ def prepare(scene: Scene) -> Simulation:
         except ValueError as error:
             raise SceneError("monitor", [m["point"] for m in monitors], f"points inside the mesh ({error})")
         simulation.monitor_names = [m["name"] for m in monitors]
+        simulation.monitor_stress = monitor_stress_operator(scene, model, points)
     if "contact" in scene.effects:
         simulation.contact_arrays = contact_arguments(scene, model)
         pair_monitors = scene.get("pair_monitor", [])

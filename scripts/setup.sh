@@ -12,7 +12,7 @@ packages=(
   python3-numpy python3-scipy python3-matplotlib python3-h5py python3-tqdm python3-pytest
 )
 if [ "${1:-}" = "--with-paraview" ]; then
-  packages+=(paraview python3-paraview xvfb)
+  packages+=(paraview python3-paraview xvfb xauth)
 fi
 missing=()
 for p in "${packages[@]}"; do

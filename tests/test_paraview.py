@@ -1,0 +1,114 @@
+"""The run's fields.xdmf opens in ParaView's own Python (slow tier).
+
+A short run of the case-3 scene writes fields.xdmf/.h5; `xvfb-run -a pvbatch` loads it with
+ParaView's reader, finds the output time of the largest displacement magnitude, renders the
+magnitude there to a PNG and prints what it read. The test checks the PNG is an image with
+content (not a blank window) and that ParaView read the same peak magnitude, time and number
+of points as h5py reads from the .h5 independently.
+
+Needs Debian's packages paraview, python3-paraview and xvfb (pvbatch aborts without an X
+server, hence xvfb-run); skipped with that reason when they are missing.
+"""
+import json
+import pathlib
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.slow
+
+REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
+CASE3 = REPOSITORY / "workflows" / "scenes" / "case3_contact_coarse.toml"
+
+PVBATCH_SCRIPT = r'''
+import json
+import sys
+
+from paraview.simple import ColorBy, GetActiveViewOrCreate, SaveScreenshot, Show, XDMFReader
+
+xdmf, png = sys.argv[1], sys.argv[2]
+# ParaView's XDMF (2) reader: its Xdmf3 readers, OpenDataFile's default pick, show no points
+# for meshio's time series. The file also holds the bare "mesh" grid that the time steps
+# include by XPointer; read only the time series.
+reader = XDMFReader(FileNames=[xdmf])
+reader.UpdatePipelineInformation()
+reader.GridStatus = [grid for grid in reader.GridStatus if grid != "mesh"]
+reader.UpdatePipelineInformation()
+times = list(reader.TimestepValues)
+peak_time, peak = times[0], -1.0
+for t in times:
+    reader.UpdatePipeline(t)
+    magnitude_range = reader.PointData["displacement"].GetRange(-1)   # -1: vector magnitude
+    if magnitude_range[1] > peak:
+        peak_time, peak = t, magnitude_range[1]
+view = GetActiveViewOrCreate("RenderView")
+view.ViewSize = [800, 600]
+view.ViewTime = peak_time
+reader.UpdatePipeline(peak_time)
+display = Show(reader, view)
+ColorBy(display, ("POINTS", "displacement", "Magnitude"))
+display.RescaleTransferFunctionToDataRange(True, False)
+display.SetScalarBarVisibility(view, True)
+view.CameraPosition = [400.0, -600.0, 300.0]
+view.CameraFocalPoint = [0.0, 0.0, 30.0]
+view.CameraViewUp = [0.0, 0.0, 1.0]
+view.ResetCamera()
+SaveScreenshot(png, view, ImageResolution=[800, 600])
+info = reader.GetDataInformation()
+print("PVRESULT " + json.dumps({"times": times, "peak_time": peak_time, "peak": peak,
+                                "points": info.GetNumberOfPoints()}))
+'''
+
+
+def test_fields_xdmf_renders_in_pvbatch(tmp_path):
+    pvbatch, xvfb_run = shutil.which("pvbatch"), shutil.which("xvfb-run")
+    if pvbatch is None or xvfb_run is None:
+        pytest.skip("pvbatch or xvfb-run not installed (Debian packages paraview, python3-paraview, xvfb)")
+    from pyfem.scene import load_scene
+    from pyfem.solver import run
+
+    scene = load_scene(CASE3, ["time.duration=0.06", "output.xdmf_interval=0.02"])
+    out = tmp_path / "run"
+    run(scene, out)
+    script = tmp_path / "render.py"
+    script.write_text(PVBATCH_SCRIPT)
+    png = tmp_path / "displacement.png"
+    command = [xvfb_run, "-a", pvbatch, str(script), str((out / "fields.xdmf").resolve()), str(png)]
+    # On a shared machine the X server xvfb-run starts is sometimes gone when pvbatch opens its
+    # window ("bad X server connection", seen ~1 in 3 here while others run Xvfb too): retry that
+    # case only; any other failure fails at once.
+    for _ in range(4):
+        result = subprocess.run(command, capture_output=True, text=True, timeout=600)
+        if result.returncode == 0 or "bad X server connection" not in result.stderr:
+            break
+    assert result.returncode == 0, result.stderr[-3000:]
+    line = next(text for text in result.stdout.splitlines() if text.startswith("PVRESULT "))
+    read = json.loads(line.removeprefix("PVRESULT "))
+
+    # The same numbers from the .xdmf/.h5, read with ElementTree and h5py, not ParaView.
+    import xml.etree.ElementTree as ElementTree
+
+    import h5py
+
+    tree = ElementTree.parse(out / "fields.xdmf")
+    geometry = tree.find(".//Geometry/DataItem").text.strip().split(":")[-1]
+    displacement = [item.find("DataItem").text.strip().split(":")[-1]
+                    for item in tree.iter("Attribute") if item.get("Name") == "displacement"]
+    with h5py.File(out / "fields.h5") as h5:
+        n_points = h5[geometry].shape[0]
+        peaks = [float(np.linalg.norm(h5[name][()], axis=1).max()) for name in displacement]
+    assert len(peaks) == 4
+    assert len(read["times"]) == 4                  # t = 0, 0.02, 0.04, 0.06 s
+    assert read["points"] == n_points                # the time series only, not the bare "mesh" grid
+    assert read["peak"] == pytest.approx(max(peaks), rel=1e-6)
+    assert read["peak"] > 0.0
+
+    from matplotlib import image
+
+    pixels = image.imread(png)[..., :3]
+    assert pixels.shape[:2] == (600, 800)
+    colours = np.unique((pixels.reshape(-1, 3) * 255).astype(np.uint8), axis=0)
+    assert len(colours) > 50                         # a rendered, coloured mesh, not a blank window
+    assert pixels.std() > 0.05
