@@ -142,22 +142,11 @@ class Model:
         Returns:
             nodes (m, k) int32 and weights (m, k) float64, k = 8 (Q1) or 27 (Q2).
         """
-        points = np.asarray(points, dtype=np.float64)
-        if points.ndim == 1:
-            points = points.reshape(1, -1)
-        if points.ndim != 2 or points.shape[1] != SPACE_DIMENSION:
-            raise ValueError(f"points: shape {points.shape} given; expected (m, 3) coordinates (m)")
-        cells = self._containing_cells(points)
+        cells, reference_points = self._located_points(points)
         basix_element = self.V.element.basix_element
-        geometry_dofmap = self.mesh.geometry.dofmap
-        geometry_x = self.mesh.geometry.x
-        coordinate_map = self.mesh.geometry.cmap
-        n_basis = basix_element.dim
-        nodes = np.empty((points.shape[0], n_basis), dtype=np.int32)
-        weights = np.empty((points.shape[0], n_basis), dtype=np.float64)
-        for j, (point, cell) in enumerate(zip(points, cells)):
-            cell_geometry = geometry_x[geometry_dofmap.links(cell)]
-            reference_point = coordinate_map.pull_back(point.reshape(1, -1), cell_geometry)
+        nodes = np.empty((len(cells), basix_element.dim), dtype=np.int32)
+        weights = np.empty((len(cells), basix_element.dim), dtype=np.float64)
+        for j, (cell, reference_point) in enumerate(zip(cells, reference_points)):
             weights[j] = basix_element.tabulate(0, reference_point)[0, 0, :, 0]
             nodes[j] = self.V.dofmap.cell_dofs(cell)
         return nodes, weights
@@ -181,22 +170,12 @@ class Model:
             nodes (m, k) int32, gradients (m, k, 3) float64 (1/m), and cells (m,) int32
             (the local cell each point was evaluated in), k = 8 (Q1) or 27 (Q2).
         """
-        points = np.asarray(points, dtype=np.float64)
-        if points.ndim == 1:
-            points = points.reshape(1, -1)
-        if points.ndim != 2 or points.shape[1] != SPACE_DIMENSION:
-            raise ValueError(f"points: shape {points.shape} given; expected (m, 3) coordinates (m)")
-        cells = self._containing_cells(points)
+        cells, reference_points = self._located_points(points)
         basix_element = self.V.element.basix_element
-        geometry_dofmap = self.mesh.geometry.dofmap
-        geometry_x = self.mesh.geometry.x
-        coordinate_map = self.mesh.geometry.cmap
         n_basis = basix_element.dim
-        nodes = np.empty((points.shape[0], n_basis), dtype=np.int32)
-        gradients = np.empty((points.shape[0], n_basis, SPACE_DIMENSION), dtype=np.float64)
-        for j, (point, cell) in enumerate(zip(points, cells)):
-            cell_geometry = geometry_x[geometry_dofmap.links(cell)]
-            reference_point = coordinate_map.pull_back(point.reshape(1, -1), cell_geometry)
+        nodes = np.empty((len(cells), n_basis), dtype=np.int32)
+        gradients = np.empty((len(cells), n_basis, SPACE_DIMENSION), dtype=np.float64)
+        for j, (cell, reference_point) in enumerate(zip(cells, reference_points)):
             # tabulate(1, X): [value, d/dX, d/dY, d/dZ] x points x basis x value size.
             reference_gradients = basix_element.tabulate(1, reference_point)[1:, 0, :, 0].T   # (k, 3)
             cell_nodes = self.V.dofmap.cell_dofs(cell)
@@ -217,6 +196,21 @@ class Model:
                 raise ValueError(f"cell {cell} has no region tag")
             names.append(tag_of_region[int(self.cell_tags.values[order[position]])])
         return names
+
+    def _located_points(self, points) -> tuple[np.ndarray, list]:
+        """Containing cell and reference coordinates (each (1, 3)) of (m, 3) points (m)."""
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim == 1:
+            points = points.reshape(1, -1)
+        if points.ndim != 2 or points.shape[1] != SPACE_DIMENSION:
+            raise ValueError(f"points: shape {points.shape} given; expected (m, 3) coordinates (m)")
+        cells = self._containing_cells(points)
+        geometry_dofmap = self.mesh.geometry.dofmap
+        geometry_x = self.mesh.geometry.x
+        coordinate_map = self.mesh.geometry.cmap
+        reference_points = [coordinate_map.pull_back(point.reshape(1, -1), geometry_x[geometry_dofmap.links(cell)])
+                            for point, cell in zip(points, cells)]
+        return cells, reference_points
 
     def _containing_cells(self, points: np.ndarray) -> np.ndarray:
         """One cell containing each point, or ValueError naming the first point outside."""
