@@ -72,8 +72,11 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     for name, peak in summary["monitors"].items():
         line = f"  {name}: peak |u| {peak['displacement']:.4g} m, |a| {peak['acceleration']:.4g} m/s^2"
         if "freefield_error" in peak:
-            line += f", error against the free field {100 * peak['freefield_error']:.2f} %"
+            line += f", differs from the free field by {100 * peak['freefield_error']:.2f} %"
         print(line)
+    if any("freefield_error" in peak for peak in summary["monitors"].values()):
+        print("  (the difference from the free field is the error of a homogeneous model, and the "
+              "scattering by the cavern, layers and interfaces otherwise)")
     print(f"outputs: {out_dir}/ (run.json, monitors/, plots/, fields.xdmf for ParaView)")
     return 0
 
