@@ -419,14 +419,17 @@ def run(scene: Scene, out_dir) -> dict:
     loop_start = time.perf_counter()
     from tqdm import tqdm
 
-    with tqdm(total=n_outputs, desc=scene["title"][:30], unit="out", leave=False,
-              disable=not writer.show_progress) as progress:
-        for _ in range(n_outputs):
-            t = stepper.run(u, v, a, ts.steps_per_output, t)
-            if not np.isfinite(u).all():
-                writer.fail(t, "non-finite displacement")
-                raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
-            writer.sample(t, u, v, a, stepper.energy())
-            progress.update()
+    try:
+        with tqdm(total=n_outputs, desc=scene["title"][:30], unit="out", leave=False,
+                  disable=not writer.show_progress) as progress:
+            for _ in range(n_outputs):
+                t = stepper.run(u, v, a, ts.steps_per_output, t)
+                if not np.isfinite(u).all():
+                    raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+                writer.sample(t, u, v, a, stepper.energy())
+                progress.update()
+    except BaseException as error:  # also Ctrl-C: run.json must not stay "running"
+        writer.fail(t, f"{type(error).__name__}: {error}")
+        raise
     loop_seconds = time.perf_counter() - loop_start
     return writer.finish(wall_seconds=time.perf_counter() - wall_start, loop_seconds=loop_seconds)

@@ -203,3 +203,26 @@ def test_user_dt_above_stable_is_an_error_naming_both(tmp_path):
     message = str(error.value)
     assert "time.dt" in message and "0.5" in message and "stable" in message
     assert not (tmp_path / "run").exists()
+
+
+def test_interrupted_run_is_marked_failed_not_running(tmp_path, monkeypatch):
+    """An exception inside the time loop (here a stand-in for Ctrl-C) leaves run.json 'failed' with the reason."""
+    from pyfem.output import RunWriter
+
+    original = RunWriter.sample
+    calls = {"n": 0}
+
+    def sample_then_interrupt(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt("stopped by the user")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(RunWriter, "sample", sample_then_interrupt)
+    scene = column_scene("SV", h=SHORTEST_WAVELENGTH / 8, duration=0.1)
+    with pytest.raises(KeyboardInterrupt):
+        solver.run(scene, tmp_path / "run")
+    run_json = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert calls["n"] == 3
+    assert run_json["status"] == "failed"
+    assert "KeyboardInterrupt" in run_json["failure"] and run_json["failed_at"] > 0.0
