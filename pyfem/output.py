@@ -123,13 +123,17 @@ class RunWriter:
                 values[:, 9:15] = np.stack([stress[:, i, j] for i, j in _VOIGT], axis=1)
             self.monitor_samples.append(values)
         self.energy_samples.append([t] + [energy[name] for name in self.energy_columns[1:]])
+        write_fields = bool(self.xdmf_every) and self._sample_count % self.xdmf_every == 0
         contact = sim.contact_pairs
+        pair_values = None  # every pair's values, computed once when monitors or fields need them
         if contact is not None:
             self.state_count_samples.append(np.asarray(contact.state_counts(), dtype=np.int64).copy())
+            if len(sim.pair_monitor_names) or write_fields:
+                pair_values = self._pair_values(u)
             if len(sim.pair_monitor_names):
-                self.pair_samples.append(self._pair_values(u)[sim.pair_monitor_pairs])
-        if self.xdmf_every and self._sample_count % self.xdmf_every == 0:
-            self._write_fields(t, u, v)
+                self.pair_samples.append(pair_values[sim.pair_monitor_pairs])
+        if write_fields:
+            self._write_fields(t, u, v, pair_values)
         self._sample_count += 1
 
     def _pair_values(self, u: np.ndarray) -> np.ndarray:
@@ -307,14 +311,15 @@ class RunWriter:
         self.xdmf.h5_file = h5py.File(self.out_dir / "fields.h5", "w")
         self.xdmf.write_points_cells(model.node_coords[self._field_nodes], [("hexahedron", hexahedra)])
 
-    def _write_fields(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
+    def _write_fields(self, t: float, u: np.ndarray, v: np.ndarray, pair_values: np.ndarray | None) -> None:
+        """Writes the fields at time t; pair_values is `_pair_values(u)` when contact is on."""
         point_data = {}
         for name, values in (("displacement", u), ("velocity", v)):
             if name in self.scene["output"]["fields"]:
                 point_data[name] = values.reshape(-1, 3)[self._field_nodes]
-        if self.simulation.contact_pairs is not None:
+        if pair_values is not None:
             # Interface fields on both nodes of every pair, 0 elsewhere.
-            values = self._pair_values(u)
+            values = pair_values
             nodes = self.simulation.contact_arrays["pairs"]
             n_nodes = len(self.simulation.mass)
             for name, column in (("pair_state", 8), ("pair_slip", 3), ("pair_D", 7)):
