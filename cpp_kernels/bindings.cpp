@@ -379,6 +379,32 @@ Args:
     nodes: int32 (k,) nodes; a node listed twice gets the sum. Copied.
     C: float64 (k, 3, 3) symmetric positive semi-definite dashpot matrices (N s/m). Copied.)")
       .def(
+          "set_constraints",
+          [](Stepper& stepper, const py::object& nodes_object, const py::object& P_object) {
+            auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
+            auto P = checked_array<double>(P_object, "projection", {nodes.shape(0), 3, 3});
+            stepper.set_constraints(nodes.data(), nodes.shape(0), P.data());
+          },
+          py::arg("nodes"), py::arg("projection"),
+          R"(Kinematic constraints (fixed, roller), replacing any previous set.
+
+Node k moves only in the range of the orthogonal projection P_k: zeros hold it (fixed),
+I - n n^T holds its normal component (roller). The held part of the force goes to the support
+(reactions()); velocities and accelerations of held components stay zero.
+
+Args:
+    nodes: int32 (k,) distinct nodes. Copied.
+    projection: float64 (k, 3, 3) symmetric idempotent matrices P. Copied.)")
+      .def(
+          "reactions",
+          [](const Stepper& stepper) {
+            const std::vector<double>& values = stepper.reactions();
+            py::array_t<double> out({static_cast<py::ssize_t>(values.size() / 3), py::ssize_t(3)});
+            std::copy(values.begin(), values.end(), out.mutable_data());
+            return out;
+          },
+          "Reactions (k, 3) of the constraints at the last step (N), in set_constraints order (a copy).")
+      .def(
           "add_seismic_input",
           [](Stepper& stepper, std::shared_ptr<SeismicInput> input) {
             stepper.add_provider(std::move(input));

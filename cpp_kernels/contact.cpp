@@ -54,6 +54,16 @@ void ImplicitNodeOperators::damping(std::int64_t node, double out[9]) const {
   out[8] += mass_damping;
 }
 
+void ImplicitNodeOperators::project(std::int64_t node, double* x) const {
+  if (!constraint_of_slot || !dashpot_slot) return;
+  const std::int32_t slot = dashpot_slot[node];
+  const std::int32_t constraint = slot >= 0 ? constraint_of_slot[slot] : -1;
+  if (constraint < 0) return;
+  double projected[3];
+  multiply_3x3(constraint_projection + 9 * constraint, x, projected);
+  for (int c = 0; c < 3; ++c) x[c] = projected[c];
+}
+
 ContactPairs::ContactPairs(const ContactGeometry& geometry, const ContactStrength& strength)
     : n_pairs_(geometry.n_pairs), strength_(strength) {
   if (n_pairs_ < 0)
@@ -268,6 +278,7 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
         a[3 * node + c] += (force[c] - damping_dv[c]) / m;
         node_force[c] += force[c];
       }
+      operators.project(node, a + 3 * node);  // a support takes the held part
     }
 
     state_[p] = state;

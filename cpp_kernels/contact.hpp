@@ -47,12 +47,16 @@ struct ImplicitNodeOperators {
   const double* mass = nullptr;
   const std::int32_t* dashpot_slot = nullptr;  // (n_nodes) slot or -1
   const double* dashpot_C = nullptr;           // (slots, 9)
-  const double* dashpot_inverse = nullptr;     // (slots, 9) Atilde^-1
+  const double* dashpot_inverse = nullptr;     // (slots, 9) Atilde^-1 (restricted when constrained)
+  const std::int32_t* constraint_of_slot = nullptr;  // (slots) constraint or -1; null: none
+  const double* constraint_projection = nullptr;     // (constraints, 9) P of constraints.hpp
 
   /// Atilde^-1 of node (row-major 3x3) into out.
   void inverse(std::int64_t node, double out[9]) const;
   /// alpha M I + C of node (row-major 3x3) into out.
   void damping(std::int64_t node, double out[9]) const;
+  /// Replaces the 3-vector x of node by P x when the node is constrained (no-op otherwise).
+  void project(std::int64_t node, double* x) const;
 };
 
 /// Power and dissipation of one contact correction.

@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "constraints.hpp"
 #include "small_matrix.hpp"
 
 namespace cavern {
@@ -37,21 +38,77 @@ Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
 }
 
 void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
-  std::vector<std::int32_t> slot(n_nodes(), -1);
-  std::vector<double> summed_C;
+  for (std::int64_t k = 0; k < count; ++k)
+    if (nodes[k] < 0 || nodes[k] >= n_nodes())
+      throw std::invalid_argument("dashpot nodes[" + std::to_string(k) +
+                                  "] = " + std::to_string(nodes[k]) + " is not a node in [0, " +
+                                  std::to_string(n_nodes()) + ")");
+  std::vector<std::int32_t> previous_nodes = std::move(dashpot_nodes_given_);
+  std::vector<double> previous_C = std::move(dashpot_C_given_);
+  dashpot_nodes_given_.assign(nodes, nodes + count);
+  dashpot_C_given_.assign(C, C + 9 * count);
+  try {
+    build_implicit_slots();
+  } catch (...) {
+    dashpot_nodes_given_ = std::move(previous_nodes);
+    dashpot_C_given_ = std::move(previous_C);
+    throw;
+  }
+}
+
+void Stepper::set_constraints(const std::int32_t* nodes, std::int64_t count,
+                              const double* projection) {
+  std::vector<char> seen(n_nodes(), 0);
   for (std::int64_t k = 0; k < count; ++k) {
     const std::int32_t node = nodes[k];
     if (node < 0 || node >= n_nodes())
-      throw std::invalid_argument("dashpot nodes[" + std::to_string(k) +
+      throw std::invalid_argument("constraint nodes[" + std::to_string(k) +
                                   "] = " + std::to_string(node) + " is not a node in [0, " +
                                   std::to_string(n_nodes()) + ")");
+    if (seen[node])
+      throw std::invalid_argument("constraint nodes[" + std::to_string(k) + "] = " +
+                                  std::to_string(node) +
+                                  " is listed twice; combine its held directions in one P");
+    seen[node] = 1;
+    check_projection(projection + 9 * k, k);
+  }
+  std::vector<std::int32_t> previous_nodes = std::move(constraint_nodes_);
+  std::vector<double> previous_projection = std::move(constraint_projection_);
+  constraint_nodes_.assign(nodes, nodes + count);
+  constraint_projection_.assign(projection, projection + 9 * count);
+  try {
+    build_implicit_slots();
+  } catch (...) {
+    constraint_nodes_ = std::move(previous_nodes);
+    constraint_projection_ = std::move(previous_projection);
+    build_implicit_slots();
+    throw;
+  }
+  reactions_.assign(3 * count, 0.0);
+}
+
+void Stepper::build_implicit_slots() {
+  std::vector<std::int32_t> slot(n_nodes(), -1);
+  std::vector<double> summed_C;
+  auto slot_of = [&](std::int32_t node) {
     if (slot[node] < 0) {
       slot[node] = static_cast<std::int32_t>(summed_C.size() / 9);
       summed_C.resize(summed_C.size() + 9, 0.0);
     }
-    double* target = summed_C.data() + 9 * slot[node];
-    for (int c = 0; c < 9; ++c) target[c] += C[9 * k + c];
+    return slot[node];
+  };
+  const std::int64_t n_dashpots = static_cast<std::int64_t>(dashpot_nodes_given_.size());
+  for (std::int64_t k = 0; k < n_dashpots; ++k) {
+    const std::int32_t node_slot = slot_of(dashpot_nodes_given_[k]);  // may grow summed_C
+    double* target = summed_C.data() + 9 * node_slot;
+    for (int c = 0; c < 9; ++c) target[c] += dashpot_C_given_[9 * k + c];
   }
+  const std::int64_t n_constraints = static_cast<std::int64_t>(constraint_nodes_.size());
+  for (std::int64_t k = 0; k < n_constraints; ++k) slot_of(constraint_nodes_[k]);
+  const std::size_t n_slots = summed_C.size() / 9;
+  std::vector<std::int32_t> constraint_of_slot(n_slots, -1);
+  for (std::int64_t k = 0; k < n_constraints; ++k)
+    constraint_of_slot[slot[constraint_nodes_[k]]] = static_cast<std::int32_t>(k);
 
   const double half_dt = 0.5 * parameters_.dt;
   std::vector<double> inverse(summed_C.size());
@@ -73,16 +130,21 @@ void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const 
     A[8] += diagonal;
     // (M (1 + dt/2 alpha) I + dt/2 C) is positive definite iff C is not too negative.
     const double minor2 = A[0] * A[4] - A[1] * A[3];
-    const double determinant = invert_3x3(A, inverse.data() + 9 * slot[node]);
+    double* node_inverse = inverse.data() + 9 * slot[node];
+    const double determinant = invert_3x3(A, node_inverse);
     if (!(A[0] > 0.0 && minor2 > 0.0 && determinant > 0.0))
       throw std::invalid_argument("dashpot C at node " + std::to_string(node) +
                                   " is not positive semi-definite");
+    const std::int32_t constraint = constraint_of_slot[slot[node]];
+    if (constraint >= 0)
+      constrained_inverse(A, constraint_projection_.data() + 9 * constraint, node_inverse);
   }
 
-  if (count == 0) slot.clear();  // no dashpots: pass B skips the slot look-up
+  if (n_slots == 0) slot.clear();  // nothing implicit: pass B skips the slot look-up
   dashpot_slot_ = std::move(slot);
   dashpot_C_ = std::move(summed_C);
   dashpot_inverse_ = std::move(inverse);
+  constraint_of_slot_ = std::move(constraint_of_slot);
 }
 
 void Stepper::set_contact(std::shared_ptr<ContactPairs> contact) {
@@ -105,6 +167,8 @@ ImplicitNodeOperators Stepper::implicit_operators() const {
   operators.dashpot_slot = dashpot_slot_.empty() ? nullptr : dashpot_slot_.data();
   operators.dashpot_C = dashpot_C_.data();
   operators.dashpot_inverse = dashpot_inverse_.data();
+  operators.constraint_of_slot = constraint_nodes_.empty() ? nullptr : constraint_of_slot_.data();
+  operators.constraint_projection = constraint_projection_.data();
   return operators;
 }
 
@@ -196,6 +260,10 @@ void Stepper::pass_b(double* u, double* v, double* a) {
   const std::int32_t* dashpot_slot = dashpot_slot_.empty() ? nullptr : dashpot_slot_.data();
   const double* dashpot_C = dashpot_C_.data();
   const double* dashpot_inverse = dashpot_inverse_.data();
+  const std::int32_t* constraint_of_slot =
+      constraint_nodes_.empty() ? nullptr : constraint_of_slot_.data();
+  const double* projection = constraint_projection_.data();
+  double* reactions = reactions_.data();
 
   double vMv = 0.0, uKu = 0.0, aMa = 0.0, Fa = 0.0, external_power = 0.0, damping_power = 0.0;
 #pragma omp parallel for schedule(static) if (threaded) \
@@ -224,19 +292,34 @@ void Stepper::pass_b(double* u, double* v, double* a) {
       rhs[c] = m * vi[c] + half_dt * r[c];
     }
     const std::int32_t slot = dashpot_slot ? dashpot_slot[i] : -1;
+    double net_force[3];
     if (slot < 0) {
       const double inverse = 1.0 / (m * (1.0 + half_dt * alpha));
       for (int c = 0; c < 3; ++c) {
         v_next[c] = rhs[c] * inverse;
         implicit_damping[c] = alpha * m * v_next[c];
+        net_force[c] = r[c] - implicit_damping[c];
       }
     } else {
       multiply_3x3(dashpot_inverse + 9 * slot, rhs, v_next);
       multiply_3x3(dashpot_C + 9 * slot, v_next, implicit_damping);
-      for (int c = 0; c < 3; ++c) implicit_damping[c] += alpha * m * v_next[c];
+      for (int c = 0; c < 3; ++c) {
+        implicit_damping[c] += alpha * m * v_next[c];
+        net_force[c] = r[c] - implicit_damping[c];
+      }
+      const std::int32_t constraint = constraint_of_slot ? constraint_of_slot[slot] : -1;
+      if (constraint >= 0) {
+        // The support takes the held part: R = -(I - P)(r - d), M a = P (r - d).
+        double free_force[3];
+        multiply_3x3(projection + 9 * constraint, net_force, free_force);
+        for (int c = 0; c < 3; ++c) {
+          reactions[3 * constraint + c] = free_force[c] - net_force[c];
+          net_force[c] = free_force[c];
+        }
+      }
     }
     for (int c = 0; c < 3; ++c) {
-      const double a_next = (r[c] - implicit_damping[c]) / m;
+      const double a_next = net_force[c] / m;
       const double damping_force = implicit_damping[c] + beta * Kv[c];
       const double non_stiffness_force = fi[c] - damping_force;
       vMv += m * v_next[c] * v_next[c];

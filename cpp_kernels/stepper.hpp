@@ -71,6 +71,16 @@ class Stepper {
   /// twice gets the sum of its dashpots. Precomputes (M(1 + dt/2 alpha) I + dt/2 C)^-1.
   void set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C);
 
+  /// Kinematic constraints (constraints.hpp): node k moves only in the range of the orthogonal
+  /// projection P_k (count, 3, 3); P = 0 holds the node (fixed), I - n n^T holds its normal
+  /// component (roller). Replaces any previous set; nodes must be distinct. The support's
+  /// reaction R = -(I - P)(r - d) of the last step is reported by reactions(). u, v, a of a
+  /// constrained node must start in the range of P (zero for the held components).
+  void set_constraints(const std::int32_t* nodes, std::int64_t count, const double* projection);
+
+  /// Reactions (count, 3) of the constraints at the last step (N), in set_constraints order.
+  const std::vector<double>& reactions() const { return reactions_; }
+
   /// Adds a force provider (shared: the caller may keep and query it).
   void add_provider(std::shared_ptr<ForceProvider> provider);
 
@@ -99,6 +109,9 @@ class Stepper {
   void accumulate_work(const double* v);
   void contact_post_pass(double t, const double* u, double* v, double* a);
   ImplicitNodeOperators implicit_operators() const;
+  // Slots of the nodes with a dashpot or a constraint, and per slot the inverse of the implicit
+  // velocity system (restricted to the free directions for a constrained node).
+  void build_implicit_slots();
 
   BlockCsrView stiffness_;
   std::unique_ptr<SymmetricBlockCsr> symmetric_;  // owned upper triangle, when symmetric_storage
@@ -107,10 +120,17 @@ class Stepper {
   const double* mass_;
   StepperParameters parameters_;
 
-  // Dashpots: slot of each node (-1: none), C and the inverse of the implicit 3x3 system.
+  // Dashpots and constraints as given (copied), then per node its slot (-1: none) and per slot
+  // C, the inverse of the implicit 3x3 system and the constraint (-1: none).
+  std::vector<std::int32_t> dashpot_nodes_given_;
+  std::vector<double> dashpot_C_given_;
+  std::vector<std::int32_t> constraint_nodes_;
+  std::vector<double> constraint_projection_;  // (constraints, 9)
+  std::vector<double> reactions_;              // (constraints, 3)
   std::vector<std::int32_t> dashpot_slot_;
-  std::vector<double> dashpot_C_;        // (k, 9)
-  std::vector<double> dashpot_inverse_;  // (k, 9)
+  std::vector<double> dashpot_C_;              // (slots, 9)
+  std::vector<double> dashpot_inverse_;        // (slots, 9)
+  std::vector<std::int32_t> constraint_of_slot_;  // (slots) constraint index or -1
 
   std::vector<std::shared_ptr<ForceProvider>> providers_;
   std::shared_ptr<ContactPairs> contact_;  // null: no contact, no cost
