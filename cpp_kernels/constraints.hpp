@@ -1,5 +1,5 @@
 // Kinematic constraints of boundary nodes: a "fixed" node holds all three components, a
-// "roller" node the component along its face normal (DESIGN sec. 6, docs/boundaries.md).
+// "roller" node the component along its face normal (docs/boundaries.md).
 //
 // A constrained node moves only in its free subspace, given by the orthogonal projection P
 // (P = 0 fixed, P = I - n n^T roller, P = I - n1 n1^T - n2 n2^T on an edge of two rollers).

@@ -88,12 +88,13 @@ def pareto_front(rows: list[dict], cost=COST_COLUMN) -> list[dict]:
     return front
 
 
-def recommend(error_budget: float, results_csv=DEFAULT_RESULTS) -> dict:
+def recommend(error_budget: float, results_csv=DEFAULT_RESULTS, order: int | None = None) -> dict:
     """The cheapest settings of the study whose measured error is within the budget.
 
     Args:
         error_budget: largest acceptable relative L2 error of the displacement (e.g. 0.05).
         results_csv: the study's CSV.
+        order: only runs of this element order (1 or 2); None: any order.
 
     Returns:
         dict: order (1 or 2), elements_per_wavelength (elements per shortest shear
@@ -102,12 +103,15 @@ def recommend(error_budget: float, results_csv=DEFAULT_RESULTS) -> dict:
         many runs of the study met the budget).
 
     Raises:
-        ValueError: the budget is not a positive number, or no run of the study meets it
-            (the message gives the smallest error measured).
+        ValueError: the budget is not a positive number, the study has no run of `order`, or no
+            run of the study meets it (the message gives the smallest error measured).
     """
     if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
         raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
-    rows = read_results(results_csv)
+    rows = [r for r in read_results(results_csv) if order is None or r["order"] == order]
+    if not rows:
+        raise ValueError(f"order = {order!r}: the study has no run of this order; allowed: "
+                         f"{sorted({r['order'] for r in read_results(results_csv)})}")
     meeting = [r for r in rows if r["error"] <= error_budget]
     if not meeting:
         best = min(rows, key=lambda r: r["error"])
@@ -142,7 +146,8 @@ def slowest_shear_speed(scene) -> float:
     return min(speeds)
 
 
-def element_size_for(scene, error_budget: float, results_csv=DEFAULT_RESULTS) -> dict:
+def element_size_for(scene, error_budget: float, results_csv=DEFAULT_RESULTS,
+                     order: int | None = None) -> dict:
     """Element size and order a scene needs to keep its wave-propagation error within a budget.
 
     The shortest wavelength is the slowest shear speed of the materials over the highest
@@ -153,6 +158,7 @@ def element_size_for(scene, error_budget: float, results_csv=DEFAULT_RESULTS) ->
         scene: validated Scene with a [wave] table.
         error_budget: largest acceptable relative error (e.g. 0.05).
         results_csv: the study's CSV.
+        order: advice for this element order (1 or 2); None: the cheapest order.
 
     Returns:
         dict: h (largest element size, m), order, elements_per_wavelength,
@@ -166,7 +172,7 @@ def element_size_for(scene, error_budget: float, results_csv=DEFAULT_RESULTS) ->
     if scene.get("wave") is None:
         raise ValueError("scene has no [wave]: allowed is a scene with seismic input (its frequency content "
                          "sets the shortest wavelength)")
-    advice = recommend(error_budget, results_csv)
+    advice = recommend(error_budget, results_csv, order)
     frequency = highest_frequency(scene)
     speed = slowest_shear_speed(scene)
     wavelength = speed / frequency

@@ -10,8 +10,13 @@ Commands:
     bench [ARGS ...]
         Benchmarks; ARGS go to ``pyfem.bench.main`` unchanged.
 
-A scene error (or a missing scene, mesh or record file) prints ``error: ...``
-on stderr and exits with status 2, with no traceback; nothing is written.
+A scene error (or a missing scene, mesh or record file, a mesh or record file that
+cannot be read, an ``--out`` that cannot be written) prints one line ``error: ...``
+on stderr and exits with status 2, with no traceback; nothing is written. What a user
+may mean but is probably a mistake prints one line ``warning: ...`` on stderr each
+(`Scene.warnings`; run.json keeps them under "warnings").
+Ctrl-C (SIGINT) or SIGTERM during a run prints ``error: interrupted at t = ... s;
+partial results kept in DIR`` and exits with 130 (SIGINT) or 143 (SIGTERM).
 """
 from __future__ import annotations
 
@@ -22,7 +27,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from pyfem import __version__
-from pyfem.scene import Scene, SceneError, load_scene
+from pyfem.scene import Scene, SceneError, load_scene, scene_error_from
 
 EXIT_USAGE = 2  # argparse's own status for bad arguments; a bad scene is one too
 
@@ -61,9 +66,11 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     """Validate fully and hand over to ``pyfem.solver.run``, which creates `out_dir` only
     after the model and the time step are known to be good."""
     scene = load_scene(scene_path, overrides)
+    report_warnings(scene)
+    out_dir = default_out_dir(scene_path) if out_dir is None else out_dir
+    check_out_dir(out_dir)
     from pyfem import solver  # heavy (dolfinx, kernels): only when running
 
-    out_dir = default_out_dir(scene_path) if out_dir is None else out_dir
     summary = solver.run(scene, out_dir)
     energy = summary["energy"]
     print(f"run finished in {summary['wall_seconds']:.1f} s: {summary['steps']} steps of "
@@ -84,6 +91,7 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
 def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     """Validate the scene and print the solver's plan for it."""
     scene = load_scene(scene_path, overrides)
+    report_warnings(scene)
     from pyfem import solver  # heavy (dolfinx, kernels): only after validation
 
     plan = solver.plan(scene)
@@ -94,6 +102,50 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     if "seismic_input" in scene.effects:
         print(mesh_advice(scene))
     return 0
+
+
+def report_warnings(scene: Scene) -> None:
+    """Prints each of the scene's warnings as one ``warning: ...`` line on stderr, now and as the
+    solver adds more (`Scene.warn`)."""
+    def show(message: str) -> None:
+        print(f"warning: {message}", file=sys.stderr)
+
+    for message in scene.warnings:
+        show(message)
+    scene.on_warning = show
+
+
+def check_out_dir(out_dir: Path) -> None:
+    """Refuses a run directory that cannot be created or written, before anything is built.
+
+    A probe directory is made in `out_dir` (or in its nearest existing ancestor, which is where
+    the run would create it) and in its parent (where an earlier run is moved aside), then
+    removed: nothing is left behind.
+
+    Raises:
+        SceneError naming --out, the path and why.
+    """
+    import tempfile
+
+    out_dir = Path(out_dir)
+
+    def refuse(reason: str) -> None:
+        allowed = "a directory that can be created and written"
+        raise SceneError("--out", str(out_dir), allowed, f"--out {out_dir}: {reason}; allowed: {allowed}")
+
+    if out_dir.exists() and not out_dir.is_dir():
+        refuse("exists and is not a directory")
+    ancestor = out_dir.absolute()
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        refuse(f"{ancestor} is not a directory")
+    probes = [ancestor] if ancestor != out_dir.absolute() else [ancestor, ancestor.parent]
+    for directory in probes:
+        try:
+            Path(tempfile.mkdtemp(prefix=".pyfem-probe-", dir=directory)).rmdir()
+        except OSError as error:
+            refuse(f"cannot create a directory in {directory} ({error.strerror or error})")
 
 
 def mesh_advice(scene: Scene) -> str:
@@ -174,8 +226,12 @@ def _format_value(key: str, value: Any) -> str:
         return str(value)
 
 
-def _scene_error_text(error: SceneError) -> str:
+def _scene_error_text(error: SceneError, scene_path: Path | None = None) -> str:
+    """The error's message, after the scene file it is about (errors found after validation,
+    by the mesh builders, carry no source; --out errors are not about the scene)."""
     message = str(error)
+    if error.source is None and scene_path is not None and not str(error.key).startswith("--"):
+        error.source = str(scene_path)
     if error.source and not message.startswith(error.source):
         message = f"{error.source}: {message}"
     return message
@@ -193,12 +249,32 @@ def main(argv: Sequence[str] | None = None) -> int:
             return command_run(args.scene, args.out, args.overrides)
         return command_check(args.scene, args.overrides)
     except SceneError as error:
-        print(f"error: {_scene_error_text(error)}", file=sys.stderr)
+        print(f"error: {_scene_error_text(error, args.scene)}", file=sys.stderr)
+        return EXIT_USAGE
+    except ValueError as error:
+        # Builders and readers below the scene (pyfem.geometry, pyfem.interfaces, ...) report bad
+        # input as a ValueError whose message starts with the scene key; any other is a bug.
+        converted = scene_error_from(error)
+        if converted is None:
+            raise
+        print(f"error: {_scene_error_text(converted, args.scene)}", file=sys.stderr)
         return EXIT_USAGE
     except FileNotFoundError as error:
         name = error.filename if error.filename is not None else str(error)
         print(f"error: no such file: {name}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as error:
+        print(f"error: {interruption_text(error)}", file=sys.stderr)
+        return getattr(error, "exit_status", 130)
+
+
+def interruption_text(error: KeyboardInterrupt) -> str:
+    """One line on an interrupted command: when it stopped and where its partial results are."""
+    if not hasattr(error, "out_dir"):  # not from a run (pyfem.interrupts.RunInterrupted)
+        return "interrupted"
+    reached, out_dir = error.time_reached, error.out_dir
+    if out_dir is None:
+        return "interrupted before the run started; nothing written"
+    if reached is None:
+        return f"interrupted before the first sample; run.json in {out_dir} says so"
+    return f"interrupted at t = {reached:.6g} s; partial results kept in {out_dir}"

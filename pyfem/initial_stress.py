@@ -1,4 +1,4 @@
-"""Initial (static) stress state and the static forces it puts on contact pairs (DESIGN section 3).
+"""Initial (static) stress state and the static forces it puts on contact pairs (docs/method.md section 8).
 
 Geostatic stress (compression negative, z up), from a scene's [initial_stress]:
 

@@ -1,4 +1,4 @@
-"""Interlayer interfaces: node splitting and contact node pairs (DESIGN section 3, "Interlayer contact").
+"""Interlayer interfaces: node splitting and contact node pairs (docs/method.md section 9, "Node pairs").
 
 Two steps, both before the time loop:
 

@@ -14,16 +14,17 @@ from __future__ import annotations
 
 import typing
 
-import gmsh
+from pyfem._gmsh import gmsh
 import numpy as np
 from dolfinx.io import gmshio
 from mpi4py import MPI
 
 from pyfem.geometry import build_box, build_layered_box, build_layered_cavern, gmsh_session, load_msh
+from pyfem.scene import SceneError
 
 # gmsh element type numbers of the volume elements accepted as cells.
 GMSH_HEXAHEDRON_8 = 5
-SUPPORTED_CELL_TYPES = {GMSH_HEXAHEDRON_8: "8-node hexahedron"}
+SUPPORTED_CELL_TYPES = {GMSH_HEXAHEDRON_8: "8-node hexahedra"}
 
 
 def create_mesh(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD):
@@ -74,7 +75,8 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
             model_facts = _physical_groups_and_cell_types()
         model_facts = comm.bcast(model_facts, root=model_rank)
         regions, boundaries, cell_types = model_facts
-        _check_cell_types(cell_types)
+        source = ("mesh.file", mesh_settings["file"]) if builder == "file" else ("mesh.builder", builder)
+        _check_cell_types(cell_types, *source)
         _check_regions_match_materials(regions, scene["materials"])
         interface_names = list((scene.get("contact") or {}).get("interfaces") or [])
         if not interface_names:
@@ -82,11 +84,9 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
             return mesh, cell_tags, facet_tags, regions, boundaries, {}
         missing = [name for name in interface_names if name not in boundaries]
         if missing:
-            from pyfem.scene import SceneError
-
-            raise SceneError("contact.interfaces", interface_names,
-                             f"names of physical surfaces of the mesh; {missing} not found "
-                             f"(surfaces: {sorted(boundaries)})")
+            index = interface_names.index(missing[0])
+            raise SceneError(f"contact.interfaces.{index}", missing[0], "must name a physical surface of the "
+                             "mesh: " + (", ".join(sorted(boundaries)) or "none"))
         from pyfem.interfaces import split_interfaces
 
         arrays = None
@@ -127,7 +127,9 @@ def _model_arrays() -> dict:
     else:
         facets, facet_values = np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int32)
     if facets.shape[1] != 4:
-        raise ValueError(f"mesh: physical surfaces must be made of 4-node quadrilaterals (found {facets.shape[1]} nodes)")
+        allowed = (f"physical surfaces must be made of 4-node quadrilaterals "
+                   f"(found {facets.shape[1]}-node faces)")
+        raise SceneError("mesh.file", None, allowed, f"scene key 'mesh.file': {allowed}")
     return {"x": x.copy(), "cells": cells, "cell_values": cell_values, "facets": facets,
             "facet_values": facet_values}
 
@@ -152,21 +154,37 @@ def _physical_name(dim: int, tag: int) -> str:
     return name if name else f"{'volume' if dim == 3 else 'surface'}_{tag}"
 
 
-def _check_cell_types(cell_types: list[tuple[int, str]]) -> None:
+def _check_cell_types(cell_types: list[tuple[int, str]], key: str = "mesh.file", value=None) -> None:
+    """The physical volumes hold elements, all of a supported type.
+
+    Raises:
+        SceneError naming `key` (mesh.file, or mesh.builder for a built mesh) and `value`.
+    """
+    allowed = " and ".join(f"{name} (gmsh type {number})" for number, name in SUPPORTED_CELL_TYPES.items())
     if not cell_types:
-        raise ValueError("mesh: the gmsh model has no elements in its physical volumes")
+        raise SceneError(key, value, f"the physical volumes hold no elements; allowed: {allowed} "
+                         "(mesh the volumes: gmsh -3, with recombination into hexahedra)")
     unsupported = [name for number, name in cell_types if number not in SUPPORTED_CELL_TYPES]
     if unsupported:
-        raise ValueError(
-            f"mesh: gmsh element types {unsupported} are not supported; "
-            f"allowed: {list(SUPPORTED_CELL_TYPES.values())} (gmsh type {list(SUPPORTED_CELL_TYPES)})")
+        raise SceneError(key, value, f"gmsh element types {', '.join(unsupported)} are not supported; "
+                         f"allowed: {allowed} only (mesh.order = 2 builds Q2 from them)")
 
 
 def _check_regions_match_materials(regions: dict[str, int], materials: typing.Mapping) -> None:
-    """Every region needs a [materials.NAME] table and every table a region;
-    one ValueError lists every mismatch."""
+    """Every region needs a [materials.NAME] table and every table a region.
+
+    Raises:
+        SceneError naming the first mismatched materials.NAME, listing every mismatch and the
+        regions found.
+    """
     found = sorted(regions)
-    problems = [f"materials.{name}: missing table for mesh region {name!r}" for name in found if name not in materials]
-    problems += [f"materials.{name}: no mesh region of that name" for name in materials if name not in regions]
+    problems = [(name, f"[materials.{name}] is missing for mesh region \"{name}\"")
+                for name in found if name not in materials]
+    problems += [(name, f"[materials.{name}] names no mesh region")
+                 for name in materials if name not in regions]
     if problems:
-        raise ValueError("; ".join(problems) + f" (regions found: {found})")
+        allowed = ("[materials] must name exactly the regions (physical volumes) of the mesh: "
+                   + (", ".join(found) or "none"))
+        key = f"materials.{problems[0][0]}"
+        raise SceneError(key, None, allowed,
+                         f"scene key '{key}': " + "; ".join(text for _, text in problems) + "; " + allowed)

@@ -4,9 +4,9 @@ dolfinx assembles everything once, before the time loop:
 - mass: row-sum lumped mass, M_i = int rho phi_i dx (one value per node);
 - stiffness: K_ij = int sigma(phi_j) : eps(phi_i) dx of linear isotropic
   elasticity, no boundary conditions, as a scipy BSR matrix with 3x3 blocks;
-- faces: per named outer boundary, the lumped facet integrals of 1, n,
-  rho c_p, rho c_s and G that the viscoelastic boundary (DESIGN section 3)
-  and the seismic input forces need.
+- faces: per truncation face (where the model is cut, docs/boundaries.md; never a
+  cavity or lining surface), the lumped facet integrals of 1, n, rho c_p, rho c_s
+  and G that the viscoelastic boundary and the seismic input forces need.
 
 Numbering (docs/ARCHITECTURE.md): a node is a dof block of
 VectorFunctionSpace(mesh, ("Lagrange", order)); dof = 3 * node + component.
@@ -34,10 +34,11 @@ SUPPORTED_ORDERS = (1, 2)
 
 @dataclasses.dataclass
 class BoundaryFace:
-    """Lumped facet data of one named outer boundary (per face node).
+    """Lumped facet data of one truncation face (per face node).
 
     Attributes:
-        name: physical surface name (box: xmin, xmax, ymin, ymax, zmin, zmax).
+        name: physical surface name (box: xmin, xmax, ymin, ymax, zmin, zmax), or for the
+            exterior facets on a bounding-box plane of a mesh without such names, the plane's.
         nodes: (k,) int32 nodes of the face with nonzero lumped area.
         area: (k,) lumped area int phi_i ds (m^2).
         normal: (k, 3) unit outward normal, normalised int phi_i n ds (-).
@@ -45,6 +46,9 @@ class BoundaryFace:
         rho_cs: (k,) int phi_i rho c_s ds (kg/s), S-wave dashpot per unit velocity.
         shear_modulus: (k,) int phi_i G ds (N/m = Pa m^2).
         plane_distance: (k,) |n . (x_node - centre)| (m), R of the viscoelastic boundary.
+        kind: boundary type of the face: "viscoelastic", "viscous", "fixed", "roller", "free".
+        source: how the face was found: "boundary.faces", "named surface" or "bounding-box plane".
+        n_facets: number of mesh facets of the face.
     """
 
     name: str
@@ -55,6 +59,14 @@ class BoundaryFace:
     rho_cs: np.ndarray
     shear_modulus: np.ndarray
     plane_distance: np.ndarray
+    kind: str = "viscoelastic"
+    source: str = "named surface"
+    n_facets: int = 0
+
+    @property
+    def total_area(self) -> float:
+        """Area of the face (m^2): the sum of its lumped nodal areas."""
+        return float(np.sum(self.area))
 
 
 @dataclasses.dataclass
@@ -70,7 +82,10 @@ class Model:
         node_coords: (n_nodes, 3) node coordinates (m).
         mass: (n_nodes,) row-sum lumped mass (kg), > 0.
         stiffness: (3 n_nodes, 3 n_nodes) BSR matrix with (3, 3) blocks (N/m).
-        faces: one BoundaryFace per named outer boundary.
+        faces: one BoundaryFace per truncation face (docs/boundaries.md).
+        free_surfaces: named exterior surfaces that are not truncation faces (cavity walls,
+            lining faces: traction-free), and "(unnamed)" for other exterior facets, with their
+            facet counts.
         interface_tags: split interface name -> (facet tag of side i, of side j); empty without contact.
         pairs: contact node pairs of the split interfaces (pyfem.interfaces.NodePairs), or None.
     """
@@ -85,6 +100,7 @@ class Model:
     mass: np.ndarray
     stiffness: scipy.sparse.bsr_matrix
     faces: list[BoundaryFace]
+    free_surfaces: dict = dataclasses.field(default_factory=dict)
     interface_tags: dict = dataclasses.field(default_factory=dict)
     pairs: typing.Any = None
     _materials: typing.Optional["CellMaterials"] = dataclasses.field(default=None, repr=False, compare=False)
@@ -291,10 +307,11 @@ def build_model(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> Model
     centre = np.asarray(centre, dtype=np.float64)
     if centre.shape != (SPACE_DIMENSION,):
         raise ValueError(f"boundary.centre = {scene['boundary']['centre']!r}: expected [x, y, z] (m)")
-    face_names = _outer_face_names(scene, mesh, facet_tags, boundaries, interface_tags)
+    truncation, free_surfaces = truncation_faces(scene, mesh, facet_tags, boundaries, interface_tags)
+    kinds = face_kinds(scene, truncation)
     faces = [
-        boundary_face(name, V, facet_tags, boundaries[name], materials, node_coords, centre, quadrature)
-        for name in face_names
+        boundary_face(name, V, facets, materials, node_coords, centre, quadrature, kind=kinds[name], source=source)
+        for name, (facets, source) in truncation.items()
     ]
     pairs = None
     if interface_tags:
@@ -303,7 +320,8 @@ def build_model(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> Model
         pairs = interface_pairs(V, facet_tags, interface_tags, mass, node_coords, quadrature)
     return Model(mesh=mesh, V=V, cell_tags=cell_tags, facet_tags=facet_tags, regions=regions,
                  boundaries=boundaries, node_coords=node_coords, mass=mass, stiffness=stiffness,
-                 faces=faces, interface_tags=interface_tags, pairs=pairs, _materials=materials)
+                 faces=faces, free_surfaces=free_surfaces, interface_tags=interface_tags, pairs=pairs,
+                 _materials=materials)
 
 
 def _cell_materials(mesh, cell_tags, regions: dict[str, int], material_tables: typing.Mapping) -> CellMaterials:
@@ -400,19 +418,20 @@ def assemble_nodal_vector(linear_form: ufl.Form, V: fem.FunctionSpace) -> np.nda
     return values.reshape(-1, SPACE_DIMENSION)
 
 
-def boundary_face(name: str, V: fem.FunctionSpace, facet_tags, tag: int, materials: CellMaterials,
-                  node_coords: np.ndarray, centre: np.ndarray, quadrature: dict) -> BoundaryFace:
-    """Lumped facet integrals over the facets of `facet_tags` equal to `tag`.
+def boundary_face(name: str, V: fem.FunctionSpace, facets: np.ndarray, materials: CellMaterials,
+                  node_coords: np.ndarray, centre: np.ndarray, quadrature: dict, kind: str = "viscoelastic",
+                  source: str = "named surface") -> BoundaryFace:
+    """Lumped facet integrals over the given exterior facets (local facet indices).
 
     DG0 material fields on an exterior facet take the value of the one cell
     adjacent to it.
     """
     mesh = V.mesh
-    facets = facet_tags.indices[facet_tags.values == tag]
+    facets = np.unique(np.asarray(facets, dtype=np.int32))
     # A meshtags holding only this face, always with marker 1, keeps the form
     # signature the same for every face, so the forms compile once.
     face_marker = 1
-    face_tags = dolfinx_mesh.meshtags(mesh, mesh.topology.dim - 1, facets.astype(np.int32),
+    face_tags = dolfinx_mesh.meshtags(mesh, mesh.topology.dim - 1, facets,
                                       np.full(len(facets), face_marker, dtype=np.int32))
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=face_tags, subdomain_id=face_marker, metadata=quadrature)
     test = ufl.TestFunction(V)
@@ -435,24 +454,98 @@ def boundary_face(name: str, V: fem.FunctionSpace, facet_tags, tag: int, materia
     plane_distance = np.abs(np.einsum("ij,ij->i", normal, node_coords[nodes] - centre))
     return BoundaryFace(name=name, nodes=nodes, area=area[nodes].copy(), normal=normal,
                         rho_cp=scalars[nodes, 1].copy(), rho_cs=scalars[nodes, 2].copy(),
-                        shear_modulus=shear[nodes].copy(), plane_distance=plane_distance)
+                        shear_modulus=shear[nodes].copy(), plane_distance=plane_distance, kind=kind,
+                        source=source, n_facets=int(len(facets)))
 
 
-def _outer_face_names(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[str, int],
-                      interface_tags: typing.Mapping = ()) -> list[str]:
-    """Named surfaces that are outer boundaries: the six box faces, or for a
-    file every physical surface whose facets all lie on the exterior (a split
-    interface is exterior to each side but is not an outer boundary)."""
-    if scene["mesh"]["builder"] == "box":
-        return list(BOX_FACES)
+# Relative distance (of the model's extent) within which a facet lies on a bounding-box plane.
+_PLANE_TOLERANCE = 1.0e-8
+
+
+def truncation_faces(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[str, int],
+                     interface_tags: typing.Mapping = ()) -> tuple[dict, dict]:
+    """The faces where the model is cut (they carry the artificial boundary and the input).
+
+    In order: the physical surfaces named in `boundary.faces`; else the surfaces named xmin,
+    xmax, ymin, ymax, zmin, zmax that the mesh has; else the exterior facets lying on the
+    planes of the mesh's bounding box (one face per plane, named after it). Every other
+    exterior surface (a cavity, a lining face, a tunnel wall) is traction-free.
+
+    Returns:
+        (faces, free_surfaces): faces maps a face name to (local facet indices int32, source);
+        free_surfaces maps the named exterior surfaces that are not truncation faces, and
+        "(unnamed)" for the remaining exterior facets, to their facet counts.
+
+    Raises:
+        SceneError: boundary.faces names an unknown surface, or one that is not on the exterior.
+    """
+    from pyfem.scene import SceneError
+
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim - 1, tdim)
     exterior = dolfinx_mesh.exterior_facet_indices(mesh.topology)
-    names = []
-    for name, tag in boundaries.items():
-        if name in interface_tags:
-            continue
-        facets = facet_tags.indices[facet_tags.values == tag]
-        if len(facets) > 0 and np.all(np.isin(facets, exterior)):
-            names.append(name)
-    return names
+    split = {tag for tags in dict(interface_tags).values() for tag in tags}
+    surfaces = {name: facet_tags.indices[facet_tags.values == tag] for name, tag in boundaries.items()
+                if name not in dict(interface_tags) and tag not in split}
+    given = (scene.get("boundary") or {}).get("faces")
+    faces: dict[str, tuple[np.ndarray, str]] = {}
+    if given:
+        for index, name in enumerate(given):
+            if name not in surfaces:
+                raise SceneError(f"boundary.faces.{index}", name,
+                                 "names of physical surfaces of the mesh: " + ", ".join(sorted(surfaces)))
+            facets = surfaces[name]
+            if len(facets) == 0 or not np.all(np.isin(facets, exterior)):
+                raise SceneError(f"boundary.faces.{index}", name,
+                                 "surfaces on the exterior of the mesh (this one has facets inside it)")
+            faces[name] = (facets.astype(np.int32), "boundary.faces")
+    elif any(name in surfaces for name in BOX_FACES):
+        for name in BOX_FACES:
+            if name in surfaces:
+                facets = surfaces[name]
+                faces[name] = (facets[np.isin(facets, exterior)].astype(np.int32), "named surface")
+    else:
+        x = mesh.geometry.x
+        lo, hi = x.min(axis=0), x.max(axis=0)
+        tolerance = _PLANE_TOLERANCE * float(np.max(hi - lo))
+        for name in BOX_FACES:
+            axis = "xyz".index(name[0])
+            value = lo[axis] if name.endswith("min") else hi[axis]
+            facets = dolfinx_mesh.locate_entities_boundary(
+                mesh, tdim - 1, lambda points, a=axis, v=value: np.abs(points[a] - v) <= tolerance)
+            facets = facets[np.isin(facets, exterior)]
+            if len(facets):
+                faces[name] = (facets.astype(np.int32), "bounding-box plane")
+    on_faces = np.concatenate([f for f, _ in faces.values()]) if faces else np.zeros(0, dtype=np.int32)
+    free_surfaces = {}
+    named = np.zeros(0, dtype=np.int32)
+    for name, facets in surfaces.items():
+        outside = facets[np.isin(facets, exterior)]
+        named = np.concatenate([named, outside])
+        if name not in faces and len(outside) and not np.all(np.isin(outside, on_faces)):
+            free_surfaces[name] = int(len(outside))
+    interface_facets = np.concatenate([facet_tags.indices[facet_tags.values == tag] for tag in split]) \
+        if split else np.zeros(0, dtype=np.int32)
+    unnamed = np.setdiff1d(exterior, np.concatenate([named, on_faces, interface_facets]))
+    if len(unnamed):
+        free_surfaces["(unnamed)"] = int(len(unnamed))
+    return faces, free_surfaces
+
+
+def face_kinds(scene: typing.Mapping, faces: typing.Mapping) -> dict[str, str]:
+    """Boundary type of each truncation face: `boundary.face.NAME.type`, else `boundary.type`.
+
+    Raises:
+        SceneError: a `boundary.face.NAME` table names no truncation face.
+    """
+    from pyfem.scene import SceneError
+
+    boundary = scene.get("boundary") or {}
+    per_face = boundary.get("face") or {}
+    for name, table in per_face.items():
+        if name not in faces:
+            raise SceneError(f"boundary.face.{name}", table,
+                             "tables named after truncation faces: " + (", ".join(faces) or "none found")
+                             + " (set boundary.faces to choose them)")
+    default = boundary.get("type", "viscoelastic")
+    return {name: (per_face.get(name) or {}).get("type") or default for name in faces}

@@ -1,8 +1,12 @@
 """Run directory: run.json, monitors/*.csv, energy.csv, fields.xdmf (+ .h5), plots/*.png,
 and with contact pairs/*.csv (pair monitors) and the pair-state counts over time.
 
-run.json is written first with "status": "running" and rewritten with "finished" (or
-"failed") at the end, so a half-written directory never looks like a finished run.
+run.json is written first with "status": "running" and rewritten with "finished",
+"interrupted" (Ctrl-C, SIGTERM) or "failed" (any other error) at the end, so a half-written
+directory never looks like a finished run. The CSV histories are written row by row as the run
+goes (flushed every few seconds of wall time and at the end), so an interrupted or failed run
+keeps every sample computed before it stopped. An earlier run in the directory is moved to
+`<dir>.previous`, `<dir>.previous-2`, ... (the first free name), never deleted.
 """
 from __future__ import annotations
 
@@ -12,6 +16,7 @@ import os
 import shutil
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +31,14 @@ ENERGY_COLUMNS = ["t", "kinetic", "strain", "external_work", "damping_work", "ba
 CONTACT_ENERGY_COLUMNS = ["contact_work", "friction_dissipation"]
 PAIR_COLUMNS = ["t", "dux", "duy", "duz", "slip", "gap", "N", "T", "D", "state"]
 PAIR_STATES = ("bonded", "stick", "sliding", "separated")  # kernel state codes 0..3
+# Format of the history rows, as np.savetxt wrote them when the files were written at the end.
+MONITOR_FORMAT = PAIR_FORMAT = "%.10e"
+ENERGY_FORMAT = "%.18e"
+# The CSV files are flushed after a sample when this much wall time (s) passed since the last flush.
+FLUSH_SECONDS = 2.0
+# Symmetric tensors in fields.xdmf: 6 components in the order of XDMF's "Tensor6" attribute,
+# which ParaView's XDMF reader expands to the full 3x3 tensor row by row.
+TENSOR6_COMPONENTS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # xx, xy, xz, yy, yz, zz
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -56,12 +69,144 @@ def max_principal(voigt: np.ndarray) -> np.ndarray:
     return np.linalg.eigvalsh(tensor)[:, -1]
 
 
-class RunWriter:
-    """Collects samples during a run and writes the run directory.
+def previous_run_dir(out_dir: Path) -> Path:
+    """Where an earlier run in out_dir goes: `<out_dir>.previous`, else `.previous-2`, `-3`, ...
+    (the first free name)."""
+    candidate = out_dir.with_name(out_dir.name + ".previous")
+    number = 1
+    while candidate.exists():
+        number += 1
+        candidate = out_dir.with_name(f"{out_dir.name}.previous-{number}")
+    return candidate
+
+
+class CsvHistory:
+    """One CSV history file written as the run goes: the header at once, then rows.
+
+    Rows are formatted as np.savetxt formats them (`fmt` for every column, comma-separated)
+    and kept until `flush`, which writes them in one piece, so a reader never sees half a row.
 
     Args:
-        out_dir: directory of the run; a previous finished run there is moved to
-            `<out_dir>.previous` (one generation is kept) rather than mixed with the new one.
+        path: the file (created or truncated).
+        columns: column names (the header line).
+        fmt: printf format of every value, e.g. "%.10e".
+    """
+
+    def __init__(self, path: Path, columns: list[str], fmt: str):
+        self.path = Path(path)
+        self.n_columns = len(columns)
+        self._row_format = ",".join([fmt] * len(columns)) + "\n"
+        self._pending: list[str] = []
+        self._file = open(self.path, "w")
+        self._file.write(",".join(columns) + "\n")
+
+    def append(self, row) -> None:
+        """Queues one row of `n_columns` values."""
+        self._pending.append(self._row_format % tuple(row))
+
+    def flush(self) -> None:
+        """Writes the queued rows and hands them to the operating system."""
+        if self._file.closed:
+            return
+        if self._pending:
+            self._file.write("".join(self._pending))
+            self._pending.clear()
+        self._file.flush()
+
+    def close(self) -> None:
+        """Flushes and closes the file (again: nothing)."""
+        if not self._file.closed:
+            self.flush()
+            self._file.close()
+
+
+@dataclass
+class CellStrain:
+    """Cell-average (centroid) strain and stress of a displacement field, for fields.xdmf.
+
+    The strain of each cell is evaluated at its centroid, the mean strain of a Q1 cell and the
+    centroid value of a Q2 one: eps = sym(grad u) with grad u_i / dx_l = sum_k u[nodes[c, k], i]
+    gradients[c, k, l]; stress = lambda tr(eps) I + 2 G eps + sigma0 (Pa, tension positive).
+
+    Attributes:
+        nodes: (c, k) int32 nodes of each cell (its dofmap row).
+        gradients: (c, k, 3) basis gradients at the centroid (1/m).
+        lame_lambda: (c,) Lame's lambda of each cell's material (Pa).
+        shear_modulus: (c,) G of each cell's material (Pa).
+        static: (c, 3, 3) initial stress at the centroids (Pa), zero without [initial_stress].
+
+    A cell in no region of the scene's materials gets NaN moduli (its stress is NaN, not a guess).
+    """
+
+    nodes: np.ndarray
+    gradients: np.ndarray
+    lame_lambda: np.ndarray
+    shear_modulus: np.ndarray
+    static: np.ndarray
+
+    def strain(self, u: np.ndarray) -> np.ndarray:
+        """(c, 3, 3) strain of the displacement u (dofs, m) at the cell centroids (-)."""
+        nodal = u.reshape(-1, 3)[self.nodes]                                    # (c, k, 3)
+        gradient = np.einsum("cki,ckl->cil", nodal, self.gradients)
+        return 0.5 * (gradient + gradient.transpose(0, 2, 1))
+
+    def stress(self, strain: np.ndarray) -> np.ndarray:
+        """(c, 3, 3) total stress C : strain + sigma0 (Pa) for the cells' strain (c, 3, 3)."""
+        trace = np.trace(strain, axis1=1, axis2=2)
+        return (self.lame_lambda[:, None, None] * trace[:, None, None] * np.eye(3)
+                + 2.0 * self.shear_modulus[:, None, None] * strain + self.static)
+
+
+def cell_strain_operator(scene, model) -> CellStrain:
+    """The centroid gradients, materials and initial stress of every cell of the model.
+
+    Same mapping as `Model.point_gradient_weights`, vectorised over the cells: at the reference
+    centroid X_c, J = sum_k x_k (x) dphi_k/dX (dx/dX) and dphi/dx = dphi/dX J^-1.
+
+    Args:
+        scene: validated scene ([materials], optional [initial_stress]).
+        model: pyfem.operators.Model.
+    """
+    import basix
+
+    from pyfem.initial_stress import stress_field_from_scene
+    from pyfem.operators import lame_parameters
+
+    element = model.V.element.basix_element
+    nodes = model.V.dofmap.list.array.reshape(-1, element.dim).astype(np.int32)
+    centroid = basix.geometry(element.cell_type).mean(axis=0).reshape(1, 3)
+    table = element.tabulate(1, centroid)[:, 0, :, 0]                            # (4, k): phi, dphi/dX
+    reference_gradients = table[1:].T                                             # (k, 3)
+    coords = model.node_coords[nodes]                                             # (c, k, 3)
+    jacobian = np.einsum("cka,kb->cab", coords, reference_gradients)              # dx_a/dX_b
+    gradients = np.einsum("kb,cbl->ckl", reference_gradients, np.linalg.inv(jacobian))
+    n_cells = len(nodes)
+    lame_lambda, shear_modulus = np.full(n_cells, np.nan), np.full(n_cells, np.nan)
+    for region, tag in model.regions.items():
+        material = scene["materials"].get(region)
+        if material is None:
+            continue
+        cells = model.cell_tags.indices[model.cell_tags.values == tag]
+        cells = cells[cells < n_cells]
+        lame_lambda[cells], shear_modulus[cells] = lame_parameters(material["E"], material["nu"])
+    field = stress_field_from_scene(scene)
+    centroids = np.einsum("k,cka->ca", table[0], coords)
+    static = np.zeros((n_cells, 3, 3)) if field is None else np.asarray(field(centroids), dtype=np.float64)
+    return CellStrain(nodes=nodes, gradients=gradients, lame_lambda=lame_lambda, shear_modulus=shear_modulus,
+                      static=static)
+
+
+def tensor6(tensors: np.ndarray) -> np.ndarray:
+    """(n, 6) components xx, xy, xz, yy, yz, zz (XDMF "Tensor6") of symmetric (n, 3, 3) tensors."""
+    return np.stack([tensors[:, i, j] for i, j in TENSOR6_COMPONENTS], axis=1)
+
+
+class RunWriter:
+    """Writes the run directory as the run goes: histories row by row, fields, run.json.
+
+    Args:
+        out_dir: directory of the run; an earlier run there (a run.json) is moved to
+            `previous_run_dir(out_dir)` rather than mixed with the new one or deleted.
         simulation: the prepared `pyfem.solver.Simulation`.
     """
 
@@ -70,26 +215,34 @@ class RunWriter:
         self.simulation = simulation
         self.scene = simulation.scene
         self.times: list[float] = []
-        self.monitor_samples: list[np.ndarray] = []  # each (n_monitors, 9 or 15 with the dynamic stress)
+        # Every row written to the history files is also kept for the peaks in run.json.
+        self.monitor_rows: list[np.ndarray] = []    # each (n_monitors, len(monitor_columns))
         self.energy_samples: list[list[float]] = []
         self.contact_on = simulation.contact_arrays is not None
         self.energy_columns = ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if self.contact_on else [])
-        self.pair_samples: list[np.ndarray] = []        # each (n_pair_monitors, 9)
+        self.pair_rows: list[np.ndarray] = []       # each (n_pair_monitors, len(PAIR_COLUMNS))
         self.state_count_samples: list[np.ndarray] = []  # each (4,)
+        self.monitor_columns = self._monitor_columns()
+        self._monitor_points = (np.array([m["point"] for m in self.scene["monitor"]], dtype=float)
+                                if simulation.monitor_nodes is not None else None)
         self.xdmf = None
         self.show_progress = sys.stderr.isatty()
         interval = self.scene["output"]["xdmf_interval"]
         self.xdmf_every = (max(1, round(interval / self.scene["output"]["interval"]))
                            if interval and interval > 0 else 0)
+        fields = self.scene["output"]["fields"]
+        self.cell_strain = (cell_strain_operator(self.scene, simulation.model)
+                            if self.xdmf_every and ("stress" in fields or "strain" in fields) else None)
+        self._histories: dict[str, CsvHistory] = {}
+        self._summary: dict | None = None  # set by start()
+        self._last_flush = -math.inf
         self._sample_count = 0
 
     # -- life cycle ---------------------------------------------------------------------
     def start(self) -> None:
-        """Creates the directory and marks the run as running."""
+        """Moves an earlier run aside, creates the directory and its history files, marks it running."""
         if (self.out_dir / "run.json").exists():
-            previous = self.out_dir.with_name(self.out_dir.name + ".previous")
-            if previous.exists():
-                shutil.rmtree(previous)
+            previous = previous_run_dir(self.out_dir)
             shutil.move(str(self.out_dir), str(previous))
             print(f"note: the earlier run in {self.out_dir} was moved to {previous}", file=sys.stderr)
         (self.out_dir / "monitors").mkdir(parents=True, exist_ok=True)
@@ -99,42 +252,142 @@ class RunWriter:
         self._summary = self._base_summary()
         self._summary["status"] = "running"
         _write_json(self.out_dir / "run.json", self._summary)
+        self._open_histories()
         if self.xdmf_every:
             self._open_fields()
 
-    def fail(self, t: float, why: str) -> None:
-        """Marks the run as failed at time t (s)."""
-        self._summary.update(status="failed", failed_at=t, failure=why)
-        self._close_fields()
+    @property
+    def started(self) -> bool:
+        """Whether start() has marked the directory as a running run."""
+        return self._summary is not None
+
+    def fail(self, reason: str, interrupted: bool = False) -> None:
+        """Closes every file with the rows written so far and marks the run interrupted or failed.
+
+        Args:
+            reason: why the run stopped (one line).
+            interrupted: True for Ctrl-C / SIGTERM ("interrupted"), False for an error ("failed").
+        """
+        self._summary.update(status="interrupted" if interrupted else "failed",
+                             time_reached=self.times[-1] if self.times else None, reason=reason)
+        problems = []
+        for close in (self._close_histories, self._close_fields, self._partial_summary):
+            try:
+                close()
+            except Exception as error:  # run.json must still say what happened
+                problems.append(f"{close.__name__}: {type(error).__name__}: {error}")
+        if problems:
+            self._summary["output_errors"] = problems
         _write_json(self.out_dir / "run.json", self._summary)
 
-    def sample(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray, energy: dict) -> None:
-        """Records monitors and energy at time t; writes fields every xdmf interval."""
+    def sample(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray, energy: dict,
+               reactions: np.ndarray | None = None) -> None:
+        """Records monitors, pairs and energy at time t (s); writes fields every xdmf interval.
+
+        reactions: (k, 3) the kernel's constraint reactions (N) when fixed or roller faces exist;
+        their resultant per face goes to reactions.csv.
+
+        Everything is computed first and then appended, so an exception in between leaves the
+        histories with whole samples only.
+        """
         sim = self.simulation
-        self.times.append(t)
-        if sim.monitor_nodes is not None:
-            with_stress = sim.monitor_stress is not None
-            values = np.empty((len(sim.monitor_names), 15 if with_stress else 9))
-            for k, field in enumerate((u, v, a)):
-                nodal = field.reshape(-1, 3)[sim.monitor_nodes]  # (m, k, 3)
-                values[:, 3 * k:3 * k + 3] = np.einsum("mk,mkc->mc", sim.monitor_weights, nodal)
-            if with_stress:
-                stress = sim.monitor_stress.dynamic_stress(u)
-                values[:, 9:15] = np.stack([stress[:, i, j] for i, j in _VOIGT], axis=1)
-            self.monitor_samples.append(values)
-        self.energy_samples.append([t] + [energy[name] for name in self.energy_columns[1:]])
+        monitor_rows = self._monitor_rows(t, u, v, a) if sim.monitor_nodes is not None else None
+        energy_row = [t] + [energy[name] for name in self.energy_columns[1:]]
+        reaction_row = None
+        if sim.constraints is not None:
+            resultants = (sim.constraints.face_resultants(reactions) if reactions is not None
+                          else np.zeros((len(sim.constraints.face_names), 3)))
+            reaction_row = [t] + list(resultants.ravel())
         write_fields = bool(self.xdmf_every) and self._sample_count % self.xdmf_every == 0
         contact = sim.contact_pairs
-        pair_values = None  # every pair's values, computed once when monitors or fields need them
+        pair_values = pair_rows = state_counts = None  # every pair's values, computed once when needed
         if contact is not None:
-            self.state_count_samples.append(np.asarray(contact.state_counts(), dtype=np.int64).copy())
+            state_counts = np.asarray(contact.state_counts(), dtype=np.int64).copy()
             if len(sim.pair_monitor_names) or write_fields:
                 pair_values = self._pair_values(u)
             if len(sim.pair_monitor_names):
-                self.pair_samples.append(pair_values[sim.pair_monitor_pairs])
+                pair_rows = np.column_stack([np.full(len(sim.pair_monitor_names), t),
+                                             pair_values[sim.pair_monitor_pairs]])
         if write_fields:
-            self._write_fields(t, u, v, pair_values)
+            self._write_fields(t, u, v, a, pair_values)
+        self.times.append(t)
+        self.energy_samples.append(energy_row)
+        self._histories["energy"].append(energy_row)
+        if reaction_row is not None:
+            self._histories["reactions"].append(reaction_row)
+        if monitor_rows is not None:
+            self.monitor_rows.append(monitor_rows)
+            for name, row in zip(sim.monitor_names, monitor_rows):
+                self._histories[f"monitors/{name}"].append(row)
+        if state_counts is not None:
+            self.state_count_samples.append(state_counts)
+        if pair_rows is not None:
+            self.pair_rows.append(pair_rows)
+            for name, row in zip(sim.pair_monitor_names, pair_rows):
+                self._histories[f"pairs/{name}"].append(row)
         self._sample_count += 1
+        if time.monotonic() - self._last_flush > FLUSH_SECONDS:
+            self.flush()
+
+    def flush(self) -> None:
+        """Writes the queued history rows to disk and the time reached to run.json."""
+        for history in self._histories.values():
+            history.flush()
+        if self.times:
+            self._summary["time_reached"] = self.times[-1]
+            _write_json(self.out_dir / "run.json", self._summary)
+        self._last_flush = time.monotonic()
+
+    def _monitor_columns(self) -> list[str]:
+        """Columns of monitors/NAME.csv: t, u, v, a, then the free field with a wave, then the stress."""
+        sim = self.simulation
+        columns = list(MONITOR_COLUMNS)
+        if sim.freefield is not None:
+            columns += FREEFIELD_COLUMNS
+        if sim.monitor_stress is not None:
+            columns += STRESS_COLUMNS
+        return columns
+
+    def _monitor_rows(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """(n_monitors, len(monitor_columns)) rows of the monitor files at time t (s)."""
+        sim = self.simulation
+        values = [np.full((len(sim.monitor_names), 1), t)]
+        for field in (u, v, a):
+            nodal = field.reshape(-1, 3)[sim.monitor_nodes]  # (m, k, 3)
+            values.append(np.einsum("mk,mkc->mc", sim.monitor_weights, nodal))
+        if sim.freefield is not None:
+            times = np.array([t])
+            values += [sim.freefield.displacement(self._monitor_points, times)[0],
+                       sim.freefield.velocity(self._monitor_points, times)[0]]
+        stress = sim.monitor_stress
+        if stress is not None:
+            dynamic_tensor = stress.dynamic_stress(u)
+            dynamic = np.stack([dynamic_tensor[:, i, j] for i, j in _VOIGT], axis=1)
+            total = dynamic + np.stack([stress.static[:, i, j] for i, j in _VOIGT], axis=1)
+            values += [total, max_principal(total)[:, None], max_principal(dynamic)[:, None]]
+        return np.hstack(values)
+
+    def _open_histories(self) -> None:
+        """energy.csv, monitors/NAME.csv and pairs/NAME.csv with their headers."""
+        histories = {"energy": CsvHistory(self.out_dir / "energy.csv", self.energy_columns, ENERGY_FORMAT)}
+        if self.simulation.monitor_nodes is not None:
+            for name in self.simulation.monitor_names:
+                histories[f"monitors/{name}"] = CsvHistory(self.out_dir / "monitors" / f"{name}.csv",
+                                                           self.monitor_columns, MONITOR_FORMAT)
+        constraints = self.simulation.constraints
+        if constraints is not None:
+            # Resultant support force on each fixed or roller face (N), the face's share of its nodes.
+            columns = ["t"] + [f"{face}_F{axis}" for face in constraints.face_names for axis in "xyz"]
+            histories["reactions"] = CsvHistory(self.out_dir / "reactions.csv", columns, ENERGY_FORMAT)
+        if self.contact_on:
+            for name in self.simulation.pair_monitor_names:
+                histories[f"pairs/{name}"] = CsvHistory(self.out_dir / "pairs" / f"{name}.csv",
+                                                        PAIR_COLUMNS, PAIR_FORMAT)
+        self._histories = histories
+
+    def _close_histories(self) -> None:
+        for history in self._histories.values():
+            history.close()
 
     def _pair_values(self, u: np.ndarray) -> np.ndarray:
         """(n_pairs, 9): dux, duy, duz, slip, gap (m), N, T (N), D (-), state of every pair."""
@@ -148,34 +401,49 @@ class RunWriter:
                                 np.asarray(contact.deterioration()), np.asarray(contact.state(), dtype=float)])
 
     def finish(self, wall_seconds: float, loop_seconds: float) -> dict:
-        """Writes monitors, energy, plots and the final run.json; returns the summary."""
+        """Closes histories and fields, draws the plots, writes the final run.json; returns the summary."""
+        self._close_histories()
         self._close_fields()
-        times = np.array(self.times)
-        energy = np.array(self.energy_samples)
         summary = self._summary
         summary["status"] = "finished"
+        summary["time_reached"] = self.times[-1]
         summary["wall_seconds"] = wall_seconds
         summary["loop_seconds"] = loop_seconds
         summary["seconds_per_step"] = loop_seconds / max(1, self.simulation.n_steps)
-        summary["energy"] = self._energy_summary(energy, self.energy_columns)
-        np.savetxt(self.out_dir / "energy.csv", energy, delimiter=",", header=",".join(self.energy_columns),
-                   comments="")
-        summary["monitors"] = self._write_monitors(times)
-        from pyfem import plots
+        self._partial_summary()
+        self._plots()
+        _write_json(self.out_dir / "run.json", summary)
+        return summary
 
+    def _partial_summary(self) -> None:
+        """Energy, peaks and pair states of the samples recorded so far, into the summary."""
+        if not self.times:
+            return
+        summary = self._summary
+        times = np.array(self.times)
+        summary["energy"] = self._energy_summary(np.array(self.energy_samples), self.energy_columns)
+        summary["monitors"] = self._monitor_peaks(times)
         if self.contact_on:
-            summary["pairs"] = self._write_pairs(times)
+            summary["pairs"] = self._pair_peaks()
             counts = np.array(self.state_count_samples).reshape(-1, len(PAIR_STATES))
             summary["pair_states"] = {"t": times.tolist(),
                                       **{name: counts[:, k].tolist() for k, name in enumerate(PAIR_STATES)}}
             summary["pair_states_final"] = {name: int(counts[-1, k]) for k, name in enumerate(PAIR_STATES)}
             summary["n_pairs"] = int(len(self.simulation.contact_arrays["area"]))
-            plots.pair_states(self.out_dir / "plots" / "pair_states.png", times, counts, PAIR_STATES)
-        plots.energy(self.out_dir / "plots" / "energy.png", energy, self.energy_columns)
+
+    def _plots(self) -> None:
+        """plots/*.png from the closed history files."""
+        from pyfem import plots
+
+        plot_dir = self.out_dir / "plots"
+        if self.contact_on:
+            counts = np.array(self.state_count_samples).reshape(-1, len(PAIR_STATES))
+            plots.pair_states(plot_dir / "pair_states.png", np.array(self.times), counts, PAIR_STATES)
+            for name in self.simulation.pair_monitor_names:
+                plots.pair_monitor(plot_dir / f"pair_{name}.png", self.out_dir / "pairs" / f"{name}.csv")
+        plots.energy(plot_dir / "energy.png", np.array(self.energy_samples), self.energy_columns)
         for name in self.simulation.monitor_names:
-            plots.monitor(self.out_dir / "plots" / f"monitor_{name}.png", self.out_dir / "monitors" / f"{name}.csv")
-        _write_json(self.out_dir / "run.json", summary)
-        return summary
+            plots.monitor(plot_dir / f"monitor_{name}.png", self.out_dir / "monitors" / f"{name}.csv")
 
     # -- pieces -------------------------------------------------------------------------
     def _base_summary(self) -> dict:
@@ -194,7 +462,10 @@ class RunWriter:
             "omega_max": ts.omega_max,
             "steps": sim.n_steps,
             "rayleigh": {"alpha": sim.alpha, "beta": sim.beta},
+            "boundary_faces": _face_report(sim.model),
+            "traction_free_surfaces": dict(sim.model.free_surfaces),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "warnings": list(getattr(self.scene, "warnings", [])),
         }
 
     @staticmethod
@@ -211,44 +482,26 @@ class RunWriter:
         final["reference_energy"] = float(scale)
         return final
 
-    def _write_monitors(self, times: np.ndarray) -> dict:
-        """monitors/NAME.csv (+ exact free field columns when a wave is on); returns peaks per monitor."""
+    def _monitor_peaks(self, times: np.ndarray) -> dict:
+        """Peaks per monitor (and the difference from the free field with a wave) from the rows kept."""
         sim = self.simulation
         peaks = {}
         if sim.monitor_nodes is None:
             return peaks
-        samples = np.array(self.monitor_samples)  # (nt, m, 9 or 15)
-        stress = sim.monitor_stress
-        freefield = None
-        if sim.freefield is not None:
-            points = np.array([m["point"] for m in self.scene["monitor"]], dtype=float)
-            freefield = np.concatenate([sim.freefield.displacement(points, times),
-                                        sim.freefield.velocity(points, times)], axis=2)  # (nt, m, 6)
+        rows = np.array(self.monitor_rows)  # (nt, m, len(monitor_columns))
+        column = {name: k for k, name in enumerate(self.monitor_columns)}
         for j, name in enumerate(sim.monitor_names):
-            columns = [times[:, None], samples[:, j, :9]]
-            header = list(MONITOR_COLUMNS)
-            if freefield is not None:
-                columns.append(freefield[:, j, :])
-                header += FREEFIELD_COLUMNS
-            if stress is not None:
-                dynamic = samples[:, j, 9:15]
-                total = dynamic + np.array([stress.static[j, a, b] for a, b in _VOIGT])[None, :]
-                s1 = max_principal(total)
-                s1_dynamic = max_principal(dynamic)
-                columns += [total, s1[:, None], s1_dynamic[:, None]]
-                header += STRESS_COLUMNS
-            np.savetxt(self.out_dir / "monitors" / f"{name}.csv", np.hstack(columns), delimiter=",",
-                       header=",".join(header), comments="", fmt="%.10e")
-            u, vel, acc = samples[:, j, 0:3], samples[:, j, 3:6], samples[:, j, 6:9]
+            u, vel, acc = (rows[:, j, column[f"{q}x"]:column[f"{q}z"] + 1] for q in "uva")
             peak = {"displacement": float(np.max(np.linalg.norm(u, axis=1))),
                     "velocity": float(np.max(np.linalg.norm(vel, axis=1))),
                     "acceleration": float(np.max(np.linalg.norm(acc, axis=1)))}
-            if freefield is not None:
-                reference = freefield[:, j, 0:3]
+            if "ux_ff" in column:
+                reference = rows[:, j, column["ux_ff"]:column["uz_ff"] + 1]
                 norm = np.linalg.norm(reference)
                 peak["freefield_error"] = float(np.linalg.norm(u - reference) / norm) if norm > 0 else math.nan
-            if stress is not None:
-                peak["region"] = stress.regions[j]
+            if sim.monitor_stress is not None:
+                s1, s1_dynamic = rows[:, j, column["s1"]], rows[:, j, column["s1_dynamic"]]
+                peak["region"] = sim.monitor_stress.regions[j]
                 peak["s1_max"] = float(np.max(s1))
                 peak["s1_max_time"] = float(times[int(np.argmax(s1))])
                 peak["s1_initial"] = float(s1[0])
@@ -256,19 +509,17 @@ class RunWriter:
             peaks[name] = peak
         return peaks
 
-    def _write_pairs(self, times: np.ndarray) -> dict:
-        """pairs/NAME.csv per pair monitor; returns the peaks and final values per pair monitor."""
+    def _pair_peaks(self) -> dict:
+        """Peaks and final values per pair monitor from the rows kept."""
         sim = self.simulation
         peaks = {}
         if not sim.pair_monitor_names:
             return peaks
-        samples = np.array(self.pair_samples)  # (nt, m, 9)
+        rows = np.array(self.pair_rows)  # (nt, m, 10): t, then PAIR_COLUMNS[1:]
         pairs = sim.model.pairs
         for j, name in enumerate(sim.pair_monitor_names):
-            np.savetxt(self.out_dir / "pairs" / f"{name}.csv", np.hstack([times[:, None], samples[:, j, :]]),
-                       delimiter=",", header=",".join(PAIR_COLUMNS), comments="", fmt="%.10e")
             index = int(sim.pair_monitor_pairs[j])
-            values = samples[:, j, :]
+            values = rows[:, j, 1:]
             peaks[name] = {
                 "pair": index,
                 "interface": pairs.names[int(pairs.interface[index])],
@@ -282,10 +533,6 @@ class RunWriter:
                 "min_D": float(np.min(values[:, 7])),
                 "final_state": PAIR_STATES[int(values[-1, 8])],
             }
-        from pyfem import plots
-
-        for name in sim.pair_monitor_names:
-            plots.pair_monitor(self.out_dir / "plots" / f"pair_{name}.png", self.out_dir / "pairs" / f"{name}.csv")
         return peaks
 
     def _open_fields(self) -> None:
@@ -311,11 +558,18 @@ class RunWriter:
         self.xdmf.h5_file = h5py.File(self.out_dir / "fields.h5", "w")
         self.xdmf.write_points_cells(model.node_coords[self._field_nodes], [("hexahedron", hexahedra)])
 
-    def _write_fields(self, t: float, u: np.ndarray, v: np.ndarray, pair_values: np.ndarray | None) -> None:
-        """Writes the fields at time t; pair_values is `_pair_values(u)` when contact is on."""
+    def _write_fields(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray,
+                      pair_values: np.ndarray | None) -> None:
+        """Writes the requested fields at time t (s); pair_values is `_pair_values(u)` with contact.
+
+        Point data: displacement (m), velocity (m/s), acceleration (m/s^2). Cell data: strain (-)
+        and total stress (Pa, tension positive, initial + dynamic) at the cell centroids, as
+        6 components xx, xy, xz, yy, yz, zz (XDMF Tensor6).
+        """
+        fields = self.scene["output"]["fields"]
         point_data = {}
-        for name, values in (("displacement", u), ("velocity", v)):
-            if name in self.scene["output"]["fields"]:
+        for name, values in (("displacement", u), ("velocity", v), ("acceleration", a)):
+            if name in fields:
                 point_data[name] = values.reshape(-1, 3)[self._field_nodes]
         if pair_values is not None:
             # Interface fields on both nodes of every pair, 0 elsewhere.
@@ -327,9 +581,23 @@ class RunWriter:
                 nodal[nodes[:, 0]] = values[:, column]
                 nodal[nodes[:, 1]] = values[:, column]
                 point_data[name] = nodal[self._field_nodes]
-        self.xdmf.write_data(t, point_data=point_data)
+        cell_data = {}
+        if self.cell_strain is not None:
+            strain = self.cell_strain.strain(u)
+            if "strain" in fields:
+                cell_data["strain"] = [tensor6(strain)]
+            if "stress" in fields:
+                cell_data["stress"] = [tensor6(self.cell_strain.stress(strain))]
+        self.xdmf.write_data(t, point_data=point_data, cell_data=cell_data)
 
     def _close_fields(self) -> None:
         if self.xdmf is not None:
             self.xdmf.__exit__(None, None, None)
             self.xdmf = None
+
+
+def _face_report(model) -> list:
+    """The truncation faces of the model (pyfem.solver.face_report)."""
+    from pyfem.solver import face_report
+
+    return face_report(model)

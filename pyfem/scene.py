@@ -18,6 +18,7 @@ what is allowed, e.g.::
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import difflib
 import json
@@ -26,7 +27,7 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -34,21 +35,44 @@ EFFECT_ORDER = ("seismic_input", "damping", "initial_stress", "contact", "deteri
 """Every effect a scene can switch on, in the order `Scene.effects` lists them."""
 
 MATERIAL_PRESETS = {
-    # DESIGN Table 1; densities are not in the paper (DESIGN section 3 fixes them).
-    "sandstone": dict(E=8.0e9, nu=0.24, rho=2600.0, cohesion=1.10e6,
-                      friction_angle=42.0, tensile_strength=1.95e6),
-    "non_sandstone": dict(E=2.0e9, nu=0.30, rho=2400.0, cohesion=0.35e6,
-                          friction_angle=26.0, tensile_strength=0.25e6),
-    "concrete": dict(E=28.0e9, nu=0.167, rho=2500.0, cohesion=1.80e6,
-                     friction_angle=46.0, tensile_strength=1.27e6),
+    # The paper's Table 1; densities are not in the paper (docs/method.md section 10).
+    "sandstone": dict(E=8.0e9, nu=0.24, rho=2600.0),
+    "non_sandstone": dict(E=2.0e9, nu=0.30, rho=2400.0),
+    "concrete": dict(E=28.0e9, nu=0.167, rho=2500.0),
 }
-"""Materials of the paper's Table 1, selectable with ``preset = "NAME"``."""
+"""Elastic constants of the paper's Table 1, selectable with ``preset = "NAME"``."""
+
+PRESET_STRENGTHS = {
+    # The paper's Table 1 (Pa, deg). Nothing reads them yet: the materials are linear elastic. They
+    # are kept for [materials.NAME.plasticity] / [materials.NAME.damage] once those land.
+    "sandstone": dict(cohesion=1.10e6, friction_angle=42.0, tensile_strength=1.95e6),
+    "non_sandstone": dict(cohesion=0.35e6, friction_angle=26.0, tensile_strength=0.25e6),
+    "concrete": dict(cohesion=1.80e6, friction_angle=46.0, tensile_strength=1.27e6),
+}
+"""Strength parameters of the paper's Table 1, not copied into the settings (not read yet)."""
+
+# Plausible ranges for rock and concrete (and the odd steel part): a value outside them is almost
+# always a unit slip (GPa or MPa for Pa, t/m^3 for kg/m^3), which would give a meaningless run.
+YOUNG_MODULUS_RANGE = (1.0e7, 3.0e11)  # Pa: soft soil-like rock ... above steel
+DENSITY_RANGE = (500.0, 8000.0)        # kg/m^3: above porous fill ... steel
+# A cohesion or tensile strength of an interface below this (but > 0) is negligible next to any
+# geostatic stress and is a value in MPa or kPa written as Pa; 0 means none.
+SMALLEST_STRENGTH = 100.0              # Pa
 
 BOX_REGION = "rock"
 """The single region (cell tag name) of the ``box`` mesh builder."""
 
-OUTPUT_FIELDS = ("displacement", "velocity", "acceleration", "stress", "strain", "damage")
+# Boundary types of a truncation face: viscoelastic and viscous faces carry the seismic input,
+# fixed and roller faces are kernel constraints (roller: normal component held), free is free.
+BOUNDARY_TYPES = ("viscoelastic", "viscous", "fixed", "roller", "free")
+OUTPUT_FIELDS = ("displacement", "velocity", "acceleration", "stress", "strain")
 """Field names ``output.fields`` may list."""
+
+FIELDS_NOT_PRODUCED = {
+    "damage": "there is no damage model yet (the materials are linear elastic), so no damage field "
+              "is produced; fields produced: " + ", ".join(OUTPUT_FIELDS),
+}
+"""Field names a user may expect that nothing produces yet, and why."""
 
 _FILENAME_SAFE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
@@ -270,6 +294,7 @@ class TextList:
     default: Any = REQUIRED
     options: tuple | None = None
     non_empty: bool = False
+    unavailable: dict | None = None  # item -> why it is not among the options (yet)
 
     @property
     def allowed(self) -> str:
@@ -284,6 +309,8 @@ class TextList:
             raise SceneError(key, value, self.allowed)
         if self.options is not None:
             for index, item in enumerate(value):
+                if self.unavailable and item in self.unavailable:
+                    raise SceneError(f"{key}.{index}", item, self.unavailable[item])
                 if item not in self.options:
                     raise SceneError(f"{key}.{index}", item, self.allowed)
         if len(set(value)) != len(value):
@@ -318,12 +345,16 @@ class Table:
         presence: ``"filled"``: absent means all defaults; ``"optional"``: absent
             means left out of the scene (an effect off); ``"required"``.
         shorthand: If set, a plain string ``s`` stands for ``{shorthand = s}``.
+        not_read: Key -> why nothing reads it: keys a user may write here (from an older
+            version, or ahead of a feature) that are refused with that reason rather than
+            as unknown.
     """
 
     fields: dict
     description: str
     presence: str = "filled"
     shorthand: str | None = None
+    not_read: dict | None = None
 
     @property
     def allowed(self) -> str:
@@ -336,6 +367,8 @@ class Table:
             raise SceneError(key, value, self.allowed)
         prefix = f"{key}." if key else ""
         for name in value:
+            if self.not_read and name in self.not_read:
+                raise SceneError(prefix + str(name), value[name], self.not_read[name])
             if name not in self.fields:
                 raise _unknown_key(prefix + str(name), value[name],
                                    [prefix + valid for valid in self.fields])
@@ -420,18 +453,27 @@ def _unknown_key(key: str, value: Any, candidates: Sequence[str]) -> SceneError:
 
 
 # ---------------------------------------------------------------------------
-# The schema: every scene key, its type, range and default (DESIGN section 4).
+# The schema: every scene key, its type, range and default (docs/method.md section 13, README "A scene").
 # ---------------------------------------------------------------------------
 
+_STRENGTH_NOT_READ = (
+    "not read: the materials are linear elastic (E, nu, rho); strength parameters will go in "
+    "[materials.NAME.plasticity] (rock: cohesion, friction_angle, dilation_angle, tensile_strength) "
+    "or [materials.NAME.damage] (concrete) once the nonlinear materials land; remove the key "
+    "(keep it as a comment); interface strengths go in [contact]")
+_NONLINEAR_NOT_YET = ("nonlinear materials are not implemented yet: the materials are linear elastic "
+                      "(E, nu, rho); remove the table (keep it as a comment)")
+
 _MATERIAL = Table({
-    "preset": Choice("material preset (DESIGN Table 1)", tuple(MATERIAL_PRESETS), default=None),
+    "preset": Choice("material preset (the paper's Table 1, docs/method.md section 10)", tuple(MATERIAL_PRESETS), default=None),
     "E": Number("Young's modulus E (Pa)", POSITIVE, default=None),  # required unless preset
     "nu": Number("Poisson's ratio", "(-1, 0.5)", default=None),
     "rho": Number("density (kg/m^3)", POSITIVE, default=None),
-    "cohesion": Number("cohesion (Pa)", NON_NEGATIVE, default=None),
-    "friction_angle": Number("friction angle (deg)", "[0, 90)", default=None),
-    "tensile_strength": Number("tensile strength (Pa)", NON_NEGATIVE, default=None),
-}, "a material")
+}, "a material", not_read={
+    **{key: _STRENGTH_NOT_READ
+       for key in ("cohesion", "friction_angle", "dilation_angle", "tensile_strength")},
+    **{key: _NONLINEAR_NOT_YET for key in ("plasticity", "damage")},
+})
 
 _WAVE_TYPE = Choice("wave type", ("P", "SV", "SH"))
 
@@ -494,8 +536,13 @@ SCHEMA = Table({
         }, "[wave.motion]", presence="required"),
     }, "[wave]", presence="optional"),
     "boundary": Table({
-        "type": Choice("boundary type", ("viscoelastic", "viscous", "fixed", "free"),
-                       default="viscoelastic"),
+        # The truncation faces (docs/boundaries.md): where the model is cut. Cavity and lining
+        # surfaces are never among them; they are traction-free.
+        "type": Choice("boundary type", BOUNDARY_TYPES, default="viscoelastic"),
+        "faces": TextList("truncation faces (physical surface names)", default=None, non_empty=True),
+        "face": TableMap(Table({
+            "type": Choice("boundary type of this face", BOUNDARY_TYPES),
+        }, "a face's boundary"), "[boundary.face.NAME]", default=None),
         "alpha_N": Number("normal spring factor alpha_N", POSITIVE, default=4.0 / 3.0),
         "alpha_T": Number("tangential spring factor alpha_T", POSITIVE, default=2.0 / 3.0),
         "centre": Vector("scattering centre (m)", 3, default=None),   # default model centre
@@ -509,7 +556,7 @@ SCHEMA = Table({
         "xdmf_interval": Number("field output interval (s; 0: no fields)", NON_NEGATIVE,
                                 default=0.1),
         "fields": TextList("output fields", default=["displacement", "velocity"],
-                           options=OUTPUT_FIELDS),
+                           options=OUTPUT_FIELDS, unavailable=FIELDS_NOT_PRODUCED),
     }, "[output]"),
     "damping": Table({
         "ratio": Number("damping ratio", "[0, 1)", default=None),
@@ -569,11 +616,18 @@ class Scene(dict):
     Attributes:
         source: The scene file path (``"<dict>"`` for `parse_scene` without one).
         effects: Names of the effects that are on, in `EFFECT_ORDER`.
+        warnings: One line each on what a user may mean but is probably a mistake (a mesh far
+            coarser than its waves need, a run shorter than its record, ...). Filled by
+            validation; the solver may add more with `warn` before the run directory is
+            written. The CLI prints them, run.json keeps them.
+        on_warning: Called with each message `warn` adds (the CLI prints it), or ``None``.
     """
 
-    def __init__(self, settings: dict, source: str):
+    def __init__(self, settings: dict, source: str, warnings: Iterable[str] = ()):
         super().__init__(settings)
         self.source = source
+        self.warnings: list[str] = list(warnings)
+        self.on_warning = None
         present = {
             "seismic_input": "wave" in self,
             "damping": "damping" in self,
@@ -582,6 +636,13 @@ class Scene(dict):
             "deterioration": "deterioration" in self.get("contact", {}),
         }
         self.effects = tuple(name for name in EFFECT_ORDER if present[name])
+
+    def warn(self, message: str) -> None:
+        """Adds a warning (one line, no ``warning:`` prefix) unless it is there already."""
+        if message not in self.warnings:
+            self.warnings.append(message)
+            if self.on_warning is not None:
+                self.on_warning(message)
 
     def to_json(self) -> dict:
         """The settings as a JSON-serialisable dict (`parse_scene` accepts it back)."""
@@ -634,10 +695,10 @@ def rayleigh_coefficients(ratio: float, f1: float, f2: float) -> tuple[float, fl
 # Conditional rules: what one table cannot say about itself.
 # ---------------------------------------------------------------------------
 
-def _check_rules(settings: dict, base_dirs: Sequence[Path]) -> None:
-    """Apply the cross-key rules and derived defaults in place."""
+def _check_rules(settings: dict, base_dirs: Sequence[Path], warnings: list[str]) -> None:
+    """Apply the cross-key rules and derived defaults in place; append warnings to `warnings`."""
     _check_mesh(settings)
-    _check_materials(settings)
+    _check_materials(settings, warnings)
     _check_time(settings)
     if "wave" in settings:
         _check_wave(settings)
@@ -653,6 +714,8 @@ def _check_rules(settings: dict, base_dirs: Sequence[Path]) -> None:
                     raise SceneError(f"contact.interfaces.{index}", name,
                                      "must name an interface of the layered box: "
                                      + ", ".join(known))
+        for name in ("cohesion", "tensile_strength"):
+            _check_strength(f"contact.{name}", contact[name])
         if contact["dynamic_friction_angle"] is None:
             contact["dynamic_friction_angle"] = contact["friction_angle"]
         if contact["tensile_strength"] is None:
@@ -660,8 +723,15 @@ def _check_rules(settings: dict, base_dirs: Sequence[Path]) -> None:
     elif settings["pair_monitor"]:
         raise SceneError("pair_monitor", settings["pair_monitor"],
                          "pair monitors need a [contact] table")
+    if "initial_stress" in settings:
+        _check_density("initial_stress.rho", settings["initial_stress"]["rho"], warnings)
+    _check_output(settings, warnings)
     _check_points_inside(settings)
     _resolve_files(settings, base_dirs)
+    if "record" in settings.get("wave", {}).get("motion", {}):
+        _check_record(settings, warnings)
+    if "wave" in settings:
+        _check_resolution(settings, warnings)
 
 
 def _check_mesh(settings: dict) -> None:
@@ -681,9 +751,24 @@ def _check_mesh(settings: dict) -> None:
     if mesh["builder"] == "box" and mesh["parameters"] is not None:
         raise SceneError("mesh.parameters", mesh["parameters"],
                          "builder \"box\" takes no parameters (use size, h)")
+    # Keys the chosen builder does not read are refused: a user who sets mesh.h on a file mesh
+    # expects a finer mesh and would not get one.
+    sizes_from = {"file": "the file", "layered_cavern": "mesh.parameters (h_cavern, h_far, ...)"}
+    if mesh["builder"] in sizes_from:
+        builder, where = _show(mesh["builder"]), sizes_from[mesh["builder"]]
+        for name in ("size", "h"):
+            if mesh[name] is not None:
+                raise SceneError(f"mesh.{name}", mesh[name], f"not read by builder {builder}: mesh.{name} "
+                                 f"is a setting of builder \"box\" only (sizes come from {where})")
+        if mesh["origin"] != SCHEMA.fields["mesh"].fields["origin"].default:
+            raise SceneError("mesh.origin", mesh["origin"], f"not read by builder {builder}: mesh.origin "
+                             f"is a setting of builder \"box\" only (coordinates come from {where})")
+    if mesh["builder"] == "file" and mesh["parameters"] is not None:
+        raise SceneError("mesh.parameters", mesh["parameters"], "not read by builder \"file\": it takes "
+                         "no parameters (everything comes from the file)")
 
 
-def _check_materials(settings: dict) -> None:
+def _check_materials(settings: dict, warnings: list[str]) -> None:
     mesh = settings["mesh"]
     if mesh["builder"] == "box" and mesh["layers"]:
         _check_layers(settings)
@@ -708,6 +793,150 @@ def _check_materials(settings: dict) -> None:
                 raise _missing(f"materials.{name}.{key}",
                                f"{spec.allowed} (or give preset = one of "
                                + ", ".join(_show(p) for p in MATERIAL_PRESETS) + ")")
+        _check_young_modulus(f"materials.{name}.E", material["E"])
+        _check_density(f"materials.{name}.rho", material["rho"], warnings)
+
+
+def _scientific(x: float) -> str:
+    """A number as one would write it in a scene: 8.0e9, 2600.0, 1.0e-3."""
+    if 1.0 <= abs(x) < 1.0e5:
+        return repr(float(f"{x:.6g}"))
+    mantissa, exponent = f"{x:.6e}".split("e")
+    mantissa = mantissa.rstrip("0")
+    return f"{mantissa}{'0' if mantissa.endswith('.') else ''}e{int(exponent)}"
+
+
+def _unit_hint(value: float, plausible: tuple[float, float], units: Sequence[tuple[str, float]]) -> str:
+    """'; looks like GPa: write 8.0e9' for the units that would bring `value` into `plausible`."""
+    lo, hi = plausible
+    fits = [(unit, value * factor) for unit, factor in units if lo <= value * factor <= hi]
+    if not fits:
+        return ""
+    (unit, fixed), others = fits[0], fits[1:]
+    hint = f"; looks like {unit}: write {_scientific(fixed)}"
+    if others:
+        hint += " (or " + ", ".join(f"{u}: {_scientific(f)}" for u, f in others) + ")"
+    return hint
+
+
+def _check_young_modulus(key: str, E: float) -> None:
+    """E outside `YOUNG_MODULUS_RANGE` is an error that says which unit it looks like."""
+    lo, hi = YOUNG_MODULUS_RANGE
+    if lo <= E <= hi:
+        return
+    allowed = f"Young's modulus (Pa) of rock or concrete must lie in [{_scientific(lo)}, {_scientific(hi)}]"
+    raise SceneError(key, E, allowed + _unit_hint(E, YOUNG_MODULUS_RANGE,
+                                                   (("GPa", 1.0e9), ("MPa", 1.0e6), ("kPa", 1.0e3))))
+
+
+def _check_density(key: str, rho: float, warnings: list[str]) -> None:
+    """rho below `DENSITY_RANGE` is an error (t/m^3 for kg/m^3); above it, a warning (a heavy
+    part may be meant, e.g. a numerical test with a rigid mass)."""
+    lo, hi = DENSITY_RANGE
+    if rho < lo:
+        raise SceneError(key, rho, f"density (kg/m^3) of rock or concrete must lie in [{lo:g}, {hi:g}]"
+                         + _unit_hint(rho, DENSITY_RANGE, (("t/m^3", 1.0e3),)))
+    if rho > hi:
+        warnings.append(f"{key} = {_scientific(rho)} kg/m^3 is above {hi:g} kg/m^3 (steel), heavier "
+                        "than any rock or concrete; used as given")
+
+
+def _check_strength(key: str, value: float | None) -> None:
+    """An interface strength in (0, SMALLEST_STRENGTH) Pa is an error: it is a value in MPa (or
+    kPa) written as Pa; 0 is allowed and means none."""
+    if value is None or value == 0.0 or value >= SMALLEST_STRENGTH:
+        return
+    raise SceneError(key, value, f"an interface strength in Pa is 0 (none) or at least "
+                     f"{SMALLEST_STRENGTH:g} Pa (below that it is negligible next to any geostatic stress)"
+                     + _unit_hint(value, (1.0e3, 1.0e8), (("MPa", 1.0e6), ("kPa", 1.0e3))))
+
+
+def _check_output(settings: dict, warnings: list[str]) -> None:
+    output = settings["output"]
+    default_fields = SCHEMA.fields["output"].fields["fields"].default
+    if output["xdmf_interval"] == 0.0 and output["fields"] != default_fields:
+        warnings.append(f"output.fields = {_show(output['fields'])} but output.xdmf_interval = 0: "
+                        "no fields are written")
+
+
+def _check_record(settings: dict, warnings: list[str]) -> None:
+    """Reads and processes the accelerogram as the run will: a malformed file, or a window outside
+    the record, is an error now; a duration shorter than the processed motion is a warning."""
+    from pyfem.seismic.records import read_record
+    from pyfem.seismic.setup import processed_record
+
+    spec = settings["wave"]["motion"]["record"]
+    try:
+        record = read_record(spec["file"], units=spec["units"], dt=spec["dt"], format=spec["format"])
+    except ValueError as error:
+        where = "" if spec["file"] in str(error) else f"{spec['file']}: "
+        raise SceneError("wave.motion.record.file", spec["file"], "", "scene key 'wave.motion.record.file': "
+                         f"not a readable accelerogram: {where}{error}") from None
+    t_first, t_last = float(record.t[0]), float(record.t[-1])
+    window = spec["window"]
+    if window is not None and not (t_first - 0.5 * record.dt <= window[0]
+                                   and window[1] <= t_last + 0.5 * record.dt
+                                   and window[1] - window[0] >= 2 * record.dt):
+        raise SceneError("wave.motion.record.window", window, f"the window must lie inside the record "
+                         f"[{t_first:g}, {t_last:g}] s of {spec['file']}")
+    with _python_warnings_to(warnings, "wave.motion.record"):
+        try:
+            processed = processed_record(spec, record)
+        except ValueError as error:
+            raise SceneError("wave.motion.record", None, "",
+                             f"scene key 'wave.motion.record': cannot process the record: {error}") from None
+    duration, motion = settings["time"]["duration"], float(processed.t[-1])
+    if duration < motion * (1.0 - 1e-9):
+        start, end = processed.window
+        warnings.append(
+            f"time.duration = {duration:g} s is shorter than the record's motion of {motion:.4g} s "
+            f"({processed.record_start:.3g} s filter lead-in + window [{start:g}, {end:g}] s = "
+            f"{end - start:g} s; see wave.motion.record.lead_in): the run stops before the record ends")
+
+
+@contextlib.contextmanager
+def _python_warnings_to(warnings: list[str], key: str) -> Iterator[None]:
+    """Python warnings raised in the body become one-line scene warnings about `key`."""
+    import warnings as python_warnings
+
+    with python_warnings.catch_warnings(record=True) as caught:
+        python_warnings.simplefilter("always")
+        yield
+    for warning in caught:
+        warnings.append(f"{key}: {' '.join(str(warning.message).split())}")
+
+
+def _check_resolution(settings: dict, warnings: list[str]) -> None:
+    """A mesh more than twice as coarse as the accuracy study's advice for a 5 % error is a warning.
+
+    The element size is mesh.h (box) or mesh.parameters h_far (layered_cavern, the far field that
+    carries the waves in); a file mesh is not checked (its size is known only once loaded).
+    """
+    from pyfem import accuracy
+
+    mesh = settings["mesh"]
+    if mesh["builder"] == "box":
+        h, key = mesh["h"], "mesh.h"
+    elif mesh["builder"] == "layered_cavern":
+        from pyfem.geometry.layered_cavern import layered_cavern_parameters
+
+        try:
+            h, key = layered_cavern_parameters(mesh["parameters"] or {})["h_far"], "mesh.parameters.h_far"
+        except ValueError as error:
+            raise scene_error_from(error) or error
+    else:
+        return
+    budget = 0.05
+    try:
+        advice = accuracy.element_size_for(settings, budget, order=mesh["order"])
+    except (ValueError, FileNotFoundError):
+        return  # no study for this order or budget: no advice to compare with
+    if h > 2.0 * advice["h"]:
+        warnings.append(
+            f"{key} = {h:g} m is {h / advice['h']:.1f}x the element size the accuracy study advises for a "
+            f"{100 * budget:g} % error with Q{advice['order']} elements, h <= {advice['h']:.3g} m "
+            f"({advice['elements_per_wavelength']:.3g} per shortest shear wavelength "
+            f"{advice['shortest_wavelength']:.4g} m at {advice['highest_frequency']:.3g} Hz): expect a larger error")
 
 
 def _check_layers(settings: dict) -> None:
@@ -741,6 +970,10 @@ def _check_time(settings: dict) -> None:
     if time["dt"] is not None and time["dt"] >= time["duration"]:
         raise SceneError("time.dt", time["dt"],
                          f"fixed time step must be shorter than time.duration = {time['duration']:g} s")
+    if time["dt"] is not None and time["safety"] != SCHEMA.fields["time"].fields["safety"].default:
+        raise SceneError("time.safety", time["safety"],
+                         "not read when time.dt is given (the fixed step is used as it is, after a check "
+                         "against the stable step): give time.dt or time.safety, not both")
 
 
 def _check_wave(settings: dict) -> None:
@@ -928,14 +1161,37 @@ def parse_scene(data: dict, source: str = "<dict>", overrides: Iterable[str] = (
         SceneError: naming the first offending key.
     """
     base_dirs = [Path.cwd()] if base_dir is None else [Path(base_dir), Path.cwd()]
+    warnings: list[str] = []
     try:
         raw = apply_overrides(data, overrides)
         settings = SCHEMA.check(raw, "")
-        _check_rules(settings, base_dirs)
+        _check_rules(settings, base_dirs, warnings)
     except SceneError as error:
         error.source = str(source)
         raise
-    return Scene(settings, str(source))
+    return Scene(settings, str(source), warnings)
+
+
+_KEY_AT_START = re.compile(r"^(?P<key>(?:%s)(?:\.[A-Za-z0-9_-]+)*)(?P<rest>(?: = |: ).*)$"
+                           % "|".join(re.escape(name) for name in SCHEMA.fields), re.DOTALL)
+
+
+def scene_error_from(error: ValueError) -> SceneError | None:
+    """The SceneError a ValueError stands for when its message starts with a scene key.
+
+    Builders and readers deeper down (pyfem.geometry, pyfem.mesh, pyfem.interfaces) report bad
+    input as ``ValueError("mesh.parameters.h_far = 3.0: must be >= ...")``. Such an error is the
+    user's, and becomes ``scene key 'mesh.parameters.h_far' = 3.0: must be >= ...``. Any other
+    ValueError is a bug and gives ``None`` (the caller re-raises it).
+    """
+    if isinstance(error, SceneError):
+        return error
+    text = " ".join(str(error).split())  # one line
+    match = _KEY_AT_START.match(text)
+    if match is None:
+        return None
+    key = match.group("key")
+    return SceneError(key, None, match.group("rest").lstrip(" =:"), f"scene key '{key}'{match.group('rest')}")
 
 
 def load_scene(path: str | Path, overrides: Iterable[str] = ()) -> Scene:
@@ -950,11 +1206,20 @@ def load_scene(path: str | Path, overrides: Iterable[str] = ()) -> Scene:
 
     Raises:
         FileNotFoundError: the scene file does not exist.
-        SceneError: the file is not TOML (message names file and line), or a key is wrong.
+        SceneError: the file cannot be read or is not TOML (message names file and line), or a
+            key is wrong.
     """
     path = Path(path)
-    with open(path, "rb") as stream:
-        text = stream.read()
+    try:
+        with open(path, "rb") as stream:
+            text = stream.read()
+    except FileNotFoundError:
+        raise
+    except OSError as error:  # a directory, no permission
+        scene_error = SceneError(None, str(path), "a readable TOML file",
+                                 f"{path}: cannot read the scene file ({error.strerror or error})")
+        scene_error.source = str(path)
+        raise scene_error from None
     try:
         data = tomllib.loads(text.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:

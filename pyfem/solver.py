@@ -1,6 +1,6 @@
 """Builds the explicit kernel from a scene and runs it in chunks of one output interval.
 
-Data flow (DESIGN section 2): scene -> model (gmsh -> dolfinx operators) -> boundary
+Data flow (docs/method.md section 1): scene -> model (gmsh -> dolfinx operators) -> boundary
 springs/dashpots and seismic input forces -> C++ Stepper (many steps per call) -> outputs.
 Python owns orchestration and I/O; nothing in Python runs once per time step.
 """
@@ -17,9 +17,9 @@ from pyfem.scene import Scene, SceneError, rayleigh_coefficients
 
 # Memory traffic assumed by the time estimate before a measurement exists (bytes/s).
 _ASSUMED_BANDWIDTH = 5.0e9
-# A "fixed" boundary holds its nodes by a mass this many times their own: their acceleration
-# is ~1e-20 of a free node's, i.e. zero in double precision, with no change to the kernel.
-_FIXED_MASS_FACTOR = 1.0e20
+# Held directions of a node closer than this (singular value relative to the largest) to the
+# span of the others add no new constraint (e.g. a roller edge between coplanar facets).
+_DIRECTION_TOLERANCE = 1.0e-6
 
 
 @dataclass
@@ -54,6 +54,7 @@ class Simulation:
     time_step: TimeStep
     dashpot_nodes: np.ndarray
     dashpot_matrices: np.ndarray
+    constraints: "BoundaryConstraints | None" = None
     freefield: object = None
     input_arrays: dict | None = None
     monitor_names: list = field(default_factory=list)
@@ -241,26 +242,116 @@ def choose_time_step(scene: Scene, stiffness: sp.bsr_matrix, mass: np.ndarray, b
     return TimeStep(dt=dt, critical=critical, omega_max=omega, reason=reason, steps_per_output=steps_per_output)
 
 
+@dataclass
+class BoundaryConstraints:
+    """Kinematic constraints of the fixed and roller faces, as the kernel takes them.
+
+    Attributes:
+        nodes: (k,) int32 distinct constrained nodes.
+        projection: (k, 3, 3) orthogonal projection onto each node's free directions
+            (0: fixed; I - n n^T: roller; I - n1 n1^T - n2 n2^T on the edge of two rollers).
+        face_names: names of the fixed and roller faces.
+        face_weights: (n_faces, k) share of each node's reaction attributed to each face (its
+            lumped area on that face over its area on all constrained faces): the face
+            resultant is face_weights @ reactions.
+    """
+
+    nodes: np.ndarray
+    projection: np.ndarray
+    face_names: list
+    face_weights: sp.csr_matrix
+
+    def face_resultants(self, reactions: np.ndarray) -> np.ndarray:
+        """(n_faces, 3) resultant reaction force of each constrained face (N)."""
+        return np.asarray(self.face_weights @ np.asarray(reactions).reshape(-1, 3))
+
+
+def boundary_constraints(faces) -> BoundaryConstraints | None:
+    """The constraints of the fixed (all components) and roller (normal component) faces.
+
+    A node on several constrained faces is held in the span of all their held directions.
+    Returns None when no face is fixed or roller.
+    """
+    held_faces = [face for face in faces if face.kind in ("fixed", "roller")]
+    if not held_faces:
+        return None
+    node_list, direction_list, face_list, area_list = [], [], [], []
+    for index, face in enumerate(held_faces):
+        if face.kind == "fixed":
+            directions = np.repeat(np.eye(3)[None], len(face.nodes), axis=0)      # (k, 3, 3)
+        else:
+            directions = np.asarray(face.normal, dtype=float)[:, None, :]        # (k, 1, 3)
+        node_list.append(np.repeat(face.nodes, directions.shape[1]))
+        direction_list.append(directions.reshape(-1, 3))
+        face_list.append(np.full(len(face.nodes), index))
+        area_list.append(np.asarray(face.area, dtype=float))
+    nodes_per_direction = np.concatenate(node_list)
+    directions = np.concatenate(direction_list)
+    nodes, counts = np.unique(nodes_per_direction, return_counts=True)
+    order = np.argsort(nodes_per_direction, kind="stable")
+    projection = np.empty((len(nodes), 3, 3))
+    single = counts == 1
+    n_single = directions[order][np.repeat(single, counts)]
+    projection[single] = np.eye(3) - np.einsum("ki,kj->kij", n_single, n_single)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    for k in np.flatnonzero(~single):
+        held = directions[order[starts[k]:starts[k] + counts[k]]]
+        _, singular_values, basis = np.linalg.svd(held)
+        rank = int(np.count_nonzero(singular_values > _DIRECTION_TOLERANCE * singular_values[0]))
+        projection[k] = np.eye(3) - basis[:rank].T @ basis[:rank]
+    # Reaction shares by lumped area.
+    face_of_entry = np.concatenate(face_list)
+    node_of_entry = np.searchsorted(nodes, np.concatenate([face.nodes for face in held_faces]))
+    area_of_entry = np.concatenate(area_list)
+    total_area = np.bincount(node_of_entry, weights=area_of_entry, minlength=len(nodes))
+    weights = sp.csr_matrix((area_of_entry / total_area[node_of_entry], (face_of_entry, node_of_entry)),
+                            shape=(len(held_faces), len(nodes)))
+    return BoundaryConstraints(nodes=nodes.astype(np.int32), projection=projection,
+                               face_names=[face.name for face in held_faces], face_weights=weights)
+
+
 def boundary_operators(scene: Scene, model):
-    """Boundary springs (added to K), dashpots (implicit in the kernel) and held nodes.
+    """Boundary springs (added to K) and dashpots (implicit in the kernel) of the viscoelastic
+    and viscous truncation faces, and the constraints of the fixed and roller faces.
 
     Returns:
-        (spring_nodes, spring_blocks, dashpot_nodes, dashpot_blocks, fixed_nodes)
+        (spring_nodes, spring_blocks, dashpot_nodes, dashpot_blocks, constraints or None)
     """
     from pyfem.seismic.forces import boundary_springs_and_dashpots
 
     boundary = scene["boundary"]
-    empty_nodes = np.zeros(0, dtype=np.int32)
-    empty_blocks = np.zeros((0, 3, 3))
-    kind = boundary["type"]
-    if kind == "free":
-        return empty_nodes, empty_blocks, empty_nodes, empty_blocks, empty_nodes
-    if kind == "fixed":
-        fixed = np.unique(np.concatenate([face.nodes for face in model.faces])).astype(np.int32)
-        return empty_nodes, empty_blocks, empty_nodes, empty_blocks, fixed
     spring_nodes, springs, dashpot_nodes, dashpots = boundary_springs_and_dashpots(
-        model.faces, len(model.mass), kind, boundary["alpha_N"], boundary["alpha_T"])
-    return spring_nodes, springs, dashpot_nodes, dashpots, empty_nodes
+        model.faces, len(model.mass), None, boundary["alpha_N"], boundary["alpha_T"])
+    return spring_nodes, springs, dashpot_nodes, dashpots, boundary_constraints(model.faces)
+
+
+def check_input_faces(scene: Scene, model) -> None:
+    """A scene with [wave] needs a truncation face that carries input (viscoelastic or viscous).
+
+    Raises:
+        SceneError naming the faces found and their types.
+    """
+    from pyfem.seismic.forces import INPUT_TYPES
+
+    if "seismic_input" not in scene.effects:
+        return
+    if any(face.kind in INPUT_TYPES for face in model.faces):
+        return
+    found = ", ".join(f"{face.name} ({face.kind})" for face in model.faces) or "none"
+    key = "boundary.type" if not (scene["boundary"].get("face")) else "boundary.face"
+    raise SceneError(key, scene["boundary"]["type"] if key == "boundary.type" else scene["boundary"]["face"],
+                     f"with [wave], at least one truncation face must be viscoelastic or viscous to carry "
+                     f"the input (faces found: {found}; fixed, roller and free faces carry none)")
+
+
+def face_report(model) -> list[dict]:
+    """Per truncation face: name, type, nodes, facets, area (m^2), whether it carries input, how
+    it was found; for `check`, run.json and the README."""
+    from pyfem.seismic.forces import INPUT_TYPES
+
+    return [{"name": face.name, "type": face.kind, "nodes": int(len(face.nodes)), "facets": face.n_facets,
+             "area": face.total_area, "input": face.kind in INPUT_TYPES, "source": face.source}
+            for face in model.faces]
 
 
 def prepare(scene: Scene) -> Simulation:
@@ -269,10 +360,9 @@ def prepare(scene: Scene) -> Simulation:
 
     model = build_model(scene)
     mass = np.array(model.mass, dtype=np.float64)
-    spring_nodes, springs, dashpot_nodes, dashpots, fixed_nodes = boundary_operators(scene, model)
+    check_input_faces(scene, model)
+    spring_nodes, springs, dashpot_nodes, dashpots, constraints = boundary_operators(scene, model)
     stiffness = add_block_diagonal(model.stiffness, spring_nodes, springs)
-    if len(fixed_nodes):
-        mass[fixed_nodes] *= _FIXED_MASS_FACTOR
     alpha, beta = damping_coefficients(scene)
     time_step = choose_time_step(scene, stiffness, mass, beta)
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
@@ -280,13 +370,11 @@ def prepare(scene: Scene) -> Simulation:
     n_steps = time_step.steps_per_output * math.ceil(n_steps / time_step.steps_per_output)
     simulation = Simulation(scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
                             time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
-                            n_steps=n_steps)
+                            constraints=constraints, n_steps=n_steps)
     if "seismic_input" in scene.effects:
         from pyfem.seismic.setup import seismic_input_from_scene
 
         simulation.freefield, simulation.input_arrays = seismic_input_from_scene(scene, model)
-        if scene["boundary"]["type"] in ("fixed", "free"):
-            simulation.input_arrays = None  # no boundary to carry the input: the comparison runs of the study
     monitors = scene.get("monitor", [])
     if monitors:
         points = np.array([m["point"] for m in monitors], dtype=np.float64)
@@ -330,6 +418,9 @@ def make_stepper(simulation: Simulation):
     if len(simulation.dashpot_nodes):
         stepper.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
                              np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
+    if simulation.constraints is not None:
+        stepper.set_constraints(np.ascontiguousarray(simulation.constraints.nodes, dtype=np.int32),
+                                np.ascontiguousarray(simulation.constraints.projection, dtype=np.float64))
     if simulation.input_arrays is not None:
         a = simulation.input_arrays
         stepper.add_seismic_input(_kernels.SeismicInput(
@@ -387,7 +478,11 @@ def plan(scene: Scene) -> dict:
         "nodes": len(simulation.mass),
         "dofs": n,
         **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
-        "boundary": scene["boundary"]["type"],
+        "truncation faces": {face["name"]: f"{face['type']}, {face['nodes']} nodes, {face['area']:.4g} m^2"
+                             + (", input" if face["input"] else "") + f" ({face['source']})"
+                             for face in face_report(model)},
+        "traction-free surfaces": ", ".join(f"{name} ({count} facets)" for name, count in
+                                            model.free_surfaces.items()) or "none",
         "dt": f"{ts.dt:.6g} s ({ts.reason})",
         "steps": simulation.n_steps,
         "memory": f"{memory_estimate(simulation) / 2**20:.1f} MiB",
@@ -399,37 +494,62 @@ def plan(scene: Scene) -> dict:
 def run(scene: Scene, out_dir) -> dict:
     """Runs the scene and writes run.json, monitors/, fields.xdmf and plots/ into out_dir.
 
+    The histories are written as the run goes. Ctrl-C or SIGTERM stops the run between two
+    samples: run.json says "interrupted" with the time reached, every row so far is kept, and
+    `pyfem.interrupts.RunInterrupted` (a KeyboardInterrupt) is raised. Any other error marks
+    the run "failed" the same way and is raised again.
+
     Returns:
         The run summary (also written to run.json).
     """
+    from tqdm import tqdm
+
+    from pyfem.interrupts import RunInterrupted, StopSignals
     from pyfem.output import RunWriter
 
     wall_start = time.perf_counter()
-    simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
-    writer = RunWriter(out_dir, simulation)
-    writer.start()
-    stepper = make_stepper(simulation)
-    n = simulation.stiffness.shape[0]
-    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    t = 0.0
-    stepper.reset_energy(u, v, a, t)
-    writer.sample(t, u, v, a, stepper.energy())
-    ts = simulation.time_step
-    n_outputs = simulation.n_steps // ts.steps_per_output
-    loop_start = time.perf_counter()
-    from tqdm import tqdm
-
-    try:
-        with tqdm(total=n_outputs, desc=scene["title"][:30], unit="out", leave=False,
-                  disable=not writer.show_progress) as progress:
-            for _ in range(n_outputs):
-                t = stepper.run(u, v, a, ts.steps_per_output, t)
-                if not np.isfinite(u).all():
-                    raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+    with StopSignals() as signals:
+        simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
+        writer = RunWriter(out_dir, simulation)
+        try:
+            with signals.deferred():
+                writer.start()
+            stepper = make_stepper(simulation)
+            n = simulation.stiffness.shape[0]
+            u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+            t = 0.0
+            stepper.reset_energy(u, v, a, t)
+            with signals.deferred():
                 writer.sample(t, u, v, a, stepper.energy())
-                progress.update()
-    except BaseException as error:  # also Ctrl-C: run.json must not stay "running"
-        writer.fail(t, f"{type(error).__name__}: {error}")
-        raise
-    loop_seconds = time.perf_counter() - loop_start
-    return writer.finish(wall_seconds=time.perf_counter() - wall_start, loop_seconds=loop_seconds)
+            ts = simulation.time_step
+            n_outputs = simulation.n_steps // ts.steps_per_output
+            loop_start = time.perf_counter()
+            with tqdm(total=n_outputs, desc=scene["title"][:30], unit="out", leave=False,
+                      disable=not writer.show_progress) as progress:
+                for _ in range(n_outputs):
+                    t = stepper.run(u, v, a, ts.steps_per_output, t)
+                    reactions = stepper.reactions() if simulation.constraints is not None else None
+                    if not np.isfinite(u).all():
+                        raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+                    with signals.deferred():
+                        writer.sample(t, u, v, a, stepper.energy(), reactions)
+                    progress.update()
+            loop_seconds = time.perf_counter() - loop_start
+            return writer.finish(wall_seconds=time.perf_counter() - wall_start, loop_seconds=loop_seconds)
+        except KeyboardInterrupt as error:
+            interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
+            if writer.started:
+                with signals.deferred(reraise=False):  # a second Ctrl-C must not cut the files short
+                    writer.fail(f"interrupted by {interrupted.signal_name}", interrupted=True)
+                interrupted.time_reached = writer.times[-1] if writer.times else None
+                interrupted.out_dir = writer.out_dir
+            if interrupted is error:
+                raise
+            raise interrupted from error
+        except BaseException as error:
+            if writer.started:
+                with signals.deferred(reraise=False):
+                    writer.fail(f"{type(error).__name__}: {error}")
+                reached = f"t = {writer.times[-1]:.6g} s" if writer.times else "no sample"
+                error.add_note(f"run failed; the results up to {reached} are kept in {writer.out_dir}")
+            raise

@@ -142,8 +142,8 @@ def test_defaults_are_filled():
     assert scene["wave"]["medium"] == "rock"  # the only material
     assert scene["wave"]["motion"]["ricker"]["t0"] == pytest.approx(1.5 / 5.0)
     assert "record" not in scene["wave"]["motion"]
-    assert scene["boundary"] == {"type": "viscoelastic", "alpha_N": 4.0 / 3.0, "alpha_T": 2.0 / 3.0,
-                                 "centre": [50.0, 5.0, 50.0]}
+    assert scene["boundary"] == {"type": "viscoelastic", "faces": None, "face": None, "alpha_N": 4.0 / 3.0,
+                                 "alpha_T": 2.0 / 3.0, "centre": [50.0, 5.0, 50.0]}
     assert scene["output"] == {"interval": 0.01, "xdmf_interval": 0.1,
                                "fields": ["displacement", "velocity"]}
     assert scene["pair_monitor"] == []

@@ -18,7 +18,7 @@ import contextlib
 import math
 import typing
 
-import gmsh
+from pyfem._gmsh import gmsh, initialize as initialize_gmsh
 import numpy as np
 
 BOX_REGION = "rock"
@@ -54,7 +54,7 @@ def gmsh_session(model_name: str) -> typing.Iterator[None]:
         model_name: name of the gmsh model created for the body.
     """
     if not gmsh_is_initialized():
-        gmsh.initialize(readConfigFiles=False)
+        initialize_gmsh(readConfigFiles=False)
         gmsh.option.setNumber("General.Terminal", 0)
     previous_terminal = gmsh.option.getNumber("General.Terminal")
     gmsh.option.setNumber("General.Terminal", 0)

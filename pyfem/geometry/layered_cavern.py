@@ -13,7 +13,7 @@ centre line is x = 0; the cavern floor (excavation bottom) is z = floor_z
 (default 0); the middle of the cavern length is Y = 0, the paper's
 monitoring section.
 
-How the mesh is made ("sheared extrusion", DESIGN Sec. 3):
+How the mesh is made ("sheared extrusion", docs/method.md section 12):
 
 1. The x-z cross-section is meshed with quadrilaterals in numpy: an O-grid
    of radial lines from the lining's inner face through the lining
@@ -81,7 +81,7 @@ import math
 import numbers
 import typing
 
-import gmsh
+from pyfem._gmsh import gmsh
 import numpy as np
 
 # gmsh element type numbers.
@@ -113,7 +113,7 @@ COMMON_PARAMETERS = {
     "layer_offset": 0.0,      # m, y of the centre of layers[0] at z = layer_reference_z
     "layer_reference_z": None,  # m, default floor_z + height / 2 (cavern mid-height)
     "excavated": True,        # False: the excavation cells are present as region "excavation"
-    "materials": {            # for the time-step estimate only (Pa, -, kg/m^3; DESIGN Table 1)
+    "materials": {            # for the time-step estimate only (Pa, -, kg/m^3; the paper's Table 1, densities docs/method.md section 10)
         "sandstone": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0},
         "non_sandstone": {"E": 2.0e9, "nu": 0.30, "rho": 2400.0},
         "lining": {"E": 28.0e9, "nu": 0.167, "rho": 2500.0},
@@ -174,7 +174,7 @@ def layered_cavern_parameters(parameters: typing.Mapping | None = None) -> dict:
     if not isinstance(p["lining_elements"], numbers.Integral) or isinstance(p["lining_elements"], bool) \
             or p["lining_elements"] < 2:
         raise ValueError(f"{_PREFIX}lining_elements = {p['lining_elements']!r}: an integer >= 2 "
-                         "(DESIGN: at least two elements through the lining)")
+                         "(docs/method.md section 3: at least two elements through the lining)")
     p["lining_elements"] = int(p["lining_elements"])
     if p["h_near"] is None:
         p["h_near"] = p["lining_wall"] / p["lining_elements"]
@@ -665,8 +665,8 @@ def build_layered_cavern(parameters: typing.Mapping | None = None) -> dict:
     min_jacobian = float(jacobians.min())
     if min_jacobian <= 0.0:
         worst = all_cells[int(np.argmin(jacobians))]
-        raise ValueError(f"layered_cavern: {int(np.sum(jacobians <= 0))} inverted hexahedra "
-                         f"(min scaled Jacobian {min_jacobian:.3g}, e.g. near "
+        raise ValueError(f"mesh.parameters: the layered_cavern builder made {int(np.sum(jacobians <= 0))} "
+                         f"inverted hexahedra (min scaled Jacobian {min_jacobian:.3g}, e.g. near "
                          f"{x[worst].mean(axis=0).round(2).tolist()} m); check "
                          "mesh.parameters margin_y, dip and the element sizes")
     edge_lengths = {name: np.linalg.norm(x[c[:, _HEX_EDGES[:, 1]]] - x[c[:, _HEX_EDGES[:, 0]]], axis=2)

@@ -12,7 +12,7 @@ from pyfem.seismic.reflection import critical_angle, free_surface_coefficients, 
 from pyfem.seismic.waveforms import WaveformTables, hilbert_pair, ricker, ricker_analytic_signal
 
 
-def input_forces(model, freefield, boundary_type="viscoelastic", alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0) -> dict:
+def input_forces(model, freefield, boundary_type=None, alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0) -> dict:
     """SeismicInput arrays for a Model (its faces and node coordinates); see `equivalent_input_forces`."""
     return equivalent_input_forces(model.faces, model.node_coords, freefield, boundary_type, alpha_N, alpha_T)
 

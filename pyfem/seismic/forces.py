@@ -1,7 +1,7 @@
 """Viscoelastic boundary operators and equivalent seismic input forces (paper Eq. 6).
 
 At a boundary node with lumped face integrals (ARCHITECTURE, BoundaryFace) the
-viscoelastic boundary (DESIGN section 3, Liu Jingbo et al. 2005) is
+viscoelastic boundary (docs/method.md section 5, Liu Jingbo et al. 2005) is
     K_b = (G_int / R) (alpha_N n n^T + alpha_T (I - n n^T)),
     C_b = rho_cp_int n n^T + rho_cs_int (I - n n^T),
 with G_int = int phi G ds, rho_cp_int = int phi rho c_p ds, rho_cs_int likewise and
@@ -10,16 +10,26 @@ the boundary transparent to the free field is f = K_b u_ff + C_b v_ff + A sigma_
 with the total free field.  For a free-field slot u = a y(t - tau), sigma = S y'(t - tau):
     f = sum_slots P y(t - tau) + Q y'(t - tau),  P = K_b a,  Q = C_b a + A S n.
 
-Boundary types: "viscoelastic" (springs and dashpots), "viscous" (dashpots only,
-K_b = 0), and, for comparison runs of the accuracy study, "fixed" (boundary nodes
-held at zero displacement) and "free" (traction-free): these two have no springs,
-no dashpots and no input forces (they are NOT "boundary held at the free field").
+Boundary types (per face, `BoundaryFace.kind`, or one type for all faces):
+"viscoelastic" (springs and dashpots), "viscous" (dashpots only, K_b = 0), and
+"fixed", "roller" (kernel constraints, docs/boundaries.md) and "free" (traction-free):
+these three have no springs, no dashpots and no input forces (they are NOT "boundary
+held at the free field"). Only viscoelastic and viscous faces carry seismic input.
 """
 from __future__ import annotations
 
 import numpy as np
 
-BOUNDARY_TYPES = ("viscoelastic", "viscous", "fixed", "free")
+BOUNDARY_TYPES = ("viscoelastic", "viscous", "fixed", "roller", "free")
+# Faces of these types carry springs, dashpots and the seismic input.
+INPUT_TYPES = ("viscoelastic", "viscous")
+
+
+def face_kind(face, boundary_type=None):
+    """The boundary type of `face`: `boundary_type` when given, else the face's own `kind`."""
+    kind = boundary_type if boundary_type is not None else getattr(face, "kind", "viscoelastic")
+    _check_boundary_type(kind)
+    return kind
 
 
 def _check_boundary_type(boundary_type):
@@ -34,15 +44,15 @@ def _check_alpha(name, value):
     return value
 
 
-def face_node_operators(face, boundary_type, alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0):
-    """K_b (k,3,3) N/m and C_b (k,3,3) N s/m of each node of one face."""
-    _check_boundary_type(boundary_type)
+def face_node_operators(face, boundary_type=None, alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0):
+    """K_b (k,3,3) N/m and C_b (k,3,3) N s/m of each node of one face (zero unless it carries input)."""
+    boundary_type = face_kind(face, boundary_type)
     alpha_N = _check_alpha("alpha_N", alpha_N)
     alpha_T = _check_alpha("alpha_T", alpha_T)
     normal = np.asarray(face.normal, dtype=float)
     normal_part = np.einsum("ki,kj->kij", normal, normal)
     tangent_part = np.eye(3) - normal_part
-    if boundary_type in ("fixed", "free"):
+    if boundary_type not in INPUT_TYPES:
         zero = np.zeros((len(face.nodes), 3, 3))
         return zero, zero.copy()
     rho_cp = np.asarray(face.rho_cp, dtype=float)[:, None, None]
@@ -65,36 +75,37 @@ def _sum_per_node(nodes, blocks):
     return unique.astype(np.int32), summed
 
 
-def boundary_springs_and_dashpots(faces, n_nodes, boundary_type, alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0):
+def boundary_springs_and_dashpots(faces, n_nodes, boundary_type=None, alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0):
     """Per-node spring and dashpot blocks of the boundary, summed over the faces.
 
     Args:
         faces: list of BoundaryFace.
         n_nodes: number of nodes of the model (to check the node ids).
-        boundary_type: "viscoelastic" | "viscous" | "fixed" | "free".
+        boundary_type: one of BOUNDARY_TYPES for every face, or None: each face's own kind.
         alpha_N, alpha_T: normal and tangential spring factors.
 
     Returns:
         (spring_nodes int32 (k,), K_nodes (k,3,3) N/m, dashpot_nodes int32 (l,),
-        C_nodes (l,3,3) N s/m).  Springs are empty unless "viscoelastic"; both are
-        empty for "fixed" and "free".
+        C_nodes (l,3,3) N s/m) over the viscoelastic (springs and dashpots) and viscous
+        (dashpots) faces; fixed, roller and free faces add nothing here.
     """
-    _check_boundary_type(boundary_type)
     empty = (np.zeros(0, dtype=np.int32), np.zeros((0, 3, 3)))
-    if boundary_type in ("fixed", "free") or not faces:
+    faces = [f for f in faces if face_kind(f, boundary_type) in INPUT_TYPES]
+    if not faces:
         return empty + empty
     nodes = np.concatenate([np.asarray(f.nodes, dtype=np.int64) for f in faces])
     if nodes.size and (nodes.min() < 0 or nodes.max() >= n_nodes):
         raise ValueError(f"faces' nodes from {nodes.min()} to {nodes.max()}: allowed are 0 .. n_nodes-1 = {n_nodes - 1}")
     operators = [face_node_operators(f, boundary_type, alpha_N, alpha_T) for f in faces]
     dashpots = _sum_per_node(nodes, np.concatenate([c for _, c in operators]))
-    if boundary_type == "viscous":
+    with_springs = [face_kind(f, boundary_type) == "viscoelastic" for f in faces]
+    if not any(with_springs):
         return empty + dashpots
     springs = _sum_per_node(nodes, np.concatenate([k for k, _ in operators]))
     return springs + dashpots
 
 
-def equivalent_input_forces(faces, node_coords, freefield, boundary_type="viscoelastic",
+def equivalent_input_forces(faces, node_coords, freefield, boundary_type=None,
                             alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0) -> dict:
     """Arrays of the kernel's SeismicInput: f_node(t) = sum P y(t - tau) + Q y'(t - tau).
 
@@ -106,7 +117,8 @@ def equivalent_input_forces(faces, node_coords, freefield, boundary_type="viscoe
             shear_modulus, plane_distance).
         node_coords: (n_nodes, 3) coordinates, m.
         freefield: FreeField; its `tables` are the kernel's tables.
-        boundary_type: "viscoelastic" | "viscous" | "fixed" | "free" (the last two: no entries).
+        boundary_type: one of BOUNDARY_TYPES for every face, or None: each face's own kind
+            (fixed, roller and free faces carry no input).
         alpha_N, alpha_T: spring factors.
 
     Returns:
@@ -115,13 +127,13 @@ def equivalent_input_forces(faces, node_coords, freefield, boundary_type="viscoe
         table int32 (n_entries,), tau (n_entries,) s, P (n_entries,3) N/m,
         Q (n_entries,3) N s/m; all C-contiguous.
     """
-    _check_boundary_type(boundary_type)
+    faces = [f for f in faces if face_kind(f, boundary_type) in INPUT_TYPES]
     node_coords = np.asarray(node_coords, dtype=float)
     tables = freefield.tables
     result = {"table_t0": float(tables.t0), "table_dt": float(tables.dt),
               "g": np.ascontiguousarray(tables.g), "dg": np.ascontiguousarray(tables.dg),
               "ddg": np.ascontiguousarray(tables.ddg)}
-    if boundary_type in ("fixed", "free") or not faces:
+    if not faces:
         result.update(node_ptr=np.zeros(1, dtype=np.int64), nodes=np.zeros(0, dtype=np.int32),
                       table=np.zeros(0, dtype=np.int32), tau=np.zeros(0), P=np.zeros((0, 3)), Q=np.zeros((0, 3)))
         return result
@@ -164,19 +176,16 @@ def evaluate_input_forces(arrays, tables, t, n_nodes):
     return forces
 
 
-def equivalent_input_forces_reference(faces, node_coords, freefield, t, boundary_type="viscoelastic",
+def equivalent_input_forces_reference(faces, node_coords, freefield, t, boundary_type=None,
                                       alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0):
     """f(t) (nt, n_nodes, 3), N, straight from FreeField.displacement/velocity/stress (slow, for tests).
 
     f = K_b u_ff + C_b v_ff + A sigma_ff n per face node, summed over faces.
     """
-    _check_boundary_type(boundary_type)
     node_coords = np.asarray(node_coords, dtype=float)
     t = np.atleast_1d(np.asarray(t, dtype=float))
     forces = np.zeros((len(t), len(node_coords), 3))
-    if boundary_type in ("fixed", "free"):
-        return forces
-    for face in faces:
+    for face in [f for f in faces if face_kind(f, boundary_type) in INPUT_TYPES]:
         points = node_coords[np.asarray(face.nodes)]
         u = freefield.displacement(points, t)
         v = freefield.velocity(points, t)

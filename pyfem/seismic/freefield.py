@@ -1,6 +1,6 @@
 """Analytical free field of a homogeneous half-space under plane P, SV and SH waves.
 
-The field is a sum of plane-wave components (DESIGN section 3): component j moves
+The field is a sum of plane-wave components (docs/method.md section 6): component j moves
 u_j(x, t) = a_j y_j(t - tau_j(x)), with a_j = R_j d_j (m per unit waveform), y_j a
 waveform table (the input g, its Hilbert transform, or depth-filtered versions of
 them) and tau_j = p_j . x + offset_j a delay linear in x (s).  Its strain is
@@ -170,7 +170,9 @@ class FreeField:
         self.surface = None if surface is None else float(surface)
         self.model_bounds = None if model_bounds is None else (np.asarray(model_bounds[0], dtype=float),
                                                                 np.asarray(model_bounds[1], dtype=float))
-        if self.model_bounds is not None and self.surface is not None and self.model_bounds[1][2] > self.surface:
+        # A surface at the model's top is allowed: mesh coordinates carry round-off (60.000000000000014).
+        if self.model_bounds is not None and self.surface is not None and self.model_bounds[1][2] > \
+                self.surface + 1e-9 * max(float(np.max(self.model_bounds[1] - self.model_bounds[0])), 1.0):
             raise ValueError(f"surface = {surface!r} m: allowed is z_s >= the model's top "
                              f"z = {self.model_bounds[1][2]!r} m")
         self.padding_factor = padding_factor

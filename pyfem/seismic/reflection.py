@@ -1,6 +1,6 @@
 """Free-surface reflection of plane P, SV and SH waves in a homogeneous half-space.
 
-Frame of one incident wave (DESIGN section 3): e_h is the horizontal unit vector of
+Frame of one incident wave (docs/method.md section 6): e_h is the horizontal unit vector of
 the propagation direction (azimuth phi from +x toward +y), e_z points up, and
 e_t = e_z x e_h.  In the vertical (e_h, e_z) plane a wave is described by its
 polarisation d and slowness vector p (s/m); its displacement is u = R d g(t - p.x).

@@ -41,14 +41,33 @@ def input_waveform(scene):
 
         n_samples = math.ceil(duration / table_dt) + 4
         return waveform, (0.0, table_dt, n_samples), None
-    from pyfem.seismic.records import as_waveform, process_record, read_record
+    from pyfem.seismic.records import as_waveform
 
-    spec = motion["record"]
-    record = read_record(spec["file"], units=spec["units"], dt=spec.get("dt"), format=spec["format"])
-    processed = process_record(record, window=spec.get("window"), band=tuple(spec["band"]), pga=spec.get("pga"),
-                               table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"))
+    processed = processed_record(motion["record"])
     t0, dt, g, dg, ddg = as_waveform(processed)
     return WaveformTables(t0=t0, dt=dt, g=g[None, :], dg=dg[None, :], ddg=ddg[None, :]), None, processed
+
+
+def processed_record(spec, record=None):
+    """The input motion of a scene's [wave.motion.record] table, processed as the run uses it.
+
+    Args:
+        spec: the validated wave.motion.record table (file, units, dt, format, window, band,
+            pga, lead_in).
+        record: the file already read (pyfem.seismic.records.Record), or None to read it.
+
+    Returns:
+        pyfem.seismic.records.ProcessedRecord (time from 0, step _RECORD_TABLE_DT s).
+
+    Raises:
+        ValueError: a malformed file, or settings the record cannot meet.
+    """
+    from pyfem.seismic.records import process_record, read_record
+
+    if record is None:
+        record = read_record(spec["file"], units=spec["units"], dt=spec.get("dt"), format=spec["format"])
+    return process_record(record, window=spec.get("window"), band=tuple(spec["band"]), pga=spec.get("pga"),
+                          table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"))
 
 
 def seismic_input_from_scene(scene, model):
@@ -76,7 +95,8 @@ def seismic_input_from_scene(scene, model):
             np.arange(len(model.node_coords))
         warn_if_start_is_cut(freefield, model.node_coords[boundary_nodes], wave["reference_point"])
     boundary = scene["boundary"]
-    arrays = equivalent_input_forces(model.faces, model.node_coords, freefield, boundary["type"],
+    # Each truncation face by its own type: only viscoelastic and viscous faces carry input.
+    arrays = equivalent_input_forces(model.faces, model.node_coords, freefield, None,
                                      boundary["alpha_N"], boundary["alpha_T"])
     return freefield, arrays
 

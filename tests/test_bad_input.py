@@ -1,0 +1,317 @@
+"""No silent nonsense: every bad input a user can write is one `error:` line and exit 2, and
+what a user may mean is one `warning:` line each, also kept in run.json.
+
+The CLI runs in-process (`pyfem.cli.main`) so the table stays fast; four cases run it as a
+subprocess to show that nothing else (a traceback, gmsh's own messages) reaches stderr.
+"""
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from pyfem import cli
+from pyfem._gmsh import gmsh
+from pyfem.geometry import gmsh_session
+
+REPO = Path(__file__).resolve().parents[1]
+RECORD = REPO / "data" / "elcentro_1940_ns.txt"
+TWO_LAYER_MSH = REPO / "meshes" / "two_layer_block.msh"  # volumes sandstone, mudstone; interface_1
+
+BOX = """
+title = "bad input"
+[mesh]
+size = [20.0, 10.0, 20.0]
+h = 5.0
+[materials.rock]
+E = 8.0e9
+nu = 0.24
+rho = 2600.0
+[time]
+duration = 0.02
+[output]
+xdmf_interval = 0.0
+[[monitor]]
+name = "centre"
+point = [10.0, 5.0, 10.0]
+"""
+
+TWO_LAYER = f"""
+[mesh]
+builder = "file"
+file = "{TWO_LAYER_MSH}"
+[materials.sandstone]
+preset = "sandstone"
+[materials.mudstone]
+preset = "non_sandstone"
+[time]
+duration = 0.01
+"""
+
+
+def write_msh_without_volumes(path):
+    """A box whose surfaces only are meshed (quadrilaterals), with a physical surface."""
+    with gmsh_session("surfaces"):
+        volume = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        surfaces = [tag for _, tag in gmsh.model.getBoundary([(3, volume)], oriented=False)]
+        gmsh.model.setPhysicalName(2, gmsh.model.addPhysicalGroup(2, surfaces), "outside")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+        gmsh.option.setNumber("Mesh.RecombineAll", 1)
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+
+
+def write_msh_with_tetrahedra(path):
+    """A box meshed with tetrahedra, its volume a physical group "rock"."""
+    with gmsh_session("tets"):
+        volume = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, [volume]), "rock")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+
+
+def file_scene(msh):
+    return f"""
+[mesh]
+builder = "file"
+file = "{msh}"
+[materials.rock]
+preset = "sandstone"
+[time]
+duration = 0.01
+"""
+
+
+def replace(text, old, new):
+    assert old in text
+    return text.replace(old, new, 1)
+
+
+def box(old=None, new=None, extra=""):
+    """BOX with one line replaced and `extra` TOML appended: a scene without side files."""
+    def setup(tmp):
+        return (BOX if old is None else replace(BOX, old, new)) + extra, []
+    return setup
+
+
+def two_layer(old=None, new=None, extra=""):
+    def setup(tmp):
+        return (TWO_LAYER if old is None else replace(TWO_LAYER, old, new)) + extra, []
+    return setup
+
+
+def mesh_file(write):
+    """A file-builder scene whose .msh is made by write(path) in the test's directory."""
+    def setup(tmp):
+        path = tmp / "bad.msh"
+        write(path)
+        return file_scene(path), []
+    return setup
+
+
+def with_out(out):
+    def setup(tmp):
+        return BOX, ["--out", out(tmp)]
+    return setup
+
+
+def malformed_record(tmp):
+    path = tmp / "rec.txt"
+    path.write_text("0.0 0.01\n0.02 abc\n")
+    return BOX + record_wave(path), []
+
+
+def record_wave(path, more=""):
+    return (f'[wave]\ntype = "SV"\nsurface = 20.0\n[wave.motion]\n'
+            f'record = {{ file = "{path}", units = "g"{more} }}\n')
+
+
+def regular_file_as_parent(tmp):
+    (tmp / "plain").write_text("x")
+    return str(tmp / "plain" / "run")
+
+
+LAYERED_BOX_CONTACT = ('[materials.rock2]\npreset = "non_sandstone"\n'
+                       '[contact]\ninterfaces = ["interface_1"]\ncohesion = 1.0\nfriction_angle = 30.0\n')
+TWO_LAYERS = ('h = 5.0\nlayers = [{material = "rock", thickness = 10.0}, '
+              '{material = "rock2", thickness = 10.0}]')
+CAVERN_BAD_H_FAR = ('[mesh]\nbuilder = "layered_cavern"\n[mesh.parameters]\nh_far = -1.0\n'
+                    '[materials.sandstone]\npreset = "sandstone"\n[time]\nduration = 0.01\n')
+
+
+def contact_on(interface):
+    return f'[contact]\ninterfaces = ["{interface}"]\ncohesion = 0.0\nfriction_angle = 30.0\n'
+
+
+# (id, setup(tmp_path) -> (scene text, extra CLI arguments), key the message names, words it holds)
+BAD_INPUTS = [
+    ("E in GPa", box("E = 8.0e9", "E = 8.0"), "materials.rock.E", ["looks like GPa: write 8.0e9"]),
+    ("E in MPa", box("E = 8.0e9", "E = 8000.0"), "materials.rock.E", ["looks like MPa: write 8.0e9"]),
+    ("E absurdly high", box("E = 8.0e9", "E = 8.0e15"), "materials.rock.E", ["[1.0e7, 3.0e11]"]),
+    ("rho in t/m^3", box("rho = 2600.0", "rho = 2.6"), "materials.rock.rho",
+     ["looks like t/m^3: write 2600.0"]),
+    ("initial_stress rho in t/m^3", box(extra="[initial_stress]\nsurface = 20.0\nrho = 2.6\n"),
+     "initial_stress.rho", ["looks like t/m^3: write 2600.0"]),
+    ("cohesion at top of materials", box("rho = 2600.0", "rho = 2600.0\ncohesion = 1.1e6"),
+     "materials.rock.cohesion", ["not read", "[materials.NAME.plasticity]"]),
+    ("friction_angle at top of materials", box("rho = 2600.0", "rho = 2600.0\nfriction_angle = 42.0"),
+     "materials.rock.friction_angle", ["not read", "[materials.NAME.damage]"]),
+    ("tensile_strength at top of materials", box("rho = 2600.0", "rho = 2600.0\ntensile_strength = 1.9e6"),
+     "materials.rock.tensile_strength", ["not read"]),
+    ("plasticity table", box(extra="[materials.rock.plasticity]\ncohesion = 1.1e6\n"),
+     "materials.rock.plasticity", ["not implemented yet"]),
+    ("contact cohesion in MPa", box("h = 5.0", TWO_LAYERS, extra=LAYERED_BOX_CONTACT),
+     "contact.cohesion", ["looks like MPa: write 1.0e6"]),
+    ("output field damage", box("[output]", '[output]\nfields = ["displacement", "damage"]'),
+     "output.fields.1", ["no damage model yet"]),
+    ("time.safety with time.dt", box("duration = 0.02", "duration = 0.02\ndt = 1.0e-4\nsafety = 0.5"),
+     "time.safety", ["not both"]),
+    ("mesh.h with a file mesh", two_layer("[mesh]", "[mesh]\nh = 0.1"), "mesh.h",
+     ['not read by builder "file"']),
+    ("msh without volumes", mesh_file(write_msh_without_volumes), "mesh.file", ["no physical volume"]),
+    ("msh with tetrahedra", mesh_file(write_msh_with_tetrahedra), "mesh.file",
+     ["Tetrahedron 4", "8-node hexahedra"]),
+    ("msh garbage", mesh_file(lambda path: path.write_bytes(b"\x00\x01garbage\n")), "mesh.file",
+     ["gmsh cannot read"]),
+    ("msh empty", mesh_file(lambda path: path.write_bytes(b"")), "mesh.file", ["gmsh cannot read"]),
+    ("interface names a missing surface", two_layer(extra=contact_on("interface_9")),
+     "contact.interfaces.0", ["interface_1"]),
+    ("interface on the outside of the mesh", two_layer(extra=contact_on("zmax")),
+     "contact.interfaces", ["not inside the model"]),
+    ("materials do not match the volumes", two_layer("[materials.mudstone]", "[materials.granite]"),
+     "materials.mudstone", ["granite", "sandstone"]),
+    ("layered_cavern bad parameter", lambda tmp: (CAVERN_BAD_H_FAR, []), "mesh.parameters.h_far", ["> 0"]),
+    ("out under /proc", with_out(lambda tmp: "/proc/pyfem-out"), "--out", ["/proc"]),
+    ("out under a regular file", with_out(regular_file_as_parent), "--out", ["is not a directory"]),
+    ("record file malformed", malformed_record, "wave.motion.record.file", ["line 2", "expected numbers"]),
+    ("record window outside the record", box(extra=record_wave(RECORD, ", window = [0.0, 99.0]")),
+     "wave.motion.record.window", ["inside the record"]),
+]
+
+
+def run_cli(capsys, tmp_path, scene_text, extra, command="run"):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(scene_text)
+    out = [] if command == "check" or "--out" in extra else ["--out", str(tmp_path / "out")]
+    status = cli.main([command, str(scene), *out, *extra])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+@pytest.mark.parametrize("setup, key, words", [case[1:] for case in BAD_INPUTS],
+                         ids=[case[0] for case in BAD_INPUTS])
+def test_bad_input_is_one_error_line_with_exit_2_and_writes_nothing(capsys, tmp_path, setup, key, words):
+    scene_text, extra = setup(tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    status, out, err = run_cli(capsys, tmp_path, scene_text, extra)
+    lines = err.splitlines()
+    assert status == 2, err
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert f"'{key}'" in lines[0] or f"{key} " in lines[0], lines[0]
+    for word in words:
+        assert word in lines[0], lines[0]
+    after = sorted(p.name for p in tmp_path.iterdir())
+    assert after == sorted(before + ["scene.toml"])  # no run directory, nothing else
+    assert not Path("/proc/pyfem-out").exists()
+
+
+@pytest.mark.parametrize("case", ["msh garbage", "msh with tetrahedra", "record file malformed",
+                                  "out under /proc"])
+def test_bad_input_in_a_child_process_prints_only_the_error_line(tmp_path, case):
+    setup = next(c[1] for c in BAD_INPUTS if c[0] == case)
+    scene_text, extra = setup(tmp_path)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(scene_text)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out = [] if "--out" in extra else ["--out", str(tmp_path / "out")]
+    result = subprocess.run(["/usr/bin/python3", "-m", "pyfem", "run", str(scene), *out, *extra],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2
+    assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith("error: "), result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_directory_as_the_scene_file_is_an_error_line(capsys, tmp_path):
+    assert cli.main(["check", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"error: {tmp_path}: cannot read the scene file (Is a directory)\n"
+
+
+def test_a_value_error_that_names_no_key_is_a_bug_and_keeps_its_traceback(monkeypatch, tmp_path):
+    from pyfem import solver
+
+    def broken(scene):
+        raise ValueError("operands could not be broadcast together")
+
+    monkeypatch.setattr(solver, "plan", broken)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(BOX)
+    with pytest.raises(ValueError, match="broadcast"):
+        cli.main(["check", str(scene)])
+
+
+# A box far coarser than the accuracy advice (20 m elements; a 25 Hz record band in rock with
+# c_s ~ 1100 m/s wants ~5 m for Q1), run for 0.02 s of a 2 s window (plus the filter lead-in).
+WARNED = f"""
+title = "warned"
+[mesh]
+size = [60.0, 20.0, 60.0]
+h = 20.0
+[materials.rock]
+preset = "sandstone"
+[time]
+duration = 0.02
+[wave]
+type = "SV"
+surface = 60.0
+[wave.motion]
+record = {{ file = "{RECORD}", units = "g", window = [0.0, 2.0] }}
+[output]
+xdmf_interval = 0.0
+[[monitor]]
+name = "centre"
+point = [30.0, 10.0, 30.0]
+"""
+
+
+def assert_the_two_warnings(lines):
+    warnings = [line for line in lines if line.startswith("warning: ")]
+    duration = [line for line in warnings if "time.duration = 0.02 s" in line]
+    coarse = [line for line in warnings if "mesh.h = 20 m" in line]
+    assert len(duration) == 1 and "window [0, 2] s" in duration[0] and "lead-in" in duration[0]
+    assert len(coarse) == 1 and "accuracy study" in coarse[0]
+    return duration[0], coarse[0]
+
+
+def test_warnings_are_printed_by_run_and_kept_in_run_json(capsys, tmp_path):
+    status, out, err = run_cli(capsys, tmp_path, WARNED, [])
+    assert status == 0, err
+    duration, coarse = assert_the_two_warnings(err.splitlines())
+    summary = json.loads((tmp_path / "out" / "run.json").read_text())
+    assert summary["warnings"] == [duration.removeprefix("warning: "), coarse.removeprefix("warning: ")]
+
+
+def test_warnings_are_printed_by_check(capsys, tmp_path):
+    status, out, err = run_cli(capsys, tmp_path, WARNED, [], command="check")
+    assert status == 0, err
+    assert_the_two_warnings(err.splitlines())
+
+
+def test_a_heavy_density_is_a_warning_not_an_error(capsys, tmp_path):
+    heavy = replace(BOX, "rho = 2600.0", "rho = 9.0e5")
+    status, out, err = run_cli(capsys, tmp_path, heavy, [], command="check")
+    assert status == 0, err
+    assert [line for line in err.splitlines() if line.startswith("warning: ")] == [
+        "warning: materials.rock.rho = 9.0e5 kg/m^3 is above 8000 kg/m^3 (steel), heavier than any rock "
+        "or concrete; used as given"]
+
+
+def test_a_fine_enough_scene_has_no_warnings(capsys, tmp_path):
+    fine = replace(replace(WARNED, "h = 20.0", "h = 5.0"), "duration = 0.02", "duration = 30.0")
+    status, out, err = run_cli(capsys, tmp_path, fine, [],
+                               command="check")
+    assert status == 0, err
+    assert "warning" not in err
