@@ -10,7 +10,7 @@ namespace cavern {
 
 /// Gershgorin bound on the spectrum of M^-1 K (lumped mass m per node, 3 dofs per node):
 ///   omega_max^2 <= max over dof rows r of node i of (1/m_i) sum_c |K_rc|.
-/// Guaranteed upper bound (DESIGN sec. 3, critical step).
+/// Guaranteed upper bound (docs/method.md section 4, critical step).
 double gershgorin_bound(const BlockCsrView& K, const double* mass);
 
 /// Power iteration on the symmetric form S = M^-1/2 K M^-1/2 from a seeded random start:

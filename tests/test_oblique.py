@@ -2,7 +2,7 @@
 
 With the total free field (incident plus free-surface reflections) applied on all six
 faces, a homogeneous box must move as the analytical half-space free field up to
-discretisation error (DESIGN section 3). The reference is the exact field written by the
+discretisation error (docs/method.md section 5). The reference is the exact field written by the
 run (ux_ff.. columns of monitors/*.csv, from pyfem.seismic.freefield, itself tested for a
 traction-free surface, the wave equation and against the analytic signal).
 
