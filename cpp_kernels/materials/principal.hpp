@@ -1,0 +1,198 @@
+// Principal values and directions of symmetric 3x3 tensors, and the Voigt conventions shared by
+// the material laws (docs/materials.md).
+//
+// Voigt order [xx, yy, zz, xy, yz, xz] everywhere. Stress-like Voigt vectors hold the tensor
+// components; strain-like Voigt vectors hold ENGINEERING shear (gamma_xy = 2 eps_xy), so that
+// stress . strain (a plain 6-term dot product) is the double contraction sigma : eps.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+
+namespace cavern {
+
+using Voigt = std::array<double, 6>;
+
+/// Damage mechanism of a material point, as reported in monitors and XDMF `damage_type`:
+/// 0 none, 1 tension (rock: cut-off planes; concrete: d_t), 2 shear (Mohr-Coulomb; d_c).
+enum class DamageType : std::int32_t { none = 0, tension = 1, shear = 2 };
+using Matrix3 = std::array<std::array<double, 3>, 3>;
+
+/// Eigenvalues in descending order (values[0] >= values[1] >= values[2]) and the matching unit
+/// eigenvectors, vectors[k] belonging to values[k]; the vectors form a right-handed orthonormal
+/// basis to round-off.
+struct SymmetricEigen {
+  std::array<double, 3> values{};
+  Matrix3 vectors{};
+};
+
+/// Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations (Golub & Van Loan,
+/// Matrix Computations, 4th ed., Sec. 8.5; stable rotation of Rutishauser). Jacobi is used
+/// rather than the closed-form cubic because it stays accurate for repeated and nearly repeated
+/// eigenvalues (the M-C edges and apex, hydrostatic states): every rotation is orthogonal, so
+/// the eigenvectors are orthonormal whatever the spectrum, and it converges quadratically
+/// (three or four sweeps to round-off for 3x3).
+inline SymmetricEigen symmetric_eigen(const Matrix3& matrix) {
+  Matrix3 a = matrix;
+  Matrix3 v{{{1.0, 0.0, 0.0}, {0.0, 1.0, 0.0}, {0.0, 0.0, 1.0}}};
+  double norm = 0.0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) norm += a[i][j] * a[i][j];
+  norm = std::sqrt(norm);
+  // An off-diagonal entry this small changes no eigenvalue at double precision.
+  const double negligible = 1e-22 * norm;
+  constexpr int kPairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+  for (int sweep = 0; sweep < 32; ++sweep) {
+    bool rotated = false;
+    for (const auto& pair : kPairs) {
+      const int p = pair[0], q = pair[1];
+      if (std::abs(a[p][q]) <= negligible) {
+        a[p][q] = a[q][p] = 0.0;
+        continue;
+      }
+      rotated = true;
+      // Rotation angle theta with t = tan(theta) the smaller root of t^2 + 2 zeta t - 1 = 0.
+      const double zeta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+      // (For |zeta| > 1e150, zeta^2 would overflow: t = 1 / (2 zeta) to double precision.)
+      const double abs_zeta = std::abs(zeta);
+      const double t =
+          (zeta >= 0.0 ? 1.0 : -1.0) /
+          (abs_zeta > 1e150 ? 2.0 * abs_zeta : abs_zeta + std::sqrt(1.0 + zeta * zeta));
+      const double c = 1.0 / std::sqrt(1.0 + t * t);
+      const double s = t * c;
+      for (int k = 0; k < 3; ++k) {  // A <- A J (columns p, q)
+        const double akp = a[k][p], akq = a[k][q];
+        a[k][p] = c * akp - s * akq;
+        a[k][q] = s * akp + c * akq;
+      }
+      for (int k = 0; k < 3; ++k) {  // A <- J^T A (rows p, q)
+        const double apk = a[p][k], aqk = a[q][k];
+        a[p][k] = c * apk - s * aqk;
+        a[q][k] = s * apk + c * aqk;
+      }
+      a[p][q] = a[q][p] = 0.0;       // exact by construction of theta
+      for (int k = 0; k < 3; ++k) {  // V <- V J
+        const double vkp = v[k][p], vkq = v[k][q];
+        v[k][p] = c * vkp - s * vkq;
+        v[k][q] = s * vkp + c * vkq;
+      }
+    }
+    if (!rotated) break;
+  }
+  std::array<int, 3> order{0, 1, 2};
+  std::sort(order.begin(), order.end(), [&](int i, int j) { return a[i][i] > a[j][j]; });
+  SymmetricEigen result;
+  for (int k = 0; k < 3; ++k) {
+    result.values[k] = a[order[k]][order[k]];
+    for (int i = 0; i < 3; ++i) result.vectors[k][i] = v[i][order[k]];
+  }
+  // Right-handed basis: e2 = e0 x e1 (only the sign can differ from the Jacobi column).
+  const auto& e0 = result.vectors[0];
+  const auto& e1 = result.vectors[1];
+  const std::array<double, 3> cross{e0[1] * e1[2] - e0[2] * e1[1], e0[2] * e1[0] - e0[0] * e1[2],
+                                    e0[0] * e1[1] - e0[1] * e1[0]};
+  result.vectors[2] = cross;
+  return result;
+}
+
+/// Eigenvalues (descending) of a symmetric 3x3 matrix by the trigonometric closed form
+/// (Smith 1961, "Eigenvalues of a symmetric 3x3 matrix", Commun. ACM 4(4) 168). Several times
+/// faster than symmetric_eigen but, near repeated eigenvalues, accurate only to about 1e-8 of
+/// the deviatoric size |A - tr(A)/3 I| (acos is ill-conditioned there): use it to screen
+/// (decide "clearly elastic" with a margin), never for a returned stress.
+inline std::array<double, 3> symmetric_eigenvalues_estimate(const Matrix3& a) {
+  const double mean = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
+  const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+  const double d0 = a[0][0] - mean, d1 = a[1][1] - mean, d2 = a[2][2] - mean;
+  const double size = std::sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0);
+  if (size == 0.0) return {mean, mean, mean};
+  const double b00 = d0 / size, b11 = d1 / size, b22 = d2 / size;
+  const double b01 = a[0][1] / size, b02 = a[0][2] / size, b12 = a[1][2] / size;
+  const double half_det = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) +
+                                 b02 * (b01 * b12 - b11 * b02));
+  const double angle = std::acos(std::clamp(half_det, -1.0, 1.0)) / 3.0;
+  const double largest = mean + 2.0 * size * std::cos(angle);
+  const double smallest = mean + 2.0 * size * std::cos(angle + 2.0943951023931954923);
+  return {largest, 3.0 * mean - largest - smallest, smallest};
+}
+
+/// 3x3 tensor of a stress-like Voigt vector (tensor shear components).
+inline Matrix3 tensor_from_stress_voigt(const Voigt& s) {
+  return {{{s[0], s[3], s[5]}, {s[3], s[1], s[4]}, {s[5], s[4], s[2]}}};
+}
+
+/// 3x3 tensor of a strain-like Voigt vector (engineering shear: eps_xy = gamma_xy / 2).
+inline Matrix3 tensor_from_strain_voigt(const Voigt& e) {
+  return {{{e[0], 0.5 * e[3], 0.5 * e[5]},
+           {0.5 * e[3], e[1], 0.5 * e[4]},
+           {0.5 * e[5], 0.5 * e[4], e[2]}}};
+}
+
+/// Principal stresses (descending, tension positive) and directions of a stress Voigt vector.
+inline SymmetricEigen principal_stresses(const Voigt& stress) {
+  return symmetric_eigen(tensor_from_stress_voigt(stress));
+}
+
+/// Principal strains (descending) and directions of a strain Voigt vector (engineering shear).
+inline SymmetricEigen principal_strains(const Voigt& strain) {
+  return symmetric_eigen(tensor_from_strain_voigt(strain));
+}
+
+/// Stress Voigt vector sum_k values[k] n_k (x) n_k with n_k = vectors[k] (tensor shear).
+inline Voigt stress_voigt_from_principal(const std::array<double, 3>& values,
+                                         const Matrix3& vectors) {
+  Voigt s{};
+  for (int k = 0; k < 3; ++k) {
+    const auto& n = vectors[k];
+    const double value = values[k];
+    s[0] += value * n[0] * n[0];
+    s[1] += value * n[1] * n[1];
+    s[2] += value * n[2] * n[2];
+    s[3] += value * n[0] * n[1];
+    s[4] += value * n[1] * n[2];
+    s[5] += value * n[0] * n[2];
+  }
+  return s;
+}
+
+/// Strain Voigt vector (engineering shear) of the tensor sum_k values[k] n_k (x) n_k.
+inline Voigt strain_voigt_from_principal(const std::array<double, 3>& values,
+                                         const Matrix3& vectors) {
+  Voigt e = stress_voigt_from_principal(values, vectors);
+  e[3] *= 2.0;
+  e[4] *= 2.0;
+  e[5] *= 2.0;
+  return e;
+}
+
+/// sigma : eps for a stress-like and a strain-like (engineering shear) Voigt vector.
+inline double double_contraction(const Voigt& stress, const Voigt& strain) {
+  double sum = 0.0;
+  for (int k = 0; k < 6; ++k) sum += stress[k] * strain[k];
+  return sum;
+}
+
+/// Isotropic linear elasticity sigma = C : eps (engineering shear strain in, tensor stress out):
+/// sigma = lambda tr(eps) I + 2 G eps.
+inline Voigt isotropic_stress(double lambda, double shear_modulus, const Voigt& strain) {
+  const double volumetric = lambda * (strain[0] + strain[1] + strain[2]);
+  const double two_g = 2.0 * shear_modulus;
+  return {volumetric + two_g * strain[0], volumetric + two_g * strain[1],
+          volumetric + two_g * strain[2], shear_modulus * strain[3],
+          shear_modulus * strain[4],      shear_modulus * strain[5]};
+}
+
+/// Complementary elastic energy density 1/2 sigma : C^-1 : sigma (J/m^3) of an isotropic
+/// material: (1/2E) [(1 + nu) sigma : sigma - nu tr(sigma)^2].
+inline double isotropic_complementary_energy(double young_modulus, double poisson_ratio,
+                                             const Voigt& stress) {
+  const double trace = stress[0] + stress[1] + stress[2];
+  const double squares =
+      stress[0] * stress[0] + stress[1] * stress[1] + stress[2] * stress[2] +
+      2.0 * (stress[3] * stress[3] + stress[4] * stress[4] + stress[5] * stress[5]);
+  return 0.5 / young_modulus * ((1.0 + poisson_ratio) * squares - poisson_ratio * trace * trace);
+}
+
+}  // namespace cavern
