@@ -65,8 +65,12 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
         gmsh.model.mesh.field.setNumber(threshold, "DistMin", 0.5 * radius)
         gmsh.model.mesh.field.setNumber(threshold, "DistMax", 6.0 * radius)
         gmsh.model.mesh.field.setAsBackgroundMesh(threshold)
+        # Every option the mesh depends on is set here: a gmsh that was initialized before keeps
+        # the options others set (gmsh 4.8 has no way to restore the defaults).
         for option, value in (("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.MeshSizeFromPoints", 0),
-                              ("Mesh.MeshSizeFromCurvature", 0),
+                              ("Mesh.MeshSizeFromCurvature", 0), ("Mesh.MeshSizeMin", 0.0),
+                              ("Mesh.MeshSizeMax", 1.0e22), ("Mesh.MeshSizeFactor", 1.0),
+                              ("Mesh.Algorithm", 6), ("Mesh.ElementOrder", 1), ("Mesh.SubdivisionAlgorithm", 0),
                               ("Mesh.RecombineAll", 1), ("Mesh.RecombinationAlgorithm", 1)):
             gmsh.option.setNumber(option, value)
 

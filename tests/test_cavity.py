@@ -33,18 +33,17 @@ KIRSCH_TOLERANCE = 0.10  # the issue's 10 %
 
 @pytest.fixture(scope="module")
 def tunnel_meshes(tmp_path_factory):
-    """The same tunnel meshed twice: with named faces and wall, and with no surface named."""
-    import importlib.util
+    """The same tunnel meshed twice by the script, as a user runs it (its own process, so no gmsh
+    option set by other tests leaks in): with named faces and wall, and with no surface named."""
+    import subprocess
+    import sys
 
-    spec = importlib.util.spec_from_file_location("tunnel_in_box", "meshes/tunnel_in_box.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
     folder = tmp_path_factory.mktemp("tunnel")
     paths = {}
     for named in (True, False):
         path = folder / f"tunnel_{'named' if named else 'unnamed'}.msh"
-        module.build_tunnel_in_box(str(path), radius=RADIUS, size=(SECTION, SECTION), thickness=THICKNESS,
-                                   name_surfaces=named)
+        subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(path), "--radius", str(RADIUS)]
+                       + ([] if named else ["--unnamed"]), check=True, timeout=300)
         paths[named] = path
     return paths
 
