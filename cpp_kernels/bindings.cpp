@@ -13,6 +13,7 @@
 
 #include "bsr.hpp"
 #include "contact.hpp"
+#include "internal_force.hpp"
 #include "parallel.hpp"
 #include "seismic_input.hpp"
 #include "stable_step.hpp"
@@ -333,6 +334,143 @@ Args:
           "Number of pairs in each state 0..3: new int64 array (4,).")
       .def_property_readonly("n_pairs", &ContactPairs::n_pairs);
 
+  py::class_<InternalForceComponent, std::shared_ptr<InternalForceComponent>>(
+      m, "InternalForceComponent",
+      R"(Base of the internal-force components: cells whose force f_int(u) the Stepper adds to
+K u (add_internal_force). compute() evaluates a trial state without changing the committed one;
+commit() accepts it (the Stepper does both once per step).)")
+      .def(
+          "compute",
+          [](InternalForceComponent& component, const py::object& u_object,
+             const py::object& force_object) {
+            auto u = checked_array<double>(u_object, "u", {kAny});
+            auto force = checked_array<double>(force_object, "force", {u.shape(0)}, true);
+            if (u.shape(0) % 3 != 0)
+              throw py::value_error("u: length " + std::to_string(u.shape(0)) +
+                                    " is not 3 n_nodes");
+            component.check_nodes(u.shape(0) / 3);
+            double* force_data = force.mutable_data();
+            const double* u_data = u.data();
+            InternalEnergy energy;
+            {
+              py::gil_scoped_release release;
+              energy = component.compute(u_data, force_data);
+            }
+            py::dict result;
+            result["stored"] = energy.stored;
+            result["dissipation_increment"] = energy.dissipation_increment;
+            return result;
+          },
+          py::arg("u"), py::arg("force").noconvert(),
+          R"(Adds f_int(u) (N) to force and computes the trial state at u (committed state unchanged).
+
+Args:
+    u: float64 (3 n_nodes,) displacement (m), read only.
+    force: float64 (3 n_nodes,) modified in place (added to).
+Returns:
+    dict: stored (J) and dissipation_increment (J) of the trial state.)")
+      .def("commit", &InternalForceComponent::commit,
+           "Makes the trial state of the last compute() the committed one (RuntimeError "
+           "without one).")
+      .def("stored_energy", &InternalForceComponent::stored_energy,
+           "Stored energy of the committed state (J).")
+      .def("dissipation", &InternalForceComponent::dissipation,
+           "Dissipation accumulated over all commits (J).")
+      .def_property_readonly("name", &InternalForceComponent::name);
+
+  py::class_<HexahedronElementsBase, InternalForceComponent,
+             std::shared_ptr<HexahedronElementsBase>>(
+      m, "HexahedronElements",
+      R"(Hexahedral cells of one region integrated point by point with a material law.
+
+At each quadrature point q of cell c: eps = sym(sum_a u_a (x) gradients[c, q, a]) (engineering
+shear, Voigt order xx, yy, zz, xy, yz, xz), the law gives the trial stress sigma (total, Pa) from
+the committed state, and f_a += weights[c, q] (sigma - sigma0) gradients[c, q, a]. With
+law="linear_elastic" this is the cells' stiffness matrix times u, to round-off.
+Deterministic: the same bits for any number of threads.
+
+Args:
+    cell_nodes: int32 (c, k) node of each basis function, k = 8 (Q1) or 27 (Q2). Borrowed.
+    gradients: float64 (c, q, k, 3) basis gradients dphi/dx at the points (1/m). Borrowed.
+    weights: float64 (c, q) quadrature weight x |det J| (m^3), > 0. Borrowed.
+    law: material law name (known_laws()).
+    parameters: dict name -> float of the law's parameters (SI), e.g. linear_elastic:
+        lame_lambda, shear_modulus (Pa).
+    initial_stress: None or float64 (c, q, 6) static stress sigma0 (Pa, Voigt order). Copied.
+    mean_dilatation: replace the volumetric strain by its cell mean (B-bar, for Q1 plasticity).
+    min_cells_for_threads: below this many cells the loops run on one thread.
+Borrowed arrays are kept alive by this object and must not be modified while it is in use.)")
+      .def(py::init([](const py::object& cell_nodes_object, const py::object& gradients_object,
+                       const py::object& weights_object, const std::string& law,
+                       const ParameterMap& parameters, const py::object& initial_stress_object,
+                       bool mean_dilatation, std::int64_t min_cells_for_threads) {
+             auto cell_nodes = checked_array<std::int32_t>(cell_nodes_object, "cell_nodes",
+                                                           {kAny, kAny});
+             const py::ssize_t n_cells = cell_nodes.shape(0), n_basis = cell_nodes.shape(1);
+             auto weights = checked_array<double>(weights_object, "weights", {n_cells, kAny});
+             const py::ssize_t n_points = weights.shape(1);
+             auto gradients = checked_array<double>(gradients_object, "gradients",
+                                                    {n_cells, n_points, n_basis, 3});
+             const double* initial_stress = nullptr;
+             py::array_t<double> initial_stress_array;
+             if (!initial_stress_object.is_none()) {
+               initial_stress_array = checked_array<double>(
+                   initial_stress_object, "initial_stress", {n_cells, n_points, 6});
+               initial_stress = initial_stress_array.data();
+             }
+             HexahedronGeometry geometry{n_cells,          n_points,       n_basis,
+                                         cell_nodes.data(), gradients.data(), weights.data()};
+             ElementOptions options;
+             options.mean_dilatation = mean_dilatation;
+             options.min_cells_for_threads = min_cells_for_threads;
+             return make_hexahedron_elements(law, parameters, geometry, options, initial_stress);
+           }),
+           py::arg("cell_nodes"), py::arg("gradients"), py::arg("weights"),
+           py::arg("law"), py::arg("parameters"),
+           py::arg("initial_stress") = py::none(), py::arg("mean_dilatation") = false,
+           py::arg("min_cells_for_threads") = ElementOptions{}.min_cells_for_threads,
+           py::keep_alive<1, 2>(), py::keep_alive<1, 3>(), py::keep_alive<1, 4>())
+      .def(
+          "stress",
+          [](const HexahedronElementsBase& elements) {
+            py::array_t<double> out({static_cast<py::ssize_t>(elements.n_cells()),
+                                     static_cast<py::ssize_t>(elements.n_points()),
+                                     static_cast<py::ssize_t>(6)});
+            elements.stress(out.mutable_data());
+            return out;
+          },
+          "Committed total stress at the quadrature points (Pa, tension positive, Voigt order xx, "
+          "yy, zz, xy, yz, xz): new float64 array (c, q, 6).")
+      .def(
+          "characteristic_length",
+          [](const HexahedronElementsBase& elements) {
+            const auto& h = elements.characteristic_length();
+            py::array_t<double> out(static_cast<py::ssize_t>(h.size()));
+            std::copy(h.begin(), h.end(), out.mutable_data());
+            return out;
+          },
+          "Cube root of each cell's volume (m), the law's characteristic length: new (c,) array.")
+      .def(
+          "nodes",
+          [](const HexahedronElementsBase& elements) {
+            const auto& nodes = elements.nodes();
+            py::array_t<std::int32_t> out(static_cast<py::ssize_t>(nodes.size()));
+            std::copy(nodes.begin(), nodes.end(), out.mutable_data());
+            return out;
+          },
+          "Distinct nodes of the cells, sorted: new int32 array.")
+      .def_property_readonly("n_cells", &HexahedronElementsBase::n_cells)
+      .def_property_readonly("n_points", &HexahedronElementsBase::n_points)
+      .def_property_readonly("n_basis", &HexahedronElementsBase::n_basis)
+      .def_property_readonly("mean_dilatation",
+                             [](const HexahedronElementsBase& elements) {
+                               return elements.options().mean_dilatation;
+                             })
+      .def_property_readonly("owned_bytes", &HexahedronElementsBase::owned_bytes,
+                             "Bytes of state and buffers owned (the borrowed geometry excluded).");
+
+  m.def("known_laws", &known_laws, "Names of the material laws HexahedronElements accepts.");
+
   py::class_<Stepper>(m, "Stepper", R"(Velocity-Verlet central difference with lumped mass.
 
 Per step: v_half = v + dt/2 a; u += dt v_half; f = f_ext(t_{n+1});
@@ -422,6 +560,18 @@ Args:
           "One per Stepper. ValueError names a pair node outside the model or a pair joining a "
           "node to itself. Without it contact costs nothing.")
       .def(
+          "add_internal_force",
+          [](Stepper& stepper, std::shared_ptr<InternalForceComponent> component) {
+            stepper.add_internal_force(std::move(component));
+          },
+          py::arg("component"), py::keep_alive<1, 2>(),
+          R"(Adds an internal-force component (e.g. HexahedronElements; shared, kept alive).
+
+Its cells must not be in the stiffness matrix: r = f - K u - sum_components f_int(u). The energy
+account restarts at the next run() unless reset_energy is called after this; energy() then has
+internal_stored, internal_dissipation and internal_work. ValueError names a node outside the
+model. Without components nothing changes (not one operation per node).)")
+      .def(
           "run",
           [](Stepper& stepper, const py::object& u_object, const py::object& v_object,
              const py::object& a_object, std::int64_t n_steps, double t0) {
@@ -462,6 +612,11 @@ The GIL is released while stepping.)")
             result["damping_work"] = report.damping_work;
             result["contact_work"] = report.contact_work;
             result["friction_dissipation"] = report.friction_dissipation;
+            if (report.has_internal) {
+              result["internal_stored"] = report.internal_stored;
+              result["internal_dissipation"] = report.internal_dissipation;
+              result["internal_work"] = report.internal_work;
+            }
             result["balance"] = report.balance;
             py::dict provider_work;
             for (std::size_t k = 0; k < report.provider_work.size(); ++k)
@@ -475,7 +630,12 @@ total (H_n = kinetic + strain - dt^2/8 a.Ma + dt^2/4 F.a), initial (H_0), extern
 damping_work (dissipated), contact_work (work of the dynamic contact forces R on the mesh,
 trapezoid), friction_dissipation (>= 0, work of the slip forces over the slip),
 balance = H_n - H_0 - external_work + damping_work - contact_work (zero to round-off for linear
-problems) and provider_work {name_index: work} (sums to external_work).)")
+problems) and provider_work {name_index: work} (sums to external_work).
+With internal-force components also internal_stored (Psi_n, their stored energy, included in
+total and, at the reset, in initial), internal_dissipation (D since the reset, added to balance)
+and internal_work (W_int, the trapezoid sum of 1/2 (g_n + g_{n+1}).(u_{n+1} - u_n), which the
+scheme balances exactly: balance - (Psi_n - Psi_0 + D - W_int) is round-off; the difference
+is the laws' own energy error, round-off for linear_elastic).)")
       .def(
           "reset_energy",
           [](Stepper& stepper, const py::object& u_object, const py::object& v_object,

@@ -186,8 +186,10 @@ void Stepper::contact_post_pass(double t, const double* u, double* v, double* a)
   const ContactStepResult result = contact_->correct(t, operators, u, v, a);
 
   // Pass B summed the pair nodes' energy terms without contact: add after minus before. The
-  // external force f is not kept by pass B; M a = f - K u - d gives it back (d = implicit damping
-  // + beta K v_{n+1/2}, unchanged stiffness part), and F = f + R - d = M a + K u.
+  // external force f is not kept by pass B; M a = f - K u - g - d gives it back (d = implicit
+  // damping + beta K v_{n+1/2}, unchanged stiffness part), and F = f + R - d = M a + K u + g.
+  const double* g = components_.empty() ? nullptr : internal_force_.data();
+  const double* g_damping = internal_damping_.empty() ? nullptr : internal_damping_.data();
   const double beta = parameters_.beta;
   double d_vMv = 0.0, d_aMa = 0.0, d_Fa = 0.0, d_external = 0.0, d_damping = 0.0;
   for (std::size_t k = 0; k < n_pair_nodes; ++k) {
@@ -211,9 +213,15 @@ void Stepper::contact_post_pass(double t, const double* u, double* v, double* a)
     const double* a_after = a + 3 * node;
     multiply_3x3(damping, v_before, d_before);
     multiply_3x3(damping, v_after, d_after);
+    if (g)
+      for (int c = 0; c < 3; ++c) Ku[c] += g[3 * node + c];  // the whole internal force K u + g
     for (int c = 0; c < 3; ++c) {
       d_before[c] += beta * Kv[c];
       d_after[c] += beta * Kv[c];
+      if (g_damping) {  // beta K0 v_{n+1/2} of the components' cells
+        d_before[c] += g_damping[3 * node + c];
+        d_after[c] += g_damping[3 * node + c];
+      }
       const double f = m * a_before[c] + Ku[c] + d_before[c];
       d_vMv += m * (v_after[c] * v_after[c] - v_before[c] * v_before[c]);
       d_aMa += m * (a_after[c] * a_after[c] - a_before[c] * a_before[c]);
@@ -239,7 +247,16 @@ void Stepper::add_provider(std::shared_ptr<ForceProvider> provider) {
   provider_power_.push_back(0.0);
 }
 
-template <bool kStiffnessDamping, bool kSymmetric>
+void Stepper::add_internal_force(std::shared_ptr<InternalForceComponent> component) {
+  component->check_nodes(n_nodes());
+  components_.push_back(std::move(component));
+  internal_force_.assign(n_dofs(), 0.0);
+  if (parameters_.beta != 0.0) internal_damping_.assign(n_dofs(), 0.0);
+  // g_n of the new component is unknown until reset_energy computes it.
+  energy_started_ = false;
+}
+
+template <bool kStiffnessDamping, bool kSymmetric, bool kInternal>
 void Stepper::pass_b(double* u, double* v, double* a) {
   if constexpr (kSymmetric) {
     const int threads = threaded_ ? omp_get_max_threads() : 1;
@@ -264,6 +281,8 @@ void Stepper::pass_b(double* u, double* v, double* a) {
       constraint_nodes_.empty() ? nullptr : constraint_of_slot_.data();
   const double* projection = constraint_projection_.data();
   double* reactions = reactions_.data();
+  const double* g = internal_force_.data();
+  const double* g_damping = internal_damping_.data();  // beta K0 v_{n+1/2} of the components
 
   double vMv = 0.0, uKu = 0.0, aMa = 0.0, Fa = 0.0, external_power = 0.0, damping_power = 0.0;
 #pragma omp parallel for schedule(static) if (threaded) \
@@ -289,6 +308,11 @@ void Stepper::pass_b(double* u, double* v, double* a) {
     double r[3], rhs[3], v_next[3], implicit_damping[3];
     for (int c = 0; c < 3; ++c) {
       r[c] = fi[c] - Ku[c] - beta * Kv[c];
+      if constexpr (kInternal) {
+        const double gi = g[3 * i + c];
+        r[c] -= gi;
+        if constexpr (kStiffnessDamping) r[c] -= g_damping[3 * i + c];
+      }
       rhs[c] = m * vi[c] + half_dt * r[c];
     }
     const std::int32_t slot = dashpot_slot ? dashpot_slot[i] : -1;
@@ -320,7 +344,8 @@ void Stepper::pass_b(double* u, double* v, double* a) {
     }
     for (int c = 0; c < 3; ++c) {
       const double a_next = net_force[c] / m;
-      const double damping_force = implicit_damping[c] + beta * Kv[c];
+      double damping_force = implicit_damping[c] + beta * Kv[c];
+      if constexpr (kInternal && kStiffnessDamping) damping_force += g_damping[3 * i + c];
       const double non_stiffness_force = fi[c] - damping_force;
       vMv += m * v_next[c] * v_next[c];
       uKu += ui[c] * Ku[c];
@@ -338,6 +363,64 @@ void Stepper::pass_b(double* u, double* v, double* a) {
   acceleration_term_ = -dt * dt / 8.0 * aMa + dt * dt / 4.0 * Fa;
   external_power_ = external_power;
   damping_power_ = damping_power;
+}
+
+template <bool kInternal>
+void Stepper::dispatch_pass_b(double* u, double* v, double* a) {
+  if (symmetric_) {
+    if (parameters_.beta != 0.0)
+      pass_b<true, true, kInternal>(u, v, a);
+    else
+      pass_b<false, true, kInternal>(u, v, a);
+  } else {
+    if (parameters_.beta != 0.0)
+      pass_b<true, false, kInternal>(u, v, a);
+    else
+      pass_b<false, false, kInternal>(u, v, a);
+  }
+}
+
+double Stepper::pass_a_with_internal(double* u, double* v, const double* a) {
+  const std::int64_t n = n_dofs();
+  const double dt = parameters_.dt;
+  const double half_dt = 0.5 * dt;
+  const bool stiffness_damping = parameters_.beta != 0.0;
+  double* v_half = v_half_.data();
+  double* g = internal_force_.data();
+  double* g_damping = internal_damping_.data();
+  double power = 0.0;
+#pragma omp parallel for schedule(static) if (threaded_) reduction(+ : power)
+  for (std::int64_t d = 0; d < n; ++d) {
+    const double velocity_half = v[d] + half_dt * a[d];
+    v[d] = velocity_half;
+    u[d] += dt * velocity_half;
+    power += g[d] * velocity_half;  // g_n.v_{n+1/2}
+    g[d] = 0.0;
+    if (stiffness_damping) {
+      v_half[d] = velocity_half;
+      g_damping[d] = 0.0;
+    }
+  }
+  if (stiffness_damping)
+    for (auto& component : components_)
+      component->add_stiffness_damping(v, parameters_.beta, g_damping);
+  return power;
+}
+
+double Stepper::compute_internal_forces(const double* u) {
+  double stored = 0.0;
+  for (auto& component : components_)
+    stored += component->compute(u, internal_force_.data()).stored;
+  return stored;
+}
+
+double Stepper::internal_power(const double* v) const {
+  const std::int64_t n = n_dofs();
+  const double* g = internal_force_.data();
+  double power = 0.0;
+#pragma omp parallel for schedule(static) if (threaded_) reduction(+ : power)
+  for (std::int64_t d = 0; d < n; ++d) power += g[d] * v[d];
+  return power;
 }
 
 void Stepper::accumulate_work(const double* v) {
@@ -358,16 +441,25 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
   double* v_half = v_half_.data();
   double* f = external_force_.data();
 
+  const bool internal = !components_.empty();
+
   for (std::int64_t step = 0; step < n_steps; ++step) {
     // Multiplying, not accumulating, keeps t free of drift over many steps.
     const double t_next = t0 + static_cast<double>(step + 1) * dt;
 
+    double previous_internal_power = 0.0, stored = 0.0;
+    if (internal) {
+      previous_internal_power = pass_a_with_internal(u, v, a);
+      stored = compute_internal_forces(u);
+      internal_power_ = internal_power(v);  // g_{n+1}.v_{n+1/2}, before pass B overwrites v
+    } else {
 #pragma omp parallel for schedule(static) if (threaded_)
-    for (std::int64_t d = 0; d < n; ++d) {
-      const double velocity_half = v[d] + half_dt * a[d];
-      v[d] = velocity_half;
-      u[d] += dt * velocity_half;
-      if (stiffness_damping) v_half[d] = velocity_half;
+      for (std::int64_t d = 0; d < n; ++d) {
+        const double velocity_half = v[d] + half_dt * a[d];
+        v[d] = velocity_half;
+        u[d] += dt * velocity_half;
+        if (stiffness_damping) v_half[d] = velocity_half;
+      }
     }
 
     for (auto& provider : providers_) provider->add_forces(t_next, u, v, f);
@@ -375,18 +467,21 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
     const double previous_external_power = external_power_;
     const double previous_damping_power = damping_power_;
     const double previous_contact_power = contact_power_;
-    if (symmetric_) {
-      if (stiffness_damping)
-        pass_b<true, true>(u, v, a);
-      else
-        pass_b<false, true>(u, v, a);
-    } else {
-      if (stiffness_damping)
-        pass_b<true, false>(u, v, a);
-      else
-        pass_b<false, false>(u, v, a);
-    }
+    if (internal)
+      dispatch_pass_b<true>(u, v, a);
+    else
+      dispatch_pass_b<false>(u, v, a);
     if (contact_) contact_post_pass(t_next, u, v, a);
+    if (internal) {
+      double dissipation = 0.0;
+      for (auto& component : components_) {
+        component->commit();
+        dissipation += component->dissipation();
+      }
+      internal_work_ += half_dt * (previous_internal_power + internal_power_);
+      internal_stored_ = stored;
+      internal_dissipation_ = dissipation - dissipation_at_reset_;
+    }
     external_work_ += half_dt * (previous_external_power + external_power_);
     damping_work_ += half_dt * (previous_damping_power + damping_power_);
     contact_work_ += half_dt * (previous_contact_power + contact_power_);
@@ -399,6 +494,15 @@ void Stepper::reset_energy(const double* u, const double* v, const double* a, do
   const std::int64_t n = n_dofs();
   std::vector<double> Ku(n);
   spmv(stiffness_, u, Ku.data());
+  // g(u_0) stays in internal_force_ as g_n of the first step's pass A.
+  const double* g = nullptr;
+  double stored = 0.0, dissipation = 0.0;
+  if (!components_.empty()) {
+    std::fill(internal_force_.begin(), internal_force_.end(), 0.0);
+    stored = compute_internal_forces(u);
+    for (const auto& component : components_) dissipation += component->dissipation();
+    g = internal_force_.data();
+  }
   double* f = external_force_.data();
   std::fill(external_force_.begin(), external_force_.end(), 0.0);
   for (auto& provider : providers_) provider->add_forces(t0, u, v, f);
@@ -416,8 +520,8 @@ void Stepper::reset_energy(const double* u, const double* v, const double* a, do
     reduction(+ : vMv, uKu, aMa, Fa, external_power, damping_power)
   for (std::int64_t d = 0; d < n; ++d) {
     const double m = mass_[d / 3];
-    // The non-stiffness force that a_0 implies: M a_0 = F_0 - K u_0.
-    const double non_stiffness_force = m * a[d] + Ku[d];
+    // The non-stiffness force that a_0 implies: M a_0 = F_0 - K u_0 - g(u_0).
+    const double non_stiffness_force = m * a[d] + Ku[d] + (g ? g[d] : 0.0);
     vMv += m * v[d] * v[d];
     uKu += u[d] * Ku[d];
     aMa += m * a[d] * a[d];
@@ -432,7 +536,11 @@ void Stepper::reset_energy(const double* u, const double* v, const double* a, do
   twice_kinetic_ = vMv;
   twice_strain_ = uKu;
   acceleration_term_ = -dt * dt / 8.0 * aMa + dt * dt / 4.0 * Fa;
-  initial_energy_ = 0.5 * vMv + 0.5 * uKu + acceleration_term_;
+  initial_energy_ = 0.5 * vMv + 0.5 * uKu + acceleration_term_ + stored;
+  internal_work_ = 0.0;
+  internal_stored_ = stored;
+  internal_dissipation_ = 0.0;
+  dissipation_at_reset_ = dissipation;
   external_power_ = external_power;
   damping_power_ = damping_power;
   external_work_ = 0.0;
@@ -453,12 +561,19 @@ EnergyReport Stepper::energy() const {
   report.strain = 0.5 * twice_strain_;
   report.total = report.kinetic + report.strain + acceleration_term_;
   report.initial = initial_energy_;
+  if (!components_.empty()) {
+    report.has_internal = true;
+    report.internal_stored = internal_stored_;
+    report.internal_dissipation = internal_dissipation_;
+    report.internal_work = internal_work_;
+    report.total += internal_stored_;
+  }
   report.external_work = external_work_;
   report.damping_work = damping_work_;
   report.contact_work = contact_work_;
   report.friction_dissipation = friction_dissipation_;
   report.balance = report.total - report.initial - report.external_work + report.damping_work -
-                   report.contact_work;
+                   report.contact_work + report.internal_dissipation;
   for (const auto& provider : providers_) report.provider_names.push_back(provider->name());
   report.provider_work = provider_work_;
   return report;

@@ -1,5 +1,5 @@
 // Explicit central-difference time stepping in velocity-Verlet form with implicit per-node
-// damping, force providers and an exact discrete energy balance (DESIGN sec. 3).
+// damping, force providers and an exact discrete energy balance (docs/method.md section 4).
 #pragma once
 
 #include <cstdint>
@@ -10,6 +10,7 @@
 #include "bsr.hpp"
 #include "contact.hpp"
 #include "force_provider.hpp"
+#include "internal_force.hpp"
 #include "symmetric_bsr.hpp"
 
 namespace cavern {
@@ -28,17 +29,23 @@ struct StepperParameters {
 constexpr std::int64_t kMinRowsForThreads = 4096;
 
 /// Energy terms of the current state (J). balance = total - initial - external_work +
-/// damping_work - contact_work is zero to round-off for a linear problem with symmetric K.
+/// damping_work - contact_work + internal_dissipation is zero to round-off for a linear problem
+/// with symmetric K, and with internal-force components whose laws close their own account
+/// (materials/material_law.hpp).
 struct EnergyReport {
   double kinetic = 0.0;        // 1/2 v.Mv
   double strain = 0.0;         // 1/2 u.Ku
-  double total = 0.0;          // H_n
-  double initial = 0.0;        // H_0
+  double total = 0.0;          // H_n (+ internal_stored with components)
+  double initial = 0.0;        // H_0 (+ internal_stored at the reset)
   double external_work = 0.0;  // trapezoid integral of f_ext . v
   double damping_work = 0.0;   // trapezoid integral of d . v (dissipated)
   double contact_work =
       0.0;  // trapezoid integral of sum_pairs R.(v_i - v_j) (work done on the mesh)
   double friction_dissipation = 0.0;  // sum over slipping steps of T.(slip increment), >= 0
+  bool has_internal = false;          // internal-force components present
+  double internal_stored = 0.0;       // sum of the components' stored energy Psi_n
+  double internal_dissipation = 0.0;  // their dissipation since the reset
+  double internal_work = 0.0;         // W_int = sum 1/2 (g_n + g_{n+1}).(u_{n+1} - u_n)
   double balance = 0.0;
   std::vector<std::string> provider_names;
   std::vector<double> provider_work;  // each provider's share of external_work
@@ -61,6 +68,26 @@ struct EnergyReport {
 /// updates their v_{n+1}, a_{n+1}; R is then one more non-stiffness force in F (H_n and the
 /// trapezoid work contact_work), and the pass-B energy sums of the pair nodes are corrected by
 /// the difference of their contributions after and before the correction.
+/// Internal-force components (optional, internal_force.hpp; none: not one extra operation per
+/// node): g(u) = sum_components f_int(u) joins the stiffness,
+///     r = f - K (u_{n+1} + beta v_{n+1/2}) - g(u_{n+1}) - beta K0 v_{n+1/2},
+/// each component computing its trial state at u_{n+1} after pass A and committing it after
+/// the step; K0 is the components' initial elastic stiffness (the damping their cells would
+/// get in the matrix), a damping force in d. With G = K u + g, the leapfrog gives for any g
+/// (no symmetry or linearity needed)
+///   K_n = 1/2 v_n.M v_n - dt^2/8 a_n.M a_n = 1/2 v_{n+1/2}.M v_{n-1/2},
+///   K_{n+1} - K_n + 1/2 (G_n + G_{n+1}).(u_{n+1} - u_n) = dt/2 (F_n + F_{n+1}).v_{n+1/2}
+///     = dt/2 (F_n.v_n + F_{n+1}.v_{n+1}) - dt^2/4 (F_{n+1}.a_{n+1} - F_n.a_n).
+/// The K part of the G term is 1/2 u.Ku |_n^{n+1} exactly; the g part is the internal work by
+/// the trapezoid rule in displacement,
+///     W_int += 1/2 (g_n + g_{n+1}).(u_{n+1} - u_n) = dt/2 (g_n + g_{n+1}).v_{n+1/2}
+/// (g_n.v_{n+1/2} summed in pass A, g_{n+1}.v_{n+1/2} after the components), so
+/// H_n + W_int - W_ext + W_damp - W_contact is constant to round-off. Per point W_int is the
+/// trapezoid sum of (sigma - sigma0) : d eps; the balance reported uses the laws' stored energy
+/// Psi and dissipation D instead,
+///     balance = H_n + Psi_n - (H_0 + Psi_0) - W_ext + W_damp - W_contact + D,
+/// which is round-off when Psi_n - Psi_0 + D = W_int (elastic laws, and the rules of
+/// materials/material_law.hpp) and otherwise shows the law's own energy error.
 /// The stiffness, mass and providers are borrowed; u, v, a are modified in place.
 class Stepper {
  public:
@@ -84,6 +111,11 @@ class Stepper {
   /// Adds a force provider (shared: the caller may keep and query it).
   void add_provider(std::shared_ptr<ForceProvider> provider);
 
+  /// Adds an internal-force component (shared: the caller may keep and query it). Its cells
+  /// must not be in the stiffness matrix. The energy account restarts at the next run() unless
+  /// reset_energy is called after this. Throws std::invalid_argument for a node outside the model.
+  void add_internal_force(std::shared_ptr<InternalForceComponent> component);
+
   /// Attaches the interlayer contact pairs (shared). Throws std::invalid_argument for a pair node
   /// outside the model, a pair joining a node to itself, or a second ContactPairs.
   void set_contact(std::shared_ptr<ContactPairs> contact);
@@ -93,8 +125,9 @@ class Stepper {
   double run(double* u, double* v, double* a, std::int64_t n_steps, double t0);
 
   /// Sets H_0 from the state (u, v, a) at t0 and zeroes the accumulated work. H_0 uses
-  /// F_0 = M a_0 + K u_0 (exact for any a_0); the damping power at t0 is (f_ext(t0) - F_0).v_0,
-  /// which is the damping force's power whenever a_0 came from this scheme.
+  /// F_0 = M a_0 + K u_0 + g(u_0) (exact for any a_0); the damping power at t0 is
+  /// (f_ext(t0) - F_0).v_0, which is the damping force's power whenever a_0 came from this
+  /// scheme. Components compute g(u_0) and Psi_0 without committing (their state is unchanged).
   void reset_energy(const double* u, const double* v, const double* a, double t0);
 
   EnergyReport energy() const;
@@ -104,8 +137,18 @@ class Stepper {
   std::int64_t n_dofs() const { return 3 * stiffness_.n_block_rows; }
 
  private:
-  template <bool kStiffnessDamping, bool kSymmetric>
+  template <bool kStiffnessDamping, bool kSymmetric, bool kInternal>
   void pass_b(double* u, double* v, double* a);
+  template <bool kInternal>
+  void dispatch_pass_b(double* u, double* v, double* a);
+  // Pass A with components: also returns g_n.v_{n+1/2}, zeroes g for the next compute and,
+  // with beta, fills internal_damping_ with the components' beta K0 v_{n+1/2}.
+  double pass_a_with_internal(double* u, double* v, const double* a);
+  // One step's components: compute g(u_{n+1}) into internal_force_ (before pass B); returns
+  // their stored energy.
+  double compute_internal_forces(const double* u);
+  // g.v with g = internal_force_.
+  double internal_power(const double* v) const;
   void accumulate_work(const double* v);
   void contact_post_pass(double t, const double* u, double* v, double* a);
   ImplicitNodeOperators implicit_operators() const;
@@ -134,6 +177,9 @@ class Stepper {
 
   std::vector<std::shared_ptr<ForceProvider>> providers_;
   std::shared_ptr<ContactPairs> contact_;  // null: no contact, no cost
+  std::vector<std::shared_ptr<InternalForceComponent>> components_;  // empty: no cost
+  std::vector<double> internal_force_;  // g (3 n_nodes) of the last compute, with components
+  std::vector<double> internal_damping_;  // beta K0 v_{n+1/2} of the components, when beta != 0
   std::vector<double> contact_scratch_;    // (unique pair nodes, 6): v, a before the correction
 
   // Scratch, allocated once: external forces (zeroed again by pass B as it reads them) and,
@@ -154,6 +200,11 @@ class Stepper {
   double contact_work_ = 0.0;
   double contact_power_ = 0.0;  // sum_pairs R.(v_i - v_j) at the current step
   double friction_dissipation_ = 0.0;
+  double internal_work_ = 0.0;
+  double internal_power_ = 0.0;  // g_{n+1}.v_{n+1/2} of the current step
+  double internal_stored_ = 0.0;       // Psi_n
+  double internal_dissipation_ = 0.0;  // D since the reset
+  double dissipation_at_reset_ = 0.0;  // sum of the components' dissipation() at the reset
   std::vector<double> provider_work_;
   std::vector<double> provider_power_;
 };

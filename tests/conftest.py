@@ -2,6 +2,7 @@
 import numpy as np
 
 ROUNDOFF = 1e-10  # relative agreement expected between two evaluations of the same arithmetic
+EXACT = 1e-12  # relative agreement of two arrangements of the same sums over a few hundred steps
 
 
 def rel_error(a, b):

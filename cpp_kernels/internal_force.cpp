@@ -1,0 +1,146 @@
+#include "internal_force.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "materials/linear_elastic.hpp"
+
+namespace cavern {
+
+HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometry,
+                                               const ElementOptions& options,
+                                               const double* initial_stress)
+    : geometry_(geometry), options_(options) {
+  const std::int64_t n_cells = geometry.n_cells, n_points = geometry.n_points, k = geometry.n_basis;
+  if (k != 8 && k != 27)
+    throw std::invalid_argument("cell_nodes: " + std::to_string(k) +
+                                " nodes per cell; hexahedra have 8 (Q1) or 27 (Q2)");
+  if (n_cells < 0 || (n_cells > 0 && n_points < 1))
+    throw std::invalid_argument("weights: need at least one quadrature point per cell");
+  for (std::int64_t j = 0; j < n_cells * k; ++j)
+    if (geometry.cell_nodes[j] < 0)
+      throw std::invalid_argument("cell_nodes[" + std::to_string(j / k) + ", " +
+                                  std::to_string(j % k) +
+                                  "] = " + std::to_string(geometry.cell_nodes[j]) + " is negative");
+  for (std::int64_t j = 0; j < n_cells * n_points * k * 3; ++j)
+    if (!std::isfinite(geometry.gradients[j]))
+      throw std::invalid_argument("gradients: entry " + std::to_string(j) + " is not finite");
+  characteristic_length_.assign(n_cells, 0.0);
+  for (std::int64_t cell = 0; cell < n_cells; ++cell) {
+    double volume = 0.0;
+    for (std::int64_t q = 0; q < n_points; ++q) {
+      const double w = geometry.weights[cell * n_points + q];
+      if (!(std::isfinite(w) && w > 0.0))
+        throw std::invalid_argument("weights[" + std::to_string(cell) + ", " + std::to_string(q) +
+                                    "] = " + std::to_string(w) +
+                                    " must be finite and > 0 (weight x det J of a valid cell)");
+      volume += w;
+    }
+    characteristic_length_[cell] = std::cbrt(volume);
+  }
+  if (initial_stress) {
+    initial_stress_.assign(initial_stress, initial_stress + 6 * n_cells * n_points);
+    for (std::size_t j = 0; j < initial_stress_.size(); ++j)
+      if (!std::isfinite(initial_stress_[j]))
+        throw std::invalid_argument("initial_stress: entry " + std::to_string(j) +
+                                    " is not finite");
+  }
+  element_force_.assign(3 * n_cells * k, 0.0);
+  cell_energy_.assign(2 * n_cells, 0.0);
+
+  // Node -> slots (cell * k + a) by a counting sort over the slots in increasing order, so each
+  // node's slots are increasing and the gather sums in a fixed order.
+  const std::int64_t n_slots = n_cells * k;
+  std::int32_t max_node = -1;
+  for (std::int64_t j = 0; j < n_slots; ++j) max_node = std::max(max_node, geometry.cell_nodes[j]);
+  std::vector<std::int64_t> count(static_cast<std::size_t>(max_node) + 1, 0);
+  for (std::int64_t j = 0; j < n_slots; ++j) ++count[geometry.cell_nodes[j]];
+  std::vector<std::int64_t> index_of_node(count.size(), -1);
+  for (std::size_t node = 0; node < count.size(); ++node)
+    if (count[node]) {
+      index_of_node[node] = static_cast<std::int64_t>(unique_nodes_.size());
+      unique_nodes_.push_back(static_cast<std::int32_t>(node));
+    }
+  node_ptr_.assign(unique_nodes_.size() + 1, 0);
+  for (std::size_t m = 0; m < unique_nodes_.size(); ++m)
+    node_ptr_[m + 1] = node_ptr_[m] + count[unique_nodes_[m]];
+  node_slots_.resize(n_slots);
+  std::vector<std::int64_t> next(node_ptr_.begin(), node_ptr_.end() - 1);
+  for (std::int64_t j = 0; j < n_slots; ++j)
+    node_slots_[next[index_of_node[geometry.cell_nodes[j]]]++] = j;
+}
+
+void HexahedronElementsBase::commit() {
+  if (!trial_ready_)
+    throw std::logic_error(name() + ": commit() without a compute() since the last commit()");
+  swap_states();
+  stored_energy_ = trial_energy_.stored;
+  dissipation_ += trial_energy_.dissipation_increment;
+  trial_ready_ = false;
+}
+
+void HexahedronElementsBase::check_nodes(std::int64_t n_nodes) const {
+  if (!unique_nodes_.empty() && unique_nodes_.back() >= n_nodes)
+    throw std::invalid_argument(name() + ": cell node " + std::to_string(unique_nodes_.back()) +
+                                " is not a node in [0, " + std::to_string(n_nodes) + ")");
+}
+
+std::int64_t HexahedronElementsBase::owned_bytes() const {
+  return static_cast<std::int64_t>(sizeof(double) *
+                                       (initial_stress_.size() + characteristic_length_.size() +
+                                        element_force_.size() + cell_energy_.size()) +
+                                   sizeof(std::int32_t) * unique_nodes_.size() +
+                                   sizeof(std::int64_t) * (node_ptr_.size() + node_slots_.size()));
+}
+
+void HexahedronElementsBase::add_element_forces(double* out_force) const {
+  const std::int64_t n_unique = static_cast<std::int64_t>(unique_nodes_.size());
+  const double* element_force = element_force_.data();
+#pragma omp parallel for schedule(static) if (threaded())
+  for (std::int64_t m = 0; m < n_unique; ++m) {
+    double f0 = 0.0, f1 = 0.0, f2 = 0.0;
+    for (std::int64_t j = node_ptr_[m]; j < node_ptr_[m + 1]; ++j) {
+      const double* slot = element_force + 3 * node_slots_[j];
+      f0 += slot[0];
+      f1 += slot[1];
+      f2 += slot[2];
+    }
+    double* target = out_force + 3 * static_cast<std::int64_t>(unique_nodes_[m]);
+    target[0] += f0;
+    target[1] += f1;
+    target[2] += f2;
+  }
+}
+
+InternalEnergy HexahedronElementsBase::gather(double* out_force) {
+  add_element_forces(out_force);
+  InternalEnergy energy;
+  for (std::int64_t cell = 0; cell < geometry_.n_cells; ++cell) {
+    energy.stored += cell_energy_[2 * cell];
+    energy.dissipation_increment += cell_energy_[2 * cell + 1];
+  }
+  trial_energy_ = energy;
+  trial_ready_ = true;
+  return energy;
+}
+
+std::shared_ptr<HexahedronElementsBase> make_hexahedron_elements(const std::string& law,
+                                                                 const ParameterMap& parameters,
+                                                                 const HexahedronGeometry& geometry,
+                                                                 const ElementOptions& options,
+                                                                 const double* initial_stress) {
+  // One line per law (materials/*.hpp).
+  if (law == LinearElastic::kName)
+    return std::make_shared<HexahedronElements<LinearElastic>>(
+        geometry, LinearElastic::parameters_from(parameters), options, initial_stress);
+  std::string known;
+  for (const std::string& name : known_laws()) known += (known.empty() ? "" : ", ") + name;
+  throw std::invalid_argument("law '" + law + "' is not known; known laws: " + known);
+}
+
+std::vector<std::string> known_laws() { return {LinearElastic::kName}; }
+
+}  // namespace cavern

@@ -1,0 +1,339 @@
+// Internal forces computed element by element, for the regions whose material is not linear
+// elastic (docs/ARCHITECTURE.md "Kernel"). The linear regions stay in the stiffness matrix; the
+// stepper adds the forces of these components to its block-CSR product.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "materials/material_law.hpp"
+
+namespace cavern {
+
+/// Energies (J) of a component's trial state.
+struct InternalEnergy {
+  double stored = 0.0;                 // sum_points w psi at the trial state
+  double dissipation_increment = 0.0;  // sum_points w delta from the committed to the trial state
+};
+
+/// A set of cells whose internal force f_int(u) the stepper adds to K u.
+///
+/// compute() evaluates a trial state from the committed one and never changes the committed
+/// state, so it may be called any number of times (the stepper calls it once per step and once
+/// in reset_energy); commit() accepts the last trial. The stepper's balance uses stored_energy()
+/// and dissipation() (stepper.hpp: with the internal work W_int it closes the account exactly).
+class InternalForceComponent {
+ public:
+  virtual ~InternalForceComponent() = default;
+
+  /// Adds f_int(u) = sum_cells sum_points w B^T (sigma_trial - sigma0) to out_force (3 n_nodes,
+  /// dof = 3 node + component), computing the trial state at the displacement u (3 n_nodes)
+  /// from the committed state. Returns the trial energies. May run OpenMP loops itself; the
+  /// result does not depend on the number of threads.
+  virtual InternalEnergy compute(const double* u, double* out_force) = 0;
+
+  /// Makes the trial state of the last compute() the committed state (stored energy and
+  /// accumulated dissipation included). Throws std::logic_error without a compute() since the
+  /// last commit().
+  virtual void commit() = 0;
+
+  /// Adds beta K0 v to out_force (3 n_nodes): the stiffness-proportional Rayleigh damping force
+  /// of these cells, K0 their initial elastic stiffness (the cells are not in the matrix that
+  /// the stepper damps). A damping force: no state, in the stepper's damping work.
+  virtual void add_stiffness_damping(const double* v, double beta, double* out_force) = 0;
+
+  /// Stored energy of the committed state (J).
+  virtual double stored_energy() const = 0;
+
+  /// Dissipation accumulated over all commits since construction (J), >= 0 for a sound law.
+  virtual double dissipation() const = 0;
+
+  /// Throws std::invalid_argument naming a node outside [0, n_nodes).
+  virtual void check_nodes(std::int64_t n_nodes) const = 0;
+
+  /// Short name used in messages.
+  virtual std::string name() const = 0;
+};
+
+/// Borrowed element arrays of hexahedral cells (Q1: k = 8, Q2: k = 27), from pyfem/elements.py.
+struct HexahedronGeometry {
+  std::int64_t n_cells = 0;
+  std::int64_t n_points = 0;                 // q, quadrature points per cell
+  std::int64_t n_basis = 0;                  // k, nodes per cell
+  const std::int32_t* cell_nodes = nullptr;  // (c, k) node of each basis function
+  const double* gradients = nullptr;         // (c, q, k, 3) dphi/dx at the points (1/m)
+  const double* weights = nullptr;           // (c, q) quadrature weight x det J (m^3), > 0
+};
+
+/// Options of the element loop.
+struct ElementOptions {
+  /// Mean dilatation (B-bar) against volumetric locking of Q1 with plastic flow: the
+  /// volumetric strain at every point is replaced by its cell mean,
+  ///   eps_bar = eps + 1/3 (theta_bar - tr eps) I,  theta_bar = sum_q w_q tr eps_q / sum_q w_q,
+  /// and the force is its exact derivative, f_a = sum_q w_q [s grad phi_a + 1/3 tr(s)
+  /// (mean grad phi_a - grad phi_a)], s = sigma - sigma0. Exact for linear displacements.
+  bool mean_dilatation = false;
+  /// Below this many cells the loop runs on one thread (a parallel region costs more).
+  std::int64_t min_cells_for_threads = 512;
+};
+
+/// The law-independent part of the hexahedron loop: geometry, the node gather, energies.
+///
+/// Threading: each cell writes its element force to its own slot of an owned buffer (c, k, 3);
+/// a second loop gives each node the sum of its slots in a fixed order (cell, then local
+/// index). Nothing is summed by atomics or per-thread buffers, so the force, the stress and
+/// the energies are the same bits for any number of threads.
+class HexahedronElementsBase : public InternalForceComponent {
+ public:
+  /// Throws std::invalid_argument for k not in {8, 27}, a negative node, a non-finite gradient
+  /// or a weight <= 0, or an initial_stress that is not finite. initial_stress (c, q, 6) is
+  /// copied (null: zero).
+  HexahedronElementsBase(const HexahedronGeometry& geometry, const ElementOptions& options,
+                         const double* initial_stress);
+
+  void commit() override;
+  double stored_energy() const override { return stored_energy_; }
+  double dissipation() const override { return dissipation_; }
+  void check_nodes(std::int64_t n_nodes) const override;
+
+  std::int64_t n_cells() const { return geometry_.n_cells; }
+  std::int64_t n_points() const { return geometry_.n_points; }
+  std::int64_t n_basis() const { return geometry_.n_basis; }
+  const ElementOptions& options() const { return options_; }
+  /// Cube root of each cell's volume sum_q w_q (m), the law's characteristic length.
+  const std::vector<double>& characteristic_length() const { return characteristic_length_; }
+  /// Distinct nodes of the cells, sorted.
+  const std::vector<std::int32_t>& nodes() const { return unique_nodes_; }
+
+  /// Committed total stress (c, q, 6) into out (Pa, order of material_law.hpp).
+  virtual void stress(double* out) const = 0;
+  /// Bytes of the state, buffers and adjacency this component owns (geometry is borrowed).
+  virtual std::int64_t owned_bytes() const;
+
+ protected:
+  // Adds the element forces of the last cell loop to out_force, node by node, in a fixed order.
+  void add_element_forces(double* out_force) const;
+  // add_element_forces, then sums the per-cell energies in cell order and marks the trial
+  // ready for commit().
+  InternalEnergy gather(double* out_force);
+  // Swaps the committed and trial state arrays of the law.
+  virtual void swap_states() = 0;
+  const double* initial_stress_of(std::int64_t cell, std::int64_t point) const {
+    return initial_stress_.empty()
+               ? kZeroStress
+               : initial_stress_.data() + 6 * (cell * geometry_.n_points + point);
+  }
+  bool threaded() const { return geometry_.n_cells >= options_.min_cells_for_threads; }
+
+  static constexpr double kZeroStress[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+  static constexpr int kMaxBasis = 27;
+
+  HexahedronGeometry geometry_;
+  ElementOptions options_;
+  std::vector<double> initial_stress_;         // (c, q, 6) or empty
+  std::vector<double> characteristic_length_;  // (c)
+  std::vector<double> element_force_;          // (c, k, 3) of the last cell loop
+  std::vector<double> cell_energy_;            // (c, 2): stored, dissipation increment
+  std::vector<std::int32_t> unique_nodes_;     // sorted
+  std::vector<std::int64_t> node_ptr_;         // (unique + 1) slots of each node
+  std::vector<std::int64_t> node_slots_;       // cell * k + local index, increasing per node
+  bool trial_ready_ = false;
+  InternalEnergy trial_energy_;
+  double stored_energy_ = 0.0;
+  double dissipation_ = 0.0;
+};
+
+/// Hexahedral cells of one region with the material law `Law` (material_law.hpp) at every
+/// quadrature point:
+///   eps_q = sym(sum_a u_a (x) grad phi_a(x_q)) (engineering shear),
+///   (sigma_q, psi_q, delta_q) = Law::evaluate(committed_q, eps_q),
+///   f_a = sum_q w_q (sigma_q - sigma0_q) grad phi_a(x_q)   (+ the mean-dilatation term).
+/// With LinearElastic this is K_cells u of the same quadrature, to round-off.
+template <class Law>
+class HexahedronElements final : public HexahedronElementsBase {
+ public:
+  HexahedronElements(const HexahedronGeometry& geometry, const typename Law::Parameters& parameters,
+                     const ElementOptions& options, const double* initial_stress)
+      : HexahedronElementsBase(geometry, options, initial_stress),
+        parameters_(parameters),
+        moduli_(Law::elastic_moduli(parameters)) {
+    const std::int64_t n = geometry.n_cells * geometry.n_points;
+    committed_.resize(n);
+    for (std::int64_t cell = 0; cell < geometry.n_cells; ++cell)
+      for (std::int64_t q = 0; q < geometry.n_points; ++q)
+        committed_[cell * geometry.n_points + q] =
+            Law::initial_state(parameters_, initial_stress_of(cell, q));
+    trial_ = committed_;
+  }
+
+  InternalEnergy compute(const double* u, double* out_force) override {
+    if (geometry_.n_basis == 8)
+      cell_loop<8>(u, false);
+    else
+      cell_loop<27>(u, false);
+    return gather(out_force);
+  }
+
+  void add_stiffness_damping(const double* v, double beta, double* out_force) override {
+    beta_ = beta;
+    if (geometry_.n_basis == 8)
+      cell_loop<8>(v, true);
+    else
+      cell_loop<27>(v, true);
+    add_element_forces(out_force);
+  }
+
+  void stress(double* out) const override {
+    const std::int64_t n = geometry_.n_cells * geometry_.n_points;
+    for (std::int64_t p = 0; p < n; ++p)
+      for (int c = 0; c < 6; ++c) out[6 * p + c] = committed_[p].stress[c];
+  }
+
+  std::int64_t owned_bytes() const override {
+    return HexahedronElementsBase::owned_bytes() +
+           static_cast<std::int64_t>(2 * committed_.size() * sizeof(typename Law::State));
+  }
+
+  std::string name() const override { return std::string("hexahedra/") + Law::kName; }
+  const typename Law::Parameters& parameters() const { return parameters_; }
+  const std::vector<typename Law::State>& committed_state() const { return committed_; }
+
+ private:
+  void swap_states() override { std::swap(committed_, trial_); }
+
+  template <int kBasis>
+  void cell_loop(const double* x, bool damping) {
+    const std::int64_t n_cells = geometry_.n_cells;
+#pragma omp parallel for schedule(static) if (threaded())
+    for (std::int64_t cell = 0; cell < n_cells; ++cell) {
+      if (damping)
+        cell_damping<kBasis>(cell, x);
+      else
+        cell_force<kBasis>(cell, x);
+    }
+  }
+
+  // Trial states, energies and element force of one cell at the displacement u.
+  template <int kBasis>
+  void cell_force(std::int64_t cell, const double* u) {
+    double stored = 0.0, dissipation = 0.0;
+    integrate_cell<kBasis>(cell, u, [&](std::int64_t q, const double* strain, double* s) {
+      const std::int64_t p = cell * geometry_.n_points + q;
+      const double* sigma0 = initial_stress_of(cell, q);
+      const PointStrain point{strain, sigma0, characteristic_length_[cell]};
+      const PointEnergy energy = Law::evaluate(parameters_, committed_[p], point, trial_[p]);
+      const double w = geometry_.weights[p];
+      stored += w * energy.stored;
+      dissipation += w * energy.dissipation;
+      for (int c = 0; c < 6; ++c) s[c] = trial_[p].stress[c] - sigma0[c];
+    });
+    cell_energy_[2 * cell] = stored;
+    cell_energy_[2 * cell + 1] = dissipation;
+  }
+
+  // Element force beta C0 : eps(v) of one cell (C0 the law's initial elastic moduli).
+  template <int kBasis>
+  void cell_damping(std::int64_t cell, const double* v) {
+    const double beta_lambda = beta_ * moduli_.lame_lambda;
+    const double beta_G = beta_ * moduli_.shear_modulus;
+    integrate_cell<kBasis>(cell, v, [&](std::int64_t, const double* strain, double* s) {
+      const double trace_term = beta_lambda * (strain[0] + strain[1] + strain[2]);
+      for (int c = 0; c < 3; ++c) s[c] = trace_term + 2.0 * beta_G * strain[c];
+      for (int c = 3; c < 6; ++c) s[c] = beta_G * strain[c];  // engineering shear
+    });
+  }
+
+  // f_a = sum_q w_q [s_q grad phi_a + (mean dilatation) 1/3 tr(s_q) (mean grad phi_a -
+  // grad phi_a)] into element_force_ of the cell, with s_q = stress_of(q, eps_q) (Voigt).
+  template <int kBasis, class StressOf>
+  void integrate_cell(std::int64_t cell, const double* x, StressOf&& stress_of) {
+    const std::int64_t n_points = geometry_.n_points;
+    const std::int32_t* nodes = geometry_.cell_nodes + cell * kBasis;
+    const double* cell_gradients = geometry_.gradients + cell * n_points * kBasis * 3;
+    const double* weights = geometry_.weights + cell * n_points;
+    double x_cell[kBasis][3];
+    for (int a = 0; a < kBasis; ++a)
+      for (int i = 0; i < 3; ++i) x_cell[a][i] = x[3 * static_cast<std::int64_t>(nodes[a]) + i];
+
+    // Mean dilatation: cell means of grad phi_a and of tr eps.
+    const bool mean_dilatation = options_.mean_dilatation;
+    double mean_gradient[kBasis][3];
+    double mean_trace = 0.0;
+    if (mean_dilatation) {
+      double volume = 0.0;
+      for (int a = 0; a < kBasis; ++a)
+        for (int i = 0; i < 3; ++i) mean_gradient[a][i] = 0.0;
+      for (std::int64_t q = 0; q < n_points; ++q) {
+        const double* G = cell_gradients + q * kBasis * 3;
+        volume += weights[q];
+        for (int a = 0; a < kBasis; ++a)
+          for (int i = 0; i < 3; ++i) mean_gradient[a][i] += weights[q] * G[3 * a + i];
+      }
+      for (int a = 0; a < kBasis; ++a)
+        for (int i = 0; i < 3; ++i) {
+          mean_gradient[a][i] /= volume;
+          mean_trace += x_cell[a][i] * mean_gradient[a][i];
+        }
+    }
+
+    double force[kBasis][3] = {};
+    for (std::int64_t q = 0; q < n_points; ++q) {
+      const double* G = cell_gradients + q * kBasis * 3;
+      // H_il = dx_i/dx_l = sum_a x_a,i dphi_a/dx_l
+      double H[3][3] = {};
+      for (int a = 0; a < kBasis; ++a)
+        for (int i = 0; i < 3; ++i)
+          for (int l = 0; l < 3; ++l) H[i][l] += x_cell[a][i] * G[3 * a + l];
+      // Engineering shear (material_law.hpp).
+      double strain[6] = {H[0][0],           H[1][1],           H[2][2],
+                          H[0][1] + H[1][0], H[1][2] + H[2][1], H[0][2] + H[2][0]};
+      if (mean_dilatation) {
+        const double correction = (mean_trace - (H[0][0] + H[1][1] + H[2][2])) / 3.0;
+        for (int c = 0; c < 3; ++c) strain[c] += correction;
+      }
+      double voigt[6];
+      stress_of(q, strain, voigt);
+      const double w = weights[q];
+      double s[3][3];
+      s[0][0] = w * voigt[kXX];
+      s[1][1] = w * voigt[kYY];
+      s[2][2] = w * voigt[kZZ];
+      s[0][1] = s[1][0] = w * voigt[kXY];
+      s[1][2] = s[2][1] = w * voigt[kYZ];
+      s[0][2] = s[2][0] = w * voigt[kXZ];
+      for (int a = 0; a < kBasis; ++a)
+        for (int i = 0; i < 3; ++i)
+          force[a][i] += s[i][0] * G[3 * a] + s[i][1] * G[3 * a + 1] + s[i][2] * G[3 * a + 2];
+      if (mean_dilatation) {
+        const double third_trace = (s[0][0] + s[1][1] + s[2][2]) / 3.0;
+        for (int a = 0; a < kBasis; ++a)
+          for (int i = 0; i < 3; ++i)
+            force[a][i] += third_trace * (mean_gradient[a][i] - G[3 * a + i]);
+      }
+    }
+    double* out = element_force_.data() + cell * kBasis * 3;
+    for (int a = 0; a < kBasis; ++a)
+      for (int i = 0; i < 3; ++i) out[3 * a + i] = force[a][i];
+  }
+
+  typename Law::Parameters parameters_;
+  ElasticModuli moduli_;  // initial elastic moduli (stiffness-proportional damping)
+  double beta_ = 0.0;
+  std::vector<typename Law::State> committed_, trial_;  // (c, q)
+};
+
+/// The component for a law given by name (LinearElastic::kName, ...) and its named parameters.
+/// Throws std::invalid_argument naming an unknown law (and the known ones) or a bad parameter.
+std::shared_ptr<HexahedronElementsBase> make_hexahedron_elements(const std::string& law,
+                                                                 const ParameterMap& parameters,
+                                                                 const HexahedronGeometry& geometry,
+                                                                 const ElementOptions& options,
+                                                                 const double* initial_stress);
+
+/// Names of the laws make_hexahedron_elements knows.
+std::vector<std::string> known_laws();
+
+}  // namespace cavern

@@ -1,0 +1,260 @@
+"""Internal forces computed element by element (pyfem.elements, kernel HexahedronElements).
+
+- exactness: a layer taken out of the stiffness matrix and run through the element loop with
+  the linear elastic law equals the all-matrix run to round-off (Q1 and Q2, seismic input,
+  boundary dashpots and springs, mass- and stiffness-proportional damping);
+- the stress held at the quadrature points is C : eps(u) of the displacement;
+- energy: the balance with the component's stored energy closes to round-off (also with mean
+  dilatation, and beside sliding contact pairs), and the scheme's internal work equals the
+  stored energy;
+- threads: 1 and 2 threads give the same bits;
+- zero cost when off: a component with no cells leaves the run bitwise unchanged;
+- reset_energy computes without committing: a reset in the middle leaves the run bitwise unchanged.
+"""
+import dataclasses
+import pathlib
+import tomllib
+
+import numpy as np
+import pytest
+
+from conftest import EXACT, rel_error
+from pyfem import _kernels
+from pyfem.elements import element_arrays, nonlinear_component, quadrature_rule, region_cells
+from pyfem.operators import lame_parameters
+from pyfem.scene import parse_scene
+from pyfem.solver import add_block_diagonal, boundary_operators, make_stepper, prepare
+
+CONTACT_WORKFLOW = pathlib.Path(__file__).resolve().parents[1] / "workflows" / "scenes" / "contact_two_layer_sv.toml"
+UPPER = {"E": 2.0e9, "nu": 0.3, "rho": 2400.0}
+LOWER = {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}
+
+
+def two_layer_scene(order: int):
+    """A 40 x 20 x 40 m box of two layers under a vertical SV Ricker pulse, viscoelastic faces,
+    Rayleigh damping with both coefficients."""
+    return parse_scene({
+        "title": f"two layers Q{order}",
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [40.0, 20.0, 40.0], "h": 5.0, "order": order,
+                 "layers": [{"material": "lower", "thickness": 20.0}, {"material": "upper", "thickness": 20.0}]},
+        "materials": {"lower": LOWER, "upper": UPPER},
+        "time": {"duration": 0.3},
+        "wave": {"type": "SV", "angle": 0.0, "surface": 60.0, "medium": "lower",
+                 "motion": {"ricker": {"f0": 8.0, "amplitude": 1.0e-3}}},
+        "boundary": {"type": "viscoelastic"},
+        "damping": {"alpha": 0.5, "beta": 2.0e-5},
+        "output": {"interval": 0.01, "xdmf_interval": 0.0},
+    })
+
+
+_SIMULATIONS = {}
+
+
+def simulation_of(order):
+    """prepare() of the two-layer scene, once per order."""
+    if order not in _SIMULATIONS:
+        _SIMULATIONS[order] = prepare(two_layer_scene(order))
+    return _SIMULATIONS[order]
+
+
+def split_stepper(simulation, regions=("upper",), **options):
+    """The kernel stepper with `regions` in the element loop and the other cells in the matrix."""
+    nonlinear = nonlinear_component(simulation.model, list(regions), **options)
+    spring_nodes, springs, *_ = boundary_operators(simulation.scene, simulation.model)
+    split = dataclasses.replace(simulation, stiffness=add_block_diagonal(nonlinear.stiffness, spring_nodes, springs))
+    stepper = make_stepper(split)
+    for component in nonlinear.components:
+        stepper.add_internal_force(component)
+    return stepper, nonlinear
+
+
+def history(stepper, n_dofs, chunks=6, steps=50):
+    """(u, v, a) after each chunk of steps from rest, and the last energy report."""
+    u, v, a = np.zeros(n_dofs), np.zeros(n_dofs), np.zeros(n_dofs)
+    stepper.reset_energy(u, v, a, 0.0)
+    t, samples = 0.0, []
+    for _ in range(chunks):
+        t = stepper.run(u, v, a, steps, t)
+        samples.append(np.concatenate([u, v, a]))
+    return np.array(samples), stepper.energy()
+
+
+def energy_scale(energy):
+    return max(abs(energy["total"]), abs(energy["external_work"]), abs(energy["damping_work"]))
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_element_loop_region_equals_the_all_matrix_run(order):
+    simulation = simulation_of(order)
+    n = simulation.model.n_dofs
+    reference, reference_energy = history(make_stepper(simulation), n)
+    stepper, nonlinear = split_stepper(simulation)
+    split, energy = history(stepper, n)
+    cells = nonlinear.components[0].n_cells
+    assert 0 < cells < simulation.model.n_cells
+    assert nonlinear.stiffness.indices.size < simulation.model.stiffness.indices.size  # cells left the matrix
+    assert np.max(np.abs(reference[:, :n])) > 1e-6  # the wave is in the box
+    # Relative to the largest value of each field over the run: the pulse leaves through the
+    # faces, and round-off from its peak stays in the small field left behind.
+    checks = 0
+    for part in range(3):  # u, v, a
+        fields, fields_split = reference[:, part * n:(part + 1) * n], split[:, part * n:(part + 1) * n]
+        peak = np.max(np.linalg.norm(fields, axis=1))
+        assert np.max(np.linalg.norm(fields_split - fields, axis=1)) < EXACT * peak
+        checks += 1
+    assert checks == 3
+    # The energy terms split between the matrix and the component.
+    assert abs(energy["strain"] + energy["internal_stored"] - reference_energy["strain"]) < EXACT * reference_energy["strain"]
+    assert abs(energy["damping_work"] - reference_energy["damping_work"]) < EXACT * reference_energy["damping_work"]
+    assert energy["internal_stored"] > 1e-2 * reference_energy["strain"]  # the layer holds a share
+
+
+@pytest.mark.parametrize("order, mean_dilatation", [(1, False), (2, False), (1, True)])
+def test_energy_balance_closes_with_the_elastic_component(order, mean_dilatation):
+    simulation = simulation_of(order)
+    stepper, _ = split_stepper(simulation, mean_dilatation=mean_dilatation)
+    _, energy = history(stepper, simulation.model.n_dofs)
+    scale = energy_scale(energy)
+    assert energy["external_work"] > 1e-3 * scale and energy["damping_work"] > 1e-3 * scale
+    assert abs(energy["balance"]) < EXACT * scale, energy
+    # From rest Psi_0 = 0: the scheme's internal work is the stored energy, no dissipation.
+    assert abs(energy["internal_work"] - energy["internal_stored"]) < EXACT * scale
+    assert energy["internal_dissipation"] == 0.0
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_stress_at_the_quadrature_points_is_C_eps_of_the_displacement(order):
+    simulation = simulation_of(order)
+    stepper, nonlinear = split_stepper(simulation)
+    samples, _ = history(stepper, simulation.model.n_dofs, chunks=4)
+    u = samples[-1, :simulation.model.n_dofs]
+    arrays = nonlinear.arrays["upper"]
+    nodal = u.reshape(-1, 3)[arrays.cell_nodes]                                 # (c, k, 3)
+    gradient = np.einsum("cki,cqkl->cqil", nodal, arrays.gradients)             # du_i/dx_l
+    strain = 0.5 * (gradient + gradient.transpose(0, 1, 3, 2))
+    lame_lambda, shear_modulus = lame_parameters(UPPER["E"], UPPER["nu"])
+    stress = lame_lambda * np.trace(strain, axis1=2, axis2=3)[..., None, None] * np.eye(3) + 2 * shear_modulus * strain
+    expected = np.stack([stress[..., 0, 0], stress[..., 1, 1], stress[..., 2, 2],
+                         stress[..., 0, 1], stress[..., 1, 2], stress[..., 0, 2]], axis=-1)
+    held = nonlinear.components[0].stress()
+    assert held.shape == expected.shape == (len(arrays.cells), (order + 1) ** 3, 6)
+    assert np.abs(expected).max() > 1e3  # Pa: the wave strains the layer
+    assert rel_error(held, expected) < EXACT
+
+
+def test_element_arrays_integrate_the_region_volume_with_dolfinx_quadrature():
+    model = simulation_of(2).model
+    arrays = element_arrays(model.V, region_cells(model, "upper"))
+    assert arrays.weights.shape[1] == len(quadrature_rule(2)[1]) == 27
+    assert abs(arrays.weights.sum() - model.volume_of_region("upper")) < EXACT * arrays.weights.sum()
+    assert np.all(arrays.points[..., 2] >= 20.0 - 1e-9)  # the upper layer's points
+    # Partition of unity: the basis gradients sum to zero at every point.
+    assert np.abs(arrays.gradients.sum(axis=2)).max() < EXACT * np.abs(arrays.gradients).max()
+
+
+@pytest.mark.skipif(not hasattr(_kernels, "ContactPairs"), reason="kernel built without ContactPairs")
+def test_element_loop_beside_sliding_contact_equals_the_matrix_run_and_closes_the_balance():
+    # The contact correction reads the internal force of the pair nodes (F = M a + K u + g).
+    with open(CONTACT_WORKFLOW, "rb") as stream:
+        data = tomllib.load(stream)
+    data["mesh"]["order"] = 1
+    data["time"].update(dt=1.0e-3, duration=0.6)
+    data["contact"].update(cohesion=2.0e4, tensile_strength=2.0e4)
+    data["wave"]["motion"]["ricker"]["amplitude"] = 0.05
+    simulation = prepare(parse_scene(data, source="test", base_dir=CONTACT_WORKFLOW.parent))
+    n = simulation.model.n_dofs
+    reference, reference_energy = history(make_stepper(simulation), n, chunks=6, steps=100)
+    stepper, _ = split_stepper(simulation, regions=("mudstone",))
+    split, energy = history(stepper, n, chunks=6, steps=100)
+    assert energy["friction_dissipation"] > 1e-3 * energy_scale(energy)  # pairs slid
+    peak = np.max(np.linalg.norm(reference[:, :n], axis=1))
+    assert np.max(np.linalg.norm(split[:, :n] - reference[:, :n], axis=1)) < EXACT * peak
+    assert abs(energy["balance"]) < EXACT * energy_scale(energy)
+
+
+def test_one_and_two_threads_give_the_same_bits():
+    simulation = simulation_of(2)
+    previous = _kernels.max_threads()
+    runs = []
+    try:
+        for threads in (1, 2):
+            _kernels.set_num_threads(threads)
+            stepper, nonlinear = split_stepper(simulation, min_cells_for_threads=0)
+            samples, energy = history(stepper, simulation.model.n_dofs, chunks=2)
+            runs.append((samples, nonlinear.components[0].stress(), energy["internal_stored"]))
+    finally:
+        _kernels.set_num_threads(previous)
+    assert np.array_equal(runs[0][0], runs[1][0])
+    assert np.array_equal(runs[0][1], runs[1][1])
+    assert runs[0][2] == runs[1][2]
+
+
+def test_a_component_without_cells_leaves_the_run_bitwise_unchanged():
+    simulation = simulation_of(1)
+    n = simulation.model.n_dofs
+    reference, reference_energy = history(make_stepper(simulation), n)
+    stepper = make_stepper(simulation)
+    empty = _kernels.HexahedronElements(np.zeros((0, 8), dtype=np.int32), np.zeros((0, 8, 8, 3)), np.zeros((0, 8)),
+                                        "linear_elastic", {"lame_lambda": 1e9, "shear_modulus": 1e9})
+    stepper.add_internal_force(empty)
+    samples, energy = history(stepper, n)
+    assert np.array_equal(samples, reference)
+    assert energy["balance"] == reference_energy["balance"]
+    assert "internal_stored" in energy and "internal_stored" not in reference_energy
+
+
+def test_reset_energy_does_not_commit_the_component_state():
+    simulation = simulation_of(1)
+    n = simulation.model.n_dofs
+    reference, _ = history(split_stepper(simulation)[0], n, chunks=4)
+    stepper, nonlinear = split_stepper(simulation)
+    component = nonlinear.components[0]
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    stepper.reset_energy(u, v, a, 0.0)
+    t = 0.0
+    samples = []
+    for chunk in range(4):
+        t = stepper.run(u, v, a, 50, t)
+        samples.append(np.concatenate([u, v, a]))
+        if chunk == 1:
+            stress = component.stress()
+            dissipation, stored = component.dissipation(), component.stored_energy()
+            for _ in range(2):
+                stepper.reset_energy(u, v, a, t)
+            assert np.array_equal(component.stress(), stress)
+            assert (component.dissipation(), component.stored_energy()) == (dissipation, stored)
+            # A compute at another displacement is a trial only.
+            component.compute(2.0 * u, np.zeros(n))
+            assert np.array_equal(component.stress(), stress)
+            stepper.reset_energy(u, v, a, t)
+            energy = stepper.energy()
+            assert energy["balance"] == 0.0 and energy["internal_work"] == 0.0
+            assert energy["internal_stored"] == stored
+    assert np.array_equal(np.array(samples), reference)
+
+
+def test_bad_arguments_are_value_errors_naming_the_parameter():
+    nodes = np.zeros((2, 8), dtype=np.int32)
+    gradients, weights = np.zeros((2, 8, 8, 3)), np.ones((2, 8))
+    elastic = {"lame_lambda": 1e9, "shear_modulus": 1e9}
+    with pytest.raises(ValueError, match="weights"):
+        _kernels.HexahedronElements(nodes, gradients, np.ones((3, 8)), "linear_elastic", elastic)
+    with pytest.raises(ValueError, match="gradients"):
+        _kernels.HexahedronElements(nodes, np.zeros((2, 8, 8, 2)), weights, "linear_elastic", elastic)
+    with pytest.raises(ValueError, match="known laws: linear_elastic"):
+        _kernels.HexahedronElements(nodes, gradients, weights, "no_such_law", elastic)
+    with pytest.raises(ValueError, match="shear_modulus' missing"):
+        _kernels.HexahedronElements(nodes, gradients, weights, "linear_elastic", {"lame_lambda": 1e9})
+    with pytest.raises(ValueError, match="unknown parameter 'E'"):
+        _kernels.HexahedronElements(nodes, gradients, weights, "linear_elastic", {**elastic, "E": 1.0})
+    with pytest.raises(ValueError, match="weights"):
+        _kernels.HexahedronElements(nodes, gradients, np.zeros((2, 8)), "linear_elastic", elastic)
+    component = _kernels.HexahedronElements(nodes + 5, gradients, weights, "linear_elastic", elastic)
+    with pytest.raises(RuntimeError, match="commit"):
+        component.commit()
+    stepper = _kernels.Stepper(np.zeros(3, dtype=np.int64), np.zeros(0, dtype=np.int32), np.zeros((0, 3, 3)),
+                               np.ones(2), 1e-3)
+    with pytest.raises(ValueError, match="not a node"):
+        stepper.add_internal_force(component)
+    with pytest.raises(ValueError, match="not among region_names"):
+        nonlinear_component(simulation_of(1).model, ["upper"], {"lower": {"law": "linear_elastic"}})
