@@ -4,7 +4,7 @@
 PYTHON := /usr/bin/python3
 # The main job: the paper's case 3 (oblique P + SV El Centro, interlayer contact with
 # deterioration) on the coarse layered-cavern mesh, the first 5 s of the record (its PGA is
-# at 2.0 s) after a 1 s filter lead-in: about 10 minutes on 2 cores. The full comparison of
+# at 2.0 s) after a 1 s filter lead-in: about 7 minutes on 2 cores. The full comparison of
 # the three cases is workflows/case_study.py.
 SCENE ?= workflows/scenes/case3_contact_coarse.toml
 RUN_ARGS ?= --set wave.motion.record.lead_in=1.0 --set time.duration=6.0
