@@ -115,6 +115,44 @@ std::int64_t node_count(const py::object& mass_object) {
   return mass.shape(0);
 }
 
+/// int64 flat point indices (n,) of a component, each checked to lie in [0, c q).
+py::array_t<std::int64_t> checked_points(const HexahedronElementsBase& elements,
+                                         const py::object& points_object) {
+  auto points = checked_array<std::int64_t>(points_object, "points", {kAny});
+  const std::int64_t n_points = elements.n_cells() * elements.n_points();
+  for (py::ssize_t j = 0; j < points.shape(0); ++j)
+    if (points.data()[j] < 0 || points.data()[j] >= n_points)
+      throw py::value_error("points[" + std::to_string(j) + "] = " +
+                            std::to_string(points.data()[j]) + " is not a point index in [0, " +
+                            std::to_string(n_points) + ")");
+  return points;
+}
+
+/// One of the law's reports (0 damage, 1 damage_type, 2 plastic_strain) of all points (c, q) or
+/// of the given flat indices (n,).
+template <typename T>
+py::array_t<T> point_output(const HexahedronElementsBase& elements,
+                            const py::object& points_object, int which) {
+  py::array_t<std::int64_t> points;
+  std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(elements.n_cells()),
+                                 static_cast<py::ssize_t>(elements.n_points())};
+  if (!points_object.is_none()) {
+    points = checked_points(elements, points_object);
+    shape = {points.shape(0)};
+  }
+  const std::int64_t n = points_object.is_none() ? 0 : points.shape(0);
+  const std::int64_t* indices = points_object.is_none() ? nullptr : points.data();
+  py::array_t<T> out(shape);
+  T* data = out.mutable_data();
+  if constexpr (std::is_same_v<T, std::int32_t>) {
+    elements.point_output(indices, n, nullptr, data, nullptr);
+  } else {
+    elements.point_output(indices, n, which == 0 ? data : nullptr, nullptr,
+                          which == 2 ? data : nullptr);
+  }
+  return out;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_kernels, m) {
@@ -394,9 +432,16 @@ Args:
     gradients: float64 (c, q, k, 3) basis gradients dphi/dx at the points (1/m). Borrowed.
     weights: float64 (c, q) quadrature weight x |det J| (m^3), > 0. Borrowed.
     law: material law name (known_laws()).
-    parameters: dict name -> float of the law's parameters (SI), e.g. linear_elastic:
-        lame_lambda, shear_modulus (Pa).
+    parameters: dict name -> float of the law's parameters (SI, angles in deg):
+        linear_elastic: lame_lambda, shear_modulus (Pa);
+        mohr_coulomb: young_modulus, poisson_ratio, cohesion, friction_angle, tensile_strength,
+            optional dilation_angle (0), damage_max (0.9), damage_plastic_strain (0.005);
+        concrete_damage: young_modulus, poisson_ratio, tensile_strength, cohesion,
+            friction_angle, optional fracture_energy (120 N/m), A_t, B_t, A_c, B_c,
+            stiffness_recovery, damage_max (docs/materials.md).
     initial_stress: None or float64 (c, q, 6) static stress sigma0 (Pa, Voigt order). Copied.
+        The laws see the total stress sigma0 + the dynamic part; a sigma0 beyond a law's
+        strength is returned (damaged) at construction and released from t = 0.
     mean_dilatation: replace the volumetric strain by its cell mean (B-bar, for Q1 plasticity).
     min_cells_for_threads: below this many cells the loops run on one thread.
 Borrowed arrays are kept alive by this object and must not be modified while it is in use.)")
@@ -432,15 +477,61 @@ Borrowed arrays are kept alive by this object and must not be modified while it 
            py::keep_alive<1, 2>(), py::keep_alive<1, 3>(), py::keep_alive<1, 4>())
       .def(
           "stress",
-          [](const HexahedronElementsBase& elements) {
-            py::array_t<double> out({static_cast<py::ssize_t>(elements.n_cells()),
-                                     static_cast<py::ssize_t>(elements.n_points()),
-                                     static_cast<py::ssize_t>(6)});
-            elements.stress(out.mutable_data());
+          [](const HexahedronElementsBase& elements, const py::object& points_object) {
+            if (points_object.is_none()) {
+              py::array_t<double> out({static_cast<py::ssize_t>(elements.n_cells()),
+                                       static_cast<py::ssize_t>(elements.n_points()),
+                                       static_cast<py::ssize_t>(6)});
+              elements.stress(out.mutable_data());
+              return out;
+            }
+            auto points = checked_points(elements, points_object);
+            py::array_t<double> out({points.shape(0), static_cast<py::ssize_t>(6)});
+            elements.stress_at(points.data(), points.shape(0), out.mutable_data());
             return out;
           },
-          "Committed total stress at the quadrature points (Pa, tension positive, Voigt order xx, "
-          "yy, zz, xy, yz, xz): new float64 array (c, q, 6).")
+          py::arg("points") = py::none(),
+          R"(Committed total stress at the quadrature points (Pa, tension positive, Voigt order
+xx, yy, zz, xy, yz, xz).
+
+Args:
+    points: None (all) or int64 (n,) flat indices cell * q + point (read only).
+Returns:
+    new float64 array (c, q, 6), or (n, 6) for the given points.)")
+      .def(
+          "damage",
+          [](const HexahedronElementsBase& elements, const py::object& points_object) {
+            return point_output<double>(elements, points_object, 0);
+          },
+          py::arg("points") = py::none(),
+          "Scalar damage d in [0, 1) of the committed state: new float64 array (c, q), or (n,) "
+          "for int64 flat indices `points` (cell * q + point).")
+      .def(
+          "damage_type",
+          [](const HexahedronElementsBase& elements, const py::object& points_object) {
+            return point_output<std::int32_t>(elements, points_object, 1);
+          },
+          py::arg("points") = py::none(),
+          "Damage mechanism of the committed state, 0 none, 1 tension, 2 shear: new int32 "
+          "array (c, q), or (n,) for int64 flat indices `points`.")
+      .def(
+          "plastic_strain",
+          [](const HexahedronElementsBase& elements, const py::object& points_object) {
+            return point_output<double>(elements, points_object, 2);
+          },
+          py::arg("points") = py::none(),
+          "Equivalent plastic strain sqrt(2/3) sum |d eps_p| (-) of the committed state (0 for "
+          "laws without plastic strain): new float64 array (c, q), or (n,) for int64 flat "
+          "indices `points`.")
+      .def(
+          "weights",
+          [](const HexahedronElementsBase& elements) {
+            py::array_t<double> out({static_cast<py::ssize_t>(elements.n_cells()),
+                                     static_cast<py::ssize_t>(elements.n_points())});
+            std::copy(elements.weights(), elements.weights() + out.size(), out.mutable_data());
+            return out;
+          },
+          "Quadrature weight x |det J| of every point (m^3): new float64 array (c, q).")
       .def(
           "characteristic_length",
           [](const HexahedronElementsBase& elements) {

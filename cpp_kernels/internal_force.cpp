@@ -6,7 +6,9 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "materials/concrete_damage.hpp"
 #include "materials/linear_elastic.hpp"
+#include "materials/mohr_coulomb.hpp"
 
 namespace cavern {
 
@@ -136,11 +138,19 @@ std::shared_ptr<HexahedronElementsBase> make_hexahedron_elements(const std::stri
   if (law == LinearElastic::kName)
     return std::make_shared<HexahedronElements<LinearElastic>>(
         geometry, LinearElastic::parameters_from(parameters), options, initial_stress);
+  if (law == MohrCoulombLaw::kName)
+    return std::make_shared<HexahedronElements<MohrCoulombLaw>>(
+        geometry, MohrCoulombLaw::parameters_from(parameters), options, initial_stress);
+  if (law == ConcreteDamageLaw::kName)
+    return std::make_shared<HexahedronElements<ConcreteDamageLaw>>(
+        geometry, ConcreteDamageLaw::parameters_from(parameters), options, initial_stress);
   std::string known;
   for (const std::string& name : known_laws()) known += (known.empty() ? "" : ", ") + name;
   throw std::invalid_argument("law '" + law + "' is not known; known laws: " + known);
 }
 
-std::vector<std::string> known_laws() { return {LinearElastic::kName}; }
+std::vector<std::string> known_laws() {
+  return {LinearElastic::kName, MohrCoulombLaw::kName, ConcreteDamageLaw::kName};
+}
 
 }  // namespace cavern

@@ -110,6 +110,16 @@ class HexahedronElementsBase : public InternalForceComponent {
 
   /// Committed total stress (c, q, 6) into out (Pa, order of material_law.hpp).
   virtual void stress(double* out) const = 0;
+  /// Committed total stress of the n points `points` (flat index cell * q + point, each in
+  /// [0, c q), checked by the caller) into out (n, 6).
+  virtual void stress_at(const std::int64_t* points, std::int64_t n, double* out) const = 0;
+  /// The law's report (material_law.hpp PointOutput) of the committed state of the n points
+  /// `points` (null: all c q points, n ignored) into damage, damage_type and plastic_strain
+  /// (each (n,) or (c, q)); a null output is skipped.
+  virtual void point_output(const std::int64_t* points, std::int64_t n, double* damage,
+                            std::int32_t* damage_type, double* plastic_strain) const = 0;
+  /// Quadrature weight x det J of every point (c, q) (m^3), borrowed.
+  const double* weights() const { return geometry_.weights; }
   /// Bytes of the state, buffers and adjacency this component owns (geometry is borrowed).
   virtual std::int64_t owned_bytes() const;
 
@@ -165,7 +175,8 @@ class HexahedronElements final : public HexahedronElementsBase {
     for (std::int64_t cell = 0; cell < geometry.n_cells; ++cell)
       for (std::int64_t q = 0; q < geometry.n_points; ++q)
         committed_[cell * geometry.n_points + q] =
-            Law::initial_state(parameters_, initial_stress_of(cell, q));
+            Law::initial_state(parameters_, initial_stress_of(cell, q),
+                               characteristic_length_[cell]);
     trial_ = committed_;
   }
 
@@ -190,6 +201,22 @@ class HexahedronElements final : public HexahedronElementsBase {
     const std::int64_t n = geometry_.n_cells * geometry_.n_points;
     for (std::int64_t p = 0; p < n; ++p)
       for (int c = 0; c < 6; ++c) out[6 * p + c] = committed_[p].stress[c];
+  }
+
+  void stress_at(const std::int64_t* points, std::int64_t n, double* out) const override {
+    for (std::int64_t j = 0; j < n; ++j)
+      for (int c = 0; c < 6; ++c) out[6 * j + c] = committed_[points[j]].stress[c];
+  }
+
+  void point_output(const std::int64_t* points, std::int64_t n, double* damage,
+                    std::int32_t* damage_type, double* plastic_strain) const override {
+    if (!points) n = geometry_.n_cells * geometry_.n_points;
+    for (std::int64_t j = 0; j < n; ++j) {
+      const PointOutput report = Law::output(committed_[points ? points[j] : j]);
+      if (damage) damage[j] = report.damage;
+      if (damage_type) damage_type[j] = report.damage_type;
+      if (plastic_strain) plastic_strain[j] = report.plastic_strain;
+    }
   }
 
   std::int64_t owned_bytes() const override {

@@ -8,7 +8,14 @@ outer faces "xmin" .. "zmax" and the tunnel wall "tunnel_wall". Without names, p
 exterior facets on the bounding-box planes as the truncation faces, and the wall is free either
 way.
 
-    /usr/bin/python3 meshes/tunnel_in_box.py out.msh [--radius 5] [--unnamed]
+With `filled` (`--filled`) the hole is meshed too, as the volume "excavation", for a static stage
+that removes it (`[static] excavate = ["excavation"]`, docs/static.md); with `lining` = t
+(`--lining t`) a ring of thickness t inside the radius is the volume "lining" (the size near the
+wall is then at most t/2: two elements through it) and the rest of the hole "excavation".
+Without either option the script writes the mesh it always has.
+
+    /usr/bin/python3 meshes/tunnel_in_box.py out.msh [--radius 5] [--unnamed] [--filled] [--lining 0.5]
+                                                 [--size 120] [--h-wall 0.6] [--h-far 8]
 """
 from __future__ import annotations
 
@@ -18,7 +25,8 @@ import signal
 
 
 def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 120.0), thickness: float = 2.0,
-                        h_wall: float = 0.6, h_far: float = 8.0, layers: int = 1, name_surfaces: bool = True) -> None:
+                        h_wall: float = 0.6, h_far: float = 8.0, layers: int = 1, name_surfaces: bool = True,
+                        filled: bool = False, lining: float = 0.0) -> None:
     """Mesh the tunnel-in-box model and write it to `path` (gmsh .msh 4.1).
 
     Args:
@@ -29,6 +37,9 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
         h_wall, h_far: element sizes at the wall and far from it (m).
         layers: elements through the thickness.
         name_surfaces: name the outer faces (xmin .. zmax) and the wall (tunnel_wall).
+        filled: mesh the hole as the volume "excavation" (the wall is then inside the mesh).
+        lining: thickness (m) of a ring inside the radius meshed as the volume "lining" (implies
+            `filled`; 0: none).
     """
     handler = signal.getsignal(signal.SIGINT)
     import gmsh  # resets SIGINT: restored below
@@ -41,17 +52,58 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
         gmsh.model.add("tunnel_in_box")
         occ = gmsh.model.occ
         # The section in the x-y plane of gmsh, then turned about x so that y becomes z.
+        if not 0.0 <= lining < radius:
+            raise ValueError(f"tunnel_in_box: lining = {lining!r} must lie in [0, radius = {radius!r})")
+        filled = filled or lining > 0.0
+        if lining > 0.0:
+            h_wall = min(h_wall, 0.5 * lining)
         box = occ.addRectangle(0.0, 0.0, 0.0, lx, lz)
         hole = occ.addDisk(lx / 2, lz / 2, 0.0, radius, radius)
-        section, _ = occ.cut([(2, box)], [(2, hole)])
+        if filled:
+            # The hole's pieces (core, lining ring in quarters) share their curves with the rock.
+            tools = [(2, hole)]
+            if lining > 0.0:
+                core = occ.addDisk(lx / 2, lz / 2, 0.0, radius - lining, radius - lining)
+                ring, _ = occ.cut(tools, [(2, occ.copy([(2, core)])[0][1])])
+                tools = [(2, core)]
+                for x0, z0 in ((0.0, 0.0), (-radius, 0.0), (-radius, -radius), (0.0, -radius)):
+                    quadrant = occ.addRectangle(lx / 2 + x0, lz / 2 + z0, 0.0, radius, radius)
+                    quarter, _ = occ.intersect(occ.copy(ring), [(2, quadrant)])
+                    tools += quarter
+                occ.remove(ring)
+            section, _ = occ.fragment([(2, box)], tools)
+        else:
+            section, _ = occ.cut([(2, box)], [(2, hole)])
         occ.rotate(section, 0, 0, 0, 1, 0, 0, math.pi / 2)   # (x, y, 0) -> (x, 0, y)
         occ.synchronize()
         # The rotation maps y to z and leaves the section at y = 0; extrude it along +y.
         extruded = occ.extrude(section, 0.0, thickness, 0.0, numElements=[layers], recombine=True)
         occ.synchronize()
-        volumes = [tag for dim, tag in extruded if dim == 3]
+        # Sort the volumes by where they lie: in the core, in the lining ring, or in the rock.
+        pieces = {"rock": [], "lining": [], "excavation": []}
+        for tag in (tag for dim, tag in extruded if dim == 3):
+            if not _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius, dim=3):
+                pieces["rock"].append(tag)
+            elif lining > 0.0 and not _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius - lining, dim=3):
+                pieces["lining"].append(tag)
+            else:
+                pieces["excavation"].append(tag)
+        volumes = pieces["rock"]
+        rock_section = [(dim, tag) for dim, tag in section
+                        if not _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius, dim=dim)]
+        for dim, tag in section:
+            if (lining > 0.0 and _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius, dim=dim)
+                    and not _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius - lining, dim=dim)):
+                # A quarter of the thin ring: structured (transfinite) quadrilaterals, as many
+                # through the thickness as h_wall asks (the unstructured mesher leaves triangles).
+                for _, curve in gmsh.model.getBoundary([(dim, tag)], oriented=False):
+                    length = occ.getMass(1, curve)
+                    points = (max(2, math.ceil(lining / h_wall - 1e-9)) if abs(length - lining) < 1e-6 * radius
+                              else max(2, math.ceil(0.5 * math.pi * radius / h_wall))) + 1  # both arcs alike
+                    gmsh.model.mesh.setTransfiniteCurve(curve, points)
+                gmsh.model.mesh.setTransfiniteSurface(tag)
 
-        wall_curves = [tag for dim, tag in gmsh.model.getBoundary(section, oriented=False)
+        wall_curves = [tag for dim, tag in gmsh.model.getBoundary(rock_section, oriented=False)
                        if dim == 1 and _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius)]
         if not wall_curves:
             raise RuntimeError("tunnel_in_box: the tunnel wall curves were not found")
@@ -75,6 +127,9 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
             gmsh.option.setNumber(option, value)
 
         gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, volumes), "rock")
+        for name in ("lining", "excavation"):
+            if pieces[name]:
+                gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, pieces[name]), name)
         if name_surfaces:
             eps = 1e-6 * max(lx, lz)
             planes = {"xmin": (0, 0.0), "xmax": (0, lx), "ymin": (1, 0.0), "ymax": (1, thickness),
@@ -97,9 +152,10 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
         signal.signal(signal.SIGINT, handler)
 
 
-def _is_on_circle(gmsh, curve: int, xc: float, zc: float, radius: float) -> bool:
-    """Whether a curve's bounding box lies within the tunnel's (after the turn to x-z)."""
-    x0, _, z0, x1, _, z1 = gmsh.model.getBoundingBox(1, curve)
+def _is_on_circle(gmsh, curve: int, xc: float, zc: float, radius: float, dim: int = 1) -> bool:
+    """Whether the bounding box of an entity (a curve by default) lies within the tunnel's (after
+    the turn to x-z)."""
+    x0, _, z0, x1, _, z1 = gmsh.model.getBoundingBox(dim, curve)
     margin = 1e-6 * radius + 1e-9
     return (x0 >= xc - radius - margin and x1 <= xc + radius + margin
             and z0 >= zc - radius - margin and z1 <= zc + radius + margin)
@@ -110,8 +166,15 @@ def main() -> None:
     parser.add_argument("out", help="output .msh file")
     parser.add_argument("--radius", type=float, default=5.0)
     parser.add_argument("--unnamed", action="store_true", help="name no surface (bounding-box faces)")
+    parser.add_argument("--size", type=float, default=120.0, help="side of the square x-z section (m)")
+    parser.add_argument("--h-wall", type=float, default=0.6, help="element size at the wall (m)")
+    parser.add_argument("--h-far", type=float, default=8.0, help="element size far from the wall (m)")
+    parser.add_argument("--filled", action="store_true", help="mesh the hole as the volume \"excavation\"")
+    parser.add_argument("--lining", type=float, default=0.0,
+                        help="thickness (m) of a ring inside the radius meshed as the volume \"lining\"")
     args = parser.parse_args()
-    build_tunnel_in_box(args.out, radius=args.radius, name_surfaces=not args.unnamed)
+    build_tunnel_in_box(args.out, radius=args.radius, size=(args.size, args.size), h_wall=args.h_wall,
+                        h_far=args.h_far, name_surfaces=not args.unnamed, filled=args.filled, lining=args.lining)
 
 
 if __name__ == "__main__":

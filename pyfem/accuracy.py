@@ -22,6 +22,8 @@ import math
 from pathlib import Path
 
 DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "accuracy_cost.csv"
+if not DEFAULT_RESULTS.is_file():  # an installed package (pip install .) carries a copy (setup.py)
+    DEFAULT_RESULTS = Path(__file__).resolve().parent / "data" / "accuracy_cost.csv"
 # The highest frequency with energy in a Ricker wavelet, in units of its peak frequency f0:
 # the amplitude spectrum (f/f0)^2 exp(-(f/f0)^2) at 2.5 f0 is 3 % of its peak at f0.
 RICKER_MAX_FREQUENCY_FACTOR = 2.5

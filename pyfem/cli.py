@@ -7,6 +7,9 @@ Commands:
     check SCENE.toml [--set key.path=value ...]
         Validate the scene and print the plan (effects on, mesh size, dofs,
         time step and why, steps, memory and time estimates) without running.
+    keys [--write [PATH]]
+        Print the scene-key reference (markdown, `pyfem.scene_keys`); with --write, write it to
+        PATH (default: docs/scene-keys.md of the source tree).
     bench [ARGS ...]
         Benchmarks; ARGS go to ``pyfem.bench.main`` unchanged.
 
@@ -34,7 +37,8 @@ EXIT_USAGE = 2  # argparse's own status for bad arguments; a bad scene is one to
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python3 -m pyfem",
+        # `pyfem` when run as the installed console command (pip install .).
+        prog="pyfem" if Path(sys.argv[0]).name == "pyfem" else "python3 -m pyfem",
         description="3D explicit seismic analysis of deep caverns in layered rock.")
     parser.add_argument("--version", action="version", version=f"pyfem {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -51,6 +55,10 @@ def _parser() -> argparse.ArgumentParser:
     check.add_argument("scene", type=Path, help="scene file (TOML)")
     check.add_argument("--set", dest="overrides", action="append", default=[],
                        metavar="KEY=VALUE", help=overrides_help)
+
+    keys = commands.add_parser("keys", help="print the scene-key reference (markdown)")
+    keys.add_argument("--write", nargs="?", const="", default=None, metavar="PATH",
+                      help="write it to PATH instead (default: docs/scene-keys.md of the source tree)")
 
     commands.add_parser("bench", help="benchmarks (arguments go to pyfem.bench)",
                         add_help=False)
@@ -162,6 +170,25 @@ def mesh_advice(scene: Scene) -> str:
     return "\n".join(lines)
 
 
+def command_keys(write: str | None) -> int:
+    """Print the scene-key reference, or write it to `write` ("": docs/scene-keys.md of the
+    source tree; an installed package has none and must be given a path)."""
+    from pyfem import scene_keys
+
+    text = scene_keys.reference()
+    if write is None:
+        print(text, end="")
+        return 0
+    path = Path(write) if write else scene_keys.repository_document()
+    if path is None:
+        print("error: --write: this pyfem is not in a source tree (no docs/ next to it); "
+              "give a path: --write PATH", file=sys.stderr)
+        return EXIT_USAGE
+    path.write_text(text)
+    print(f"wrote {path}")
+    return 0
+
+
 def command_bench(argv: Sequence[str]) -> int:
     """Pass `argv` to ``pyfem.bench.main``; its return value is the exit status."""
     from pyfem import bench
@@ -244,6 +271,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         # bench owns its arguments; argparse would reject its options.
         return command_bench(argv[1:])
     args = _parser().parse_args(argv)
+    if args.command == "keys":
+        return command_keys(args.write)
     try:
         if args.command == "run":
             return command_run(args.scene, args.out, args.overrides)

@@ -17,14 +17,18 @@ matrix, so the linear cells' element matrices are the same numbers; the blocks t
 removed cells fed are then exactly zero and are dropped from the pattern, so the kernel streams
 nothing for them.
 
-Usage (the solver, once [materials.X.plasticity] is wired):
-    nonlinear = nonlinear_component(model, ["lining"], {"lining": {"law": "linear_elastic", ...}})
+The scene's [materials.NAME.plasticity] (law "mohr_coulomb") and [materials.NAME.damage] (law
+"concrete_damage") tables select the regions and their laws (`scene_laws`); the solver does
+    nonlinear = nonlinear_component(model, list(laws), laws, initial_stress=field, mean_dilatation=...)
     stiffness = nonlinear.stiffness (+ boundary springs); dt from the full model.stiffness
     for component in nonlinear.components: stepper.add_internal_force(component)
+and reads the laws' state back for output (`NonlinearRegions.cell_averages`, `region_summary`,
+`nearest_point`).
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 
 import basix
@@ -32,6 +36,12 @@ import numpy as np
 import scipy.sparse
 
 SPACE_DIMENSION = 3
+
+LAW_OF_TABLE = {"plasticity": "mohr_coulomb", "damage": "concrete_damage"}
+"""Kernel law (cpp_kernels/materials) of each nonlinear sub-table of [materials.NAME]."""
+
+DAMAGED = 0.01
+"""A point counts as damaged in run.json's damaged_volume when d > DAMAGED."""
 
 
 @dataclasses.dataclass
@@ -69,17 +79,114 @@ class NonlinearRegions:
         components: one pyfem._kernels.HexahedronElements per region, in region order.
         arrays: region name -> ElementArrays (quadrature points for output).
         laws: region name -> (law name, parameters dict).
+        initial_stress: region name -> (c, q, 6) static stress at the points (Pa) or None.
+        options: region name -> keyword options of HexahedronElements (mean_dilatation, ...).
     """
 
     stiffness: scipy.sparse.bsr_matrix
     components: list
     arrays: dict
     laws: dict
+    initial_stress: dict = dataclasses.field(default_factory=dict)
+    options: dict = dataclasses.field(default_factory=dict)
 
     @property
     def memory_bytes(self) -> int:
         """Bytes the element loop holds: borrowed arrays plus the kernels' state and buffers."""
         return sum(a.nbytes for a in self.arrays.values()) + sum(c.owned_bytes for c in self.components)
+
+    @property
+    def regions(self) -> list[str]:
+        """Region names, in component order."""
+        return list(self.arrays)
+
+    @property
+    def n_points(self) -> int:
+        """Quadrature points of all components."""
+        return int(sum(a.weights.size for a in self.arrays.values()))
+
+    def new_components(self) -> list:
+        """Builds every component afresh (initial state) into `components` and returns them: a
+        component holds the state of one run, so each stepper gets its own."""
+        from pyfem import _kernels
+
+        self.components = [
+            _kernels.HexahedronElements(arrays.cell_nodes, arrays.gradients, arrays.weights, *self.laws[name],
+                                        initial_stress=self.initial_stress.get(name),
+                                        **self.options.get(name, {}))
+            for name, arrays in self.arrays.items()]
+        return self.components
+
+    def nearest_point(self, cell: int, point) -> tuple[int, int] | None:
+        """(component index, flat point index cell * q + point) of the quadrature point of local cell
+        `cell` nearest to `point` (m), or None when the cell is in no component."""
+        for index, arrays in enumerate(self.arrays.values()):
+            position = int(np.searchsorted(arrays.cells, cell))
+            if position < len(arrays.cells) and arrays.cells[position] == cell:
+                distance = np.linalg.norm(arrays.points[position] - np.asarray(point, dtype=float), axis=1)
+                return index, position * arrays.weights.shape[1] + int(np.argmin(distance))
+        return None
+
+    def point_values(self, locations: typing.Sequence) -> dict:
+        """The committed state at points given as `nearest_point` gives them (None: not in a
+        component): {"found" (m,) bool, "stress" (m, 6) Voigt (Pa; NaN where not found),
+        "damage" (m,), "damage_type" (m,) int32, "plastic_strain" (m,)} (0 where not found)."""
+        m = len(locations)
+        values = {"found": np.array([found is not None for found in locations], dtype=bool),
+                  "stress": np.full((m, 6), np.nan), "damage": np.zeros(m),
+                  "damage_type": np.zeros(m, dtype=np.int32), "plastic_strain": np.zeros(m)}
+        for index, component in enumerate(self.components):
+            rows = [j for j, found in enumerate(locations) if found is not None and found[0] == index]
+            if not rows:
+                continue
+            points = np.array([locations[j][1] for j in rows], dtype=np.int64)
+            values["stress"][rows] = component.stress(points)
+            values["damage"][rows] = component.damage(points)
+            values["damage_type"][rows] = component.damage_type(points)
+            values["plastic_strain"][rows] = component.plastic_strain(points)
+        return values
+
+    def cell_averages(self) -> dict:
+        """Per region, the committed state averaged over each cell's points (weights w |det J|):
+        {"cells" (c,), "stress" (c, 6) Voigt xx yy zz xy yz xz (Pa), "damage" (c,),
+        "plastic_strain" (c,), "damage_type" (c,) int32: the type of the cell's most damaged
+        point (of its largest plastic strain when no point is damaged; 0 for neither)}."""
+        result = {}
+        for component, (name, arrays) in zip(self.components, self.arrays.items()):
+            weights = arrays.weights / arrays.weights.sum(axis=1, keepdims=True)
+            damage, plastic = component.damage(), component.plastic_strain()
+            kind = component.damage_type()
+            most = np.where(damage.max(axis=1) > 0.0, damage.argmax(axis=1), plastic.argmax(axis=1))
+            result[name] = {
+                "cells": arrays.cells,
+                "stress": np.einsum("cq,cqk->ck", weights, component.stress()),
+                "damage": np.einsum("cq,cq->c", weights, damage),
+                "plastic_strain": np.einsum("cq,cq->c", weights, plastic),
+                "damage_type": kind[np.arange(len(kind)), most].astype(np.int32),
+            }
+        return result
+
+    def region_summary(self) -> dict:
+        """Per region, for run.json: law, cells, points, volume (m^3), damaged_volume (d > DAMAGED,
+        m^3, by points), peak_damage, yielded_volume (plastic strain > 0, m^3), peak_plastic_strain,
+        tension_points / shear_points (damage_type 1 / 2), dissipated_energy (J since the start)."""
+        summary = {}
+        for component, (name, arrays) in zip(self.components, self.arrays.items()):
+            damage, plastic, kind = component.damage(), component.plastic_strain(), component.damage_type()
+            summary[name] = {
+                "law": self.laws[name][0],
+                "cells": int(arrays.weights.shape[0]),
+                "points": int(arrays.weights.size),
+                "volume": float(arrays.weights.sum()),
+                "damaged_volume": float(arrays.weights[damage > DAMAGED].sum()),
+                "peak_damage": float(damage.max(initial=0.0)),
+                "yielded_volume": float(arrays.weights[plastic > 0.0].sum()),
+                "peak_plastic_strain": float(plastic.max(initial=0.0)),
+                "tension_points": int(np.count_nonzero(kind == 1)),
+                "shear_points": int(np.count_nonzero(kind == 2)),
+                "dissipated_energy": float(component.dissipation()),
+            }
+        return summary
 
 
 def quadrature_rule(order: int) -> tuple[np.ndarray, np.ndarray]:
@@ -204,9 +311,82 @@ def quadrature_initial_stress(points: np.ndarray, field) -> np.ndarray:
     return np.ascontiguousarray(voigt.reshape(points.shape[0], points.shape[1], 6))
 
 
+def initial_warnings(regions: NonlinearRegions, scene: typing.Mapping) -> list[str]:
+    """One line per thing a user should know about the regions' initial state: points whose initial
+    stress is beyond the law's strength (returned or damaged at t = 0, the excess released as
+    motion), and concrete cells too large for the crack band (h > 2 E G_f / f_t^2: brittle)."""
+    messages = []
+    for component, (name, arrays) in zip(regions.components, regions.arrays.items()):
+        law, parameters = regions.laws[name]
+        table = {kernel_law: table for table, kernel_law in LAW_OF_TABLE.items()}.get(law)
+        if table is None:
+            continue
+        sigma0 = regions.initial_stress.get(name)
+        if sigma0 is not None:
+            tolerance = 1e-9 * max(1.0, float(np.abs(sigma0).max()))
+            changed = np.any(np.abs(component.stress() - sigma0) > tolerance, axis=2)
+            if changed.any():
+                messages.append(f"materials.{name}.{table}: {int(changed.sum())} of {changed.size} points start "
+                                "beyond the strength under [initial_stress]; their stress was returned to it "
+                                "(damaged) at t = 0 and the excess is released as motion")
+        if law == "concrete_damage" and parameters.get("fracture_energy", 0.0) > 0.0:
+            largest = (2.0 * parameters["young_modulus"] * parameters["fracture_energy"]
+                       / parameters["tensile_strength"] ** 2)
+            h = component.characteristic_length()
+            if np.any(h >= largest):
+                messages.append(f"materials.{name}.damage: {int(np.count_nonzero(h >= largest))} cells are larger "
+                                f"than 2 E G_f / f_t^2 = {largest:.3g} m (up to {h.max():.3g} m): the crack band "
+                                "cannot regularise them and they crack brittly; refine the mesh there")
+    return messages
+
+
+def plastic_frequency_factor(poisson_ratio: float, friction_angle: float, dilation_angle: float) -> float:
+    """Bound on how much non-associated Mohr-Coulomb flow can raise a frequency over the elastic one.
+
+    On a yield plane with normal n and flow N the tangent is D - (D N)(D n)^T / (n . D N); the
+    largest Rayleigh quotient of its symmetric part over that of D is 1 + (1/cos(theta) - 1)/2,
+    theta the angle between D^1/2 N and D^1/2 n (0 for associated flow, psi = phi). Frequencies
+    scale with the square root. Principal space, main plane; an estimate for the edges.
+
+    Args:
+        poisson_ratio: nu (-).
+        friction_angle, dilation_angle: phi, psi (deg).
+    """
+    lame_over_shear = 2.0 * poisson_ratio / (1.0 - 2.0 * poisson_ratio)  # lambda / G
+    elasticity = lame_over_shear * np.ones((3, 3)) + 2.0 * np.eye(3)        # D / G
+    values, vectors = np.linalg.eigh(elasticity)
+    root = vectors @ np.diag(np.sqrt(values)) @ vectors.T
+    sin_phi, sin_psi = math.sin(math.radians(friction_angle)), math.sin(math.radians(dilation_angle))
+    a = root @ np.array([1.0 + sin_psi, 0.0, -(1.0 - sin_psi)])
+    b = root @ np.array([1.0 + sin_phi, 0.0, -(1.0 - sin_phi)])
+    cosine = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return math.sqrt(1.0 + 0.5 * (1.0 / cosine - 1.0))
+
+
+def scene_laws(scene: typing.Mapping) -> tuple[dict, dict]:
+    """The element-loop laws of a validated scene: the regions whose material has a
+    [plasticity] or [damage] table.
+
+    Returns:
+        (law_parameters, mean_dilatation): region -> {"law": name, **parameters (SI, deg)} as
+        `nonlinear_component` takes them, and region -> bool (B-bar). Empty without such tables.
+    """
+    law_parameters, mean_dilatation = {}, {}
+    for name, material in scene["materials"].items():
+        for table, law in LAW_OF_TABLE.items():
+            settings = material.get(table)
+            if settings is None:
+                continue
+            parameters = {key: value for key, value in settings.items() if key != "mean_dilatation"}
+            law_parameters[name] = {"law": law, "young_modulus": material["E"],
+                                    "poisson_ratio": material["nu"], **parameters}
+            mean_dilatation[name] = bool(settings.get("mean_dilatation") or False)
+    return law_parameters, mean_dilatation
+
+
 def nonlinear_component(model, region_names: typing.Sequence[str],
                         law_parameters: typing.Mapping[str, typing.Mapping] | None = None,
-                        initial_stress=None, mean_dilatation: bool = False,
+                        initial_stress=None, mean_dilatation: bool | typing.Mapping[str, bool] = False,
                         min_cells_for_threads: int | None = None) -> NonlinearRegions:
     """Kernel components for the regions whose material the element loop integrates, and the
     stiffness of all other cells.
@@ -222,35 +402,37 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
         initial_stress: None, or a callable (m, 3) points (m) -> (m, 3, 3) static stress (Pa)
             evaluated at the quadrature points (the laws' total stress starts there; the force
             uses sigma - sigma0).
-        mean_dilatation: B-bar (mean volumetric strain per cell) in every component.
+        mean_dilatation: B-bar (mean volumetric strain per cell) in every component, or
+            region -> bool (absent: False).
         min_cells_for_threads: kernel threshold below which a component runs on one thread
             (None: the kernel's default).
 
     Returns:
         NonlinearRegions: stiffness (the kernel's K without springs), components, arrays, laws.
     """
-    from pyfem import _kernels
-
     region_names = list(dict.fromkeys(region_names))
     law_parameters = dict(law_parameters or {})
     unknown = sorted(set(law_parameters) - set(region_names))
     if unknown:
         raise ValueError(f"law_parameters: regions {unknown} are not among region_names {region_names}")
-    components, arrays, laws, removed = [], {}, {}, []
+    arrays, laws, stresses, options, removed = {}, {}, {}, {}, []
     for name in region_names:
         cells = region_cells(model, name)
         given = dict(law_parameters.get(name) or {"law": "linear_elastic", **region_elastic_parameters(model, name)})
         law = given.pop("law", "linear_elastic")
         parameters = {key: float(value) for key, value in given.items()}
         region_arrays = element_arrays(model.V, cells)
-        sigma0 = None if initial_stress is None else quadrature_initial_stress(region_arrays.points, initial_stress)
-        options = {} if min_cells_for_threads is None else {"min_cells_for_threads": int(min_cells_for_threads)}
-        components.append(_kernels.HexahedronElements(
-            region_arrays.cell_nodes, region_arrays.gradients, region_arrays.weights, law, parameters,
-            initial_stress=sigma0, mean_dilatation=mean_dilatation, **options))
+        stresses[name] = (None if initial_stress is None
+                          else quadrature_initial_stress(region_arrays.points, initial_stress))
+        options[name] = {"mean_dilatation": bool(mean_dilatation if isinstance(mean_dilatation, bool)
+                                                 else mean_dilatation.get(name, False))}
+        if min_cells_for_threads is not None:
+            options[name]["min_cells_for_threads"] = int(min_cells_for_threads)
         arrays[name] = region_arrays
         laws[name] = (law, parameters)
         removed.append(cells)
     removed_cells = np.concatenate(removed) if removed else np.zeros(0, dtype=np.int32)
-    return NonlinearRegions(stiffness=linear_stiffness(model, removed_cells), components=components,
-                            arrays=arrays, laws=laws)
+    regions = NonlinearRegions(stiffness=linear_stiffness(model, removed_cells), components=[], arrays=arrays,
+                               laws=laws, initial_stress=stresses, options=options)
+    regions.new_components()
+    return regions

@@ -13,7 +13,12 @@ F_i = A_i sigma0(x_i) n_i: the force side j exerts on node i (n from side i to
 side j; with compression negative a compressed horizontal interface pushes
 node i down).
 
-Any stress field works: `pair_static_forces` takes a callable x (m, 3) -> (m, 3, 3).
+Uniform stress, `[initial_stress] stress = [sxx, syy, szz, syz, sxz, sxy]` (Pa, compression
+negative; this order, the scene's, differs from the kernel's Voigt order xx yy zz xy yz xz, so
+`stress_tensor` names every component): the same tensor everywhere, no body force to balance.
+
+Any stress field works: `pair_static_forces` takes a callable x (m, 3) -> (m, 3, 3). With a static
+stage ([static], pyfem/static.py) the pairs' static forces come from the stage instead.
 """
 from __future__ import annotations
 
@@ -53,11 +58,37 @@ def geostatic_stress(surface: float, rho: float, k: typing.Sequence[float] = (1.
     return stress
 
 
+def stress_tensor(stress: typing.Sequence[float]) -> np.ndarray:
+    """(3, 3) symmetric tensor of a stress given in the scene's order [sxx, syy, szz, syz, sxz, sxy] (Pa)."""
+    sxx, syy, szz, syz, sxz, sxy = (float(value) for value in stress)
+    return np.array([[sxx, sxy, sxz], [sxy, syy, syz], [sxz, syz, szz]])
+
+
+def uniform_stress(stress: typing.Sequence[float]) -> StressField:
+    """The same stress everywhere.
+
+    Args:
+        stress: [sxx, syy, szz, syz, sxz, sxy] (Pa, compression negative), the scene's order.
+
+    Returns:
+        A function x (m, 3) (m) -> sigma (m, 3, 3) (Pa).
+    """
+    tensor = stress_tensor(stress)
+
+    def field(x: np.ndarray) -> np.ndarray:
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        return np.repeat(tensor[None], len(x), axis=0)
+
+    return field
+
+
 def stress_field_from_scene(scene: typing.Mapping) -> StressField | None:
-    """The scene's [initial_stress] field, or None when the effect is off."""
+    """The scene's [initial_stress] field (uniform or geostatic), or None when the effect is off."""
     settings = scene.get("initial_stress")
     if settings is None:
         return None
+    if settings.get("stress") is not None:
+        return uniform_stress(settings["stress"])
     return geostatic_stress(settings["surface"], settings["rho"], settings["k"])
 
 

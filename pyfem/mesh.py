@@ -77,9 +77,11 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
         regions, boundaries, cell_types = model_facts
         source = ("mesh.file", mesh_settings["file"]) if builder == "file" else ("mesh.builder", builder)
         _check_cell_types(cell_types, *source)
-        _check_regions_match_materials(regions, scene["materials"])
+        excavated = _excavated_regions(scene, regions)
+        regions = {name: tag for name, tag in regions.items() if name not in excavated}
+        _check_regions_match_materials(regions, scene["materials"], optional=excavated)
         interface_names = list((scene.get("contact") or {}).get("interfaces") or [])
-        if not interface_names:
+        if not interface_names and not excavated:
             mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, model_rank, gdim=3)
             return mesh, cell_tags, facet_tags, regions, boundaries, {}
         missing = [name for name in interface_names if name not in boundaries]
@@ -92,6 +94,12 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
         arrays = None
         if comm.rank == model_rank:
             arrays = _model_arrays()
+            if excavated:
+                arrays = _without_cells(arrays, list(excavated.values()))
+        if excavated:  # a surface only the excavated cells had is gone with them
+            present = comm.bcast(set(np.unique(arrays["facet_values"]).tolist()) if comm.rank == model_rank
+                                 else None, root=model_rank)
+            boundaries = {name: tag for name, tag in boundaries.items() if tag in present}
         mesh, cell_tags, facet_tags, interface_tags = split_interfaces(
             arrays, {name: boundaries[name] for name in interface_names}, comm, model_rank)
     return mesh, cell_tags, facet_tags, regions, boundaries, interface_tags
@@ -134,6 +142,43 @@ def _model_arrays() -> dict:
             "facet_values": facet_values}
 
 
+def _excavated_regions(scene: typing.Mapping, regions: dict[str, int]) -> dict[str, int]:
+    """The regions `[static] excavate` removes (name -> tag): the model is built without their cells.
+
+    Raises:
+        SceneError naming static.excavate.i for a name that is no region, or when nothing would remain.
+    """
+    names = list((scene.get("static") or {}).get("excavate") or [])
+    for index, name in enumerate(names):
+        if name not in regions:
+            raise SceneError(f"static.excavate.{index}", name, "must name a region (physical volume) of the "
+                             "mesh: " + (", ".join(sorted(regions)) or "none"))
+    if names and len(names) == len(regions):
+        raise SceneError("static.excavate", names, "must leave at least one region of the mesh: "
+                         + ", ".join(sorted(regions)))
+    return {name: regions[name] for name in names}
+
+
+def _without_cells(arrays: dict, removed_tags: list[int]) -> dict:
+    """`_model_arrays` without the cells of the given physical volumes, the tagged quadrilaterals that
+    are no face of a remaining cell, and the nodes no remaining cell uses (renumbered)."""
+    keep = ~np.isin(arrays["cell_values"], removed_tags)
+    cells, cell_values = arrays["cells"][keep], arrays["cell_values"][keep]
+    used, compact = np.unique(cells, return_inverse=True)
+    index = np.full(len(arrays["x"]), -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    # A quadrilateral is a face of a remaining cell when its four nodes are nodes of that cell.
+    from pyfem.interfaces import _incidence
+
+    facets = arrays["facets"]
+    shared = _incidence(facets, len(arrays["x"])) @ _incidence(cells, len(arrays["x"])).T
+    on_cell = np.asarray(shared.max(axis=1).todense()).ravel() >= facets.shape[1] if len(facets) else \
+        np.zeros(0, dtype=bool)
+    return {"x": arrays["x"][used].copy(), "cells": compact.reshape(cells.shape).astype(np.int64),
+            "cell_values": cell_values, "facets": index[facets[on_cell]],
+            "facet_values": arrays["facet_values"][on_cell]}
+
+
 def _physical_groups_and_cell_types() -> tuple[dict[str, int], dict[str, int], list[tuple[int, str]]]:
     """Names and tags of the physical volumes and surfaces of the current gmsh
     model, and the gmsh element types (number, name) found in the physical volumes."""
@@ -170,8 +215,10 @@ def _check_cell_types(cell_types: list[tuple[int, str]], key: str = "mesh.file",
                          f"allowed: {allowed} only (mesh.order = 2 builds Q2 from them)")
 
 
-def _check_regions_match_materials(regions: dict[str, int], materials: typing.Mapping) -> None:
-    """Every region needs a [materials.NAME] table and every table a region.
+def _check_regions_match_materials(regions: dict[str, int], materials: typing.Mapping,
+                                   optional: typing.Iterable[str] = ()) -> None:
+    """Every region needs a [materials.NAME] table and every table a region (a table named in
+    `optional`, an excavated region's, may be there or not: nothing reads it).
 
     Raises:
         SceneError naming the first mismatched materials.NAME, listing every mismatch and the
@@ -181,7 +228,7 @@ def _check_regions_match_materials(regions: dict[str, int], materials: typing.Ma
     problems = [(name, f"[materials.{name}] is missing for mesh region \"{name}\"")
                 for name in found if name not in materials]
     problems += [(name, f"[materials.{name}] names no mesh region")
-                 for name in materials if name not in regions]
+                 for name in materials if name not in regions and name not in set(optional)]
     if problems:
         allowed = ("[materials] must name exactly the regions (physical volumes) of the mesh: "
                    + (", ".join(found) or "none"))

@@ -26,9 +26,15 @@ FREEFIELD_COLUMNS = ["ux_ff", "uy_ff", "uz_ff", "vx_ff", "vy_ff", "vz_ff"]
 # Stress at the monitor (Pa, tension positive): total = initial (geostatic) + dynamic, its
 # largest principal value s1, and s1 of the dynamic increment alone.
 STRESS_COLUMNS = ["sxx", "syy", "szz", "sxy", "syz", "sxz", "s1", "s1_dynamic"]
+# With nonlinear regions: the law's damage d, its type (0 none, 1 tension, 2 shear) and the
+# equivalent plastic strain at the monitor's kernel point (0 in the matrix cells). In a nonlinear
+# region the stress columns are the law's stress at that point (total, initial included).
+DAMAGE_COLUMNS = ["damage", "damage_type", "plastic_strain"]
 _VOIGT = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
 ENERGY_COLUMNS = ["t", "kinetic", "strain", "external_work", "damping_work", "balance"]
 CONTACT_ENERGY_COLUMNS = ["contact_work", "friction_dissipation"]
+# With nonlinear regions: the laws' stored energy Psi and their dissipation since the start (J).
+INTERNAL_ENERGY_COLUMNS = ["internal_stored", "internal_dissipation"]
 PAIR_COLUMNS = ["t", "dux", "duy", "duz", "slip", "gap", "N", "T", "D", "state"]
 PAIR_STATES = ("bonded", "stick", "sliding", "separated")  # kernel state codes 0..3
 # Format of the history rows, as np.savetxt wrote them when the files were written at the end.
@@ -219,7 +225,9 @@ class RunWriter:
         self.monitor_rows: list[np.ndarray] = []    # each (n_monitors, len(monitor_columns))
         self.energy_samples: list[list[float]] = []
         self.contact_on = simulation.contact_arrays is not None
-        self.energy_columns = ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if self.contact_on else [])
+        self.nonlinear = simulation.nonlinear  # pyfem.elements.NonlinearRegions or None
+        self.energy_columns = (ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if self.contact_on else [])
+                               + (INTERNAL_ENERGY_COLUMNS if self.nonlinear is not None else []))
         self.pair_rows: list[np.ndarray] = []       # each (n_pair_monitors, len(PAIR_COLUMNS))
         self.state_count_samples: list[np.ndarray] = []  # each (4,)
         self.monitor_columns = self._monitor_columns()
@@ -346,6 +354,8 @@ class RunWriter:
             columns += FREEFIELD_COLUMNS
         if sim.monitor_stress is not None:
             columns += STRESS_COLUMNS
+            if self.nonlinear is not None:
+                columns += DAMAGE_COLUMNS
         return columns
 
     def _monitor_rows(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -363,8 +373,18 @@ class RunWriter:
         if stress is not None:
             dynamic_tensor = stress.dynamic_stress(u)
             dynamic = np.stack([dynamic_tensor[:, i, j] for i, j in _VOIGT], axis=1)
-            total = dynamic + np.stack([stress.static[:, i, j] for i, j in _VOIGT], axis=1)
+            static = np.stack([stress.static[:, i, j] for i, j in _VOIGT], axis=1)
+            total = dynamic + static
+            kernel = None
+            if stress.kernel_points is not None:  # the law's stress where the cell is nonlinear
+                kernel = self.nonlinear.point_values(stress.kernel_points)
+                found = kernel["found"]
+                total[found] = kernel["stress"][found]
+                dynamic[found] = total[found] - static[found]
             values += [total, max_principal(total)[:, None], max_principal(dynamic)[:, None]]
+            if kernel is not None:
+                values += [kernel["damage"][:, None], kernel["damage_type"][:, None].astype(float),
+                           kernel["plastic_strain"][:, None]]
         return np.hstack(values)
 
     def _open_histories(self) -> None:
@@ -423,6 +443,9 @@ class RunWriter:
         times = np.array(self.times)
         summary["energy"] = self._energy_summary(np.array(self.energy_samples), self.energy_columns)
         summary["monitors"] = self._monitor_peaks(times)
+        if self.nonlinear is not None:
+            # Damage and plastic strain never decrease: the final state holds the peaks.
+            summary["nonlinear_regions"] = self.nonlinear.region_summary()
         if self.contact_on:
             summary["pairs"] = self._pair_peaks()
             counts = np.array(self.state_count_samples).reshape(-1, len(PAIR_STATES))
@@ -464,6 +487,7 @@ class RunWriter:
             "rayleigh": {"alpha": sim.alpha, "beta": sim.beta},
             "boundary_faces": _face_report(sim.model),
             "traction_free_surfaces": dict(sim.model.free_surfaces),
+            **({"static": sim.static.summary()} if getattr(sim, "static", None) is not None else {}),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
             "warnings": list(getattr(self.scene, "warnings", [])),
         }
@@ -477,6 +501,9 @@ class RunWriter:
         if "contact_work" in columns:
             scale = max(scale, np.max(np.abs(columns["contact_work"])),
                         np.max(np.abs(columns["friction_dissipation"])))
+        if "internal_stored" in columns:
+            scale = max(scale, np.max(columns["kinetic"] + columns["strain"] + columns["internal_stored"]),
+                        np.max(np.abs(columns["internal_dissipation"])))
         final = {name: float(columns[name][-1]) for name in names[1:]}
         final["balance_error"] = float(np.max(np.abs(columns["balance"])) / scale)
         final["reference_energy"] = float(scale)
@@ -506,6 +533,9 @@ class RunWriter:
                 peak["s1_max_time"] = float(times[int(np.argmax(s1))])
                 peak["s1_initial"] = float(s1[0])
                 peak["s1_dynamic_max"] = float(np.max(s1_dynamic))
+            if "damage" in column:
+                peak["damage_max"] = float(np.max(rows[:, j, column["damage"]]))
+                peak["plastic_strain_max"] = float(np.max(rows[:, j, column["plastic_strain"]]))
             peaks[name] = peak
         return peaks
 
@@ -564,7 +594,9 @@ class RunWriter:
 
         Point data: displacement (m), velocity (m/s), acceleration (m/s^2). Cell data: strain (-)
         and total stress (Pa, tension positive, initial + dynamic) at the cell centroids, as
-        6 components xx, xy, xz, yy, yz, zz (XDMF Tensor6).
+        6 components xx, xy, xz, yy, yz, zz (XDMF Tensor6); in a nonlinear region the stress is
+        the law's, averaged over the cell's quadrature points. "damage": cell fields damage,
+        damage_type and plastic_strain (`NonlinearRegions.cell_averages`; 0 in the matrix cells).
         """
         fields = self.scene["output"]["fields"]
         point_data = {}
@@ -582,12 +614,25 @@ class RunWriter:
                 nodal[nodes[:, 1]] = values[:, column]
                 point_data[name] = nodal[self._field_nodes]
         cell_data = {}
+        averages = (self.nonlinear.cell_averages() if self.nonlinear is not None
+                    and ("stress" in fields or "damage" in fields) else {})
         if self.cell_strain is not None:
             strain = self.cell_strain.strain(u)
             if "strain" in fields:
                 cell_data["strain"] = [tensor6(strain)]
             if "stress" in fields:
-                cell_data["stress"] = [tensor6(self.cell_strain.stress(strain))]
+                stress = tensor6(self.cell_strain.stress(strain))
+                for region in averages.values():
+                    voigt = region["stress"]  # xx yy zz xy yz xz -> Tensor6 xx xy xz yy yz zz
+                    stress[region["cells"]] = voigt[:, [0, 3, 5, 1, 4, 2]]
+                cell_data["stress"] = [stress]
+        if "damage" in fields:
+            n_cells = self.simulation.model.n_cells
+            for name, dtype in (("damage", float), ("damage_type", np.int32), ("plastic_strain", float)):
+                values = np.zeros(n_cells, dtype=dtype)
+                for region in averages.values():
+                    values[region["cells"]] = region[name]
+                cell_data[name] = [values]
         self.xdmf.write_data(t, point_data=point_data, cell_data=cell_data)
 
     def _close_fields(self) -> None:

@@ -5,8 +5,9 @@ reads it, applies command-line overrides, checks every key against one
 declarative schema (`SCHEMA` below) and returns a `Scene`: a plain nested dict
 in which every key of the schema is present (optional settings that were not
 given are ``None``), except the optional effect tables (``wave``, ``damping``,
-``initial_stress``, ``contact``, ``contact.deterioration``) and the two motion
-kinds (``wave.motion.ricker`` / ``wave.motion.record``): those are present only
+``initial_stress``, ``contact``, ``contact.deterioration``, ``static``) and the two motion
+kinds (``wave.motion.ricker`` / ``wave.motion.record``) and the nonlinear material
+tables (``materials.NAME.plasticity`` / ``materials.NAME.damage``): those are present only
 when the scene gives them, because their presence is what switches an effect on.
 
 Units are SI (m, kg, s, Pa); angles are in degrees; z points up.
@@ -43,13 +44,17 @@ MATERIAL_PRESETS = {
 """Elastic constants of the paper's Table 1, selectable with ``preset = "NAME"``."""
 
 PRESET_STRENGTHS = {
-    # The paper's Table 1 (Pa, deg). Nothing reads them yet: the materials are linear elastic. They
-    # are kept for [materials.NAME.plasticity] / [materials.NAME.damage] once those land.
+    # The paper's Table 1 (Pa, deg).
     "sandstone": dict(cohesion=1.10e6, friction_angle=42.0, tensile_strength=1.95e6),
     "non_sandstone": dict(cohesion=0.35e6, friction_angle=26.0, tensile_strength=0.25e6),
     "concrete": dict(cohesion=1.80e6, friction_angle=46.0, tensile_strength=1.27e6),
 }
-"""Strength parameters of the paper's Table 1, not copied into the settings (not read yet)."""
+"""Strength parameters of the paper's Table 1: the defaults of cohesion, friction_angle and
+tensile_strength in [materials.NAME.plasticity] / [materials.NAME.damage] of a material with
+that preset (a material without a preset gives them)."""
+
+NONLINEAR_TABLES = ("plasticity", "damage")
+"""Sub-tables of [materials.NAME] that make a region nonlinear (element loop of the kernel)."""
 
 # Plausible ranges for rock and concrete (and the odd steel part): a value outside them is almost
 # always a unit slip (GPa or MPa for Pa, t/m^3 for kg/m^3), which would give a meaningless run.
@@ -65,13 +70,13 @@ BOX_REGION = "rock"
 # Boundary types of a truncation face: viscoelastic and viscous faces carry the seismic input,
 # fixed and roller faces are kernel constraints (roller: normal component held), free is free.
 BOUNDARY_TYPES = ("viscoelastic", "viscous", "fixed", "roller", "free")
-OUTPUT_FIELDS = ("displacement", "velocity", "acceleration", "stress", "strain")
-"""Field names ``output.fields`` may list."""
+# During a static stage a truncation face is held (roller: normal component; fixed) or carries the
+# in-situ traction only (free); docs/static.md.
+STATIC_BOUNDARY_TYPES = ("roller", "fixed", "free")
+OUTPUT_FIELDS = ("displacement", "velocity", "acceleration", "stress", "strain", "damage")
+"""Field names ``output.fields`` may list ("damage": cell fields damage, damage_type, plastic_strain)."""
 
-FIELDS_NOT_PRODUCED = {
-    "damage": "there is no damage model yet (the materials are linear elastic), so no damage field "
-              "is produced; fields produced: " + ", ".join(OUTPUT_FIELDS),
-}
+FIELDS_NOT_PRODUCED: dict = {}
 """Field names a user may expect that nothing produces yet, and why."""
 
 _FILENAME_SAFE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
@@ -457,22 +462,49 @@ def _unknown_key(key: str, value: Any, candidates: Sequence[str]) -> SceneError:
 # ---------------------------------------------------------------------------
 
 _STRENGTH_NOT_READ = (
-    "not read: the materials are linear elastic (E, nu, rho); strength parameters will go in "
-    "[materials.NAME.plasticity] (rock: cohesion, friction_angle, dilation_angle, tensile_strength) "
-    "or [materials.NAME.damage] (concrete) once the nonlinear materials land; remove the key "
-    "(keep it as a comment); interface strengths go in [contact]")
-_NONLINEAR_NOT_YET = ("nonlinear materials are not implemented yet: the materials are linear elastic "
-                      "(E, nu, rho); remove the table (keep it as a comment)")
+    "not read here: strengths go in [materials.NAME.plasticity] (rock, Mohr-Coulomb: cohesion, "
+    "friction_angle, dilation_angle, tensile_strength) or [materials.NAME.damage] (concrete: "
+    "cohesion, friction_angle, tensile_strength, fracture_energy); a material without either "
+    "table is linear elastic; interface strengths go in [contact]")
+
+# Rock: Mohr-Coulomb with tension cut-off and plastic-strain damage (docs/materials.md). The three
+# strengths default to PRESET_STRENGTHS of the material's preset (required without a preset).
+_PLASTICITY = Table({
+    "cohesion": Number("cohesion c (Pa)", NON_NEGATIVE, default=None),
+    "friction_angle": Number("friction angle phi (deg)", "[0, 90)", default=None),
+    "dilation_angle": Number("dilation angle psi (deg)", "[0, 90)", default=0.0),
+    "tensile_strength": Number("tensile strength of the cut-off (Pa; >= c cot(phi): none)",
+                               NON_NEGATIVE, default=None),
+    "damage_max": Number("largest damage d_max (0: no damage)", "[0, 1)", default=0.9),
+    "damage_plastic_strain": Number("equivalent plastic strain scale kappa_ref of the damage",
+                                    POSITIVE, default=0.005),
+    # None: on for Q1 (volumetric locking of plastic flow), off for Q2.
+    "mean_dilatation": Flag("mean dilatation (B-bar) in the region's cells", default=None),
+}, "[materials.NAME.plasticity]", presence="optional")
+
+# Lining concrete: Eq. 21 of the paper with crack band (docs/materials.md). Strengths as above.
+_DAMAGE = Table({
+    "cohesion": Number("cohesion c of the compression-shear criterion (Pa)", POSITIVE, default=None),
+    "friction_angle": Number("friction angle phi (deg)", "[0, 90)", default=None),
+    "tensile_strength": Number("tensile strength f_t (Pa)", POSITIVE, default=None),
+    "fracture_energy": Number("fracture energy G_f (N/m; 0: no crack band)", NON_NEGATIVE, default=120.0),
+    "A_t": Number("Eq. 21 tension constant A_t", "(0, 1]", default=1.0),
+    "B_t": Number("Eq. 21 tension constant B_t", POSITIVE, default=5.0e4),
+    "A_c": Number("Eq. 21 compression constant A_c", POSITIVE, default=1.4),
+    "B_c": Number("Eq. 21 compression constant B_c", POSITIVE, default=1.5e3),
+    "stiffness_recovery": Number("share s of d_t acting in compression", "[0, 1]", default=0.0),
+    "damage_max": Number("cap of the damage (stiffness floor)", "[0, 1)", default=0.9999),
+}, "[materials.NAME.damage]", presence="optional")
 
 _MATERIAL = Table({
     "preset": Choice("material preset (the paper's Table 1, docs/method.md section 10)", tuple(MATERIAL_PRESETS), default=None),
     "E": Number("Young's modulus E (Pa)", POSITIVE, default=None),  # required unless preset
     "nu": Number("Poisson's ratio", "(-1, 0.5)", default=None),
     "rho": Number("density (kg/m^3)", POSITIVE, default=None),
+    "plasticity": _PLASTICITY,
+    "damage": _DAMAGE,
 }, "a material", not_read={
-    **{key: _STRENGTH_NOT_READ
-       for key in ("cohesion", "friction_angle", "dilation_angle", "tensile_strength")},
-    **{key: _NONLINEAR_NOT_YET for key in ("plasticity", "damage")},
+    key: _STRENGTH_NOT_READ for key in ("cohesion", "friction_angle", "dilation_angle", "tensile_strength")
 })
 
 _WAVE_TYPE = Choice("wave type", ("P", "SV", "SH"))
@@ -566,10 +598,30 @@ SCHEMA = Table({
         "beta": Number("stiffness-proportional coefficient beta (s)", NON_NEGATIVE, default=None),
     }, "[damping]", presence="optional"),
     "initial_stress": Table({
-        "surface": Number("z of the ground surface (m)"),
-        "rho": Number("overburden density (kg/m^3)", POSITIVE),
+        # Geostatic (surface, rho, k) or uniform (stress); one of the two (docs/static.md).
+        "surface": Number("z of the ground surface (m)", default=None),
+        "rho": Number("overburden density (kg/m^3)", POSITIVE, default=None),
         "k": Vector("stress ratios [k_x, k_y, k_z]", 3, POSITIVE, default=[1.0, 1.0, 1.0]),
+        "stress": Vector("uniform initial stress [sxx, syy, szz, syz, sxz, sxy] (Pa, compression negative)", 6,
+                         default=None),
     }, "[initial_stress]", presence="optional"),
+    "static": Table({
+        # A static stage before the dynamic run (docs/static.md): present = on.
+        "excavate": TextList("regions removed by the excavation", default=[]),
+        "relaxation": Number("fraction lambda of the excavation load released before install", "[0, 1]",
+                             default=0.5),
+        "install": TextList("regions activated stress-free after the first release", default=[]),
+        "gravity": Flag("the materials' weight as a body force of the stage", default=False),
+        "tolerance": Number("relative residual of the linear solve", "(0, 0.1]", default=1.0e-8),
+        "solver": Choice("static solver", ("auto", "direct", "iterative"), default="auto"),
+        "boundary": Table({
+            "type": Choice("boundary type of the truncation faces during the stage", STATIC_BOUNDARY_TYPES,
+                           default="roller"),
+            "face": TableMap(Table({
+                "type": Choice("boundary type of this face during the stage", STATIC_BOUNDARY_TYPES),
+            }, "a face's boundary during the stage"), "[static.boundary.face.NAME]", default=None),
+        }, "[static.boundary]"),
+    }, "[static]", presence="optional"),
     "contact": Table({
         "interfaces": TextList("interface names", non_empty=True),
         "cohesion": Number("interface cohesion (Pa)", NON_NEGATIVE),
@@ -724,7 +776,9 @@ def _check_rules(settings: dict, base_dirs: Sequence[Path], warnings: list[str])
         raise SceneError("pair_monitor", settings["pair_monitor"],
                          "pair monitors need a [contact] table")
     if "initial_stress" in settings:
-        _check_density("initial_stress.rho", settings["initial_stress"]["rho"], warnings)
+        _check_initial_stress(settings["initial_stress"], warnings)
+    if "static" in settings:
+        _check_static(settings)
     _check_output(settings, warnings)
     _check_points_inside(settings)
     _resolve_files(settings, base_dirs)
@@ -795,6 +849,44 @@ def _check_materials(settings: dict, warnings: list[str]) -> None:
                                + ", ".join(_show(p) for p in MATERIAL_PRESETS) + ")")
         _check_young_modulus(f"materials.{name}.E", material["E"])
         _check_density(f"materials.{name}.rho", material["rho"], warnings)
+        _check_nonlinear_material(name, material, mesh["order"])
+
+
+def _check_nonlinear_material(name: str, material: dict, order: int) -> None:
+    """[materials.NAME.plasticity] / [materials.NAME.damage]: one of them, strengths from the preset
+    when not given, cross-key ranges; mean_dilatation resolved for the element order."""
+    given = [table for table in NONLINEAR_TABLES if table in material]
+    if len(given) > 1:
+        raise SceneError(f"materials.{name}", given, "a material has one nonlinear "
+                         "law: [plasticity] (Mohr-Coulomb rock) or [damage] (concrete), not both")
+    if not given:
+        return
+    table = given[0]
+    key, values = f"materials.{name}.{table}", material[table]
+    spec = _MATERIAL.fields[table]
+    preset = PRESET_STRENGTHS.get(material["preset"], {})
+    for strength in ("cohesion", "friction_angle", "tensile_strength"):
+        if values[strength] is None:
+            values[strength] = preset.get(strength)
+        if values[strength] is None:
+            raise _missing(f"{key}.{strength}", spec.fields[strength].allowed + " (or give the material a "
+                           "preset: " + ", ".join(_show(p) for p in PRESET_STRENGTHS) + ")")
+    for strength in ("cohesion", "tensile_strength"):
+        _check_strength(f"{key}.{strength}", values[strength], "a material strength")
+    if table == "plasticity":
+        if values["dilation_angle"] > values["friction_angle"]:
+            raise SceneError(f"{key}.dilation_angle", values["dilation_angle"], "the dilation angle must "
+                             f"not exceed the friction angle {values['friction_angle']:g} deg (a larger one "
+                             "makes plastic flow create energy)")
+        if values["friction_angle"] == 0.0 and values["cohesion"] == 0.0:
+            raise SceneError(f"{key}.cohesion", 0.0,
+                             "must be > 0 when friction_angle = 0 (the material would have no shear strength)")
+        if values["mean_dilatation"] is None:
+            values["mean_dilatation"] = order == 1
+    elif values["fracture_energy"] > 0.0 and values["A_t"] != 1.0:
+        raise SceneError(f"{key}.A_t", values["A_t"], "must be 1 when fracture_energy > 0 (with A_t < 1 the "
+                         "stress keeps (1 - A_t) f_t forever and no fracture energy can be matched); set "
+                         "fracture_energy = 0 for the unregularised law")
 
 
 def _scientific(x: float) -> str:
@@ -841,14 +933,46 @@ def _check_density(key: str, rho: float, warnings: list[str]) -> None:
                         "than any rock or concrete; used as given")
 
 
-def _check_strength(key: str, value: float | None) -> None:
-    """An interface strength in (0, SMALLEST_STRENGTH) Pa is an error: it is a value in MPa (or
-    kPa) written as Pa; 0 is allowed and means none."""
+def _check_strength(key: str, value: float | None, what: str = "an interface strength") -> None:
+    """A strength in (0, SMALLEST_STRENGTH) Pa is an error: it is a value in MPa (or kPa) written
+    as Pa; 0 is allowed and means none."""
     if value is None or value == 0.0 or value >= SMALLEST_STRENGTH:
         return
-    raise SceneError(key, value, f"an interface strength in Pa is 0 (none) or at least "
+    raise SceneError(key, value, f"{what} in Pa is 0 (none) or at least "
                      f"{SMALLEST_STRENGTH:g} Pa (below that it is negligible next to any geostatic stress)"
                      + _unit_hint(value, (1.0e3, 1.0e8), (("MPa", 1.0e6), ("kPa", 1.0e3))))
+
+
+def _check_initial_stress(initial: dict, warnings: list[str]) -> None:
+    """[initial_stress]: the geostatic form (surface, rho, k) or the uniform one (stress), not both."""
+    if initial["stress"] is not None:
+        for name in ("surface", "rho"):
+            if initial[name] is not None:
+                raise SceneError(f"initial_stress.{name}", initial[name], "a setting of the geostatic form: give "
+                                 "initial_stress.stress (uniform) or surface, rho and k (geostatic), not both")
+        if initial["k"] != SCHEMA.fields["initial_stress"].fields["k"].default:
+            raise SceneError("initial_stress.k", initial["k"], "a setting of the geostatic form: give "
+                             "initial_stress.stress (uniform) or surface, rho and k (geostatic), not both")
+        return
+    for name in ("surface", "rho"):
+        if initial[name] is None:
+            spec = SCHEMA.fields["initial_stress"].fields[name]
+            raise _missing(f"initial_stress.{name}", f"{spec.allowed} (the geostatic form: surface, rho, k), or "
+                           "give initial_stress.stress = [sxx, syy, szz, syz, sxz, sxy] (Pa) for a uniform stress")
+    _check_density("initial_stress.rho", initial["rho"], warnings)
+
+
+def _check_static(settings: dict) -> None:
+    """[static]: something to load the stage, no region both excavated and installed."""
+    static = settings["static"]
+    if "initial_stress" not in settings and not static["gravity"]:
+        raise SceneError("static", {}, "a static stage needs a load: an [initial_stress] table (its excavation "
+                         "load), or static.gravity = true (the materials' weight)")
+    both = [name for name in static["install"] if name in static["excavate"]]
+    if both:
+        index = static["install"].index(both[0])
+        raise SceneError(f"static.install.{index}", both[0], "a region is excavated (static.excavate) or "
+                         "installed (static.install), not both")
 
 
 def _check_output(settings: dict, warnings: list[str]) -> None:
@@ -857,6 +981,11 @@ def _check_output(settings: dict, warnings: list[str]) -> None:
     if output["xdmf_interval"] == 0.0 and output["fields"] != default_fields:
         warnings.append(f"output.fields = {_show(output['fields'])} but output.xdmf_interval = 0: "
                         "no fields are written")
+    nonlinear = any(table in material for material in settings["materials"].values()
+                    for table in NONLINEAR_TABLES)
+    if "damage" in output["fields"] and not nonlinear:
+        warnings.append("output.fields lists \"damage\" but no material has a [plasticity] or [damage] "
+                        "table: the damage fields are zero everywhere")
 
 
 def _check_record(settings: dict, warnings: list[str]) -> None:

@@ -66,6 +66,8 @@ class Simulation:
     contact_pairs: object = None         # the kernel's ContactPairs, set by make_stepper
     pair_monitor_names: list = field(default_factory=list)
     pair_monitor_pairs: np.ndarray | None = None  # (m,) pair index of each pair monitor
+    nonlinear: "NonlinearRegions | None" = None  # element-loop regions (pyfem.elements), None: matrix only
+    static: object = None                # pyfem.static.StaticState when a [static] stage ran
 
 
 @dataclass
@@ -79,7 +81,11 @@ class MonitorStress:
         shear_modulus: (m,) G of that material (Pa).
         regions: region (material) name of each containing cell.
         static: (m, 3, 3) initial stress at the points (Pa, compression negative); zero
-            without [initial_stress].
+            without [initial_stress]. At a kernel point, that point's.
+        cells: (m,) local cell containing each monitor.
+        kernel_points: None without nonlinear regions; else per monitor (component index, flat
+            point index) of the nearest quadrature point of its cell when the cell is in a
+            nonlinear region (its stress is the law's there), None in the matrix cells.
     """
 
     nodes: np.ndarray
@@ -88,6 +94,8 @@ class MonitorStress:
     shear_modulus: np.ndarray
     regions: list
     static: np.ndarray
+    cells: np.ndarray | None = None
+    kernel_points: list | None = None
 
     def dynamic_stress(self, u: np.ndarray) -> np.ndarray:
         """(m, 3, 3) stress of the displacement increment u (dofs, m) at the monitors (Pa)."""
@@ -117,7 +125,51 @@ def monitor_stress_operator(scene: Scene, model, points: np.ndarray) -> MonitorS
     field = stress_field_from_scene(scene)
     static = np.zeros((len(points), 3, 3)) if field is None else np.asarray(field(points), dtype=np.float64)
     return MonitorStress(nodes=nodes, gradients=gradients, lame_lambda=lame[:, 0], shear_modulus=lame[:, 1],
-                         regions=regions, static=static)
+                         regions=regions, static=static, cells=np.asarray(cells))
+
+
+def nonlinear_regions(scene: Scene, model, time_step: TimeStep):
+    """The regions whose material has a [plasticity] or [damage] table, taken out of the stiffness
+    matrix into kernel element loops (pyfem.elements), or None when there are none. Their laws start
+    from the scene's initial stress at the quadrature points; warnings go to the scene (also a step
+    too close to the elastic limit for non-associated flow, `plastic_frequency_factor`)."""
+    from pyfem.elements import initial_warnings, nonlinear_component, plastic_frequency_factor, scene_laws
+    from pyfem.initial_stress import stress_field_from_scene
+
+    laws, mean_dilatation = scene_laws(scene)
+    if not laws:
+        return None
+    try:
+        nonlinear = nonlinear_component(model, list(laws), laws, mean_dilatation=mean_dilatation,
+                                        initial_stress=stress_field_from_scene(scene))
+    except ValueError as error:  # the kernel's own range checks, should the scene's have missed one
+        raise SceneError("materials", sorted(laws), f"a nonlinear material was refused by the kernel: "
+                         f"{error}")
+    for message in initial_warnings(nonlinear, scene):
+        scene.warn(message)
+    for name, parameters in laws.items():
+        if parameters["law"] == "mohr_coulomb":
+            factor = plastic_frequency_factor(parameters["poisson_ratio"], parameters["friction_angle"],
+                                              parameters["dilation_angle"])
+            if factor * time_step.dt > time_step.critical:
+                margin = time_step.critical / time_step.dt - 1
+                scene.warn(f"materials.{name}.plasticity: non-associated flow (dilation_angle < "
+                           f"friction_angle) can raise frequencies by up to {100 * (factor - 1):.0f} %, more "
+                           f"than the step's margin {100 * margin:.0f} % to the elastic stable limit: lower "
+                           "time.safety or time.dt")
+    return nonlinear
+
+
+def attach_kernel_points(stress: MonitorStress, points: np.ndarray, nonlinear) -> None:
+    """Monitors in a nonlinear region take the law's stress at the nearest quadrature point of their
+    cell (and that point's initial stress as their static stress)."""
+    stress.kernel_points = [nonlinear.nearest_point(int(cell), point)
+                            for cell, point in zip(stress.cells, points)]
+    for j, found in enumerate(stress.kernel_points):
+        sigma0 = None if found is None else nonlinear.initial_stress[nonlinear.regions[found[0]]]
+        if sigma0 is not None:
+            xx, yy, zz, xy, yz, xz = sigma0.reshape(-1, 6)[found[1]]
+            stress.static[j] = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
 
 
 def earthquake_duration(scene: Scene) -> float:
@@ -354,8 +406,9 @@ def face_report(model) -> list[dict]:
             for face in model.faces]
 
 
-def prepare(scene: Scene) -> Simulation:
-    """Builds the model and every operator the kernel needs (no time stepping)."""
+def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
+    """Builds the model and every operator the kernel needs (no time stepping); with [static], runs
+    the static stage and hands its state over (solve_static=False: only checks it, for `plan`)."""
     from pyfem.operators import build_model
 
     model = build_model(scene)
@@ -365,12 +418,15 @@ def prepare(scene: Scene) -> Simulation:
     stiffness = add_block_diagonal(model.stiffness, spring_nodes, springs)
     alpha, beta = damping_coefficients(scene)
     time_step = choose_time_step(scene, stiffness, mass, beta)
+    nonlinear = nonlinear_regions(scene, model, time_step)
+    if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
+        stiffness = add_block_diagonal(nonlinear.stiffness, spring_nodes, springs)
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
     # Whole output intervals: the last sample lands on or just after the duration.
     n_steps = time_step.steps_per_output * math.ceil(n_steps / time_step.steps_per_output)
     simulation = Simulation(scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
                             time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
-                            constraints=constraints, n_steps=n_steps)
+                            constraints=constraints, n_steps=n_steps, nonlinear=nonlinear)
     if "seismic_input" in scene.effects:
         from pyfem.seismic.setup import seismic_input_from_scene
 
@@ -384,12 +440,18 @@ def prepare(scene: Scene) -> Simulation:
             raise SceneError("monitor", [m["point"] for m in monitors], f"points inside the mesh ({error})")
         simulation.monitor_names = [m["name"] for m in monitors]
         simulation.monitor_stress = monitor_stress_operator(scene, model, points)
+        if nonlinear is not None:
+            attach_kernel_points(simulation.monitor_stress, points, nonlinear)
     if "contact" in scene.effects:
         simulation.contact_arrays = contact_arguments(scene, model)
         pair_monitors = scene.get("pair_monitor", [])
         simulation.pair_monitor_names = [m["name"] for m in pair_monitors]
         simulation.pair_monitor_pairs = np.array([model.pairs.nearest(m["point"]) for m in pair_monitors],
                                                  dtype=np.int64)
+    if "static" in scene:  # the stage's stress and pair forces become the initial state (pyfem/static.py)
+        from pyfem.static import hand_over
+
+        hand_over(simulation, solve=solve_static)
     return simulation
 
 
@@ -429,6 +491,13 @@ def make_stepper(simulation: Simulation):
     if simulation.contact_arrays is not None:
         simulation.contact_pairs = make_contact_pairs(simulation.contact_arrays)
         stepper.add_contact(simulation.contact_pairs)
+    if simulation.nonlinear is not None:  # fresh state: a component holds the state of one run
+        for component in simulation.nonlinear.new_components():
+            stepper.add_internal_force(component)
+    if simulation.static is not None:  # the stage's out-of-balance, held constant (pyfem/static.py)
+        from pyfem.static import add_hand_over_force
+
+        add_hand_over_force(stepper, simulation)
     return stepper
 
 
@@ -453,15 +522,20 @@ def memory_estimate(simulation: Simulation) -> int:
         n_pairs = len(simulation.contact_arrays["area"])
         total += sum(v.nbytes for v in simulation.contact_arrays.values() if isinstance(v, np.ndarray))
         total += n_pairs * (3 * 3 * 8 + 8)  # kernel state per pair: forces, D, state (estimate)
+    if simulation.nonlinear is not None:
+        total += simulation.nonlinear.memory_bytes  # element arrays, per-point state, buffers
     return int(total)
 
 
 def plan(scene: Scene) -> dict:
     """What a run of the scene would do, without running it: effects, sizes, dt, memory and time.
 
-    The time estimate comes from timing a few kernel steps on the real matrices.
+    The time estimate comes from timing a few kernel steps on the real matrices. A static stage is
+    described, not solved.
     """
-    simulation = prepare(scene)
+    from pyfem.static import plan_report
+
+    simulation = prepare(scene, solve_static=False)
     stepper = make_stepper(simulation)
     n = simulation.stiffness.shape[0]
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -471,6 +545,7 @@ def plan(scene: Scene) -> dict:
     per_step = (time.perf_counter() - start) / trial_steps
     model = simulation.model
     ts = simulation.time_step
+    element_loop = element_loop_plan(simulation.nonlinear, u, per_step, simulation.time_step)
     return {
         "title": scene["title"],
         "effects on": ", ".join(scene.effects) or "none (free vibration)",
@@ -484,10 +559,51 @@ def plan(scene: Scene) -> dict:
         "traction-free surfaces": ", ".join(f"{name} ({count} facets)" for name, count in
                                             model.free_surfaces.items()) or "none",
         "dt": f"{ts.dt:.6g} s ({ts.reason})",
+        **element_loop,
+        **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
         "steps": simulation.n_steps,
         "memory": f"{memory_estimate(simulation) / 2**20:.1f} MiB",
         "time per step": f"{per_step * 1e3:.3f} ms (measured over {trial_steps} steps)",
         "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion",
+    }
+
+
+def element_loop_plan(nonlinear, u: np.ndarray, per_step: float, time_step: TimeStep) -> dict:
+    """The plan's lines on the element loop: its regions, points, state bytes and measured time,
+    and why the elastic stable step holds."""
+    from pyfem.elements import plastic_frequency_factor
+
+    if nonlinear is None:
+        return {"element loop": "none (no [plasticity] or [damage] table: every cell in the stiffness "
+                                "matrix)"}
+    regions, stiffening = {}, 1.0
+    for component, (name, (law, parameters)) in zip(nonlinear.components, nonlinear.laws.items()):
+        regions[name] = (f"{law}, {component.n_cells} cells, {component.n_cells * component.n_points} points"
+                         + (", mean dilatation" if component.mean_dilatation else "")
+                         + f", {component.owned_bytes / 2**20:.1f} MiB of state and buffers")
+        if law == "mohr_coulomb":
+            stiffening = max(stiffening, plastic_frequency_factor(parameters["poisson_ratio"],
+                                                                  parameters["friction_angle"],
+                                                                  parameters.get("dilation_angle", 0.0)))
+    margin = time_step.critical / time_step.dt
+    scratch = np.zeros_like(u)
+    repeats = 5
+    start = time.perf_counter()
+    for _ in range(repeats):  # trial states only: nothing is committed
+        for component in nonlinear.components:
+            component.compute(u, scratch)
+    loop = (time.perf_counter() - start) / repeats
+    return {
+        "nonlinear regions": regions,
+        "element loop": (f"{loop * 1e3:.3f} ms per step ({loop / max(1, nonlinear.n_points) * 1e9:.0f} ns per "
+                         f"point, {100 * loop / per_step:.0f} % of the step), measured at rest; a yielding "
+                         "Mohr-Coulomb point costs about 6x, a damaging concrete point 3x (README)"),
+        "element loop dt": ("from the full elastic stiffness: damage and mean dilatation only soften the cells"
+                            + ("" if stiffening == 1.0 else
+                               "; non-associated plastic flow (psi < phi) can raise a frequency by up to "
+                               f"{100 * (stiffening - 1):.0f} %, "
+                               f"{'inside' if stiffening < margin else 'BEYOND'} the step's margin "
+                               f"{100 * (margin - 1):.0f} % to the stable limit")),
     }
 
 
@@ -514,6 +630,10 @@ def run(scene: Scene, out_dir) -> dict:
         try:
             with signals.deferred():
                 writer.start()
+                if simulation.static is not None:  # static/ and the stage's stress in the fields
+                    from pyfem.static_output import write_static_outputs
+
+                    write_static_outputs(writer)
             stepper = make_stepper(simulation)
             n = simulation.stiffness.shape[0]
             u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)

@@ -2,7 +2,8 @@
 # Installs what the project needs from Debian's archive (quiet and quick when present),
 # then builds the C++ kernel module into pyfem/ (incremental: rebuilds only what changed).
 #   scripts/setup.sh                  what runs and the default test tier need
-#   scripts/setup.sh --with-paraview  also ParaView's Python and a virtual X server (slow tier)
+#   scripts/setup.sh --with-paraview  also ParaView's Python and a virtual X server, and python3-venv
+#                                     for the install test (slow tier)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -12,7 +13,7 @@ packages=(
   python3-numpy python3-scipy python3-matplotlib python3-h5py python3-tqdm python3-pytest
 )
 if [ "${1:-}" = "--with-paraview" ]; then
-  packages+=(paraview python3-paraview xvfb xauth)
+  packages+=(paraview python3-paraview xvfb xauth python3-venv)
 fi
 missing=()
 for p in "${packages[@]}"; do

@@ -19,6 +19,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "material_law.hpp"
 #include "principal.hpp"
 
 namespace cavern {
@@ -320,5 +321,117 @@ inline ConcreteDamageStep concrete_damage_update(const ConcreteDamageMaterial& m
   }
   return detail::finish_concrete_step(old, step);
 }
+
+/// The lining law in the element loop (material_law.hpp), law name "concrete_damage".
+///
+/// The law is secant in the strain measured from the stress-free state. The static stress
+/// sigma0 of a point is that of the strain eps0 = C^-1 : sigma0, so the law is called with
+/// eps0 + eps (eps the strain of the dynamic displacement): undamaged, its stress is
+/// sigma0 + C : eps (to round-off of C C^-1), and both criteria see the total stress. Damage
+/// scales the whole stress, the static part included. A sigma0 that already exceeds a criterion
+/// is damaged by initial_state (one update from the stress-free state to eps0); the cell then
+/// starts out of balance and releases the excess dynamically from t = 0.
+///
+/// Energy (material_law.hpp): the scheme's work of a step is w = 1/2 (sigma_c + sigma_t -
+/// 2 sigma0) : d_eps. With W = 1/2 sigma : (eps0 + eps) (concrete_stored_energy),
+///   psi = W - 1/2 sigma0 : eps0 - sigma0 : eps
+/// is 0 at an admissible initial state and 1/2 eps : C : eps while undamaged. A step in which
+/// damage grows sets psi to this closed form and delta = w - (psi_t - psi_c) (the law's
+/// dissipation rewritten with sigma0); a step at fixed damage sets delta = 0 and psi_t = psi_c + w
+/// (the closed form agrees up to round-off of the static energy and, in mixed tension-compression
+/// after cracking, the second-order trapezoid error of the split; either would otherwise show as
+/// dissipation of either sign without any damage).
+struct ConcreteDamageLaw {
+  static constexpr const char* kName = "concrete_damage";
+
+  using Parameters = ConcreteDamageMaterial;
+
+  struct State : ConcreteDamageState {  // strain: eps0 + eps of the last commit
+    double stored = 0.0;                 // psi (J/m^3)
+  };
+
+  /// Keys: young_modulus, poisson_ratio, tensile_strength, cohesion (Pa), friction_angle (deg)
+  /// required; fracture_energy (N/m, 120), A_t (1), B_t (5e4), A_c (1.4), B_c (1500),
+  /// stiffness_recovery (0), damage_max (0.9999) optional (ConcreteDamageParameters).
+  static Parameters parameters_from(const ParameterMap& parameters) {
+    static constexpr const char* kKnown[] = {
+        "young_modulus", "poisson_ratio", "tensile_strength", "cohesion",
+        "friction_angle", "fracture_energy", "A_t", "B_t", "A_c", "B_c",
+        "stiffness_recovery", "damage_max"};
+    check_parameter_names(parameters, kName, kKnown);
+    ConcreteDamageParameters p;
+    p.young_modulus = required_parameter(parameters, kName, "young_modulus");
+    p.poisson_ratio = required_parameter(parameters, kName, "poisson_ratio");
+    p.tensile_strength = required_parameter(parameters, kName, "tensile_strength");
+    p.cohesion = required_parameter(parameters, kName, "cohesion");
+    p.friction_angle = required_parameter(parameters, kName, "friction_angle");
+    p.fracture_energy = optional_parameter(parameters, "fracture_energy", p.fracture_energy);
+    p.A_t = optional_parameter(parameters, "A_t", p.A_t);
+    p.B_t = optional_parameter(parameters, "B_t", p.B_t);
+    p.A_c = optional_parameter(parameters, "A_c", p.A_c);
+    p.B_c = optional_parameter(parameters, "B_c", p.B_c);
+    p.stiffness_recovery =
+        optional_parameter(parameters, "stiffness_recovery", p.stiffness_recovery);
+    p.damage_max = optional_parameter(parameters, "damage_max", p.damage_max);
+    try {
+      return concrete_damage_material(p);
+    } catch (const std::invalid_argument& error) {
+      throw std::invalid_argument(std::string("law concrete_damage: ") + error.what());
+    }
+  }
+
+  static ElasticModuli elastic_moduli(const Parameters& m) { return {m.lambda, m.shear_modulus}; }
+
+  static State initial_state(const Parameters& m, const double initial_stress[6],
+                             double characteristic_length) {
+    State state;
+    const Voigt eps0 = static_strain(m, initial_stress);
+    const ConcreteDamageStep step =
+        concrete_damage_update(m, ConcreteDamageState{}, eps0, characteristic_length);
+    static_cast<ConcreteDamageState&>(state) = step.state;
+    if (step.state.damage > 0.0)
+      state.stored =
+          step.stored_energy - 0.5 * stress_dot_strain(initial_stress, eps0.data());
+    return state;
+  }
+
+  static PointEnergy evaluate(const Parameters& m, const State& committed,
+                              const PointStrain& point, State& trial) {
+    const Voigt eps0 = static_strain(m, point.initial_stress);
+    Voigt strain;
+    for (int c = 0; c < 6; ++c) strain[c] = eps0[c] + point.strain[c];
+    const ConcreteDamageStep step =
+        concrete_damage_update(m, committed, strain, point.characteristic_length);
+    static_cast<ConcreteDamageState&>(trial) = step.state;
+    double work = 0.0;
+    for (int c = 0; c < 6; ++c)
+      work += 0.5 * (committed.stress[c] + trial.stress[c] - 2.0 * point.initial_stress[c]) *
+              (trial.strain[c] - committed.strain[c]);
+    PointEnergy energy;
+    if (trial.kappa_tension == committed.kappa_tension &&
+        trial.kappa_compression == committed.kappa_compression) {  // no damage growth
+      trial.stored = committed.stored + work;
+    } else {
+      trial.stored = step.stored_energy -
+                     0.5 * stress_dot_strain(point.initial_stress, eps0.data()) -
+                     stress_dot_strain(point.initial_stress, point.strain);
+      energy.dissipation = work - (trial.stored - committed.stored);
+    }
+    energy.stored = trial.stored;
+    return energy;
+  }
+
+  /// Damage 1 - (1 - d_t)(1 - d_c), its mechanism; no plastic strain (0).
+  static PointOutput output(const State& state) {
+    return {state.damage, static_cast<std::int32_t>(state.damage_type), 0.0};
+  }
+
+ private:
+  static Voigt static_strain(const Parameters& m, const double* initial_stress) {
+    Voigt sigma0;
+    for (int c = 0; c < 6; ++c) sigma0[c] = initial_stress[c];
+    return isotropic_strain(m.young_modulus, m.poisson_ratio, sigma0);
+  }
+};
 
 }  // namespace cavern

@@ -46,7 +46,8 @@ struct LinearElastic {
     return {parameters.lame_lambda, parameters.shear_modulus};
   }
 
-  static State initial_state(const Parameters&, const double initial_stress[6]) {
+  static State initial_state(const Parameters&, const double initial_stress[6],
+                             double /*characteristic_length*/) {
     State state;
     for (int c = 0; c < 6; ++c) state.stress[c] = initial_stress[c];
     return state;
@@ -66,6 +67,8 @@ struct LinearElastic {
     energy.stored = 0.5 * stress_dot_strain(dynamic, eps);
     return energy;
   }
+
+  static PointOutput output(const State&) { return {}; }
 };
 
 }  // namespace cavern

@@ -6,10 +6,17 @@
 //   struct State { Voigt stress; ... };   // per point, trivially copyable; stress[c] (total, Pa)
 //   static constexpr const char* kName;              // the name Python selects it by
 //   static Parameters parameters_from(const ParameterMap&);   // throws std::invalid_argument
-//   static State initial_state(const Parameters&, const double initial_stress[6]);
+//   static State initial_state(const Parameters&, const double initial_stress[6],
+//                              double characteristic_length);
 //   static ElasticModuli elastic_moduli(const Parameters&);   // initial (undamaged) moduli
 //   static PointEnergy evaluate(const Parameters&, const State& committed,
 //                               const PointStrain& point, State& trial);
+//   static PointOutput output(const State&);        // damage, its type, plastic strain
+// initial_state is the state at zero dynamic strain. Its stress is sigma0 when sigma0 is
+// admissible; a law with a strength returns a sigma0 that violates it to the yield surface (or
+// damages it) there, so the cell starts out of balance and releases the excess dynamically
+// from t = 0 (the static state was not one this strength can carry). The characteristic length
+// is that of PointStrain (the crack band of a damage that starts at the initial state).
 // evaluate computes the trial state at the total strain of `point` from the committed state and
 // writes nothing else: it is called concurrently for different points, again for the same
 // step (reset_energy computes without committing) and its trial is committed only when the
@@ -40,6 +47,7 @@
 // loads are not in the dynamic problem).
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <stdexcept>
 #include <string>
@@ -66,6 +74,13 @@ struct ElasticModuli {
   double shear_modulus = 0.0;
 };
 
+/// What a law reports of a committed state (monitors, fields, run.json).
+struct PointOutput {
+  double damage = 0.0;            // scalar damage d in [0, 1)
+  std::int32_t damage_type = 0;   // 0 none, 1 tension, 2 shear (principal.hpp DamageType)
+  double plastic_strain = 0.0;    // equivalent plastic strain sqrt(2/3) sum |d eps_p| (-)
+};
+
 /// Energy densities of a trial state (J/m^3).
 struct PointEnergy {
   double stored = 0.0;       // psi at the trial state
@@ -84,6 +99,13 @@ inline double required_parameter(const ParameterMap& parameters, const char* law
   if (found == parameters.end())
     throw std::invalid_argument(std::string("law ") + law + ": parameter '" + key + "' missing");
   return found->second;
+}
+
+/// The value of `key` in `parameters`, or `fallback` when it is not given.
+inline double optional_parameter(const ParameterMap& parameters, const char* key,
+                                 double fallback) {
+  const auto found = parameters.find(key);
+  return found == parameters.end() ? fallback : found->second;
 }
 
 /// Throws std::invalid_argument naming the first key of `parameters` not in `known`.

@@ -14,7 +14,10 @@
 
 #include <array>
 #include <cstdint>
+#include <stdexcept>
+#include <string>
 
+#include "material_law.hpp"
 #include "principal.hpp"
 
 namespace cavern {
@@ -122,5 +125,111 @@ double mohr_coulomb_yield(const MohrCoulombMaterial& material,
 MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& material,
                                     const MohrCoulombState& old_state,
                                     const Voigt& strain_increment);
+
+/// The rock law in the element loop (material_law.hpp), law name "mohr_coulomb".
+///
+/// The law is incremental; the loop gives the total strain eps of the dynamic displacement, so
+/// the state keeps the committed eps and each step hands the law d_eps = eps_trial -
+/// eps_committed. The static stress sigma0 is the initial stress (and effective stress) of the
+/// state, so the strength is checked against the total stress sigma0 + C : (eps - eps_p) (times
+/// 1 - d). A sigma0 outside the yield surface is returned to it by initial_state (one return
+/// from sigma0 as the trial, plastic strain and damage kept); the cell then starts out of
+/// balance and the excess is released dynamically from t = 0.
+///
+/// Energy (material_law.hpp): the scheme's work of a step is w = 1/2 (sigma_c + sigma_t -
+/// 2 sigma0) : d_eps. With W the law's stored energy (mohr_coulomb_stored_energy),
+///   psi = W - W(sigma0) - sigma0 : eps,   W(sigma0) = 1/2 sigma0 : C^-1 : sigma0,
+/// is 0 at an admissible initial state and 1/2 eps : C : eps while elastic. A plastic step sets
+/// psi to this closed form and delta = w - (psi_t - psi_c) (mohr_coulomb_update's dissipation,
+/// W_t - W_c + delta = 1/2 (sigma_c + sigma_t) : d_eps, rewritten with sigma0). An elastic step
+/// sets delta = 0 and psi_t = psi_c + w: the closed form would give the same up to round-off of
+/// W(sigma0) (geostatic W is large next to the dynamic energy), which would show as dissipation
+/// noise of either sign in elastic runs.
+struct MohrCoulombLaw {
+  static constexpr const char* kName = "mohr_coulomb";
+
+  using Parameters = MohrCoulombMaterial;
+
+  struct State : MohrCoulombState {
+    Voigt strain{};       // committed total strain of the dynamic displacement (engineering shear)
+    double stored = 0.0;  // psi (J/m^3)
+  };
+
+  /// Keys: young_modulus, poisson_ratio (Pa, -), cohesion (Pa), friction_angle (deg),
+  /// tensile_strength (Pa; a value >= c cot(phi), or inf, cuts nothing off) required;
+  /// dilation_angle (deg, default 0), damage_max (0.9), damage_plastic_strain (0.005) optional
+  /// (MohrCoulombParameters). Ranges as mohr_coulomb_material.
+  static Parameters parameters_from(const ParameterMap& parameters) {
+    static constexpr const char* kKnown[] = {
+        "young_modulus",  "poisson_ratio", "cohesion",   "friction_angle",
+        "dilation_angle", "tensile_strength", "damage_max", "damage_plastic_strain"};
+    check_parameter_names(parameters, kName, kKnown);
+    MohrCoulombParameters p;
+    p.young_modulus = required_parameter(parameters, kName, "young_modulus");
+    p.poisson_ratio = required_parameter(parameters, kName, "poisson_ratio");
+    p.cohesion = required_parameter(parameters, kName, "cohesion");
+    p.friction_angle = required_parameter(parameters, kName, "friction_angle");
+    p.tensile_strength = required_parameter(parameters, kName, "tensile_strength");
+    p.dilation_angle = optional_parameter(parameters, "dilation_angle", 0.0);
+    p.damage_max = optional_parameter(parameters, "damage_max", p.damage_max);
+    p.damage_plastic_strain =
+        optional_parameter(parameters, "damage_plastic_strain", p.damage_plastic_strain);
+    try {
+      return mohr_coulomb_material(p);
+    } catch (const std::invalid_argument& error) {
+      throw std::invalid_argument(std::string("law mohr_coulomb: ") + error.what());
+    }
+  }
+
+  static ElasticModuli elastic_moduli(const Parameters& m) { return {m.lambda, m.shear_modulus}; }
+
+  static State initial_state(const Parameters& m, const double initial_stress[6], double) {
+    State state;
+    for (int c = 0; c < 6; ++c) state.stress[c] = state.effective_stress[c] = initial_stress[c];
+    // A zero increment: sigma0 itself when admissible (bit for bit), else its return.
+    const MohrCoulombStep step = mohr_coulomb_update(m, state, Voigt{});
+    if (step.region != ReturnRegion::elastic) {
+      static_cast<MohrCoulombState&>(state) = step.state;
+      Voigt sigma0;
+      for (int c = 0; c < 6; ++c) sigma0[c] = initial_stress[c];
+      state.stored = step.stored_energy -
+                     isotropic_complementary_energy(m.young_modulus, m.poisson_ratio, sigma0);
+    }
+    return state;
+  }
+
+  static PointEnergy evaluate(const Parameters& m, const State& committed,
+                              const PointStrain& point, State& trial) {
+    Voigt increment, sigma0;
+    for (int c = 0; c < 6; ++c) {
+      increment[c] = point.strain[c] - committed.strain[c];
+      sigma0[c] = point.initial_stress[c];
+    }
+    const MohrCoulombStep step = mohr_coulomb_update(m, committed, increment);
+    static_cast<MohrCoulombState&>(trial) = step.state;
+    double work = 0.0;
+    for (int c = 0; c < 6; ++c) {
+      trial.strain[c] = point.strain[c];
+      work += 0.5 * (committed.stress[c] + trial.stress[c] - 2.0 * sigma0[c]) * increment[c];
+    }
+    PointEnergy energy;
+    if (step.region == ReturnRegion::elastic) {
+      trial.stored = committed.stored + work;
+    } else {
+      trial.stored = step.stored_energy -
+                     isotropic_complementary_energy(m.young_modulus, m.poisson_ratio, sigma0) -
+                     stress_dot_strain(point.initial_stress, point.strain);
+      energy.dissipation = work - (trial.stored - committed.stored);
+    }
+    energy.stored = trial.stored;
+    return energy;
+  }
+
+  /// Damage d, its mechanism, and kappa_t + kappa_s (sqrt(2/3) sum |d eps_p|).
+  static PointOutput output(const State& state) {
+    return {state.damage, static_cast<std::int32_t>(state.damage_type),
+            state.kappa_tension + state.kappa_shear};
+  }
+};
 
 }  // namespace cavern

@@ -184,6 +184,18 @@ inline Voigt isotropic_stress(double lambda, double shear_modulus, const Voigt& 
           shear_modulus * strain[4],      shear_modulus * strain[5]};
 }
 
+/// Isotropic compliance eps = C^-1 : sigma (tensor stress in, engineering shear strain out):
+/// eps = [(1 + nu) sigma - nu tr(sigma) I] / E, gamma = tau / G.
+inline Voigt isotropic_strain(double young_modulus, double poisson_ratio, const Voigt& stress) {
+  const double trace = stress[0] + stress[1] + stress[2];
+  const double normal = (1.0 + poisson_ratio) / young_modulus;
+  const double lateral = poisson_ratio * trace / young_modulus;
+  const double shear = 2.0 * normal;  // 1 / G
+  return {normal * stress[0] - lateral, normal * stress[1] - lateral,
+          normal * stress[2] - lateral, shear * stress[3],
+          shear * stress[4],            shear * stress[5]};
+}
+
 /// Complementary elastic energy density 1/2 sigma : C^-1 : sigma (J/m^3) of an isotropic
 /// material: (1/2E) [(1 + nu) sigma : sigma - nu tr(sigma)^2].
 inline double isotropic_complementary_energy(double young_modulus, double poisson_ratio,

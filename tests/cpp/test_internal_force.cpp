@@ -133,11 +133,12 @@ struct ToyVonMises {
   static ElasticModuli elastic_moduli(const Parameters& p) {
     return {p.lame_lambda, p.shear_modulus};
   }
-  static State initial_state(const Parameters&, const double initial_stress[6]) {
+  static State initial_state(const Parameters&, const double initial_stress[6], double) {
     State state{};
     for (int c = 0; c < 6; ++c) state.stress[c] = initial_stress[c];
     return state;
   }
+  static PointOutput output(const State&) { return {}; }
   static PointEnergy evaluate(const Parameters& p, const State& committed, const PointStrain& point,
                               State& trial) {
     double elastic[6], sigma[6];

@@ -1,0 +1,765 @@
+"""The static stage: in-situ stress, excavation with partial relaxation, support installed
+stress-free, solved as a linear-elastic problem (PETSc through petsc4py) on the very model the
+dynamic run uses, and handed over to that run in equilibrium (docs/static.md).
+
+The model is the dynamic one: the cells of `[static] excavate` are never in it (pyfem/mesh.py
+drops them before dolfinx builds the mesh), so the dynamic run has no excavated cell, no orphan
+node and a traction-free excavation surface. What the excavation does to the rock is the
+out-of-balance force of the in-situ stress sigma0 on the body that remains,
+
+    f_exc = int_Gt phi sigma0 n dS + int_rock phi b dV - int_rock B^T sigma0 dV,
+
+Gt the truncation faces (the outer rock keeps pushing on them with sigma0 n), b the body force
+sigma0 is in equilibrium with (-div sigma0: zero for a uniform stress, the overburden's weight for
+the geostatic form; with `gravity = true` the materials' own weight instead). For an
+equilibrated sigma0 this is exactly -int_S phi sigma0 n dS over the traction-free surfaces S
+the remaining body has (the excavation surface, or a cavity already in the mesh): the traction
+the removed rock exerted is released, pointing into the opening.
+
+Stages (u = 0 at the start, lambda = `relaxation`):
+    1. the `install` regions are absent too (their cells out of K, nodes only they use held);
+       K_rock u1 = lambda f_exc.
+    2. the `install` regions join stress-free: K u2 = (1 - lambda) f_exc (+ their weight with
+       gravity).
+    stress: sigma0 + C : eps(u1 + u2) in the rock, C : eps(u2) in the installed regions.
+Truncation faces are rollers during the stage unless `[static.boundary]` says otherwise; contact
+pairs are bonded (their two nodes move together).
+
+Hand-over: the dynamic run starts from u = v = 0 with this stress as its initial stress (monitors,
+fields, the pairs' static forces F0). Its kernel solves for the increment over the stage's state,
+which assumes the stage's external forces stay: the in-situ traction on Gt, the body force and the
+support reactions of the stage (held as constant forces on the truncation faces) and the pair
+forces F0. What the state is not in equilibrium with, the linear solve's out-of-balance
+g = F_held - f_int(sigma_static), is applied to the dynamic run as a constant external force, so the
+run is the one a total-stress formulation would make; a run with no wave stays at rest to that
+out-of-balance (tests/test_static.py).
+
+Linear only: a region with a [plasticity] or [damage] table stops the stage with an error (the
+dynamic-relaxation stage for nonlinear materials is not written yet).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import typing
+
+import numpy as np
+import scipy.sparse as sp
+
+from pyfem.scene import SceneError
+
+SPACE_DIMENSION = 3
+# Largest reduced system solved by a direct factorisation (MUMPS Cholesky); above it CG + GAMG
+# (the coarse layered cavern, 136 000 unknowns: 45 s with CG + GAMG, 200 s with MUMPS here).
+DIRECT_SOLVER_LIMIT = 50_000
+# A node's held directions: eigenvalues of the summed held projections above this are held.
+_HELD_TOLERANCE = 1.0e-6
+SUMMARY_KEYS = ("name", "solver", "iterations", "residual", "seconds", "max_displacement", "free_dofs",
+                "load_fraction")
+"""What run.json's "static" keeps of each Stage."""
+NONLINEAR_NOT_YET = ("static stage with nonlinear materials: not implemented yet (the linear stage "
+                     "needs every material linear elastic; the dynamic-relaxation stage for [plasticity] "
+                     "and [damage] regions is still to be written, docs/static.md)")
+
+
+@dataclasses.dataclass
+class Stage:
+    """One solve of the static stage (docs/static.md).
+
+    Attributes:
+        name: "excavation" (stage 1) or "support" (stage 2).
+        active_regions: regions with stiffness in this stage.
+        load: what is applied, in words.
+        load_fraction: share of the excavation load f_exc applied (-).
+        free_dofs: unknowns of the reduced system (held and bonded dofs removed).
+        solver: how it was solved ("MUMPS Cholesky", "CG + GAMG", "none: no load").
+        iterations: Krylov iterations (1 for a direct solve, 0 without load).
+        residual: ||f - K u|| / ||f|| of the reduced system (-), 0 without load.
+        seconds: wall time of the stage (assembly of the reduced system and solve) (s).
+        max_displacement: largest |u| of the stage's increment (m).
+        max_displacement_point: where (m).
+    """
+
+    name: str
+    active_regions: list
+    load: str
+    load_fraction: float
+    free_dofs: int
+    solver: str = ""
+    iterations: int = 0
+    residual: float = 0.0
+    seconds: float = 0.0
+    max_displacement: float = 0.0
+    max_displacement_point: list = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
+class StaticState:
+    """The result of the static stage, in the model's node numbering (docs/ARCHITECTURE.md).
+
+    Attributes:
+        stages: the two `Stage`s.
+        displacement_first: (n_dofs,) u1, displacement at the end of stage 1 (m).
+        displacement: (n_dofs,) u1 + u2, displacement at the end of the stage (m).
+        installed_cells: local cells of the installed regions (stress-free until stage 2).
+        installed_regions: their names.
+        excavation_load: (n_dofs,) f_exc (N).
+        support_force: (n_dofs,) reactions of the stage's held faces beyond the in-situ traction (N).
+        in_situ_traction: (n_dofs,) int_Gt phi sigma0 n dS on the rock's truncation faces (N).
+        hand_over_force: (n_dofs,) g = F_held - f_int(sigma_static), the out-of-balance the dynamic
+            run receives as a constant external force (N).
+        out_of_balance: ||g|| / ||applied load|| (-).
+        pair_forces: (n_pairs, 3) F0, the force side j exerts on node i of each contact pair in
+            the final state (N), or None without pairs.
+        face_support_forces: face name -> (3,) resultant support force beyond the in-situ traction (N).
+        face_in_situ_tractions: face name -> (3,) resultant in-situ traction (N).
+        boundary: face name -> type during the stage.
+        seconds: wall time of the whole stage (s).
+        cell_stress: (n_cells, 3, 3) static stress at the cell centroids (Pa), set by `hand_over`.
+        cell_stress_first: (n_cells, 3, 3) the same after stage 1 (installed cells: 0).
+        monitor_stress: (m, 3, 3) static stress at the monitors (Pa), set by `hand_over`.
+    """
+
+    stages: list
+    displacement_first: np.ndarray
+    displacement: np.ndarray
+    installed_cells: np.ndarray
+    installed_regions: list
+    excavation_load: np.ndarray
+    support_force: np.ndarray
+    in_situ_traction: np.ndarray
+    hand_over_force: np.ndarray
+    out_of_balance: float
+    pair_forces: np.ndarray | None
+    face_support_forces: dict
+    face_in_situ_tractions: dict
+    boundary: dict
+    seconds: float
+    settings: dict
+    cell_stress: np.ndarray | None = None
+    cell_stress_first: np.ndarray | None = None
+    monitor_stress: np.ndarray | None = None
+
+    def summary(self) -> dict:
+        """run.json's "static": per stage its solver, iterations, residual, time and largest
+        displacement; the hand-over's out-of-balance; the total time."""
+        return {
+            "stages": [{key: getattr(stage, key) for key in SUMMARY_KEYS} for stage in self.stages],
+            "max_displacement": float(np.max(np.linalg.norm(self.displacement.reshape(-1, 3), axis=1),
+                                             initial=0.0)),
+            "out_of_balance": self.out_of_balance,
+            "seconds": self.seconds,
+            "outputs": "static/static.json, static/fields.xdmf",
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# Scene checks and the stage's boundary
+# ---------------------------------------------------------------------------------------------
+
+def check_linear(scene: typing.Mapping) -> None:
+    """A static stage needs every material linear elastic (for now).
+
+    Raises:
+        SceneError naming the first nonlinear material table.
+    """
+    for name, material in scene["materials"].items():
+        for table in ("plasticity", "damage"):
+            if material.get(table) is not None:
+                raise SceneError(f"materials.{name}.{table}", None, NONLINEAR_NOT_YET,
+                                 f"scene key 'materials.{name}.{table}': {NONLINEAR_NOT_YET}")
+
+
+def stage_boundary(scene: typing.Mapping, model) -> dict[str, str]:
+    """Type of each truncation face during the stage: `static.boundary.face.NAME.type`, else
+    `static.boundary.type` (default "roller").
+
+    Raises:
+        SceneError: a `static.boundary.face.NAME` table names no truncation face.
+    """
+    boundary = scene["static"]["boundary"]
+    names = [face.name for face in model.faces]
+    per_face = boundary.get("face") or {}
+    for name, table in per_face.items():
+        if name not in names:
+            raise SceneError(f"static.boundary.face.{name}", table,
+                             "tables named after truncation faces: " + (", ".join(names) or "none found"))
+    return {name: (per_face.get(name) or {}).get("type") or boundary["type"] for name in names}
+
+
+def _install_cells(scene: typing.Mapping, model) -> tuple[list, np.ndarray]:
+    """Names and local cells of the `install` regions."""
+    from pyfem.elements import region_cells
+
+    names = list(scene["static"]["install"])
+    cells = []
+    for index, name in enumerate(names):
+        if name not in model.regions:
+            raise SceneError(f"static.install.{index}", name, "must name a region of the model: "
+                             + ", ".join(sorted(model.regions)))
+        cells.append(region_cells(model, name))
+    if names and len(names) == len(model.regions):
+        raise SceneError("static.install", names, "must leave some region in place for stage 1 (the rock)")
+    if not cells:
+        return names, np.zeros(0, dtype=np.int32)
+    return names, np.unique(np.concatenate(cells)).astype(np.int32)
+
+
+# ---------------------------------------------------------------------------------------------
+# Loads: f_exc from dolfinx forms
+# ---------------------------------------------------------------------------------------------
+
+def initial_stress_expression(scene: typing.Mapping, mesh):
+    """(sigma0 as a UFL 3x3 expression, the body force b = -div sigma0 as a 3-vector or None), or
+    (None, None) without [initial_stress]."""
+    import ufl
+    from dolfinx import fem
+
+    from pyfem.initial_stress import STANDARD_GRAVITY, stress_tensor
+
+    settings = scene.get("initial_stress")
+    if settings is None:
+        return None, None
+    if settings.get("stress") is not None:
+        return fem.Constant(mesh, stress_tensor(settings["stress"])), None
+    k_x, k_y, k_z = settings["k"]
+    weight = settings["rho"] * STANDARD_GRAVITY
+    vertical = -weight * (settings["surface"] - ufl.SpatialCoordinate(mesh)[2])
+    sigma0 = ufl.as_matrix([[k_x * vertical, 0, 0], [0, k_y * vertical, 0], [0, 0, k_z * vertical]])
+    # d sigma_zz / dz = k_z rho g: the field balances a body force -k_z rho g e_z.
+    return sigma0, fem.Constant(mesh, np.array([0.0, 0.0, -k_z * weight]))
+
+
+@dataclasses.dataclass
+class StageLoads:
+    """Nodal loads (n_nodes, 3) of the stage (N)."""
+
+    excavation: np.ndarray      # f_exc over the rock (stage-1 body)
+    in_situ_traction: np.ndarray  # int_Gt phi sigma0 n over the rock's truncation facets
+    body: np.ndarray            # int_rock phi b
+    installed_weight: np.ndarray  # the installed regions' weight (gravity = true), else 0
+
+
+def stage_loads(scene: typing.Mapping, model, installed_cells: np.ndarray) -> StageLoads:
+    """f_exc = int_Gt phi sigma0 n + int_rock phi b - int_rock grad(phi) : sigma0 and the
+    installed regions' weight, assembled by dolfinx over the rock's cells only (a DG0 indicator,
+    as pyfem.elements.linear_stiffness zeroes moduli)."""
+    import ufl
+    from dolfinx import fem
+    from dolfinx import mesh as dolfinx_mesh
+
+    from pyfem.initial_stress import STANDARD_GRAVITY
+    from pyfem.operators import assemble_nodal_vector, truncation_faces
+
+    V, mesh = model.V, model.mesh
+    materials = model._materials
+    n_nodes = model.n_nodes
+    rock = fem.Function(materials.rho.function_space)
+    rock.x.array[:] = 1.0
+    rock.x.array[materials.dof_of_cell[installed_cells]] = 0.0
+    installed = fem.Function(materials.rho.function_space)
+    installed.x.array[:] = 1.0 - rock.x.array
+    v = ufl.TestFunction(V)
+    metadata = {"quadrature_degree": 2 * model.order + 1}
+    dx = ufl.dx(domain=mesh, metadata=metadata)
+    zero = np.zeros((n_nodes, SPACE_DIMENSION))
+
+    sigma0, body_force = initial_stress_expression(scene, mesh)
+    gravity = scene["static"]["gravity"]
+    if gravity:
+        body_force = materials.rho * fem.Constant(mesh, np.array([0.0, 0.0, -STANDARD_GRAVITY]))
+    body = zero if body_force is None else assemble_nodal_vector(rock * ufl.inner(body_force, v) * dx, V)
+    installed_weight = zero
+    if gravity and len(installed_cells):
+        installed_weight = assemble_nodal_vector(installed * ufl.inner(body_force, v) * dx, V)
+    if sigma0 is None:
+        return StageLoads(excavation=body.copy(), in_situ_traction=zero, body=body,
+                          installed_weight=installed_weight)
+    internal = assemble_nodal_vector(rock * ufl.inner(sigma0, ufl.grad(v)) * dx, V)
+    faces, _ = truncation_faces(scene, mesh, model.facet_tags, model.boundaries, model.interface_tags)
+    facets = (np.unique(np.concatenate([f for f, _ in faces.values()])) if faces
+              else np.zeros(0, dtype=np.int32))
+    marker = 1
+    tags = dolfinx_mesh.meshtags(mesh, mesh.topology.dim - 1, facets.astype(np.int32),
+                                 np.full(len(facets), marker, dtype=np.int32))
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags, subdomain_id=marker, metadata=metadata)
+    traction = assemble_nodal_vector(rock * ufl.inner(ufl.dot(sigma0, ufl.FacetNormal(mesh)), v) * ds, V)
+    return StageLoads(excavation=traction + body - internal, in_situ_traction=traction, body=body,
+                      installed_weight=installed_weight)
+
+
+# ---------------------------------------------------------------------------------------------
+# The reduced system: held directions, bonded pairs, orphan nodes
+# ---------------------------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class FreeBasis:
+    """u = T w: the displacements the stage allows, in reduced unknowns w.
+
+    Attributes:
+        T: (n_dofs, m) CSR, orthonormal 3 x m_g blocks per node (m_g free directions of its group).
+        projection: (n_nodes, 3, 3) projection onto each node's free directions (I for most).
+        group: (n_nodes,) group of each node (bonded pair nodes share one).
+    """
+
+    T: sp.csr_matrix
+    projection: np.ndarray
+    group: np.ndarray
+
+
+def free_basis(n_nodes: int, held_nodes: np.ndarray, held_projection: np.ndarray, pairs: np.ndarray | None,
+               inactive_nodes: np.ndarray) -> FreeBasis:
+    """The free directions of every node during a stage.
+
+    Args:
+        n_nodes: nodes of the model.
+        held_nodes: (k,) nodes of the held faces; held_projection (k, 3, 3) their free projections
+            (pyfem.solver.boundary_constraints: 0 fixed, I - n n^T roller).
+        pairs: (p, 2) contact pair nodes, bonded: both nodes of a pair move together; or None.
+        inactive_nodes: nodes no active cell uses (held at zero unless bonded to an active node).
+    """
+    if pairs is not None and len(pairs):
+        graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_nodes, n_nodes))
+        _, group = sp.csgraph.connected_components(graph, directed=False)
+    else:
+        group = np.arange(n_nodes)
+    n_groups = int(group.max(initial=-1)) + 1
+    held = np.zeros((n_groups, 3, 3))
+    np.add.at(held, group[held_nodes], np.eye(3)[None] - held_projection)
+    active_members = (np.bincount(group, minlength=n_groups)
+                      - np.bincount(group[inactive_nodes], minlength=n_groups))
+    held[active_members == 0] = np.eye(3)
+    special = np.flatnonzero(np.abs(held).reshape(n_groups, -1).max(axis=1) > 0.0)
+    # Free directions of the held groups: eigenvectors of the summed held projections with eigenvalue 0.
+    eigenvalues, eigenvectors = np.linalg.eigh(held[special])                       # (s, 3), (s, 3, 3)
+    free = eigenvalues <= _HELD_TOLERANCE * np.maximum(1.0, eigenvalues.max(axis=1, initial=0.0))[:, None]
+    n_columns = np.full(n_groups, 3, dtype=np.int64)
+    n_columns[special] = free.sum(axis=1)
+    offsets = np.concatenate([[0], np.cumsum(n_columns)])
+    special_index = np.full(n_groups, -1, dtype=np.int64)
+    special_index[special] = np.arange(len(special))
+    plain = np.flatnonzero(special_index[group] < 0)
+    held_nodes_all = np.flatnonzero(special_index[group] >= 0)
+    # Plain nodes: identity blocks.
+    rows = [(3 * plain[:, None] + np.arange(3)).ravel()]
+    columns = [(offsets[group[plain]][:, None] + np.arange(3)).ravel()]
+    values = [np.ones(3 * len(plain))]
+    # Held nodes: T[3 node + a, offset + rank(e)] = eigenvector e's component a, for the free e.
+    k = special_index[group[held_nodes_all]]
+    rank = np.cumsum(free, axis=1) - 1                                              # (s, 3)
+    mask = np.broadcast_to(free[k][:, None, :], (len(k), 3, 3))
+    component_rows = 3 * held_nodes_all[:, None, None] + np.arange(3)[None, :, None]
+    rows.append(np.broadcast_to(component_rows, mask.shape)[mask])
+    columns.append(np.broadcast_to(offsets[group[held_nodes_all]][:, None, None] + rank[k][:, None, :],
+                                   mask.shape)[mask])
+    values.append(eigenvectors[k][mask])
+    projection = np.repeat(np.eye(3)[None], n_nodes, axis=0)
+    projection[held_nodes_all] = np.einsum("nae,ne,nbe->nab", eigenvectors[k], free[k].astype(float),
+                                           eigenvectors[k])
+    T = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
+                      shape=(3 * n_nodes, int(offsets[-1])))
+    return FreeBasis(T=T, projection=projection, group=group)
+
+
+def rigid_body_modes(node_coords: np.ndarray) -> np.ndarray:
+    """(3 n, 6) translations and rotations about the centroid (the near null space of elasticity)."""
+    x = node_coords - node_coords.mean(axis=0)
+    n = len(x)
+    modes = np.zeros((n, 3, 6))
+    for axis in range(3):
+        modes[:, axis, axis] = 1.0
+    # Rotation about e_k: e_k x (x - c).
+    for k in range(3):
+        modes[:, :, 3 + k] = np.cross(np.eye(3)[k][None], x)
+    return modes.reshape(3 * n, 6)
+
+
+def check_held(basis: FreeBasis, node_coords: np.ndarray, inactive_nodes: np.ndarray, boundary: dict) -> None:
+    """The stage's boundary must hold the active body: no rigid-body motion may lie in the range of T.
+
+    Raises:
+        SceneError (static.boundary) naming the motions left free.
+    """
+    modes = rigid_body_modes(node_coords)
+    rows = np.ones(len(node_coords), dtype=bool)
+    rows[inactive_nodes] = False
+    rows = np.repeat(rows, 3)
+    outside = (modes - basis.T @ (basis.T.T @ modes))[rows]       # the part of each mode the stage forbids
+    gram = outside.T @ outside
+    scale = np.max(np.sum(modes[rows] ** 2, axis=0))
+    values, vectors = np.linalg.eigh(gram)
+    free = vectors[:, values <= 1e-10 * scale]
+    if free.shape[1]:
+        names = ("x", "y", "z", "rotation about x", "rotation about y", "rotation about z")
+        motions = sorted({names[int(np.argmax(np.abs(column)))] for column in free.T})
+        raise SceneError("static.boundary", boundary, "the faces held during the stage (roller or "
+                         "fixed) must keep the model from moving as a rigid body; these faces leave it "
+                         f"free to move ({', '.join(motions)}): hold more faces "
+                         "(static.boundary.type = \"roller\", the default)")
+
+
+class LinearSolver:
+    """K w = f for a symmetric positive definite reduced stiffness, with PETSc (petsc4py).
+
+    Direct (MUMPS Cholesky when PETSc has MUMPS, else PETSc's LU) up to DIRECT_SOLVER_LIMIT
+    unknowns or when asked; above, CG with smoothed-aggregation AMG (GAMG) given the rigid-body
+    modes as near null space, to the relative residual `tolerance`.
+    """
+
+    def __init__(self, matrix: sp.csr_matrix, tolerance: float, choice: str = "auto",
+                 near_null_space: np.ndarray | None = None):
+        from petsc4py import PETSc
+
+        n = matrix.shape[0]
+        self.method = choice if choice != "auto" else ("direct" if n <= DIRECT_SOLVER_LIMIT else "iterative")
+        self.tolerance = tolerance
+        self.matrix = matrix
+        matrix = matrix.tocsr()
+        matrix.sort_indices()
+        csr = (matrix.indptr.astype(PETSc.IntType), matrix.indices.astype(PETSc.IntType),
+               np.ascontiguousarray(matrix.data, dtype=np.float64))
+        self._A = PETSc.Mat().createAIJ(size=(n, n), csr=csr, comm=PETSc.COMM_SELF)
+        self._A.assemble()
+        ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        ksp.setOperators(self._A)
+        pc = ksp.getPC()
+        if self.method == "direct":
+            ksp.setType("preonly")
+            if PETSc.Sys.hasExternalPackage("mumps"):
+                pc.setType("cholesky")
+                pc.setFactorSolverType("mumps")
+                self.name = "direct (MUMPS Cholesky)"
+            else:
+                pc.setType("lu")
+                self.name = "direct (PETSc LU)"
+        else:
+            ksp.setType("cg")
+            ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)  # the tolerance is on ||f - K w|| / ||f||
+            pc.setType("gamg")
+            if near_null_space is not None and near_null_space.shape[1]:
+                basis, _ = np.linalg.qr(near_null_space)
+                vectors = [PETSc.Vec().createWithArray(np.ascontiguousarray(column), comm=PETSc.COMM_SELF)
+                           for column in basis.T]
+                self._null_space = PETSc.NullSpace().create(vectors=vectors, comm=PETSc.COMM_SELF)
+                self._A.setNearNullSpace(self._null_space)
+            ksp.setTolerances(rtol=tolerance, atol=0.0, max_it=max(1000, 10 * int(math.sqrt(n))))
+            self.name = "iterative (CG + GAMG)"
+        self._ksp = ksp
+
+    def solve(self, rhs: np.ndarray) -> tuple[np.ndarray, int, float]:
+        """(w, iterations, ||f - K w|| / ||f||).
+
+        Raises:
+            RuntimeError: the factorisation failed (a singular stiffness: the model is not held)
+                or CG did not reach the tolerance.
+        """
+        from petsc4py import PETSc
+
+        norm = float(np.linalg.norm(rhs))
+        if norm == 0.0:
+            return np.zeros_like(rhs), 0, 0.0
+        b = PETSc.Vec().createWithArray(np.ascontiguousarray(rhs, dtype=np.float64), comm=PETSc.COMM_SELF)
+        x = b.duplicate()
+        try:
+            self._ksp.solve(b, x)
+        except PETSc.Error as error:
+            raise RuntimeError(f"the static stage's stiffness could not be factorised ({error}): it is "
+                               "singular when the held faces leave the model free to move as a rigid body; "
+                               "hold more faces ([static.boundary])") from None
+        w = x.getArray().copy()
+        residual = float(np.linalg.norm(rhs - self.matrix @ w)) / norm
+        iterations = max(1, self._ksp.getIterationNumber()) if self.method == "iterative" else 1
+        # A direct solve is not iterated to the tolerance: a residual far above round-off there means
+        # a (nearly) singular stiffness.
+        limit = self.tolerance if self.method == "iterative" else max(self.tolerance, 1.0e-6)
+        if not np.all(np.isfinite(w)) or residual > limit:
+            raise RuntimeError(f"the static solve ({self.name}) reached a relative residual {residual:.3g} "
+                               f"after {iterations} iterations, above static.tolerance = {self.tolerance:g} "
+                               f"(KSP reason {self._ksp.getConvergedReason()}); a singular stiffness "
+                               "(a model free to move) does this: hold more faces ([static.boundary])")
+        return w, iterations, residual
+
+
+# ---------------------------------------------------------------------------------------------
+# The stage
+# ---------------------------------------------------------------------------------------------
+
+def _stage_constraints(model, boundary: dict[str, str]):
+    """(held nodes, free projections, BoundaryConstraints or None) of the stage's fixed and roller faces."""
+    from pyfem.solver import boundary_constraints
+
+    faces = [dataclasses.replace(face, kind=boundary[face.name]) for face in model.faces]
+    constraints = boundary_constraints(faces)
+    if constraints is None:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3, 3)), None
+    return constraints.nodes.astype(np.int64), constraints.projection, constraints
+
+
+def face_support_resultants(faces, boundary: dict[str, str], support: np.ndarray) -> dict[str, list]:
+    """Resultant support force (N) of each held face: a node's reaction is split among the faces
+    holding it along the directions each holds (a roller its normal, a fixed face any), by least
+    squares, so an edge node's vertical reaction goes to the floor and not to a side roller."""
+    entries = []   # (node, face index, direction)
+    held = [face for face in faces if boundary[face.name] in ("roller", "fixed")]
+    for index, face in enumerate(held):
+        nodes = np.asarray(face.nodes, dtype=np.int64)
+        if boundary[face.name] == "fixed":
+            directions = np.repeat(np.eye(3)[None], len(nodes), axis=0)
+        else:
+            directions = np.asarray(face.normal, dtype=float)[:, None, :]
+        for k in range(directions.shape[1]):
+            entries.append((nodes, np.full(len(nodes), index), directions[:, k, :]))
+    resultants = np.zeros((len(held), 3))
+    if not entries:
+        return {}
+    nodes = np.concatenate([e[0] for e in entries])
+    face_of = np.concatenate([e[1] for e in entries])
+    direction = np.concatenate([e[2] for e in entries])
+    order = np.argsort(nodes, kind="stable")
+    nodes, face_of, direction = nodes[order], face_of[order], direction[order]
+    starts = np.flatnonzero(np.concatenate([[True], nodes[1:] != nodes[:-1]]))
+    ends = np.concatenate([starts[1:], [len(nodes)]])
+    single = ends - starts == 1  # held along one direction only (most roller nodes): its component
+    one = starts[single]
+    np.add.at(resultants, face_of[one],
+              np.einsum("nc,nc->n", direction[one], support[nodes[one]])[:, None] * direction[one])
+    for start, end in zip(starts[~single], ends[~single]):
+        R = support[nodes[start]]
+        D = direction[start:end]                                  # (k, 3) held directions
+        alpha = np.linalg.lstsq(D.T, R, rcond=None)[0]
+        np.add.at(resultants, face_of[start:end], alpha[:, None] * D)
+    return {face.name: resultants[k].tolist() for k, face in enumerate(held)}
+
+
+def _nodes_of_cells(model, cells: np.ndarray) -> np.ndarray:
+    n_basis = model.V.dofmap.dof_layout.num_dofs
+    return np.unique(model.V.dofmap.list.array.reshape(-1, n_basis)[cells])
+
+
+def _cells_except(model, cells: np.ndarray) -> np.ndarray:
+    keep = np.ones(model.n_cells, dtype=bool)
+    keep[cells] = False
+    return np.flatnonzero(keep).astype(np.int32)
+
+
+def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
+    """Runs the two stages of docs/static.md on the model and decomposes the final out-of-balance
+    force into support reactions, pair forces and the hand-over force.
+
+    Args:
+        scene: validated scene with [static] (and [initial_stress] or static.gravity).
+        model: pyfem.operators.Model (the dynamic model: excavated cells already absent).
+
+    Returns:
+        StaticState (stresses are added by `hand_over`).
+    """
+    from pyfem.elements import linear_stiffness
+
+    start = time.perf_counter()
+    check_linear(scene)
+    settings = scene["static"]
+    boundary = stage_boundary(scene, model)
+    installed_regions, installed_cells = _install_cells(scene, model)
+    loads = stage_loads(scene, model, installed_cells)
+    n_nodes = model.n_nodes
+    held_nodes, held_projection, constraints = _stage_constraints(model, boundary)
+    pairs = None if model.pairs is None else np.asarray(model.pairs.nodes, dtype=np.int64)
+    rock_regions = [name for name in model.regions if name not in installed_regions]
+
+    K_full = model.stiffness.tocsr()
+    if len(installed_cells):
+        K_rock = linear_stiffness(model, installed_cells).tocsr()
+        rock_nodes = _nodes_of_cells(model, _cells_except(model, installed_cells))
+        inactive = np.setdiff1d(np.arange(n_nodes), rock_nodes)
+    else:
+        K_rock, inactive = K_full, np.zeros(0, dtype=np.int64)
+    basis_rock = free_basis(n_nodes, held_nodes, held_projection, pairs, inactive)
+    basis_full = (basis_rock if not len(installed_cells)
+                  else free_basis(n_nodes, held_nodes, held_projection, pairs, np.zeros(0, dtype=np.int64)))
+    check_held(basis_rock, model.node_coords, inactive, boundary)
+    relaxation = settings["relaxation"]
+    f_exc = loads.excavation.ravel()
+    support_load = (1.0 - relaxation) * f_exc + loads.installed_weight.ravel()
+    weight_words = " + weight of the installed regions" if np.any(loads.installed_weight) else ""
+    stage_specs = [
+        ("excavation", K_rock, basis_rock, rock_regions, relaxation * f_exc, relaxation,
+         f"{relaxation:g} f_exc (released before {', '.join(installed_regions) or 'any support'})"),
+        ("support", K_full, basis_full, list(model.regions), support_load, 1.0 - relaxation,
+         f"{1.0 - relaxation:g} f_exc{weight_words}"),
+    ]
+    stages, increments = [], []
+    solver_cache = {}
+    coordinates = model.node_coords
+    for name, K, basis, regions, load, fraction, words in stage_specs:
+        stage_start = time.perf_counter()
+        T = basis.T
+        key = (id(K), id(basis))
+        if key not in solver_cache:
+            reduced = (T.T @ (K @ T)).tocsr()
+            solver_cache[key] = LinearSolver(reduced, settings["tolerance"], settings["solver"],
+                                             near_null_space=T.T @ rigid_body_modes(coordinates))
+        solver = solver_cache[key]
+        w, iterations, residual = solver.solve(T.T @ load)
+        u = T @ w
+        magnitude = np.linalg.norm(u.reshape(-1, 3), axis=1)
+        worst = int(np.argmax(magnitude)) if len(magnitude) else 0
+        stages.append(Stage(name=name, active_regions=regions, load=words, load_fraction=fraction,
+                            free_dofs=int(T.shape[1]), solver=solver.name if iterations else "none: no load",
+                            iterations=iterations, residual=residual,
+                            seconds=time.perf_counter() - stage_start,
+                            max_displacement=float(magnitude[worst]) if len(magnitude) else 0.0,
+                            max_displacement_point=coordinates[worst].tolist() if len(magnitude) else []))
+        increments.append(u)
+    u1, u2 = increments
+    # Nodal out-of-balance f_int(sigma) - f_ext of the final state (N): zero on free directions up to
+    # the solve's residual; reactions on held ones; the pair forces at split interfaces.
+    applied = f_exc + loads.installed_weight.ravel()
+    residual = (K_full @ u2 + K_rock @ u1 - applied).reshape(-1, 3)
+    pair_forces = None
+    if pairs is not None and len(pairs):
+        i, j = pairs[:, 0], pairs[:, 1]
+        pair_forces = np.ascontiguousarray(0.5 * (residual[i] - residual[j]))
+        mean = 0.5 * (residual[i] + residual[j])
+        residual[i] = mean
+        residual[j] = mean
+    projection = basis_full.projection
+    free_part = np.einsum("nab,nb->na", projection, residual)
+    support = residual - free_part
+    hand_over_force = -free_part
+    load_norm = float(np.linalg.norm(applied))
+    out_of_balance = float(np.linalg.norm(hand_over_force)) / load_norm if load_norm > 0.0 else 0.0
+    face_traction = {}
+    traction = loads.in_situ_traction
+    face_support = face_support_resultants(model.faces, boundary, support)
+    for face in model.faces:
+        face_traction[face.name] = traction[face.nodes].sum(axis=0).tolist()
+    return StaticState(stages=stages, displacement_first=u1, displacement=u1 + u2,
+                       installed_cells=installed_cells, installed_regions=installed_regions,
+                       excavation_load=f_exc, support_force=support.ravel(),
+                       in_situ_traction=traction.ravel(), hand_over_force=hand_over_force.ravel(),
+                       out_of_balance=out_of_balance,
+                       pair_forces=pair_forces, face_support_forces=face_support,
+                       face_in_situ_tractions=face_traction, boundary=boundary,
+                       seconds=time.perf_counter() - start, settings=dict(settings))
+
+
+# ---------------------------------------------------------------------------------------------
+# Hand-over to the dynamic run
+# ---------------------------------------------------------------------------------------------
+
+def static_stress(strain_stress, installed: np.ndarray, u_total: np.ndarray,
+                  u_support: np.ndarray) -> np.ndarray:
+    """(m, 3, 3) static stress at points (Pa): sigma0 + C : eps(u1 + u2) in the rock, C : eps(u2) in the
+    installed regions (stress-free when they joined).
+
+    Args:
+        strain_stress: callable u -> (m, 3, 3) C : eps(u) at the points.
+        installed: (m,) bool, the point lies in an installed region.
+        u_total: u1 + u2 (dofs, m); u_support: u2 (dofs, m).
+    """
+    total = strain_stress(u_total)
+    if np.any(installed):
+        total[installed] = strain_stress(u_support)[installed]
+    return total
+
+
+def hand_over(simulation, solve: bool = True) -> None:
+    """Runs the static stage of the simulation's scene and makes it the dynamic run's initial state:
+    monitor static stress, the pairs' static forces, the cell stress of the fields; the constant
+    hand-over force is added by `add_hand_over_force` (pyfem.solver.make_stepper).
+
+    Args:
+        simulation: pyfem.solver.Simulation, prepared (monitors, contact arrays).
+        solve: False only checks the scene's stage (pyfem.solver.plan): nothing is solved.
+    """
+    scene, model = simulation.scene, simulation.model
+    check_linear(scene)
+    stage_boundary(scene, model)
+    _install_cells(scene, model)
+    if not solve:
+        return
+    state = solve_static_stage(scene, model)
+    installed_regions = set(state.installed_regions)
+    u_total, u_support = state.displacement, state.displacement - state.displacement_first
+    monitors = simulation.monitor_stress
+    if monitors is not None:
+        installed = np.array([region in installed_regions for region in monitors.regions], dtype=bool)
+        base = monitors.static.copy()
+        sigma = static_stress(monitors.dynamic_stress, installed, u_total, u_support)
+        sigma[~installed] += base[~installed]
+        monitors.static = sigma
+        state.monitor_stress = sigma
+    from pyfem.output import cell_strain_operator
+
+    cells = cell_strain_operator(scene, model)
+    installed = np.zeros(len(cells.nodes), dtype=bool)
+    installed[state.installed_cells] = True
+    sigma0 = cells.static.copy()
+
+    def cell_elastic_stress(u):
+        return cells.stress(cells.strain(u)) - sigma0
+
+    final = static_stress(cell_elastic_stress, installed, u_total, u_support)
+    final[~installed] += sigma0[~installed]
+    first = cell_elastic_stress(state.displacement_first) + sigma0
+    first[installed] = 0.0
+    state.cell_stress, state.cell_stress_first = final, first
+    if simulation.contact_arrays is not None and state.pair_forces is not None:
+        simulation.contact_arrays["static_force"] = np.ascontiguousarray(state.pair_forces, dtype=np.float64)
+    simulation.static = state
+
+
+def hand_over_force_provider(force: np.ndarray):
+    """A kernel force provider holding `force` (dofs, N) constant for the whole run: a SeismicInput
+    with one table that is 1 from long before the run starts."""
+    from pyfem import _kernels
+
+    nodal = np.asarray(force, dtype=np.float64).reshape(-1, 3)
+    nodes = np.flatnonzero(np.any(nodal != 0.0, axis=1)).astype(np.int32)
+    table = (np.ones((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)))  # g = 1, g' = g'' = 0
+    return _kernels.SeismicInput(-1.0e6, 1.0, *table, np.arange(len(nodes) + 1, dtype=np.int64), nodes,
+                                 np.zeros(len(nodes), dtype=np.int32), np.zeros(len(nodes)),
+                                 np.ascontiguousarray(nodal[nodes]), np.zeros((len(nodes), 3)))
+
+
+def add_hand_over_force(stepper, simulation) -> None:
+    """Adds the stage's out-of-balance force to the stepper (nothing without a solved stage)."""
+    state = getattr(simulation, "static", None)
+    if state is None or not np.any(state.hand_over_force):
+        return
+    stepper.add_seismic_input(hand_over_force_provider(state.hand_over_force))
+
+
+def plan_report(scene: typing.Mapping, model) -> dict:
+    """The `check` lines on the static stage: what each stage removes, installs and loads, the
+    boundary and the solver it will use (nothing is solved)."""
+    settings = scene["static"]
+    boundary = stage_boundary(scene, model)
+    installed, installed_cells = _install_cells(scene, model)
+    excavated = settings["excavate"]
+    relaxation = settings["relaxation"]
+    initial = scene.get("initial_stress")
+    if initial is None:
+        source = "none (the materials' weight only)"
+    elif initial.get("stress") is not None:
+        source = "uniform " + str(initial["stress"]) + " Pa (sxx, syy, szz, syz, sxz, sxy)"
+    else:
+        source = (f"geostatic, surface {initial['surface']:g} m, rho {initial['rho']:g} kg/m^3, "
+                  f"k {initial['k']}")
+    n_dofs = model.n_dofs
+    method = settings["solver"] if settings["solver"] != "auto" else (
+        "direct" if n_dofs <= DIRECT_SOLVER_LIMIT else "iterative")
+    return {
+        "initial stress": source + (", gravity on" if settings["gravity"] else ""),
+        "stage 1 (excavation)": (f"{', '.join(excavated) or 'no region'} removed (absent from the model)"
+                                 + (f", {', '.join(installed)} not yet installed" if installed else "")
+                                 + f"; {relaxation:g} of the excavation load released"),
+        "stage 2 (support)": ((f"{', '.join(installed)} installed stress-free "
+                               f"({len(installed_cells)} cells); " if installed else "nothing installed; ")
+                              + f"the remaining {1.0 - relaxation:g} released"),
+        "boundary": ", ".join(f"{name} {kind}" for name, kind in boundary.items()),
+        "solver": f"{method} (up to {n_dofs} unknowns; direct up to {DIRECT_SOLVER_LIMIT}), tolerance "
+                  f"{settings['tolerance']:g}",
+        "hand-over": "static stress, pair forces and support reactions to the dynamic run (u = v = 0)",
+    }

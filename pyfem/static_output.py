@@ -1,0 +1,121 @@
+"""The static stage's outputs in the run directory (docs/static.md):
+
+    static/static.json   the stages (what each removed, installed and loaded; solver, iterations,
+                         residual, time, largest displacement), the boundary during the stage and its
+                         support forces, the hand-over's out-of-balance, displacement and stress at
+                         the monitors, the contact pairs' static forces in figures
+    static/fields.xdmf   (+ .h5) one time per stage (t = 1: after stage 1, t = 2: after stage 2):
+                         point data displacement (m, total so far) and stage_displacement (m, the
+                         stage's increment); cell data stress (Pa, Tensor6 xx xy xz yy yz zz, at the
+                         centroids; an installed region is 0 before it joins) and active (1/0)
+
+run.json gets the summary under "static" (pyfem.static.StaticState.summary), and the dynamic
+fields' stress starts from the stage's (RunWriter.cell_strain).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pyfem.output import _write_json, tensor6
+
+# Monitor stress names of monitors/NAME.csv and their tensor components.
+VOIGT_NAMES = {"sxx": (0, 0), "syy": (1, 1), "szz": (2, 2), "sxy": (0, 1), "syz": (1, 2), "sxz": (0, 2)}
+
+
+def write_static_outputs(writer) -> None:
+    """Writes static/ into the run directory of a started RunWriter and makes the stage's stress the
+    static part of the dynamic fields' stress.
+
+    Args:
+        writer: pyfem.output.RunWriter whose simulation has a solved stage (simulation.static).
+    """
+    simulation = writer.simulation
+    state = simulation.static
+    folder = Path(writer.out_dir) / "static"
+    folder.mkdir(parents=True, exist_ok=True)
+    if writer.cell_strain is not None:
+        writer.cell_strain.static = state.cell_stress
+    _write_json(folder / "static.json", static_report(simulation))
+    write_static_fields(folder, simulation)
+
+
+def static_report(simulation) -> dict:
+    """The content of static/static.json (SI units)."""
+    state = simulation.static
+    scene = simulation.scene
+    displacement = state.displacement.reshape(-1, 3)
+    magnitude = np.linalg.norm(displacement, axis=1)
+    worst = int(np.argmax(magnitude)) if len(magnitude) else 0
+    report = {
+        "settings": state.settings,
+        "initial_stress": scene.get("initial_stress"),
+        "excavated": list(state.settings["excavate"]),
+        "installed": state.installed_regions,
+        "boundary": state.boundary,
+        "stages": [vars(stage) for stage in state.stages],
+        "seconds": state.seconds,
+        "max_displacement": {"value": float(magnitude[worst]) if len(magnitude) else 0.0,
+                             "point": simulation.model.node_coords[worst].tolist() if len(magnitude) else [],
+                             "vector": displacement[worst].tolist() if len(magnitude) else []},
+        "out_of_balance": state.out_of_balance,
+        "hand_over": "the dynamic run starts from u = v = 0 with the stage's stress; the in-situ traction, "
+                     "body force, support forces and pair forces of the stage are held constant; the "
+                     "out-of-balance above is applied as a constant external force",
+        "support_forces": state.face_support_forces,
+        "in_situ_tractions": state.face_in_situ_tractions,
+    }
+    if simulation.monitor_nodes is not None:
+        monitors = {}
+        for j, name in enumerate(simulation.monitor_names):
+            nodes, weights = simulation.monitor_nodes[j], simulation.monitor_weights[j]
+            first = weights @ state.displacement_first.reshape(-1, 3)[nodes]
+            total = weights @ displacement[nodes]
+            entry = {"displacement_stage_1": first.tolist(), "displacement": total.tolist()}
+            if state.monitor_stress is not None:
+                sigma = state.monitor_stress[j]
+                entry["stress"] = {name: float(sigma[a, b]) for name, (a, b) in VOIGT_NAMES.items()}
+                entry["region"] = simulation.monitor_stress.regions[j]
+            monitors[name] = entry
+        report["monitors"] = monitors
+    if state.pair_forces is not None and simulation.contact_arrays is not None:
+        normal = simulation.contact_arrays["normal"]
+        area = simulation.contact_arrays["area"]
+        N = -np.einsum("pc,pc->p", state.pair_forces, normal)           # compression positive
+        T = np.linalg.norm(state.pair_forces + (N[:, None] * normal), axis=1)
+        report["pairs"] = {"count": int(len(N)), "normal_stress_min": float(np.min(N / area)),
+                           "normal_stress_max": float(np.max(N / area)),
+                           "shear_stress_max": float(np.max(T / area)),
+                           "in_tension": int(np.count_nonzero(N < 0.0))}
+    return report
+
+
+def write_static_fields(folder: Path, simulation) -> None:
+    """static/fields.xdmf: one time per stage, at the cell vertices as the run's fields.xdmf."""
+    import h5py
+    import meshio
+
+    state = simulation.static
+    model = simulation.model
+    dofs_per_cell = model.V.dofmap.dof_layout.num_dofs
+    cell_nodes = model.V.dofmap.list.array.reshape(-1, dofs_per_cell)[:, :8]  # vertices come first
+    field_nodes, compact = np.unique(cell_nodes, return_inverse=True)
+    hexahedra = compact.reshape(-1, 8)[:, [0, 1, 3, 2, 4, 5, 7, 6]]  # dolfinx -> VTK order
+    active_first = np.ones(len(cell_nodes))
+    active_first[state.installed_cells] = 0.0
+    u1 = state.displacement_first.reshape(-1, 3)
+    u = state.displacement.reshape(-1, 3)
+    writer = meshio.xdmf.TimeSeriesWriter(str(folder / "fields.xdmf"))
+    writer.h5_filename = "fields.h5"
+    writer.h5_file = h5py.File(folder / "fields.h5", "w")
+    try:
+        writer.write_points_cells(model.node_coords[field_nodes], [("hexahedron", hexahedra)])
+        stages = ((1.0, u1, u1, state.cell_stress_first, active_first),
+                  (2.0, u, u - u1, state.cell_stress, np.ones(len(cell_nodes))))
+        for t, total, increment, stress, active in stages:
+            writer.write_data(t, point_data={"displacement": total[field_nodes],
+                                             "stage_displacement": increment[field_nodes]},
+                              cell_data={"stress": [tensor6(stress)], "active": [active]})
+    finally:
+        writer.__exit__(None, None, None)
