@@ -137,7 +137,9 @@ void Stepper::build_implicit_slots() {
                                   " is not positive semi-definite");
     const std::int32_t constraint = constraint_of_slot[slot[node]];
     if (constraint >= 0)
-      constrained_inverse(A, constraint_projection_.data() + 9 * constraint, node_inverse);
+      if (!constrained_inverse(A, constraint_projection_.data() + 9 * constraint, node_inverse))
+        throw std::invalid_argument("constraint at node " + std::to_string(node) +
+                                    ": the implicit system is singular in the free directions");
   }
 
   if (n_slots == 0) slot.clear();  // nothing implicit: pass B skips the slot look-up

@@ -184,7 +184,12 @@ def command_keys(write: str | None) -> int:
         print("error: --write: this pyfem is not in a source tree (no docs/ next to it); "
               "give a path: --write PATH", file=sys.stderr)
         return EXIT_USAGE
-    path.write_text(text)
+    try:
+        path.write_text(text)
+    except OSError as error:
+        print(f"error: --write {path}: {error.strerror or error}; allowed: a file path that can be written",
+              file=sys.stderr)
+        return EXIT_USAGE
     print(f"wrote {path}")
     return 0
 

@@ -2,7 +2,8 @@
 Newmark's rigid-block displacement, hard cases stay stable, energy closes, outputs are written.
 
 Base shaking of the block tests (sliding, chatter) is applied in the frame of a rigid base: the
-lower layer is held (its nodes get 1e20 times their mass, as the "fixed" boundary does) and every
+lower layer is held (its nodes get 1e20 times their mass: this test's own rigid base; the scene's
+"fixed" faces are kernel constraints) and every
 node of the upper layer gets the inertial force -M_i a_g(t), delivered by the kernel's
 SeismicInput provider from a table of a_g (the provider evaluates P g(t - tau) + Q g'(t - tau)
 with P = -M_i e, Q = 0, tau = 0). Gravity is not a body force of the dynamic run: the block's
