@@ -707,7 +707,35 @@ def hand_over(simulation, solve: bool = True) -> None:
     state.cell_stress, state.cell_stress_first = final, first
     if simulation.contact_arrays is not None and state.pair_forces is not None:
         simulation.contact_arrays["static_force"] = np.ascontiguousarray(state.pair_forces, dtype=np.float64)
+        over = pairs_over_strength(simulation.contact_arrays)
+        if over["opening"] or over["sliding"]:
+            simulation.scene.warn(
+                f"static: {over['opening']} contact pairs are in tension beyond their tensile strength and "
+                f"{over['sliding']} beyond their shear strength at the end of the stage (the stage keeps pairs "
+                "bonded): they open or slide in the first steps of the dynamic run, a sudden release that "
+                "is not the earthquake's (the stage with the pair law is not implemented yet)")
     simulation.static = state
+
+
+def pairs_over_strength(contact_arrays: dict) -> dict:
+    """How many pairs the static forces F0 put beyond the interface strength at D = 1.
+
+    With N = -n.F0 (compression positive) and T = |F0 - (n.F0) n|: tension beyond t_s A opens a
+    pair, |T| > mu_s N + c A slides it (docs/method.md section 9).
+
+    Returns:
+        {"opening": count, "sliding": count}
+    """
+    force = np.asarray(contact_arrays["static_force"], dtype=float)
+    normal = np.asarray(contact_arrays["normal"], dtype=float)
+    area = np.asarray(contact_arrays["area"], dtype=float)
+    normal_part = np.einsum("pc,pc->p", normal, force)
+    compression = -normal_part
+    shear = np.linalg.norm(force - normal_part[:, None] * normal, axis=1)
+    opening = (compression < 0.0) & (-compression > contact_arrays["tensile_strength"] * area)
+    sliding = (compression >= 0.0) & (shear > contact_arrays["friction_static"] * compression
+                                      + contact_arrays["cohesion"] * area)
+    return {"opening": int(np.count_nonzero(opening)), "sliding": int(np.count_nonzero(sliding))}
 
 
 def hand_over_force_provider(force: np.ndarray):

@@ -355,3 +355,19 @@ def test_bad_static_scenes(meshes):
     with pytest.raises(SceneError, match="hold more faces"):
         solver.prepare(tunnel_scene(meshes["filled"], static={"excavate": ["excavation"],
                                                                "boundary": {"type": "free"}}))
+
+
+def test_pairs_over_strength_counts_opening_and_sliding_pairs():
+    """The hand-over's check of the stage's pair forces against the interface strength (D = 1):
+    a pair in tension beyond t_s A opens, one whose shear exceeds mu_s N + c A slides."""
+    from pyfem.static import pairs_over_strength
+
+    normal = np.tile([0.0, 0.0, 1.0], (4, 1))
+    area = np.full(4, 2.0)                       # m^2: c A = 2e6 N, t_s A = 2e6 N
+    force = np.array([[0.0, 0.0, -1.0e6],        # compression 1e6 N (N = -n.F0), no shear: bonded
+                      [0.0, 0.0, 3.0e6],         # tension 3e6 N > t_s A: opens
+                      [2.6e6, 0.0, -1.0e6],      # shear 2.6e6 > 0.5 x 1e6 + 2e6: slides
+                      [2.4e6, 0.0, -1.0e6]])     # shear 2.4e6 < 2.5e6: holds
+    counts = pairs_over_strength({"static_force": force, "normal": normal, "area": area, "cohesion": 1.0e6,
+                                  "tensile_strength": 1.0e6, "friction_static": 0.5})
+    assert counts == {"opening": 1, "sliding": 1}
