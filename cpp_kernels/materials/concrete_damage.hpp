@@ -76,15 +76,8 @@ struct ConcreteDamageStep {
 
 /// Validates (std::invalid_argument naming the first bad parameter) and precomputes.
 inline ConcreteDamageMaterial concrete_damage_material(const ConcreteDamageParameters& p) {
-  auto require = [](bool ok, const char* name, double value, const char* allowed) {
-    if (!ok)
-      throw std::invalid_argument(std::string(name) + " = " + std::to_string(value) + " must be " +
-                                  allowed);
-  };
-  require(std::isfinite(p.young_modulus) && p.young_modulus > 0.0, "young_modulus", p.young_modulus,
-          "finite and > 0 (Pa)");
-  require(std::isfinite(p.poisson_ratio) && p.poisson_ratio > -1.0 && p.poisson_ratio < 0.5,
-          "poisson_ratio", p.poisson_ratio, "in (-1, 0.5)");
+  const auto require = require_parameter;
+  require_elastic_constants(p.young_modulus, p.poisson_ratio);
   require(std::isfinite(p.tensile_strength) && p.tensile_strength > 0.0, "tensile_strength",
           p.tensile_strength, "finite and > 0 (Pa)");
   require(std::isfinite(p.cohesion) && p.cohesion > 0.0, "cohesion", p.cohesion,

@@ -47,6 +47,7 @@
 // loads are not in the dynamic problem).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <map>
 #include <stdexcept>
@@ -94,6 +95,21 @@ inline double stress_dot_strain(const double* sigma, const double* eps) {
 }
 
 /// The value of `key` in `parameters`; throws std::invalid_argument naming the law and the key.
+/// Throws std::invalid_argument "NAME = VALUE must be ALLOWED" unless ok (a law's parameter check).
+inline void require_parameter(bool ok, const char* name, double value, const char* allowed) {
+  if (!ok)
+    throw std::invalid_argument(std::string(name) + " = " + std::to_string(value) + " must be " +
+                                allowed);
+}
+
+/// The elastic constants every law checks: E finite > 0 (Pa), nu in (-1, 0.5).
+inline void require_elastic_constants(double young_modulus, double poisson_ratio) {
+  require_parameter(std::isfinite(young_modulus) && young_modulus > 0.0, "young_modulus", young_modulus,
+                    "finite and > 0 (Pa)");
+  require_parameter(std::isfinite(poisson_ratio) && poisson_ratio > -1.0 && poisson_ratio < 0.5,
+                    "poisson_ratio", poisson_ratio, "in (-1, 0.5)");
+}
+
 inline double required_parameter(const ParameterMap& parameters, const char* law, const char* key) {
   const auto found = parameters.find(key);
   if (found == parameters.end())

@@ -208,15 +208,8 @@ MohrCoulombStep& finish_step(const MohrCoulombMaterial& m, const MohrCoulombStat
 }  // namespace
 
 MohrCoulombMaterial mohr_coulomb_material(const MohrCoulombParameters& p) {
-  auto require = [](bool ok, const char* name, double value, const char* allowed) {
-    if (!ok)
-      throw std::invalid_argument(std::string(name) + " = " + std::to_string(value) + " must be " +
-                                  allowed);
-  };
-  require(std::isfinite(p.young_modulus) && p.young_modulus > 0.0, "young_modulus", p.young_modulus,
-          "finite and > 0 (Pa)");
-  require(std::isfinite(p.poisson_ratio) && p.poisson_ratio > -1.0 && p.poisson_ratio < 0.5,
-          "poisson_ratio", p.poisson_ratio, "in (-1, 0.5)");
+  const auto require = require_parameter;
+  require_elastic_constants(p.young_modulus, p.poisson_ratio);
   require(std::isfinite(p.friction_angle) && p.friction_angle >= 0.0 && p.friction_angle < 90.0,
           "friction_angle", p.friction_angle, "in [0, 90) (deg)");
   require(std::isfinite(p.dilation_angle) && p.dilation_angle >= 0.0 &&
