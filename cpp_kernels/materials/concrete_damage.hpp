@@ -101,9 +101,9 @@ inline ConcreteDamageMaterial concrete_damage_material(const ConcreteDamageParam
   ConcreteDamageMaterial m{};
   m.young_modulus = p.young_modulus;
   m.poisson_ratio = p.poisson_ratio;
-  m.shear_modulus = p.young_modulus / (2.0 * (1.0 + p.poisson_ratio));
-  m.lambda =
-      p.young_modulus * p.poisson_ratio / ((1.0 + p.poisson_ratio) * (1.0 - 2.0 * p.poisson_ratio));
+  const LameConstants lame = lame_constants(p.young_modulus, p.poisson_ratio);
+  m.shear_modulus = lame.shear_modulus;
+  m.lambda = lame.lambda;
   m.tensile_strength = p.tensile_strength;
   m.fracture_energy = p.fracture_energy;
   const double phi = p.friction_angle * 3.14159265358979323846 / 180.0;

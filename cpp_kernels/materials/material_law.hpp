@@ -102,6 +102,16 @@ inline void require_parameter(bool ok, const char* name, double value, const cha
                                 allowed);
 }
 
+/// Lame's constants of isotropic elasticity: lambda = E nu / ((1 + nu)(1 - 2 nu)), G = E / (2 (1 + nu)) (Pa).
+struct LameConstants {
+  double lambda = 0.0;
+  double shear_modulus = 0.0;
+};
+inline LameConstants lame_constants(double young_modulus, double poisson_ratio) {
+  return {young_modulus * poisson_ratio / ((1.0 + poisson_ratio) * (1.0 - 2.0 * poisson_ratio)),
+          young_modulus / (2.0 * (1.0 + poisson_ratio))};
+}
+
 /// The elastic constants every law checks: E finite > 0 (Pa), nu in (-1, 0.5).
 inline void require_elastic_constants(double young_modulus, double poisson_ratio) {
   require_parameter(std::isfinite(young_modulus) && young_modulus > 0.0, "young_modulus", young_modulus,

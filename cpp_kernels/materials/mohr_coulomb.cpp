@@ -229,9 +229,9 @@ MohrCoulombMaterial mohr_coulomb_material(const MohrCoulombParameters& p) {
   MohrCoulombMaterial m{};
   m.young_modulus = p.young_modulus;
   m.poisson_ratio = p.poisson_ratio;
-  m.shear_modulus = p.young_modulus / (2.0 * (1.0 + p.poisson_ratio));
-  m.lambda =
-      p.young_modulus * p.poisson_ratio / ((1.0 + p.poisson_ratio) * (1.0 - 2.0 * p.poisson_ratio));
+  const LameConstants lame = lame_constants(p.young_modulus, p.poisson_ratio);
+  m.shear_modulus = lame.shear_modulus;
+  m.lambda = lame.lambda;
   const double phi = p.friction_angle * kPi / 180.0;
   m.sin_phi = std::sin(phi);
   m.sin_psi = std::sin(p.dilation_angle * kPi / 180.0);

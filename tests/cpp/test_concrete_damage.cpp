@@ -8,9 +8,12 @@
 #include <random>
 #include <stdexcept>
 
+#include "rotation.hpp"
 #include "materials/concrete_damage.hpp"
 
 using namespace cavern;
+using cavern::testing::rotate_tensor;
+using cavern::testing::rotation;
 
 namespace {
 
@@ -38,22 +41,6 @@ double tension_closed_form(const ConcreteDamageParameters& p, double e, double h
   return std::max(softening, (1.0 - p.damage_max) * E * e);  // the damage cap's stiffness floor
 }
 
-Matrix3 rotation(double a, double b, double c) {
-  const double ca = std::cos(a), sa = std::sin(a), cb = std::cos(b), sb = std::sin(b),
-               cc = std::cos(c), sc = std::sin(c);
-  return {{{ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc},
-           {sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc},
-           {-sb, cb * sc, cb * cc}}};
-}
-
-Matrix3 rotate_tensor(const Matrix3& R, const Matrix3& T) {
-  Matrix3 out{};
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      for (int k = 0; k < 3; ++k)
-        for (int l = 0; l < 3; ++l) out[i][j] += R[i][k] * T[k][l] * R[j][l];
-  return out;
-}
 
 }  // namespace
 

@@ -10,10 +10,13 @@
 #include <random>
 #include <stdexcept>
 
+#include "rotation.hpp"
 #include "materials/mohr_coulomb.hpp"
 #include "materials/principal.hpp"
 
 using namespace cavern;
+using cavern::testing::rotate_tensor;
+using cavern::testing::rotation;
 
 namespace {
 
@@ -79,22 +82,6 @@ MohrCoulombStep return_from_trial(const MohrCoulombMaterial& m, const Voigt& tri
   return mohr_coulomb_update(m, MohrCoulombState{}, strain_of_stress(m, trial));
 }
 
-Matrix3 rotation(double a, double b, double c) {  // R = Rz(a) Ry(b) Rx(c)
-  const double ca = std::cos(a), sa = std::sin(a), cb = std::cos(b), sb = std::sin(b),
-               cc = std::cos(c), sc = std::sin(c);
-  return {{{ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc},
-           {sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc},
-           {-sb, cb * sc, cb * cc}}};
-}
-
-Matrix3 rotate_tensor(const Matrix3& R, const Matrix3& T) {  // R T R^T
-  Matrix3 out{};
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      for (int k = 0; k < 3; ++k)
-        for (int l = 0; l < 3; ++l) out[i][j] += R[i][k] * T[k][l] * R[j][l];
-  return out;
-}
 
 Voigt stress_voigt(const Matrix3& T) {
   return {T[0][0], T[1][1], T[2][2], T[0][1], T[1][2], T[0][2]};
