@@ -21,3 +21,24 @@ def observed_orders(hs, errors):
     hs = np.asarray(hs, dtype=float)
     errors = np.asarray(errors, dtype=float)
     return np.log(errors[:-1] / errors[1:]) / np.log(hs[:-1] / hs[1:])
+
+
+def write_msh_with_tetrahedra(path):
+    """A unit box meshed with tetrahedra, its volume the physical group "rock" (an unsupported mesh).
+
+    The gmsh size option it sets is put back: gmsh keeps options for the whole process.
+    """
+    from pyfem._gmsh import gmsh
+    from pyfem.geometry import gmsh_session
+
+    with gmsh_session("tets"):
+        previous_size = gmsh.option.getNumber("Mesh.MeshSizeMax")
+        volume = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, [volume]), "rock")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+        try:
+            gmsh.model.mesh.generate(3)
+            gmsh.write(str(path))
+        finally:
+            gmsh.option.setNumber("Mesh.MeshSizeMax", previous_size)

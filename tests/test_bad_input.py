@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from conftest import write_msh_with_tetrahedra
+
 from pyfem import cli
 from pyfem._gmsh import gmsh
 from pyfem.geometry import gmsh_session
@@ -60,17 +62,6 @@ def write_msh_without_volumes(path):
         gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
         gmsh.option.setNumber("Mesh.RecombineAll", 1)
         gmsh.model.mesh.generate(2)
-        gmsh.write(str(path))
-
-
-def write_msh_with_tetrahedra(path):
-    """A box meshed with tetrahedra, its volume a physical group "rock"."""
-    with gmsh_session("tets"):
-        volume = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
-        gmsh.model.occ.synchronize()
-        gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, [volume]), "rock")
-        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
-        gmsh.model.mesh.generate(3)
         gmsh.write(str(path))
 
 

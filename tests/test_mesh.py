@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from dolfinx import mesh as dolfinx_mesh
 
+from conftest import write_msh_with_tetrahedra
 from pyfem.geometry import BOX_FACES, elements_per_direction, gmsh_session
 from pyfem.mesh import create_mesh
 
@@ -104,13 +105,7 @@ def test_box_material_name_mismatch_names_the_key():
 
 def test_tetrahedra_are_rejected(tmp_path):
     path = tmp_path / "tets.msh"
-    with gmsh_session("tets"):
-        volume = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
-        gmsh.model.occ.synchronize()
-        gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, [volume]), "rock")
-        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
-        gmsh.model.mesh.generate(3)
-        gmsh.write(str(path))
+    write_msh_with_tetrahedra(path)
     scene = box_scene()
     scene["mesh"] = {"builder": "file", "file": str(path), "order": 1}
     with pytest.raises(ValueError, match="Tetrahedron"):
