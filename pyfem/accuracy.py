@@ -21,6 +21,8 @@ import csv
 import math
 from pathlib import Path
 
+from pyfem.material import Material
+
 DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "accuracy_cost.csv"
 if not DEFAULT_RESULTS.is_file():  # an installed package (pip install .) carries a copy (setup.py)
     DEFAULT_RESULTS = Path(__file__).resolve().parent / "data" / "accuracy_cost.csv"
@@ -136,13 +138,9 @@ def highest_frequency(scene) -> float:
 
 
 def slowest_shear_speed(scene) -> float:
-    """Smallest shear wave speed sqrt(G / rho) (m/s) over the scene's materials."""
-    speeds = []
-    for name, material in scene["materials"].items():
-        E, nu, rho = material.get("E"), material.get("nu"), material.get("rho")
-        if E is None or nu is None or rho is None:
-            continue
-        speeds.append(math.sqrt(E / (2.0 * (1.0 + nu)) / rho))
+    """Smallest shear wave speed sqrt(G / rho) (m/s) over the scene's materials (those with E, nu, rho)."""
+    speeds = [Material.from_scene(name, table).s_wave_speed for name, table in scene["materials"].items()
+              if all(table.get(key) is not None for key in ("E", "nu", "rho"))]
     if not speeds:
         raise ValueError("scene materials: allowed is at least one material with E, nu and rho")
     return min(speeds)

@@ -5,9 +5,10 @@ groups of the gmsh model become dolfinx MeshTags and their names the keys of
 `regions` (volumes) and `boundaries` (surfaces).
 
 With a [contact] table, the interfaces it names are split before dolfinx sees
-the mesh (`pyfem.interfaces.split_interfaces`): the cells on one side of each
-interface get their own copies of the interface nodes, so the two sides meet
-only through node pairs. Without [contact] the gmsh model goes through
+the mesh (`split_interfaces`, with the numpy node splitting of
+`pyfem.interface_split`): the cells on one side of each interface get their own
+copies of the interface nodes, so the two sides meet only through node pairs
+(`pyfem.interfaces.interface_pairs`). Without [contact] the gmsh model goes through
 `gmshio.model_to_mesh` unchanged.
 """
 from __future__ import annotations
@@ -16,10 +17,13 @@ import typing
 
 from pyfem._gmsh import gmsh
 import numpy as np
+from dolfinx import cpp as _cpp
+from dolfinx import mesh as dolfinx_mesh
 from dolfinx.io import gmshio
 from mpi4py import MPI
 
 from pyfem.geometry import build_box, build_layered_box, build_layered_cavern, gmsh_session, load_msh
+from pyfem.interface_split import incidence, split_topology
 from pyfem.scene import SceneError
 
 # gmsh element type numbers of the volume elements accepted as cells.
@@ -53,7 +57,7 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
         (mesh, cell_tags, facet_tags, regions, boundaries, interface_tags) with
         interface_tags: name -> (tag of the side-i facets, tag of the side-j
         facets) for every interface in scene["contact"]["interfaces"]; empty
-        without [contact]. The side rule is `pyfem.interfaces.split_interfaces`'s.
+        without [contact]. The side rule is `pyfem.interface_split`'s.
     """
     mesh_settings = scene["mesh"]
     builder = mesh_settings.get("builder")
@@ -89,8 +93,6 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
             index = interface_names.index(missing[0])
             raise SceneError(f"contact.interfaces.{index}", missing[0], "must name a physical surface of the "
                              "mesh: " + (", ".join(sorted(boundaries)) or "none"))
-        from pyfem.interfaces import split_interfaces
-
         arrays = None
         if comm.rank == model_rank:
             arrays = _model_arrays()
@@ -103,6 +105,49 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
         mesh, cell_tags, facet_tags, interface_tags = split_interfaces(
             arrays, {name: boundaries[name] for name in interface_names}, comm, model_rank)
     return mesh, cell_tags, facet_tags, regions, boundaries, interface_tags
+
+
+def split_interfaces(arrays: dict | None, interface_tags: typing.Mapping[str, int], comm: MPI.Comm,
+                     model_rank: int = 0):
+    """Split the named interfaces (`pyfem.interface_split.split_topology`) and build the dolfinx
+    mesh and tags from the split arrays.
+
+    Args:
+        arrays: on `model_rank`, `_model_arrays()` of the gmsh model
+            (x, cells, cell_values, facets, facet_values); ignored elsewhere.
+        interface_tags: interface name -> physical surface tag.
+        comm: MPI communicator of the mesh.
+        model_rank: rank holding the arrays.
+
+    Returns:
+        (mesh, cell_tags, facet_tags, interface_tags_split) with
+        interface_tags_split: name -> (tag of side-i facets, tag of side-j facets).
+    """
+    if comm.rank == model_rank:
+        x, cells, facets, facet_values, split_tags, _ = split_topology(
+            arrays["x"], arrays["cells"], arrays["facets"], arrays["facet_values"], interface_tags)
+        cell_values = np.asarray(arrays["cell_values"], dtype=np.int32)
+    else:
+        x, cells = np.zeros((0, 3)), np.zeros((0, 8), dtype=np.int64)
+        facets, facet_values = np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int32)
+        cell_values, split_tags = np.zeros(0, dtype=np.int32), None
+    split_tags = comm.bcast(split_tags, root=model_rank)
+
+    ufl_domain = gmshio.ufl_mesh(GMSH_HEXAHEDRON_8, 3)
+    cells = cells[:, gmshio.cell_perm_array(dolfinx_mesh.CellType.hexahedron, 8)]
+    mesh = dolfinx_mesh.create_mesh(comm, cells, x, ufl_domain)
+    local_entities, local_values = _cpp.io.distribute_entity_data(mesh._mesh, 3, cells, cell_values)
+    mesh.topology.create_connectivity(3, 0)
+    cell_tags = dolfinx_mesh.meshtags_from_entities(mesh, 3, _cpp.graph.AdjacencyList_int32(local_entities),
+                                                    local_values.astype(np.int32))
+    cell_tags.name = "Cell tags"
+    facets = facets[:, gmshio.cell_perm_array(dolfinx_mesh.CellType.quadrilateral, 4)]
+    local_entities, local_values = _cpp.io.distribute_entity_data(mesh._mesh, 2, facets, facet_values)
+    mesh.topology.create_connectivity(2, 3)
+    facet_tags = dolfinx_mesh.meshtags_from_entities(mesh, 2, _cpp.graph.AdjacencyList_int32(local_entities),
+                                                     local_values.astype(np.int32))
+    facet_tags.name = "Facet tags"
+    return mesh, cell_tags, facet_tags, split_tags
 
 
 def _model_arrays() -> dict:
@@ -168,10 +213,8 @@ def _without_cells(arrays: dict, removed_tags: list[int]) -> dict:
     index = np.full(len(arrays["x"]), -1, dtype=np.int64)
     index[used] = np.arange(len(used))
     # A quadrilateral is a face of a remaining cell when its four nodes are nodes of that cell.
-    from pyfem.interfaces import _incidence
-
     facets = arrays["facets"]
-    shared = _incidence(facets, len(arrays["x"])) @ _incidence(cells, len(arrays["x"])).T
+    shared = incidence(facets, len(arrays["x"])) @ incidence(cells, len(arrays["x"])).T
     on_cell = np.asarray(shared.max(axis=1).todense()).ravel() >= facets.shape[1] if len(facets) else \
         np.zeros(0, dtype=bool)
     return {"x": arrays["x"][used].copy(), "cells": compact.reshape(cells.shape).astype(np.int64),

@@ -10,6 +10,8 @@ dolfinx assembles everything once, before the time loop:
 
 Numbering (docs/ARCHITECTURE.md): a node is a dof block of
 VectorFunctionSpace(mesh, ("Lagrange", order)); dof = 3 * node + component.
+The assembly helpers live in `pyfem.assembly` (re-exported here: assemble_nodal_vector,
+lumped_mass, elastic_stiffness), the material constants in `pyfem.material`.
 """
 from __future__ import annotations
 
@@ -21,14 +23,16 @@ import scipy.sparse
 import ufl
 from dolfinx import fem, geometry
 from dolfinx import mesh as dolfinx_mesh
-from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
-from petsc4py import PETSc
 
+from pyfem.assembly import (SPACE_DIMENSION, assemble_nodal_vector, elastic_stiffness, facet_measure,
+                            lumped_mass)
 from pyfem.geometry import BOX_FACES
+from pyfem.interfaces import interface_pairs
+from pyfem.material import Material
 from pyfem.mesh import create_mesh_with_interfaces
+from pyfem.scene import SceneError
 
-SPACE_DIMENSION = 3
 SUPPORTED_ORDERS = (1, 2)
 
 
@@ -269,10 +273,12 @@ class CellMaterials:
 
 
 def lame_parameters(E: float, nu: float) -> tuple[float, float]:
-    """Lame's lambda and the shear modulus G (Pa) from Young's modulus E (Pa) and Poisson's ratio nu (-)."""
-    lame_lambda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-    shear_modulus = E / (2.0 * (1.0 + nu))
-    return lame_lambda, shear_modulus
+    """Lame's lambda and the shear modulus G (Pa) from Young's modulus E (Pa) and Poisson's ratio nu (-).
+
+    `pyfem.material.Material(...).lame`, kept for the callers that have no density at hand (the
+    density does not enter; ValueError for E or nu out of range).
+    """
+    return Material(E=E, nu=nu, rho=1.0).lame
 
 
 def build_model(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> Model:
@@ -315,8 +321,6 @@ def build_model(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD) -> Model
     ]
     pairs = None
     if interface_tags:
-        from pyfem.interfaces import interface_pairs
-
         pairs = interface_pairs(V, facet_tags, interface_tags, mass, node_coords, quadrature)
     return Model(mesh=mesh, V=V, cell_tags=cell_tags, facet_tags=facet_tags, regions=regions,
                  boundaries=boundaries, node_coords=node_coords, mass=mass, stiffness=stiffness,
@@ -333,19 +337,10 @@ def _cell_materials(mesh, cell_tags, regions: dict[str, int], material_tables: t
     fields = {name: fem.Function(Q, name=name) for name in ("rho", "lame_lambda", "shear_modulus", "rho_cp", "rho_cs")}
     covered = np.zeros(n_cells, dtype=bool)
     for region, tag in regions.items():
-        table = material_tables[region]
-        E, nu, rho = (_material_value(table, region, key) for key in ("E", "nu", "rho"))
-        if not E > 0.0:
-            raise ValueError(f"materials.{region}.E = {E!r}: must be > 0 (Pa)")
-        if not -1.0 < nu < 0.5:
-            raise ValueError(f"materials.{region}.nu = {nu!r}: must be in (-1, 0.5)")
-        if not rho > 0.0:
-            raise ValueError(f"materials.{region}.rho = {rho!r}: must be > 0 (kg/m^3)")
-        lame_lambda, shear_modulus = lame_parameters(E, nu)
-        c_p = np.sqrt((lame_lambda + 2.0 * shear_modulus) / rho)
-        c_s = np.sqrt(shear_modulus / rho)
-        values = {"rho": rho, "lame_lambda": lame_lambda, "shear_modulus": shear_modulus,
-                  "rho_cp": rho * c_p, "rho_cs": rho * c_s}
+        material = Material.from_scene(region, material_tables[region])
+        rho_cp, rho_cs = material.impedances
+        values = {"rho": material.rho, "lame_lambda": material.lame_lambda,
+                  "shear_modulus": material.shear_modulus, "rho_cp": rho_cp, "rho_cs": rho_cs}
         region_cells = cell_tags.indices[cell_tags.values == tag]
         covered[region_cells] = True
         for key, value in values.items():
@@ -353,69 +348,6 @@ def _cell_materials(mesh, cell_tags, regions: dict[str, int], material_tables: t
     if not np.all(covered):
         raise ValueError(f"mesh: {np.count_nonzero(~covered)} cells belong to no region (physical volume)")
     return CellMaterials(indicator=fem.Function(Q), dof_of_cell=dof_of_cell, **fields)
-
-
-def _material_value(table: typing.Mapping, region: str, key: str) -> float:
-    if key not in table:
-        raise ValueError(f"materials.{region}.{key}: missing (needed: E in Pa, nu, rho in kg/m^3)")
-    return float(table[key])
-
-
-def lumped_mass(V: fem.FunctionSpace, rho: fem.Function, quadrature: dict) -> np.ndarray:
-    """Row-sum lumped mass M_i = int rho phi_i dx per node (kg).
-
-    Raises:
-        ValueError: if a node gets a lumped mass <= 0 (e.g. serendipity elements).
-    """
-    test = ufl.TestFunction(V)
-    ones = fem.Constant(V.mesh, np.ones(SPACE_DIMENSION, dtype=PETSc.ScalarType))
-    per_dof = assemble_nodal_vector(rho * ufl.inner(ones, test) * ufl.dx(metadata=quadrature), V)
-    # The vector form puts the same row sum on each component; keep one.
-    mass = per_dof[:, 0].copy()
-    if not np.allclose(per_dof, mass[:, None], rtol=1e-12, atol=0.0):
-        raise RuntimeError("lumped mass differs between components of a node")
-    if not np.all(mass > 0.0):
-        worst = int(np.argmin(mass))
-        raise ValueError(f"lumped mass of node {worst} is {mass[worst]:.6g} kg: row-sum lumping needs every mass > 0")
-    return mass
-
-
-def elastic_stiffness(V: fem.FunctionSpace, lame_lambda: fem.Function, shear_modulus: fem.Function,
-                      quadrature: dict) -> scipy.sparse.bsr_matrix:
-    """Stiffness of linear isotropic elasticity, no boundary conditions, as BSR (3, 3) blocks (N/m).
-
-    K_ij = int (2 G eps(phi_j) + lambda tr(eps(phi_j)) I) : eps(phi_i) dx.
-    """
-    trial, test = ufl.TrialFunction(V), ufl.TestFunction(V)
-
-    def strain(u):
-        return ufl.sym(ufl.grad(u))
-
-    stress = 2.0 * shear_modulus * strain(trial) + lame_lambda * ufl.tr(strain(trial)) * ufl.Identity(SPACE_DIMENSION)
-    form = fem.form(ufl.inner(stress, strain(test)) * ufl.dx(metadata=quadrature))
-    matrix = fem_petsc.assemble_matrix(form)
-    matrix.assemble()
-    indptr, indices, data = matrix.getValuesCSR()
-    n_dofs = matrix.getSize()[0]
-    matrix.destroy()
-    csr = scipy.sparse.csr_matrix((data, indices, indptr), shape=(n_dofs, n_dofs))
-    csr.sort_indices()  # a no-op when PETSc already returned sorted rows
-    bsr = csr.tobsr(blocksize=(SPACE_DIMENSION, SPACE_DIMENSION))
-    bsr.sort_indices()
-    if bsr.nnz != csr.nnz:
-        raise RuntimeError(f"stiffness pattern is not 3x3 blocked ({csr.nnz} entries, {bsr.nnz} in blocks)")
-    return bsr
-
-
-def assemble_nodal_vector(linear_form: ufl.Form, V: fem.FunctionSpace) -> np.ndarray:
-    """Assemble a linear form on the vector space V; returns (n_nodes, 3) owned + ghost values."""
-    vector = fem_petsc.assemble_vector(fem.form(linear_form))
-    vector.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-    vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-    with vector.localForm() as local:
-        values = local.array.copy()
-    vector.destroy()
-    return values.reshape(-1, SPACE_DIMENSION)
 
 
 def boundary_face(name: str, V: fem.FunctionSpace, facets: np.ndarray, materials: CellMaterials,
@@ -428,12 +360,7 @@ def boundary_face(name: str, V: fem.FunctionSpace, facets: np.ndarray, materials
     """
     mesh = V.mesh
     facets = np.unique(np.asarray(facets, dtype=np.int32))
-    # A meshtags holding only this face, always with marker 1, keeps the form
-    # signature the same for every face, so the forms compile once.
-    face_marker = 1
-    face_tags = dolfinx_mesh.meshtags(mesh, mesh.topology.dim - 1, facets,
-                                      np.full(len(facets), face_marker, dtype=np.int32))
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=face_tags, subdomain_id=face_marker, metadata=quadrature)
+    ds = facet_measure(mesh, facets, quadrature)
     test = ufl.TestFunction(V)
     outward_normal = ufl.FacetNormal(mesh)
     # One vector form carries three scalar integrals: component 0: 1, 1: rho c_p, 2: rho c_s.
@@ -479,8 +406,6 @@ def truncation_faces(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[s
     Raises:
         SceneError: boundary.faces names an unknown surface, or one that is not on the exterior.
     """
-    from pyfem.scene import SceneError
-
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim - 1, tdim)
     exterior = dolfinx_mesh.exterior_facet_indices(mesh.topology)
@@ -538,8 +463,6 @@ def face_kinds(scene: typing.Mapping, faces: typing.Mapping) -> dict[str, str]:
     Raises:
         SceneError: a `boundary.face.NAME` table names no truncation face.
     """
-    from pyfem.scene import SceneError
-
     boundary = scene.get("boundary") or {}
     per_face = boundary.get("face") or {}
     for name, table in per_face.items():

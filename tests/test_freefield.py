@@ -15,7 +15,8 @@ from conftest import ROUNDOFF, observed_orders, rel_error
 from pyfem.seismic import reflection
 from pyfem.seismic.forces import (boundary_springs_and_dashpots, equivalent_input_forces,
                                   equivalent_input_forces_reference)
-from pyfem.seismic.freefield import FreeField, IncidentWave, lame_constants
+from pyfem.material import Material
+from pyfem.seismic.freefield import FreeField, IncidentWave
 from pyfem.seismic.waveforms import WaveformTables, hilbert_pair, ricker, ricker_analytic_signal
 
 E, NU, RHO = 8.0e9, 0.24, 2600.0
@@ -244,7 +245,8 @@ def box_faces(n=(5, 3, 5)):
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     index = np.arange(len(grid)).reshape(n)
     centre = 0.5 * (np.array(BOUNDS[0]) + np.array(BOUNDS[1]))
-    _, mu, c_p, c_s = lame_constants(E, NU, RHO)
+    material = Material(E=E, nu=NU, rho=RHO)
+    mu, c_p, c_s = material.shear_modulus, material.p_wave_speed, material.s_wave_speed
     rng = np.random.default_rng(7)
     faces = []
     for axis in range(3):

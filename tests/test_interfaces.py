@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import ROUNDOFF, rel_error
-from pyfem.interfaces import oriented_normals, split_topology
+from pyfem.interface_split import oriented_normals, split_topology
 from pyfem.operators import build_model
 from pyfem.scene import SceneError, parse_scene
 

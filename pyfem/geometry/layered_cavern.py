@@ -84,6 +84,8 @@ import typing
 from pyfem._gmsh import gmsh
 import numpy as np
 
+from pyfem.material import Material, check_elastic
+
 # gmsh element type numbers.
 GMSH_QUADRANGLE_4 = 3
 GMSH_HEXAHEDRON_8 = 5
@@ -268,11 +270,7 @@ def _check_materials(materials) -> None:
     for name, material in materials.items():
         if not isinstance(material, typing.Mapping) or not {"E", "nu", "rho"} <= set(material):
             raise ValueError(f"{_PREFIX}materials.{name} = {material!r}: needs E (Pa), nu, rho (kg/m^3)")
-        _positive(f"materials.{name}.E", material["E"])
-        _positive(f"materials.{name}.rho", material["rho"])
-        nu = _finite(f"materials.{name}.nu", material["nu"])
-        if not -1.0 < nu < 0.5:
-            raise ValueError(f"{_PREFIX}materials.{name}.nu = {nu!r}: Poisson's ratio must lie in (-1, 0.5)")
+        check_elastic(material["E"], material["nu"], material["rho"], prefix=f"{_PREFIX}materials.{name}.")
 
 
 # --------------------------------------------------------------------------------------------
@@ -557,11 +555,6 @@ def scaled_jacobians(x: np.ndarray, hexahedra: np.ndarray) -> np.ndarray:
     return np.min(determinant / norms, axis=1)
 
 
-def _p_wave_speed(material: typing.Mapping) -> float:
-    E, nu, rho = material["E"], material["nu"], material["rho"]
-    return math.sqrt(E * (1 - nu) / ((1 + nu) * (1 - 2 * nu) * rho))
-
-
 def build_layered_cavern(parameters: typing.Mapping | None = None) -> dict:
     """Mesh the layered-rock cavern model with hexahedra in the current gmsh model.
 
@@ -671,8 +664,10 @@ def build_layered_cavern(parameters: typing.Mapping | None = None) -> dict:
                          "mesh.parameters margin_y, dip and the element sizes")
     edge_lengths = {name: np.linalg.norm(x[c[:, _HEX_EDGES[:, 1]]] - x[c[:, _HEX_EDGES[:, 0]]], axis=2)
                     for name, c in cells.items()}
-    time_steps = {name: float(edge_lengths[name].min()) / _p_wave_speed(p["materials"][name])
-                  for name in region_names if name in p["materials"]}
+    p_wave_speeds = {name: Material.from_scene(name, table).p_wave_speed
+                     for name, table in p["materials"].items()}
+    time_steps = {name: float(edge_lengths[name].min()) / p_wave_speeds[name]
+                  for name in region_names if name in p_wave_speeds}
 
     _add_to_gmsh(x, cells, region_names, surfaces)
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pyfem.material import Material
 from pyfem.seismic import reflection
 from pyfem.seismic.waveforms import WaveformTables, hilbert_pair, hilbert_response, spectral_filter
 
@@ -103,20 +104,6 @@ class PlaneWaveComponent:
     depths: np.ndarray | None = None
 
 
-def lame_constants(E, nu, rho):
-    """(lambda Pa, mu Pa, c_p m/s, c_s m/s) of an isotropic medium; ValueError for bad input."""
-    E, nu, rho = float(E), float(nu), float(rho)
-    if not np.isfinite(E) or E <= 0.0:
-        raise ValueError(f"E = {E!r} Pa: allowed is a finite positive Young's modulus")
-    if not (-1.0 < nu < 0.5):
-        raise ValueError(f"nu = {nu!r}: allowed is -1 < nu < 0.5")
-    if not np.isfinite(rho) or rho <= 0.0:
-        raise ValueError(f"rho = {rho!r} kg/m^3: allowed is a finite positive density")
-    mu = E / (2.0 * (1.0 + nu))
-    lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-    return lam, mu, np.sqrt((lam + 2.0 * mu) / rho), np.sqrt(mu / rho)
-
-
 def _sym_outer(a, p):
     return 0.5 * (np.outer(a, p) + np.outer(p, a))
 
@@ -153,13 +140,16 @@ class FreeField:
     Attributes:
         components: list of PlaneWaveComponent.
         tables: WaveformTables read by the kernel (table 0 is g).
-        lam, mu, c_p, c_s, rho: reference medium (Pa, Pa, m/s, m/s, kg/m^3).
+        material: the reference medium (pyfem.material.Material).
+        lam, mu, c_p, c_s, rho: its constants (Pa, Pa, m/s, m/s, kg/m^3).
     """
 
     def __init__(self, waves, E, nu, rho, surface=None, waveform=None, table_grid=None,
                  reference_point=None, model_bounds=None, depth_step=None, padding_factor=4):
-        self.lam, self.mu, self.c_p, self.c_s = lame_constants(E, nu, rho)
-        self.rho = float(rho)
+        self.material = Material(E=E, nu=nu, rho=rho)
+        self.lam, self.mu = self.material.lame
+        self.c_p, self.c_s = self.material.p_wave_speed, self.material.s_wave_speed
+        self.rho = self.material.rho
         self.waves = [w if isinstance(w, IncidentWave) else IncidentWave(
             wave_type=w.get("wave_type", w.get("type")), angle=w.get("angle", 0.0),
             azimuth=w.get("azimuth", 0.0), scale=w.get("scale", 1.0)) for w in waves]

@@ -1,0 +1,89 @@
+"""dolfinx assembly helpers shared by the operators, the interface pairs, the element arrays and
+the static stage: nodal vectors, a facet measure over chosen facets, the lumped mass and the
+elastic stiffness as a block-CSR matrix.
+
+Numbering (docs/ARCHITECTURE.md): a node is a dof block of
+VectorFunctionSpace(mesh, ("Lagrange", order)); dof = 3 * node + component.
+This module imports no other pyfem module.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+import ufl
+from dolfinx import fem
+from dolfinx import mesh as dolfinx_mesh
+from dolfinx.fem import petsc as fem_petsc
+from petsc4py import PETSc
+
+SPACE_DIMENSION = 3
+
+
+def assemble_nodal_vector(linear_form: ufl.Form, V: fem.FunctionSpace) -> np.ndarray:
+    """Assemble a linear form on the vector space V; returns (n_nodes, 3) owned + ghost values."""
+    vector = fem_petsc.assemble_vector(fem.form(linear_form))
+    vector.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    with vector.localForm() as local:
+        values = local.array.copy()
+    vector.destroy()
+    return values.reshape(-1, SPACE_DIMENSION)
+
+
+def facet_measure(mesh, facets: np.ndarray, quadrature: dict) -> ufl.Measure:
+    """The ds measure over the given local facets only.
+
+    A meshtags holding only these facets, always with marker 1, keeps the form signature the
+    same for every facet set, so forms built on it compile once.
+    """
+    marker = 1
+    facets = np.unique(np.asarray(facets, dtype=np.int32))
+    tags = dolfinx_mesh.meshtags(mesh, mesh.topology.dim - 1, facets,
+                                 np.full(len(facets), marker, dtype=np.int32))
+    return ufl.Measure("ds", domain=mesh, subdomain_data=tags, subdomain_id=marker, metadata=quadrature)
+
+
+def lumped_mass(V: fem.FunctionSpace, rho: fem.Function, quadrature: dict) -> np.ndarray:
+    """Row-sum lumped mass M_i = int rho phi_i dx per node (kg).
+
+    Raises:
+        ValueError: if a node gets a lumped mass <= 0 (e.g. serendipity elements).
+    """
+    test = ufl.TestFunction(V)
+    ones = fem.Constant(V.mesh, np.ones(SPACE_DIMENSION, dtype=PETSc.ScalarType))
+    per_dof = assemble_nodal_vector(rho * ufl.inner(ones, test) * ufl.dx(metadata=quadrature), V)
+    # The vector form puts the same row sum on each component; keep one.
+    mass = per_dof[:, 0].copy()
+    if not np.allclose(per_dof, mass[:, None], rtol=1e-12, atol=0.0):
+        raise RuntimeError("lumped mass differs between components of a node")
+    if not np.all(mass > 0.0):
+        worst = int(np.argmin(mass))
+        raise ValueError(f"lumped mass of node {worst} is {mass[worst]:.6g} kg: row-sum lumping needs every mass > 0")
+    return mass
+
+
+def elastic_stiffness(V: fem.FunctionSpace, lame_lambda: fem.Function, shear_modulus: fem.Function,
+                      quadrature: dict) -> scipy.sparse.bsr_matrix:
+    """Stiffness of linear isotropic elasticity, no boundary conditions, as BSR (3, 3) blocks (N/m).
+
+    K_ij = int (2 G eps(phi_j) + lambda tr(eps(phi_j)) I) : eps(phi_i) dx.
+    """
+    trial, test = ufl.TrialFunction(V), ufl.TestFunction(V)
+
+    def strain(u):
+        return ufl.sym(ufl.grad(u))
+
+    stress = 2.0 * shear_modulus * strain(trial) + lame_lambda * ufl.tr(strain(trial)) * ufl.Identity(SPACE_DIMENSION)
+    form = fem.form(ufl.inner(stress, strain(test)) * ufl.dx(metadata=quadrature))
+    matrix = fem_petsc.assemble_matrix(form)
+    matrix.assemble()
+    indptr, indices, data = matrix.getValuesCSR()
+    n_dofs = matrix.getSize()[0]
+    matrix.destroy()
+    csr = scipy.sparse.csr_matrix((data, indices, indptr), shape=(n_dofs, n_dofs))
+    csr.sort_indices()  # a no-op when PETSc already returned sorted rows
+    bsr = csr.tobsr(blocksize=(SPACE_DIMENSION, SPACE_DIMENSION))
+    bsr.sort_indices()
+    if bsr.nnz != csr.nnz:
+        raise RuntimeError(f"stiffness pattern is not 3x3 blocked ({csr.nnz} entries, {bsr.nnz} in blocks)")
+    return bsr
