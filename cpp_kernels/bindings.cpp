@@ -283,6 +283,39 @@ Args:
     R0: limit of eta, in (0, 1].  lam: decay rate, >= 0.  duration: t_s (s), > 0.
     m: > 0.  n: slip-rate offset (m/s), > 0.  p: exponent, >= 0.)")
       .def(
+          "rebase",
+          [](ContactPairs& contact, const py::object& u_object) {
+            auto u = checked_array<double>(u_object, "u", {kAny});
+            contact.check_nodes(u.shape(0) / 3);
+            if (u.shape(0) % 3 != 0)
+              throw py::value_error("u: length " + std::to_string(u.shape(0)) + " is not 3 n_nodes");
+            contact.rebase(u.data());
+          },
+          py::arg("u"),
+          R"(Makes the current state the static state of a new run (the static stage's hand-over):
+F0 becomes the total force F0 + R of the last step, R 0, the normal gap n.(u_j - u_i) at u
+(3 n_nodes,) is kept as the pair's gap offset (the new run's displacement starts from 0), the
+slip rate 0; states, bonds and deterioration settings kept.)")
+      .def(
+          "gap_offset",
+          [](const ContactPairs& contact) {
+            const auto& values = contact.gap_offset();
+            py::array_t<double> out(static_cast<py::ssize_t>(values.size()));
+            std::copy(values.begin(), values.end(), out.mutable_data());
+            return out;
+          },
+          "Normal gap at u = 0 of every pair (m; 0 unless rebased): new float64 array (n_pairs,).")
+      .def(
+          "static_force",
+          [](const ContactPairs& contact) {
+            const auto n = static_cast<py::ssize_t>(contact.n_pairs());
+            py::array_t<double> out({n, py::ssize_t(3)});
+            for (py::ssize_t p = 0; p < n; ++p)
+              for (int c = 0; c < 3; ++c) out.mutable_at(p, c) = contact.static_force()[3 * p + c];
+            return out;
+          },
+          "Static force F0 of every pair (N, side j on node i): new float64 array (n_pairs, 3).")
+      .def(
           "state",
           [](const ContactPairs& contact) {
             const auto& state = contact.state();
@@ -410,6 +443,10 @@ Returns:
       .def("commit", &InternalForceComponent::commit,
            "Makes the trial state of the last compute() the committed one (RuntimeError "
            "without one).")
+      .def("rebase", &InternalForceComponent::rebase,
+           R"(Makes the committed state the reference of a new run (the static stage's hand-over):
+its stress becomes the initial stress sigma0 (zero force at u = 0), its strain the zero of the
+next displacement, its stored energy 0; plastic strain, damage and dissipation kept.)")
       .def("stored_energy", &InternalForceComponent::stored_energy,
            "Stored energy of the committed state (J).")
       .def("dissipation", &InternalForceComponent::dissipation,
@@ -624,6 +661,9 @@ I - n n^T holds its normal component (roller). The held part of the force goes t
 Args:
     nodes: int32 (k,) distinct nodes. Copied.
     projection: float64 (k, 3, 3) symmetric idempotent matrices P. Copied.)")
+      .def("set_mass_damping", &Stepper::set_mass_damping, py::arg("alpha"),
+           "Changes the mass-proportional damping alpha (1/s, >= 0) for the following steps "
+           "(dynamic relaxation of the static stage adapts it). ValueError for a bad alpha.")
       .def(
           "reactions",
           [](const Stepper& stepper) {

@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "materials/principal.hpp"
 #include "small_matrix.hpp"
 
 namespace cavern {
@@ -26,6 +27,26 @@ void require_finite(const double* values, std::int64_t count, const char* name) 
     if (!std::isfinite(values[k]))
       throw std::invalid_argument(std::string(name) + " has a non-finite value at flat index " +
                                   std::to_string(k));
+}
+
+// W = (W^-1)^+ of the pair's symmetric positive semi-definite W^-1 = Atilde_i^-1 + Atilde_j^-1:
+// the plain inverse, or, where both nodes are held along a direction (a pair on a roller or fixed
+// face: W^-1 has a null space), the pseudo-inverse, so that R has no part the supports take.
+void pair_mass_matrix(const double* W_inverse, double* W) {
+  const double scale = std::abs(W_inverse[0]) + std::abs(W_inverse[4]) + std::abs(W_inverse[8]);
+  const double determinant = invert_3x3(W_inverse, W);
+  if (std::abs(determinant) > 1e-9 * scale * scale * scale && std::isfinite(determinant)) return;
+  Matrix3 matrix;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) matrix[r][c] = W_inverse[3 * r + c];
+  const SymmetricEigen eigen = symmetric_eigen(matrix);
+  std::fill(W, W + 9, 0.0);
+  for (int k = 0; k < 3; ++k) {
+    if (!(eigen.values[k] > 1e-9 * scale)) continue;
+    const auto& e = eigen.vectors[k];
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) W[3 * r + c] += e[r] * e[c] / eigen.values[k];
+  }
 }
 
 }  // namespace
@@ -111,6 +132,7 @@ ContactPairs::ContactPairs(const ContactGeometry& geometry, const ContactStrengt
   contact_force_.assign(3 * n_pairs_, 0.0);
   deterioration_.assign(n_pairs_, 1.0);
   slip_rate_.assign(n_pairs_, 0.0);
+  gap_offset_.assign(n_pairs_, 0.0);
   // Before any step the pairs carry the static force.
   normal_force_.resize(n_pairs_);
   tangential_force_.resize(3 * n_pairs_);
@@ -157,12 +179,13 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
     const double* n = normal_.data() + 3 * p;
     const double* F0 = static_force_.data() + 3 * p;
     const double area = area_[p];
+    const double g0 = gap_offset_[p];
 
     double inverse_i[9], inverse_j[9], W_inverse[9], W[9];
     operators.inverse(i, inverse_i);
     operators.inverse(j, inverse_j);
     for (int c = 0; c < 9; ++c) W_inverse[c] = inverse_i[c] + inverse_j[c];
-    invert_3x3(W_inverse, W);
+    pair_mass_matrix(W_inverse, W);
 
     // Relative displacement now and predicted at n+2 without contact force.
     double delta[3], delta_pred[3];
@@ -185,7 +208,7 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
       // Gap at n+2 if the pair keeps carrying nothing (R = -F0).
       double W_inverse_F0[3];
       multiply_3x3(W_inverse, F0, W_inverse_F0);
-      double open_gap = 0.0;
+      double open_gap = g0;
       for (int c = 0; c < 3; ++c) open_gap += n[c] * (delta_pred[c] + dt2 * W_inverse_F0[c]);
       separated = open_gap > 0.0;
     }
@@ -194,7 +217,7 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
       // Stick (Eq. 17): close the normal gap, keep the tangential relative displacement.
       double tangential_delta[3], target[3], R_stick[3];
       tangential_part(n, delta, tangential_delta);
-      for (int c = 0; c < 3; ++c) target[c] = (delta_pred[c] - tangential_delta[c]) / dt2;
+      for (int c = 0; c < 3; ++c) target[c] = (delta_pred[c] - tangential_delta[c] + g0 * n[c]) / dt2;
       multiply_3x3(W, target, R_stick);
 
       double F[3], T[3];
@@ -231,8 +254,11 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
           // Normal R that closes the gap at n+2 given the tangential R (exact with 3x3 W).
           multiply_3x3(W_inverse, R_tangential, W_inverse_R);
           multiply_3x3(W_inverse, n, W_inverse_n);
+          const double normal_compliance = dt2 * dot(n, W_inverse_n);  // 0: both nodes held along n
           const double R_normal =
-              (dot(n, delta_pred) - dt2 * dot(n, W_inverse_R)) / (dt2 * dot(n, W_inverse_n));
+              normal_compliance > 0.0
+                  ? (dot(n, delta_pred) + g0 - dt2 * dot(n, W_inverse_R)) / normal_compliance
+                  : 0.0;
           for (int c = 0; c < 3; ++c) R[c] = R_normal * n[c] + R_tangential[c];
         }
       }
@@ -294,6 +320,20 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
   result.contact_power = contact_power(v);
   observe_velocity(v);
   return result;
+}
+
+void ContactPairs::rebase(const double* u) {
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
+    const double* n = normal_.data() + 3 * p;
+    for (int c = 0; c < 3; ++c) {
+      static_force_[3 * p + c] += contact_force_[3 * p + c];
+      contact_force_[3 * p + c] = 0.0;
+      gap_offset_[p] += n[c] * (u[3 * j + c] - u[3 * i + c]);
+    }
+    slip_rate_[p] = 0.0;
+  }
+  std::fill(node_force_.begin(), node_force_.end(), 0.0);
 }
 
 void ContactPairs::observe_velocity(const double* v) {

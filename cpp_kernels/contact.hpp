@@ -67,6 +67,8 @@ struct ContactStepResult {
 };
 
 /// Explicit contact correction of the velocity-Verlet step (after the stepper's pass B).
+/// Gaps below are n.Delta + g0, g0 the pair's normal gap at u = 0 (0 unless rebase() set it):
+/// "closing the normal gap" drives n.Delta_{n+2} to -g0.
 ///
 /// With state (u_{n+1}, v_{n+1}, a_{n+1}) computed without contact, a force R on node i (-R on
 /// j) added to r changes v_{n+1} by dt/2 Atilde^-1 R, a_{n+1} by (R - (alpha M + C) dv)/M and so
@@ -109,6 +111,17 @@ class ContactPairs {
   ContactStepResult correct(double t, const ImplicitNodeOperators& operators, const double* u,
                             double* v, double* a);
 
+  /// Makes the current state the static state of a new run (the static stage's hand-over,
+  /// pyfem/static.py): F0 becomes the total force F0 + R of the last correction, R 0, the normal
+  /// gap n.(u_j - u_i) at u is kept as an offset (the new run's u starts from 0; an open pair
+  /// stays open by that gap), the slip rate 0; states, bonds and deterioration kept.
+  void rebase(const double* u);
+
+  /// Normal gap offset g0 of every pair (m): the gap is g0 + n.(u_j - u_i); 0 unless rebased.
+  const std::vector<double>& gap_offset() const { return gap_offset_; }
+  /// F0 of every pair (n_pairs, 3) (N).
+  const std::vector<double>& static_force() const { return static_force_; }
+
   /// Records dv_t = |P_t (v_j - v_i)| of the state v for the next correction's D.
   void observe_velocity(const double* v);
 
@@ -150,6 +163,7 @@ class ContactPairs {
   std::vector<std::uint8_t> bond_intact_;
   std::vector<double> normal_force_, tangential_force_, contact_force_, deterioration_;
   std::vector<double> slip_rate_;  // dv_t at t_n (m/s)
+  std::vector<double> gap_offset_;  // g0 (m): normal gap at u = 0
 };
 
 }  // namespace cavern

@@ -84,6 +84,14 @@ void HexahedronElementsBase::commit() {
   trial_ready_ = false;
 }
 
+void HexahedronElementsBase::rebase() {
+  const std::int64_t n = geometry_.n_cells * geometry_.n_points;
+  if (initial_stress_.empty()) initial_stress_.assign(6 * n, 0.0);
+  rebase_states(initial_stress_.data());
+  stored_energy_ = 0.0;
+  trial_ready_ = false;
+}
+
 void HexahedronElementsBase::check_nodes(std::int64_t n_nodes) const {
   if (!unique_nodes_.empty() && unique_nodes_.back() >= n_nodes)
     throw std::invalid_argument(name() + ": cell node " + std::to_string(unique_nodes_.back()) +

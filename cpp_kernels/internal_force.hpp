@@ -45,6 +45,14 @@ class InternalForceComponent {
   /// the stepper damps). A damping force: no state, in the stepper's damping work.
   virtual void add_stiffness_damping(const double* v, double beta, double* out_force) = 0;
 
+  /// Makes the committed state the reference of a new run (the static stage's hand-over,
+  /// pyfem/static.py): its stress becomes the initial stress sigma0, its strain the zero of the
+  /// next run's displacement, its stored energy 0; history (plastic strain, damage) and the
+  /// accumulated dissipation are kept. The next compute() must be at a displacement measured
+  /// from the state that was committed (u = 0 of the new run). A pending trial (compute()
+  /// without commit()) is discarded.
+  virtual void rebase() = 0;
+
   /// Stored energy of the committed state (J).
   virtual double stored_energy() const = 0;
 
@@ -95,6 +103,7 @@ class HexahedronElementsBase : public InternalForceComponent {
                          const double* initial_stress);
 
   void commit() override;
+  void rebase() override;
   double stored_energy() const override { return stored_energy_; }
   double dissipation() const override { return dissipation_; }
   void check_nodes(std::int64_t n_nodes) const override;
@@ -131,6 +140,8 @@ class HexahedronElementsBase : public InternalForceComponent {
   InternalEnergy gather(double* out_force);
   // Swaps the committed and trial state arrays of the law.
   virtual void swap_states() = 0;
+  // Law::rebase of every committed point, the committed stress into sigma0 (c, q, 6), trial = committed.
+  virtual void rebase_states(double* initial_stress) = 0;
   const double* initial_stress_of(std::int64_t cell, std::int64_t point) const {
     return initial_stress_.empty()
                ? kZeroStress
@@ -230,6 +241,14 @@ class HexahedronElements final : public HexahedronElementsBase {
 
  private:
   void swap_states() override { std::swap(committed_, trial_); }
+
+  void rebase_states(double* initial_stress) override {
+    for (std::size_t p = 0; p < committed_.size(); ++p) {
+      Law::rebase(parameters_, committed_[p]);
+      for (int c = 0; c < 6; ++c) initial_stress[6 * p + c] = committed_[p].stress[c];
+    }
+    trial_ = committed_;
+  }
 
   template <int kBasis>
   void cell_loop(const double* x, bool damping) {

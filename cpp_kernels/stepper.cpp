@@ -87,6 +87,13 @@ void Stepper::set_constraints(const std::int32_t* nodes, std::int64_t count,
   reactions_.assign(3 * count, 0.0);
 }
 
+void Stepper::set_mass_damping(double alpha) {
+  if (!(std::isfinite(alpha) && alpha >= 0.0))
+    throw std::invalid_argument("alpha must be finite and >= 0, got " + std::to_string(alpha));
+  parameters_.alpha = alpha;
+  build_implicit_slots();  // the slots' inverses hold M (1 + dt/2 alpha)
+}
+
 void Stepper::build_implicit_slots() {
   std::vector<std::int32_t> slot(n_nodes(), -1);
   std::vector<double> summed_C;

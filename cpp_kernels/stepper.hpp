@@ -105,6 +105,12 @@ class Stepper {
   /// constrained node must start in the range of P (zero for the held components).
   void set_constraints(const std::int32_t* nodes, std::int64_t count, const double* projection);
 
+  /// Changes the mass-proportional damping coefficient alpha (1/s, finite, >= 0) for the
+  /// following steps (the static stage's dynamic relaxation adapts it to the lowest frequency,
+  /// pyfem/static.py). The energy account keeps running; its damping work uses the new alpha.
+  /// Throws std::invalid_argument for a bad alpha.
+  void set_mass_damping(double alpha);
+
   /// Reactions (count, 3) of the constraints at the last step (N), in set_constraints order.
   const std::vector<double>& reactions() const { return reactions_; }
 

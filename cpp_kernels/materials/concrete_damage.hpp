@@ -328,6 +328,8 @@ inline ConcreteDamageStep concrete_damage_update(const ConcreteDamageMaterial& m
 /// Energy (material_law.hpp): the scheme's work of a step is w = 1/2 (sigma_c + sigma_t -
 /// 2 sigma0) : d_eps. With W = 1/2 sigma : (eps0 + eps) (concrete_stored_energy),
 ///   psi = W - 1/2 sigma0 : eps0 - sigma0 : eps
+/// (eps0 and 1/2 sigma0 : eps0 are the state's reference_strain and energy_offset; a rebase makes
+/// them the committed total strain and its W, and sigma0 the committed stress)
 /// is 0 at an admissible initial state and 1/2 eps : C : eps while undamaged. A step in which
 /// damage grows sets psi to this closed form and delta = w - (psi_t - psi_c) (the law's
 /// dissipation rewritten with sigma0); a step at fixed damage sets delta = 0 and psi_t = psi_c + w
@@ -341,6 +343,8 @@ struct ConcreteDamageLaw {
 
   struct State : ConcreteDamageState {  // strain: eps0 + eps of the last commit
     double stored = 0.0;                 // psi (J/m^3)
+    Voigt reference_strain{};            // eps0: total strain at zero dynamic strain
+    double energy_offset = 0.0;          // W at zero dynamic strain (1/2 sigma0 : eps0)
   };
 
   /// Keys: young_modulus, poisson_ratio, tensile_strength, cohesion (Pa), friction_angle (deg)
@@ -382,20 +386,30 @@ struct ConcreteDamageLaw {
     const ConcreteDamageStep step =
         concrete_damage_update(m, ConcreteDamageState{}, eps0, characteristic_length);
     static_cast<ConcreteDamageState&>(state) = step.state;
-    if (step.state.damage > 0.0)
-      state.stored =
-          step.stored_energy - 0.5 * stress_dot_strain(initial_stress, eps0.data());
+    state.reference_strain = eps0;
+    state.energy_offset = 0.5 * stress_dot_strain(initial_stress, eps0.data());
+    if (step.state.damage > 0.0) state.stored = step.stored_energy - state.energy_offset;
     return state;
+  }
+
+  /// The committed state as the zero of a new run (InternalForceComponent::rebase): its total
+  /// strain becomes eps0, its W the offset, psi 0; stress, kappa and damage kept.
+  static void rebase(const Parameters&, State& state) {
+    state.reference_strain = state.strain;
+    state.energy_offset = concrete_stored_energy(state);
+    state.stored = 0.0;
   }
 
   static PointEnergy evaluate(const Parameters& m, const State& committed,
                               const PointStrain& point, State& trial) {
-    const Voigt eps0 = static_strain(m, point.initial_stress);
+    const Voigt& eps0 = committed.reference_strain;
     Voigt strain;
     for (int c = 0; c < 6; ++c) strain[c] = eps0[c] + point.strain[c];
     const ConcreteDamageStep step =
         concrete_damage_update(m, committed, strain, point.characteristic_length);
     static_cast<ConcreteDamageState&>(trial) = step.state;
+    trial.reference_strain = committed.reference_strain;
+    trial.energy_offset = committed.energy_offset;
     double work = 0.0;
     for (int c = 0; c < 6; ++c)
       work += 0.5 * (committed.stress[c] + trial.stress[c] - 2.0 * point.initial_stress[c]) *
@@ -405,8 +419,7 @@ struct ConcreteDamageLaw {
         trial.kappa_compression == committed.kappa_compression) {  // no damage growth
       trial.stored = committed.stored + work;
     } else {
-      trial.stored = step.stored_energy -
-                     0.5 * stress_dot_strain(point.initial_stress, eps0.data()) -
+      trial.stored = step.stored_energy - committed.energy_offset -
                      stress_dot_strain(point.initial_stress, point.strain);
       energy.dissipation = work - (trial.stored - committed.stored);
     }

@@ -68,6 +68,9 @@ struct LinearElastic {
     return energy;
   }
 
+  /// A rebase (InternalForceComponent::rebase) keeps the stress, which becomes sigma0.
+  static void rebase(const Parameters&, State&) {}
+
   static PointOutput output(const State&) { return {}; }
 };
 

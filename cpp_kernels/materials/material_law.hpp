@@ -12,6 +12,7 @@
 //   static PointEnergy evaluate(const Parameters&, const State& committed,
 //                               const PointStrain& point, State& trial);
 //   static PointOutput output(const State&);        // damage, its type, plastic strain
+//   static void rebase(const Parameters&, State&);   // the state as the zero strain of a new run
 // initial_state is the state at zero dynamic strain. Its stress is sigma0 when sigma0 is
 // admissible; a law with a strength returns a sigma0 that violates it to the yield surface (or
 // damages it) there, so the cell starts out of balance and releases the excess dynamically

@@ -138,7 +138,9 @@ MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& material,
 ///
 /// Energy (material_law.hpp): the scheme's work of a step is w = 1/2 (sigma_c + sigma_t -
 /// 2 sigma0) : d_eps. With W the law's stored energy (mohr_coulomb_stored_energy),
-///   psi = W - W(sigma0) - sigma0 : eps,   W(sigma0) = 1/2 sigma0 : C^-1 : sigma0,
+///   psi = W - W(sigma0) - sigma0 : eps,   W(sigma0) = 1/2 sigma0 : C^-1 : sigma0
+/// (after a rebase, sigma0 is the committed stress and W(sigma0) the W of that state: the
+/// state's energy_offset),
 /// is 0 at an admissible initial state and 1/2 eps : C : eps while elastic. A plastic step sets
 /// psi to this closed form and delta = w - (psi_t - psi_c) (mohr_coulomb_update's dissipation,
 /// W_t - W_c + delta = 1/2 (sigma_c + sigma_t) : d_eps, rewritten with sigma0). An elastic step
@@ -153,6 +155,7 @@ struct MohrCoulombLaw {
   struct State : MohrCoulombState {
     Voigt strain{};       // committed total strain of the dynamic displacement (engineering shear)
     double stored = 0.0;  // psi (J/m^3)
+    double energy_offset = 0.0;  // W at zero strain: W(sigma0) at construction, W at a rebase
   };
 
   /// Keys: young_modulus, poisson_ratio (Pa, -), cohesion (Pa), friction_angle (deg),
@@ -188,14 +191,22 @@ struct MohrCoulombLaw {
     for (int c = 0; c < 6; ++c) state.stress[c] = state.effective_stress[c] = initial_stress[c];
     // A zero increment: sigma0 itself when admissible (bit for bit), else its return.
     const MohrCoulombStep step = mohr_coulomb_update(m, state, Voigt{});
+    Voigt sigma0;
+    for (int c = 0; c < 6; ++c) sigma0[c] = initial_stress[c];
+    state.energy_offset = isotropic_complementary_energy(m.young_modulus, m.poisson_ratio, sigma0);
     if (step.region != ReturnRegion::elastic) {
       static_cast<MohrCoulombState&>(state) = step.state;
-      Voigt sigma0;
-      for (int c = 0; c < 6; ++c) sigma0[c] = initial_stress[c];
-      state.stored = step.stored_energy -
-                     isotropic_complementary_energy(m.young_modulus, m.poisson_ratio, sigma0);
+      state.stored = step.stored_energy - state.energy_offset;
     }
     return state;
+  }
+
+  /// The committed state as the zero of a new run (InternalForceComponent::rebase): strain 0,
+  /// psi 0, the closed form's offset W of the state; stress, plastic strain, damage kept.
+  static void rebase(const Parameters& m, State& state) {
+    state.strain = Voigt{};
+    state.stored = 0.0;
+    state.energy_offset = mohr_coulomb_stored_energy(m, state);
   }
 
   static PointEnergy evaluate(const Parameters& m, const State& committed,
@@ -207,6 +218,7 @@ struct MohrCoulombLaw {
     }
     const MohrCoulombStep step = mohr_coulomb_update(m, committed, increment);
     static_cast<MohrCoulombState&>(trial) = step.state;
+    trial.energy_offset = committed.energy_offset;
     double work = 0.0;
     for (int c = 0; c < 6; ++c) {
       trial.strain[c] = point.strain[c];
@@ -216,8 +228,7 @@ struct MohrCoulombLaw {
     if (step.region == ReturnRegion::elastic) {
       trial.stored = committed.stored + work;
     } else {
-      trial.stored = step.stored_energy -
-                     isotropic_complementary_energy(m.young_modulus, m.poisson_ratio, sigma0) -
+      trial.stored = step.stored_energy - committed.energy_offset -
                      stress_dot_strain(point.initial_stress, point.strain);
       energy.dissipation = work - (trial.stored - committed.stored);
     }

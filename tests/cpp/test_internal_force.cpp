@@ -139,6 +139,9 @@ struct ToyVonMises {
     return state;
   }
   static PointOutput output(const State&) { return {}; }
+  static void rebase(const Parameters&, State&) {
+    throw std::logic_error("toy_von_mises: no rebase (its stress is not incremental)");
+  }
   static PointEnergy evaluate(const Parameters& p, const State& committed, const PointStrain& point,
                               State& trial) {
     double elastic[6], sigma[6];
