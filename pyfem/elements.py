@@ -108,14 +108,18 @@ class NonlinearRegions:
     def new_components(self) -> list:
         """Builds every component afresh (initial state) into `components` and returns them: a
         component holds the state of one run, so each stepper gets its own."""
+        self.components = [self.new_component(name) for name in self.arrays]
+        return self.components
+
+    def new_component(self, name: str, initial_stress="scene"):
+        """A fresh component of region `name` (not stored in `components`): its initial stress is
+        the region's `initial_stress` ("scene"), or the (c, q, 6) array given, or zero (None)."""
         from pyfem import _kernels
 
-        self.components = [
-            _kernels.HexahedronElements(arrays.cell_nodes, arrays.gradients, arrays.weights, *self.laws[name],
-                                        initial_stress=self.initial_stress.get(name),
-                                        **self.options.get(name, {}))
-            for name, arrays in self.arrays.items()]
-        return self.components
+        arrays = self.arrays[name]
+        sigma0 = self.initial_stress.get(name) if isinstance(initial_stress, str) else initial_stress
+        return _kernels.HexahedronElements(arrays.cell_nodes, arrays.gradients, arrays.weights, *self.laws[name],
+                                           initial_stress=sigma0, **self.options.get(name, {}))
 
     def nearest_point(self, cell: int, point) -> tuple[int, int] | None:
         """(component index, flat point index cell * q + point) of the quadrature point of local cell

@@ -32,6 +32,9 @@ from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from pyfem import material as _material
+from pyfem.material import DENSITY_RANGE, NONLINEAR_TABLES, YOUNG_MODULUS_RANGE
+
 EFFECT_ORDER = ("seismic_input", "damping", "initial_stress", "contact", "deterioration")
 """Every effect a scene can switch on, in the order `Scene.effects` lists them."""
 
@@ -53,13 +56,9 @@ PRESET_STRENGTHS = {
 tensile_strength in [materials.NAME.plasticity] / [materials.NAME.damage] of a material with
 that preset (a material without a preset gives them)."""
 
-NONLINEAR_TABLES = ("plasticity", "damage")
-"""Sub-tables of [materials.NAME] that make a region nonlinear (element loop of the kernel)."""
-
-# Plausible ranges for rock and concrete (and the odd steel part): a value outside them is almost
-# always a unit slip (GPa or MPa for Pa, t/m^3 for kg/m^3), which would give a meaningless run.
-YOUNG_MODULUS_RANGE = (1.0e7, 3.0e11)  # Pa: soft soil-like rock ... above steel
-DENSITY_RANGE = (500.0, 8000.0)        # kg/m^3: above porous fill ... steel
+# NONLINEAR_TABLES (the sub-tables of [materials.NAME] that make a region nonlinear) and the
+# plausible ranges YOUNG_MODULUS_RANGE and DENSITY_RANGE (outside them: a unit slip) are
+# pyfem.material's, like the ranges of E, nu and rho in the schema below.
 # A cohesion or tensile strength of an interface below this (but > 0) is negligible next to any
 # geostatic stress and is a value in MPa or kPa written as Pa; 0 means none.
 SMALLEST_STRENGTH = 100.0              # Pa
@@ -498,9 +497,9 @@ _DAMAGE = Table({
 
 _MATERIAL = Table({
     "preset": Choice("material preset (the paper's Table 1, docs/method.md section 10)", tuple(MATERIAL_PRESETS), default=None),
-    "E": Number("Young's modulus E (Pa)", POSITIVE, default=None),  # required unless preset
-    "nu": Number("Poisson's ratio", "(-1, 0.5)", default=None),
-    "rho": Number("density (kg/m^3)", POSITIVE, default=None),
+    # Required unless preset; descriptions and ranges are pyfem.material's (ELASTIC_RANGES).
+    **{key: Number(_material.ELASTIC_RANGES[key][0], _material.interval(key), default=None)
+       for key in ("E", "nu", "rho")},
     "plasticity": _PLASTICITY,
     "damage": _DAMAGE,
 }, "a material", not_read={
@@ -612,8 +611,13 @@ SCHEMA = Table({
                              default=0.5),
         "install": TextList("regions activated stress-free after the first release", default=[]),
         "gravity": Flag("the materials' weight as a body force of the stage", default=False),
-        "tolerance": Number("relative residual of the linear solve", "(0, 0.1]", default=1.0e-8),
-        "solver": Choice("static solver", ("auto", "direct", "iterative"), default="auto"),
+        "tolerance": Number("relative residual ||f - f_int|| / ||f|| the stage must reach (default 1e-8 for "
+                            "the linear solve, 1e-5 for dynamic relaxation)", "(0, 0.1]", default=None),
+        "solver": Choice("static solver: direct or iterative (linear elastic), relaxation (dynamic relaxation "
+                         "with the kernel: plasticity, damage and the contact pair law); auto: relaxation when "
+                         "a material has [plasticity] or [damage], else direct or iterative by size",
+                         ("auto", "direct", "iterative", "relaxation"), default="auto"),
+        "max_steps": Number("largest number of dynamic-relaxation steps per stage", "[1, 1e9]", default=200000),
         "boundary": Table({
             "type": Choice("boundary type of the truncation faces during the stage", STATIC_BOUNDARY_TYPES,
                            default="roller"),

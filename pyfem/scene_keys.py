@@ -61,6 +61,7 @@ DIMENSIONLESS = (
     "initial_stress.k",
     "static.relaxation",
     "static.tolerance",
+    "static.max_steps",
     "contact.deterioration.R0",
     "contact.deterioration.lambda",  # eta = R0 + (1 - R0) exp(-lambda t / t_s)
     "contact.deterioration.m",       # gamma = m (|dv_t| + n)^(-p), the paper's constant
@@ -108,6 +109,8 @@ UNSET = {
     "initial_stress.rho": "none; required by the geostatic form",
     "initial_stress.stress": "none: the geostatic form",
     "static.boundary.face": "every truncation face has `static.boundary.type`",
+    "static.tolerance": "1e-8 for the linear solve (relative residual), 1e-5 for dynamic relaxation "
+                        "(out-of-balance force ratio)",
     "contact.dynamic_friction_angle": "= `contact.friction_angle`",
     "contact.tensile_strength": "= `contact.cohesion`",
 }

@@ -116,11 +116,11 @@ def monitor_stress_operator(scene: Scene, model, points: np.ndarray) -> MonitorS
         points: (m, 3) monitor points (m).
     """
     from pyfem.initial_stress import stress_field_from_scene
-    from pyfem.operators import lame_parameters
+    from pyfem.material import Material
 
     nodes, gradients, cells = model.point_gradient_weights(points)
     regions = model.region_of_cells(cells)
-    lame = np.array([lame_parameters(scene["materials"][name]["E"], scene["materials"][name]["nu"])
+    lame = np.array([Material.from_scene(name, scene["materials"][name]).lame
                      for name in regions], dtype=np.float64).reshape(-1, 2)
     field = stress_field_from_scene(scene)
     static = np.zeros((len(points), 3, 3)) if field is None else np.asarray(field(points), dtype=np.float64)
@@ -488,11 +488,16 @@ def make_stepper(simulation: Simulation):
         stepper.add_seismic_input(_kernels.SeismicInput(
             a["table_t0"], a["table_dt"], a["g"], a["dg"], a["ddg"], a["node_ptr"], a["nodes"],
             a["table"], a["tau"], a["P"], a["Q"]))
+    handed_over = getattr(simulation.static, "components", None) is not None  # a relaxation stage ran
     if simulation.contact_arrays is not None:
-        simulation.contact_pairs = make_contact_pairs(simulation.contact_arrays)
+        contact = getattr(simulation.static, "contact", None)  # the stage's pairs, rebased, go on
+        simulation.contact_pairs = contact if contact is not None else make_contact_pairs(simulation.contact_arrays)
         stepper.add_contact(simulation.contact_pairs)
-    if simulation.nonlinear is not None:  # fresh state: a component holds the state of one run
-        for component in simulation.nonlinear.new_components():
+    if simulation.nonlinear is not None:
+        # A component holds the state of one run: fresh ones, or the stage's (rebased) after a
+        # relaxation stage, which a prepared simulation hands to one stepper only.
+        components = simulation.nonlinear.components if handed_over else simulation.nonlinear.new_components()
+        for component in components:
             stepper.add_internal_force(component)
     if simulation.static is not None:  # the stage's out-of-balance, held constant (pyfem/static.py)
         from pyfem.static import add_hand_over_force
@@ -533,16 +538,33 @@ def plan(scene: Scene) -> dict:
     The time estimate comes from timing a few kernel steps on the real matrices. A static stage is
     described, not solved.
     """
+    return simulation_plan(prepare(scene, solve_static=False))
+
+
+def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
+    """The plan of a prepared simulation (`plan`; `run` prints it before the time loop).
+
+    The time per step is measured on a stepper of its own, run `trial_steps` steps from rest and
+    then dropped. It is made from a copy of the simulation without the static stage's state
+    (static=None: fresh element-loop components and contact pairs), so the state a solved stage
+    hands to the run's stepper is never touched.
+    """
+    import dataclasses
+
     from pyfem.static import plan_report
 
-    simulation = prepare(scene, solve_static=False)
-    stepper = make_stepper(simulation)
+    scene = simulation.scene
+    nonlinear = simulation.nonlinear
+    kept = None if nonlinear is None else nonlinear.components  # the trial's fresh ones must not replace them
+    stepper = make_stepper(dataclasses.replace(simulation, static=None, contact_pairs=None))
     n = simulation.stiffness.shape[0]
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    trial_steps = 20
     start = time.perf_counter()
     stepper.run(u, v, a, trial_steps, 0.0)
     per_step = (time.perf_counter() - start) / trial_steps
+    del stepper
+    if nonlinear is not None:
+        nonlinear.components = kept
     model = simulation.model
     ts = simulation.time_step
     element_loop = element_loop_plan(simulation.nonlinear, u, per_step, simulation.time_step)
@@ -607,8 +629,13 @@ def element_loop_plan(nonlinear, u: np.ndarray, per_step: float, time_step: Time
     }
 
 
-def run(scene: Scene, out_dir) -> dict:
+def run(scene: Scene, out_dir, on_plan=None, progress=None) -> dict:
     """Runs the scene and writes run.json, monitors/, fields.xdmf and plots/ into out_dir.
+
+    on_plan: called with the plan (`simulation_plan`, a dict) once the model is built, before
+    the run directory is touched (the command line prints it). progress: None shows a tqdm bar
+    on a terminal (stderr); else an object with start(t0) and __call__(t) (pyfem.progress.
+    ProgressLines), told the simulated time reached after every output interval; no bar then.
 
     The histories are written as the run goes. Ctrl-C or SIGTERM stops the run between two
     samples: run.json says "interrupted" with the time reached, every row so far is kept, and
@@ -626,6 +653,8 @@ def run(scene: Scene, out_dir) -> dict:
     wall_start = time.perf_counter()
     with StopSignals() as signals:
         simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
+        if on_plan is not None:
+            on_plan(simulation_plan(simulation))
         writer = RunWriter(out_dir, simulation)
         try:
             with signals.deferred():
@@ -644,8 +673,10 @@ def run(scene: Scene, out_dir) -> dict:
             ts = simulation.time_step
             n_outputs = simulation.n_steps // ts.steps_per_output
             loop_start = time.perf_counter()
+            if progress is not None:
+                progress.start(t)
             with tqdm(total=n_outputs, desc=scene["title"][:30], unit="out", leave=False,
-                      disable=not writer.show_progress) as progress:
+                      disable=progress is not None or not writer.show_progress) as bar:
                 for _ in range(n_outputs):
                     t = stepper.run(u, v, a, ts.steps_per_output, t)
                     reactions = stepper.reactions() if simulation.constraints is not None else None
@@ -653,7 +684,9 @@ def run(scene: Scene, out_dir) -> dict:
                         raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
                     with signals.deferred():
                         writer.sample(t, u, v, a, stepper.energy(), reactions)
-                    progress.update()
+                    bar.update()
+                    if progress is not None:
+                        progress(t)
             loop_seconds = time.perf_counter() - loop_start
             return writer.finish(wall_seconds=time.perf_counter() - wall_start, loop_seconds=loop_seconds)
         except KeyboardInterrupt as error:

@@ -55,12 +55,15 @@ SPACE_DIMENSION = 3
 DIRECT_SOLVER_LIMIT = 50_000
 # A node's held directions: eigenvalues of the summed held projections above this are held.
 _HELD_TOLERANCE = 1.0e-6
-SUMMARY_KEYS = ("name", "solver", "iterations", "residual", "seconds", "max_displacement", "free_dofs",
-                "load_fraction")
+SUMMARY_KEYS = ("name", "solver", "iterations", "residual", "converged", "seconds", "max_displacement",
+                "free_dofs", "load_fraction")
 """What run.json's "static" keeps of each Stage."""
-NONLINEAR_NOT_YET = ("static stage with nonlinear materials: not implemented yet (the linear stage "
-                     "needs every material linear elastic; the dynamic-relaxation stage for [plasticity] "
-                     "and [damage] regions is still to be written, docs/static.md)")
+LINEAR_TOLERANCE = 1.0e-8
+"""Default static.tolerance of the linear solve (relative residual)."""
+RELAXATION_TOLERANCE = 1.0e-5
+"""Default static.tolerance of dynamic relaxation (out-of-balance force ratio ||r|| / ||f||)."""
+LINEAR_ONLY = ("solves linear elastic stages only: a material with [plasticity] or [damage] needs "
+               "static.solver = \"relaxation\" (or \"auto\", which chooses it)")
 
 
 @dataclasses.dataclass
@@ -92,6 +95,9 @@ class Stage:
     seconds: float = 0.0
     max_displacement: float = 0.0
     max_displacement_point: list = dataclasses.field(default_factory=list)
+    converged: bool = True
+    residual_history: list = dataclasses.field(default_factory=list)
+    regions: dict = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass
@@ -119,6 +125,12 @@ class StaticState:
         cell_stress: (n_cells, 3, 3) static stress at the cell centroids (Pa), set by `hand_over`.
         cell_stress_first: (n_cells, 3, 3) the same after stage 1 (installed cells: 0).
         monitor_stress: (m, 3, 3) static stress at the monitors (Pa), set by `hand_over`.
+        components: dynamic relaxation only: the element-loop components (region order of
+            pyfem.elements.NonlinearRegions), rebased to the final state; the dynamic run continues them.
+        contact: dynamic relaxation with contact only: the kernel's ContactPairs, rebased (F0 = the
+            final pair forces, open gaps kept); the dynamic run continues it.
+        cell_state, cell_state_first: dynamic relaxation only: {"plastic_strain", "damage",
+            "damage_type"} per cell (n_cells,) at the end and after stage 1 (0 outside the element loop).
     """
 
     stages: list
@@ -140,6 +152,10 @@ class StaticState:
     cell_stress: np.ndarray | None = None
     cell_stress_first: np.ndarray | None = None
     monitor_stress: np.ndarray | None = None
+    components: list | None = None
+    contact: object = None
+    cell_state: dict | None = None
+    cell_state_first: dict | None = None
 
     def summary(self) -> dict:
         """run.json's "static": per stage its solver, iterations, residual, time and largest
@@ -158,17 +174,38 @@ class StaticState:
 # Scene checks and the stage's boundary
 # ---------------------------------------------------------------------------------------------
 
+def uses_relaxation(scene: typing.Mapping) -> bool:
+    """The stage is solved by dynamic relaxation: static.solver = "relaxation", or "auto" with a
+    [plasticity] or [damage] table."""
+    solver = scene["static"]["solver"]
+    if solver in ("direct", "iterative"):
+        return False
+    return solver == "relaxation" or any(material.get(table) is not None for material in scene["materials"].values()
+                                         for table in ("plasticity", "damage"))
+
+
+def stage_tolerance(scene: typing.Mapping) -> float:
+    """static.tolerance, or its default for the stage's solver."""
+    given = scene["static"]["tolerance"]
+    if given is not None:
+        return float(given)
+    return RELAXATION_TOLERANCE if uses_relaxation(scene) else LINEAR_TOLERANCE
+
+
 def check_linear(scene: typing.Mapping) -> None:
-    """A static stage needs every material linear elastic (for now).
+    """A linear solver (static.solver "direct" or "iterative") needs every material linear elastic.
 
     Raises:
-        SceneError naming the first nonlinear material table.
+        SceneError naming the solver and the first nonlinear material table.
     """
+    if uses_relaxation(scene):
+        return
     for name, material in scene["materials"].items():
         for table in ("plasticity", "damage"):
             if material.get(table) is not None:
-                raise SceneError(f"materials.{name}.{table}", None, NONLINEAR_NOT_YET,
-                                 f"scene key 'materials.{name}.{table}': {NONLINEAR_NOT_YET}")
+                solver = scene["static"]["solver"]
+                raise SceneError("static.solver", solver, f"static.solver = \"{solver}\" {LINEAR_ONLY} "
+                                 f"(materials.{name}.{table} is set)")
 
 
 def stage_boundary(scene: typing.Mapping, model) -> dict[str, str]:
@@ -597,7 +634,7 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
         key = (id(K), id(basis))
         if key not in solver_cache:
             reduced = (T.T @ (K @ T)).tocsr()
-            solver_cache[key] = LinearSolver(reduced, settings["tolerance"], settings["solver"],
+            solver_cache[key] = LinearSolver(reduced, stage_tolerance(scene), settings["solver"],
                                              near_null_space=T.T @ rigid_body_modes(coordinates))
         solver = solver_cache[key]
         w, iterations, residual = solver.solve(T.T @ load)
@@ -645,6 +682,244 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
 
 
 # ---------------------------------------------------------------------------------------------
+# The nonlinear stage: dynamic relaxation with the kernel
+# ---------------------------------------------------------------------------------------------
+
+def _cell_state(model, nonlinear, components) -> dict:
+    """{"plastic_strain", "damage", "damage_type", "stress"} per cell of the model from the given
+    components (region order of `nonlinear`; None: a region not active yet): cell averages of the
+    points (pyfem.elements.NonlinearRegions.cell_averages); zeros and no stress elsewhere."""
+    state = {"plastic_strain": np.zeros(model.n_cells), "damage": np.zeros(model.n_cells),
+             "damage_type": np.zeros(model.n_cells, dtype=np.int32), "stress": {}}
+    if nonlinear is None:
+        return state
+    saved = nonlinear.components
+    try:
+        active = [(k, c) for k, c in enumerate(components) if c is not None]
+        for k, component in active:
+            name = nonlinear.regions[k]
+            nonlinear.components = [component]
+            arrays = nonlinear.arrays
+            nonlinear.arrays = {name: arrays[name]}
+            try:
+                averages = nonlinear.cell_averages()[name]
+            finally:
+                nonlinear.arrays = arrays
+            cells = averages["cells"]
+            for key in ("plastic_strain", "damage", "damage_type"):
+                state[key][cells] = averages[key]
+            state["stress"][name] = (cells, averages["stress"])
+    finally:
+        nonlinear.components = saved
+    return state
+
+
+def _voigt_to_tensor(voigt: np.ndarray) -> np.ndarray:
+    """(m, 6) Voigt xx yy zz xy yz xz -> (m, 3, 3)."""
+    xx, yy, zz, xy, yz, xz = voigt.T
+    return np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], -2)
+
+
+def _pair_force_vector(n_nodes: int, contact_arrays: dict) -> np.ndarray:
+    """(3 n_nodes,) the pairs' static forces as nodal forces: F0 on node i, -F0 on node j."""
+    force = np.zeros((n_nodes, 3))
+    pairs = np.asarray(contact_arrays["pairs"], dtype=np.int64)
+    F0 = np.asarray(contact_arrays["static_force"], dtype=np.float64)
+    np.add.at(force, pairs[:, 0], F0)
+    np.add.at(force, pairs[:, 1], -F0)
+    return force.ravel()
+
+
+def _stage_stepper(stiffness, mass: np.ndarray, constraints, load: np.ndarray, components: list, contact,
+                   ramp: float = 0.0):
+    """A kernel Stepper for one relaxation stage: the matrix cells, the scaled mass (dt = 1, no
+    damping yet), the stage's held faces, the constant load, the components and the pairs."""
+    from pyfem import _kernels
+    from pyfem.relaxation import PSEUDO_STEP
+    from pyfem.solver import bsr_arrays
+
+    indptr, indices, blocks = bsr_arrays(stiffness.tobsr(blocksize=(3, 3)))
+    stepper = _kernels.Stepper(indptr, indices, blocks, mass, PSEUDO_STEP, 0.0, 0.0)
+    if constraints is not None:
+        stepper.set_constraints(np.ascontiguousarray(constraints.nodes, dtype=np.int32),
+                                np.ascontiguousarray(constraints.projection, dtype=np.float64))
+    if np.any(load):
+        stepper.add_seismic_input(hand_over_force_provider(load, ramp))
+    for component in components:
+        stepper.add_internal_force(component)
+    if contact is not None:
+        stepper.add_contact(contact)
+    return stepper
+
+
+def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
+    """The two stages of docs/static.md solved by dynamic relaxation (pyfem/relaxation.py) with the
+    dynamic run's own kernel: material laws at every point of the [plasticity]/[damage] regions,
+    the contact pair law (bond, slip, opening; no deterioration during the stage), the stage's
+    held faces as kernel constraints. Each stage starts a stepper from u = 0 with its load plus
+    the out-of-balance the previous stage left; the components and pairs carry their state from
+    one stage to the next and to the dynamic run by `rebase` (the final state becomes their zero).
+
+    Args:
+        scene: validated scene with [static].
+        simulation: pyfem.solver.Simulation being prepared (model, nonlinear regions, contact arrays).
+
+    Returns:
+        StaticState, with `components` and `contact` for the dynamic run.
+    """
+    from pyfem.elements import linear_stiffness, plastic_frequency_factor, region_cells, scene_laws
+    from pyfem.relaxation import probe_frequency, ramp_length, relax, scaled_mass
+    from pyfem.solver import make_contact_pairs
+
+    start = time.perf_counter()
+    model, nonlinear = simulation.model, simulation.nonlinear
+    settings = scene["static"]
+    tolerance, max_steps = stage_tolerance(scene), int(settings["max_steps"])
+    boundary = stage_boundary(scene, model)
+    installed_regions, installed_cells = _install_cells(scene, model)
+    loads = stage_loads(scene, model, installed_cells)
+    n_nodes = model.n_nodes
+    held_nodes, held_projection, constraints = _stage_constraints(model, boundary)
+    pairs = None if model.pairs is None else np.asarray(model.pairs.nodes, dtype=np.int64)
+    rock_regions = [name for name in model.regions if name not in installed_regions]
+    if len(installed_cells):
+        rock_nodes = _nodes_of_cells(model, _cells_except(model, installed_cells))
+        inactive = np.setdiff1d(np.arange(n_nodes), rock_nodes)
+    else:
+        inactive = np.zeros(0, dtype=np.int64)
+    # The bonded stage is the stiffest one the pairs allow: if it can move as a rigid body, so can this.
+    check_held(free_basis(n_nodes, held_nodes, held_projection, pairs, inactive), model.node_coords, inactive,
+               boundary)
+
+    # Matrix cells of each stage: all but the element-loop cells (and, in stage 1, the installed ones).
+    element_regions = [] if nonlinear is None else nonlinear.regions
+    element_cells = (np.concatenate([region_cells(model, name) for name in element_regions])
+                     if element_regions else np.zeros(0, dtype=np.int32))
+    K_support = (nonlinear.stiffness if nonlinear is not None else model.stiffness).tocsr()
+    K_excavation = (linear_stiffness(model, np.union1d(element_cells, installed_cells)).tocsr()
+                    if len(installed_cells) else K_support)
+    laws, _ = scene_laws(scene)
+    factor = max([plastic_frequency_factor(p["poisson_ratio"], p["friction_angle"], p["dilation_angle"])
+                  for p in laws.values() if p["law"] == "mohr_coulomb"], default=1.0)
+    mass = scaled_mass(model.stiffness, factor)
+
+    # Components: the rock's from the in-situ stress now, the installed regions' stress-free in stage 2.
+    components = [None] * len(element_regions)
+    for k, name in enumerate(element_regions):
+        if name not in installed_regions:
+            components[k] = nonlinear.new_component(name)
+    contact = None
+    if simulation.contact_arrays is not None:
+        contact = make_contact_pairs(dict(simulation.contact_arrays, deterioration=None))
+
+    relaxation = settings["relaxation"]
+    f_exc = loads.excavation.ravel()
+    if contact is not None:
+        # The pairs carry F0 = A sigma0 n in the initial state, but the kernel applies only their change
+        # R (the total is F0 + R): the load the stage's kernel sees includes F0 on node i and -F0 on j,
+        # which with the -F0 / +F0 that f_exc has at a split interface leaves zero where nothing is
+        # excavated (as the bonded pairs of the linear stage sum them).
+        f_exc = f_exc + _pair_force_vector(n_nodes, simulation.contact_arrays)
+    weight_words = " + weight of the installed regions" if np.any(loads.installed_weight) else ""
+    # Ratios are taken against the stage's load, or 1e-3 of the in-situ force on the truncation faces
+    # when the load nearly cancels (nothing excavated).
+    floor = 1.0e-3 * float(np.linalg.norm(loads.in_situ_traction))
+    # How slowly to load: the lowest frequency of the elastic stage-1 body (bonded pairs as they start).
+    ramp, probe_steps = 0.0, 0
+    path_dependent = any(c is not None for c in components) or contact is not None
+    probe_load = f_exc + loads.installed_weight.ravel()
+    if path_dependent and np.any(probe_load):
+        elastic = linear_stiffness(model, installed_cells) if len(installed_cells) else model.stiffness
+        probe_contact = None if contact is None else make_contact_pairs(dict(simulation.contact_arrays,
+                                                                             deterioration=None))
+        omega, probe_steps = probe_frequency(_stage_stepper(elastic, mass, constraints, probe_load, [], probe_contact),
+                                             mass, probe_load, max_steps, floor=floor)
+        ramp = ramp_length(omega)
+    stages, increments, reactions = [], [], []
+    carried = np.zeros(3 * n_nodes)
+    coordinates = model.node_coords
+    cell_state_first = None
+    for index, (name, stiffness, regions, fraction, words) in enumerate((
+            ("excavation", K_excavation, rock_regions, relaxation,
+             f"{relaxation:g} f_exc (released before {', '.join(installed_regions) or 'any support'})"),
+            ("support", K_support, list(model.regions), 1.0 - relaxation,
+             f"{1.0 - relaxation:g} f_exc{weight_words}"))):
+        stage_start = time.perf_counter()
+        if index == 1:
+            for k, region in enumerate(element_regions):
+                if components[k] is None:
+                    components[k] = nonlinear.new_component(region, initial_stress=None)
+        load = fraction * f_exc + carried + (loads.installed_weight.ravel() if index == 1 else 0.0)
+        active = [component for component in components if component is not None]
+        stepper = _stage_stepper(stiffness, mass, constraints, load, active, contact, ramp)
+        u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor)
+        for component in active:
+            component.rebase()
+        if contact is not None:
+            contact.rebase(u)
+        carried = result.out_of_balance
+        support = np.zeros((n_nodes, 3))
+        if constraints is not None:
+            support[constraints.nodes] = stepper.reactions()
+        reactions.append(support)
+        magnitude = np.linalg.norm(u.reshape(-1, 3), axis=1)
+        worst = int(np.argmax(magnitude))
+        stage_regions = {}
+        if nonlinear is not None:
+            saved = nonlinear.components
+            names = [element_regions[k] for k, c in enumerate(components) if c is not None]
+            arrays = nonlinear.arrays
+            nonlinear.components, nonlinear.arrays = active, {n: arrays[n] for n in names}
+            try:
+                stage_regions = nonlinear.region_summary()
+            finally:
+                nonlinear.components, nonlinear.arrays = saved, arrays
+        stages.append(Stage(name=name, active_regions=regions, load=words, load_fraction=fraction,
+                            free_dofs=int(3 * n_nodes - 3 * len(inactive) if index == 0 else 3 * n_nodes),
+                            solver="dynamic relaxation" if np.any(load) else "none: no load",
+                            iterations=result.steps, residual=result.residual,
+                            seconds=time.perf_counter() - stage_start, max_displacement=float(magnitude[worst]),
+                            max_displacement_point=coordinates[worst].tolist(), converged=result.converged,
+                            residual_history=[[step, ratio] for step, ratio, _ in result.history],
+                            regions=stage_regions))
+        increments.append(u)
+        if index == 0:
+            cell_state_first = _cell_state(model, nonlinear, components)
+        if not result.converged:
+            simulation.scene.warn(
+                f"static: the {name} stage did not reach static.tolerance = {tolerance:g} in static.max_steps = "
+                f"{max_steps} relaxation steps (out-of-balance ratio {result.residual:.3g}): the model may be "
+                "collapsing (plastic flow without end) or need more steps; its state is handed over as it is, "
+                "with the out-of-balance applied as a constant force")
+    u1, u2 = increments
+    applied = f_exc + loads.installed_weight.ravel()
+    load_norm = max(float(np.linalg.norm(applied)), floor)
+    out_of_balance = float(np.linalg.norm(carried)) / load_norm if load_norm > 0.0 else 0.0
+    # The relaxed state is handed over as the static state: its out-of-balance r (<= tolerance of the
+    # load) is the stage's error and is not applied to the dynamic run, which therefore starts in exact
+    # equilibrium (the state solves the stage's load minus r). Applying r, as the linear stage does
+    # with its round-off residual, would set the model moving at a speed proportional to the tolerance.
+    hand_over_force = np.zeros_like(carried)
+    support = reactions[0] + reactions[1]
+    traction = loads.in_situ_traction
+    state = StaticState(stages=stages, displacement_first=u1, displacement=u1 + u2,
+                        installed_cells=installed_cells, installed_regions=installed_regions,
+                        excavation_load=f_exc, support_force=support.ravel(), in_situ_traction=traction.ravel(),
+                        hand_over_force=hand_over_force, out_of_balance=out_of_balance,
+                        pair_forces=None if contact is None else np.ascontiguousarray(contact.static_force()),
+                        face_support_forces=face_support_resultants(model.faces, boundary, support),
+                        face_in_situ_tractions={face.name: traction[face.nodes].sum(axis=0).tolist()
+                                                for face in model.faces},
+                        boundary=boundary, seconds=time.perf_counter() - start,
+                        settings=dict(settings, tolerance=tolerance, load_ramp_steps=ramp,
+                                      probe_steps=probe_steps),
+                        components=components, contact=contact)
+    state.cell_state_first = cell_state_first
+    state.cell_state = _cell_state(model, nonlinear, components)
+    return state
+
+
+# ---------------------------------------------------------------------------------------------
 # Hand-over to the dynamic run
 # ---------------------------------------------------------------------------------------------
 
@@ -679,7 +954,8 @@ def hand_over(simulation, solve: bool = True) -> None:
     _install_cells(scene, model)
     if not solve:
         return
-    state = solve_static_stage(scene, model)
+    relaxed = uses_relaxation(scene)
+    state = solve_relaxation_stage(scene, simulation) if relaxed else solve_static_stage(scene, model)
     installed_regions = set(state.installed_regions)
     u_total, u_support = state.displacement, state.displacement - state.displacement_first
     monitors = simulation.monitor_stress
@@ -688,6 +964,11 @@ def hand_over(simulation, solve: bool = True) -> None:
         base = monitors.static.copy()
         sigma = static_stress(monitors.dynamic_stress, installed, u_total, u_support)
         sigma[~installed] += base[~installed]
+        if relaxed and monitors.kernel_points is not None:  # the law's stress where the cell is nonlinear
+            for j, found in enumerate(monitors.kernel_points):
+                if found is not None:
+                    voigt = state.components[found[0]].stress(np.array([found[1]], dtype=np.int64))
+                    sigma[j] = _voigt_to_tensor(voigt)[0]
         monitors.static = sigma
         state.monitor_stress = sigma
     from pyfem.output import cell_strain_operator
@@ -704,16 +985,30 @@ def hand_over(simulation, solve: bool = True) -> None:
     final[~installed] += sigma0[~installed]
     first = cell_elastic_stress(state.displacement_first) + sigma0
     first[installed] = 0.0
+    if relaxed:  # element-loop cells: the laws' stress (cell means of the points)
+        for stress, cell_state in ((final, state.cell_state), (first, state.cell_state_first)):
+            for cells_of_region, voigt in cell_state["stress"].values():
+                stress[cells_of_region] = _voigt_to_tensor(voigt)
+        nonlinear = simulation.nonlinear
+        if nonlinear is not None:  # the dynamic run continues the stage's components
+            nonlinear.components = list(state.components)
+            for name, component in zip(nonlinear.regions, state.components):
+                nonlinear.initial_stress[name] = component.stress()
     state.cell_stress, state.cell_stress_first = final, first
     if simulation.contact_arrays is not None and state.pair_forces is not None:
         simulation.contact_arrays["static_force"] = np.ascontiguousarray(state.pair_forces, dtype=np.float64)
-        over = pairs_over_strength(simulation.contact_arrays)
-        if over["opening"] or over["sliding"]:
-            simulation.scene.warn(
-                f"static: {over['opening']} contact pairs are in tension beyond their tensile strength and "
-                f"{over['sliding']} beyond their shear strength at the end of the stage (the stage keeps pairs "
-                "bonded): they open or slide in the first steps of the dynamic run, a sudden release that "
-                "is not the earthquake's (the stage with the pair law is not implemented yet)")
+        if state.contact is not None:  # the dynamic run continues the stage's pairs, now with D(t)
+            if simulation.contact_arrays["deterioration"] is not None:
+                state.contact.set_deterioration(*simulation.contact_arrays["deterioration"])
+        else:
+            over = pairs_over_strength(simulation.contact_arrays)
+            if over["opening"] or over["sliding"]:
+                simulation.scene.warn(
+                    f"static: {over['opening']} contact pairs are in tension beyond their tensile strength and "
+                    f"{over['sliding']} beyond their shear strength at the end of the stage (a linear stage keeps "
+                    "pairs bonded): they open or slide in the first steps of the dynamic run, a sudden release "
+                    "that is not the earthquake's; static.solver = \"relaxation\" lets them open or slide "
+                    "during the stage")
     simulation.static = state
 
 
@@ -738,15 +1033,21 @@ def pairs_over_strength(contact_arrays: dict) -> dict:
     return {"opening": int(np.count_nonzero(opening)), "sliding": int(np.count_nonzero(sliding))}
 
 
-def hand_over_force_provider(force: np.ndarray):
-    """A kernel force provider holding `force` (dofs, N) constant for the whole run: a SeismicInput
-    with one table that is 1 from long before the run starts."""
+def hand_over_force_provider(force: np.ndarray, ramp: float = 0.0):
+    """A kernel force provider holding `force` (dofs, N): constant for the whole run (ramp = 0: a
+    SeismicInput with one table that is 1 from long before the run starts), or rising smoothly
+    from 0 at t = 0 to 1 at t = ramp (cubic Hermite, zero slope at both ends) and constant after."""
     from pyfem import _kernels
 
     nodal = np.asarray(force, dtype=np.float64).reshape(-1, 3)
     nodes = np.flatnonzero(np.any(nodal != 0.0, axis=1)).astype(np.int32)
-    table = (np.ones((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)))  # g = 1, g' = g'' = 0
-    return _kernels.SeismicInput(-1.0e6, 1.0, *table, np.arange(len(nodes) + 1, dtype=np.int64), nodes,
+    if ramp > 0.0:
+        t0, dt, g = 0.0, float(ramp), np.array([[0.0, 1.0]])
+        # g' of the smoothstep 3s^2 - 2s^3 is 0 at both ends; the g'' table's slopes: 6/ramp^2, -6/ramp^2.
+        tables = (g, np.zeros((1, 2)), np.array([[6.0, -6.0]]) / ramp ** 2)
+    else:
+        t0, dt, tables = -1.0e6, 1.0, (np.ones((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)))  # g = 1
+    return _kernels.SeismicInput(t0, dt, *tables, np.arange(len(nodes) + 1, dtype=np.int64), nodes,
                                  np.zeros(len(nodes), dtype=np.int32), np.zeros(len(nodes)),
                                  np.ascontiguousarray(nodal[nodes]), np.zeros((len(nodes), 3)))
 
@@ -776,8 +1077,14 @@ def plan_report(scene: typing.Mapping, model) -> dict:
         source = (f"geostatic, surface {initial['surface']:g} m, rho {initial['rho']:g} kg/m^3, "
                   f"k {initial['k']}")
     n_dofs = model.n_dofs
-    method = settings["solver"] if settings["solver"] != "auto" else (
-        "direct" if n_dofs <= DIRECT_SOLVER_LIMIT else "iterative")
+    if uses_relaxation(scene):
+        solver_words = (f"dynamic relaxation with the kernel (mass scaling, adaptive critical damping), out-of-balance "
+                        f"ratio {stage_tolerance(scene):g}, at most {int(settings['max_steps'])} steps per stage")
+    else:
+        method = settings["solver"] if settings["solver"] != "auto" else (
+            "direct" if n_dofs <= DIRECT_SOLVER_LIMIT else "iterative")
+        solver_words = (f"{method} (up to {n_dofs} unknowns; direct up to {DIRECT_SOLVER_LIMIT}), tolerance "
+                        f"{stage_tolerance(scene):g}")
     return {
         "initial stress": source + (", gravity on" if settings["gravity"] else ""),
         "stage 1 (excavation)": (f"{', '.join(excavated) or 'no region'} removed (absent from the model)"
@@ -787,7 +1094,7 @@ def plan_report(scene: typing.Mapping, model) -> dict:
                                f"({len(installed_cells)} cells); " if installed else "nothing installed; ")
                               + f"the remaining {1.0 - relaxation:g} released"),
         "boundary": ", ".join(f"{name} {kind}" for name, kind in boundary.items()),
-        "solver": f"{method} (up to {n_dofs} unknowns; direct up to {DIRECT_SOLVER_LIMIT}), tolerance "
-                  f"{settings['tolerance']:g}",
-        "hand-over": "static stress, pair forces and support reactions to the dynamic run (u = v = 0)",
+        "solver": solver_words,
+        "hand-over": "static stress, pair forces and support reactions to the dynamic run (u = v = 0)"
+                     + ("; plastic strain, damage and pair states go on" if uses_relaxation(scene) else ""),
     }

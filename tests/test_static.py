@@ -24,7 +24,7 @@ import sys
 import numpy as np
 import pytest
 
-from pyfem import solver
+from pyfem import solver, static
 from pyfem.scene import SceneError, parse_scene
 
 RADIUS = 5.0
@@ -136,7 +136,7 @@ def test_kirsch_excavation(meshes, order):
     simulation = solver.prepare(tunnel_scene(meshes["filled"], order))
     state, model = simulation.static, simulation.model
     assert "excavation" not in model.regions and "tunnel_wall" in model.free_surfaces
-    tolerance = simulation.scene["static"]["tolerance"]  # Q1: MUMPS; Q2 (51 698 unknowns): CG + GAMG
+    tolerance = static.stage_tolerance(simulation.scene)  # Q1: MUMPS; Q2 (51 698 unknowns): CG + GAMG
     assert state.stages[1].residual < tolerance and state.out_of_balance < tolerance
     cell_points = centroids(model)
     checks = 0
@@ -347,8 +347,10 @@ def test_bad_static_scenes(meshes):
     wall_fixed = {"excavate": ["excavation"], "boundary": {"face": {"tunnel_wall": {"type": "fixed"}}}}
     with pytest.raises(SceneError, match="static.boundary.face.tunnel_wall"):
         solver.prepare(tunnel_scene(meshes["filled"], static=wall_fixed))
-    with pytest.raises(SceneError, match="static stage with nonlinear materials: not implemented yet"):
-        check_linear({"materials": {"rock": {"E": 8e9, "plasticity": {"cohesion": 1e6}}}})
+    with pytest.raises(SceneError, match='static.solver = "direct" solves linear elastic stages only'):
+        check_linear({"materials": {"rock": {"E": 8e9, "plasticity": {"cohesion": 1e6}}},
+                      "static": {"solver": "direct"}})
+    check_linear({"materials": {"rock": {"E": 8e9, "plasticity": {"cohesion": 1e6}}}, "static": {"solver": "auto"}})
     with pytest.raises(SceneError, match="needs a load"):
         parse_scene({"mesh": {"size": [2.0, 2.0, 2.0], "h": 1.0}, "materials": {"rock": dict(ROCK)},
                      "time": {"duration": 0.01}, "static": {}})
