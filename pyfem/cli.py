@@ -2,8 +2,10 @@
 
 Commands:
     run SCENE.toml [--out DIR] [--set key.path=value ...]
-        Validate the scene, then run it; results go to DIR
-        (default ``runs/<scene file stem>``).
+        Validate the scene, print the plan (as check does), then run it; results go to DIR
+        (default ``runs/<scene file stem>``). On a terminal a progress bar shows on stderr;
+        when stdout is not a terminal (a pipe, a log file) one flushed line every 5 % of the
+        simulated time instead: simulated time, wall time, estimated end (pyfem.progress).
     check SCENE.toml [--set key.path=value ...]
         Validate the scene and print the plan (effects on, mesh size, dofs,
         time step and why, steps, memory and time estimates) without running.
@@ -78,8 +80,10 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     out_dir = default_out_dir(scene_path) if out_dir is None else out_dir
     check_out_dir(out_dir)
     from pyfem import solver  # heavy (dolfinx, kernels): only when running
+    from pyfem.progress import ProgressLines
 
-    summary = solver.run(scene, out_dir)
+    progress = None if sys.stdout.isatty() else ProgressLines(scene["time"]["duration"])
+    summary = solver.run(scene, out_dir, on_plan=lambda plan: show_plan(scene, plan), progress=progress)
     energy = summary["energy"]
     print(f"run finished in {summary['wall_seconds']:.1f} s: {summary['steps']} steps of "
           f"{summary['dt']:.4g} s, {summary['dofs']} dofs; energy balance error "
@@ -92,6 +96,11 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     if any("freefield_error" in peak for peak in summary["monitors"].values()):
         print("  (the difference from the free field is the error of a homogeneous model, and the "
               "scattering by the cavern, layers and interfaces otherwise)")
+    motion = summary.get("input_motion")
+    if motion is not None:
+        print(f"  input motion (g(t) x wave.scale, as the kernel is driven): PGA {motion['pga']:.4g} m/s^2 "
+              f"({motion['pga_g']:.3g} g), PGV {motion['pgv']:.4g} m/s, PGD {motion['pgd']:.4g} m; "
+              f"plots/input.png")
     print(f"outputs: {out_dir}/ (run.json, monitors/, plots/, fields.xdmf for ParaView)")
     return 0
 
@@ -102,14 +111,19 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     report_warnings(scene)
     from pyfem import solver  # heavy (dolfinx, kernels): only after validation
 
-    plan = solver.plan(scene)
+    show_plan(scene, solver.plan(scene))
+    return 0
+
+
+def show_plan(scene: Scene, plan: dict) -> None:
+    """Prints the plan of a scene (check, and run before it starts), flushed."""
     print(f"scene: {scene.source}")
     if not any("effects" in str(key) for key in plan):
         print(describe_scene(scene))
     print(format_plan(plan))
     if "seismic_input" in scene.effects:
         print(mesh_advice(scene))
-    return 0
+    sys.stdout.flush()
 
 
 def report_warnings(scene: Scene) -> None:

@@ -10,6 +10,7 @@ keeps every sample computed before it stopped. An earlier run in the directory i
 """
 from __future__ import annotations
 
+import decimal
 import json
 import math
 import os
@@ -45,6 +46,10 @@ FLUSH_SECONDS = 2.0
 # Symmetric tensors in fields.xdmf: 6 components in the order of XDMF's "Tensor6" attribute,
 # which ParaView's XDMF reader expands to the full 3x3 tensor row by row.
 TENSOR6_COMPONENTS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # xx, xy, xz, yy, yz, zz
+# The 8 vertices of a hexahedron in VTK/XDMF order, as (x, y, z) steps on its reference grid.
+_VTK_HEXAHEDRON = ((0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1))
+# Cell field "region" of a cell without a region tag (none in a mesh the builders accept).
+NO_REGION = -1
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -202,6 +207,118 @@ def cell_strain_operator(scene, model) -> CellStrain:
                       static=static)
 
 
+def field_mesh(model) -> tuple[np.ndarray, str, np.ndarray, np.ndarray]:
+    """The mesh fields.xdmf is written on: every node of the model, in linear cells.
+
+    Q1 hexahedra are written as they are. A Q2 hexahedron (27 nodes) is written as the 8
+    hexahedra of its 3 x 3 x 3 node grid, so every node's value is in the file and a viewer
+    interpolates linearly between neighbouring nodes (a refined Q1 mesh: the usual way to show
+    quadratic results); cell data repeats on the 8 parts. Other cells (tetrahedra) are written
+    by their vertices.
+
+    Returns:
+        (nodes, cell_type, cells, parent): nodes (p,) the model nodes written, in file order;
+        cell_type the meshio name ("hexahedron", "tetra"); cells (c', k) indices into `nodes`
+        (VTK order); parent (c',) the model cell of each written cell.
+    """
+    import basix
+
+    element = model.V.element.basix_element
+    cell_nodes = model.V.dofmap.list.array.reshape(-1, element.dim)
+    n_cells = len(cell_nodes)
+    if element.cell_type == basix.CellType.hexahedron:
+        degree = model.order
+        # Position of each local node on the cell's reference grid (basix points, 0..degree).
+        grid = np.rint(np.asarray(element.points) * degree).astype(int)
+        local = np.full((degree + 1,) * 3, -1)
+        local[grid[:, 0], grid[:, 1], grid[:, 2]] = np.arange(element.dim)
+        if np.any(local < 0) or len(grid) != (degree + 1) ** 3:
+            raise ValueError(f"fields.xdmf: a hexahedral element of degree {degree} whose nodes are not "
+                             "a full grid")
+        parts = [[local[i + di, j + dj, k + dk] for di, dj, dk in _VTK_HEXAHEDRON]
+                 for k in range(degree) for j in range(degree) for i in range(degree)]
+        cell_type, written = "hexahedron", cell_nodes[:, np.array(parts)].reshape(-1, 8)
+        parent = np.repeat(np.arange(n_cells), len(parts))
+    elif element.cell_type == basix.CellType.tetrahedron:
+        cell_type, written, parent = "tetra", cell_nodes[:, :4], np.arange(n_cells)
+    else:
+        raise ValueError(f"fields.xdmf: cells of type {element.cell_type} are not supported")
+    nodes, compact = np.unique(written, return_inverse=True)
+    return nodes, cell_type, compact.reshape(written.shape).astype(np.int64), parent
+
+
+def cell_regions(model) -> np.ndarray:
+    """(n_cells,) int32 region id of every cell of the dofmap: its cell tag (`Model.regions` maps
+    the names to these ids), NO_REGION where a cell has none."""
+    n_cells = len(model.V.dofmap.list.array) // model.V.dofmap.dof_layout.num_dofs
+    regions = np.full(n_cells, NO_REGION, dtype=np.int32)
+    indices = np.asarray(model.cell_tags.indices)
+    keep = indices < n_cells
+    regions[indices[keep]] = np.asarray(model.cell_tags.values)[keep]
+    return regions
+
+
+def time_decimals(*intervals) -> int:
+    """Decimals of the shortest of these intervals as written (0.005 -> 3, 0.1 -> 1, 2.5e-5 -> 6),
+    at most 15; 0 for none."""
+    decimals = 0
+    for interval in intervals:
+        if interval is not None and interval > 0:
+            exponent = decimal.Decimal(repr(float(interval))).normalize().as_tuple().exponent
+            decimals = max(decimals, -int(exponent))
+    return min(decimals, 15)
+
+
+def input_motion(simulation) -> dict | None:
+    """The input motion the kernel is driven with, its peaks and its 5 %-damped response spectrum.
+
+    The motion is the incident wave's displacement g(t) at the reference point times wave.scale,
+    with its velocity and acceleration, as the kernel's waveform table holds them (a record as
+    processed: window, taper, resampling, band-pass, baseline, pga; a Ricker wavelet sampled on
+    its table grid). Each wave component adds its own scale (listed under "components").
+
+    Returns:
+        None without a [wave]; else a dict with the summary for run.json (SI units) and, under
+        "_series", (t, a, v, d, spectrum, run end) for `plots.input_motion` (not for run.json).
+    """
+    from pyfem.seismic.records import STANDARD_GRAVITY
+    from pyfem.seismic.spectrum import DEFAULT_PERIODS, STANDARD_DAMPING, peak_values, response_spectrum
+
+    freefield = simulation.freefield
+    if freefield is None:
+        return None
+    scene = simulation.scene
+    wave = scene["wave"]
+    scale = float(wave.get("scale", 1.0))
+    tables = freefield.tables
+    t = np.round(tables.t0 + tables.dt * np.arange(tables.g.shape[1]), time_decimals(tables.dt) + 3)
+    d, v, a = (scale * np.asarray(values[0], dtype=float) for values in (tables.g, tables.dg, tables.ddg))
+    run_end = simulation.n_steps * simulation.time_step.dt
+    inside = t <= run_end + 1e-9 * max(run_end, 1.0)
+    spectrum = response_spectrum(a, tables.dt, DEFAULT_PERIODS, STANDARD_DAMPING)
+    motion = scene["wave"]["motion"]
+    record = motion.get("record")
+    summary = {
+        "kind": "record" if record is not None else "ricker",
+        **({"source": str(record["file"])} if record is not None else {}),
+        "what": "incident displacement g(t) x wave.scale at the reference point, its velocity and "
+                "acceleration, as the kernel's waveform table holds them (a record as processed)",
+        "scale": scale,
+        "components": [{key: component[key] for key in ("type", "scale", "angle", "azimuth")}
+                       for component in scene.wave_components()],
+        "dt": float(tables.dt),
+        "t_end": float(t[-1]),
+        **peak_values(t, a, v, d),
+        "within_run": {"until": float(run_end), **peak_values(t[inside], a[inside], v[inside], d[inside])},
+        "spectrum": {"damping": spectrum["damping"], "periods": np.round(spectrum["periods"], 6).tolist(),
+                     "psa": [float(f"{value:.6g}") for value in spectrum["psa"]]},
+        "plot": "plots/input.png",
+        "_series": (t, a, v, d, spectrum, run_end),
+    }
+    summary["pga_g"] = summary["pga"] / STANDARD_GRAVITY
+    return summary
+
+
 def tensor6(tensors: np.ndarray) -> np.ndarray:
     """(n, 6) components xx, xy, xz, yy, yz, zz (XDMF "Tensor6") of symmetric (n, 3, 3) tensors."""
     return np.stack([tensors[:, i, j] for i, j in TENSOR6_COMPONENTS], axis=1)
@@ -236,6 +353,9 @@ class RunWriter:
         self.xdmf = None
         self.show_progress = sys.stderr.isatty()
         interval = self.scene["output"]["xdmf_interval"]
+        # Field times rounded to the intervals' decimals: 0.3, not 0.30000000000000004.
+        self.time_decimals = time_decimals(self.scene["output"]["interval"], interval)
+        self.input_motion = None  # set by start() with a [wave]: input_motion(simulation)
         self.xdmf_every = (max(1, round(interval / self.scene["output"]["interval"]))
                            if interval and interval > 0 else 0)
         fields = self.scene["output"]["fields"]
@@ -259,10 +379,26 @@ class RunWriter:
         (self.out_dir / "plots").mkdir(exist_ok=True)
         self._summary = self._base_summary()
         self._summary["status"] = "running"
+        self.input_motion = input_motion(self.simulation)
+        if self.input_motion is not None:
+            self._summary["input_motion"] = {key: value for key, value in self.input_motion.items()
+                                             if not key.startswith("_")}
         _write_json(self.out_dir / "run.json", self._summary)
+        if self.input_motion is not None:  # at once: the input can be checked while the run goes
+            from pyfem import plots
+
+            plots.input_motion(self.out_dir / "plots" / "input.png", *self.input_motion["_series"],
+                               title=self._input_title())
         self._open_histories()
         if self.xdmf_every:
             self._open_fields()
+
+    def _input_title(self) -> str:
+        motion = self.input_motion
+        source = Path(motion["source"]).name if motion["kind"] == "record" else "Ricker wavelet"
+        scale = "" if motion["scale"] == 1.0 else f" x wave.scale {motion['scale']:g}"
+        return (f"input motion: {source}{scale}: PGA {motion['pga_g']:.3g} g, "
+                f"PGV {100 * motion['pgv']:.3g} cm/s, PGD {100 * motion['pgd']:.3g} cm")
 
     @property
     def started(self) -> bool:
@@ -485,6 +621,8 @@ class RunWriter:
             "omega_max": ts.omega_max,
             "steps": sim.n_steps,
             "rayleigh": {"alpha": sim.alpha, "beta": sim.beta},
+            # The ids of fields.xdmf's cell field "region" (the cell tags).
+            "regions": dict(sorted(sim.model.regions.items(), key=lambda item: item[1])),
             "boundary_faces": _face_report(sim.model),
             "traction_free_surfaces": dict(sim.model.free_surfaces),
             **({"static": sim.static.summary()} if getattr(sim, "static", None) is not None else {}),
@@ -568,17 +706,18 @@ class RunWriter:
     def _open_fields(self) -> None:
         """One temporal XDMF collection holding every field per time (ParaView, meshio read it).
 
-        Fields are written at the cell vertices (the Q1 geometry): for Q2 the vertex values
-        are the Q2 nodal values there, so nothing is interpolated.
+        Fields are written at every node (`field_mesh`: a Q2 hexahedron as the 8 hexahedra of its
+        27 nodes, its cell data repeated on them), with the cell field "region" (the cell's region
+        id, run.json "regions") at every time.
         """
         import meshio
 
         model = self.simulation.model
-        dofs_per_cell = model.V.dofmap.dof_layout.num_dofs
-        cell_nodes = model.V.dofmap.list.array.reshape(-1, dofs_per_cell)[:, :8]  # vertices come first
-        self._field_nodes, compact = np.unique(cell_nodes, return_inverse=True)
-        # dolfinx numbers hexahedron vertices lexicographically; VTK/XDMF goes round each face.
-        hexahedra = compact.reshape(-1, 8)[:, [0, 1, 3, 2, 4, 5, 7, 6]]
+        self._field_nodes, cell_type, cells, parent = field_mesh(model)
+        # None: one written cell per model cell, in order (Q1), nothing to repeat.
+        self._field_parent = None if len(parent) == len(cells) and np.array_equal(
+            parent, np.arange(len(parent))) else parent
+        self._field_regions = self._per_written_cell(cell_regions(model))
         import h5py
 
         self.xdmf = meshio.xdmf.TimeSeriesWriter(str(self.out_dir / "fields.xdmf"))
@@ -586,7 +725,11 @@ class RunWriter:
         # name only, so it must sit beside the .xdmf: open it there ourselves.
         self.xdmf.h5_filename = "fields.h5"
         self.xdmf.h5_file = h5py.File(self.out_dir / "fields.h5", "w")
-        self.xdmf.write_points_cells(model.node_coords[self._field_nodes], [("hexahedron", hexahedra)])
+        self.xdmf.write_points_cells(model.node_coords[self._field_nodes], [(cell_type, cells)])
+
+    def _per_written_cell(self, values: np.ndarray) -> np.ndarray:
+        """Values per model cell -> per cell of fields.xdmf (`field_mesh`)."""
+        return values if self._field_parent is None else values[self._field_parent]
 
     def _write_fields(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray,
                       pair_values: np.ndarray | None) -> None:
@@ -597,6 +740,8 @@ class RunWriter:
         6 components xx, xy, xz, yy, yz, zz (XDMF Tensor6); in a nonlinear region the stress is
         the law's, averaged over the cell's quadrature points. "damage": cell fields damage,
         damage_type and plastic_strain (`NonlinearRegions.cell_averages`; 0 in the matrix cells).
+        Always the cell field "region" (int32 region ids, run.json "regions"). Cell data is per cell
+        of `field_mesh` (a Q2 cell's values on its 8 parts); t is rounded to `time_decimals`.
         """
         fields = self.scene["output"]["fields"]
         point_data = {}
@@ -613,7 +758,7 @@ class RunWriter:
                 nodal[nodes[:, 0]] = values[:, column]
                 nodal[nodes[:, 1]] = values[:, column]
                 point_data[name] = nodal[self._field_nodes]
-        cell_data = {}
+        cell_data = {"region": [self._field_regions]}
         averages = (self.nonlinear.cell_averages() if self.nonlinear is not None
                     and ("stress" in fields or "damage" in fields) else {})
         if self.cell_strain is not None:
@@ -633,7 +778,10 @@ class RunWriter:
                 for region in averages.values():
                     values[region["cells"]] = region[name]
                 cell_data[name] = [values]
-        self.xdmf.write_data(t, point_data=point_data, cell_data=cell_data)
+        for name in cell_data:
+            if name != "region":
+                cell_data[name] = [self._per_written_cell(cell_data[name][0])]
+        self.xdmf.write_data(round(float(t), self.time_decimals), point_data=point_data, cell_data=cell_data)
 
     def _close_fields(self) -> None:
         if self.xdmf is not None:

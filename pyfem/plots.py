@@ -1,5 +1,6 @@
 """Plots of a run: monitor histories (against the exact free field when there is one), energy,
-and with contact the pair-state counts and pair monitors."""
+with contact the pair-state counts and pair monitors, with a [wave] the input motion and its
+response spectrum."""
 from __future__ import annotations
 
 import matplotlib
@@ -119,6 +120,52 @@ def pair_monitor(png_path, csv_path) -> None:
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
     axes[0].set_title(f"pair monitor {png_path.stem.removeprefix('pair_')}")
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+
+
+def input_motion(png_path, t, acceleration, velocity, displacement, spectrum: dict, run_end: float,
+                 title: str = "input motion") -> None:
+    """The input motion: acceleration, velocity and displacement against time, and its response
+    spectrum (pseudo-acceleration against period).
+
+    Args:
+        png_path: output image.
+        t, acceleration, velocity, displacement: (n,) s, m/s^2, m/s, m.
+        spectrum: `pyfem.seismic.spectrum.response_spectrum` of the acceleration.
+        run_end: simulated time the run reaches (s), marked on the histories.
+        title: the figure's title.
+    """
+    from pyfem.seismic.records import STANDARD_GRAVITY
+
+    fig = plt.figure(figsize=(12, 6.5))
+    grid = fig.add_gridspec(3, 2, width_ratios=(1.6, 1.0))
+    panels = ((acceleration, 1.0 / STANDARD_GRAVITY, "a (g)"), (velocity, 100.0, "v (cm/s)"),
+              (displacement, 100.0, "d (cm)"))
+    axes = []
+    for row, (values, factor, label) in enumerate(panels):
+        ax = fig.add_subplot(grid[row, 0], sharex=axes[0] if axes else None)
+        ax.plot(t, factor * np.asarray(values), "C0", lw=0.9)
+        peak = int(np.argmax(np.abs(values)))
+        ax.plot(t[peak], factor * values[peak], "o", color="C3", ms=4,
+                label=f"peak {factor * abs(values[peak]):.3g} at {t[peak]:.3g} s")
+        if run_end < t[-1]:
+            ax.axvline(run_end, color="0.4", ls="--", lw=0.8, label=f"run ends ({run_end:g} s)")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+        axes.append(ax)
+    axes[-1].set_xlabel("t (s)")
+    ax = fig.add_subplot(grid[:, 1])
+    ax.semilogx(spectrum["periods"], np.asarray(spectrum["psa"]) / STANDARD_GRAVITY, "C1", lw=1.2)
+    ax.axhline(np.max(np.abs(acceleration)) / STANDARD_GRAVITY, color="0.5", ls=":", lw=0.8, label="PGA")
+    ax.set_xlabel("period T (s)")
+    ax.set_ylabel("pseudo-acceleration PSA (g)")
+    ax.set_title(f"response spectrum, {100 * spectrum['damping']:.0f} % damping", fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    fig.suptitle(title, fontsize=11)
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
     plt.close(fig)

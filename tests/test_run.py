@@ -327,7 +327,7 @@ def test_stress_strain_and_acceleration_fields(tmp_path):
         for k in range(reader.num_steps):
             t, point_data, cell_data = reader.read_data(k)
             assert set(point_data) == {"displacement", "acceleration"}
-            assert set(cell_data) == {"stress", "strain"}
+            assert set(cell_data) == {"stress", "strain", "region"}
             assert point_data["acceleration"].shape == (len(points), 3)
             stress, strain = cell_data["stress"][0], cell_data["strain"][0]
             assert stress.shape == strain.shape == (len(centroids), 6)

@@ -1,0 +1,204 @@
+"""What a run shows a person: the plan and progress lines of `pyfem run`, the region field, every
+Q2 node and clean times in fields.xdmf, the processed input's peaks, spectrum and plot."""
+import json
+import os
+import re
+import subprocess
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pyfem import solver
+from pyfem.progress import ProgressLines
+from pyfem.scene import parse_scene
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+PYTHON = "/usr/bin/python3"
+ELCENTRO = REPOSITORY / "data" / "elcentro_1940_ns.txt"
+
+PROGRESS_SCENE = """
+title = "progress lines"
+[mesh]
+size = [20.0, 10.0, 20.0]
+h = 5.0
+[materials.rock]
+preset = "sandstone"
+[time]
+duration = 0.2
+[wave]
+type = "SV"
+surface = 30.0
+[wave.motion]
+ricker = { f0 = 10.0, amplitude = 1.0e-3 }
+[output]
+interval = 0.002
+xdmf_interval = 0.0
+"""
+PROGRESS_LINE = re.compile(r"progress: +(\d+) %  t = (\S+) s of 0.2 s, wall (\S+) (s|min|h), (.*)$")
+
+
+def test_run_prints_the_plan_then_a_progress_line_every_5_percent_off_a_terminal(tmp_path):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(PROGRESS_SCENE)
+    env = dict(os.environ, PYTHONPATH=str(REPOSITORY))
+    result = subprocess.run([PYTHON, "-m", "pyfem", "run", str(scene), "--out", str(tmp_path / "run")],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    progress = [k for k, line in enumerate(lines) if line.startswith("progress:")]
+    # The plan comes first: dt, steps and the time estimate before the first progress line.
+    for label in ("dt:", "steps:", "time estimate:"):
+        assert any(line.startswith(label) for line in lines[:progress[0]]), label
+    assert "it/s" not in result.stderr and "out/s" not in result.stderr  # no tqdm bar in a pipe
+    parsed = [PROGRESS_LINE.match(lines[k]) for k in progress]
+    assert all(parsed), [lines[k] for k in progress]
+    percent = np.array([int(match[1]) for match in parsed])
+    simulated = np.array([float(match[2]) for match in parsed])
+    units = {"s": 1.0, "min": 60.0, "h": 3600.0}
+    wall = np.array([float(match[3]) * units[match[4]] for match in parsed])
+    # 100 samples of 1 %: one line at each 5 %, in order.
+    assert percent.tolist() == list(range(5, 101, 5))
+    assert np.allclose(simulated, percent / 100 * 0.2, rtol=0, atol=1e-9)
+    assert np.all(np.diff(simulated) > 0) and np.all(np.diff(wall) >= 0)
+    assert all(match[5].startswith("estimated end in ") for match in parsed[:-1])
+    assert parsed[-1][5] == "done"
+    assert progress[-1] < next(k for k, line in enumerate(lines) if line.startswith("run finished"))
+
+
+def test_progress_lines_with_coarse_samples_and_a_fake_clock():
+    """Samples 10 % apart: a line at each; the estimate extrapolates wall time per simulated second."""
+    lines = []
+    clock = iter(np.arange(0.0, 100.0, 2.0))
+    progress = ProgressLines(1.0, stream=type("S", (), {"write": lambda self, text: lines.append(text),
+                                                        "flush": lambda self: None})(),
+                             clock=lambda: float(next(clock)))
+    progress.start(0.0)
+    t = 0.0
+    for _ in range(10):
+        t += 0.1
+        progress(t)
+    text = "".join(lines).splitlines()
+    assert len(text) == 10 == progress.lines
+    assert text[0].startswith("progress:  10 %  t = 0.1 s of 1 s, wall 2 s, estimated end in 18 s")
+    assert text[4].startswith("progress:  50 %  t = 0.5 s of 1 s, wall 10 s, estimated end in 10 s")
+    assert text[-1] == "progress: 100 %  t = 1 s of 1 s, wall 20 s, done"
+
+
+def two_layer_scene(order: int) -> dict:
+    """Two regions (a below z = 10, b above) under El Centro at half its 0.32 g PGA (wave.scale)."""
+    return parse_scene({
+        "title": f"two layers Q{order}",
+        "mesh": {"builder": "box", "size": [20.0, 10.0, 20.0], "h": 5.0 * order, "order": order,
+                 "layers": [{"material": "a", "thickness": 10.0}, {"material": "b", "thickness": 10.0}]},
+        "materials": {"a": {"preset": "sandstone"}, "b": {"preset": "non_sandstone"}},
+        "time": {"duration": 0.06},
+        "wave": {"type": "SV", "surface": 30.0, "medium": "a", "scale": 0.5,
+                 "motion": {"record": {"file": str(ELCENTRO), "units": "g", "pga": 0.32,
+                                       "window": [0.0, 20.0], "lead_in": 0.0}}},
+        "output": {"interval": 0.01, "xdmf_interval": 0.03, "fields": ["displacement", "stress"]},
+    })
+
+
+@pytest.fixture(scope="module", params=[1, 2], ids=["Q1", "Q2"])
+def two_layer_run(request, tmp_path_factory):
+    """(run directory, RunWriter, last displacement written to the fields) of a short run."""
+    from pyfem.output import RunWriter
+
+    writers, written = [], []
+    original_finish, original_fields = RunWriter.finish, RunWriter._write_fields
+    RunWriter.finish = lambda self, **kw: writers.append(self) or original_finish(self, **kw)
+    RunWriter._write_fields = (lambda self, t, u, *rest:
+                               written.append(u.copy()) or original_fields(self, t, u, *rest))
+    try:
+        out = tmp_path_factory.mktemp(f"q{request.param}") / "run"
+        solver.run(two_layer_scene(request.param), out)
+    finally:
+        RunWriter.finish, RunWriter._write_fields = original_finish, original_fields
+    return out, writers[0], written[-1]
+
+
+def read_fields(out):
+    import meshio
+
+    with meshio.xdmf.TimeSeriesReader(str(out / "fields.xdmf")) as reader:
+        points, cells = reader.read_points_cells()
+        steps = [reader.read_data(k) for k in range(reader.num_steps)]
+    return points, cells[0].data, steps
+
+
+def test_region_field_has_each_cells_region_id(two_layer_run):
+    out, writer, _ = two_layer_run
+    legend = json.loads((out / "run.json").read_text())["regions"]
+    assert set(legend) == {"a", "b"} and legend["a"] != legend["b"]
+    points, cells, steps = read_fields(out)
+    centroid_z = points[cells].mean(axis=1)[:, 2]
+    expected = np.where(centroid_z < 10.0, legend["a"], legend["b"])
+    for _, _, cell_data in steps:
+        region = cell_data["region"][0]
+        assert region.dtype.kind == "i" and region.shape == (len(cells),)
+        assert np.array_equal(region, expected)
+        assert cell_data["stress"][0].shape == (len(cells), 6)
+    assert np.count_nonzero(expected == legend["a"]) == np.count_nonzero(expected == legend["b"])
+    assert np.count_nonzero(expected == legend["a"]) == len(cells) // 2
+
+
+def test_fields_hold_every_node_and_clean_times(two_layer_run):
+    """Q1: the vertices; Q2: all 27 nodes of each cell (its 8 sub-hexahedra), values as computed."""
+    out, writer, last_u = two_layer_run
+    model = writer.simulation.model
+    points, cells, steps = read_fields(out)
+    assert len(points) == model.n_nodes  # 5 x 3 x 5 grid points, Q1 at h = 5 and Q2 at h = 10
+    assert len(cells) == 8 * model.n_cells if model.order == 2 else len(cells) == model.n_cells
+    # Every node once, at its coordinates, with its displacement.
+    order = np.lexsort(points.T)
+    node_order = np.lexsort(model.node_coords.T)
+    assert np.array_equal(points[order], model.node_coords[node_order])
+    displacement = steps[-1][1]["displacement"]
+    assert np.max(np.abs(last_u)) > 0
+    assert np.array_equal(displacement[order], last_u.reshape(-1, 3)[node_order])
+    # Positive, equal volumes: the sub-hexahedra are 5 m cubes in VTK order.
+    corners = points[cells]
+    edges = corners[:, [1, 3, 4]] - corners[:, [0, 0, 0]]
+    assert np.allclose(np.linalg.det(edges), 125.0)
+    # Times as written in the file: 0.03 and 0.06, not 0.060000000000000005.
+    times = [element.get("Value") for element in ElementTree.parse(out / "fields.xdmf").iter("Time")]
+    assert times == ["0.0", "0.03", "0.06"]
+
+
+def test_input_motion_peaks_spectrum_and_plot(two_layer_run):
+    """run.json's PGA, PGV, PGD are those of the processed record the kernel is driven with, x wave.scale."""
+    from pyfem.seismic.records import STANDARD_GRAVITY
+    from pyfem.seismic.setup import processed_record
+
+    out, writer, _ = two_layer_run
+    motion = json.loads((out / "run.json").read_text())["input_motion"]
+    processed = processed_record(writer.scene["wave"]["motion"]["record"])
+    tables = writer.simulation.freefield.tables
+    assert np.array_equal(tables.ddg[0], processed.acceleration)  # the kernel's table is the processed record
+    assert motion["kind"] == "record" and motion["scale"] == 0.5
+    assert motion["pga"] == pytest.approx(0.5 * np.max(np.abs(processed.acceleration)), rel=1e-14)
+    assert motion["pga"] == pytest.approx(0.5 * 0.32 * STANDARD_GRAVITY, rel=1e-12)
+    assert motion["pga_g"] == pytest.approx(0.16, rel=1e-12)
+    assert motion["pgv"] == pytest.approx(0.5 * np.max(np.abs(processed.velocity)), rel=1e-14)
+    assert motion["pgd"] == pytest.approx(0.5 * np.max(np.abs(processed.displacement)), rel=1e-14)
+    k = int(np.argmax(np.abs(processed.acceleration)))
+    assert motion["t_pga"] == pytest.approx(processed.t[k], abs=1e-9)
+    assert motion["within_run"]["until"] == pytest.approx(0.06)
+    assert motion["within_run"]["pga"] <= motion["pga"]
+    spectrum = motion["spectrum"]
+    assert spectrum["damping"] == 0.05 and len(spectrum["periods"]) == len(spectrum["psa"]) > 20
+    assert max(spectrum["psa"]) > 2 * motion["pga"]   # a 5 % spectrum of El Centro peaks near 3 x PGA
+    assert spectrum["psa"][0] == pytest.approx(motion["pga"], rel=0.1)  # T = 0.02 s: close to the PGA
+    assert (out / "plots" / "input.png").stat().st_size > 10_000
+
+
+def test_no_input_motion_without_a_wave(tmp_path):
+    scene = parse_scene({"title": "free", "mesh": {"size": [10.0, 10.0, 10.0], "h": 5.0},
+                         "materials": {"rock": {"preset": "sandstone"}}, "time": {"duration": 0.01},
+                         "output": {"interval": 0.005, "xdmf_interval": 0.0}})
+    summary = solver.run(scene, tmp_path / "run")
+    assert "input_motion" not in summary and summary["regions"] == {"rock": summary["regions"]["rock"]}
+    assert not (tmp_path / "run" / "plots" / "input.png").exists()
