@@ -40,6 +40,9 @@ SPACE_DIMENSION = 3
 LAW_OF_TABLE = {"plasticity": "mohr_coulomb", "damage": "concrete_damage"}
 """Kernel law (cpp_kernels/materials) of each nonlinear sub-table of [materials.NAME]."""
 
+ZONE_EDGE = 2.5
+"""run.json counts the yielded points closer than this (m) to the edge of a [plasticity] zone."""
+
 DAMAGED = 0.01
 """A point counts as damaged in run.json's damaged_volume when d > DAMAGED."""
 
@@ -81,6 +84,8 @@ class NonlinearRegions:
         laws: region name -> (law name, parameters dict).
         initial_stress: region name -> (c, q, 6) static stress at the points (Pa) or None.
         options: region name -> keyword options of HexahedronElements (mean_dilatation, ...).
+        zones: region name -> box [xmin, ymin, zmin, xmax, ymax, zmax] (m) its cells were taken from
+            (`[plasticity] zone`), absent for a whole region.
     """
 
     stiffness: scipy.sparse.bsr_matrix
@@ -89,6 +94,7 @@ class NonlinearRegions:
     laws: dict
     initial_stress: dict = dataclasses.field(default_factory=dict)
     options: dict = dataclasses.field(default_factory=dict)
+    zones: dict = dataclasses.field(default_factory=dict)
 
     @property
     def memory_bytes(self) -> int:
@@ -190,6 +196,13 @@ class NonlinearRegions:
                 "shear_points": int(np.count_nonzero(kind == 2)),
                 "dissipated_energy": float(component.dissipation()),
             }
+            zone = self.zones.get(name)
+            if zone is not None:  # yielding at the zone's edge: the zone may be too small
+                low, high = np.asarray(zone[:3]), np.asarray(zone[3:])
+                margin = np.minimum(arrays.points - low, high - arrays.points).min(axis=2)
+                summary[name]["zone"] = list(zone)
+                summary[name]["yielded_points_near_zone_edge"] = int(np.count_nonzero(
+                    (plastic > 0.0) & (margin < ZONE_EDGE)))
         return summary
 
 
@@ -288,6 +301,20 @@ def linear_stiffness(model, removed_cells: np.ndarray) -> scipy.sparse.bsr_matri
     return stiffness
 
 
+def cells_in_zone(model, cells: np.ndarray, zone) -> np.ndarray:
+    """The cells (sorted) whose centroid (mean of the geometry nodes) lies in the box zone =
+    [xmin, ymin, zmin, xmax, ymax, zmax] (m); all of them for zone None."""
+    cells = np.asarray(cells, dtype=np.int32)
+    if zone is None or not len(cells):
+        return cells
+    mesh = model.mesh
+    n_geometry = mesh.geometry.dofmap.offsets[1] - mesh.geometry.dofmap.offsets[0]
+    centroids = mesh.geometry.x[mesh.geometry.dofmap.array.reshape(-1, n_geometry)[cells]].mean(axis=1)
+    low, high = np.asarray(zone[:3], dtype=float), np.asarray(zone[3:], dtype=float)
+    inside = np.all((centroids >= low) & (centroids <= high), axis=1)
+    return cells[inside]
+
+
 def region_elastic_parameters(model, name: str) -> dict:
     """{"lame_lambda", "shear_modulus"} (Pa) of region `name`, from the model's material fields."""
     cells = region_cells(model, name)
@@ -381,7 +408,9 @@ def scene_laws(scene: typing.Mapping) -> tuple[dict, dict]:
             settings = material.get(table)
             if settings is None:
                 continue
-            parameters = {key: value for key, value in settings.items() if key != "mean_dilatation"}
+            parameters = {key: value for key, value in settings.items() if key not in ("mean_dilatation", "zone")}
+            if settings.get("zone") is not None:
+                parameters["zone"] = list(settings["zone"])
             law_parameters[name] = {"law": law, "young_modulus": material["E"],
                                     "poisson_ratio": material["nu"], **parameters}
             mean_dilatation[name] = bool(settings.get("mean_dilatation") or False)
@@ -419,11 +448,17 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
     unknown = sorted(set(law_parameters) - set(region_names))
     if unknown:
         raise ValueError(f"law_parameters: regions {unknown} are not among region_names {region_names}")
-    arrays, laws, stresses, options, removed = {}, {}, {}, {}, []
+    arrays, laws, stresses, options, removed, zones = {}, {}, {}, {}, [], {}
     for name in region_names:
-        cells = region_cells(model, name)
         given = dict(law_parameters.get(name) or {"law": "linear_elastic", **region_elastic_parameters(model, name)})
         law = given.pop("law", "linear_elastic")
+        zone = given.pop("zone", None)
+        cells = cells_in_zone(model, region_cells(model, name), zone)
+        if zone is not None:
+            zones[name] = list(zone)
+        if not len(cells):
+            raise ValueError(f"materials.{name}.plasticity.zone = {law_parameters[name].get('zone')}: no cell of "
+                             f"region {name!r} has its centroid in the box")
         parameters = {key: float(value) for key, value in given.items()}
         region_arrays = element_arrays(model.V, cells)
         stresses[name] = (None if initial_stress is None
@@ -437,6 +472,6 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
         removed.append(cells)
     removed_cells = np.concatenate(removed) if removed else np.zeros(0, dtype=np.int32)
     regions = NonlinearRegions(stiffness=linear_stiffness(model, removed_cells), components=[], arrays=arrays,
-                               laws=laws, initial_stress=stresses, options=options)
+                               laws=laws, initial_stress=stresses, options=options, zones=zones)
     regions.new_components()
     return regions

@@ -17,9 +17,9 @@ not matter:
   quasi-statically instead of overshooting into plastic flow or slip that a static path would
   not see (Salencon's cavity with the load applied at once: 78 % too much wall convergence);
 - **critical damping, adapted** (Underwood's adaptive dynamic relaxation): alpha = 2 omega with
-  omega^2 = u.f_int(u) / u.M_s u, the Rayleigh quotient of the current displacement, which tends
-  to the lowest frequency of the deformation being relaxed; recomputed every `chunk` steps from
-  f_int = f - r, r = M_s (a + alpha v) the out-of-balance force the kernel's last step leaves.
+  omega^2 = du.df_int / du.M_s du, the Rayleigh quotient of the displacement increment of the last
+  `chunk` steps, which tends to the lowest frequency of the deformation still moving; f_int =
+  f(t) - r, r = M_s (a + alpha v) the out-of-balance force the kernel's last step leaves.
 
 Convergence: ||r|| / ||f|| <= tolerance (r on the free directions: the kernel projects the held
 ones out) at two successive checks. Python checks between chunks of steps; no Python runs per
@@ -43,6 +43,10 @@ CHUNK = 50
 # finds (Salencon's cavity: 2 and 6 periods give the same wall displacement to 1e-5).
 RAMP_PERIODS = 3.0
 MINIMUM_RAMP = 200.0
+import os
+DIAGNOSE = bool(os.environ.get("PYFEM_RELAX_DIAGNOSE"))
+# Wall time between two progress reports of a long relaxation (s).
+REPORT_SECONDS = float(os.environ.get('PYFEM_RELAX_REPORT', 30.0))
 # Out-of-balance ratio of the elastic probe (enough for its Rayleigh quotient).
 PROBE_TOLERANCE = 1.0e-3
 
@@ -88,6 +92,15 @@ def scaled_mass(stiffness, frequency_factor: float = 1.0, safety: float = SAFETY
     return mass
 
 
+def load_factor(t: float, ramp: float) -> float:
+    """The share of the load applied at pseudo time t: the smoothstep 3 s^2 - 2 s^3 of s = t / ramp
+    (pyfem.static.hand_over_force_provider's cubic Hermite table), 1 after the ramp."""
+    if ramp <= 0.0 or t >= ramp:
+        return 1.0
+    s = max(t, 0.0) / ramp
+    return s * s * (3.0 - 2.0 * s)
+
+
 def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
                     tolerance: float = PROBE_TOLERANCE, floor: float = 0.0) -> tuple[float, int]:
     """The lowest frequency (1/pseudo time) that relaxing `load` excites: an elastic relaxation
@@ -114,7 +127,7 @@ def ramp_length(omega: float) -> float:
 
 
 def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_steps: int,
-          chunk: int = CHUNK, ramp: float = 0.0, floor: float = 0.0) -> tuple[np.ndarray, RelaxationResult]:
+          chunk: int = CHUNK, ramp: float = 0.0, floor: float = 0.0, report=None) -> tuple[np.ndarray, RelaxationResult]:
     """Runs the damped pseudo-dynamics of a stepper built for the stage from rest to equilibrium.
 
     Args:
@@ -128,6 +141,7 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         ramp: the provider's load rises over this pseudo time; convergence is checked after it.
         floor: smallest force norm the ratio is taken against (N): a stage whose load nearly
             cancels (nothing excavated) is measured against the stress state's force scale.
+        report: None, or called as report(steps, ratio, seconds) every REPORT_SECONDS of wall time.
 
     Returns:
         (u, RelaxationResult): the displacement at the end (n_dofs,) and how it went.
@@ -139,6 +153,8 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
     load_norm = max(float(np.linalg.norm(load)), floor)
     history = []
     t, steps, alpha, below = 0.0, 0, 0.0, 0
+    last_report = start
+    previous_u, previous_internal = np.zeros(n), np.zeros(n)
     ratio = 0.0 if load_norm == 0.0 else 1.0
     residual = np.zeros(n)
     if load_norm == 0.0:
@@ -153,13 +169,26 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         ratio = float(np.linalg.norm(residual)) / load_norm
         history.append((steps, ratio, alpha))
         below = below + 1 if ratio <= tolerance and t >= ramp else 0
+        if report is not None and time.perf_counter() - last_report > REPORT_SECONDS:
+            last_report = time.perf_counter()
+            report(steps, ratio, last_report - start)
+            if DIAGNOSE:
+                worst = int(np.argmax(np.abs(residual))) // 3
+                print(f"   alpha {alpha:.3g}, |v|max {np.abs(v).max():.3g}, worst node {worst} "
+                      f"|r| {np.abs(residual[3 * worst:3 * worst + 3]).max():.3g}", flush=True)
         if below >= 2:
             break
-        # Rayleigh quotient of the current displacement: u.f_int(u) / u.M u with f_int = f - r.
-        stiffness_term = float(u @ (load - residual))
-        mass_term = float(u @ (m * u))
+        # Rayleigh quotient of the chunk's displacement increment (Underwood): du.df_int / du.M du,
+        # f_int = f(t) - r; the mode still moving sets the damping. The total u's quotient when the
+        # increment's is not positive (softening) or on the first chunk.
+        internal = load_factor(t, ramp) * load - residual
+        increment, force_increment = u - previous_u, internal - previous_internal
+        stiffness_term, mass_term = float(increment @ force_increment), float(increment @ (m * increment))
+        if not (stiffness_term > 0.0 and mass_term > 0.0):
+            stiffness_term, mass_term = float(u @ internal), float(u @ (m * u))
         if stiffness_term > 0.0 and mass_term > 0.0:
             alpha = min(2.0 * math.sqrt(stiffness_term / mass_term), 2.0 / PSEUDO_STEP)
             stepper.set_mass_damping(alpha)
+        previous_u, previous_internal = u.copy(), internal
     return u, RelaxationResult(converged=below >= 2, steps=steps, residual=ratio, history=history,
                                out_of_balance=residual, seconds=time.perf_counter() - start)

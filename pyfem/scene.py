@@ -479,6 +479,10 @@ _PLASTICITY = Table({
                                     POSITIVE, default=0.005),
     # None: on for Q1 (volumetric locking of plastic flow), off for Q2.
     "mean_dilatation": Flag("mean dilatation (B-bar) in the region's cells", default=None),
+    # Where the law acts: the region's cells whose centroid lies in the box; the others stay linear
+    # elastic in the stiffness matrix (the far field of a cavern model, which does not yield).
+    "zone": Vector("box [xmin, ymin, zmin, xmax, ymax, zmax] (m) of the cells with the law; the region's other "
+                   "cells stay linear elastic", 6, default=None),
 }, "[materials.NAME.plasticity]", presence="optional")
 
 # Lining concrete: Eq. 21 of the paper with crack band (docs/materials.md). Strengths as above.
@@ -887,6 +891,10 @@ def _check_nonlinear_material(name: str, material: dict, order: int) -> None:
                              "must be > 0 when friction_angle = 0 (the material would have no shear strength)")
         if values["mean_dilatation"] is None:
             values["mean_dilatation"] = order == 1
+        zone = values.get("zone")
+        if zone is not None and not all(zone[k] < zone[k + 3] for k in range(3)):
+            raise SceneError(f"{key}.zone", zone, "a box [xmin, ymin, zmin, xmax, ymax, zmax] with each minimum "
+                             "below its maximum (m)")
     elif values["fracture_energy"] > 0.0 and values["A_t"] != 1.0:
         raise SceneError(f"{key}.A_t", values["A_t"], "must be 1 when fracture_energy > 0 (with A_t < 1 the "
                          "stress keeps (1 - A_t) f_t forever and no fracture energy can be matched); set "

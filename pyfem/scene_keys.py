@@ -109,6 +109,7 @@ UNSET = {
     "initial_stress.rho": "none; required by the geostatic form",
     "initial_stress.stress": "none: the geostatic form",
     "static.boundary.face": "every truncation face has `static.boundary.type`",
+    "materials.NAME.plasticity.zone": "the whole region",
     "static.tolerance": "1e-8 for the linear solve (relative residual), 1e-5 for dynamic relaxation "
                         "(out-of-balance force ratio)",
     "contact.dynamic_friction_angle": "= `contact.friction_angle`",

@@ -470,10 +470,25 @@ def make_contact_pairs(arrays: dict):
     return contact
 
 
+def kernel_threads() -> int:
+    """Sets the kernel's OpenMP threads to OMP_NUM_THREADS, else the cores this process may use, and
+    returns the number. Needed before stepping: gmsh shares libgomp and sets it to its own
+    General.NumThreads (1) when it meshes, which left every run after a gmsh call on one thread."""
+    import os
+
+    from pyfem import _kernels
+
+    given = os.environ.get("OMP_NUM_THREADS", "")
+    threads = int(given) if given.isdigit() and int(given) > 0 else len(os.sched_getaffinity(0))
+    _kernels.set_num_threads(threads)
+    return threads
+
+
 def make_stepper(simulation: Simulation):
     """The C++ stepper with the force providers the scene calls for, and nothing else."""
     from pyfem import _kernels
 
+    kernel_threads()
     indptr, indices, blocks = bsr_arrays(simulation.stiffness)
     stepper = _kernels.Stepper(indptr, indices, blocks, simulation.mass, simulation.time_step.dt,
                                simulation.alpha, simulation.beta)

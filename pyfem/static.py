@@ -736,8 +736,9 @@ def _stage_stepper(stiffness, mass: np.ndarray, constraints, load: np.ndarray, c
     damping yet), the stage's held faces, the constant load, the components and the pairs."""
     from pyfem import _kernels
     from pyfem.relaxation import PSEUDO_STEP
-    from pyfem.solver import bsr_arrays
+    from pyfem.solver import bsr_arrays, kernel_threads
 
+    kernel_threads()
     indptr, indices, blocks = bsr_arrays(stiffness.tobsr(blocksize=(3, 3)))
     stepper = _kernels.Stepper(indptr, indices, blocks, mass, PSEUDO_STEP, 0.0, 0.0)
     if constraints is not None:
@@ -767,7 +768,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     Returns:
         StaticState, with `components` and `contact` for the dynamic run.
     """
-    from pyfem.elements import linear_stiffness, plastic_frequency_factor, region_cells, scene_laws
+    from pyfem.elements import linear_stiffness, plastic_frequency_factor, scene_laws
     from pyfem.relaxation import probe_frequency, ramp_length, relax, scaled_mass
     from pyfem.solver import make_contact_pairs
 
@@ -793,7 +794,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
 
     # Matrix cells of each stage: all but the element-loop cells (and, in stage 1, the installed ones).
     element_regions = [] if nonlinear is None else nonlinear.regions
-    element_cells = (np.concatenate([region_cells(model, name) for name in element_regions])
+    element_cells = (np.concatenate([nonlinear.arrays[name].cells for name in element_regions])
                      if element_regions else np.zeros(0, dtype=np.int32))
     K_support = (nonlinear.stiffness if nonlinear is not None else model.stiffness).tocsr()
     K_excavation = (linear_stiffness(model, np.union1d(element_cells, installed_cells)).tocsr()
@@ -852,7 +853,10 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         load = fraction * f_exc + carried + (loads.installed_weight.ravel() if index == 1 else 0.0)
         active = [component for component in components if component is not None]
         stepper = _stage_stepper(stiffness, mass, constraints, load, active, contact, ramp)
-        u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor)
+        u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor,
+                          report=lambda steps, ratio, seconds, name=name: print(
+                              f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), "
+                              f"out-of-balance {ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True))
         for component in active:
             component.rebase()
         if contact is not None:

@@ -63,6 +63,7 @@ def static_report(simulation) -> dict:
         "hand_over": "the dynamic run starts from u = v = 0 with the stage's stress; the in-situ traction, "
                      "body force, support forces and pair forces of the stage are held constant; the "
                      "out-of-balance above is applied as a constant external force",
+        "load_ramp_steps": state.settings.get("load_ramp_steps"),
         "support_forces": state.face_support_forces,
         "in_situ_tractions": state.face_in_situ_tractions,
     }
@@ -88,6 +89,13 @@ def static_report(simulation) -> dict:
                            "normal_stress_max": float(np.max(N / area)),
                            "shear_stress_max": float(np.max(T / area)),
                            "in_tension": int(np.count_nonzero(N < 0.0))}
+        if state.contact is not None:  # the pair law ran in the stage: its states at the hand-over
+            counts = np.bincount(state.contact.state(), minlength=4)
+            report["pairs"]["states"] = {name: int(count) for name, count in
+                                         zip(("bonded", "stick", "sliding", "separated"), counts)}
+            report["pairs"]["largest_open_gap"] = float(np.max(state.contact.gap_offset(), initial=0.0))
+    if state.cell_state is not None:
+        report["regions"] = state.stages[-1].regions
     return report
 
 
@@ -113,9 +121,14 @@ def write_static_fields(folder: Path, simulation) -> None:
         writer.write_points_cells(model.node_coords[field_nodes], [("hexahedron", hexahedra)])
         stages = ((1.0, u1, u1, state.cell_stress_first, active_first),
                   (2.0, u, u - u1, state.cell_stress, np.ones(len(cell_nodes))))
-        for t, total, increment, stress, active in stages:
+        states = (state.cell_state_first, state.cell_state)
+        for (t, total, increment, stress, active), cell_state in zip(stages, states):
+            cell_data = {"stress": [tensor6(stress)], "active": [active]}
+            if cell_state is not None:  # relaxation stage: the laws' history, cell means
+                for key in ("plastic_strain", "damage", "damage_type"):
+                    cell_data[key] = [np.asarray(cell_state[key], dtype=float)]
             writer.write_data(t, point_data={"displacement": total[field_nodes],
                                              "stage_displacement": increment[field_nodes]},
-                              cell_data={"stress": [tensor6(stress)], "active": [active]})
+                              cell_data=cell_data)
     finally:
         writer.__exit__(None, None, None)

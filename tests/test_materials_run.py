@@ -298,3 +298,41 @@ def test_a_scene_without_nonlinear_tables_runs_the_matrix_path(tmp_path):
     assert (tmp_path / "first" / "energy.csv").read_text().startswith(
         "t,kinetic,strain,external_work,damping_work,balance\n")
     assert "nonlinear_regions" not in json.loads((tmp_path / "first" / "run.json").read_text())
+
+
+def test_plasticity_zone_takes_only_its_cells_into_the_element_loop():
+    """[plasticity] zone: the weak layer's cells with centroids in the box go to the element loop, the
+    others stay in the matrix; the matrix then has the element loop's cells only where it should
+    (its stiffness plus the element loop's linear force is the full model's for a linear law)."""
+    from pyfem.elements import (cells_in_zone, nonlinear_component, region_cells, region_elastic_parameters,
+                                scene_laws)
+    from pyfem.operators import build_model
+
+    scene = weak_layer_scene(True)
+    scene["materials"]["weak"]["plasticity"]["zone"] = [50.0, -1.0, 0.0, 100.0, 11.0, 60.0]
+    laws, _ = scene_laws(scene)
+    assert laws["weak"]["zone"] == [50.0, -1.0, 0.0, 100.0, 11.0, 60.0]
+    model = build_model(scene)
+    nonlinear = nonlinear_component(model, list(laws), laws)
+    cells = nonlinear.arrays["weak"].cells
+    every = region_cells(model, "weak")
+    assert 0 < len(cells) < len(every)
+    x = nonlinear.arrays["weak"].points[..., 0]
+    assert x.min() > 50.0 - 5.0 and x.max() < 100.0 + 5.0, "only cells of the box (h = 5 m)"
+    assert np.array_equal(cells, cells_in_zone(model, every, [50.0, -1.0, 0.0, 100.0, 11.0, 60.0]))
+    assert nonlinear.zones["weak"] == [50.0, -1.0, 0.0, 100.0, 11.0, 60.0]
+    # The matrix keeps the weak cells outside the zone: K_matrix u + f_loop(u) = K_full u.
+    elastic = {"law": "linear_elastic", "zone": laws["weak"]["zone"], **region_elastic_parameters(model, "weak")}
+    linear = nonlinear_component(model, ["weak"], {"weak": elastic})
+    assert np.array_equal(linear.arrays["weak"].cells, cells)
+    u = np.random.default_rng(1).normal(size=model.n_dofs) * 1e-4
+    force = np.zeros(model.n_dofs)
+    linear.components[0].compute(u, force)
+    full = model.stiffness @ u
+    assert np.allclose(linear.stiffness @ u + force, full, rtol=1e-9, atol=1e-9 * np.abs(full).max())
+    summary = nonlinear.region_summary()["weak"]
+    assert summary["zone"] == [50.0, -1.0, 0.0, 100.0, 11.0, 60.0] and summary["yielded_points_near_zone_edge"] == 0
+    with pytest.raises(Exception, match="zone"):
+        bad = weak_layer_scene(True)
+        bad["materials"]["weak"]["plasticity"]["zone"] = [50.0, 0.0, 0.0, 40.0, 10.0, 60.0]
+        parse_scene(dict(bad))
