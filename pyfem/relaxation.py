@@ -18,8 +18,10 @@ not matter:
   not see (Salencon's cavity with the load applied at once: 78 % too much wall convergence);
 - **critical damping, adapted** (Underwood's adaptive dynamic relaxation): alpha = 2 omega with
   omega^2 = du.df_int / du.M_s du, the Rayleigh quotient of the displacement increment of the last
-  `chunk` steps, which tends to the lowest frequency of the deformation still moving; f_int =
-  f(t) - r, r = M_s (a + alpha v) the out-of-balance force the kernel's last step leaves.
+  `chunk` steps, which tends to the lowest frequency of the deformation still moving, but not
+  below half the total displacement's (a softening mechanism would otherwise leave the stiffer
+  modes ringing); f_int = f(t) - r, r = M_s (a + alpha v) the out-of-balance force the kernel's
+  last step leaves.
 
 Convergence: ||r|| / ||f|| <= tolerance (r on the free directions: the kernel projects the held
 ones out) at two successive checks. Python checks between chunks of steps; no Python runs per
@@ -90,6 +92,12 @@ def scaled_mass(stiffness, frequency_factor: float = 1.0, safety: float = SAFETY
     positive = mass > 0.0
     mass[~positive] = mass[positive].max(initial=1.0)
     return mass
+
+
+def _rayleigh(x: np.ndarray, force: np.ndarray, m: np.ndarray) -> float:
+    """sqrt(x.force / x.M x), or 0 when either is not positive."""
+    stiffness_term, mass_term = float(x @ force), float(x @ (m * x))
+    return math.sqrt(stiffness_term / mass_term) if stiffness_term > 0.0 and mass_term > 0.0 else 0.0
 
 
 def load_factor(t: float, ramp: float) -> float:
@@ -183,11 +191,13 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         # increment's is not positive (softening) or on the first chunk.
         internal = load_factor(t, ramp) * load - residual
         increment, force_increment = u - previous_u, internal - previous_internal
-        stiffness_term, mass_term = float(increment @ force_increment), float(increment @ (m * increment))
-        if not (stiffness_term > 0.0 and mass_term > 0.0):
-            stiffness_term, mass_term = float(u @ internal), float(u @ (m * u))
-        if stiffness_term > 0.0 and mass_term > 0.0:
-            alpha = min(2.0 * math.sqrt(stiffness_term / mass_term), 2.0 / PSEUDO_STEP)
+        omega_increment = _rayleigh(increment, force_increment, m)
+        omega_total = _rayleigh(u, internal, m)
+        # Not below half the total displacement's: a softening mechanism (cracking, slip) gives the
+        # increment a tiny quotient, and so little damping would leave the stiffer modes ringing.
+        omega = max(omega_increment, 0.5 * omega_total)
+        if omega > 0.0:
+            alpha = min(2.0 * omega, 2.0 / PSEUDO_STEP)
             stepper.set_mass_damping(alpha)
         previous_u, previous_internal = u.copy(), internal
     return u, RelaxationResult(converged=below >= 2, steps=steps, residual=ratio, history=history,
