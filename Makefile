@@ -7,7 +7,7 @@ PYTHON := /usr/bin/python3
 # at 2.0 s) after a 1 s filter lead-in: about 7 minutes on 2 cores. The full comparison of
 # the three cases is workflows/case_study.py.
 SCENE ?= workflows/scenes/case3_contact_coarse.toml
-RUN_ARGS ?= --set wave.motion.record.lead_in=1.0 --set time.duration=6.0
+RUN_ARGS ?= --set time.duration=3.0
 
 .PHONY: setup run test test-slow bench
 setup:
