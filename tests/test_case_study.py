@@ -120,12 +120,41 @@ def test_max_principal_is_the_largest_eigenvalue_tension_positive():
     assert np.allclose(max_principal(voigt), [2 * s, -1.0], rtol=1e-14)
 
 
+def elastic_case3(overrides=()):
+    """Case 3's scene file without its static stage and nonlinear tables (the cavity already hollow,
+    the geostatic state): the monitors, pairs and report of the workflow, in seconds instead of the
+    static stage's minutes (that one: `test_case_scenes_plan_their_static_stage`, and the slow tier)."""
+    import tomllib
+
+    data = tomllib.loads(CASE3.read_text())
+    data.pop("static")
+    data["mesh"]["parameters"].pop("excavated")
+    for material in data["materials"].values():
+        material.pop("plasticity", None)
+        material.pop("damage", None)
+    return parse_scene(data, source=str(CASE3), overrides=overrides, base_dir=CASE3.parent)
+
+
+def test_case_scenes_plan_their_static_stage():
+    """The three coarse case scenes carry the static stage (excavation, lining installed after
+    relaxation), Mohr-Coulomb rock in a zone and the lining's damage law; `check` plans them."""
+    from pyfem.solver import plan
+
+    for name in ("case1_vertical_coarse", "case2_oblique_coarse", "case3_contact_coarse"):
+        scene = load_scene(REPOSITORY / "workflows" / "scenes" / f"{name}.toml")
+        assert scene["static"]["install"] == ["lining"] and scene["static"]["excavate"] == ["excavation"]
+        assert scene["materials"]["lining"]["damage"] is not None
+        assert scene["materials"]["sandstone"]["plasticity"]["zone"] is not None
+    stages = plan(scene)["static stage"]
+    assert "dynamic relaxation" in stages["solver"] and "lining installed stress-free" in stages["stage 2 (support)"]
+
+
 @pytest.fixture(scope="module")
 def short_case3(tmp_path_factory):
-    """Case 3 coarse for 0.035 s (~300 steps), through the scene file with overrides."""
+    """Case 3 coarse (elastic, no static stage: `elastic_case3`) for 0.035 s (~300 steps)."""
     from pyfem.solver import run
 
-    scene = load_scene(CASE3, ["time.duration=0.035", "output.xdmf_interval=0.0"])
+    scene = elastic_case3(["time.duration=0.035", "output.xdmf_interval=0.0"])
     out = tmp_path_factory.mktemp("runs") / "case3_coarse"
     summary = run(scene, out)
     return scene, out, summary

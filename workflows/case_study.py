@@ -167,6 +167,22 @@ def case_numbers(run: dict) -> dict:
             numbers[f"s1_{key}"] = float(columns["s1"].max())
             numbers[f"s1_{key}_initial"] = float(columns["s1"][0])
             numbers[f"s1_dynamic_{key}"] = float(columns["s1_dynamic"].max())
+    for name in ("A", "B"):  # the lining's damage at the monitors (0 without a damage law)
+        columns = monitors.get(name, {})
+        if "damage" in columns:
+            numbers.setdefault("damage_monitor", {})[name] = (float(columns["damage"][0]), float(columns["damage"].max()))
+    regions = summary.get("nonlinear_regions") or {}
+    if regions:
+        numbers["regions"] = {region: {key: values.get(key) for key in
+                                       ("peak_damage", "damaged_volume", "yielded_volume", "volume",
+                                        "yielded_points_near_zone_edge")}
+                              for region, values in regions.items()}
+    static = summary.get("static")
+    if static:
+        numbers["static"] = {"stages": [[stage["name"], stage["iterations"], stage["residual"], stage["seconds"]]
+                                        for stage in static["stages"]], "seconds": static["seconds"]}
+    record = ((summary.get("scene") or {}).get("wave") or {}).get("motion", {}).get("record") or {}
+    numbers["lead_in"] = record.get("lead_in")
     numbers["cost"] = {"wall_seconds": summary["wall_seconds"], "steps": summary["steps"], "dofs": summary["dofs"],
                        "ms_per_step": 1e3 * summary["seconds_per_step"], "dt": summary["dt"],
                        "duration": summary["scene"]["time"]["duration"], "cells": summary["cells"],
@@ -318,6 +334,10 @@ def _paper(case: int, key: str, fmt="{:.2f}") -> str:
     return "-" if value is None else fmt.format(value)
 
 
+PAPER_DAMAGE = {1: "~0.3", 2: "", 3: "up to 0.9"}
+"""The paper's lining damage (Figs. 11-12): about 0.3 in case 1, up to 0.9 in case 3."""
+
+
 def comparison_table(numbers: dict, preset: str) -> str:
     """Markdown: one row per quantity, ours | paper for each case."""
     cases = sorted(numbers)
@@ -358,9 +378,29 @@ def comparison_table(numbers: dict, preset: str) -> str:
         row(f"max principal stress at {where}, total = geostatic + dynamic (MPa; initial value)",
             lambda c, k=key: f"{MPA * numbers[c][f's1_{k}']:.2f} ({MPA * numbers[c][f's1_{k}_initial']:.2f})",
             lambda c: "")
+    row("lining damage at crown A: after the static stage / max during the run",
+        lambda c: ("{:.2f} / {:.2f}".format(*numbers[c]["damage_monitor"]["A"])
+                   if "A" in numbers[c].get("damage_monitor", {}) else "-"), lambda c: PAPER_DAMAGE.get(c, ""))
+    row("lining damage at wall B: after the static stage / max during the run",
+        lambda c: ("{:.2f} / {:.2f}".format(*numbers[c]["damage_monitor"]["B"])
+                   if "B" in numbers[c].get("damage_monitor", {}) else "-"), lambda c: "")
+    row("lining: damaged volume (d > 0.01) / lining volume (m^3), end of run",
+        lambda c: (f"{numbers[c]['regions']['lining']['damaged_volume']:.0f} / "
+                   f"{numbers[c]['regions']['lining']['volume']:.0f}" if "lining" in numbers[c].get("regions", {})
+                   else "-"), lambda c: "")
+    row("rock yielded volume in the Mohr-Coulomb zone (m^3; yielded points at the zone's edge)",
+        lambda c: (" + ".join(f"{v['yielded_volume']:.0f}" for r, v in numbers[c]["regions"].items() if r != "lining")
+                   + " (" + " + ".join(str(v["yielded_points_near_zone_edge"]) for r, v in
+                                       numbers[c]["regions"].items() if r != "lining") + ")"
+                   if numbers[c].get("regions") else "-"), lambda c: "")
+    row("static stage: relaxation steps per stage, out-of-balance, seconds",
+        lambda c: ("; ".join(f"{n} {k}, {r:.1e}, {t:.0f} s" for n, k, r, t in numbers[c]["static"]["stages"])
+                   if "static" in numbers[c] else "-"), lambda c: "")
+    lead_ins = {c: numbers[c].get("lead_in") for c in cases}
     title = f"Preset `{preset}`. Our runs cover time.duration = " + ", ".join(
         f"{numbers[c]['cost']['duration']:g} s (case {c})" for c in cases) + \
-        " of motion (t includes the record's 5.1 s filter lead-in)."
+        " of motion (t includes the record's filter lead-in: " + ", ".join(
+            f"{lead_ins[c]:g} s" if lead_ins[c] is not None else "5.1 s" for c in cases) + ")."
     return title + "\n\n" + "\n".join([head, rule, *rows]) + "\n"
 
 
