@@ -580,6 +580,34 @@ def _cells_except(model, cells: np.ndarray) -> np.ndarray:
     return np.flatnonzero(keep).astype(np.int32)
 
 
+@dataclasses.dataclass
+class _StageSetup:
+    """What both solvers of the stage start from: the stage's boundary, the installed regions and
+    their cells, the loads, the held nodes (and their free projections and kernel constraints),
+    the contact pairs' nodes and the rock (stage-1) regions."""
+
+    boundary: dict
+    installed_regions: list
+    installed_cells: np.ndarray
+    loads: StageLoads
+    held_nodes: np.ndarray
+    held_projection: np.ndarray
+    constraints: object
+    pairs: np.ndarray | None
+    rock_regions: list
+
+
+def _stage_setup(scene: typing.Mapping, model) -> _StageSetup:
+    boundary = stage_boundary(scene, model)
+    installed_regions, installed_cells = _install_cells(scene, model)
+    held_nodes, held_projection, constraints = _stage_constraints(model, boundary)
+    return _StageSetup(boundary=boundary, installed_regions=installed_regions, installed_cells=installed_cells,
+                       loads=stage_loads(scene, model, installed_cells), held_nodes=held_nodes,
+                       held_projection=held_projection, constraints=constraints,
+                       pairs=None if model.pairs is None else np.asarray(model.pairs.nodes, dtype=np.int64),
+                       rock_regions=[name for name in model.regions if name not in installed_regions])
+
+
 def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
     """Runs the two stages of docs/static.md on the model and decomposes the final out-of-balance
     force into support reactions, pair forces and the hand-over force.
@@ -596,13 +624,11 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
     start = time.perf_counter()
     check_linear(scene)
     settings = scene["static"]
-    boundary = stage_boundary(scene, model)
-    installed_regions, installed_cells = _install_cells(scene, model)
-    loads = stage_loads(scene, model, installed_cells)
-    n_nodes = model.n_nodes
-    held_nodes, held_projection, constraints = _stage_constraints(model, boundary)
-    pairs = None if model.pairs is None else np.asarray(model.pairs.nodes, dtype=np.int64)
-    rock_regions = [name for name in model.regions if name not in installed_regions]
+    setup = _stage_setup(scene, model)
+    boundary, installed_regions, installed_cells, loads = (setup.boundary, setup.installed_regions,
+                                                           setup.installed_cells, setup.loads)
+    n_nodes, held_nodes, held_projection, pairs = model.n_nodes, setup.held_nodes, setup.held_projection, setup.pairs
+    rock_regions = setup.rock_regions
 
     K_full = model.stiffness.tocsr()
     if len(installed_cells):
@@ -776,13 +802,11 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     model, nonlinear = simulation.model, simulation.nonlinear
     settings = scene["static"]
     tolerance, max_steps = stage_tolerance(scene), int(settings["max_steps"])
-    boundary = stage_boundary(scene, model)
-    installed_regions, installed_cells = _install_cells(scene, model)
-    loads = stage_loads(scene, model, installed_cells)
-    n_nodes = model.n_nodes
-    held_nodes, held_projection, constraints = _stage_constraints(model, boundary)
-    pairs = None if model.pairs is None else np.asarray(model.pairs.nodes, dtype=np.int64)
-    rock_regions = [name for name in model.regions if name not in installed_regions]
+    setup = _stage_setup(scene, model)
+    boundary, installed_regions, installed_cells, loads = (setup.boundary, setup.installed_regions,
+                                                           setup.installed_cells, setup.loads)
+    n_nodes, held_nodes, held_projection, pairs = model.n_nodes, setup.held_nodes, setup.held_projection, setup.pairs
+    constraints, rock_regions = setup.constraints, setup.rock_regions
     if len(installed_cells):
         rock_nodes = _nodes_of_cells(model, _cells_except(model, installed_cells))
         inactive = np.setdiff1d(np.arange(n_nodes), rock_nodes)
