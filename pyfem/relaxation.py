@@ -44,8 +44,10 @@ SAFETY = 0.8
 CHUNK = 50
 # The load of a nonlinear stage rises over RAMP_PERIODS periods of the lowest frequency the probe
 # finds (Salencon's cavity: 2 and 6 periods give the same wall displacement to 1e-5).
-RAMP_PERIODS = float(os.environ.get("RAMP_PERIODS", 3.0))
+RAMP_PERIODS = 3.0
 MINIMUM_RAMP = 200.0
+# Developer aids, not scene settings: PYFEM_RELAX_DIAGNOSE=1 adds alpha, the largest velocity and the
+# worst node's out-of-balance to each progress report; PYFEM_RELAX_REPORT sets its interval (s).
 DIAGNOSE = bool(os.environ.get("PYFEM_RELAX_DIAGNOSE"))
 # Wall time between two progress reports of a long relaxation (s).
 REPORT_SECONDS = float(os.environ.get('PYFEM_RELAX_REPORT', 30.0))
