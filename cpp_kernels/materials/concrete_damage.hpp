@@ -414,17 +414,10 @@ struct ConcreteDamageLaw {
     for (int c = 0; c < 6; ++c)
       work += 0.5 * (committed.stress[c] + trial.stress[c] - 2.0 * point.initial_stress[c]) *
               (trial.strain[c] - committed.strain[c]);
-    PointEnergy energy;
-    if (trial.kappa_tension == committed.kappa_tension &&
-        trial.kappa_compression == committed.kappa_compression) {  // no damage growth
-      trial.stored = committed.stored + work;
-    } else {
-      trial.stored = step.stored_energy - committed.energy_offset -
-                     stress_dot_strain(point.initial_stress, point.strain);
-      energy.dissipation = work - (trial.stored - committed.stored);
-    }
-    energy.stored = trial.stored;
-    return energy;
+    const bool damage_grew = trial.kappa_tension != committed.kappa_tension ||
+                             trial.kappa_compression != committed.kappa_compression;
+    return history_point_energy(damage_grew, work, committed.stored, step.stored_energy,
+                                committed.energy_offset, point, trial.stored);
   }
 
   /// Damage 1 - (1 - d_t)(1 - d_c), its mechanism; no plastic strain (0).

@@ -95,6 +95,27 @@ inline double stress_dot_strain(const double* sigma, const double* eps) {
          sigma[4] * eps[4] + sigma[5] * eps[5];
 }
 
+/// psi_t and delta of a trial point by the rule above, for a law with a closed-form stored energy
+/// W (Lemaitre: W of the state's elastic part) and psi = W - W_offset - sigma0 : eps:
+///   history unchanged (no plastic flow, no damage growth): psi_t = psi_c + w, delta = 0;
+///   otherwise: psi_t = W_t - W_offset - sigma0 : eps, delta = w - (psi_t - psi_c).
+/// W_offset is the W of the state at zero strain (W(sigma0) at construction, W at a rebase).
+/// Writes psi_t into trial_stored and returns both.
+inline PointEnergy history_point_energy(bool history_changed, double work, double committed_stored,
+                                        double trial_W, double energy_offset,
+                                        const PointStrain& point, double& trial_stored) {
+  PointEnergy energy;
+  if (!history_changed) {
+    trial_stored = committed_stored + work;
+  } else {
+    trial_stored =
+        trial_W - energy_offset - stress_dot_strain(point.initial_stress, point.strain);
+    energy.dissipation = work - (trial_stored - committed_stored);
+  }
+  energy.stored = trial_stored;
+  return energy;
+}
+
 /// The value of `key` in `parameters`; throws std::invalid_argument naming the law and the key.
 /// Throws std::invalid_argument "NAME = VALUE must be ALLOWED" unless ok (a law's parameter check).
 inline void require_parameter(bool ok, const char* name, double value, const char* allowed) {

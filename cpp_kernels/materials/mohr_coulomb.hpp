@@ -224,16 +224,8 @@ struct MohrCoulombLaw {
       trial.strain[c] = point.strain[c];
       work += 0.5 * (committed.stress[c] + trial.stress[c] - 2.0 * sigma0[c]) * increment[c];
     }
-    PointEnergy energy;
-    if (step.region == ReturnRegion::elastic) {
-      trial.stored = committed.stored + work;
-    } else {
-      trial.stored = step.stored_energy - committed.energy_offset -
-                     stress_dot_strain(point.initial_stress, point.strain);
-      energy.dissipation = work - (trial.stored - committed.stored);
-    }
-    energy.stored = trial.stored;
-    return energy;
+    return history_point_energy(step.region != ReturnRegion::elastic, work, committed.stored,
+                                step.stored_energy, committed.energy_offset, point, trial.stored);
   }
 
   /// Damage d, its mechanism, and kappa_t + kappa_s (sqrt(2/3) sum |d eps_p|).
