@@ -156,13 +156,21 @@ class NonlinearRegions:
             values["plastic_strain"][rows] = component.plastic_strain(points)
         return values
 
-    def cell_averages(self) -> dict:
+    def _active(self, components) -> list:
+        """(component, name, arrays) of the regions whose component is given (`components` in region
+        order, None: `self.components`; a None entry: a region not active yet, left out)."""
+        components = self.components if components is None else components
+        return [(component, name, arrays) for component, (name, arrays) in zip(components, self.arrays.items())
+                if component is not None]
+
+    def cell_averages(self, components=None) -> dict:
         """Per region, the committed state averaged over each cell's points (weights w |det J|):
         {"cells" (c,), "stress" (c, 6) Voigt xx yy zz xy yz xz (Pa), "damage" (c,),
         "plastic_strain" (c,), "damage_type" (c,) int32: the type of the cell's most damaged
-        point (of its largest plastic strain when no point is damaged; 0 for neither)}."""
+        point (of its largest plastic strain when no point is damaged; 0 for neither)}.
+        `components`: those to read (region order; None entries skipped), default `self.components`."""
         result = {}
-        for component, (name, arrays) in zip(self.components, self.arrays.items()):
+        for component, name, arrays in self._active(components):
             weights = arrays.weights / arrays.weights.sum(axis=1, keepdims=True)
             damage, plastic = component.damage(), component.plastic_strain()
             kind = component.damage_type()
@@ -176,12 +184,13 @@ class NonlinearRegions:
             }
         return result
 
-    def region_summary(self) -> dict:
+    def region_summary(self, components=None) -> dict:
         """Per region, for run.json: law, cells, points, volume (m^3), damaged_volume (d > DAMAGED,
         m^3, by points), peak_damage, yielded_volume (plastic strain > 0, m^3), peak_plastic_strain,
-        tension_points / shear_points (damage_type 1 / 2), dissipated_energy (J since the start)."""
+        tension_points / shear_points (damage_type 1 / 2), dissipated_energy (J since the start).
+        `components` as in `cell_averages`."""
         summary = {}
-        for component, (name, arrays) in zip(self.components, self.arrays.items()):
+        for component, name, arrays in self._active(components):
             damage, plastic, kind = component.damage(), component.plastic_strain(), component.damage_type()
             summary[name] = {
                 "law": self.laws[name][0],
@@ -204,6 +213,14 @@ class NonlinearRegions:
                 summary[name]["yielded_points_near_zone_edge"] = int(np.count_nonzero(
                     (plastic > 0.0) & (margin < ZONE_EDGE)))
         return summary
+
+
+def voigt_tensor(voigt: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) symmetric tensors of (..., 6) Voigt vectors in the kernel's order xx, yy, zz, xy,
+    yz, xz (tensor shear components, as the laws' stress)."""
+    voigt = np.asarray(voigt, dtype=float)
+    xx, yy, zz, xy, yz, xz = np.moveaxis(voigt, -1, 0)
+    return np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], -2)
 
 
 def quadrature_rule(order: int) -> tuple[np.ndarray, np.ndarray]:

@@ -121,12 +121,8 @@ def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
         (omega, steps taken).
     """
     u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor)
-    m = np.repeat(mass, 3)
-    stiffness_term = float(u @ (load - result.out_of_balance))
-    mass_term = float(u @ (m * u))
-    if not (stiffness_term > 0.0 and mass_term > 0.0):
-        return 2.0 * SAFETY / PSEUDO_STEP, result.steps
-    return math.sqrt(stiffness_term / mass_term), result.steps
+    omega = _rayleigh(u, load - result.out_of_balance, np.repeat(mass, 3))
+    return (omega if omega > 0.0 else 2.0 * SAFETY / PSEUDO_STEP), result.steps
 
 
 def ramp_length(omega: float) -> float:

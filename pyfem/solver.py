@@ -163,13 +163,14 @@ def nonlinear_regions(scene: Scene, model, time_step: TimeStep):
 def attach_kernel_points(stress: MonitorStress, points: np.ndarray, nonlinear) -> None:
     """Monitors in a nonlinear region take the law's stress at the nearest quadrature point of their
     cell (and that point's initial stress as their static stress)."""
+    from pyfem.elements import voigt_tensor
+
     stress.kernel_points = [nonlinear.nearest_point(int(cell), point)
                             for cell, point in zip(stress.cells, points)]
     for j, found in enumerate(stress.kernel_points):
         sigma0 = None if found is None else nonlinear.initial_stress[nonlinear.regions[found[0]]]
         if sigma0 is not None:
-            xx, yy, zz, xy, yz, xz = sigma0.reshape(-1, 6)[found[1]]
-            stress.static[j] = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
+            stress.static[j] = voigt_tensor(sigma0.reshape(-1, 6)[found[1]])
 
 
 def earthquake_duration(scene: Scene) -> float:

@@ -719,31 +719,12 @@ def _cell_state(model, nonlinear, components) -> dict:
              "damage_type": np.zeros(model.n_cells, dtype=np.int32), "stress": {}}
     if nonlinear is None:
         return state
-    saved = nonlinear.components
-    try:
-        active = [(k, c) for k, c in enumerate(components) if c is not None]
-        for k, component in active:
-            name = nonlinear.regions[k]
-            nonlinear.components = [component]
-            arrays = nonlinear.arrays
-            nonlinear.arrays = {name: arrays[name]}
-            try:
-                averages = nonlinear.cell_averages()[name]
-            finally:
-                nonlinear.arrays = arrays
-            cells = averages["cells"]
-            for key in ("plastic_strain", "damage", "damage_type"):
-                state[key][cells] = averages[key]
-            state["stress"][name] = (cells, averages["stress"])
-    finally:
-        nonlinear.components = saved
+    for name, averages in nonlinear.cell_averages(components).items():
+        cells = averages["cells"]
+        for key in ("plastic_strain", "damage", "damage_type"):
+            state[key][cells] = averages[key]
+        state["stress"][name] = (cells, averages["stress"])
     return state
-
-
-def _voigt_to_tensor(voigt: np.ndarray) -> np.ndarray:
-    """(m, 6) Voigt xx yy zz xy yz xz -> (m, 3, 3)."""
-    xx, yy, zz, xy, yz, xz = voigt.T
-    return np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], -2)
 
 
 def _pair_force_vector(n_nodes: int, contact_arrays: dict) -> np.ndarray:
@@ -892,16 +873,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         reactions.append(support)
         magnitude = np.linalg.norm(u.reshape(-1, 3), axis=1)
         worst = int(np.argmax(magnitude))
-        stage_regions = {}
-        if nonlinear is not None:
-            saved = nonlinear.components
-            names = [element_regions[k] for k, c in enumerate(components) if c is not None]
-            arrays = nonlinear.arrays
-            nonlinear.components, nonlinear.arrays = active, {n: arrays[n] for n in names}
-            try:
-                stage_regions = nonlinear.region_summary()
-            finally:
-                nonlinear.components, nonlinear.arrays = saved, arrays
+        stage_regions = {} if nonlinear is None else nonlinear.region_summary(components)
         stages.append(Stage(name=name, active_regions=regions, load=words, load_fraction=fraction,
                             free_dofs=int(3 * n_nodes - 3 * len(inactive) if index == 0 else 3 * n_nodes),
                             solver="dynamic relaxation" if np.any(load) else "none: no load",
@@ -982,6 +954,8 @@ def hand_over(simulation, solve: bool = True) -> None:
     _install_cells(scene, model)
     if not solve:
         return
+    from pyfem.elements import voigt_tensor
+
     relaxed = uses_relaxation(scene)
     state = solve_relaxation_stage(scene, simulation) if relaxed else solve_static_stage(scene, model)
     installed_regions = set(state.installed_regions)
@@ -996,7 +970,7 @@ def hand_over(simulation, solve: bool = True) -> None:
             for j, found in enumerate(monitors.kernel_points):
                 if found is not None:
                     voigt = state.components[found[0]].stress(np.array([found[1]], dtype=np.int64))
-                    sigma[j] = _voigt_to_tensor(voigt)[0]
+                    sigma[j] = voigt_tensor(voigt)[0]
         monitors.static = sigma
         state.monitor_stress = sigma
     from pyfem.output import cell_strain_operator
@@ -1016,7 +990,7 @@ def hand_over(simulation, solve: bool = True) -> None:
     if relaxed:  # element-loop cells: the laws' stress (cell means of the points)
         for stress, cell_state in ((final, state.cell_state), (first, state.cell_state_first)):
             for cells_of_region, voigt in cell_state["stress"].values():
-                stress[cells_of_region] = _voigt_to_tensor(voigt)
+                stress[cells_of_region] = voigt_tensor(voigt)
         nonlinear = simulation.nonlinear
         if nonlinear is not None:  # the dynamic run continues the stage's components
             nonlinear.components = list(state.components)
