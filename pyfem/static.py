@@ -131,6 +131,8 @@ class StaticState:
             final pair forces, open gaps kept); the dynamic run continues it.
         cell_state, cell_state_first: dynamic relaxation only: {"plastic_strain", "damage",
             "damage_type"} per cell (n_cells,) at the end and after stage 1 (0 outside the element loop).
+        pair_forces_in_situ: (n_pairs, 3) with contact: the pair forces of the in-situ stress before
+            the stage (N), set by `hand_over` (static/interface_stress.png draws both).
     """
 
     stages: list
@@ -156,6 +158,7 @@ class StaticState:
     contact: object = None
     cell_state: dict | None = None
     cell_state_first: dict | None = None
+    pair_forces_in_situ: np.ndarray | None = None
 
     def summary(self) -> dict:
         """run.json's "static": per stage its solver, iterations, residual, time and largest
@@ -998,6 +1001,7 @@ def hand_over(simulation, solve: bool = True) -> None:
                 nonlinear.initial_stress[name] = component.stress()
     state.cell_stress, state.cell_stress_first = final, first
     if simulation.contact_arrays is not None and state.pair_forces is not None:
+        state.pair_forces_in_situ = np.array(simulation.contact_arrays["static_force"], dtype=np.float64)
         simulation.contact_arrays["static_force"] = np.ascontiguousarray(state.pair_forces, dtype=np.float64)
         if state.contact is not None:  # the dynamic run continues the stage's pairs, now with D(t)
             if simulation.contact_arrays["deterioration"] is not None:

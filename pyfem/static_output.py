@@ -8,6 +8,9 @@
                          point data displacement (m, total so far) and stage_displacement (m, the
                          stage's increment); cell data stress (Pa, Tensor6 xx xy xz yy yz zz, at the
                          centroids; an installed region is 0 before it joins) and active (1/0)
+    static/section_stress.png, static/interface_stress.png (with contact): pyfem/static_plots.py;
+                         static.json "plots" holds their figures (section y, extreme principal
+                         stresses, the interfaces' mean normal stress near the walls before/after)
 
 run.json gets the summary under "static" (pyfem.static.StaticState.summary), and the dynamic
 fields' stress starts from the stage's (RunWriter.cell_strain).
@@ -37,7 +40,11 @@ def write_static_outputs(writer) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     if writer.cell_strain is not None:
         writer.cell_strain.static = state.cell_stress
-    _write_json(folder / "static.json", static_report(simulation))
+    from pyfem.static_plots import write_static_plots
+
+    report = static_report(simulation)
+    report["plots"] = write_static_plots(folder, simulation)
+    _write_json(folder / "static.json", report)
     write_static_fields(folder, simulation)
 
 

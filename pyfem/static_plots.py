@@ -1,0 +1,188 @@
+"""Pictures of the static stage (docs/static.md "Outputs"), written into the run's static/ folder:
+
+    static/section_stress.png    the stress after the stage in the section through the excavation
+                                 (the plane y through the middle of the excavation surface, or of the model):
+                                 max and min principal stress (MPa, tension positive), and with a
+                                 relaxation stage the plastic strain and damage of the cut cells
+    static/interface_stress.png  with contact: the interface pairs' normal stress (MPa, compression
+                                 positive) before the stage (the in-situ state) and after it, against
+                                 the distance from the excavation (m)
+
+Each cell cut by the section is drawn as the convex hull of its vertices projected on the plane (a
+quadrilateral for the layered cavern's cells, extruded along y); the excavated cells are not in the
+model (pyfem/mesh.py drops them), and the excavation surface is where the stage's excavation load acts.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import PolyCollection  # noqa: E402
+
+MPA = 1.0e-6
+
+
+def cell_vertices(model) -> np.ndarray:
+    """(cells, 8, 3) coordinates of each cell's vertices (m): the first 8 dofs of a Q1/Q2 cell."""
+    n_basis = model.V.dofmap.dof_layout.num_dofs
+    nodes = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :8]
+    return model.node_coords[nodes]
+
+
+def excavation_surface(state, node_coords: np.ndarray) -> np.ndarray:
+    """(k, 3) the nodes the excavation load acts on (m): the surface the removed regions left (the
+    excavated cells are never in the model, pyfem/mesh.py); empty without an excavation."""
+    load = np.linalg.norm(np.asarray(state.excavation_load).reshape(-1, 3), axis=1)
+    if not len(load) or load.max() == 0.0:
+        return np.zeros((0, 3))
+    return node_coords[load > 1e-3 * load.max()]  # above the round-off of the volume terms
+
+
+def section_plane(vertices: np.ndarray, surface: np.ndarray) -> float:
+    """y of the section (m): the middle of the excavation surface, else the middle of the model."""
+    if len(surface):
+        return float(0.5 * (surface[:, 1].min() + surface[:, 1].max()))
+    return float(0.5 * (vertices[..., 1].min() + vertices[..., 1].max()))
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull of 2-D points, counter-clockwise (Andrew's monotone chain)."""
+    points = np.unique(np.round(points, 9), axis=0)
+    if len(points) < 3:
+        return points
+
+    def half(sequence):
+        chain = []
+        for p in sequence:
+            while len(chain) >= 2 and np.cross(chain[-1] - chain[-2], p - chain[-2]) <= 0.0:
+                chain.pop()
+            chain.append(p)
+        return chain
+
+    lower, upper = half(points), half(points[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def principal_stresses(stress: np.ndarray) -> np.ndarray:
+    """(c, 3) principal stresses of (c, 3, 3) tensors, ascending (Pa, tension positive)."""
+    return np.linalg.eigvalsh(0.5 * (stress + np.swapaxes(stress, 1, 2)))
+
+
+def section_stress(png_path, vertices: np.ndarray, stress: np.ndarray, surface: np.ndarray,
+                   cell_state: dict | None = None, title: str = "") -> dict:
+    """Draws the stage's stress in the section through the excavation.
+
+    Args:
+        png_path: output image.
+        vertices: (cells, 8, 3) cell vertices (m).
+        stress: (cells, 3, 3) stress after the stage at the cell centroids (Pa, tension positive).
+        surface: (k, 3) excavation surface points (m): the section passes through their middle.
+        cell_state: relaxation stage only: {"plastic_strain", "damage"} per cell (cell means).
+        title: figure title.
+
+    Returns:
+        {"y": section y (m), "cells": cells drawn, "s1_max", "s3_min" (Pa) over the drawn cells}.
+    """
+    y0 = section_plane(vertices, surface)
+    y = vertices[..., 1]
+    cut = (y.min(axis=1) <= y0) & (y.max(axis=1) >= y0)
+    cells = np.flatnonzero(cut)
+    polygons = [_hull(vertices[c][:, [0, 2]]) for c in cells]
+    principal = principal_stresses(stress[cells])
+    panels = [("max principal stress (MPa)", principal[:, 2] * MPA, "RdBu_r", True),
+              ("min principal stress (MPa)", principal[:, 0] * MPA, "viridis", False)]
+    if cell_state is not None:
+        panels.append(("plastic strain (-)", np.asarray(cell_state["plastic_strain"], dtype=float)[cells],
+                       "magma_r", False))
+        panels.append(("damage (-)", np.asarray(cell_state["damage"], dtype=float)[cells], "inferno_r", False))
+    columns = len(panels)
+    fig, axes = plt.subplots(1, columns, figsize=(4.2 * columns, 4.8), squeeze=False)
+    for ax, (label, values, cmap, centred) in zip(axes[0], panels):
+        collection = PolyCollection(polygons, array=values, cmap=cmap, edgecolors="face", linewidths=0.2)
+        if centred:  # tension red, compression blue, zero white
+            bound = max(float(np.max(np.abs(values))), 1e-12)
+            collection.set_clim(-bound, bound)
+        ax.add_collection(collection)
+        ax.autoscale_view()
+        ax.set_aspect("equal")
+        ax.set_title(label, fontsize=9)
+        ax.set_xlabel("x (m)")
+        fig.colorbar(collection, ax=ax, shrink=0.8)
+    axes[0][0].set_ylabel("z (m)")
+    fig.suptitle(f"{title} after the static stage, section y = {y0:.3g} m".strip(), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+    return {"y": y0, "cells": int(len(cells)), "s1_max": float(principal[:, 2].max(initial=-np.inf)),
+            "s3_min": float(principal[:, 0].min(initial=np.inf))}
+
+
+def pair_normal_stress(force: np.ndarray, normal: np.ndarray, area: np.ndarray) -> np.ndarray:
+    """(p,) normal stress of pair forces F (force of side j on node i) (Pa, compression positive)."""
+    return -np.einsum("pc,pc->p", force, normal) / area
+
+
+def interface_stress(png_path, coords: np.ndarray, normal: np.ndarray, area: np.ndarray, before: np.ndarray,
+                     after: np.ndarray, excavation_points: np.ndarray, title: str = "",
+                     near_wall: float = 2.0) -> dict:
+    """Draws the interface pairs' normal stress before and after the stage against the distance from
+    the excavation.
+
+    Args:
+        png_path: output image.
+        coords, normal, area: (p, 3), (p, 3), (p,) pair positions (m), unit normals and areas (m^2).
+        before, after: (p, 3) pair forces before and after the stage (N).
+        excavation_points: (k, 3) points of the excavation surface (m); empty: distance from the
+            pairs' centroid.
+        title: figure title.
+        near_wall: distance (m) within which pairs count as "at the wall" in the returned means.
+
+    Returns:
+        {"near_wall": near_wall, "pairs": count, "pairs_near_wall": count within near_wall,
+        "before_mean", "after_mean" (Pa): their mean normal stress before and after}.
+    """
+    from scipy.spatial import cKDTree
+
+    reference = excavation_points if len(excavation_points) else coords.mean(axis=0, keepdims=True)
+    distance, _ = cKDTree(reference).query(coords)
+    normal_before = pair_normal_stress(before, normal, area)
+    normal_after = pair_normal_stress(after, normal, area)
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    ax.scatter(distance, normal_before * MPA, s=3, c="0.6", label="before (in situ)")
+    ax.scatter(distance, normal_after * MPA, s=3, c="C3", label="after the stage")
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_xlabel("distance from the excavation (m)")
+    ax.set_ylabel("interface normal stress (MPa, compression +)")
+    ax.set_xlim(0.0, float(np.percentile(distance, 90)) if len(distance) > 10 else None)
+    ax.grid(alpha=0.3)
+    ax.legend(markerscale=4, fontsize=8)
+    ax.set_title(f"{title} interface normal stress".strip(), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+    near = distance <= near_wall
+    return {"near_wall": near_wall, "pairs": int(len(distance)), "pairs_near_wall": int(near.sum()),
+            "before_mean": float(normal_before[near].mean()) if near.any() else float("nan"),
+            "after_mean": float(normal_after[near].mean()) if near.any() else float("nan")}
+
+
+def write_static_plots(folder: Path, simulation) -> dict:
+    """static/section_stress.png and, with contact, static/interface_stress.png; returns their figures
+    for static.json ("plots")."""
+    state = simulation.static
+    model = simulation.model
+    vertices = cell_vertices(model)
+    surface = excavation_surface(state, model.node_coords)
+    title = simulation.scene.get("title", "")
+    figures = {"section_stress": section_stress(folder / "section_stress.png", vertices, state.cell_stress,
+                                                surface, state.cell_state, title)}
+    arrays = simulation.contact_arrays
+    if arrays is not None and state.pair_forces is not None and state.pair_forces_in_situ is not None:
+        figures["interface_stress"] = interface_stress(
+            folder / "interface_stress.png", model.pairs.coords, arrays["normal"], arrays["area"],
+            state.pair_forces_in_situ, state.pair_forces, surface, title)
+    return figures
