@@ -77,7 +77,7 @@ def test_small_case3_without_wave_stays_at_rest(tmp_path):
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory):
     scene = small_case3(["time.duration=0.04", "output.xdmf_interval=0.02"])
-    out = tmp_path_factory.mktemp("runs") / "small_case3"
+    out = tmp_path_factory.mktemp("runs") / "case3_coarse"  # the name the workflow's report looks for
     return scene, out, solver.run(scene, out)
 
 
@@ -104,3 +104,22 @@ def test_static_stage_pictures_and_interface_figures(small_run):
     assert interface["pairs_near_wall"] > 0
     # The excavation changes the interfaces' normal stress at the walls (it is not the in-situ one).
     assert abs(interface["after_mean"] - interface["before_mean"]) > 0.05 * abs(interface["before_mean"])
+
+
+def test_case_study_report_draws_the_lining_damage_maps(small_run, tmp_path):
+    """The workflow's report on the small run: Figs. 11-13 from its damage fields and monitors."""
+    import sys
+
+    sys.path.insert(0, str(REPOSITORY / "workflows"))
+    import case_study
+
+    _, out, summary = small_run
+    numbers = case_study.report(presets=("coarse",), cases=(3,), runs_dir=out.parent, results=tmp_path, doc=False)
+    case3 = numbers["coarse"][3]
+    for name in ("fig11_lining_damage", "fig12_damage_type", "fig13_deformation"):
+        assert (tmp_path / f"{name}.png").stat().st_size > 20000
+    damage = case3["lining_damage_map"]
+    # The map reads the same damage the run's summary reports for the lining.
+    assert damage["peak_damage_bay"] <= summary["nonlinear_regions"]["lining"]["peak_damage"] + 1e-12
+    assert 0.0 <= damage["damaged_share"] <= 1.0 and damage["t"] == pytest.approx(0.04)
+    assert set(case3["upper_structure_offset"]) == {"A", "B", "C"}

@@ -19,6 +19,10 @@ directories), then draws figures like the paper's and writes the comparison:
     fig8_displacement.png        |u(t)| at A (crown), B, C (walls), D (floor) (Fig. 8)
     fig9_relative.png            peak displacement of A, B, C relative to D (Fig. 9)
     fig10_principal_stress.png   max principal stress at A and B (Fig. 10)
+    fig11_lining_damage.png      the lining unrolled, damage at the end of each run (Fig. 11)
+    fig12_damage_type.png        the same, damage type: tension or shear (Fig. 12)
+    fig13_deformation.png        the walls' and crown's x offset to the floor, and the offset
+                                 across the soft layer's interface (Fig. 13 b, d)
     comparison.md, summary.json  our numbers next to the paper's; run costs
 
 and replaces the table between the markers of docs/case_study.md.
@@ -323,6 +327,123 @@ def figure_principal_stress(runs: dict, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
+def read_last_fields(directory: pathlib.Path) -> dict | None:
+    """The last time of a run's fields.xdmf: points (m), hexahedra, point and cell data, or None
+    without fields (or without the damage fields the lining maps need)."""
+    import meshio
+
+    path = directory / "fields.xdmf"
+    if not path.exists():
+        return None
+    with meshio.xdmf.TimeSeriesReader(str(path)) as reader:
+        points, cells = reader.read_points_cells()
+        last = None
+        for k in range(reader.num_steps):
+            last = reader.read_data(k)
+    if last is None or "damage" not in last[2]:
+        return None
+    t, point_data, cell_data = last
+    return {"t": t, "points": points, "cells": cells[0].data, "point_data": point_data,
+            "cell_data": {name: values[0] for name, values in cell_data.items()}}
+
+
+def lining_cells(fields: dict, summary: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(cells, centroids) of the lining in the fields' mesh."""
+    lining = np.flatnonzero(fields["cell_data"]["region"] == summary["regions"]["lining"])
+    return lining, fields["points"][fields["cells"][lining]].mean(axis=1)
+
+
+def section_angle(centroids: np.ndarray, centre_z: float) -> np.ndarray:
+    """Position around the cavern's section (deg): the polar angle about (x = 0, z = centre_z), 90 at
+    the crown, 0 the downstream wall (+x), -90 the floor, +-180 the upstream wall."""
+    return np.degrees(np.arctan2(centroids[:, 2] - centre_z, centroids[:, 0]))
+
+
+def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathlib.Path) -> dict:
+    """Figs. 11-12: the lining unrolled (position around the section against y along the cavern),
+    coloured by damage and by damage type (tension, shear) at the end of each run; returns per case
+    the damaged share of the lining and the peak damage in the soft-layer bay (|y| < 10 m)."""
+    from matplotlib.colors import ListedColormap
+
+    plt = _pyplot()
+    fields = {case: read_last_fields(run["dir"]) for case, run in runs.items()}
+    fields = {case: f for case, f in fields.items() if f is not None}
+    if not fields:
+        return {}
+    figures = {}
+    summary = {}
+    for key, path in (("damage", path_damage), ("damage_type", path_type)):
+        fig, axes = plt.subplots(1, len(fields), figsize=(4.6 * len(fields), 5.2), squeeze=False, sharey=True)
+        for ax, (case, f) in zip(axes[0], sorted(fields.items())):
+            cells, centroids = lining_cells(f, runs[case]["summary"])
+            angle = section_angle(centroids, centre_z=0.5 * centroids[:, 2].max())
+            values = f["cell_data"][key][cells]
+            order = np.argsort(values, kind="stable")  # the most damaged (or tension) drawn last, on top
+            if key == "damage":
+                image = ax.scatter(angle[order], centroids[order, 1], c=values[order], s=5, marker="s",
+                                   cmap="inferno_r", vmin=0.0, vmax=1.0)
+                bay = np.abs(centroids[:, 1]) < 10.0
+                summary[case] = {"t": float(f["t"]), "damaged_share": float(np.mean(values > 0.01)),
+                                 "peak_damage_bay": float(values[bay].max(initial=0.0)),
+                                 "mean_damage_bay": float(values[bay].mean()) if bay.any() else 0.0}
+            else:
+                image = ax.scatter(angle[order], centroids[order, 1], c=values[order], s=5, marker="s",
+                                   cmap=ListedColormap(["0.85", "C3", "C0"]), vmin=-0.5, vmax=2.5)
+            ax.axhspan(-10.0, 10.0, color="k", alpha=0.06)
+            ax.set_xticks([-180, -90, 0, 90, 180], ["up. wall", "floor", "down. wall", "crown", "up. wall"],
+                          fontsize=7)
+            ax.set_title(f"{CASE_LABELS[case]}, t = {f['t']:.2f} s", fontsize=8)
+        axes[0][0].set_ylabel("y along the cavern (m); shaded: the soft-layer bay")
+        colorbar = fig.colorbar(image, ax=axes[0].tolist(), shrink=0.8)
+        if key == "damage_type":
+            colorbar.set_ticks([0, 1, 2], labels=["none", "tension", "shear"])
+            title = "lining damage type at the end of the run (cf. paper Fig. 12)"
+        else:
+            colorbar.set_label("damage (-)")
+            title = "lining damage at the end of the run, unrolled (cf. paper Fig. 11)"
+        fig.suptitle(title, fontsize=9)
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        figures[key] = path.name
+    return summary
+
+
+def figure_deformation(runs: dict, path: pathlib.Path) -> dict:
+    """Fig. 13: deformation modes from the monitors: (a) the walls' x displacement relative to the
+    floor at the time of the largest B - D offset, (b) the soft/hard relative displacement across
+    interface_8 at the upstream wall (I8_soft - I8_hard) against time. Returns per case the upper
+    structure's largest horizontal offset to the floor (paper: 3.1-4.2 cm)."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    offsets = {}
+    for case, run in runs.items():
+        monitors = run["monitors"]
+        if not all(name in monitors for name in ("A", "B", "C", "D")):
+            continue
+        t = monitors["D"]["t"]
+        horizontal = {name: monitors[name]["ux"] - monitors["D"]["ux"] for name in ("A", "B", "C")}
+        offsets[case] = {name: float(np.abs(values).max()) for name, values in horizontal.items()}
+        for name, style in (("A", "-"), ("B", "--"), ("C", ":")):
+            axes[0].plot(t, CM * horizontal[name], style, color=f"C{case - 1}", lw=0.9,
+                         label=f"{CASE_LABELS[case]}: {name} - D")
+        soft, hard = monitors.get(INTERLAYER_MONITORS[0]), monitors.get(INTERLAYER_MONITORS[1])
+        if soft is not None and hard is not None:
+            axes[1].plot(t, CM * np.linalg.norm(displacement(soft) - displacement(hard), axis=1),
+                         color=f"C{case - 1}", lw=0.9, label=CASE_LABELS[case])
+    axes[0].set_ylabel("x displacement relative to the floor D (cm)")
+    axes[0].set_title("upper structure against the lower: crown A, walls B, C (cf. Fig. 13b)", fontsize=8)
+    axes[1].set_ylabel("|u(I8_soft) - u(I8_hard)| (cm)")
+    axes[1].set_title("across the interface at the upstream wall (cf. Fig. 13d)", fontsize=8)
+    for ax in axes:
+        ax.set_xlabel("t (s)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return offsets
+
+
 # -- table --------------------------------------------------------------------------------------
 
 def _cm(value) -> str:
@@ -460,6 +581,14 @@ def report(presets=("coarse", "paper"), cases=tuple(CASES), runs_dir: pathlib.Pa
         figure_displacements(runs, results / f"fig8_displacement{suffix}.png")
         figure_relative(numbers, results / f"fig9_relative{suffix}.png")
         figure_principal_stress(runs, results / f"fig10_principal_stress{suffix}.png")
+        lining = figure_lining_damage(runs, results / f"fig11_lining_damage{suffix}.png",
+                                      results / f"fig12_damage_type{suffix}.png")
+        offsets = figure_deformation(runs, results / f"fig13_deformation{suffix}.png")
+        for case in numbers:
+            if case in lining:
+                numbers[case]["lining_damage_map"] = lining[case]
+            if case in offsets:
+                numbers[case]["upper_structure_offset"] = offsets[case]
         tables.append(comparison_table(numbers, preset))
     figure_input_record("coarse", results / "fig4_input_record.png")
     text = "\n".join(tables) + "\nRun costs (this 2-core machine):\n\n" + cost_table(numbers_by_preset)
