@@ -362,6 +362,9 @@ class RunWriter:
         self.cell_strain = (cell_strain_operator(self.scene, simulation.model)
                             if self.xdmf_every and ("stress" in fields or "strain" in fields) else None)
         self._histories: dict[str, CsvHistory] = {}
+        from pyfem.deformation import DeformedSection
+
+        self.deformation = DeformedSection(simulation.model, self._monitor_points, cell_regions(simulation.model))
         self._summary: dict | None = None  # set by start()
         self._last_flush = -math.inf
         self._sample_count = 0
@@ -454,6 +457,7 @@ class RunWriter:
                                              pair_values[sim.pair_monitor_pairs]])
         if write_fields:
             self._write_fields(t, u, v, a, pair_values)
+        self.deformation.update(t, u)
         self.times.append(t)
         self.energy_samples.append(energy_row)
         self._histories["energy"].append(energy_row)
@@ -603,6 +607,10 @@ class RunWriter:
         plots.energy(plot_dir / "energy.png", np.array(self.energy_samples), self.energy_columns)
         for name in self.simulation.monitor_names:
             plots.monitor(plot_dir / f"monitor_{name}.png", self.out_dir / "monitors" / f"{name}.csv")
+        names = {tag: name for name, tag in self.simulation.model.regions.items()}
+        deformed = self.deformation.plot(plot_dir / "deformed_section.png", names, self.scene.get("title", ""))
+        if deformed is not None and self._summary is not None:
+            self._summary["deformed_section"] = deformed
 
     # -- pieces -------------------------------------------------------------------------
     def _base_summary(self) -> dict:

@@ -169,3 +169,68 @@ def input_motion(png_path, t, acceleration, velocity, displacement, spectrum: di
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
     plt.close(fig)
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull of 2-D points (m, 2), counter-clockwise (Andrew's monotone chain): the outline a
+    hexahedron cut by a plane shows when its vertices are projected on that plane."""
+    points = np.unique(np.round(points, 9), axis=0)
+    if len(points) < 3:
+        return points
+
+    def half(sequence):
+        chain = []
+        for p in sequence:
+            while len(chain) >= 2 and np.cross(chain[-1] - chain[-2], p - chain[-2]) <= 0.0:
+                chain.pop()
+            chain.append(p)
+        return chain
+
+    lower, upper = half(points), half(points[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def deformed_section(png_path, coords: np.ndarray, cell_nodes: np.ndarray, displacement: np.ndarray,
+                     regions: np.ndarray, region_names: dict, y: float, t: float, title: str = "") -> float:
+    """The section y = const of the model drawn undeformed (grey outline) and deformed (cells
+    coloured by region), the displacement magnified so that its largest value is 4 % of the
+    section's size.
+
+    Args:
+        png_path: output image.
+        coords: (n, 3) coordinates of the nodes cell_nodes refers to (m).
+        cell_nodes: (c, 8) the vertices of the cells cut by the section.
+        displacement: (n, 3) displacement to draw (m), usually relative to the section's mean.
+        regions: (c,) region id of each cell; region_names: id -> name.
+        y: the section (m); t: the time shown (s); title: figure title.
+
+    Returns:
+        The magnification used.
+    """
+    from matplotlib.collections import PolyCollection
+
+    size = float(np.ptp(coords[:, [0, 2]], axis=0).max())
+    largest = float(np.linalg.norm(displacement, axis=1).max(initial=0.0))
+    scale = 0.04 * size / largest if largest > 0.0 else 1.0
+    deformed = coords + scale * displacement
+    before = [convex_hull(coords[nodes][:, [0, 2]]) for nodes in cell_nodes]
+    after = [convex_hull(deformed[nodes][:, [0, 2]]) for nodes in cell_nodes]
+    ids = sorted(set(int(r) for r in regions))
+    colour = {region: f"C{k % 10}" for k, region in enumerate(ids)}
+    fig, ax = plt.subplots(figsize=(7, 7))
+    ax.add_collection(PolyCollection(before, facecolors="none", edgecolors="0.75", linewidths=0.3))
+    ax.add_collection(PolyCollection(after, facecolors=[colour[int(r)] for r in regions], edgecolors="k",
+                                     linewidths=0.15, alpha=0.85))
+    for region in ids:
+        ax.plot([], [], "s", color=colour[region], label=region_names.get(region, str(region)))
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.legend(fontsize=7, loc="upper right")
+    ax.set_title(f"{title}\nsection y = {y:.3g} m at t = {t:.3f} s: displacement relative to the section's mean, "
+                 f"x {scale:.3g} (largest {100 * largest:.3g} cm)".strip(), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+    return scale

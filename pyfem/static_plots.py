@@ -23,6 +23,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import PolyCollection  # noqa: E402
 
+from pyfem.plots import convex_hull  # noqa: E402
+
 MPA = 1.0e-6
 
 
@@ -49,24 +51,6 @@ def section_plane(vertices: np.ndarray, surface: np.ndarray) -> float:
     return float(0.5 * (vertices[..., 1].min() + vertices[..., 1].max()))
 
 
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Convex hull of 2-D points, counter-clockwise (Andrew's monotone chain)."""
-    points = np.unique(np.round(points, 9), axis=0)
-    if len(points) < 3:
-        return points
-
-    def half(sequence):
-        chain = []
-        for p in sequence:
-            while len(chain) >= 2 and np.cross(chain[-1] - chain[-2], p - chain[-2]) <= 0.0:
-                chain.pop()
-            chain.append(p)
-        return chain
-
-    lower, upper = half(points), half(points[::-1])
-    return np.array(lower[:-1] + upper[:-1])
-
-
 def principal_stresses(stress: np.ndarray) -> np.ndarray:
     """(c, 3) principal stresses of (c, 3, 3) tensors, ascending (Pa, tension positive)."""
     return np.linalg.eigvalsh(0.5 * (stress + np.swapaxes(stress, 1, 2)))
@@ -91,7 +75,7 @@ def section_stress(png_path, vertices: np.ndarray, stress: np.ndarray, surface: 
     y = vertices[..., 1]
     cut = (y.min(axis=1) <= y0) & (y.max(axis=1) >= y0)
     cells = np.flatnonzero(cut)
-    polygons = [_hull(vertices[c][:, [0, 2]]) for c in cells]
+    polygons = [convex_hull(vertices[c][:, [0, 2]]) for c in cells]
     principal = principal_stresses(stress[cells])
     panels = [("max principal stress (MPa)", principal[:, 2] * MPA, "RdBu_r", True),
               ("min principal stress (MPa)", principal[:, 0] * MPA, "viridis", False)]

@@ -90,6 +90,8 @@ def test_small_case3_runs_all_physics_with_energy_balance(small_run):
     assert summary["energy"]["balance_error"] < 0.01
     moved = [summary["monitors"][name]["displacement"] for name in ("A", "B", "C", "D")]
     assert all(math.isfinite(value) and value > 0.0 for value in moved), "the input arrived at the lining"
+    assert summary["deformed_section"]["largest"] > 0.0 and abs(summary["deformed_section"]["y"]) < 1.0
+    assert (out / "plots" / "deformed_section.png").stat().st_size > 20000
 
 
 def test_static_stage_pictures_and_interface_figures(small_run):

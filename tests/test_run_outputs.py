@@ -202,3 +202,31 @@ def test_no_input_motion_without_a_wave(tmp_path):
     summary = solver.run(scene, tmp_path / "run")
     assert "input_motion" not in summary and summary["regions"] == {"rock": summary["regions"]["rock"]}
     assert not (tmp_path / "run" / "plots" / "input.png").exists()
+
+
+def test_deformed_section_keeps_the_most_deformed_sample(two_layer_run):
+    """plots/deformed_section.png shows the sample where the section through the monitors is most
+    deformed relative to its mean: a rigid translation counts nothing, the larger of two shears wins."""
+    from pyfem.deformation import DeformedSection
+
+    out, writer, _ = two_layer_run
+    summary = json.loads((out / "run.json").read_text())
+    kept = summary["deformed_section"]
+    assert kept["largest"] > 0.0, "the wave deformed the section"
+    assert 0.0 < kept["t"] <= summary["time_reached"] + 1e-12
+    assert (out / "plots" / "deformed_section.png").stat().st_size > 20000
+    assert set(np.unique(writer.deformation.regions)) == set(summary["regions"].values())  # both layers cut
+
+    model = writer.simulation.model
+    tracker = DeformedSection(model, writer._monitor_points, np.zeros(model.n_cells, dtype=np.int32))
+    x = model.node_coords
+    translation = np.tile([0.3, -0.2, 0.1], len(x))
+    shear = np.zeros((len(x), 3))
+    shear[:, 0] = 1e-3 * (x[:, 2] - x[:, 2].mean())  # u_x grows with z
+    tracker.update(0.1, translation)
+    assert tracker.largest == pytest.approx(0.0, abs=1e-12)
+    tracker.update(0.2, (2.0 * shear).ravel() + translation)
+    tracker.update(0.3, shear.ravel())
+    section = x[tracker.nodes]
+    expected = 2e-3 * np.abs(section[:, 2] - section[:, 2].mean()).max()
+    assert tracker.t == 0.2 and tracker.largest == pytest.approx(expected, rel=1e-9)

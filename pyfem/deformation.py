@@ -1,0 +1,57 @@
+"""The run's picture of the deformed model: plots/deformed_section.png.
+
+`DeformedSection` keeps, over the samples of a run, the displacement of the section through the
+monitors (the plane y = median y of the monitors, else the model's middle) at the sample where it
+is most deformed: the largest displacement relative to the section's mean (its rigid translation
+with the free field removed). At the end of the run `plot` draws that section undeformed and
+deformed, magnified, coloured by region (lining, rock layers): where the cavern deformed most, at
+what time. Costs one gather of the section's nodes per sample.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class DeformedSection:
+    """Tracks the most deformed sample of one section of the model.
+
+    Args:
+        model: pyfem.operators.Model.
+        monitor_points: (m, 3) monitor points (m) or None.
+        region_ids: (cells,) region id of every cell (pyfem.output.cell_regions).
+    """
+
+    def __init__(self, model, monitor_points, region_ids: np.ndarray):
+        n_basis = model.V.dofmap.dof_layout.num_dofs
+        vertices = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :8]
+        y = model.node_coords[vertices][..., 1]
+        self.y = (float(np.median(monitor_points[:, 1])) if monitor_points is not None and len(monitor_points)
+                  else float(0.5 * (y.min() + y.max())))
+        cut = (y.min(axis=1) <= self.y) & (y.max(axis=1) >= self.y)
+        self.nodes, compact = np.unique(vertices[cut], return_inverse=True)
+        self.cell_nodes = compact.reshape(-1, 8)
+        self.regions = region_ids[cut]
+        self.coords = model.node_coords[self.nodes]
+        self.largest = -1.0
+        self.t = None
+        self.displacement = None
+
+    def update(self, t: float, u: np.ndarray) -> None:
+        """Keeps the section's displacement at t (s) if it is the most deformed so far; u (dofs, m)."""
+        if not len(self.nodes):
+            return
+        section = u.reshape(-1, 3)[self.nodes]
+        relative = section - section.mean(axis=0)
+        largest = float(np.sqrt(np.max(np.einsum("nc,nc->n", relative, relative))))
+        if largest > self.largest:
+            self.largest, self.t, self.displacement = largest, float(t), relative
+
+    def plot(self, png_path, region_names: dict, title: str = "") -> dict | None:
+        """Draws the kept sample; returns {"t", "y", "largest" (m), "magnification"} or None."""
+        from pyfem.plots import deformed_section
+
+        if self.displacement is None:
+            return None
+        scale = deformed_section(png_path, self.coords, self.cell_nodes, self.displacement, self.regions,
+                                 region_names, self.y, self.t, title)
+        return {"t": self.t, "y": self.y, "largest": self.largest, "magnification": scale}
