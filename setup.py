@@ -17,8 +17,9 @@ from setuptools.command.build_ext import build_ext
 from setuptools.command.build_py import build_py
 
 ROOT = Path(__file__).resolve().parent
-# The accuracy study's results (workflows/accuracy_cost.py), read by pyfem.accuracy.
-ACCURACY_RESULTS = ROOT / "workflows" / "results" / "accuracy_cost.csv"
+# The accuracy studies' results (workflows/accuracy_cost.py, workflows/wall_stress_accuracy.py), read
+# by pyfem.accuracy.
+ACCURACY_RESULTS = [ROOT / "workflows" / "results" / name for name in ("accuracy_cost.csv", "wall_stress.csv")]
 
 
 class CMakeExtension(Extension):
@@ -49,14 +50,15 @@ class CMakeBuild(build_ext):
 
 
 class BuildPyWithData(build_py):
-    """The package's Python files, plus the accuracy study's results as pyfem/data/."""
+    """The package's Python files, plus the accuracy studies' results as pyfem/data/."""
 
     def run(self):
         super().run()
-        if ACCURACY_RESULTS.is_file():
-            target = Path(self.build_lib) / "pyfem" / "data" / ACCURACY_RESULTS.name
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(ACCURACY_RESULTS, target)
+        for results in ACCURACY_RESULTS:
+            if results.is_file():
+                target = Path(self.build_lib) / "pyfem" / "data" / results.name
+                target.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(results, target)
 
 
 setup(

@@ -779,6 +779,23 @@ is the laws' own energy error, round-off for linear_elastic).)")
           },
           py::arg("u"), py::arg("v"), py::arg("a"), py::arg("t0"),
           "Sets H_0 from the state (u, v, a) at t0 (read only) and zeroes the accumulated work.")
+      .def(
+          "phase_seconds",
+          [](const Stepper& stepper) {
+            const PhaseTimes& times = stepper.phase_times();
+            py::dict phases;
+            phases["update"] = times.update;
+            phases["element_loop"] = times.element_loop;
+            phases["input_forces"] = times.input_forces;
+            phases["stiffness"] = times.stiffness;
+            phases["contact"] = times.contact;
+            phases["steps"] = times.steps;
+            return phases;
+          },
+          "Wall time (s) of each part of the steps since construction or reset_phase_seconds(): "
+          "update (pass A), element_loop (internal-force components), input_forces (force providers "
+          "and their work), stiffness (pass B: K u and the velocity update), contact; and steps.")
+      .def("reset_phase_seconds", &Stepper::reset_phase_times, "Zeroes the phase times.")
       .def_property_readonly("dt", &Stepper::dt, "Time step (s).")
       .def_property_readonly("n_nodes", &Stepper::n_nodes)
       .def_property_readonly("n_dofs", &Stepper::n_dofs);

@@ -452,15 +452,24 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
 
   const bool internal = !components_.empty();
 
+  PhaseTimes& times = phase_times_;
   for (std::int64_t step = 0; step < n_steps; ++step) {
     // Multiplying, not accumulating, keeps t free of drift over many steps.
     const double t_next = t0 + static_cast<double>(step + 1) * dt;
 
+    double clock = omp_get_wtime();
+    auto lap = [&clock](double& phase) {
+      const double now = omp_get_wtime();
+      phase += now - clock;
+      clock = now;
+    };
     double previous_internal_power = 0.0, stored = 0.0;
     if (internal) {
       previous_internal_power = pass_a_with_internal(u, v, a);
+      lap(times.update);
       stored = compute_internal_forces(u);
       internal_power_ = internal_power(v);  // g_{n+1}.v_{n+1/2}, before pass B overwrites v
+      lap(times.element_loop);
     } else {
 #pragma omp parallel for schedule(static) if (threaded_)
       for (std::int64_t d = 0; d < n; ++d) {
@@ -469,9 +478,11 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
         u[d] += dt * velocity_half;
         if (stiffness_damping) v_half[d] = velocity_half;
       }
+      lap(times.update);
     }
 
     for (auto& provider : providers_) provider->add_forces(t_next, u, v, f);
+    lap(times.input_forces);
 
     const double previous_external_power = external_power_;
     const double previous_damping_power = damping_power_;
@@ -480,7 +491,11 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
       dispatch_pass_b<true>(u, v, a);
     else
       dispatch_pass_b<false>(u, v, a);
-    if (contact_) contact_post_pass(t_next, u, v, a);
+    lap(times.stiffness);
+    if (contact_) {
+      contact_post_pass(t_next, u, v, a);
+      lap(times.contact);
+    }
     if (internal) {
       double dissipation = 0.0;
       for (auto& component : components_) {
@@ -490,11 +505,14 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
       internal_work_ += half_dt * (previous_internal_power + internal_power_);
       internal_stored_ = stored;
       internal_dissipation_ = dissipation - dissipation_at_reset_;
+      lap(times.element_loop);
     }
     external_work_ += half_dt * (previous_external_power + external_power_);
     damping_work_ += half_dt * (previous_damping_power + damping_power_);
     contact_work_ += half_dt * (previous_contact_power + contact_power_);
     accumulate_work(v);
+    lap(times.input_forces);
+    ++times.steps;
   }
   return t0 + static_cast<double>(n_steps) * dt;
 }

@@ -51,6 +51,17 @@ struct EnergyReport {
   std::vector<double> provider_work;  // each provider's share of external_work
 };
 
+/// Wall time of each part of the steps run so far (s): where the time goes (issue 12). Two clock
+/// reads per phase per step (omp_get_wtime, ~20 ns each), nothing per node.
+struct PhaseTimes {
+  double update = 0.0;         // pass A: v_{n+1/2}, u_{n+1} (and the components' g_n.v bookkeeping)
+  double element_loop = 0.0;   // the internal-force components: g(u_{n+1}), its power, commit
+  double input_forces = 0.0;   // the force providers (seismic input, held forces) and their work
+  double stiffness = 0.0;      // pass B: K u (+ beta K v) and the per-node velocity/energy update
+  double contact = 0.0;        // the contact pairs' correction
+  std::int64_t steps = 0;      // steps timed
+};
+
 /// Velocity-Verlet central difference for M a + d(v) + K u = f_ext(t), lumped M.
 /// Per step, from (u_n, v_n, a_n) at t_n:
 ///   pass A (per dof):  v_{n+1/2} = v_n + dt/2 a_n,  u_{n+1} = u_n + dt v_{n+1/2}
@@ -138,6 +149,10 @@ class Stepper {
 
   EnergyReport energy() const;
 
+  /// Wall time per phase of the steps since construction or the last reset_phase_times().
+  const PhaseTimes& phase_times() const { return phase_times_; }
+  void reset_phase_times() { phase_times_ = PhaseTimes{}; }
+
   double dt() const { return parameters_.dt; }
   std::int64_t n_nodes() const { return stiffness_.n_block_rows; }
   std::int64_t n_dofs() const { return 3 * stiffness_.n_block_rows; }
@@ -213,6 +228,7 @@ class Stepper {
   double dissipation_at_reset_ = 0.0;  // sum of the components' dissipation() at the reset
   std::vector<double> provider_work_;
   std::vector<double> provider_power_;
+  PhaseTimes phase_times_;
 };
 
 }  // namespace cavern

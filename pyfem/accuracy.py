@@ -9,7 +9,10 @@ the run took. This module turns that table into advice:
 * `recommend(error_budget)`: the cheapest measured settings whose error is within the
   budget;
 * `element_size_for(scene, error_budget)`: the element size and order a scene needs,
-  from the shortest shear wavelength of its materials and its wave's frequency content.
+  from the shortest shear wavelength of its materials and its wave's frequency content;
+* `wall_size_for(error_budget)`: the element size at a cavern's wall, as a fraction of the
+  opening's radius, that keeps the wall's hoop stress within the budget (the wall-stress study,
+  workflows/wall_stress_accuracy.py, workflows/results/wall_stress.csv).
 
 Errors transfer between scenes through the elements per shortest wavelength (the
 dispersion error of a given element depends on h / wavelength); seconds do not
@@ -24,8 +27,10 @@ from pathlib import Path
 from pyfem.material import Material
 
 DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "accuracy_cost.csv"
+WALL_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "wall_stress.csv"
 if not DEFAULT_RESULTS.is_file():  # an installed package (pip install .) carries a copy (setup.py)
     DEFAULT_RESULTS = Path(__file__).resolve().parent / "data" / "accuracy_cost.csv"
+    WALL_RESULTS = Path(__file__).resolve().parent / "data" / "wall_stress.csv"
 # The highest frequency with energy in a Ricker wavelet, in units of its peak frequency f0:
 # the amplitude spectrum (f/f0)^2 exp(-(f/f0)^2) at 2.5 f0 is 3 % of its peak at f0.
 RICKER_MAX_FREQUENCY_FACTOR = 2.5
@@ -185,3 +190,47 @@ def element_size_for(scene, error_budget: float, results_csv=DEFAULT_RESULTS,
             "shortest_wavelength": wavelength, "highest_frequency": frequency, "shear_speed": speed,
             "safety": advice["safety"], "boundary": advice["boundary"], "expected_error": advice["error"],
             "text": text}
+
+
+def wall_size_for(error_budget: float, results_csv=WALL_RESULTS) -> list[dict]:
+    """The largest element size at a cavern wall, per order, that kept the wall's hoop stress within
+    a budget in the wall-stress study (Kirsch rows: a wave much longer than the opening).
+
+    Args:
+        error_budget: largest acceptable relative error of the hoop stress history (e.g. 0.05).
+        results_csv: the study's CSV (workflows/results/wall_stress.csv).
+
+    Returns:
+        per order (ascending) a dict: order, h_over_a (element size at the wall / the opening's
+        radius, the largest measured within the budget), error (measured), loop_seconds, and
+        "text" (one line for ``pyfem check``); an order none of whose sizes met the budget says so
+        in its text with h_over_a None.
+
+    Raises:
+        ValueError: a budget that is not a positive number, or no study results.
+    """
+    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
+        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+    with open(results_csv, newline="") as stream:
+        rows = [row for row in csv.DictReader(stream) if row["reference"] == "Kirsch"]
+    if not rows:
+        raise ValueError(f"{results_csv}: no Kirsch rows; run workflows/wall_stress_accuracy.py")
+    advice = []
+    for order in sorted({int(row["order"]) for row in rows}):
+        series = [row for row in rows if int(row["order"]) == order]
+        meeting = [row for row in series if float(row["history_error"]) <= error_budget]
+        if meeting:
+            best = max(meeting, key=lambda row: float(row["h_over_a"]))
+            h_over_a, error = float(best["h_over_a"]), float(best["history_error"])
+            text = (f"Q{order}: at most {h_over_a:.3g} x the opening's radius at the wall (study error "
+                    f"{100 * error:.2g} %)")
+            advice.append({"order": order, "h_over_a": h_over_a, "error": error,
+                           "loop_seconds": float(best["loop_seconds"]), "text": text})
+        else:
+            smallest = min(series, key=lambda row: float(row["history_error"]))
+            advice.append({"order": order, "h_over_a": None, "error": float(smallest["history_error"]),
+                           "loop_seconds": float(smallest["loop_seconds"]),
+                           "text": f"Q{order}: not reached in the study (smallest error "
+                                   f"{100 * float(smallest['history_error']):.2g} % at "
+                                   f"{float(smallest['h_over_a']):.3g} x the radius)"})
+    return advice

@@ -172,13 +172,21 @@ def check_out_dir(out_dir: Path) -> None:
 
 def mesh_advice(scene: Scene) -> str:
     """What the accuracy-versus-cost study says this scene's waves need (h, order) for 5 % and 1 %."""
-    from pyfem.accuracy import element_size_for
+    from pyfem.accuracy import element_size_for, wall_size_for
 
     lines = [f"mesh advice (workflows/accuracy_cost.py; scene h = {scene['mesh'].get('h')}, "
              f"order {scene['mesh']['order']}):"]
     for budget in (0.05, 0.01):
         try:
             lines.append(f"  {element_size_for(scene, budget)['text']}")
+        except (ValueError, FileNotFoundError) as error:
+            lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
+    lines.append("wall stress advice (workflows/wall_stress_accuracy.py: hoop stress at a circular opening's "
+                 "wall, long wave, against Kirsch):")
+    for budget in (0.05, 0.01):
+        try:
+            advice = wall_size_for(budget)
+            lines.append(f"  for a {100 * budget:g} % error: " + "; ".join(item["text"] for item in advice))
         except (ValueError, FileNotFoundError) as error:
             lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
     return "\n".join(lines)

@@ -560,8 +560,12 @@ class RunWriter:
         return np.column_stack([delta, slip, gap, np.asarray(contact.normal_force()), tangential,
                                 np.asarray(contact.deterioration()), np.asarray(contact.state(), dtype=float)])
 
-    def finish(self, wall_seconds: float, loop_seconds: float) -> dict:
-        """Closes histories and fields, draws the plots, writes the final run.json; returns the summary."""
+    def finish(self, wall_seconds: float, loop_seconds: float, phases: dict | None = None) -> dict:
+        """Closes histories and fields, draws the plots, writes the final run.json; returns the summary.
+
+        phases: pyfem.solver.phase_split of the time loop (run.json "time_per_step": ms per step and
+        share of the loop for the kernel's update, element_loop, input_forces, stiffness, contact,
+        and output (writing the samples) and other)."""
         self._close_histories()
         self._close_fields()
         summary = self._summary
@@ -570,6 +574,8 @@ class RunWriter:
         summary["wall_seconds"] = wall_seconds
         summary["loop_seconds"] = loop_seconds
         summary["seconds_per_step"] = loop_seconds / max(1, self.simulation.n_steps)
+        if phases is not None:
+            summary["time_per_step"] = phases
         self._partial_summary()
         self._plots()
         _write_json(self.out_dir / "run.json", summary)

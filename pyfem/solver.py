@@ -578,6 +578,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     start = time.perf_counter()
     stepper.run(u, v, a, trial_steps, 0.0)
     per_step = (time.perf_counter() - start) / trial_steps
+    phases = phase_split(stepper.phase_seconds(), per_step * trial_steps)
     del stepper
     if nonlinear is not None:
         nonlinear.components = kept
@@ -601,9 +602,36 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
         "steps": simulation.n_steps,
         "memory": f"{memory_estimate(simulation) / 2**20:.1f} MiB",
-        "time per step": f"{per_step * 1e3:.3f} ms (measured over {trial_steps} steps)",
+        "time per step": f"{per_step * 1e3:.3f} ms (measured over {trial_steps} steps, from rest): "
+                         + ", ".join(f"{name} {entry['ms_per_step']:.3f} ms" for name, entry in phases.items()
+                                     if name != "other" or entry["ms_per_step"] > 0.0),
         "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion",
     }
+
+
+PHASES = ("update", "element_loop", "input_forces", "stiffness", "contact")
+"""The kernel's phases of a step (Stepper.phase_seconds; cpp_kernels/stepper.hpp PhaseTimes)."""
+
+
+def phase_split(phase_seconds: dict, loop_seconds: float, output_seconds: float | None = None) -> dict:
+    """Per phase of a step: ms per step and share of the time loop.
+
+    Args:
+        phase_seconds: Stepper.phase_seconds() (s per phase, and "steps").
+        loop_seconds: wall time of the whole loop the steps ran in (s).
+        output_seconds: of that, the time spent writing samples (s), None if not measured.
+
+    Returns:
+        {phase: {"ms_per_step", "share"}} for PHASES, "output" (when given) and "other" (the loop's
+        remainder: Python between the kernel's calls, progress lines).
+    """
+    steps = max(1, int(phase_seconds["steps"]))
+    seconds = {name: float(phase_seconds[name]) for name in PHASES}
+    if output_seconds is not None:
+        seconds["output"] = float(output_seconds)
+    seconds["other"] = max(0.0, loop_seconds - sum(seconds.values()))
+    total = max(loop_seconds, 1e-300)
+    return {name: {"ms_per_step": 1e3 * value / steps, "share": value / total} for name, value in seconds.items()}
 
 
 def element_loop_plan(nonlinear, u: np.ndarray, per_step: float, time_step: TimeStep) -> dict:
@@ -688,6 +716,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None) -> dict:
                 writer.sample(t, u, v, a, stepper.energy())
             ts = simulation.time_step
             n_outputs = simulation.n_steps // ts.steps_per_output
+            stepper.reset_phase_seconds()
+            output_seconds = 0.0
             loop_start = time.perf_counter()
             if progress is not None:
                 progress.start(t)
@@ -698,13 +728,17 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None) -> dict:
                     reactions = stepper.reactions() if simulation.constraints is not None else None
                     if not np.isfinite(u).all():
                         raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+                    output_start = time.perf_counter()
                     with signals.deferred():
                         writer.sample(t, u, v, a, stepper.energy(), reactions)
+                    output_seconds += time.perf_counter() - output_start
                     bar.update()
                     if progress is not None:
                         progress(t)
             loop_seconds = time.perf_counter() - loop_start
-            return writer.finish(wall_seconds=time.perf_counter() - wall_start, loop_seconds=loop_seconds)
+            phases = phase_split(stepper.phase_seconds(), loop_seconds, output_seconds)
+            return writer.finish(wall_seconds=time.perf_counter() - wall_start, loop_seconds=loop_seconds,
+                                 phases=phases)
         except KeyboardInterrupt as error:
             interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
             if writer.started:
