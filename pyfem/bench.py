@@ -199,12 +199,51 @@ def element_loop_rows(target_dofs: int, steps: int, threads: int = 2) -> list[di
     return rows
 
 
+def case_study_rows(presets, steps: int, threads: int = 2) -> list[dict]:
+    """The case-3 scene's step (workflows/scenes/case3_contact_PRESET.toml) split into the kernel's
+    phases: stiffness product, element loop (Mohr-Coulomb rock zone and concrete lining, at rest:
+    a yielding point costs several times more), input forces, contact pairs, update. The static
+    stage is not solved (the step's cost does not depend on it; its minutes are in run.json)."""
+    from pathlib import Path
+
+    from pyfem import _kernels, solver
+    from pyfem.scene import load_scene
+
+    scenes = Path(__file__).resolve().parents[1] / "workflows" / "scenes"
+    rows = []
+    for preset in presets:
+        path = scenes / f"case3_contact_{preset}.toml"
+        if not path.is_file():  # an installed package carries no workflows
+            continue
+        simulation = solver.prepare(load_scene(path), solve_static=False)
+        stepper = solver.make_stepper(simulation)
+        _kernels.set_num_threads(threads)
+        n = simulation.stiffness.shape[0]
+        stepper_seconds_per_step(stepper, n, 2, amplitude=1.0e-9)  # warm-up
+        stepper.reset_phase_seconds()
+        rng = np.random.default_rng(0)
+        u, v, a = 1.0e-9 * rng.standard_normal(n), np.zeros(n), np.zeros(n)
+        start = time.perf_counter()
+        stepper.run(u, v, a, steps, 0.0)
+        seconds = time.perf_counter() - start
+        split = solver.phase_split(stepper.phase_seconds(), seconds)
+        rows.append({"case": f"case 3 {preset} (contact, Mohr-Coulomb zone, concrete lining, oblique input)",
+                     "dofs": n, "threads": threads, "ms": 1e3 * seconds / steps,
+                     "points": simulation.nonlinear.n_points if simulation.nonlinear is not None else 0,
+                     "pairs": len(simulation.contact_arrays["area"]) if simulation.contact_arrays else 0,
+                     "phases": {name: entry["ms_per_step"] for name, entry in split.items()}})
+    return rows
+
+
 def main(argv=None) -> int:
     """Runs the benchmark, writes the results as JSON and prints a markdown table; returns 0."""
     parser = argparse.ArgumentParser(prog="pyfem bench", description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[30_000, 200_000, 700_000])
     parser.add_argument("--steps", type=int, default=50)
     parser.add_argument("--out", default="bench.json")
+    parser.add_argument("--case-study", nargs="*", default=["coarse"], choices=["coarse", "paper"],
+                        help="case-3 scenes whose step is split into phases (default coarse; paper builds "
+                             "the 500 000-dof model, minutes); none: --case-study with no value")
     args = parser.parse_args(argv)
 
     from pyfem import _kernels
@@ -246,9 +285,11 @@ def main(argv=None) -> int:
                     "ns_per_dof": 1e9 * seconds / n,
                 })
     element_rows = element_loop_rows(args.sizes[0], args.steps)
+    case_rows = case_study_rows(args.case_study, args.steps)
     _kernels.set_num_threads(2)
     result = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.node()} {platform.processor()}",
-              "cpu_count": __import__("os").cpu_count(), "rows": rows, "element_loop": element_rows}
+              "cpu_count": __import__("os").cpu_count(), "rows": rows, "element_loop": element_rows,
+              "case_study": case_rows}
     with open(args.out, "w") as stream:
         json.dump(result, stream, indent=2)
     print(markdown_table(result))
@@ -276,6 +317,15 @@ def markdown_table(result: dict) -> str:
             per_point = "" if r["ns_per_point"] is None else f"{r['ns_per_point']:.0f}"
             lines.append(f"| {r['case']} | {r['dofs']} | {r['threads']} | {r['ms']:.3f} | {r['reference_ms']:.3f} | "
                          f"{r['ratio']:.2f} | {per_point} |")
+    if result.get("case_study"):
+        from pyfem.solver import PHASES
+
+        lines += ["", "The case study's step split into the kernel's phases (ms per step, at rest; same run):", "",
+                  "| case | dofs | element-loop points | pairs | threads | ms/step | "
+                  + " | ".join(PHASES) + " | other |", "|---|---:|---:|---:|---:|---:|" + "---:|" * (len(PHASES) + 1)]
+        for r in result["case_study"]:
+            lines.append(f"| {r['case']} | {r['dofs']} | {r['points']} | {r['pairs']} | {r['threads']} | {r['ms']:.2f} | "
+                         + " | ".join(f"{r['phases'][name]:.2f}" for name in (*PHASES, "other")) + " |")
     return "\n".join(lines)
 
 
