@@ -141,7 +141,9 @@ def interface_stress(png_path, coords: np.ndarray, normal: np.ndarray, area: np.
     ax.axhline(0.0, color="k", lw=0.6)
     ax.set_xlabel("distance from the excavation (m)")
     ax.set_ylabel("interface normal stress (MPa, compression +)")
-    ax.set_xlim(0.0, float(np.percentile(distance, 90)) if len(distance) > 10 else None)
+    far = float(np.percentile(distance, 90)) if len(distance) > 10 else 0.0
+    if far > 0.0:  # the nearer 90 % of the pairs (all pairs may lie on the loaded surface: then all)
+        ax.set_xlim(0.0, far)
     ax.grid(alpha=0.3)
     ax.legend(markerscale=4, fontsize=8)
     ax.set_title(f"{title} interface normal stress".strip(), fontsize=10)
