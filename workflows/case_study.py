@@ -373,7 +373,7 @@ def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathl
     figures = {}
     summary = {}
     for key, path in (("damage", path_damage), ("damage_type", path_type)):
-        fig, axes = plt.subplots(1, len(fields), figsize=(4.6 * len(fields), 5.2), squeeze=False, sharey=True)
+        fig, axes = plt.subplots(1, len(fields), figsize=(4.6 * len(fields) + 1.6, 5.2), squeeze=False, sharey=True)
         for ax, (case, f) in zip(axes[0], sorted(fields.items())):
             cells, centroids = lining_cells(f, runs[case]["summary"])
             angle = section_angle(centroids, centre_z=0.5 * centroids[:, 2].max())
@@ -393,14 +393,14 @@ def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathl
             ax.set_xticks([-180, -90, 0, 90, 180], ["up. wall", "floor", "down. wall", "crown", "up. wall"],
                           fontsize=7)
             ax.set_title(f"{CASE_LABELS[case]}, t = {f['t']:.2f} s", fontsize=8)
-        axes[0][0].set_ylabel("y along the cavern (m); shaded: the soft-layer bay")
+        axes[0][0].set_ylabel("y along the cavern (m)")
         colorbar = fig.colorbar(image, ax=axes[0].tolist(), shrink=0.8)
         if key == "damage_type":
             colorbar.set_ticks([0, 1, 2], labels=["none", "tension", "shear"])
-            title = "lining damage type at the end of the run (cf. paper Fig. 12)"
+            title = "lining damage type at the end of the run (cf. paper Fig. 12); shaded: the soft-layer bay"
         else:
             colorbar.set_label("damage (-)")
-            title = "lining damage at the end of the run, unrolled (cf. paper Fig. 11)"
+            title = "lining damage at the end of the run, unrolled (cf. paper Fig. 11); shaded: the soft-layer bay"
         fig.suptitle(title, fontsize=9)
         fig.savefig(path, dpi=110)
         plt.close(fig)
