@@ -661,6 +661,35 @@ I - n n^T holds its normal component (roller). The held part of the force goes t
 Args:
     nodes: int32 (k,) distinct nodes. Copied.
     projection: float64 (k, 3, 3) symmetric idempotent matrices P. Copied.)")
+      .def(
+          "save_state",
+          [](const Stepper& stepper) {
+            StateArchive archive;
+            stepper.save_state(archive);
+            py::dict out;
+            for (const auto& [name, block] : archive.blocks())
+              out[py::str(name)] = py::bytes(reinterpret_cast<const char*>(block.data()),
+                                             static_cast<py::ssize_t>(block.size()));
+            return out;
+          },
+          R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
+byte blocks (the energy account, the last internal force and reactions, the contact pairs'
+and every internal-force component's state), a copy.)")
+      .def(
+          "load_state",
+          [](Stepper& stepper, const py::dict& blocks) {
+            StateArchive::Blocks copy;
+            for (const auto& [name, value] : blocks) {
+              const std::string bytes = py::cast<py::bytes>(value);
+              copy[py::cast<std::string>(name)] =
+                  std::vector<std::uint8_t>(bytes.begin(), bytes.end());
+            }
+            stepper.load_state(StateArchive(std::move(copy)));
+          },
+          py::arg("state"),
+          R"(Restores save_state's dict into a stepper built from the same scene (same dt, damping,
+dofs, providers, pairs and components, in the same order). ValueError names the first block that
+does not fit; then nothing may be assumed about the stepper's state.)")
       .def("set_mass_damping", &Stepper::set_mass_damping, py::arg("alpha"),
            "Changes the mass-proportional damping alpha (1/s, >= 0) for the following steps "
            "(dynamic relaxation of the static stage adapts it). ValueError for a bad alpha.")

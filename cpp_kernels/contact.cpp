@@ -336,6 +336,38 @@ void ContactPairs::rebase(const double* u) {
   std::fill(node_force_.begin(), node_force_.end(), 0.0);
 }
 
+void ContactPairs::save_state(StateArchive& archive, const std::string& prefix) const {
+  archive.put(prefix + "pairs", pairs_);
+  archive.put(prefix + "state", state_);
+  archive.put(prefix + "bond_intact", bond_intact_);
+  archive.put(prefix + "normal_force", normal_force_);
+  archive.put(prefix + "tangential_force", tangential_force_);
+  archive.put(prefix + "contact_force", contact_force_);
+  archive.put(prefix + "deterioration", deterioration_);
+  archive.put(prefix + "slip_rate", slip_rate_);
+  archive.put(prefix + "gap_offset", gap_offset_);
+  archive.put(prefix + "static_force", static_force_);
+  archive.put(prefix + "node_force", node_force_);
+}
+
+void ContactPairs::load_state(const StateArchive& archive, const std::string& prefix) {
+  std::vector<std::int32_t> pairs(pairs_.size());
+  archive.get(prefix + "pairs", pairs);
+  if (pairs != pairs_)
+    throw std::invalid_argument("checkpoint block '" + prefix +
+                                "pairs': the pairs join other nodes than the model's");
+  archive.get(prefix + "state", state_);
+  archive.get(prefix + "bond_intact", bond_intact_);
+  archive.get(prefix + "normal_force", normal_force_);
+  archive.get(prefix + "tangential_force", tangential_force_);
+  archive.get(prefix + "contact_force", contact_force_);
+  archive.get(prefix + "deterioration", deterioration_);
+  archive.get(prefix + "slip_rate", slip_rate_);
+  archive.get(prefix + "gap_offset", gap_offset_);
+  archive.get(prefix + "static_force", static_force_);
+  archive.get(prefix + "node_force", node_force_);
+}
+
 void ContactPairs::observe_velocity(const double* v) {
   for (std::int64_t p = 0; p < n_pairs_; ++p) {
     const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];

@@ -3,9 +3,11 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "deterioration.hpp"
+#include "state_archive.hpp"
 
 namespace cavern {
 
@@ -130,6 +132,13 @@ class ContactPairs {
 
   /// Adds the last recorded R to node i and -R to node j of f (3 n_nodes).
   void add_last_forces(double* f) const;
+
+  /// Writes every pair's state (bond, contact state, forces, D, slip rate, the rebased gap and
+  /// static force) under `prefix` (checkpoint, docs/checkpoint.md); load_state reads it back
+  /// into pairs built from the same interfaces. Throws std::invalid_argument for a missing block
+  /// or one of another size.
+  void save_state(StateArchive& archive, const std::string& prefix) const;
+  void load_state(const StateArchive& archive, const std::string& prefix);
 
   std::int64_t n_pairs() const { return n_pairs_; }
   /// Distinct pair nodes, sorted; net_force(k) is the last net contact force on unique_nodes()[k].

@@ -92,6 +92,35 @@ void HexahedronElementsBase::rebase() {
   trial_ready_ = false;
 }
 
+void HexahedronElementsBase::save_state(StateArchive& archive, const std::string& prefix) const {
+  archive.put(prefix + "points", std::vector<std::int64_t>{geometry_.n_cells * geometry_.n_points});
+  save_points(archive, prefix + "state");
+  archive.put(prefix + "initial_stress", initial_stress_);
+  archive.put_value(prefix + "stored_energy", stored_energy_);
+  archive.put_value(prefix + "dissipation", dissipation_);
+}
+
+void HexahedronElementsBase::load_state(const StateArchive& archive, const std::string& prefix) {
+  std::vector<std::int64_t> points{geometry_.n_cells * geometry_.n_points};
+  archive.get(prefix + "points", points);
+  if (points[0] != geometry_.n_cells * geometry_.n_points)
+    throw std::invalid_argument("checkpoint block '" + prefix + "points': " +
+                                std::to_string(points[0]) + " points, the model has " +
+                                std::to_string(geometry_.n_cells * geometry_.n_points));
+  load_points(archive, prefix + "state");
+  // sigma0 at every point, or none (a component built without initial stress, never rebased).
+  const std::string stress_block = prefix + "initial_stress";
+  const std::size_t n_values = archive.contains(stress_block)
+                                   ? archive.blocks().at(stress_block).size() / sizeof(double)
+                                   : 0;
+  const std::size_t n_full = static_cast<std::size_t>(6 * points[0]);
+  initial_stress_.assign(n_values == n_full ? n_full : 0, 0.0);
+  archive.get(prefix + "initial_stress", initial_stress_);
+  archive.get_value(prefix + "stored_energy", stored_energy_);
+  archive.get_value(prefix + "dissipation", dissipation_);
+  trial_ready_ = false;
+}
+
 void HexahedronElementsBase::check_nodes(std::int64_t n_nodes) const {
   if (!unique_nodes_.empty() && unique_nodes_.back() >= n_nodes)
     throw std::invalid_argument(name() + ": cell node " + std::to_string(unique_nodes_.back()) +

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "materials/material_law.hpp"
+#include "state_archive.hpp"
 
 namespace cavern {
 
@@ -52,6 +53,13 @@ class InternalForceComponent {
   /// from the state that was committed (u = 0 of the new run). A pending trial (compute()
   /// without commit()) is discarded.
   virtual void rebase() = 0;
+
+  /// Writes the committed state (per point, the initial stress, the energies) under `prefix`
+  /// (checkpoint, docs/checkpoint.md); load_state reads it back into a component built from the
+  /// same cells and law, the trial state reset to the committed one. Throws
+  /// std::invalid_argument for a missing block or one of another size.
+  virtual void save_state(StateArchive& archive, const std::string& prefix) const = 0;
+  virtual void load_state(const StateArchive& archive, const std::string& prefix) = 0;
 
   /// Stored energy of the committed state (J).
   virtual double stored_energy() const = 0;
@@ -104,6 +112,8 @@ class HexahedronElementsBase : public InternalForceComponent {
 
   void commit() override;
   void rebase() override;
+  void save_state(StateArchive& archive, const std::string& prefix) const override;
+  void load_state(const StateArchive& archive, const std::string& prefix) override;
   double stored_energy() const override { return stored_energy_; }
   double dissipation() const override { return dissipation_; }
   void check_nodes(std::int64_t n_nodes) const override;
@@ -140,6 +150,9 @@ class HexahedronElementsBase : public InternalForceComponent {
   InternalEnergy gather(double* out_force);
   // Swaps the committed and trial state arrays of the law.
   virtual void swap_states() = 0;
+  // The law's per-point state: committed into the archive; back, trial = committed.
+  virtual void save_points(StateArchive& archive, const std::string& name) const = 0;
+  virtual void load_points(const StateArchive& archive, const std::string& name) = 0;
   // Law::rebase of every committed point, the committed stress into sigma0 (c, q, 6), trial = committed.
   virtual void rebase_states(double* initial_stress) = 0;
   const double* initial_stress_of(std::int64_t cell, std::int64_t point) const {
@@ -241,6 +254,15 @@ class HexahedronElements final : public HexahedronElementsBase {
 
  private:
   void swap_states() override { std::swap(committed_, trial_); }
+
+  void save_points(StateArchive& archive, const std::string& name) const override {
+    archive.put(name, committed_);
+  }
+
+  void load_points(const StateArchive& archive, const std::string& name) override {
+    archive.get(name, committed_);
+    trial_ = committed_;
+  }
 
   void rebase_states(double* initial_stress) override {
     for (std::size_t p = 0; p < committed_.size(); ++p) {

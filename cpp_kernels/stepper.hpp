@@ -10,6 +10,7 @@
 #include "bsr.hpp"
 #include "contact.hpp"
 #include "force_provider.hpp"
+#include "state_archive.hpp"
 #include "internal_force.hpp"
 #include "symmetric_bsr.hpp"
 
@@ -148,6 +149,15 @@ class Stepper {
   void reset_energy(const double* u, const double* v, const double* a, double t0);
 
   EnergyReport energy() const;
+
+  /// The complete state a run needs to continue bit for bit from the state (u, v, a) it has
+  /// reached (checkpoint, docs/checkpoint.md): the energy account, the last internal force and
+  /// reactions, the contact pairs' and every component's state. u, v, a and t are the caller's.
+  void save_state(StateArchive& archive) const;
+  /// Restores save_state's archive into a stepper built from the same scene (same dt, alpha,
+  /// beta, dofs, providers, pairs and components, in the same order). Throws
+  /// std::invalid_argument naming the first block that does not fit.
+  void load_state(const StateArchive& archive);
 
   /// Wall time per phase of the steps since construction or the last reset_phase_times().
   const PhaseTimes& phase_times() const { return phase_times_; }

@@ -1,9 +1,10 @@
 """The command line: ``/usr/bin/python3 -m pyfem COMMAND ...`` from the repository root.
 
 Commands:
-    run SCENE.toml [--out DIR] [--set key.path=value ...]
+    run SCENE.toml [--out DIR] [--set key.path=value ...] [--resume]
         Validate the scene, print the plan (as check does), then run it; results go to DIR
-        (default ``runs/<scene file stem>``). On a terminal a progress bar shows on stderr;
+        (default ``runs/<scene file stem>``). With --resume, continue the interrupted run in DIR
+        from its checkpoint (docs/checkpoint.md). On a terminal a progress bar shows on stderr;
         when stdout is not a terminal (a pipe, a log file) one flushed line every 5 % of the
         simulated time instead: simulated time, wall time, estimated end (pyfem.progress).
     check SCENE.toml [--set key.path=value ...]
@@ -52,6 +53,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="run directory (default: runs/<scene file stem>)")
     run.add_argument("--set", dest="overrides", action="append", default=[],
                      metavar="KEY=VALUE", help=overrides_help)
+    run.add_argument("--resume", action="store_true",
+                     help="continue the interrupted run in the run directory from its checkpoint "
+                          "(same scene and --set overrides; docs/checkpoint.md)")
 
     check = commands.add_parser("check", help="validate a scene and print the plan")
     check.add_argument("scene", type=Path, help="scene file (TOML)")
@@ -72,9 +76,10 @@ def default_out_dir(scene_path: Path) -> Path:
     return Path("runs") / Path(scene_path).stem
 
 
-def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]) -> int:
+def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str], resume: bool = False) -> int:
     """Validate fully and hand over to ``pyfem.solver.run``, which creates `out_dir` only
-    after the model and the time step are known to be good."""
+    after the model and the time step are known to be good (resume: continues the interrupted
+    run in `out_dir` from its checkpoint)."""
     scene = load_scene(scene_path, overrides)
     report_warnings(scene)
     out_dir = default_out_dir(scene_path) if out_dir is None else out_dir
@@ -83,7 +88,8 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     from pyfem.progress import ProgressLines
 
     progress = None if sys.stdout.isatty() else ProgressLines(scene["time"]["duration"])
-    summary = solver.run(scene, out_dir, on_plan=lambda plan: show_plan(scene, plan), progress=progress)
+    summary = solver.run(scene, out_dir, on_plan=lambda plan: show_plan(scene, plan), progress=progress,
+                         resume=resume)
     energy = summary["energy"]
     print(f"run finished in {summary['wall_seconds']:.1f} s: {summary['steps']} steps of "
           f"{summary['dt']:.4g} s, {summary['dofs']} dofs; energy balance error "
@@ -302,7 +308,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return command_keys(args.write)
     try:
         if args.command == "run":
-            return command_run(args.scene, args.out, args.overrides)
+            return command_run(args.scene, args.out, args.overrides, args.resume)
         return command_check(args.scene, args.overrides)
     except SceneError as error:
         print(f"error: {_scene_error_text(error, args.scene)}", file=sys.stderr)
@@ -333,4 +339,9 @@ def interruption_text(error: KeyboardInterrupt) -> str:
         return "interrupted before the run started; nothing written"
     if reached is None:
         return f"interrupted before the first sample; run.json in {out_dir} says so"
+    from pyfem.checkpoint import CHECKPOINT_NAME
+
+    if (Path(out_dir) / CHECKPOINT_NAME).exists():
+        return (f"interrupted at t = {reached:.6g} s; partial results and a checkpoint kept in {out_dir} "
+                f"(continue with the same command and --resume)")
     return f"interrupted at t = {reached:.6g} s; partial results kept in {out_dir}"

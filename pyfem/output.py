@@ -101,15 +101,28 @@ class CsvHistory:
         path: the file (created or truncated).
         columns: column names (the header line).
         fmt: printf format of every value, e.g. "%.10e".
+        resume_at: None: a new file with its header; else a resumed run's file, cut to this many
+            bytes (its length at the checkpoint, `size`) and continued.
     """
 
-    def __init__(self, path: Path, columns: list[str], fmt: str):
+    def __init__(self, path: Path, columns: list[str], fmt: str, resume_at: int | None = None):
         self.path = Path(path)
         self.n_columns = len(columns)
         self._row_format = ",".join([fmt] * len(columns)) + "\n"
         self._pending: list[str] = []
-        self._file = open(self.path, "w")
-        self._file.write(",".join(columns) + "\n")
+        if resume_at is None:
+            self._file = open(self.path, "w")
+            self._file.write(",".join(columns) + "\n")
+        else:
+            with open(self.path, "r+") as handle:  # rows after the checkpoint go
+                handle.truncate(resume_at)
+            self._file = open(self.path, "a")
+
+    def size(self) -> int:
+        """Flushes and syncs the file to disk; returns its length (bytes), for a checkpoint."""
+        self.flush()
+        os.fsync(self._file.fileno())
+        return self._file.tell()
 
     def append(self, row) -> None:
         """Queues one row of `n_columns` values."""
@@ -366,6 +379,7 @@ class RunWriter:
 
         self.deformation = DeformedSection(simulation.model, self._monitor_points, cell_regions(simulation.model))
         self._summary: dict | None = None  # set by start()
+        self.checkpoint_problem: str | None = None  # why the checkpoint of an interruption failed
         self._last_flush = -math.inf
         self._sample_count = 0
 
@@ -396,6 +410,73 @@ class RunWriter:
         if self.xdmf_every:
             self._open_fields()
 
+    def checkpoint_state(self) -> tuple[dict, dict]:
+        """The writer's part of a checkpoint (pyfem/checkpoint.py) at the last sample: (JSON part,
+        arrays). Flushes and syncs every history file and the fields file first, and writes
+        fields.xdmf as it stands, so the files on disk end exactly at this sample."""
+        offsets = {name: history.size() for name, history in self._histories.items()}
+        fields = None
+        if self.xdmf is not None:
+            from xml.etree import ElementTree as ET
+
+            self.xdmf.h5_file.flush()
+            self._write_fields_index()
+            fields = {"data_counter": self.xdmf.data_counter,
+                      "xml": ET.tostring(self.xdmf.xdmf_file, encoding="unicode")}
+        self._summary["time_reached"] = self.times[-1] if self.times else None
+        meta = {"summary": self._summary, "sample_count": self._sample_count, "history_sizes": offsets,
+                "fields": fields, "deformation": {"largest": self.deformation.largest, "t": self.deformation.t}}
+        arrays = {"times": np.array(self.times, dtype=np.float64),
+                  "energy_samples": np.array(self.energy_samples, dtype=np.float64)}
+        if self.monitor_rows:
+            arrays["monitor_rows"] = np.array(self.monitor_rows)
+        if self.pair_rows:
+            arrays["pair_rows"] = np.array(self.pair_rows)
+        if self.state_count_samples:
+            arrays["state_count_samples"] = np.array(self.state_count_samples)
+        if self.deformation.displacement is not None:
+            arrays["deformation_displacement"] = np.asarray(self.deformation.displacement)
+        return meta, arrays
+
+    def resume(self, meta: dict, arrays: dict, resumed_at: float) -> None:
+        """Continues the run directory of an interrupted run from its checkpoint (instead of
+        `start`): the samples so far back in memory, every history file cut to its length at the
+        checkpoint and reopened, the fields file cut to the checkpoint's fields, run.json running.
+
+        Args:
+            meta, arrays: the writer's part of the checkpoint (`checkpoint_state`).
+            resumed_at: the simulated time of the checkpoint (s), recorded in run.json "resumed".
+        """
+        self._summary = meta["summary"]
+        self._summary["status"] = "running"
+        self._summary.pop("reason", None)
+        self._summary.setdefault("resumed", []).append(
+            {"t": resumed_at, "at": time.strftime("%Y-%m-%dT%H:%M:%S")})
+        self.input_motion = input_motion(self.simulation)
+        self.times = arrays["times"].tolist()
+        self.energy_samples = arrays["energy_samples"].tolist()
+        self.monitor_rows = list(arrays["monitor_rows"]) if "monitor_rows" in arrays else []
+        self.pair_rows = list(arrays["pair_rows"]) if "pair_rows" in arrays else []
+        self.state_count_samples = (list(arrays["state_count_samples"]) if "state_count_samples" in arrays
+                                    else [])
+        self._sample_count = int(meta["sample_count"])
+        deformation = meta["deformation"]
+        self.deformation.largest = deformation["largest"]
+        self.deformation.t = deformation["t"]
+        self.deformation.displacement = arrays.get("deformation_displacement")
+        _write_json(self.out_dir / "run.json", self._summary)
+        self._open_histories(resume_at=meta["history_sizes"])
+        if self.xdmf_every:
+            self._open_fields(resume=meta["fields"])
+
+    def _write_fields_index(self) -> None:
+        """Writes fields.xdmf (the XML index of fields.h5) as it stands: readable during the run."""
+        from xml.etree import ElementTree as ET
+
+        temporary = self.out_dir / "fields.xdmf.tmp"
+        ET.ElementTree(self.xdmf.xdmf_file).write(temporary)
+        os.replace(temporary, self.out_dir / "fields.xdmf")
+
     def _input_title(self) -> str:
         motion = self.input_motion
         source = Path(motion["source"]).name if motion["kind"] == "record" else "Ricker wavelet"
@@ -423,6 +504,8 @@ class RunWriter:
                 close()
             except Exception as error:  # run.json must still say what happened
                 problems.append(f"{close.__name__}: {type(error).__name__}: {error}")
+        if self.checkpoint_problem is not None:
+            problems.append(f"checkpoint: {self.checkpoint_problem}")
         if problems:
             self._summary["output_errors"] = problems
         _write_json(self.out_dir / "run.json", self._summary)
@@ -527,22 +610,26 @@ class RunWriter:
                            kernel["plastic_strain"][:, None]]
         return np.hstack(values)
 
-    def _open_histories(self) -> None:
-        """energy.csv, monitors/NAME.csv and pairs/NAME.csv with their headers."""
-        histories = {"energy": CsvHistory(self.out_dir / "energy.csv", self.energy_columns, ENERGY_FORMAT)}
+    def _open_histories(self, resume_at: dict | None = None) -> None:
+        """energy.csv, monitors/NAME.csv and pairs/NAME.csv with their headers; resume_at: a resumed
+        run's history lengths at its checkpoint (name -> bytes), each file cut there and continued."""
+        def history(name: str, path: Path, columns: list[str], fmt: str) -> None:
+            histories[name] = CsvHistory(path, columns, fmt, None if resume_at is None else resume_at[name])
+
+        histories: dict[str, CsvHistory] = {}
+        history("energy", self.out_dir / "energy.csv", self.energy_columns, ENERGY_FORMAT)
         if self.simulation.monitor_nodes is not None:
             for name in self.simulation.monitor_names:
-                histories[f"monitors/{name}"] = CsvHistory(self.out_dir / "monitors" / f"{name}.csv",
-                                                           self.monitor_columns, MONITOR_FORMAT)
+                history(f"monitors/{name}", self.out_dir / "monitors" / f"{name}.csv", self.monitor_columns,
+                        MONITOR_FORMAT)
         constraints = self.simulation.constraints
         if constraints is not None:
             # Resultant support force on each fixed or roller face (N), the face's share of its nodes.
             columns = ["t"] + [f"{face}_F{axis}" for face in constraints.face_names for axis in "xyz"]
-            histories["reactions"] = CsvHistory(self.out_dir / "reactions.csv", columns, ENERGY_FORMAT)
+            history("reactions", self.out_dir / "reactions.csv", columns, ENERGY_FORMAT)
         if self.contact_on:
             for name in self.simulation.pair_monitor_names:
-                histories[f"pairs/{name}"] = CsvHistory(self.out_dir / "pairs" / f"{name}.csv",
-                                                        PAIR_COLUMNS, PAIR_FORMAT)
+                history(f"pairs/{name}", self.out_dir / "pairs" / f"{name}.csv", PAIR_COLUMNS, PAIR_FORMAT)
         self._histories = histories
 
     def _close_histories(self) -> None:
@@ -560,12 +647,14 @@ class RunWriter:
         return np.column_stack([delta, slip, gap, np.asarray(contact.normal_force()), tangential,
                                 np.asarray(contact.deterioration()), np.asarray(contact.state(), dtype=float)])
 
-    def finish(self, wall_seconds: float, loop_seconds: float, phases: dict | None = None) -> dict:
+    def finish(self, wall_seconds: float, loop_seconds: float, phases: dict | None = None,
+               checkpoints: dict | None = None) -> dict:
         """Closes histories and fields, draws the plots, writes the final run.json; returns the summary.
 
         phases: pyfem.solver.phase_split of the time loop (run.json "time_per_step": ms per step and
         share of the loop for the kernel's update, element_loop, input_forces, stiffness, contact,
-        and output (writing the samples) and other)."""
+        and output (writing the samples) and other). checkpoints: run.json "checkpoints" (written,
+        seconds, interval) of this sitting. Times are over every sitting of a resumed run."""
         self._close_histories()
         self._close_fields()
         summary = self._summary
@@ -576,6 +665,8 @@ class RunWriter:
         summary["seconds_per_step"] = loop_seconds / max(1, self.simulation.n_steps)
         if phases is not None:
             summary["time_per_step"] = phases
+        if checkpoints is not None:
+            summary["checkpoints"] = checkpoints
         self._partial_summary()
         self._plots()
         _write_json(self.out_dir / "run.json", summary)
@@ -717,12 +808,13 @@ class RunWriter:
             }
         return peaks
 
-    def _open_fields(self) -> None:
+    def _open_fields(self, resume: dict | None = None) -> None:
         """One temporal XDMF collection holding every field per time (ParaView, meshio read it).
 
         Fields are written at every node (`field_mesh`: a Q2 hexahedron as the 8 hexahedra of its
         27 nodes, its cell data repeated on them), with the cell field "region" (the cell's region
-        id, run.json "regions") at every time.
+        id, run.json "regions") at every time. resume: a resumed run's fields at its checkpoint
+        (`checkpoint_state`): the datasets written after it are deleted and the index continues.
         """
         import meshio
 
@@ -738,8 +830,22 @@ class RunWriter:
         # meshio's __enter__ opens the .h5 in the working directory; the XDMF refers to it by
         # name only, so it must sit beside the .xdmf: open it there ourselves.
         self.xdmf.h5_filename = "fields.h5"
-        self.xdmf.h5_file = h5py.File(self.out_dir / "fields.h5", "w")
-        self.xdmf.write_points_cells(model.node_coords[self._field_nodes], [(cell_type, cells)])
+        if resume is None:
+            self.xdmf.h5_file = h5py.File(self.out_dir / "fields.h5", "w")
+            self.xdmf.write_points_cells(model.node_coords[self._field_nodes], [(cell_type, cells)])
+            return
+        from xml.etree import ElementTree as ET
+
+        self.xdmf.h5_file = h5py.File(self.out_dir / "fields.h5", "a")
+        counter = int(resume["data_counter"])
+        for name in list(self.xdmf.h5_file):  # datasets data0, data1, ... in the order written
+            if name.startswith("data") and name[4:].isdigit() and int(name[4:]) >= counter:
+                del self.xdmf.h5_file[name]
+        self.xdmf.data_counter = counter
+        self.xdmf.xdmf_file = ET.fromstring(resume["xml"])
+        self.xdmf.domain = self.xdmf.xdmf_file.find("Domain")
+        self.xdmf.collection = self.xdmf.domain.find("Grid[@Name='TimeSeries_meshio']")
+        self.xdmf.has_mesh = True
 
     def _per_written_cell(self, values: np.ndarray) -> np.ndarray:
         """Values per model cell -> per cell of fields.xdmf (`field_mesh`)."""

@@ -592,6 +592,8 @@ SCHEMA = Table({
                                 default=0.1),
         "fields": TextList("output fields", default=["displacement", "velocity"],
                            options=OUTPUT_FIELDS, unavailable=FIELDS_NOT_PRODUCED),
+        "checkpoint_interval": Number("wall time between checkpoints (s; 0: none)", NON_NEGATIVE,
+                                      default=300.0),
     }, "[output]"),
     "damping": Table({
         "ratio": Number("damping ratio", "[0, 1)", default=None),

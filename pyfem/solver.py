@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -673,76 +674,131 @@ def element_loop_plan(nonlinear, u: np.ndarray, per_step: float, time_step: Time
     }
 
 
-def run(scene: Scene, out_dir, on_plan=None, progress=None) -> dict:
+def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:
     """Runs the scene and writes run.json, monitors/, fields.xdmf and plots/ into out_dir.
 
     on_plan: called with the plan (`simulation_plan`, a dict) once the model is built, before
     the run directory is touched (the command line prints it). progress: None shows a tqdm bar
     on a terminal (stderr); else an object with start(t0) and __call__(t) (pyfem.progress.
     ProgressLines), told the simulated time reached after every output interval; no bar then.
+    resume: continue the interrupted run in out_dir from its checkpoint (pyfem/checkpoint.py)
+    instead of starting a new one; its histories then equal an uninterrupted run's.
 
-    The histories are written as the run goes. Ctrl-C or SIGTERM stops the run between two
-    samples: run.json says "interrupted" with the time reached, every row so far is kept, and
+    The histories are written as the run goes; every `output.checkpoint_interval` seconds of
+    wall time the whole state goes to out_dir/checkpoint.npz (removed when the run finishes).
+    Ctrl-C or SIGTERM stops the run between two samples: a checkpoint is written, run.json says
+    "interrupted" with the time reached, every row so far is kept, and
     `pyfem.interrupts.RunInterrupted` (a KeyboardInterrupt) is raised. Any other error marks
-    the run "failed" the same way and is raised again.
+    the run "failed" the same way (its last periodic checkpoint stays) and is raised again.
 
     Returns:
         The run summary (also written to run.json).
     """
     from tqdm import tqdm
 
+    from pyfem import checkpoint as checkpoints
     from pyfem.interrupts import RunInterrupted, StopSignals
     from pyfem.output import RunWriter
 
     wall_start = time.perf_counter()
+    saved = checkpoints.read_checkpoint(out_dir) if resume else None  # refused before any work
     with StopSignals() as signals:
         simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
+        if saved is not None:
+            saved.check_model(simulation)
         if on_plan is not None:
             on_plan(simulation_plan(simulation))
         writer = RunWriter(out_dir, simulation)
+        clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"])
+        write_checkpoint = None  # set once the state (u, v, a, t, kernel, writer) is whole
         try:
-            with signals.deferred():
-                writer.start()
-                if simulation.static is not None:  # static/ and the stage's stress in the fields
-                    from pyfem.static_output import write_static_outputs
-
-                    write_static_outputs(writer)
             stepper = make_stepper(simulation)
             n = simulation.stiffness.shape[0]
-            u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-            t = 0.0
-            stepper.reset_energy(u, v, a, t)
-            with signals.deferred():
-                writer.sample(t, u, v, a, stepper.energy())
             ts = simulation.time_step
             n_outputs = simulation.n_steps // ts.steps_per_output
+            previous = {"wall_seconds": 0.0, "loop_seconds": 0.0, "output_seconds": 0.0, "phases": {}}
+            if saved is None:
+                with signals.deferred():
+                    writer.start()
+                    if simulation.static is not None:  # static/ and the stage's stress in the fields
+                        from pyfem.static_output import write_static_outputs
+
+                        write_static_outputs(writer)
+                u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+                t = 0.0
+                done = 0
+                stepper.reset_energy(u, v, a, t)
+                with signals.deferred():
+                    writer.sample(t, u, v, a, stepper.energy())
+            else:
+                with signals.deferred():
+                    writer.resume(saved.meta["writer"], saved.writer, saved.t)
+                    if simulation.static is not None:
+                        from pyfem.static_output import static_stress_in_fields
+
+                        static_stress_in_fields(writer)
+                stepper.load_state(saved.kernel)
+                u, v, a = saved.u.copy(), saved.v.copy(), saved.a.copy()
+                t, done = saved.t, saved.outputs_done
+                previous = saved.meta["timing"]
             stepper.reset_phase_seconds()
             output_seconds = 0.0
             loop_start = time.perf_counter()
+
+            def timing() -> dict:
+                """Wall time so far, over every sitting of this run."""
+                now = time.perf_counter()
+                phases = dict(stepper.phase_seconds())
+                return {"wall_seconds": previous["wall_seconds"] + now - wall_start,
+                        "loop_seconds": previous["loop_seconds"] + now - loop_start,
+                        "output_seconds": previous["output_seconds"] + output_seconds,
+                        "phases": {key: previous["phases"].get(key, 0.0) + value for key, value in phases.items()}}
+
+            def checkpoint_now() -> None:
+                began = time.perf_counter()
+                writer_meta, writer_arrays = writer.checkpoint_state()
+                meta = {"fingerprint": checkpoints.model_fingerprint(simulation), "t": t, "outputs_done": done,
+                        "timing": timing(), "writer": writer_meta}
+                checkpoints.write_checkpoint(out_dir, meta, u, v, a, stepper.save_state(), writer_arrays)
+                clock.written(time.perf_counter() - began)
+
+            write_checkpoint = checkpoint_now
             if progress is not None:
                 progress.start(t)
-            with tqdm(total=n_outputs, desc=scene["title"][:30], unit="out", leave=False,
+            with tqdm(total=n_outputs, initial=done, desc=scene["title"][:30], unit="out", leave=False,
                       disable=progress is not None or not writer.show_progress) as bar:
-                for _ in range(n_outputs):
-                    t = stepper.run(u, v, a, ts.steps_per_output, t)
-                    reactions = stepper.reactions() if simulation.constraints is not None else None
-                    if not np.isfinite(u).all():
-                        raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
-                    output_start = time.perf_counter()
+                while done < n_outputs:
+                    # One block: a stop signal waits for the sample, so the state is whole for a checkpoint.
                     with signals.deferred():
+                        t = stepper.run(u, v, a, ts.steps_per_output, t)
+                        done += 1
+                        reactions = stepper.reactions() if simulation.constraints is not None else None
+                        if not np.isfinite(u).all():
+                            raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+                        output_start = time.perf_counter()
                         writer.sample(t, u, v, a, stepper.energy(), reactions)
-                    output_seconds += time.perf_counter() - output_start
+                        output_seconds += time.perf_counter() - output_start
+                        if clock.due() and done < n_outputs:
+                            write_checkpoint()
                     bar.update()
                     if progress is not None:
                         progress(t)
-            loop_seconds = time.perf_counter() - loop_start
-            phases = phase_split(stepper.phase_seconds(), loop_seconds, output_seconds)
-            return writer.finish(wall_seconds=time.perf_counter() - wall_start, loop_seconds=loop_seconds,
-                                 phases=phases)
+            total = timing()
+            phases = phase_split(total["phases"], total["loop_seconds"], total["output_seconds"])
+            summary = writer.finish(wall_seconds=total["wall_seconds"], loop_seconds=total["loop_seconds"],
+                                    phases=phases, checkpoints={"written": clock.count, "seconds": clock.seconds,
+                                                                "interval": clock.interval})
+            (Path(out_dir) / checkpoints.CHECKPOINT_NAME).unlink(missing_ok=True)  # finished: nothing to resume
+            return summary
         except KeyboardInterrupt as error:
             interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
             if writer.started:
                 with signals.deferred(reraise=False):  # a second Ctrl-C must not cut the files short
+                    if write_checkpoint is not None:
+                        try:
+                            write_checkpoint()
+                        except Exception as problem:  # the interruption must still be reported
+                            writer.checkpoint_problem = f"{type(problem).__name__}: {problem}"
                     writer.fail(f"interrupted by {interrupted.signal_name}", interrupted=True)
                 interrupted.time_reached = writer.times[-1] if writer.times else None
                 interrupted.out_dir = writer.out_dir

@@ -35,17 +35,22 @@ def write_static_outputs(writer) -> None:
         writer: pyfem.output.RunWriter whose simulation has a solved stage (simulation.static).
     """
     simulation = writer.simulation
-    state = simulation.static
     folder = Path(writer.out_dir) / "static"
     folder.mkdir(parents=True, exist_ok=True)
-    if writer.cell_strain is not None:
-        writer.cell_strain.static = state.cell_stress
+    static_stress_in_fields(writer)
     from pyfem.static_plots import write_static_plots
 
     report = static_report(simulation)
     report["plots"] = write_static_plots(folder, simulation)
     _write_json(folder / "static.json", report)
     write_static_fields(folder, simulation)
+
+
+def static_stress_in_fields(writer) -> None:
+    """Makes the stage's stress the static part of the dynamic fields' stress (a resumed run does
+    this without writing static/ again)."""
+    if writer.cell_strain is not None:
+        writer.cell_strain.static = writer.simulation.static.cell_stress
 
 
 def static_report(simulation) -> dict:

@@ -105,7 +105,9 @@ def assert_interrupted(process, stderr: str, out_dir: Path, signal_number: int, 
     assert process.returncode == 128 + signal_number, stderr
     assert "Traceback" not in stderr
     last_line = stderr.strip().splitlines()[-1]
-    assert last_line.startswith("error: interrupted at t = ") and last_line.endswith(f"kept in {out_dir}")
+    assert last_line.startswith("error: interrupted at t = ") and f"kept in {out_dir} " in last_line
+    # The interruption's checkpoint (tests/test_checkpoint.py resumes from one).
+    assert (out_dir / "checkpoint.npz").exists() and last_line.endswith("--resume)")
     run_json = json.loads((out_dir / "run.json").read_text())
     assert run_json["status"] == "interrupted"
     assert run_json["reason"] == reason

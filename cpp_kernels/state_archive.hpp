@@ -1,0 +1,73 @@
+// Named byte blocks of the kernel objects' state, for checkpoint and resume (docs/checkpoint.md).
+// Each stateful object (Stepper, ContactPairs, the internal-force components) writes what a run
+// needs to continue bit for bit and reads it back into objects built from the same scene; a
+// block of the wrong size or a missing block is an error, never a silent partial state.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+namespace cavern {
+
+class StateArchive {
+ public:
+  using Blocks = std::map<std::string, std::vector<std::uint8_t>>;
+
+  StateArchive() = default;
+  explicit StateArchive(Blocks blocks) : blocks_(std::move(blocks)) {}
+
+  /// Stores the bytes of `values` under `name` (replacing a block of that name).
+  template <class T>
+  void put(const std::string& name, const std::vector<T>& values) {
+    static_assert(std::is_trivially_copyable_v<T>, "state blocks hold trivially copyable values");
+    const auto* bytes = reinterpret_cast<const std::uint8_t*>(values.data());
+    blocks_[name].assign(bytes, bytes + values.size() * sizeof(T));
+  }
+
+  template <class T>
+  void put_value(const std::string& name, const T& value) {
+    put(name, std::vector<T>{value});
+  }
+
+  /// Reads the block `name` into `values`, whose size (already that of the object being
+  /// restored) must match. Throws std::invalid_argument for a missing block or another size.
+  template <class T>
+  void get(const std::string& name, std::vector<T>& values) const {
+    static_assert(std::is_trivially_copyable_v<T>, "state blocks hold trivially copyable values");
+    const std::vector<std::uint8_t>& block = find(name);
+    if (block.size() != values.size() * sizeof(T))
+      throw std::invalid_argument("checkpoint block '" + name + "' holds " +
+                                  std::to_string(block.size()) + " bytes, the model needs " +
+                                  std::to_string(values.size() * sizeof(T)) +
+                                  " (a checkpoint of another model?)");
+    if (!block.empty()) std::memcpy(values.data(), block.data(), block.size());
+  }
+
+  template <class T>
+  void get_value(const std::string& name, T& value) const {
+    std::vector<T> one(1);
+    get(name, one);
+    value = one[0];
+  }
+
+  bool contains(const std::string& name) const { return blocks_.count(name) != 0; }
+  const Blocks& blocks() const { return blocks_; }
+
+ private:
+  const std::vector<std::uint8_t>& find(const std::string& name) const {
+    const auto found = blocks_.find(name);
+    if (found == blocks_.end())
+      throw std::invalid_argument("checkpoint has no block '" + name +
+                                  "' (a checkpoint of another model or build?)");
+    return found->second;
+  }
+
+  Blocks blocks_;
+};
+
+}  // namespace cavern

@@ -1,0 +1,208 @@
+"""Checkpoint and resume of a run (docs/checkpoint.md).
+
+A checkpoint is the complete state of a run at one sample: u, v, a and t, the kernel's state
+(`Stepper.save_state`: energy account, last internal force, contact pairs, every material point),
+the samples recorded so far (for run.json's peaks), the length of every history file and the
+fields file's index at that sample. It is written atomically (a temporary file, fsync, rename)
+to `checkpoint.npz` in the run directory every `[output] checkpoint_interval` seconds of wall
+time and when the run is interrupted (Ctrl-C, SIGTERM); a finished run removes it.
+
+`python3 -m pyfem run SCENE --out DIR --resume` rebuilds the model from the scene (the static
+stage is solved again: it is deterministic), checks that it is the model of the checkpoint
+(scene, dofs, dt, steps, nodal masses), truncates the histories and fields to the checkpoint's
+sample and continues: the histories of a resumed run equal those of an uninterrupted one bit for
+bit (tests/test_checkpoint.py).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pyfem.scene import SceneError
+
+CHECKPOINT_NAME = "checkpoint.npz"
+FORMAT = 1  # bumped when the content changes; an older checkpoint is refused, not misread
+# Scene keys a resumed run may change: they do not alter the computed state.
+RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
+
+
+def model_fingerprint(simulation) -> dict:
+    """What must be equal for a checkpoint to continue on this prepared simulation: the scene
+    (without the keys in RESUMABLE_CHANGES), dofs, dt, steps and a hash of the nodal masses (the
+    mesh and the materials)."""
+    scene = simulation.scene.to_json()
+    for table, key in RESUMABLE_CHANGES:
+        scene.get(table, {}).pop(key, None)
+    return {
+        "format": FORMAT,
+        "scene": scene,
+        "dofs": int(simulation.stiffness.shape[0]),
+        "dt": float(simulation.time_step.dt),
+        "steps": int(simulation.n_steps),
+        "mass_sha256": hashlib.sha256(np.ascontiguousarray(simulation.mass).tobytes()).hexdigest(),
+    }
+
+
+def _first_difference(saved, current, path: str = "") -> str | None:
+    """The first key path (dotted) where two JSON values differ, None when equal."""
+    if isinstance(saved, dict) and isinstance(current, dict):
+        for key in sorted(set(saved) | set(current)):
+            where = f"{path}.{key}" if path else str(key)
+            if key not in saved or key not in current:
+                return where
+            found = _first_difference(saved[key], current[key], where)
+            if found is not None:
+                return found
+        return None
+    if isinstance(saved, list) and isinstance(current, list) and len(saved) == len(current):
+        for index, (a, b) in enumerate(zip(saved, current)):
+            found = _first_difference(a, b, f"{path}.{index}")
+            if found is not None:
+                return found
+        return None
+    return None if saved == current else (path or "(value)")
+
+
+@dataclass
+class Checkpoint:
+    """A checkpoint read back: the run's state at one sample.
+
+    Attributes:
+        path: the file.
+        meta: JSON part: fingerprint, t, outputs_done (samples after t = 0), timing, the writer's.
+        u, v, a: (3 n_nodes,) displacement (m), velocity (m/s), acceleration (m/s^2).
+        kernel: `Stepper.save_state` blocks (name -> bytes).
+        writer: arrays of the writer (samples so far), see RunWriter.checkpoint_state.
+    """
+
+    path: Path
+    meta: dict
+    u: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    kernel: dict = field(default_factory=dict)
+    writer: dict = field(default_factory=dict)
+
+    @property
+    def t(self) -> float:
+        return float(self.meta["t"])
+
+    @property
+    def outputs_done(self) -> int:
+        return int(self.meta["outputs_done"])
+
+    def check_model(self, simulation) -> None:
+        """Raises SceneError (key --resume) when this checkpoint is not of the simulation's model."""
+        saved, current = self.meta["fingerprint"], model_fingerprint(simulation)
+        where = _first_difference(saved, current)
+        if where is None:
+            return
+        if where.startswith("scene."):
+            key = where[len("scene."):]
+            reason = f"the scene's {key} differs from the checkpoint's"
+        else:
+            reason = f"the model's {where} differs from the checkpoint's (another mesh or build?)"
+        raise SceneError("--resume", str(self.path), "the checkpoint of this scene's run",
+                         f"--resume {self.path}: {reason}; resume with the scene and --set "
+                         f"overrides of the interrupted run, or start a new run without --resume")
+
+
+def write_checkpoint(out_dir, meta: dict, u: np.ndarray, v: np.ndarray, a: np.ndarray,
+                     kernel: dict, writer: dict) -> Path:
+    """Writes `checkpoint.npz` atomically (temporary file, fsync, rename); returns its path.
+
+    Args:
+        out_dir: the run directory.
+        meta: JSON-serialisable part (fingerprint, t, outputs_done, timing, writer state).
+        u, v, a: (3 n_nodes,) state (m, m/s, m/s^2).
+        kernel: `Stepper.save_state()` (name -> bytes).
+        writer: name -> array of the writer's samples (`RunWriter.checkpoint_state`).
+    """
+    out_dir = Path(out_dir)
+    path = out_dir / CHECKPOINT_NAME
+    names = sorted(kernel)
+    arrays = {"u": u, "v": v, "a": a}
+    arrays.update({f"kernel_{k}": np.frombuffer(kernel[name], dtype=np.uint8) for k, name in enumerate(names)})
+    arrays.update({f"writer_{name}": value for name, value in writer.items()})
+    meta = dict(meta, format=FORMAT, kernel_blocks=names, writer_arrays=sorted(writer), written=time.time())
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    temporary = path.with_name(path.name + ".tmp")
+    with open(temporary, "wb") as handle:
+        np.savez(handle, **arrays)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(temporary, path)
+    directory = os.open(out_dir, os.O_RDONLY)
+    try:
+        os.fsync(directory)  # the rename itself survives a crash
+    finally:
+        os.close(directory)
+    return path
+
+
+def read_checkpoint(out_dir) -> Checkpoint:
+    """Reads `checkpoint.npz` of a run directory.
+
+    Raises:
+        SceneError (key --resume) for a missing, unreadable or other-format checkpoint, or a run
+        that finished.
+    """
+    out_dir = Path(out_dir)
+    path = out_dir / CHECKPOINT_NAME
+    allowed = "a run directory holding the checkpoint of an unfinished run"
+
+    def refuse(reason: str):
+        raise SceneError("--resume", str(out_dir), allowed, f"--resume: {out_dir}: {reason}; allowed: {allowed}")
+
+    if not path.exists():
+        status = None
+        try:
+            status = json.loads((out_dir / "run.json").read_text()).get("status")
+        except (OSError, ValueError):
+            pass
+        if status == "finished":
+            refuse("the run finished; there is nothing to resume")
+        refuse(f"no {CHECKPOINT_NAME} (the run stopped before its first checkpoint, "
+               f"or output.checkpoint_interval was 0)" if out_dir.exists() else "no such directory")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(bytes(data["meta"]).decode())
+            if meta.get("format") != FORMAT:
+                refuse(f"{CHECKPOINT_NAME} has format {meta.get('format')}, this pyfem reads {FORMAT}")
+            kernel = {name: bytes(data[f"kernel_{k}"]) for k, name in enumerate(meta["kernel_blocks"])}
+            writer = {name: np.array(data[f"writer_{name}"]) for name in meta["writer_arrays"]}
+            return Checkpoint(path=path, meta=meta, u=np.array(data["u"]), v=np.array(data["v"]),
+                              a=np.array(data["a"]), kernel=kernel, writer=writer)
+    except SceneError:
+        raise
+    except (OSError, ValueError, KeyError) as error:
+        refuse(f"{CHECKPOINT_NAME} cannot be read ({type(error).__name__}: {error})")
+
+
+class CheckpointClock:
+    """When the next periodic checkpoint is due: every `interval` seconds of wall time (0: never).
+
+    Args:
+        interval: seconds of wall time between checkpoints (`[output] checkpoint_interval`).
+    """
+
+    def __init__(self, interval: float):
+        self.interval = float(interval)
+        self._last = time.monotonic()
+        self.count = 0
+        self.seconds = 0.0  # wall time spent writing checkpoints
+
+    def due(self) -> bool:
+        return self.interval > 0 and time.monotonic() - self._last >= self.interval
+
+    def written(self, seconds: float) -> None:
+        """Records one checkpoint that took `seconds`; the next is due an interval from now."""
+        self.count += 1
+        self.seconds += seconds
+        self._last = time.monotonic()

@@ -1,0 +1,253 @@
+"""Checkpoint and resume (issue 13, docs/checkpoint.md): a run stopped at any time continues from
+its last checkpoint to the same histories, fields and run.json peaks, bit for bit.
+
+- kill -9 of a real `python3 -m pyfem run` at a random time after its first checkpoint, then
+  `--resume`: every history file equals the uninterrupted run's byte for byte (the default scene:
+  a homogeneous box under a vertical SV wave).
+- In process, on a scene with every effect that keeps state (static relaxation stage, oblique SV
+  through the viscoelastic boundary, contact pairs with deterioration, Mohr-Coulomb plasticity,
+  concrete damage): a crash (an exception) some samples after a periodic checkpoint leaves rows
+  beyond it, which the resumed run must drop and recompute; Ctrl-C writes its own checkpoint.
+  Before comparing, the test asserts that the pairs slid, the rock yielded and the concrete
+  damaged after the checkpoint, so the state restored is one that matters.
+- A checkpoint of another scene, a finished run and a directory without one are refused with one
+  line and exit status 2.
+"""
+import json
+import os
+import random
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pyfem import checkpoint, solver
+from pyfem.interrupts import RunInterrupted
+from pyfem.scene import SceneError, parse_scene
+
+REPO = Path(__file__).resolve().parents[1]
+PYTHON = "/usr/bin/python3"
+ENV = dict(os.environ, PYTHONPATH=str(REPO))
+MPa = 1.0e6
+CHECKPOINT_T = 0.30  # s: the crash test's checkpoint, after the wave has begun to slide and yield
+
+
+def history_files(out_dir: Path) -> dict[str, bytes]:
+    """Every CSV history of a run directory, by relative path."""
+    return {str(path.relative_to(out_dir)): path.read_bytes() for path in sorted(out_dir.rglob("*.csv"))}
+
+
+def assert_same_run(resumed: Path, reference: Path) -> None:
+    """Histories byte for byte, fields and run.json's peaks and energy equal."""
+    files, expected = history_files(resumed), history_files(reference)
+    assert sorted(files) == sorted(expected)
+    for name in expected:
+        assert files[name] == expected[name], f"{name} differs from the uninterrupted run's"
+    summary, summary_expected = (json.loads((d / "run.json").read_text()) for d in (resumed, reference))
+    assert summary["status"] == "finished" and summary["resumed"]
+    for key in ("monitors", "energy", "pairs", "pair_states", "nonlinear_regions", "time_reached"):
+        assert summary.get(key) == summary_expected.get(key), key
+    assert not (resumed / checkpoint.CHECKPOINT_NAME).exists(), "a finished run keeps no checkpoint"
+    if (reference / "fields.xdmf").exists():
+        import meshio
+
+        readers = [meshio.xdmf.TimeSeriesReader(str(d / "fields.xdmf")) for d in (resumed, reference)]
+        for reader in readers:
+            reader.read_points_cells()
+        assert readers[0].num_steps == readers[1].num_steps > 1
+        for step in range(readers[1].num_steps):
+            (t, points, cells), (t_ref, points_ref, cells_ref) = (reader.read_data(step) for reader in readers)
+            assert t == t_ref and sorted(points) == sorted(points_ref) and sorted(cells) == sorted(cells_ref)
+            for name in points_ref:
+                assert np.array_equal(points[name], points_ref[name]), (t, name)
+            for name in cells_ref:
+                assert all(np.array_equal(a, b) for a, b in zip(cells[name], cells_ref[name])), (t, name)
+
+
+# --------------------------------------------------------------------------- kill -9, a real process
+
+SCENE = "workflows/scenes/default.toml"
+KILL_RUN = ("--set", "time.duration=1.5", "--set", "output.xdmf_interval=0.1",
+            "--set", "output.checkpoint_interval=0.3")
+
+
+def pyfem_run(out_dir: Path, *extra: str, check: bool = True) -> subprocess.CompletedProcess:
+    result = subprocess.run([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out_dir), *KILL_RUN, *extra],
+                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
+    if check:
+        assert result.returncode == 0, result.stderr
+    return result
+
+
+def test_kill_9_at_a_random_time_then_resume_gives_the_uninterrupted_histories(tmp_path):
+    pyfem_run(tmp_path / "reference")
+    out = tmp_path / "killed"
+    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), *KILL_RUN], cwd=REPO,
+                               env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while not (out / checkpoint.CHECKPOINT_NAME).exists():
+        assert process.poll() is None, "the run ended before its first checkpoint"
+        assert time.monotonic() < deadline, "no checkpoint after 300 s"
+        time.sleep(0.05)
+    time.sleep(random.uniform(0.0, 1.0))  # anywhere: inside a sample, a checkpoint, the stepping
+    process.send_signal(signal.SIGKILL)
+    process.wait(timeout=60)
+    assert process.returncode == -signal.SIGKILL, "killed before it finished"
+    assert json.loads((out / "run.json").read_text())["status"] == "running"  # as a killed run leaves it
+    resumed = pyfem_run(out, "--resume")
+    assert "run finished" in resumed.stdout
+    summary = json.loads((out / "run.json").read_text())
+    print(f"killed at t > {summary['resumed'][0]['t']:.3f} s; resumed; {summary['checkpoints']}")
+    assert_same_run(out, tmp_path / "reference")
+
+
+def test_resume_refuses_another_scene_a_finished_run_and_no_checkpoint(tmp_path):
+    out = tmp_path / "run"
+    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), *KILL_RUN,
+                                "--set", "time.duration=60"], cwd=REPO, env=ENV, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while not (out / checkpoint.CHECKPOINT_NAME).exists():
+        assert process.poll() is None and time.monotonic() < deadline
+        time.sleep(0.05)
+    process.send_signal(signal.SIGTERM)
+    process.wait(timeout=120)
+    assert process.returncode == 128 + signal.SIGTERM
+    before = history_files(out)
+
+    other = pyfem_run(out, "--set", "time.duration=60", "--set", "materials.rock.E=1.0e10", "--resume", check=False)
+    assert other.returncode == 2, other.stderr
+    lines = other.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "materials.rock.E" in lines[0], other.stderr
+    assert history_files(out) == before, "a refused resume touches nothing"
+
+    missing = pyfem_run(tmp_path / "nothing_here", "--resume", check=False)
+    assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "--resume" in missing.stderr
+
+    pyfem_run(tmp_path / "finished", "--set", "time.duration=0.05")
+    finished = pyfem_run(tmp_path / "finished", "--set", "time.duration=0.05", "--resume", check=False)
+    assert finished.returncode == 2 and "finished" in finished.stderr and finished.stderr.count("\n") == 1
+
+
+# --------------------------------------------------------------------------- every stateful effect, in process
+
+def stateful_scene(duration=0.45):
+    """Soft rock with Mohr-Coulomb plasticity, a thin concrete-like layer with Eq. 21 damage, both
+    interfaces in contact with deterioration, a relaxation stage under a geostatic stress, an
+    oblique SV wave strong enough to slide the pairs, yield the rock and crack the layer."""
+    soft = {"E": 2.0e9, "nu": 0.30, "rho": 2400.0,
+            "plasticity": {"cohesion": 1.0 * MPa, "friction_angle": 25.0, "tensile_strength": 0.1 * MPa}}
+    stiff = {"E": 28.0e9, "nu": 0.167, "rho": 2500.0,
+             "damage": {"cohesion": 1.8 * MPa, "friction_angle": 46.0, "tensile_strength": 1.5 * MPa}}
+    return parse_scene({
+        "title": "every stateful effect",
+        "mesh": {"builder": "box", "size": [40.0, 4.0, 40.0], "h": 4.0, "order": 1,
+                 "layers": [{"material": "soft", "thickness": 19.5}, {"material": "stiff", "thickness": 1.0},
+                            {"material": "soft", "thickness": 19.5}]},
+        "materials": {"soft": soft, "stiff": stiff},
+        "time": {"duration": duration, "safety": 0.8},
+        "wave": {"type": "SV", "angle": 20.0, "surface": 45.0, "medium": "soft",
+                 "motion": {"ricker": {"f0": 4.0, "amplitude": 0.05}}},
+        "initial_stress": {"surface": 45.0, "rho": 2400.0, "k": [1.4, 1.2, 1.15]},
+        "static": {"solver": "relaxation"},
+        "contact": {"interfaces": ["interface_1", "interface_2"], "cohesion": 2.0e4, "friction_angle": 20.0,
+                    "tensile_strength": 1.0e4, "deterioration": {"R0": 0.75, "lambda": 5.0}},
+        "monitor": [{"name": "layer", "point": [20.0, 2.0, 20.0]}, {"name": "top", "point": [20.0, 2.0, 40.0]}],
+        "pair_monitor": [{"name": "upper", "point": [20.0, 2.0, 20.5]}],
+        "output": {"interval": 0.01, "xdmf_interval": 0.05, "fields": ["displacement", "velocity", "stress", "damage"],
+                   "checkpoint_interval": 1.0e-9},
+    }, source="test")
+
+
+class StopAt:
+    """A progress object (solver.run's `progress`) that raises `error` once t reaches `t_stop`."""
+
+    def __init__(self, t_stop: float, error: BaseException):
+        self.t_stop, self.error = t_stop, error
+
+    def start(self, t0):
+        pass
+
+    def __call__(self, t):
+        if t >= self.t_stop - 1e-12:
+            raise self.error
+
+
+@pytest.fixture(scope="module")
+def reference_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("checkpoint") / "reference"
+    summary = solver.run(stateful_scene(), out)
+    return out, summary
+
+
+def test_the_stateful_scene_slides_yields_and_damages(reference_run):
+    """What the resume tests restore is live state: by t = 0.30 s (the crash test's checkpoint)
+    pairs have slid and the materials have dissipated, and all of it goes on after."""
+    out, summary = reference_run
+    rows = np.loadtxt(out / "energy.csv", delimiter=",", skiprows=1)
+    columns = (out / "energy.csv").read_text().splitlines()[0].split(",")
+    at = int(np.argmin(np.abs(rows[:, 0] - CHECKPOINT_T)))
+    for name in ("internal_dissipation", "friction_dissipation"):
+        history = rows[:, columns.index(name)]
+        assert 0.0 < history[at] < 0.5 * history[-1], f"{name} grows before and after the checkpoint"
+    sliding = np.array(summary["pair_states"]["sliding"])
+    assert sliding[:at + 1].max() > 0 and sliding[at + 1:].max() > 0
+    regions = summary["nonlinear_regions"]
+    assert regions["soft"]["yielded_volume"] > 0.0 and regions["stiff"]["peak_damage"] > 0.5, regions
+    assert summary["energy"]["balance_error"] < 1e-6
+
+
+def test_crash_after_a_periodic_checkpoint_then_resume_gives_the_uninterrupted_run(reference_run, tmp_path,
+                                                                                      monkeypatch):
+    """Checkpoints every 5th sample only; the run crashes 3 samples after the one at t = 0.30 s, so
+    its files hold rows past the checkpoint that the resumed run must drop and recompute."""
+    calls = {"n": 0}
+
+    def every_fifth(self):
+        calls["n"] += 1
+        return calls["n"] % 5 == 0
+
+    monkeypatch.setattr(checkpoint.CheckpointClock, "due", every_fifth)
+    out = tmp_path / "crashed"
+    with pytest.raises(RuntimeError, match="simulated crash"):
+        solver.run(stateful_scene(), out, progress=StopAt(CHECKPOINT_T + 0.03, RuntimeError("simulated crash")))
+    saved = checkpoint.read_checkpoint(out)
+    assert saved.t == pytest.approx(CHECKPOINT_T) and saved.outputs_done == 30
+    assert json.loads((out / "run.json").read_text())["status"] == "failed"
+    assert (out / "energy.csv").read_text().count("\n") == 1 + 34, "rows past the checkpoint are on disk"
+    monkeypatch.undo()
+    summary = solver.run(stateful_scene(), out, resume=True)
+    assert summary["resumed"][0]["t"] == pytest.approx(CHECKPOINT_T)
+    assert_same_run(out, reference_run[0])
+
+
+def test_ctrl_c_writes_a_checkpoint_and_resume_continues_from_it(reference_run, tmp_path):
+    scene = stateful_scene()
+    scene["output"]["checkpoint_interval"] = 0.0  # no periodic checkpoint: the interruption's own
+    out = tmp_path / "interrupted"
+    with pytest.raises(RunInterrupted):
+        solver.run(scene, out, progress=StopAt(0.32, RunInterrupted(signal.SIGINT)))
+    assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+    assert checkpoint.read_checkpoint(out).t == pytest.approx(0.32)
+    solver.run(scene, out, resume=True)
+    assert_same_run(out, reference_run[0])
+
+
+def test_checkpoint_of_another_model_is_refused_before_anything_is_touched(reference_run, tmp_path):
+    out = tmp_path / "run"
+    scene = stateful_scene()
+    with pytest.raises(RunInterrupted):
+        solver.run(scene, out, progress=StopAt(0.05, RunInterrupted(signal.SIGINT)))
+    before = history_files(out)
+    other = stateful_scene()
+    other["contact"]["deterioration"]["R0"] = 0.8
+    with pytest.raises(SceneError, match=r"contact\.deterioration\.R0"):
+        solver.run(other, out, resume=True)
+    assert history_files(out) == before
+    changed_interval = stateful_scene()
+    changed_interval["output"]["checkpoint_interval"] = 600.0  # allowed: it changes nothing computed
+    solver.run(changed_interval, out, resume=True)
+    assert_same_run(out, reference_run[0])
