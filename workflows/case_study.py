@@ -43,6 +43,8 @@ Sample runs (from the repository root, Debian's Python):
     /usr/bin/python3 workflows/case_study.py                    # the three coarse cases (~35 min)
     /usr/bin/python3 workflows/case_study.py --case 3           # one case
     /usr/bin/python3 workflows/case_study.py --report-only      # figures from finished runs
+A stopped run (session end, kill, Ctrl-C) continues from its checkpoint when the same command is
+given again (docs/checkpoint.md; --no-resume starts it again).
     /usr/bin/python3 workflows/case_study.py --preset paper --case 3 --report-only
 """
 from __future__ import annotations
@@ -98,14 +100,25 @@ def run_dir(case: int, preset: str, runs: pathlib.Path = RUNS) -> pathlib.Path:
     return runs / f"case{case}_{preset}"
 
 
-def run_case(case: int, preset: str, overrides=(), runs: pathlib.Path = RUNS) -> dict:
-    """Runs one case's scene into RUNS/caseN_PRESET; returns run.json."""
-    from pyfem import solver
-    from pyfem.scene import load_scene
+def run_case(case: int, preset: str, overrides=(), runs: pathlib.Path = RUNS, resume: bool = True) -> dict:
+    """Runs one case's scene into RUNS/caseN_PRESET; returns run.json. A run stopped before (a
+    checkpoint.npz in the directory, docs/checkpoint.md) of the same scene and overrides is
+    continued (resume=False: started again; a checkpoint of other settings: started again, the
+    stopped run moved aside to caseN_PRESET.previous)."""
+    from pyfem import checkpoint, solver
+    from pyfem.scene import SceneError, load_scene
 
     scene = load_scene(scene_path(case, preset), overrides)
-    print(f"running {scene_path(case, preset).name} -> {run_dir(case, preset, runs)}", flush=True)
-    return solver.run(scene, run_dir(case, preset, runs))
+    out = run_dir(case, preset, runs)
+    if resume and (out / checkpoint.CHECKPOINT_NAME).exists():
+        try:
+            saved = checkpoint.read_checkpoint(out)
+            print(f"resuming {scene_path(case, preset).name} in {out} from t = {saved.t:.4g} s", flush=True)
+            return solver.run(scene, out, resume=True)
+        except SceneError as error:
+            print(f"not resuming ({error}); starting again", flush=True)
+    print(f"running {scene_path(case, preset).name} -> {out}", flush=True)
+    return solver.run(scene, out)
 
 
 def read_csv(path: pathlib.Path) -> dict:
@@ -610,12 +623,15 @@ def main(argv=None) -> int:
     parser.add_argument("--report-only", action="store_true", help="read finished run directories; run nothing")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="scene override for the runs, e.g. --set time.duration=25.2")
+    parser.add_argument("--no-resume", dest="resume", action="store_false",
+                        help="start every run again even where a stopped run of the same settings left a "
+                             "checkpoint (default: continue it)")
     args = parser.parse_args(argv)
     cases = args.case or sorted(CASES)
     if not args.report_only:
         for case in cases:
             start = time.perf_counter()
-            summary = run_case(case, args.preset, args.overrides)
+            summary = run_case(case, args.preset, args.overrides, resume=args.resume)
             print(f"case {case}: {summary['steps']} steps, {summary['dofs']} dofs, "
                   f"{time.perf_counter() - start:.0f} s", flush=True)
     # The report always covers every finished run of both sizes, so one case's rerun
