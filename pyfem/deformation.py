@@ -23,13 +23,14 @@ class DeformedSection:
 
     def __init__(self, model, monitor_points, region_ids: np.ndarray):
         n_basis = model.V.dofmap.dof_layout.num_dofs
-        vertices = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :8]
+        n_vertices = 4 if model.mesh.topology.cell_type.name == "tetrahedron" else 8
+        vertices = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :n_vertices]
         y = model.node_coords[vertices][..., 1]
         self.y = (float(np.median(monitor_points[:, 1])) if monitor_points is not None and len(monitor_points)
                   else float(0.5 * (y.min() + y.max())))
         cut = (y.min(axis=1) <= self.y) & (y.max(axis=1) >= self.y)
         self.nodes, compact = np.unique(vertices[cut], return_inverse=True)
-        self.cell_nodes = compact.reshape(-1, 8)
+        self.cell_nodes = compact.reshape(-1, n_vertices)
         self.regions = region_ids[cut]
         self.coords = model.node_coords[self.nodes]
         self.largest = -1.0

@@ -28,7 +28,8 @@ from pyfem.scene import SceneError
 
 # gmsh element type numbers of the volume elements accepted as cells.
 GMSH_HEXAHEDRON_8 = 5
-SUPPORTED_CELL_TYPES = {GMSH_HEXAHEDRON_8: "8-node hexahedra"}
+GMSH_TETRAHEDRON_4 = 4
+SUPPORTED_CELL_TYPES = {GMSH_HEXAHEDRON_8: "8-node hexahedra", GMSH_TETRAHEDRON_4: "4-node tetrahedra"}
 
 
 def create_mesh(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM_WORLD):
@@ -82,6 +83,8 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
         source = ("mesh.file", mesh_settings["file"]) if builder == "file" else ("mesh.builder", builder)
         _check_cell_types(cell_types, *source)
         excavated = _excavated_regions(scene, regions)
+        if any(number == GMSH_TETRAHEDRON_4 for number, _ in cell_types):
+            _check_tetrahedra_uses(scene, excavated)
         regions = {name: tag for name, tag in regions.items() if name not in excavated}
         _check_regions_match_materials(regions, scene["materials"], optional=excavated)
         interface_names = list((scene.get("contact") or {}).get("interfaces") or [])
@@ -251,11 +254,38 @@ def _check_cell_types(cell_types: list[tuple[int, str]], key: str = "mesh.file",
     allowed = " and ".join(f"{name} (gmsh type {number})" for number, name in SUPPORTED_CELL_TYPES.items())
     if not cell_types:
         raise SceneError(key, value, f"the physical volumes hold no elements; allowed: {allowed} "
-                         "(mesh the volumes: gmsh -3, with recombination into hexahedra)")
+                         "(mesh the volumes: gmsh -3, into tetrahedra or, recombined, hexahedra)")
     unsupported = [name for number, name in cell_types if number not in SUPPORTED_CELL_TYPES]
     if unsupported:
         raise SceneError(key, value, f"gmsh element types {', '.join(unsupported)} are not supported; "
-                         f"allowed: {allowed} only (mesh.order = 2 builds Q2 from them)")
+                         f"allowed: {allowed}, one type per mesh (mesh.order = 2 builds Q2 or P2 from them)")
+    if len({number for number, _ in cell_types}) > 1:
+        raise SceneError(key, value, "the mesh mixes " + " and ".join(name for _, name in cell_types)
+                         + f"; allowed: {allowed}, one type per mesh (dolfinx 0.5 meshes hold one cell type; "
+                         "mesh all volumes as hexahedra or all as tetrahedra)")
+
+
+def _check_tetrahedra_uses(scene: typing.Mapping, excavated: typing.Mapping) -> None:
+    """What a tetrahedral mesh cannot do yet (docs/tetrahedra.md): contact interfaces (node pairs on
+    triangle facets), a static stage that excavates (the cut is made on hexahedral topology), and
+    nonlinear materials (the kernel's element loop has hexahedra only).
+
+    Raises:
+        SceneError naming the key.
+    """
+    interfaces = list((scene.get("contact") or {}).get("interfaces") or [])
+    if interfaces:
+        raise SceneError("contact.interfaces", interfaces, "a mesh of hexahedra: contact pairs on the triangle "
+                         "facets of a tetrahedral mesh are not implemented yet (docs/tetrahedra.md)")
+    if excavated:
+        raise SceneError("static.excavate", sorted(excavated), "a mesh of hexahedra: excavation in a tetrahedral "
+                         "mesh is not implemented yet (docs/tetrahedra.md)")
+    for name, material in (scene.get("materials") or {}).items():
+        for table in ("plasticity", "damage"):
+            if material.get(table) is not None:
+                raise SceneError(f"materials.{name}.{table}", "present", "a mesh of hexahedra: the element loop "
+                                 "of nonlinear materials has hexahedra only; tetrahedral meshes are linear elastic "
+                                 "(docs/tetrahedra.md)")
 
 
 def _check_regions_match_materials(regions: dict[str, int], materials: typing.Mapping,

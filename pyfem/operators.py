@@ -26,7 +26,7 @@ from dolfinx import mesh as dolfinx_mesh
 from mpi4py import MPI
 
 from pyfem.assembly import (SPACE_DIMENSION, assemble_nodal_vector, elastic_stiffness, facet_measure,
-                            lumped_mass)
+                            hrz_lumped_vector, lumped_mass, uses_diagonal_scaling)
 from pyfem.geometry import BOX_FACES
 from pyfem.interfaces import interface_pairs
 from pyfem.material import Material
@@ -363,11 +363,19 @@ def boundary_face(name: str, V: fem.FunctionSpace, facets: np.ndarray, materials
     ds = facet_measure(mesh, facets, quadrature)
     test = ufl.TestFunction(V)
     outward_normal = ufl.FacetNormal(mesh)
-    # One vector form carries three scalar integrals: component 0: 1, 1: rho c_p, 2: rho c_s.
-    scalars = assemble_nodal_vector(
-        ufl.inner(ufl.as_vector((1.0, materials.rho_cp, materials.rho_cs)), test) * ds, V)
-    shear = assemble_nodal_vector(materials.shear_modulus * test[0] * ds, V)[:, 0]
-    normal_integral = assemble_nodal_vector(ufl.inner(outward_normal, test) * ds, V)
+    if uses_diagonal_scaling(V):
+        # Quadratic triangles: row sums vanish at the vertices; HRZ keeps every node's share > 0.
+        one = fem.Constant(mesh, 1.0)
+        scalars = np.column_stack([hrz_lumped_vector(c, V, ds) for c in (one, materials.rho_cp, materials.rho_cs)])
+        shear = hrz_lumped_vector(materials.shear_modulus, V, ds)
+        normal_integral = np.column_stack([hrz_lumped_vector(outward_normal[c], V, ds, scale=False)
+                                           for c in range(3)])
+    else:
+        # One vector form carries three scalar integrals: component 0: 1, 1: rho c_p, 2: rho c_s.
+        scalars = assemble_nodal_vector(
+            ufl.inner(ufl.as_vector((1.0, materials.rho_cp, materials.rho_cs)), test) * ds, V)
+        shear = assemble_nodal_vector(materials.shear_modulus * test[0] * ds, V)[:, 0]
+        normal_integral = assemble_nodal_vector(ufl.inner(outward_normal, test) * ds, V)
 
     area = scalars[:, 0]
     nodes = np.flatnonzero(area != 0.0).astype(np.int32)

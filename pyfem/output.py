@@ -226,8 +226,9 @@ def field_mesh(model) -> tuple[np.ndarray, str, np.ndarray, np.ndarray]:
     Q1 hexahedra are written as they are. A Q2 hexahedron (27 nodes) is written as the 8
     hexahedra of its 3 x 3 x 3 node grid, so every node's value is in the file and a viewer
     interpolates linearly between neighbouring nodes (a refined Q1 mesh: the usual way to show
-    quadratic results); cell data repeats on the 8 parts. Other cells (tetrahedra) are written
-    by their vertices.
+    quadratic results); cell data repeats on the 8 parts. A P1 tetrahedron is written as it is, a P2
+    tetrahedron (10 nodes) as the 8 tetrahedra of its vertices and edge nodes (4 at the corners,
+    4 around one diagonal of the inner octahedron), likewise.
 
     Returns:
         (nodes, cell_type, cells, parent): nodes (p,) the model nodes written, in file order;
@@ -252,12 +253,39 @@ def field_mesh(model) -> tuple[np.ndarray, str, np.ndarray, np.ndarray]:
                  for k in range(degree) for j in range(degree) for i in range(degree)]
         cell_type, written = "hexahedron", cell_nodes[:, np.array(parts)].reshape(-1, 8)
         parent = np.repeat(np.arange(n_cells), len(parts))
-    elif element.cell_type == basix.CellType.tetrahedron:
+    elif element.cell_type == basix.CellType.tetrahedron and model.order == 1:
         cell_type, written, parent = "tetra", cell_nodes[:, :4], np.arange(n_cells)
+    elif element.cell_type == basix.CellType.tetrahedron and model.order == 2:
+        parts = _p2_tetrahedron_parts(np.asarray(element.points))
+        cell_type, written = "tetra", cell_nodes[:, parts].reshape(-1, 4)
+        parent = np.repeat(np.arange(n_cells), len(parts))
+        # Each part keeps its parent's orientation only up to the numbering: make every one positive.
+        x = model.node_coords[written]
+        volume = np.einsum("ij,ij->i", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0])
+        written[volume < 0] = written[volume < 0][:, [0, 2, 1, 3]]
     else:
         raise ValueError(f"fields.xdmf: cells of type {element.cell_type} are not supported")
     nodes, compact = np.unique(written, return_inverse=True)
     return nodes, cell_type, compact.reshape(written.shape).astype(np.int64), parent
+
+
+def _p2_tetrahedron_parts(points: np.ndarray) -> np.ndarray:
+    """(8, 4) local node indices of the 8 linear tetrahedra of a 10-node tetrahedron whose local
+    nodes sit at the reference `points` (basix's element points: 4 vertices, 6 edge midpoints)."""
+    vertices = [int(np.argmin(np.linalg.norm(points - corner, axis=1)))
+                for corner in np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)]
+
+    def middle(a: int, b: int) -> int:
+        return int(np.argmin(np.linalg.norm(points - 0.5 * (points[vertices[a]] + points[vertices[b]]), axis=1)))
+
+    v = vertices
+    m = {(a, b): middle(a, b) for a in range(4) for b in range(a + 1, 4)}
+    corners = [[v[0], m[0, 1], m[0, 2], m[0, 3]], [m[0, 1], v[1], m[1, 2], m[1, 3]],
+               [m[0, 2], m[1, 2], v[2], m[2, 3]], [m[0, 3], m[1, 3], m[2, 3], v[3]]]
+    # The inner octahedron around its diagonal m02 - m13; the ring m01, m03, m23, m12.
+    ring = [m[0, 1], m[0, 3], m[2, 3], m[1, 2]]
+    inner = [[m[0, 2], m[1, 3], ring[k], ring[(k + 1) % 4]] for k in range(4)]
+    return np.array(corners + inner, dtype=np.int64)
 
 
 def cell_regions(model) -> np.ndarray:

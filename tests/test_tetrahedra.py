@@ -1,0 +1,139 @@
+"""Tetrahedral meshes from gmsh as they come (issue 14, docs/tetrahedra.md): the `file` builder
+reads a user's .geo script, gmsh meshes it to tetrahedra, and the model runs with linear (P1,
+row-sum lumped) or quadratic (P2, HRZ-lumped) tetrahedra.
+
+- P2 lumped masses are all positive and sum to the body's mass, where row sums would give every
+  vertex a negative mass.
+- A box from a .geo under an oblique SV wave (30 deg): the monitors inside follow the free field
+  within 2 % (P1) and 0.5 % (P2).
+- The tunnel of meshes/tunnel_in_box_tet.geo under a long SV wave: the wall's hoop stress follows
+  Kirsch (the cavity check of tests/test_cavity.py, its 10 %).
+- What tetrahedra cannot do yet (contact, excavation, nonlinear materials) and mixed meshes are
+  refused with one line naming the key.
+"""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pyfem import solver
+from pyfem.scene import SceneError, parse_scene
+from test_cavity import (ANGLES, RADII, free_field_shear, kirsch, monitor_points, polar_stress, read_monitor,
+                         tunnel_scene)
+
+REPO = Path(__file__).resolve().parents[1]
+TUNNEL_GEO = REPO / "meshes" / "tunnel_in_box_tet.geo"
+KIRSCH_TOLERANCE = 0.10  # as tests/test_cavity.py
+
+
+def box_geo(folder: Path, h: float) -> Path:
+    """A user's gmsh script: a 160 x 20 x 160 m box of rock meshed to tetrahedra of size h (m)."""
+    path = folder / f"box_h{h:g}.geo"
+    path.write_text('SetFactory("OpenCASCADE");\n'
+                    "Box(1) = {0, 0, 0, 160, 20, 160};\n"
+                    'Physical Volume("rock") = {1};\n'
+                    f"Mesh.MeshSizeMax = {h};\nMesh.MeshSizeMin = {h};\n")
+    return path
+
+
+def box_scene(mesh_file: Path, order: int, **changes) -> "Scene":
+    data = {
+        "title": "tetrahedra, oblique SV",
+        "mesh": {"builder": "file", "file": str(mesh_file), "order": order},
+        "materials": {"rock": {"preset": "sandstone"}},
+        "time": {"duration": 1.0, "safety": 0.8},
+        "wave": {"type": "SV", "angle": 30.0, "surface": 200.0, "medium": "rock",
+                 "motion": {"ricker": {"f0": 5.0, "amplitude": 1.0e-3}}},
+        "monitor": [{"name": "centre", "point": [80.0, 10.0, 80.0]}, {"name": "upper", "point": [40.0, 10.0, 130.0]},
+                    {"name": "lower", "point": [120.0, 10.0, 30.0]}],
+        "output": {"interval": 0.005, "xdmf_interval": 0.0},
+    }
+    data.update(changes)
+    return parse_scene(data, source="test")
+
+
+def test_p2_tetrahedra_masses_are_positive_and_sum_to_the_mass(tmp_path):
+    from pyfem.assembly import assemble_nodal_vector, uses_diagonal_scaling
+    from pyfem.operators import build_model
+    import ufl
+    from dolfinx import fem
+
+    model = build_model(box_scene(box_geo(tmp_path, 20.0), order=2))
+    assert model.mesh.topology.cell_type.name == "tetrahedron" and uses_diagonal_scaling(model.V)
+    body = 2600.0 * 160.0 * 20.0 * 160.0  # sandstone, kg
+    assert np.all(model.mass > 0.0)
+    assert model.mass.sum() == pytest.approx(body, rel=1e-12)
+    # Row sums, which the scaling replaces, are negative at every vertex of a P2 tetrahedron.
+    ones = fem.Constant(model.mesh, np.ones(3))
+    row_sums = assemble_nodal_vector(2600.0 * ufl.inner(ones, ufl.TestFunction(model.V)) * ufl.dx, model.V)[:, 0]
+    vertices = np.unique(model.V.dofmap.list.array.reshape(-1, 10)[:, :4])
+    assert np.all(row_sums[vertices] < 0.0)
+    print(f"P2 tetrahedra: {len(model.mass)} nodes, masses {model.mass.min():.4g} .. {model.mass.max():.4g} kg; "
+          f"row sums at the vertices {row_sums[vertices].max():.4g} kg (negative)")
+
+
+@pytest.mark.parametrize("order, h, tolerance", [(1, 5.0, 0.02), (2, 7.0, 0.005)])
+def test_oblique_sv_on_tetrahedra_from_a_geo_follows_the_free_field(tmp_path, order, h, tolerance):
+    summary = solver.run(box_scene(box_geo(tmp_path, h), order), tmp_path / "run")
+    assert summary["energy"]["balance_error"] < 1e-10
+    checks = 0
+    for name, peak in summary["monitors"].items():
+        assert peak["displacement"] > 5e-4, f"{name}: the wave arrived (1 mm pulse)"
+        print(f"P{order} h = {h:g} m, {name}: differs from the free field by {100 * peak['freefield_error']:.2f} %")
+        assert peak["freefield_error"] < tolerance, name
+        checks += 1
+    assert checks == 3
+
+
+@pytest.mark.parametrize("order, wall_size", [(1, 0.8), (2, 0.8)])
+def test_tunnel_geo_wall_follows_kirsch_on_tetrahedra(tmp_path, order, wall_size):
+    """The example .geo, meshed by gmsh when the run starts, with 0.8 m at the wall instead of its
+    0.4 m to keep the default tier short. P1 tetrahedra hold one strain per cell: at r = 1.05 a the
+    hoop stress is that of the first row of cells, 11 % / 21 % above Kirsch even with the 0.4 m
+    cells (measured 2026-11-24; P2 with 0.4 m: 1.0-1.5 %), so P1 is held to Kirsch at r = 2 a and
+    P2 at both radii."""
+    geo = TUNNEL_GEO.read_text()
+    assert "0.4 + 0.12" in geo
+    mesh_file = tmp_path / "tunnel.geo"
+    mesh_file.write_text(geo.replace("0.4 + 0.12", f"{wall_size:g} + 0.12"))
+    scene = tunnel_scene(mesh_file, order)
+    out = tmp_path / "run"
+    summary = solver.run(scene, out)
+    assert "(unnamed)" in summary["traction_free_surfaces"], "the wall is free, not an input face"
+    times = read_monitor(out, "r1.05_t45")["t"]
+    tau_peak = np.max(np.abs(free_field_shear(scene, times)))
+    assert tau_peak > 1e3, "the wave arrived"
+    checks = 0
+    for name, (r, theta, point) in monitor_points().items():
+        columns = read_monitor(out, name)
+        stress = np.column_stack([columns[k] for k in ("sxx", "syy", "szz", "sxy", "syz", "sxz")])
+        _, tt, _ = polar_stress(stress, theta)
+        _, k_tt, _ = kirsch(r, theta)
+        tau_here = free_field_shear(scene, times, point)
+        peak_ratio = np.max(np.abs(tt)) / (abs(k_tt) * tau_peak)
+        history_error = np.linalg.norm(tt - k_tt * tau_here) / np.linalg.norm(k_tt * tau_here)
+        print(f"P{order} tetrahedra, {wall_size} m at the wall, {name}: hoop peak / Kirsch {peak_ratio:.4f}, "
+              f"history error {history_error:.2%}")
+        if order == 2 or r >= 2.0:
+            assert abs(peak_ratio - 1.0) < KIRSCH_TOLERANCE and history_error < KIRSCH_TOLERANCE, name
+            checks += 1
+    assert checks == (len(RADII) * len(ANGLES) if order == 2 else len(ANGLES))
+
+
+def test_what_tetrahedra_cannot_do_yet_is_refused_by_key(tmp_path):
+    from pyfem.operators import build_model
+
+    geo = box_geo(tmp_path, 40.0)
+    plastic = box_scene(geo, 1, materials={"rock": {"preset": "sandstone", "plasticity": {
+        "cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e6}}})
+    with pytest.raises(SceneError, match=r"materials\.rock\.plasticity.*hexahedra"):
+        build_model(plastic)
+    mixed = tmp_path / "mixed.geo"
+    # Two separate boxes: one meshed to tetrahedra, the other transfinite and recombined to hexahedra.
+    mixed.write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 40, 40, 40};\nBox(2) = {100, 0, 0, 40, 40, 40};\n'
+                     'Physical Volume("rock") = {1, 2};\nMesh.MeshSizeMax = 20;\n'
+                     "Transfinite Curve{13:24} = 3;\nTransfinite Surface{7:12};\nRecombine Surface{7:12};\n"
+                     "Transfinite Volume{2};\n")
+    with pytest.raises(SceneError, match="mixes"):
+        build_model(box_scene(mixed, 1))
