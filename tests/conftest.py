@@ -23,22 +23,26 @@ def observed_orders(hs, errors):
     return np.log(errors[:-1] / errors[1:]) / np.log(hs[:-1] / hs[1:])
 
 
-def write_msh_with_tetrahedra(path):
-    """A unit box meshed with tetrahedra, its volume the physical group "rock" (an unsupported mesh).
+def write_msh_with_quadratic_tetrahedra(path):
+    """A unit box meshed with 10-node tetrahedra (gmsh's own second-order elements), its volume the
+    physical group "rock": an unsupported mesh (pyfem reads linear cells and builds P2/Q2 on them).
 
-    The gmsh size option it sets is put back: gmsh keeps options for the whole process.
+    The gmsh options it sets are put back: gmsh keeps options for the whole process.
     """
     from pyfem._gmsh import gmsh
     from pyfem.geometry import gmsh_session
 
     with gmsh_session("tets"):
         previous_size = gmsh.option.getNumber("Mesh.MeshSizeMax")
+        previous_order = gmsh.option.getNumber("Mesh.ElementOrder")
         volume = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
         gmsh.model.occ.synchronize()
         gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, [volume]), "rock")
         gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+        gmsh.option.setNumber("Mesh.ElementOrder", 2)
         try:
             gmsh.model.mesh.generate(3)
             gmsh.write(str(path))
         finally:
             gmsh.option.setNumber("Mesh.MeshSizeMax", previous_size)
+            gmsh.option.setNumber("Mesh.ElementOrder", previous_order)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import write_msh_with_tetrahedra
+from conftest import write_msh_with_quadratic_tetrahedra
 
 from pyfem import cli
 from pyfem._gmsh import gmsh
@@ -173,8 +173,8 @@ BAD_INPUTS = [
     ("mesh.h with a file mesh", two_layer("[mesh]", "[mesh]\nh = 0.1"), "mesh.h",
      ['not read by builder "file"']),
     ("msh without volumes", mesh_file(write_msh_without_volumes), "mesh.file", ["no physical volume"]),
-    ("msh with tetrahedra", mesh_file(write_msh_with_tetrahedra), "mesh.file",
-     ["Tetrahedron 4", "8-node hexahedra"]),
+    ("msh with gmsh's quadratic tetrahedra", mesh_file(write_msh_with_quadratic_tetrahedra), "mesh.file",
+     ["Tetrahedron 10", "8-node hexahedra", "4-node tetrahedra"]),
     ("msh garbage", mesh_file(lambda path: path.write_bytes(b"\x00\x01garbage\n")), "mesh.file",
      ["gmsh cannot read"]),
     ("msh empty", mesh_file(lambda path: path.write_bytes(b"")), "mesh.file", ["gmsh cannot read"]),
@@ -219,7 +219,7 @@ def test_bad_input_is_one_error_line_with_exit_2_and_writes_nothing(capsys, tmp_
     assert not Path("/proc/pyfem-out").exists()
 
 
-@pytest.mark.parametrize("case", ["msh garbage", "msh with tetrahedra", "record file malformed",
+@pytest.mark.parametrize("case", ["msh garbage", "msh with gmsh's quadratic tetrahedra", "record file malformed",
                                   "out under /proc"])
 def test_bad_input_in_a_child_process_prints_only_the_error_line(tmp_path, case):
     setup = next(c[1] for c in BAD_INPUTS if c[0] == case)

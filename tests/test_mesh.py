@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from dolfinx import mesh as dolfinx_mesh
 
-from conftest import write_msh_with_tetrahedra
+from conftest import write_msh_with_quadratic_tetrahedra
 from pyfem.geometry import BOX_FACES, elements_per_direction, gmsh_session
 from pyfem.mesh import create_mesh
 
@@ -103,12 +103,12 @@ def test_box_material_name_mismatch_names_the_key():
         create_mesh(box_scene(materials={"granite": {"E": 1e9, "nu": 0.2, "rho": 2000.0}}))
 
 
-def test_tetrahedra_are_rejected(tmp_path):
+def test_gmsh_quadratic_tetrahedra_are_rejected(tmp_path):
     path = tmp_path / "tets.msh"
-    write_msh_with_tetrahedra(path)
+    write_msh_with_quadratic_tetrahedra(path)
     scene = box_scene()
     scene["mesh"] = {"builder": "file", "file": str(path), "order": 1}
-    with pytest.raises(ValueError, match="Tetrahedron"):
+    with pytest.raises(ValueError, match="Tetrahedron 10"):
         create_mesh(scene)
 
 
