@@ -71,6 +71,14 @@ def test_p2_tetrahedra_masses_are_positive_and_sum_to_the_mass(tmp_path):
     assert np.all(row_sums[vertices] < 0.0)
     print(f"P2 tetrahedra: {len(model.mass)} nodes, masses {model.mass.min():.4g} .. {model.mass.max():.4g} kg; "
           f"row sums at the vertices {row_sums[vertices].max():.4g} kg (negative)")
+    # fields.xdmf writes every node: each P2 cell as 8 linear tetrahedra that tile it.
+    from pyfem.output import field_mesh
+
+    nodes, cell_type, cells, parent = field_mesh(model)
+    assert cell_type == "tetra" and len(nodes) == len(model.mass) and len(cells) == 8 * model.n_cells
+    x = model.node_coords[nodes][cells]
+    volume = np.einsum("ij,ij->i", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0]) / 6.0
+    assert np.all(volume > 0.0) and volume.sum() == pytest.approx(160.0 * 20.0 * 160.0, rel=1e-12)
 
 
 @pytest.mark.parametrize("order, h, tolerance", [(1, 5.0, 0.02), (2, 7.0, 0.005)])
