@@ -145,7 +145,7 @@ def test_defaults_are_filled():
     assert scene["boundary"] == {"type": "viscoelastic", "faces": None, "face": None, "alpha_N": 4.0 / 3.0,
                                  "alpha_T": 2.0 / 3.0, "centre": [50.0, 5.0, 50.0]}
     assert scene["output"] == {"interval": 0.01, "xdmf_interval": 0.1,
-                               "fields": ["displacement", "velocity"]}
+                               "fields": ["displacement", "velocity"], "checkpoint_interval": 300.0}
     assert scene["pair_monitor"] == []
     for effect_table in ("damping", "initial_stress", "contact"):
         assert effect_table not in scene
