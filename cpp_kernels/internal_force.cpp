@@ -109,13 +109,11 @@ void HexahedronElementsBase::load_state(const StateArchive& archive, const std::
                                 std::to_string(geometry_.n_cells * geometry_.n_points));
   load_points(archive, prefix + "state");
   // sigma0 at every point, or none (a component built without initial stress, never rebased).
-  const std::string stress_block = prefix + "initial_stress";
-  const std::size_t n_values = archive.contains(stress_block)
-                                   ? archive.blocks().at(stress_block).size() / sizeof(double)
-                                   : 0;
-  const std::size_t n_full = static_cast<std::size_t>(6 * points[0]);
-  initial_stress_.assign(n_values == n_full ? n_full : 0, 0.0);
-  archive.get(prefix + "initial_stress", initial_stress_);
+  archive.get_resized(prefix + "initial_stress", initial_stress_);
+  if (!initial_stress_.empty() && initial_stress_.size() != static_cast<std::size_t>(6 * points[0]))
+    throw std::invalid_argument("checkpoint block '" + prefix + "initial_stress': " +
+                                std::to_string(initial_stress_.size()) + " values, the model needs 0 or " +
+                                std::to_string(6 * points[0]));
   archive.get_value(prefix + "stored_energy", stored_energy_);
   archive.get_value(prefix + "dissipation", dissipation_);
   trial_ready_ = false;

@@ -48,6 +48,29 @@ class StateArchive {
     if (!block.empty()) std::memcpy(values.data(), block.data(), block.size());
   }
 
+  /// Reads the block `name` into `values`, resized to the block (for state whose size the
+  /// restored object does not know beforehand). Throws std::invalid_argument for a missing block
+  /// or one that is not a whole number of values.
+  template <class T>
+  void get_resized(const std::string& name, std::vector<T>& values) const {
+    const std::vector<std::uint8_t>& block = find(name);
+    if (block.size() % sizeof(T) != 0)
+      throw std::invalid_argument("checkpoint block '" + name + "' holds " +
+                                  std::to_string(block.size()) + " bytes, not whole values of " +
+                                  std::to_string(sizeof(T)));
+    values.resize(block.size() / sizeof(T));
+    get(name, values);
+  }
+
+  void put_text(const std::string& name, const std::string& text) {
+    put(name, std::vector<char>(text.begin(), text.end()));
+  }
+
+  std::string text(const std::string& name) const {
+    const std::vector<std::uint8_t>& block = find(name);
+    return std::string(block.begin(), block.end());
+  }
+
   template <class T>
   void get_value(const std::string& name, T& value) const {
     std::vector<T> one(1);

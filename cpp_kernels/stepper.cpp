@@ -606,27 +606,28 @@ EnergyReport Stepper::energy() const {
   return report;
 }
 
-}  // namespace cavern
-
-namespace cavern {
-
 namespace {
 constexpr const char* kEnergyBlock = "stepper/energy";
+constexpr const char* kParameterNames[] = {"dt",        "alpha",      "beta",   "dofs",
+                                           "providers", "components", "contact"};
 }  // namespace
 
+std::vector<double> Stepper::checkpoint_parameters() const {
+  return {parameters_.dt,
+          parameters_.alpha,
+          parameters_.beta,
+          static_cast<double>(n_dofs()),
+          static_cast<double>(providers_.size()),
+          static_cast<double>(components_.size()),
+          contact_ ? 1.0 : 0.0};
+}
+
 void Stepper::save_state(StateArchive& archive) const {
-  archive.put(
-      "stepper/parameters",
-      std::vector<double>{parameters_.dt, parameters_.alpha, parameters_.beta,
-                          static_cast<double>(n_dofs()), static_cast<double>(providers_.size()),
-                          static_cast<double>(components_.size()), contact_ ? 1.0 : 0.0});
+  archive.put("stepper/parameters", checkpoint_parameters());
   archive.put_value<std::uint8_t>("stepper/energy_started", energy_started_ ? 1 : 0);
-  archive.put(kEnergyBlock,
-              std::vector<double>{initial_energy_, twice_kinetic_, twice_strain_,
-                                  acceleration_term_, external_work_, damping_work_,
-                                  external_power_, damping_power_, contact_work_, contact_power_,
-                                  friction_dissipation_, internal_work_, internal_power_,
-                                  internal_stored_, internal_dissipation_, dissipation_at_reset_});
+  std::vector<double> energy;
+  for (const double* term : energy_terms(*this)) energy.push_back(*term);
+  archive.put(kEnergyBlock, energy);
   archive.put("stepper/provider_work", provider_work_);
   archive.put("stepper/provider_power", provider_power_);
   archive.put("stepper/internal_force", internal_force_);
@@ -634,47 +635,32 @@ void Stepper::save_state(StateArchive& archive) const {
   if (contact_) contact_->save_state(archive, "contact/");
   for (std::size_t k = 0; k < components_.size(); ++k) {
     const std::string prefix = "component/" + std::to_string(k) + "/";
-    const std::string name = components_[k]->name();
-    archive.put(prefix + "name", std::vector<char>(name.begin(), name.end()));
+    archive.put_text(prefix + "name", components_[k]->name());
     components_[k]->save_state(archive, prefix);
   }
 }
 
 void Stepper::load_state(const StateArchive& archive) {
-  const std::vector<double> expected{parameters_.dt,
-                                     parameters_.alpha,
-                                     parameters_.beta,
-                                     static_cast<double>(n_dofs()),
-                                     static_cast<double>(providers_.size()),
-                                     static_cast<double>(components_.size()),
-                                     contact_ ? 1.0 : 0.0};
+  const std::vector<double> expected = checkpoint_parameters();
   std::vector<double> saved(expected.size());
   archive.get("stepper/parameters", saved);
-  static constexpr const char* kNames[] = {"dt",        "alpha",      "beta",   "dofs",
-                                           "providers", "components", "contact"};
   for (std::size_t j = 0; j < expected.size(); ++j)
     if (saved[j] != expected[j])
-      throw std::invalid_argument("checkpoint: " + std::string(kNames[j]) + " was " +
+      throw std::invalid_argument("checkpoint: " + std::string(kParameterNames[j]) + " was " +
                                   std::to_string(saved[j]) + ", the model's is " +
                                   std::to_string(expected[j]) +
                                   " (a checkpoint of another scene?)");
   for (std::size_t k = 0; k < components_.size(); ++k) {
-    const std::string prefix = "component/" + std::to_string(k) + "/";
-    const std::string name = components_[k]->name();
-    std::vector<char> saved_name(name.size());
-    if (archive.contains(prefix + "name") && archive.blocks().at(prefix + "name").size() != name.size())
-      throw std::invalid_argument("checkpoint: component " + std::to_string(k) +
-                                  " is not a " + name);
-    archive.get(prefix + "name", saved_name);
-    if (std::string(saved_name.begin(), saved_name.end()) != name)
+    const std::string saved_name = archive.text("component/" + std::to_string(k) + "/name");
+    if (saved_name != components_[k]->name())
       throw std::invalid_argument("checkpoint: component " + std::to_string(k) + " is a " +
-                                  std::string(saved_name.begin(), saved_name.end()) +
-                                  ", the model's is a " + name);
+                                  saved_name + ", the model's is a " + components_[k]->name());
   }
   // Everything checked that can be checked without reading: now restore.
   std::uint8_t started = 0;
   archive.get_value("stepper/energy_started", started);
-  std::vector<double> energy(16);
+  const auto terms = energy_terms(*this);
+  std::vector<double> energy(terms.size());
   archive.get(kEnergyBlock, energy);
   archive.get("stepper/provider_work", provider_work_);
   archive.get("stepper/provider_power", provider_power_);
@@ -684,22 +670,7 @@ void Stepper::load_state(const StateArchive& archive) {
   for (std::size_t k = 0; k < components_.size(); ++k)
     components_[k]->load_state(archive, "component/" + std::to_string(k) + "/");
   energy_started_ = started != 0;
-  initial_energy_ = energy[0];
-  twice_kinetic_ = energy[1];
-  twice_strain_ = energy[2];
-  acceleration_term_ = energy[3];
-  external_work_ = energy[4];
-  damping_work_ = energy[5];
-  external_power_ = energy[6];
-  damping_power_ = energy[7];
-  contact_work_ = energy[8];
-  contact_power_ = energy[9];
-  friction_dissipation_ = energy[10];
-  internal_work_ = energy[11];
-  internal_power_ = energy[12];
-  internal_stored_ = energy[13];
-  internal_dissipation_ = energy[14];
-  dissipation_at_reset_ = energy[15];
+  for (std::size_t j = 0; j < terms.size(); ++j) *terms[j] = energy[j];
 }
 
 }  // namespace cavern

@@ -2,6 +2,7 @@
 // damping, force providers and an exact discrete energy balance (docs/method.md section 4).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -183,6 +184,19 @@ class Stepper {
   void accumulate_work(const double* v);
   void contact_post_pass(double t, const double* u, double* v, double* a);
   ImplicitNodeOperators implicit_operators() const;
+  // What a checkpoint must match: dt, alpha, beta, dofs, providers, components, contact.
+  std::vector<double> checkpoint_parameters() const;
+  // The energy account's scalars in one order for save_state and load_state (pointers to const
+  // for a const Stepper).
+  template <class Self>
+  static auto energy_terms(Self& self) {
+    return std::array{&self.initial_energy_,    &self.twice_kinetic_,      &self.twice_strain_,
+                      &self.acceleration_term_, &self.external_work_,      &self.damping_work_,
+                      &self.external_power_,    &self.damping_power_,      &self.contact_work_,
+                      &self.contact_power_,     &self.friction_dissipation_, &self.internal_work_,
+                      &self.internal_power_,    &self.internal_stored_,    &self.internal_dissipation_,
+                      &self.dissipation_at_reset_};
+  }
   // Slots of the nodes with a dashpot or a constraint, and per slot the inverse of the implicit
   // velocity system (restricted to the free directions for a constrained node).
   void build_implicit_slots();

@@ -10,6 +10,7 @@ what time. Costs one gather of the section's nodes per sample.
 from __future__ import annotations
 
 import numpy as np
+from dolfinx.cpp.mesh import cell_num_entities
 
 
 class DeformedSection:
@@ -23,7 +24,7 @@ class DeformedSection:
 
     def __init__(self, model, monitor_points, region_ids: np.ndarray):
         n_basis = model.V.dofmap.dof_layout.num_dofs
-        n_vertices = 4 if model.mesh.topology.cell_type.name == "tetrahedron" else 8
+        n_vertices = cell_num_entities(model.mesh.topology.cell_type, 0)  # 8 hexahedron, 4 tetrahedron
         vertices = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :n_vertices]
         y = model.node_coords[vertices][..., 1]
         self.y = (float(np.median(monitor_points[:, 1])) if monitor_points is not None and len(monitor_points)

@@ -442,6 +442,7 @@ class RunWriter:
         """The writer's part of a checkpoint (pyfem/checkpoint.py) at the last sample: (JSON part,
         arrays). Flushes and syncs every history file and the fields file first, and writes
         fields.xdmf as it stands, so the files on disk end exactly at this sample."""
+        self.flush()  # the queued rows, and run.json with the time reached
         offsets = {name: history.size() for name, history in self._histories.items()}
         fields = None
         if self.xdmf is not None:
@@ -451,7 +452,6 @@ class RunWriter:
             self._write_fields_index()
             fields = {"data_counter": self.xdmf.data_counter,
                       "xml": ET.tostring(self.xdmf.xdmf_file, encoding="unicode")}
-        self._summary["time_reached"] = self.times[-1] if self.times else None
         meta = {"summary": self._summary, "sample_count": self._sample_count, "history_sizes": offsets,
                 "fields": fields, "deformation": {"largest": self.deformation.largest, "t": self.deformation.t}}
         arrays = {"times": np.array(self.times, dtype=np.float64),
