@@ -466,7 +466,12 @@ Deterministic: the same bits for any number of threads.
 
 Args:
     cell_nodes: int32 (c, k) node of each basis function, k = 8 (Q1) or 27 (Q2). Borrowed.
-    gradients: float64 (c, q, k, 3) basis gradients dphi/dx at the points (1/m). Borrowed.
+    gradients: float64 (c, q, k, 3) basis gradients dphi/dx at the points (1/m), or for Q2
+        cells with the 27-point Gauss rule the tensor form, a tuple (inverse_jacobians float64
+        (c, q, 3, 3) dX_m/dx_l, node_order int32 (27,), point_order int32 (27,), basis float64
+        (3, 3), derivative float64 (3, 3)): lexicographic node/point 9 i + 3 j + k -> element
+        index, and the 1D Lagrange values/derivatives [Gauss point, node] (sum factorisation,
+        cpp_kernels/tensor_q2.hpp). Borrowed (the tables copied).
     weights: float64 (c, q) quadrature weight x |det J| (m^3), > 0. Borrowed.
     law: material law name (known_laws()).
     parameters: dict name -> float of the law's parameters (SI, angles in deg):
@@ -491,8 +496,30 @@ Borrowed arrays are kept alive by this object and must not be modified while it 
              const py::ssize_t n_cells = cell_nodes.shape(0), n_basis = cell_nodes.shape(1);
              auto weights = checked_array<double>(weights_object, "weights", {n_cells, kAny});
              const py::ssize_t n_points = weights.shape(1);
-             auto gradients = checked_array<double>(gradients_object, "gradients",
-                                                    {n_cells, n_points, n_basis, 3});
+             // Dense (c, q, k, 3), or the tensor form of Q2 (internal_force.hpp).
+             const bool tensor_form = py::isinstance<py::tuple>(gradients_object);
+             py::array_t<double> gradients, inverse_jacobians;
+             TensorQ2 tensor{};
+             if (tensor_form) {
+               const auto parts = gradients_object.cast<py::tuple>();
+               if (parts.size() != 5)
+                 throw std::invalid_argument(
+                     "gradients: a (c, q, k, 3) array or the tensor form (inverse_jacobians, "
+                     "node_order, point_order, basis, derivative)");
+               inverse_jacobians = checked_array<double>(parts[0], "inverse_jacobians",
+                                                         {n_cells, n_points, 3, 3});
+               auto node_order = checked_array<std::int32_t>(parts[1], "node_order", {27});
+               auto point_order = checked_array<std::int32_t>(parts[2], "point_order", {27});
+               auto basis = checked_array<double>(parts[3], "basis", {3, 3});
+               auto derivative = checked_array<double>(parts[4], "derivative", {3, 3});
+               std::copy_n(node_order.data(), 27, tensor.node_order);
+               std::copy_n(point_order.data(), 27, tensor.point_order);
+               std::copy_n(basis.data(), 9, tensor.basis);
+               std::copy_n(derivative.data(), 9, tensor.derivative);
+             } else {
+               gradients = checked_array<double>(gradients_object, "gradients",
+                                                 {n_cells, n_points, n_basis, 3});
+             }
              const double* initial_stress = nullptr;
              py::array_t<double> initial_stress_array;
              if (!initial_stress_object.is_none()) {
@@ -500,8 +527,14 @@ Borrowed arrays are kept alive by this object and must not be modified while it 
                    initial_stress_object, "initial_stress", {n_cells, n_points, 6});
                initial_stress = initial_stress_array.data();
              }
-             HexahedronGeometry geometry{n_cells,          n_points,       n_basis,
-                                         cell_nodes.data(), gradients.data(), weights.data()};
+             HexahedronGeometry geometry{n_cells,
+                                         n_points,
+                                         n_basis,
+                                         cell_nodes.data(),
+                                         tensor_form ? nullptr : gradients.data(),
+                                         weights.data(),
+                                         tensor_form ? &tensor : nullptr,
+                                         tensor_form ? inverse_jacobians.data() : nullptr};
              ElementOptions options;
              options.mean_dilatation = mean_dilatation;
              options.min_cells_for_threads = min_cells_for_threads;

@@ -16,6 +16,10 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
                                                const ElementOptions& options,
                                                const double* initial_stress)
     : geometry_(geometry), options_(options) {
+  if (geometry.tensor) {  // owned: the caller's table may go
+    tensor_ = *geometry.tensor;
+    geometry_.tensor = &tensor_;
+  }
   const std::int64_t n_cells = geometry.n_cells, n_points = geometry.n_points, k = geometry.n_basis;
   if (k != 8 && k != 27)
     throw std::invalid_argument("cell_nodes: " + std::to_string(k) +
@@ -27,9 +31,32 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
       throw std::invalid_argument("cell_nodes[" + std::to_string(j / k) + ", " +
                                   std::to_string(j % k) +
                                   "] = " + std::to_string(geometry.cell_nodes[j]) + " is negative");
-  for (std::int64_t j = 0; j < n_cells * n_points * k * 3; ++j)
-    if (!std::isfinite(geometry.gradients[j]))
-      throw std::invalid_argument("gradients: entry " + std::to_string(j) + " is not finite");
+  auto require_finite = [](const double* values, std::int64_t count, const std::string& name) {
+    for (std::int64_t j = 0; j < count; ++j)
+      if (!std::isfinite(values[j]))
+        throw std::invalid_argument(name + ": entry " + std::to_string(j) + " is not finite");
+  };
+  if (geometry.tensor) {
+    if (k != 27 || n_points != 27 || !geometry.inverse_jacobians || geometry.gradients)
+      throw std::invalid_argument(
+          "gradients: the tensor form is for Q2 cells with 27 points, given with the inverse "
+          "Jacobians and without dense gradients");
+    if (options.mean_dilatation)
+      throw std::invalid_argument("mean_dilatation needs the dense gradients (Q1)");
+    const TensorQ2& t = *geometry.tensor;
+    require_finite(t.basis, 9, "tensor basis");
+    require_finite(t.derivative, 9, "tensor derivative");
+    bool node_seen[27] = {}, point_seen[27] = {};
+    for (int j = 0; j < 27; ++j) {
+      if (t.node_order[j] < 0 || t.node_order[j] >= 27 || node_seen[t.node_order[j]] ||
+          t.point_order[j] < 0 || t.point_order[j] >= 27 || point_seen[t.point_order[j]])
+        throw std::invalid_argument("tensor node_order and point_order: permutations of 0..26");
+      node_seen[t.node_order[j]] = point_seen[t.point_order[j]] = true;
+    }
+    require_finite(geometry.inverse_jacobians, n_cells * n_points * 9, "inverse_jacobians");
+  } else {
+    require_finite(geometry.gradients, n_cells * n_points * k * 3, "gradients");
+  }
   characteristic_length_.assign(n_cells, 0.0);
   for (std::int64_t cell = 0; cell < n_cells; ++cell) {
     double volume = 0.0;

@@ -11,6 +11,7 @@
 
 #include "materials/material_law.hpp"
 #include "state_archive.hpp"
+#include "tensor_q2.hpp"
 
 namespace cavern {
 
@@ -75,13 +76,22 @@ class InternalForceComponent {
 };
 
 /// Borrowed element arrays of hexahedral cells (Q1: k = 8, Q2: k = 27), from pyfem/elements.py.
+/// The basis gradients dphi_a/dx at the points come in one of two forms:
+///   dense:    gradients (c, q, k, 3);
+///   tensor:   (Q2 with its 27-point Gauss rule) the cell type's TensorQ2 (tensor_q2.hpp) and
+///             the inverse Jacobians (c, q, 3, 3) dX_m/dx_l: the element loop sum-factorises
+///             the reference gradients and applies J^-1 per point, about a third of the dense
+///             arithmetic, and streams 9 numbers per point instead of 81.
+/// Exactly one of gradients and (tensor, inverse_jacobians) is set.
 struct HexahedronGeometry {
   std::int64_t n_cells = 0;
   std::int64_t n_points = 0;                 // q, quadrature points per cell
   std::int64_t n_basis = 0;                  // k, nodes per cell
   const std::int32_t* cell_nodes = nullptr;  // (c, k) node of each basis function
-  const double* gradients = nullptr;         // (c, q, k, 3) dphi/dx at the points (1/m)
+  const double* gradients = nullptr;         // (c, q, k, 3) dphi/dx at the points (1/m), or null
   const double* weights = nullptr;           // (c, q) quadrature weight x det J (m^3), > 0
+  const TensorQ2* tensor = nullptr;          // the tensor form, or null
+  const double* inverse_jacobians = nullptr;  // (c, q, 3, 3) dX_m/dx_l (1/m), tensor form
 };
 
 /// Options of the element loop.
@@ -165,7 +175,8 @@ class HexahedronElementsBase : public InternalForceComponent {
   static constexpr double kZeroStress[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
   static constexpr int kMaxBasis = 27;
 
-  HexahedronGeometry geometry_;
+  HexahedronGeometry geometry_;  // its tensor, if any, points to tensor_
+  TensorQ2 tensor_{};
   ElementOptions options_;
   std::vector<double> initial_stress_;         // (c, q, 6) or empty
   std::vector<double> characteristic_length_;  // (c)
@@ -321,6 +332,9 @@ class HexahedronElements final : public HexahedronElementsBase {
   // grad phi_a)] into element_force_ of the cell, with s_q = stress_of(q, eps_q) (Voigt).
   template <int kBasis, class StressOf>
   void integrate_cell(std::int64_t cell, const double* x, StressOf&& stress_of) {
+    if constexpr (kBasis == 27) {
+      if (geometry_.tensor) return integrate_cell_tensor(cell, x, stress_of);
+    }
     const std::int64_t n_points = geometry_.n_points;
     const std::int32_t* nodes = geometry_.cell_nodes + cell * kBasis;
     const double* cell_gradients = geometry_.gradients + cell * n_points * kBasis * 3;
@@ -388,6 +402,52 @@ class HexahedronElements final : public HexahedronElementsBase {
     double* out = element_force_.data() + cell * kBasis * 3;
     for (int a = 0; a < kBasis; ++a)
       for (int i = 0; i < 3; ++i) out[3 * a + i] = force[a][i];
+  }
+
+  // integrate_cell of a Q2 cell in the tensor form (no mean dilatation): with R = dphi/dX by
+  // sum factorisation (tensor_q2.hpp) and J^-1 = dX/dx at the point,
+  //   du_i/dx_l = sum_m (dU_i/dX_m) J^-1_ml,  f_n,i = sum_q sum_m dphi_n/dX_m(q) t_im(q),
+  //   t_im = w_q sum_l s_il J^-1_ml.
+  template <class StressOf>
+  void integrate_cell_tensor(std::int64_t cell, const double* x, StressOf& stress_of) {
+    const TensorQ2& tensor = *geometry_.tensor;
+    const std::int32_t* nodes = geometry_.cell_nodes + cell * 27;
+    const double* weights = geometry_.weights + cell * 27;
+    const double* inverses = geometry_.inverse_jacobians + cell * 27 * 9;
+    double U[3][27];
+    for (int n = 0; n < 27; ++n) {
+      const std::int64_t node = nodes[tensor.node_order[n]];
+      for (int i = 0; i < 3; ++i) U[i][n] = x[3 * node + i];
+    }
+    double reference[3][3][27];  // [i][m][point] dU_i/dX_m
+    for (int i = 0; i < 3; ++i) tensor_q2_gradient(tensor, U[i], reference[i]);
+    double flux[3][3][27];  // [i][m][point] t_im
+    for (int p = 0; p < 27; ++p) {
+      const int q = tensor.point_order[p];
+      const double* inverse = inverses + 9 * q;
+      double H[3][3];
+      for (int i = 0; i < 3; ++i)
+        for (int l = 0; l < 3; ++l)
+          H[i][l] = reference[i][0][p] * inverse[l] + reference[i][1][p] * inverse[3 + l] +
+                    reference[i][2][p] * inverse[6 + l];
+      double strain[6] = {H[0][0],           H[1][1],           H[2][2],
+                          H[0][1] + H[1][0], H[1][2] + H[2][1], H[0][2] + H[2][0]};
+      double voigt[6];
+      stress_of(q, strain, voigt);
+      const double w = weights[q];
+      const double s[3][3] = {{w * voigt[kXX], w * voigt[kXY], w * voigt[kXZ]},
+                              {w * voigt[kXY], w * voigt[kYY], w * voigt[kYZ]},
+                              {w * voigt[kXZ], w * voigt[kYZ], w * voigt[kZZ]}};
+      for (int i = 0; i < 3; ++i)
+        for (int m = 0; m < 3; ++m)
+          flux[i][m][p] = s[i][0] * inverse[3 * m] + s[i][1] * inverse[3 * m + 1] +
+                          s[i][2] * inverse[3 * m + 2];
+    }
+    double force[3][27];
+    for (int i = 0; i < 3; ++i) tensor_q2_divergence(tensor, flux[i], force[i]);
+    double* out = element_force_.data() + cell * 27 * 3;
+    for (int n = 0; n < 27; ++n)
+      for (int i = 0; i < 3; ++i) out[3 * tensor.node_order[n] + i] = force[i][n];
   }
 
   typename Law::Parameters parameters_;

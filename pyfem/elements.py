@@ -54,21 +54,41 @@ class ElementArrays:
     Attributes:
         cells: (c,) int32 local dolfinx cell indices.
         cell_nodes: (c, k) int32 node of each basis function, k = 8 (Q1) or 27 (Q2).
-        gradients: (c, q, k, 3) float64 basis gradients dphi/dx at the quadrature points (1/m).
+        reference_gradients: (q, k, 3) float64 basis gradients dphi/dX on the reference cell.
+        inverse_jacobians: (c, q, 3, 3) float64 dX_m/dx_l at the quadrature points (1/m):
+            dphi/dx = reference_gradients @ inverse_jacobians (the property `gradients`).
         weights: (c, q) float64 quadrature weight x |det J| (m^3).
         points: (c, q, 3) float64 physical coordinates of the quadrature points (m).
+        tensor: for Q2 with its 27-point Gauss rule, the tensor-product tables of the kernel's
+            sum factorisation (tensor_tables; cpp_kernels/tensor_q2.hpp), else None.
     """
 
     cells: np.ndarray
     cell_nodes: np.ndarray
-    gradients: np.ndarray
+    reference_gradients: np.ndarray
+    inverse_jacobians: np.ndarray
     weights: np.ndarray
     points: np.ndarray
+    tensor: tuple | None = None
+
+    @property
+    def gradients(self) -> np.ndarray:
+        """(c, q, k, 3) basis gradients dphi/dx at the quadrature points (1/m), computed."""
+        return np.einsum("qkm,cqml->cqkl", self.reference_gradients, self.inverse_jacobians)
+
+    def kernel_gradients(self, dense: bool = False):
+        """The `gradients` argument of pyfem._kernels.HexahedronElements: the tensor form
+        (inverse Jacobians + tables) where there is one and `dense` is false, else the dense
+        (c, q, k, 3) array (mean dilatation needs it)."""
+        if self.tensor is not None and not dense:
+            return (self.inverse_jacobians, *self.tensor)
+        return np.ascontiguousarray(self.gradients)
 
     @property
     def nbytes(self) -> int:
         """Bytes of the arrays (the kernel borrows them for the whole run)."""
-        return int(sum(getattr(self, f.name).nbytes for f in dataclasses.fields(self)))
+        return int(sum(getattr(self, f.name).nbytes for f in dataclasses.fields(self)
+                       if isinstance(getattr(self, f.name), np.ndarray)))
 
 
 @dataclasses.dataclass
@@ -124,8 +144,10 @@ class NonlinearRegions:
 
         arrays = self.arrays[name]
         sigma0 = self.initial_stress.get(name) if isinstance(initial_stress, str) else initial_stress
-        return _kernels.HexahedronElements(arrays.cell_nodes, arrays.gradients, arrays.weights, *self.laws[name],
-                                           initial_stress=sigma0, **self.options.get(name, {}))
+        options = self.options.get(name, {})
+        gradients = arrays.kernel_gradients(dense=bool(options.get("mean_dilatation")))
+        return _kernels.HexahedronElements(arrays.cell_nodes, gradients, arrays.weights, *self.laws[name],
+                                           initial_stress=sigma0, **options)
 
     def nearest_point(self, cell: int, point) -> tuple[int, int] | None:
         """(component index, flat point index cell * q + point) of the quadrature point of local cell
@@ -265,15 +287,66 @@ def element_arrays(V, cells: np.ndarray) -> ElementArrays:
     if np.any(determinant == 0.0):
         raise ValueError("element_arrays: a degenerate cell (det J = 0 at a quadrature point)")
     inverse = np.linalg.inv(jacobian)                                                            # dX_j/dx_i
-    gradients = np.einsum("qkj,cqji->cqki", basis_gradients, inverse)
     weights = reference_weights[None, :] * np.abs(determinant)
     points = np.einsum("qg,cgi->cqi", coordinate_table[0], x)
 
     n_basis = element.dim
     cell_nodes = V.dofmap.list.array.reshape(-1, n_basis)[cells]
     return ElementArrays(cells=cells, cell_nodes=np.ascontiguousarray(cell_nodes, dtype=np.int32),
-                         gradients=np.ascontiguousarray(gradients), weights=np.ascontiguousarray(weights),
-                         points=np.ascontiguousarray(points))
+                         reference_gradients=np.ascontiguousarray(basis_gradients, dtype=np.float64),
+                         inverse_jacobians=np.ascontiguousarray(inverse), weights=np.ascontiguousarray(weights),
+                         points=np.ascontiguousarray(points),
+                         tensor=tensor_tables(element, reference_points, basis_gradients))
+
+
+def tensor_tables(element, reference_points: np.ndarray, basis_gradients: np.ndarray) -> tuple | None:
+    """The tensor-product tables (node_order, point_order, basis, derivative) of a Q2 hexahedron
+    and its 27-point Gauss rule for the kernel's sum factorisation (cpp_kernels/tensor_q2.hpp),
+    or None for any other element or rule. Lexicographic index 9 i + 3 j + k of the node
+    (x_i, x_j, x_k) or point (g_i, g_j, g_k); basis[g, n] = l_n(g), derivative[g, n] = l_n'(g) of
+    the 1D Lagrange functions on the nodes. Checked: the tables reproduce the element's own
+    reference gradients to round-off, or None is returned."""
+    if element.degree != 2 or element.dim != 27 or len(reference_points) != 27:
+        return None
+    nodes_1d = np.unique(np.round(element.points, 12))
+    gauss_1d = np.unique(np.round(reference_points, 12))
+    if len(nodes_1d) != 3 or len(gauss_1d) != 3:
+        return None
+
+    def lexicographic_order(points, axis_values):
+        index = np.abs(points[:, :, None] - axis_values[None, None, :]).argmin(axis=2)   # (27, 3)
+        lex = 9 * index[:, 0] + 3 * index[:, 1] + index[:, 2]
+        if sorted(lex.tolist()) != list(range(27)):
+            return None
+        order = np.empty(27, dtype=np.int32)
+        order[lex] = np.arange(27, dtype=np.int32)
+        return order
+
+    node_order = lexicographic_order(element.points, nodes_1d)
+    point_order = lexicographic_order(reference_points, gauss_1d)
+    if node_order is None or point_order is None:
+        return None
+    basis = np.empty((3, 3))
+    derivative = np.empty((3, 3))
+    for n in range(3):
+        others = [nodes_1d[m] for m in range(3) if m != n]
+        scale = np.prod([nodes_1d[n] - o for o in others])
+        basis[:, n] = (gauss_1d - others[0]) * (gauss_1d - others[1]) / scale
+        derivative[:, n] = (2.0 * gauss_1d - others[0] - others[1]) / scale
+    # Reference gradients from the tables, in the element's numbering, against basix's.
+    lex = np.arange(27)
+    i, j, k = lex // 9, (lex // 3) % 3, lex % 3
+    rebuilt = np.empty((27, 27, 3))
+    for p in range(27):
+        for n in range(27):
+            a, b, c = i[n], j[n], k[n]
+            g, h, l = i[p], j[p], k[p]
+            rebuilt[point_order[p], node_order[n]] = [derivative[g, a] * basis[h, b] * basis[l, c],
+                                                      basis[g, a] * derivative[h, b] * basis[l, c],
+                                                      basis[g, a] * basis[h, b] * derivative[l, c]]
+    if np.abs(rebuilt - basis_gradients).max() > 1e-10 * np.abs(basis_gradients).max():
+        return None
+    return node_order, point_order, np.ascontiguousarray(basis), np.ascontiguousarray(derivative)
 
 
 def _coordinate_element(mesh):

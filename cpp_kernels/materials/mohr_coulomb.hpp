@@ -103,9 +103,15 @@ double mohr_coulomb_stored_energy(const MohrCoulombMaterial& material,
 double mohr_coulomb_yield(const MohrCoulombMaterial& material,
                           const std::array<double, 3>& principal);
 
+/// True when the stress (Voigt, tensor shear components) is certainly inside the yield surface
+/// with a round-off margin, from an upper bound of mohr_coulomb_yield in the invariants p and
+/// sqrt(J2) (no eigenvalues): the update's cheapest elastic screen. False says nothing.
+bool elastic_by_invariants(const MohrCoulombMaterial& material, const Voigt& stress);
+
 /// One strain-driven step of the rock law (pure: the old state is only read).
-///   trial:    sigma_tr = sigma_eff,n + C : d_eps (clearly elastic trials are recognised from
-///             symmetric_eigenvalues_estimate without the Jacobi decomposition)
+///   trial:    sigma_tr = sigma_eff,n + C : d_eps (clearly elastic trials are recognised by
+///             elastic_by_invariants, then symmetric_eigenvalues_estimate, without the Jacobi
+///             decomposition)
 ///   return:   closed form in principal stresses, de Souza Neto, Peric & Owen (2008) Sec. 8.2 and
 ///             Box 8.5 (main plane, both edges, apex), extended by the Rankine planes
 ///             s_i <= t and their corners with the M-C plane. Each candidate set of active planes

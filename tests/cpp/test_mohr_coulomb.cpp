@@ -708,3 +708,46 @@ TEST(MohrCoulomb, RejectsInvalidParameters) {
   EXPECT_FALSE(sandstone.tension_cutoff);
   EXPECT_NEAR(sandstone.apex, 1.10e6 / std::tan(42.0 * kPi / 180.0), 1e-6);
 }
+
+// The cheapest elastic screen (elastic_by_invariants) is an upper bound of the yield function:
+// it never calls elastic a stress that the exact principal stresses put on or outside the
+// surface, and it does recognise the confined states that most points of a deep model are in.
+TEST(MohrCoulomb, InvariantScreenNeverAcceptsAYieldingStress) {
+  std::mt19937_64 generator(7);
+  std::uniform_real_distribution<double> angle(0.0, 2.0 * kPi);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  int accepted = 0, yielding = 0, inside = 0;
+  for (const MohrCoulombMaterial& m :
+       {mohr_coulomb_material(issue_parameters()), mohr_coulomb_material(soft_rock()),
+        mohr_coulomb_material(parameters(30.0e9, 0.2, 2.0 * kMPa, 0.0, 0.0, kInfinity))}) {
+    for (int sample = 0; sample < 20000; ++sample) {
+      // Principal stresses around the surface: mean from -20 to +2 MPa, deviator up to 15 MPa.
+      const double mean = -9.0 * kMPa + 11.0 * kMPa * unit(generator);
+      const double spread = 7.5 * kMPa * (1.0 + unit(generator));
+      const Matrix3 D{{{mean + spread * unit(generator), 0.0, 0.0},
+                       {0.0, mean + spread * unit(generator), 0.0},
+                       {0.0, 0.0, mean + spread * unit(generator)}}};
+      const Voigt s = stress_voigt(
+          rotate_tensor(rotation(angle(generator), angle(generator), angle(generator)), D));
+      const double f = mohr_coulomb_yield(m, principal_stresses(s).values);
+      const bool screened = elastic_by_invariants(m, s);
+      if (f >= 0.0) {
+        ++yielding;
+        EXPECT_FALSE(screened) << "f = " << f;
+      } else {
+        ++inside;
+      }
+      accepted += screened;
+    }
+  }
+  EXPECT_GT(yielding, 1000);  // the samples do cross the surface
+  EXPECT_GT(accepted, inside / 4);  // and the screen does its job on a good share of the rest
+  // The states of a deep model at rest: 8 MPa confinement with a 3 MPa deviator.
+  const MohrCoulombMaterial rock = mohr_coulomb_material(issue_parameters());
+  EXPECT_TRUE(elastic_by_invariants(rock, {-8.0 * kMPa, -8.0 * kMPa, -11.0 * kMPa, 0.0, 0.0, 0.0}));
+  // Exactly on the surface (main plane, sigma_2 on the compression meridian) is not elastic.
+  const double k = rock.strength, sp = rock.sin_phi;
+  const double s3 = -10.0 * kMPa, s1 = (k + s3 * (1.0 - sp)) / (1.0 + sp);
+  EXPECT_NEAR(mohr_coulomb_yield(rock, {s1, s1, s3}), 0.0, 1e-9 * kMPa);
+  EXPECT_FALSE(elastic_by_invariants(rock, {s1, s1, s3, 0.0, 0.0, 0.0}));
+}
