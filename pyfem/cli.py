@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any, Sequence
@@ -65,6 +66,16 @@ def _parser() -> argparse.ArgumentParser:
     keys = commands.add_parser("keys", help="print the scene-key reference (markdown)")
     keys.add_argument("--write", nargs="?", const="", default=None, metavar="PATH",
                       help="write it to PATH instead (default: docs/scene-keys.md of the source tree)")
+
+    view = commands.add_parser("view", help="render a run in ParaView (regions, interfaces, deformed) and "
+                                            "write its ParaView state")
+    view.add_argument("run_dir", type=Path, help="run directory (holds fields.xdmf and run.json)")
+    view.add_argument("--time", type=float, default=None,
+                      help="output time to show (s); default: that of the largest displacement")
+    view.add_argument("--section-y", type=float, default=None,
+                      help="y of the cut (m); default: the monitors' mean y")
+    view.add_argument("--warp", type=float, default=None,
+                      help="displacement magnification; default: the largest displacement as 3 %% of the model")
 
     commands.add_parser("bench", help="benchmarks (arguments go to pyfem.bench)",
                         add_help=False)
@@ -306,6 +317,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "keys":
         return command_keys(args.write)
+    if args.command == "view":
+        return command_view(args.run_dir, args.time, args.section_y, args.warp)
     try:
         if args.command == "run":
             return command_run(args.scene, args.out, args.overrides, args.resume)
@@ -328,6 +341,56 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as error:
         print(f"error: {interruption_text(error)}", file=sys.stderr)
         return getattr(error, "exit_status", 130)
+
+
+def command_view(run_dir: Path, time: float | None, section_y: float | None, warp: float | None) -> int:
+    """Render a run with ParaView's pvbatch (pyfem/pvbatch_view.py; under xvfb-run when there is no
+    X display): plots/paraview.png and paraview.pvsm in the run directory (docs/paraview.md)."""
+    import shutil
+    import subprocess
+
+    run_dir = Path(run_dir)
+    for name in ("run.json", "fields.xdmf"):
+        if not (run_dir / name).exists():
+            print(f"error: view: {run_dir / name} does not exist; allowed: a run directory with fields "
+                  f"(output.xdmf_interval > 0)", file=sys.stderr)
+            return EXIT_USAGE
+    pvbatch = shutil.which("pvbatch")
+    if pvbatch is None:
+        print("error: view: pvbatch not found; install Debian's paraview and python3-paraview "
+              "(scripts/setup.sh --with-paraview)", file=sys.stderr)
+        return EXIT_USAGE
+    command = [pvbatch, str(Path(__file__).with_name("pvbatch_view.py")), str(run_dir)]
+    for flag, value in (("--time", time), ("--section-y", section_y), ("--warp", warp)):
+        if value is not None:
+            command += [flag, repr(value)]
+    if not os.environ.get("DISPLAY"):
+        xvfb_run = shutil.which("xvfb-run")
+        if xvfb_run is None:
+            print("error: view: no X display and no xvfb-run; install Debian's xvfb", file=sys.stderr)
+            return EXIT_USAGE
+        command = [xvfb_run, "-a"] + command
+    # Xvfb started by xvfb-run is sometimes gone when pvbatch opens its window on a busy machine
+    # ("bad X server connection"): try that case again, nothing else.
+    for _ in range(4):
+        result = subprocess.run(command, capture_output=True, text=True)
+        if result.returncode == 0 or "bad X server connection" not in result.stderr:
+            break
+    if result.returncode != 0:
+        print(result.stderr.strip()[-2000:], file=sys.stderr)
+        print(f"error: view: pvbatch failed with exit status {result.returncode}", file=sys.stderr)
+        return 1
+    line = next((text for text in result.stdout.splitlines() if text.startswith("PARAVIEW ")), None)
+    if line is None:
+        print("error: view: pvbatch wrote no picture", file=sys.stderr)
+        return 1
+    shown = json.loads(line.removeprefix("PARAVIEW "))
+    print(f"view: t = {shown['time']:g} s (largest displacement {shown['shown_displacement']:.4g} m, drawn "
+          f"x{shown['warp']:.3g}), regions {', '.join(shown['regions'])}"
+          + (", interfaces coloured by slip" if shown["interfaces"] else ""))
+    print(f"  picture {shown['png']}")
+    print(f"  ParaView state {shown['state']} (File > Load State, search files under the run directory)")
+    return 0
 
 
 def interruption_text(error: KeyboardInterrupt) -> str:

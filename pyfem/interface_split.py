@@ -45,6 +45,16 @@ def oriented_normals(vectors: np.ndarray) -> np.ndarray:
     return vectors
 
 
+def facet_normals(x: np.ndarray, facets: np.ndarray) -> np.ndarray:
+    """Normals (f, 3) of planar facets, quadrilaterals (f, 4: the cross product of the diagonals) or
+    triangles (f, 3: of two edges), oriented by the side rule; their length is twice the area."""
+    if facets.shape[1] == 4:
+        normals = np.cross(x[facets[:, 2]] - x[facets[:, 0]], x[facets[:, 3]] - x[facets[:, 1]])
+    else:
+        normals = np.cross(x[facets[:, 1]] - x[facets[:, 0]], x[facets[:, 2]] - x[facets[:, 0]])
+    return oriented_normals(normals)
+
+
 def incidence(rows: np.ndarray, n_columns: int) -> scipy.sparse.csr_matrix:
     """0/1 matrix with a 1 at (r, rows[r, k]) for every k."""
     n, k = rows.shape
@@ -53,7 +63,7 @@ def incidence(rows: np.ndarray, n_columns: int) -> scipy.sparse.csr_matrix:
 
 
 def _adjacent_cells(facets: np.ndarray, cells: np.ndarray, n_nodes: int) -> list[np.ndarray]:
-    """The cells having all four nodes of each quadrilateral facet (one for outer, two for inner facets)."""
+    """The cells having all nodes of each facet (one for outer, two for inner facets)."""
     shared = (incidence(facets, n_nodes) @ incidence(cells, n_nodes).T).tocsr()
     adjacent = []
     for f in range(len(facets)):
@@ -63,7 +73,7 @@ def _adjacent_cells(facets: np.ndarray, cells: np.ndarray, n_nodes: int) -> list
 
 
 def _positions(cell_nodes: np.ndarray, facet_nodes: np.ndarray) -> np.ndarray:
-    """Local positions (4,) of the facet's nodes within the cell's node list."""
+    """Local positions (4 or 3,) of the facet's nodes within the cell's node list."""
     return np.argmax(cell_nodes[None, :] == facet_nodes[:, None], axis=1)
 
 
@@ -73,9 +83,10 @@ def split_topology(x: np.ndarray, cells: np.ndarray, facets: np.ndarray, facet_v
 
     Args:
         x: (n, 3) node coordinates (m).
-        cells: (c, 8) hexahedra, gmsh node order, 0-based rows of x.
-        facets: (f, 4) tagged quadrilaterals (0-based rows of x).
-        facet_values: (f,) physical surface tag of each quadrilateral.
+        cells: (c, 8) hexahedra or (c, 4) tetrahedra, gmsh node order, 0-based rows of x.
+        facets: (f, 4) tagged quadrilaterals of hexahedra or (f, 3) triangles of tetrahedra
+            (0-based rows of x).
+        facet_values: (f,) physical surface tag of each facet.
         interface_tags: interface name -> physical surface tag, the surfaces to split.
 
     Returns:
@@ -93,8 +104,7 @@ def split_topology(x: np.ndarray, cells: np.ndarray, facets: np.ndarray, facet_v
     n_original = len(x)
     adjacent = _adjacent_cells(facets, cells, n_original)
     centroids = x[cells].mean(axis=1)
-    quad_normals = np.cross(x[facets[:, 2]] - x[facets[:, 0]], x[facets[:, 3]] - x[facets[:, 1]])
-    quad_normals = oriented_normals(quad_normals)  # |.| = 2 * quad area (planar quads)
+    quad_normals = facet_normals(x, facets)
 
     split_cells = cells.copy()
     copy_of = list(range(n_original))
@@ -104,7 +114,7 @@ def split_topology(x: np.ndarray, cells: np.ndarray, facets: np.ndarray, facet_v
     for name, tag in interface_tags.items():
         members = np.flatnonzero(facet_values == tag)
         if len(members) == 0:
-            raise ValueError(f"contact.interfaces: surface {name!r} has no quadrilaterals")
+            raise ValueError(f"contact.interfaces: surface {name!r} has no facets")
         node_normal = np.zeros((len(copy_of), 3))
         member_nodes = []
         for f in members:
@@ -145,7 +155,7 @@ def split_topology(x: np.ndarray, cells: np.ndarray, facets: np.ndarray, facet_v
     for f in range(len(facets)):
         value = int(facet_values[f])
         if len(adjacent[f]) == 0:
-            raise ValueError(f"mesh: a quadrilateral of physical surface {value} is not a face of any cell")
+            raise ValueError(f"mesh: a facet of physical surface {value} is not a face of any cell")
         if f in side_j_cell:
             a = side_j_cell[f]
             b = adjacent[f][0] if adjacent[f][0] != a else adjacent[f][1]
@@ -157,5 +167,5 @@ def split_topology(x: np.ndarray, cells: np.ndarray, facets: np.ndarray, facet_v
             c = adjacent[f][0]
             out_facets.append(split_cells[c, _positions(cells[c], facets[f])])
             out_values.append(value)
-    return (x[copy_of], split_cells, np.array(out_facets, dtype=np.int64).reshape(-1, 4),
+    return (x[copy_of], split_cells, np.array(out_facets, dtype=np.int64).reshape(-1, facets.shape[1]),
             np.array(out_values, dtype=np.int32), split_tags, copy_of)

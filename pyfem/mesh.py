@@ -84,7 +84,7 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
         _check_cell_types(cell_types, *source)
         excavated = _excavated_regions(scene, regions)
         if any(number == GMSH_TETRAHEDRON_4 for number, _ in cell_types):
-            _check_tetrahedra_uses(scene, excavated)
+            _check_tetrahedra_uses(scene)
         regions = {name: tag for name, tag in regions.items() if name not in excavated}
         _check_regions_match_materials(regions, scene["materials"], optional=excavated)
         interface_names = list((scene.get("contact") or {}).get("interfaces") or [])
@@ -126,25 +126,28 @@ def split_interfaces(arrays: dict | None, interface_tags: typing.Mapping[str, in
         (mesh, cell_tags, facet_tags, interface_tags_split) with
         interface_tags_split: name -> (tag of side-i facets, tag of side-j facets).
     """
+    nodes_per_cell = comm.bcast(arrays["cells"].shape[1] if comm.rank == model_rank else None, root=model_rank)
     if comm.rank == model_rank:
         x, cells, facets, facet_values, split_tags, _ = split_topology(
             arrays["x"], arrays["cells"], arrays["facets"], arrays["facet_values"], interface_tags)
         cell_values = np.asarray(arrays["cell_values"], dtype=np.int32)
     else:
-        x, cells = np.zeros((0, 3)), np.zeros((0, 8), dtype=np.int64)
-        facets, facet_values = np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int32)
+        x, cells = np.zeros((0, 3)), np.zeros((0, nodes_per_cell), dtype=np.int64)
+        facets = np.zeros((0, _FACET_NODES[nodes_per_cell]), dtype=np.int64)
+        facet_values = np.zeros(0, dtype=np.int32)
         cell_values, split_tags = np.zeros(0, dtype=np.int32), None
     split_tags = comm.bcast(split_tags, root=model_rank)
 
-    ufl_domain = gmshio.ufl_mesh(GMSH_HEXAHEDRON_8, 3)
-    cells = cells[:, gmshio.cell_perm_array(dolfinx_mesh.CellType.hexahedron, 8)]
+    gmsh_type, cell_type, facet_type = _cell_types_of(cells.shape[1])
+    ufl_domain = gmshio.ufl_mesh(gmsh_type, 3)
+    cells = cells[:, gmshio.cell_perm_array(cell_type, cells.shape[1])]
     mesh = dolfinx_mesh.create_mesh(comm, cells, x, ufl_domain)
     local_entities, local_values = _cpp.io.distribute_entity_data(mesh._mesh, 3, cells, cell_values)
     mesh.topology.create_connectivity(3, 0)
     cell_tags = dolfinx_mesh.meshtags_from_entities(mesh, 3, _cpp.graph.AdjacencyList_int32(local_entities),
                                                     local_values.astype(np.int32))
     cell_tags.name = "Cell tags"
-    facets = facets[:, gmshio.cell_perm_array(dolfinx_mesh.CellType.quadrilateral, 4)]
+    facets = facets[:, gmshio.cell_perm_array(facet_type, facets.shape[1])]
     local_entities, local_values = _cpp.io.distribute_entity_data(mesh._mesh, 2, facets, facet_values)
     mesh.topology.create_connectivity(2, 3)
     facet_tags = dolfinx_mesh.meshtags_from_entities(mesh, 2, _cpp.graph.AdjacencyList_int32(local_entities),
@@ -153,13 +156,28 @@ def split_interfaces(arrays: dict | None, interface_tags: typing.Mapping[str, in
     return mesh, cell_tags, facet_tags, split_tags
 
 
+# Nodes per facet of the supported cells (by nodes per cell): quadrilaterals of hexahedra,
+# triangles of tetrahedra.
+_FACET_NODES = {8: 4, 4: 3}
+
+
+def _cell_types_of(nodes_per_cell: int):
+    """(gmsh type, dolfinx cell type, dolfinx facet type) of linear cells with this many nodes."""
+    if nodes_per_cell == 8:
+        return GMSH_HEXAHEDRON_8, dolfinx_mesh.CellType.hexahedron, dolfinx_mesh.CellType.quadrilateral
+    if nodes_per_cell == 4:
+        return GMSH_TETRAHEDRON_4, dolfinx_mesh.CellType.tetrahedron, dolfinx_mesh.CellType.triangle
+    raise ValueError(f"cells with {nodes_per_cell} nodes: allowed are 8-node hexahedra and 4-node tetrahedra")
+
+
 def _model_arrays() -> dict:
-    """Nodes, hexahedra and tagged quadrilaterals of the current gmsh model as arrays.
+    """Nodes, cells (hexahedra or tetrahedra) and tagged facets (quadrilaterals or triangles) of the
+    current gmsh model as arrays.
 
     Returns:
-        dict with x (n, 3) node coordinates (m), cells (c, 8) int64 gmsh-ordered
+        dict with x (n, 3) node coordinates (m), cells (c, 8 or 4) int64 gmsh-ordered
         node indices (0-based rows of x), cell_values (c,) physical volume tags,
-        facets (f, 4) int64 node indices of the quadrilaterals of the physical
+        facets (f, 4 or 3) int64 node indices of the facets of the physical
         surfaces, facet_values (f,) their physical surface tags.
     """
     tags, coords, _ = gmsh.model.mesh.getNodes()
@@ -178,14 +196,17 @@ def _model_arrays() -> dict:
                     blocks[dim][0].append(topology)
                     blocks[dim][1].append(np.full(len(topology), tag, dtype=np.int32))
     cells, cell_values = np.concatenate(blocks[3][0]), np.concatenate(blocks[3][1])
+    facet_nodes = _FACET_NODES[cells.shape[1]]
+    facet_name = {4: "4-node quadrilaterals (faces of hexahedra)", 3: "3-node triangles (faces of tetrahedra)"}
+    found = {block.shape[1] for block in blocks[2][0]}
+    if found - {facet_nodes}:
+        allowed = (f"physical surfaces must be made of {facet_name[facet_nodes]} "
+                   f"(found {', '.join(str(k) for k in sorted(found))}-node faces)")
+        raise SceneError("mesh.file", None, allowed, f"scene key 'mesh.file': {allowed}")
     if blocks[2][0]:
         facets, facet_values = np.concatenate(blocks[2][0]), np.concatenate(blocks[2][1])
     else:
-        facets, facet_values = np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int32)
-    if facets.shape[1] != 4:
-        allowed = (f"physical surfaces must be made of 4-node quadrilaterals "
-                   f"(found {facets.shape[1]}-node faces)")
-        raise SceneError("mesh.file", None, allowed, f"scene key 'mesh.file': {allowed}")
+        facets, facet_values = np.zeros((0, facet_nodes), dtype=np.int64), np.zeros(0, dtype=np.int32)
     return {"x": x.copy(), "cells": cells, "cell_values": cell_values, "facets": facets,
             "facet_values": facet_values}
 
@@ -265,21 +286,14 @@ def _check_cell_types(cell_types: list[tuple[int, str]], key: str = "mesh.file",
                          "mesh all volumes as hexahedra or all as tetrahedra)")
 
 
-def _check_tetrahedra_uses(scene: typing.Mapping, excavated: typing.Mapping) -> None:
-    """What a tetrahedral mesh cannot do yet (docs/tetrahedra.md): contact interfaces (node pairs on
-    triangle facets), a static stage that excavates (the cut is made on hexahedral topology), and
-    nonlinear materials (the kernel's element loop has hexahedra only).
+def _check_tetrahedra_uses(scene: typing.Mapping) -> None:
+    """What a tetrahedral mesh cannot do yet (docs/tetrahedra.md): nonlinear materials (the kernel's
+    element loop has hexahedra only). Contact interfaces on triangle facets and excavation are
+    supported.
 
     Raises:
         SceneError naming the key.
     """
-    interfaces = list((scene.get("contact") or {}).get("interfaces") or [])
-    if interfaces:
-        raise SceneError("contact.interfaces", interfaces, "a mesh of hexahedra: contact pairs on the triangle "
-                         "facets of a tetrahedral mesh are not implemented yet (docs/tetrahedra.md)")
-    if excavated:
-        raise SceneError("static.excavate", sorted(excavated), "a mesh of hexahedra: excavation in a tetrahedral "
-                         "mesh is not implemented yet (docs/tetrahedra.md)")
     for name, material in (scene.get("materials") or {}).items():
         for table in ("plasticity", "damage"):
             if material.get(table) is not None:

@@ -13,6 +13,7 @@ import json
 import pathlib
 import shutil
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -62,16 +63,51 @@ print("PVRESULT " + json.dumps({"times": times, "peak_time": peak_time, "peak": 
 '''
 
 
-def test_fields_xdmf_renders_in_pvbatch(tmp_path):
-    pvbatch, xvfb_run = shutil.which("pvbatch"), shutil.which("xvfb-run")
-    if pvbatch is None or xvfb_run is None:
+@pytest.fixture(scope="module")
+def case3_run(tmp_path_factory):
+    """A short run of the case-3 scene (static stage, contact, lining) with fields every 0.02 s."""
+    if shutil.which("pvbatch") is None or shutil.which("xvfb-run") is None:
         pytest.skip("pvbatch or xvfb-run not installed (Debian packages paraview, python3-paraview, xvfb)")
     from pyfem.scene import load_scene
     from pyfem.solver import run
 
     scene = load_scene(CASE3, ["time.duration=0.06", "output.xdmf_interval=0.02"])
-    out = tmp_path / "run"
+    out = tmp_path_factory.mktemp("paraview") / "run"
     run(scene, out)
+    return out
+
+
+def test_pyfem_view_renders_regions_and_interfaces_and_writes_a_state(case3_run):
+    """`pyfem view RUN` (pyfem/pvbatch_view.py under xvfb-run): the picture shows the cut model
+    coloured by region and a second view with the interfaces coloured by slip and the lining; the
+    ParaView state names the run's fields file; the printed line says what was shown."""
+    result = subprocess.run([sys.executable, "-m", "pyfem", "view", str(case3_run)], capture_output=True,
+                            text=True, timeout=600, cwd=REPOSITORY)
+    assert result.returncode == 0, result.stderr[-3000:]
+    for name in ("lining", "sandstone", "non_sandstone"):
+        assert name in result.stdout
+    assert "interfaces coloured by slip" in result.stdout
+    png, state = case3_run / "plots" / "paraview.png", case3_run / "paraview.pvsm"
+    from matplotlib import image
+
+    pixels = image.imread(png)[..., :3]
+    assert pixels.shape[:2] == (600, 1600)  # two views side by side
+    for half in (pixels[:, :800], pixels[:, 800:]):
+        colours = np.unique((half.reshape(-1, 3) * 255).astype(np.uint8), axis=0)
+        assert len(colours) > 50 and half.std() > 0.05  # each view rendered something coloured
+    text = state.read_text()
+    assert "fields.xdmf" in text
+    for name in ("interfaces", "lining", "cut at the section", "deformed"):
+        assert name in text
+    # Bad input: one line, exit 2.
+    missing = subprocess.run([sys.executable, "-m", "pyfem", "view", str(case3_run / "nothing")],
+                             capture_output=True, text=True, timeout=60, cwd=REPOSITORY)
+    assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "run.json" in missing.stderr
+
+
+def test_fields_xdmf_renders_in_pvbatch(case3_run, tmp_path):
+    pvbatch, xvfb_run = shutil.which("pvbatch"), shutil.which("xvfb-run")
+    out = case3_run
     script = tmp_path / "render.py"
     script.write_text(PVBATCH_SCRIPT)
     png = tmp_path / "displacement.png"

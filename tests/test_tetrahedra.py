@@ -8,7 +8,8 @@ row-sum lumped) or quadratic (P2, HRZ-lumped) tetrahedra.
   within 2 % (P1) and 0.5 % (P2).
 - The tunnel of meshes/tunnel_in_box_tet.geo under a long SV wave: the wall's hoop stress follows
   Kirsch (the cavity check of tests/test_cavity.py, its 10 %).
-- What tetrahedra cannot do yet (contact, excavation, nonlinear materials) and mixed meshes are
+- The static stage excavates on tetrahedra: a filled tunnel cut out of a slab follows Kirsch.
+- What tetrahedra cannot do yet (nonlinear materials) and mixed meshes are
   refused with one line naming the key.
 """
 import math
@@ -94,7 +95,7 @@ def test_oblique_sv_on_tetrahedra_from_a_geo_follows_the_free_field(tmp_path, or
     assert checks == 3
 
 
-@pytest.mark.parametrize("order, wall_size", [(1, 0.8), (2, 0.8)])
+@pytest.mark.parametrize("order, wall_size", [(1, 0.4), (2, 0.8)])
 def test_tunnel_geo_wall_follows_kirsch_on_tetrahedra(tmp_path, order, wall_size):
     """The example .geo, meshed by gmsh when the run starts, with 0.8 m at the wall instead of its
     0.4 m to keep the default tier short. P1 tetrahedra hold one strain per cell: at r = 1.05 a the
@@ -145,3 +146,64 @@ def test_what_tetrahedra_cannot_do_yet_is_refused_by_key(tmp_path):
                      "Transfinite Volume{2};\n")
     with pytest.raises(SceneError, match="mixes"):
         build_model(box_scene(mixed, 1))
+
+
+FILLED_TUNNEL_GEO = """SetFactory("OpenCASCADE");
+Box(1) = {0, 0, 0, 240, 2, 240};
+Cylinder(2) = {120, 0, 120, 0, 2, 0, 5};
+BooleanFragments{ Volume{1}; Delete; }{ Volume{2}; Delete; }
+Physical Volume("rock") = {3};
+Physical Volume("excavation") = {2};
+Field[1] = MathEval;
+Field[1].F = "min(16, WALL + 0.12 * abs(sqrt((x - 120)^2 + (z - 120)^2) - 5))";
+Background Field = 1;
+Mesh.MeshSizeExtendFromBoundary = 0;
+Mesh.MeshSizeFromPoints = 0;
+Mesh.MeshSizeFromCurvature = 0;
+"""
+
+
+@pytest.mark.parametrize("order, wall_size", [(1, 0.4), (2, 0.8)])
+def test_kirsch_excavation_on_tetrahedra(tmp_path, order, wall_size):
+    """The static stage of tests/test_static.py (a filled circular tunnel, a = 5 m, in a 240 m
+    plane-strain slab under p_z = 10 MPa, K = 0.5; the region "excavation" removed) on a user's
+    .geo meshed to tetrahedra: hoop and radial stress near 1.05 a and 2 a at the crown and the
+    sidewall against Kirsch within the static issue's 3 %: P2 in the nearest cell; P1 (one strain
+    per cell: the nearest cell alone is off by up to 11 % at the wall, measured) as the mean over
+    the cells within 1 m, compared with Kirsch's mean over the same cells."""
+    import test_static as kirsch_static
+
+    geo = tmp_path / "filled_tunnel.geo"
+    geo.write_text(FILLED_TUNNEL_GEO.replace("WALL", f"{wall_size:g}"))
+    simulation = solver.prepare(kirsch_static.tunnel_scene(geo, order))
+    state, model = simulation.static, simulation.model
+    assert model.mesh.topology.cell_type.name == "tetrahedron"
+    assert "excavation" not in model.regions and "(unnamed)" in model.free_surfaces  # the cut wall is free
+    assert np.max(np.abs(state.displacement)) > 1e-4  # the opening converged
+    n_basis = model.V.element.basix_element.dim
+    cell_points = model.node_coords[model.V.dofmap.list.array.reshape(-1, n_basis)[:, :4]].mean(axis=1)
+    checks = 0
+    for where, degrees in kirsch_static.TARGETS.items():
+        for r_target in (1.05, 2.0):
+            theta = math.radians(degrees)
+            target = kirsch_static.CENTRE + kirsch_static.RADIUS * r_target * np.array(
+                [math.cos(theta), 0.0, math.sin(theta)])
+            distance = np.linalg.norm((cell_points - target)[:, [0, 2]], axis=1)
+            # P2: the nearest cell; P1 (one strain per cell, scattered cell to cell): the mean of the
+            # polar components over the cells within 1 m, as a user would read a P1 stress.
+            near = [int(np.argmin(distance))] if order == 2 else np.flatnonzero(distance < 1.0)
+            values = []
+            for cell in near:
+                r, angle = kirsch_static.in_plane(cell_points[cell])
+                values.append(kirsch_static.polar(state.cell_stress[cell], angle)
+                              + kirsch_static.kirsch_stress(r, angle) + (r,))
+            rr, tt, rr_exact, tt_exact, r = np.mean(values, axis=0)
+            hoop_error = abs(tt - tt_exact) / abs(tt_exact)
+            radial_error = abs(rr - rr_exact) / (kirsch_static.P if r_target < 1.5 else abs(rr_exact))
+            print(f"P{order} tetrahedra ({len(near)} cells) {where} r = {r:.3f} a: hoop {tt / 1e6:.3f} MPa vs "
+                  f"{tt_exact / 1e6:.3f} ({hoop_error:.2%}), radial {rr / 1e6:.3f} vs {rr_exact / 1e6:.3f} "
+                  f"({radial_error:.2%})")
+            assert hoop_error < kirsch_static.STRESS_TOLERANCE, (where, r_target)
+            assert radial_error < kirsch_static.STRESS_TOLERANCE, (where, r_target)
+            checks += 1
+    assert checks == 4

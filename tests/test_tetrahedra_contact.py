@@ -1,0 +1,141 @@
+"""Contact pairs on the triangle facets of tetrahedral meshes from gmsh (issue 14, docs/tetrahedra.md).
+
+A user's .geo script with two layers meshed to tetrahedra and the surface between them named as an
+interface: the `file` builder splits its triangles into node pairs as it does the quadrilaterals of
+hexahedra (pyfem.interface_split; HRZ-lumped pair areas on P2 triangles, whose row sums vanish at the
+vertices).
+
+- Bonded pairs reproduce the unsplit tetrahedral mesh to round-off, P1 and P2, while an SV pulse
+  crosses the interface (every node, both copies of every pair).
+- The pairs' lumped areas tile the interface (sum = its area), every area > 0 (P2 included).
+- A block of tetrahedra on a held base slides under a one-sided pulse by Newmark's rigid-block
+  displacement (the test of tests/test_contact.py on hexahedra), with friction dissipating energy.
+"""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from conftest import ROUNDOFF, rel_error
+from pyfem.initial_stress import STANDARD_GRAVITY
+from pyfem.scene import parse_scene
+from pyfem.solver import make_stepper, prepare
+from test_contact import newmark_sliding_block, run_block, shake_block
+
+
+def two_layer_geo(folder: Path, size, lower: float, h: float, names=("lower", "upper")) -> Path:
+    """A user's gmsh script: two boxes stacked in z (the lower one `lower` m thick), fragmented so
+    that they share the surface between them, named "interface_1"; tetrahedra of size h."""
+    lx, ly, lz = size
+    path = folder / f"two_layer_h{h:g}.geo"
+    path.write_text(
+        'SetFactory("OpenCASCADE");\n'
+        f"Box(1) = {{0, 0, 0, {lx}, {ly}, {lower}}};\n"
+        f"Box(2) = {{0, 0, {lower}, {lx}, {ly}, {lz - lower}}};\n"
+        "BooleanFragments{ Volume{1}; Delete; }{ Volume{2}; Delete; }\n"
+        f"interface() = Surface In BoundingBox{{-1, -1, {lower - 1e-3}, {lx + 1}, {ly + 1}, {lower + 1e-3}}};\n"
+        f'Physical Volume("{names[0]}") = {{1}};\n'
+        f'Physical Volume("{names[1]}") = {{2}};\n'
+        'Physical Surface("interface_1") = interface();\n'
+        f"Mesh.MeshSizeMax = {h};\nMesh.MeshSizeMin = {h};\n")
+    return path
+
+
+def layered_scene(geo: Path, order: int, contact: bool, dt: float) -> "Scene":
+    data = {
+        "title": "two layers of tetrahedra, interface contact, vertical SV",
+        "mesh": {"builder": "file", "file": str(geo), "order": order},
+        "materials": {"lower": {"preset": "sandstone"}, "upper": {"preset": "non_sandstone"}},
+        "time": {"duration": 0.5, "dt": dt},
+        "wave": {"type": "SV", "angle": 0.0, "surface": 100.0, "medium": "lower",
+                 "motion": {"ricker": {"f0": 5.0, "amplitude": 1.0e-3}}},
+        "initial_stress": {"surface": 100.0, "rho": 2500.0, "k": [1.0, 1.0, 1.0]},
+        "monitor": [{"name": "below", "point": [30.0, 5.0, 20.0]}, {"name": "above", "point": [30.0, 5.0, 45.0]}],
+        "output": {"interval": 0.005, "xdmf_interval": 0.0},
+    }
+    if contact:  # strengths far above any stress of the pulse: every pair stays bonded
+        data["contact"] = {"interfaces": ["interface_1"], "cohesion": 1.0e15, "friction_angle": 30.0,
+                           "tensile_strength": 1.0e15}
+    return parse_scene(data, source="test")
+
+
+@pytest.mark.parametrize("order, h, dt", [(1, 6.0, 5.0e-4), (2, 12.0, 2.5e-4)])
+def test_bonded_pairs_on_triangles_reproduce_the_unsplit_tetrahedra_to_roundoff(tmp_path, order, h, dt):
+    geo = two_layer_geo(tmp_path, (60.0, 10.0, 60.0), 30.0, h)
+    histories = []
+    for contact in (True, False):
+        simulation = prepare(layered_scene(geo, order, contact, dt))
+        stepper = make_stepper(simulation)
+        n = 3 * len(simulation.mass)
+        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+        t, samples = 0.0, []
+        steps = round(0.05 / dt)
+        for _ in range(10):
+            t = stepper.run(u, v, a, steps, t)
+            samples.append(u.copy())
+        histories.append((simulation, np.array(samples)))
+    (split_sim, split_u), (whole_sim, whole_u) = histories
+    assert split_sim.model.mesh.topology.cell_type.name == "tetrahedron"
+    pairs = split_sim.model.pairs
+    assert len(pairs) > 10
+    assert split_sim.model.n_nodes == whole_sim.model.n_nodes + len(pairs)  # one copy per interface node
+    # The lumped areas tile the 60 x 10 m interface, every share positive (P2: HRZ).
+    assert np.all(pairs.area > 0.0)
+    assert abs(pairs.area.sum() - 600.0) < 1e-9 * 600.0
+    assert np.allclose(pairs.normal, [0.0, 0.0, 1.0], atol=1e-12)
+    assert split_sim.contact_pairs.state_counts()[0] == len(pairs)  # all bonded
+    distance, unsplit_node = cKDTree(whole_sim.model.node_coords).query(split_sim.model.node_coords)
+    assert np.max(distance) < 1e-9
+    split_nodal = split_u.reshape(len(split_u), -1, 3)
+    whole_nodal = whole_u.reshape(len(whole_u), -1, 3)[:, unsplit_node]
+    upper = split_sim.model.node_coords[:, 2] > 35.0
+    assert np.max(np.abs(whole_nodal[:, upper])) > 5e-4  # the pulse has crossed the interface
+    error = rel_error(split_nodal, whole_nodal)
+    print(f"P{order}: {len(pairs)} pairs, bonded vs unsplit {error:.2e}")
+    assert error < ROUNDOFF
+
+
+def block_geo(folder: Path, h: float) -> Path:
+    """A 2 x 1 x 1 m block of tetrahedra on a 1 m base, the surface between them "interface_1"."""
+    return two_layer_geo(folder, (2.0, 1.0, 2.0), 1.0, h, names=("base", "block"))
+
+
+def test_block_of_tetrahedra_slides_as_newmark_rigid_block(tmp_path):
+    mu = 0.2
+    amplitude, frequency = 0.5 * STANDARD_GRAVITY, 2.0
+
+    def acceleration(t):
+        t = np.asarray(t, dtype=float)
+        return np.where(t < 0.5 / frequency, amplitude * np.sin(2 * np.pi * frequency * t), 0.0)
+
+    scene = parse_scene({
+        "title": "block of tetrahedra on a rigid base",
+        "mesh": {"builder": "file", "file": str(block_geo(tmp_path, 0.5)), "order": 1},
+        "materials": {"base": {"E": 1.0e10, "nu": 0.25, "rho": 2500.0},
+                      "block": {"E": 1.0e10, "nu": 0.25, "rho": 2500.0}},
+        "time": {"duration": 1.5, "safety": 0.8},
+        "boundary": {"type": "free"},
+        "initial_stress": {"surface": 2.0, "rho": 2500.0, "k": [1.0, 1.0, 1.0]},
+        "contact": {"interfaces": ["interface_1"], "cohesion": 0.0, "friction_angle": math.degrees(math.atan(mu)),
+                    "tensile_strength": 0.0},
+        "output": {"interval": 0.01, "xdmf_interval": 0.0},
+    }, source="test")
+    simulation = prepare(scene)
+    assert simulation.model.mesh.topology.cell_type.name == "tetrahedron"
+    shake_block(simulation, acceleration, [1.0, 0.0, 0.0])
+    stepper, energies, u = run_block(simulation)
+    slip = simulation.contact_pairs.relative_displacement(u)[:, 0].mean()
+    _, reference = newmark_sliding_block(lambda t: float(acceleration(t)), mu * STANDARD_GRAVITY,
+                                         simulation.scene["time"]["duration"])
+    print(f"tetrahedra: slip {slip:.6f} m, Newmark rigid block {reference[-1]:.6f} m")
+    assert abs(reference[-1]) > 0.05  # a real permanent displacement
+    assert abs(slip - reference[-1]) < 0.05 * abs(reference[-1])
+    # The weight m g is carried by the pairs' static normal forces.
+    assert np.isclose(np.asarray(simulation.contact_pairs.normal_force()).sum(),
+                      2500.0 * 2.0 * 1.0 * STANDARD_GRAVITY, rtol=0.05)
+    final = energies[-1]
+    scale = max(max(abs(e["external_work"]) for e in energies), max(e["kinetic"] + e["strain"] for e in energies))
+    assert max(abs(e["balance"]) for e in energies) < 0.01 * scale
+    assert final["friction_dissipation"] > 0.1 * scale
