@@ -126,6 +126,8 @@ ContactPairs::ContactPairs(const ContactGeometry& geometry, const ContactStrengt
         std::lower_bound(unique_nodes_.begin(), unique_nodes_.end(), pairs_[k]) -
         unique_nodes_.begin());
   node_force_.assign(3 * unique_nodes_.size(), 0.0);
+  colour_pairs();
+  dissipation_.assign(n_pairs_, 0.0);
 
   state_.assign(n_pairs_, kBonded);
   bond_intact_.assign(n_pairs_, 1);
@@ -142,6 +144,32 @@ ContactPairs::ContactPairs(const ContactGeometry& geometry, const ContactStrengt
     normal_force_[p] = -dot(n, F0);
     tangential_part(n, F0, tangential_force_.data() + 3 * p);
   }
+}
+
+void ContactPairs::colour_pairs() {
+  // Greedy: each pair (in order) takes the lowest colour none of its nodes' earlier pairs has.
+  // Interfaces that do not meet give one colour; pairs sharing a node (interfaces meeting on the
+  // outer boundary) get different colours.
+  std::vector<std::uint64_t> used_by_node(unique_nodes_.size(), 0);  // bit c: colour c taken
+  std::vector<std::int32_t> colour(n_pairs_, 0);
+  int n_colours = 0;
+  for (std::int64_t p = 0; p < n_pairs_; ++p) {
+    const std::uint64_t taken = used_by_node[slot_[2 * p]] | used_by_node[slot_[2 * p + 1]];
+    int c = 0;
+    while (c < 64 && (taken >> c) & 1u) ++c;
+    if (c == 64)
+      throw std::invalid_argument("contact pairs: a node is shared by more than 63 pairs");
+    colour[p] = c;
+    used_by_node[slot_[2 * p]] |= std::uint64_t{1} << c;
+    used_by_node[slot_[2 * p + 1]] |= std::uint64_t{1} << c;
+    n_colours = std::max(n_colours, c + 1);
+  }
+  colour_ptr_.assign(n_colours + 1, 0);
+  for (std::int64_t p = 0; p < n_pairs_; ++p) ++colour_ptr_[colour[p] + 1];
+  for (int c = 0; c < n_colours; ++c) colour_ptr_[c + 1] += colour_ptr_[c];
+  colour_pairs_.resize(n_pairs_);
+  std::vector<std::int64_t> next(colour_ptr_.begin(), colour_ptr_.end() - 1);
+  for (std::int64_t p = 0; p < n_pairs_; ++p) colour_pairs_[next[colour[p]]++] = p;
 }
 
 void ContactPairs::set_deterioration(const DeteriorationParameters& parameters) {
@@ -169,157 +197,170 @@ void ContactPairs::check_nodes(std::int64_t n_nodes) const {
 
 ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& operators,
                                         const double* u, double* v, double* a) {
-  const double dt = operators.dt;
-  const double dt2 = dt * dt;
   std::fill(node_force_.begin(), node_force_.end(), 0.0);
-  ContactStepResult result;
-
-  for (std::int64_t p = 0; p < n_pairs_; ++p) {
-    const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
-    const double* n = normal_.data() + 3 * p;
-    const double* F0 = static_force_.data() + 3 * p;
-    const double area = area_[p];
-    const double g0 = gap_offset_[p];
-
-    double inverse_i[9], inverse_j[9], W_inverse[9], W[9];
-    operators.inverse(i, inverse_i);
-    operators.inverse(j, inverse_j);
-    for (int c = 0; c < 9; ++c) W_inverse[c] = inverse_i[c] + inverse_j[c];
-    pair_mass_matrix(W_inverse, W);
-
-    // Relative displacement now and predicted at n+2 without contact force.
-    double delta[3], delta_pred[3];
-    for (int c = 0; c < 3; ++c) {
-      delta[c] = u[3 * j + c] - u[3 * i + c];
-      delta_pred[c] =
-          delta[c] + dt * (v[3 * j + c] - v[3 * i + c]) + 0.5 * dt2 * (a[3 * j + c] - a[3 * i + c]);
-    }
-    const double D = deterioration_on_
-                         ? cavern::deterioration(deterioration_parameters_, t, slip_rate_[p])
-                         : 1.0;
-
-    std::int8_t state = state_[p];
-    bool bond = bond_intact_[p] != 0;
-    double R[3];
-    bool slipping = false;
-    bool separated = false;
-
-    if (state == kSeparated) {
-      // Gap at n+2 if the pair keeps carrying nothing (R = -F0).
-      double W_inverse_F0[3];
-      multiply_3x3(W_inverse, F0, W_inverse_F0);
-      double open_gap = g0;
-      for (int c = 0; c < 3; ++c) open_gap += n[c] * (delta_pred[c] + dt2 * W_inverse_F0[c]);
-      separated = open_gap > 0.0;
-    }
-
-    if (!separated) {
-      // Stick (Eq. 17): close the normal gap, keep the tangential relative displacement.
-      double tangential_delta[3], target[3], R_stick[3];
-      tangential_part(n, delta, tangential_delta);
-      for (int c = 0; c < 3; ++c) target[c] = (delta_pred[c] - tangential_delta[c] + g0 * n[c]) / dt2;
-      multiply_3x3(W, target, R_stick);
-
-      double F[3], T[3];
-      for (int c = 0; c < 3; ++c) F[c] = F0[c] + R_stick[c];
-      const double N = -dot(n, F);
-      tangential_part(n, F, T);
-      const double T_magnitude = std::sqrt(dot(T, T));
-
-      if (N < 0.0) {
-        // Tension (Eq. 18, P_N = t_s D A): only an intact bond holds it.
-        if (bond && -N <= strength_.tensile_strength * D * area) {
-          std::copy(R_stick, R_stick + 3, R);
-          state = kBonded;
-        } else {
-          separated = true;
-        }
-      } else {
-        const double limit =
-            strength_.friction_static * N * D + (bond ? strength_.cohesion * D * area : 0.0);
-        if (T_magnitude <= limit) {
-          std::copy(R_stick, R_stick + 3, R);
-          state = bond ? kBonded : kStick;
-        } else {
-          // Slip (Eq. 20): dynamic friction along the stick direction; never more than the
-          // force that stops the slip (mu_d > mu_s would otherwise reverse it).
-          slipping = true;
-          state = kSliding;
-          bond = false;
-          const double slip_force = std::min(strength_.friction_dynamic * N * D, T_magnitude);
-          double R_tangential[3], F0_tangential[3], W_inverse_R[3], W_inverse_n[3];
-          tangential_part(n, F0, F0_tangential);
-          for (int c = 0; c < 3; ++c)
-            R_tangential[c] = slip_force * T[c] / T_magnitude - F0_tangential[c];
-          // Normal R that closes the gap at n+2 given the tangential R (exact with 3x3 W).
-          multiply_3x3(W_inverse, R_tangential, W_inverse_R);
-          multiply_3x3(W_inverse, n, W_inverse_n);
-          const double normal_compliance = dt2 * dot(n, W_inverse_n);  // 0: both nodes held along n
-          const double R_normal =
-              normal_compliance > 0.0
-                  ? (dot(n, delta_pred) + g0 - dt2 * dot(n, W_inverse_R)) / normal_compliance
-                  : 0.0;
-          for (int c = 0; c < 3; ++c) R[c] = R_normal * n[c] + R_tangential[c];
-        }
-      }
-    }
-
-    if (separated) {
-      // Open (Eq. 19): the total force vanishes, so the dynamic force cancels the static one.
-      state = kSeparated;
-      bond = false;
-      for (int c = 0; c < 3; ++c) R[c] = -F0[c];
-    }
-
-    // Total force after the decision.
-    double F[3], T[3];
-    for (int c = 0; c < 3; ++c) F[c] = F0[c] + R[c];
-    tangential_part(n, F, T);
-
-    if (slipping) {
-      // Work of the slip force over the slip increment it drives, Delta_{n+2} - Delta_{n+1}
-      // (= dt times the relative v_{n+3/2}: the force held over the leapfrog step).
-      double W_inverse_R[3], slip_increment[3], delta_next[3];
-      multiply_3x3(W_inverse, R, W_inverse_R);
-      for (int c = 0; c < 3; ++c) delta_next[c] = delta_pred[c] - dt2 * W_inverse_R[c] - delta[c];
-      tangential_part(n, delta_next, slip_increment);
-      result.friction_dissipation += dot(T, slip_increment);
-    }
-
-    // Apply R to i and -R to j: dv = dt/2 Atilde^-1 R, da = (R - (alpha M + C) dv)/M.
-    for (int side = 0; side < 2; ++side) {
-      const std::int64_t node = side == 0 ? i : j;
-      const double sign = side == 0 ? 1.0 : -1.0;
-      const double* node_inverse = side == 0 ? inverse_i : inverse_j;
-      double force[3], dv[3], damping[9], damping_dv[3];
-      for (int c = 0; c < 3; ++c) force[c] = sign * R[c];
-      multiply_3x3(node_inverse, force, dv);
-      for (int c = 0; c < 3; ++c) dv[c] *= 0.5 * dt;
-      operators.damping(node, damping);
-      multiply_3x3(damping, dv, damping_dv);
-      const double m = operators.mass[node];
-      double* node_force = node_force_.data() + 3 * slot_[2 * p + side];
-      for (int c = 0; c < 3; ++c) {
-        v[3 * node + c] += dv[c];
-        a[3 * node + c] += (force[c] - damping_dv[c]) / m;
-        node_force[c] += force[c];
-      }
-      operators.project(node, a + 3 * node);  // a support takes the held part
-    }
-
-    state_[p] = state;
-    bond_intact_[p] = bond ? 1 : 0;
-    for (int c = 0; c < 3; ++c) {
-      contact_force_[3 * p + c] = R[c];
-      tangential_force_[3 * p + c] = T[c];
-    }
-    normal_force_[p] = -dot(n, F);
-    deterioration_[p] = D;
+  // eta(t) is one number per step (Eq. 9); gamma depends on each pair's slip rate.
+  const double wear = deterioration_on_ ? wear_factor(deterioration_parameters_, t) : 1.0;
+  const bool threaded = n_pairs_ >= kMinPairsForThreads;
+  // Colour by colour (pairs of one colour share no node): within a colour the pairs are
+  // independent, so the result does not depend on the order they are visited in or the threads.
+  for (std::size_t colour = 0; colour + 1 < colour_ptr_.size(); ++colour) {
+    const std::int64_t begin = colour_ptr_[colour], end = colour_ptr_[colour + 1];
+#pragma omp parallel for schedule(static) if (threaded)
+    for (std::int64_t k = begin; k < end; ++k)
+      correct_pair(colour_pairs_[k], wear, operators, u, v, a);
   }
-
+  ContactStepResult result;
+  for (std::int64_t p = 0; p < n_pairs_; ++p) result.friction_dissipation += dissipation_[p];
   result.contact_power = contact_power(v);
   observe_velocity(v);
   return result;
+}
+
+void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeOperators& operators,
+                                const double* u, double* v, double* a) {
+  const double dt = operators.dt;
+  const double dt2 = dt * dt;
+  double dissipation = 0.0;
+  const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
+  const double* n = normal_.data() + 3 * p;
+  const double* F0 = static_force_.data() + 3 * p;
+  const double area = area_[p];
+  const double g0 = gap_offset_[p];
+
+  double inverse_i[9], inverse_j[9], W_inverse[9], W[9];
+  operators.inverse(i, inverse_i);
+  operators.inverse(j, inverse_j);
+  for (int c = 0; c < 9; ++c) W_inverse[c] = inverse_i[c] + inverse_j[c];
+  pair_mass_matrix(W_inverse, W);
+
+  // Relative displacement now and predicted at n+2 without contact force.
+  double delta[3], delta_pred[3];
+  for (int c = 0; c < 3; ++c) {
+    delta[c] = u[3 * j + c] - u[3 * i + c];
+    delta_pred[c] =
+        delta[c] + dt * (v[3 * j + c] - v[3 * i + c]) + 0.5 * dt2 * (a[3 * j + c] - a[3 * i + c]);
+  }
+  const double D =
+      deterioration_on_ ? wear * slip_rate_factor(deterioration_parameters_, slip_rate_[p]) : 1.0;
+
+  std::int8_t state = state_[p];
+  bool bond = bond_intact_[p] != 0;
+  double R[3];
+  bool slipping = false;
+  bool separated = false;
+
+  if (state == kSeparated) {
+    // Gap at n+2 if the pair keeps carrying nothing (R = -F0).
+    double W_inverse_F0[3];
+    multiply_3x3(W_inverse, F0, W_inverse_F0);
+    double open_gap = g0;
+    for (int c = 0; c < 3; ++c) open_gap += n[c] * (delta_pred[c] + dt2 * W_inverse_F0[c]);
+    separated = open_gap > 0.0;
+  }
+
+  if (!separated) {
+    // Stick (Eq. 17): close the normal gap, keep the tangential relative displacement.
+    double tangential_delta[3], target[3], R_stick[3];
+    tangential_part(n, delta, tangential_delta);
+    for (int c = 0; c < 3; ++c) target[c] = (delta_pred[c] - tangential_delta[c] + g0 * n[c]) / dt2;
+    multiply_3x3(W, target, R_stick);
+
+    double F[3], T[3];
+    for (int c = 0; c < 3; ++c) F[c] = F0[c] + R_stick[c];
+    const double N = -dot(n, F);
+    tangential_part(n, F, T);
+    const double T_magnitude = std::sqrt(dot(T, T));
+
+    if (N < 0.0) {
+      // Tension (Eq. 18, P_N = t_s D A): only an intact bond holds it.
+      if (bond && -N <= strength_.tensile_strength * D * area) {
+        std::copy(R_stick, R_stick + 3, R);
+        state = kBonded;
+      } else {
+        separated = true;
+      }
+    } else {
+      const double limit =
+          strength_.friction_static * N * D + (bond ? strength_.cohesion * D * area : 0.0);
+      if (T_magnitude <= limit) {
+        std::copy(R_stick, R_stick + 3, R);
+        state = bond ? kBonded : kStick;
+      } else {
+        // Slip (Eq. 20): dynamic friction along the stick direction; never more than the
+        // force that stops the slip (mu_d > mu_s would otherwise reverse it).
+        slipping = true;
+        state = kSliding;
+        bond = false;
+        const double slip_force = std::min(strength_.friction_dynamic * N * D, T_magnitude);
+        double R_tangential[3], F0_tangential[3], W_inverse_R[3], W_inverse_n[3];
+        tangential_part(n, F0, F0_tangential);
+        for (int c = 0; c < 3; ++c)
+          R_tangential[c] = slip_force * T[c] / T_magnitude - F0_tangential[c];
+        // Normal R that closes the gap at n+2 given the tangential R (exact with 3x3 W).
+        multiply_3x3(W_inverse, R_tangential, W_inverse_R);
+        multiply_3x3(W_inverse, n, W_inverse_n);
+        const double normal_compliance = dt2 * dot(n, W_inverse_n);  // 0: both nodes held along n
+        const double R_normal =
+            normal_compliance > 0.0
+                ? (dot(n, delta_pred) + g0 - dt2 * dot(n, W_inverse_R)) / normal_compliance
+                : 0.0;
+        for (int c = 0; c < 3; ++c) R[c] = R_normal * n[c] + R_tangential[c];
+      }
+    }
+  }
+
+  if (separated) {
+    // Open (Eq. 19): the total force vanishes, so the dynamic force cancels the static one.
+    state = kSeparated;
+    bond = false;
+    for (int c = 0; c < 3; ++c) R[c] = -F0[c];
+  }
+
+  // Total force after the decision.
+  double F[3], T[3];
+  for (int c = 0; c < 3; ++c) F[c] = F0[c] + R[c];
+  tangential_part(n, F, T);
+
+  if (slipping) {
+    // Work of the slip force over the slip increment it drives, Delta_{n+2} - Delta_{n+1}
+    // (= dt times the relative v_{n+3/2}: the force held over the leapfrog step).
+    double W_inverse_R[3], slip_increment[3], delta_next[3];
+    multiply_3x3(W_inverse, R, W_inverse_R);
+    for (int c = 0; c < 3; ++c) delta_next[c] = delta_pred[c] - dt2 * W_inverse_R[c] - delta[c];
+    tangential_part(n, delta_next, slip_increment);
+    dissipation = dot(T, slip_increment);
+  }
+
+  // Apply R to i and -R to j: dv = dt/2 Atilde^-1 R, da = (R - (alpha M + C) dv)/M.
+  for (int side = 0; side < 2; ++side) {
+    const std::int64_t node = side == 0 ? i : j;
+    const double sign = side == 0 ? 1.0 : -1.0;
+    const double* node_inverse = side == 0 ? inverse_i : inverse_j;
+    double force[3], dv[3], damping[9], damping_dv[3];
+    for (int c = 0; c < 3; ++c) force[c] = sign * R[c];
+    multiply_3x3(node_inverse, force, dv);
+    for (int c = 0; c < 3; ++c) dv[c] *= 0.5 * dt;
+    operators.damping(node, damping);
+    multiply_3x3(damping, dv, damping_dv);
+    const double m = operators.mass[node];
+    double* node_force = node_force_.data() + 3 * slot_[2 * p + side];
+    for (int c = 0; c < 3; ++c) {
+      v[3 * node + c] += dv[c];
+      a[3 * node + c] += (force[c] - damping_dv[c]) / m;
+      node_force[c] += force[c];
+    }
+    operators.project(node, a + 3 * node);  // a support takes the held part
+  }
+
+  state_[p] = state;
+  bond_intact_[p] = bond ? 1 : 0;
+  for (int c = 0; c < 3; ++c) {
+    contact_force_[3 * p + c] = R[c];
+    tangential_force_[3 * p + c] = T[c];
+  }
+  normal_force_[p] = -dot(n, F);
+  deterioration_[p] = D;
+  dissipation_[p] = dissipation;
 }
 
 void ContactPairs::rebase(const double* u) {
@@ -369,6 +410,7 @@ void ContactPairs::load_state(const StateArchive& archive, const std::string& pr
 }
 
 void ContactPairs::observe_velocity(const double* v) {
+#pragma omp parallel for schedule(static) if (n_pairs_ >= kMinPairsForThreads)
   for (std::int64_t p = 0; p < n_pairs_; ++p) {
     const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
     double relative[3], tangential[3];
@@ -380,6 +422,7 @@ void ContactPairs::observe_velocity(const double* v) {
 
 double ContactPairs::contact_power(const double* v) const {
   double power = 0.0;
+#pragma omp parallel for schedule(static) if (n_pairs_ >= kMinPairsForThreads) reduction(+ : power)
   for (std::int64_t p = 0; p < n_pairs_; ++p) {
     const std::int64_t i = pairs_[2 * p], j = pairs_[2 * p + 1];
     const double* R = contact_force_.data() + 3 * p;

@@ -61,6 +61,9 @@ struct ImplicitNodeOperators {
   void project(std::int64_t node, double* x) const;
 };
 
+/// Below this many pairs the pair loops run on one thread (the fork costs more than the work).
+constexpr std::int64_t kMinPairsForThreads = 1024;
+
 /// Power and dissipation of one contact correction.
 struct ContactStepResult {
   double contact_power = 0.0;  // sum_pairs R.(v_i - v_j) at the corrected v_{n+1} (W)
@@ -94,8 +97,11 @@ struct ContactStepResult {
 /// that closes the gap for the prescribed tangential R (exact decoupling when Atilde ~ I).
 /// dv_t in D is |P_t (v_j - v_i)| at t_n: after the previous step's correction (or of the state
 /// given to observe_velocity at the start).
-/// Pairs are processed in order (Gauss-Seidel); a node shared by two pairs sees the correction
-/// of the earlier pair, and only pairs with distinct nodes reproduce the unsplit mesh exactly.
+/// Pairs are coloured so that no two pairs of one colour share a node (interfaces that do not
+/// meet: one colour) and processed colour by colour, the pairs of a colour in parallel (OpenMP,
+/// from kMinPairsForThreads pairs): the result is independent of the visiting order and the
+/// thread count. A node shared by two pairs sees the correction of the pair of the lower colour
+/// (Gauss-Seidel across colours); only pairs with distinct nodes reproduce the unsplit mesh exactly.
 class ContactPairs {
  public:
   /// Copies the arrays. Throws std::invalid_argument naming a bad parameter (non-positive area,
@@ -157,8 +163,18 @@ class ContactPairs {
   void state_counts(std::int64_t counts[4]) const;
 
  private:
+  // One pair's correction (the body of correct()); writes only the pair's own state and its two
+  // nodes' v, a and node forces. wear: eta(t_{n+1}).
+  void correct_pair(std::int64_t p, double wear, const ImplicitNodeOperators& operators,
+                    const double* u, double* v, double* a);
+  // Fills colour_ptr_/colour_pairs_ (greedy colouring by shared nodes).
+  void colour_pairs();
+
   std::int64_t n_pairs_;
   std::vector<std::int32_t> pairs_;
+  std::vector<std::int64_t> colour_ptr_;    // (colours + 1) offsets into colour_pairs_
+  std::vector<std::int64_t> colour_pairs_;  // pair indices, colour by colour, ascending within
+  std::vector<double> dissipation_;         // friction dissipation of each pair in the last step
   std::vector<double> area_, normal_, static_force_;
   ContactStrength strength_;
   bool deterioration_on_ = false;

@@ -185,6 +185,8 @@ void Stepper::contact_post_pass(double t, const double* u, double* v, double* a)
   const std::vector<std::int32_t>& nodes = contact_->unique_nodes();
   const std::size_t n_pair_nodes = nodes.size();
   double* before = contact_scratch_.data();
+  const bool threaded = static_cast<std::int64_t>(n_pair_nodes) >= 2 * kMinPairsForThreads;
+#pragma omp parallel for schedule(static) if (threaded)
   for (std::size_t k = 0; k < n_pair_nodes; ++k)
     for (int c = 0; c < 3; ++c) {
       before[6 * k + c] = v[3 * nodes[k] + c];
@@ -201,6 +203,8 @@ void Stepper::contact_post_pass(double t, const double* u, double* v, double* a)
   const double* g_damping = internal_damping_.empty() ? nullptr : internal_damping_.data();
   const double beta = parameters_.beta;
   double d_vMv = 0.0, d_aMa = 0.0, d_Fa = 0.0, d_external = 0.0, d_damping = 0.0;
+#pragma omp parallel for schedule(static) if (threaded) \
+    reduction(+ : d_vMv, d_aMa, d_Fa, d_external, d_damping)
   for (std::size_t k = 0; k < n_pair_nodes; ++k) {
     const std::int64_t node = nodes[k];
     const double m = mass_[node];
