@@ -18,16 +18,27 @@ def _read_csv(path):
 
 
 def monitor(png_path, csv_path) -> None:
-    """Displacement, velocity and acceleration components of one monitor against time.
+    """Displacement, velocity and acceleration components of one monitor against time, and its
+    stress history (sxx, syy, szz, sxz and the maximum principal stress s1, total) when the file
+    has stress columns.
 
     Args:
         png_path: output image.
-        csv_path: monitors/NAME.csv of a run (m, m/s, m/s^2); free-field columns, when
+        csv_path: monitors/NAME.csv of a run (m, m/s, m/s^2, Pa); free-field columns, when
             present, are drawn dashed.
     """
     columns = _read_csv(csv_path)
     t = columns["t"]
-    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    with_stress = "sxx" in columns
+    fig, axes = plt.subplots(4 if with_stress else 3, 1, figsize=(8, 9 if with_stress else 7), sharex=True)
+    if with_stress:
+        # Total stress (initial + dynamic), tension positive, and the maximum principal stress.
+        ax = axes[-1]
+        for name, colour in (("sxx", "C0"), ("syy", "C1"), ("szz", "C2"), ("sxz", "C4"), ("s1", "k")):
+            ax.plot(t, 1e-6 * columns[name], colour, lw=1.4 if name == "s1" else 1.0, label=name)
+        ax.set_ylabel("stress (MPa)")
+        ax.grid(alpha=0.3)
+        ax.legend(ncol=5, fontsize=7, title="total stress, tension > 0", title_fontsize=7)
     for ax, (quantity, unit, factor) in zip(axes, (("u", "mm", 1e3), ("v", "mm/s", 1e3), ("a", "m/s$^2$", 1.0))):
         for component, colour in zip("xyz", ("C0", "C1", "C2")):
             ax.plot(t, factor * columns[f"{quantity}{component}"], colour, lw=1.2, label=f"{quantity}{component}")

@@ -230,3 +230,25 @@ def test_deformed_section_keeps_the_most_deformed_sample(two_layer_run):
     section = x[tracker.nodes]
     expected = 2e-3 * np.abs(section[:, 2] - section[:, 2].mean()).max()
     assert tracker.t == 0.2 and tracker.largest == pytest.approx(expected, rel=1e-9)
+
+
+def test_monitor_plot_draws_the_stress_history_when_the_file_has_stress(tmp_path):
+    """plots/monitor_NAME.png gains a fourth panel, the total stress and s1 (MPa), from the
+    monitor's stress columns; a file without them keeps three panels."""
+    from matplotlib import image
+
+    from pyfem import plots
+
+    t = np.linspace(0.0, 1.0, 11)
+    kinematics = {name: np.sin(t + k) for k, name in enumerate(
+        ["ux", "uy", "uz", "vx", "vy", "vz", "ax", "ay", "az"])}
+    stress = {name: 1e6 * np.cos(t + k) for k, name in enumerate(["sxx", "syy", "szz", "sxy", "syz", "sxz", "s1"])}
+    heights = {}
+    for label, columns in (("plain", kinematics), ("stress", {**kinematics, **stress})):
+        csv = tmp_path / f"{label}.csv"
+        names = ["t", *columns]
+        np.savetxt(csv, np.column_stack([t, *columns.values()]), delimiter=",", header=",".join(names), comments="")
+        png = tmp_path / f"monitor_{label}.png"
+        plots.monitor(png, csv)
+        heights[label] = image.imread(png).shape[0]
+    assert heights["stress"] > 1.2 * heights["plain"]  # 9 in against 7 in: the stress panel is there
