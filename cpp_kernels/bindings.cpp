@@ -649,19 +649,23 @@ Args:
     symmetric_storage: True (default) keeps an owned copy of the upper triangle of K and
         streams about half the bytes per step; False fuses the full block-CSR product into
         the update (K need not be symmetric then, but the energy identity needs it).
+    single_precision_blocks: True stores the upper triangle's blocks as float32 (half the
+        block bytes; state, sums and energy stay float64; needs symmetric_storage).
 Borrowed arrays are kept alive by this object and must not be modified while it is in use.)")
       .def(
           py::init([](const py::object& indptr, const py::object& indices, const py::object& blocks,
                       const py::object& mass, double dt, double alpha, double beta,
-                      bool symmetric_storage) {
+                      bool symmetric_storage, bool single_precision_blocks) {
             const std::int64_t n_nodes = node_count(mass);
             const BlockCsrView K = checked_block_csr(indptr, indices, blocks, n_nodes);
             auto mass_array = checked_array<double>(mass, "mass", {n_nodes});
             return std::make_unique<Stepper>(
-                K, mass_array.data(), StepperParameters{dt, alpha, beta, symmetric_storage});
+                K, mass_array.data(),
+                StepperParameters{dt, alpha, beta, symmetric_storage, single_precision_blocks});
           }),
           py::arg("indptr"), py::arg("indices"), py::arg("blocks"), py::arg("mass"), py::arg("dt"),
           py::arg("alpha") = 0.0, py::arg("beta") = 0.0, py::arg("symmetric_storage") = true,
+          py::arg("single_precision_blocks") = false,
           py::keep_alive<1, 2>(),
           py::keep_alive<1, 3>(), py::keep_alive<1, 4>(), py::keep_alive<1, 5>())
       .def(

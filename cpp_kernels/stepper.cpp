@@ -30,8 +30,15 @@ Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
   external_force_.assign(n_dofs(), 0.0);
   if (parameters.beta != 0.0) v_half_.assign(n_dofs(), 0.0);
   threaded_ = stiffness.n_block_rows >= kMinRowsForThreads;
+  if (parameters.single_precision_blocks && !parameters.symmetric_storage)
+    throw std::invalid_argument(
+        "single_precision_blocks needs symmetric_storage (the float blocks are the upper "
+        "triangle's)");
   if (parameters.symmetric_storage) {
-    symmetric_ = std::make_unique<SymmetricBlockCsr>(stiffness);
+    if (parameters.single_precision_blocks)
+      symmetric_ = std::make_unique<SymmetricBlockCsrSingle>(stiffness);
+    else
+      symmetric_ = std::make_unique<SymmetricBlockCsr>(stiffness);
     Ku_.assign(n_dofs(), 0.0);
     if (parameters.beta != 0.0) Kv_.assign(n_dofs(), 0.0);
   }
@@ -524,7 +531,12 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
 void Stepper::reset_energy(const double* u, const double* v, const double* a, double t0) {
   const std::int64_t n = n_dofs();
   std::vector<double> Ku(n);
-  spmv(stiffness_, u, Ku.data());
+  // The product the steps use (with float blocks: K rounded to float), so that H_0 is the same
+  // energy as the steps' H_n.
+  if (symmetric_)
+    symmetric_->multiply(u, Ku.data(), threaded_ ? omp_get_max_threads() : 1);
+  else
+    spmv(stiffness_, u, Ku.data());
   // g(u_0) stays in internal_force_ as g_n of the first step's pass A.
   const double* g = nullptr;
   double stored = 0.0, dissipation = 0.0;

@@ -24,6 +24,10 @@ struct StepperParameters {
   // true: the stepper keeps the upper triangle of K (about half the bytes streamed per step)
   // and pass B reads K u from a buffer; false: pass B is fused with the full block-CSR product.
   bool symmetric_storage = true;
+  /// true: the upper triangle's blocks are stored as float (half the block bytes; the state,
+  /// the products' sums and the energy account stay double; the stepped matrix is K rounded to
+  /// float, exactly symmetric, so the energy identity holds for it). Needs symmetric_storage.
+  bool single_precision_blocks = false;
 };
 
 /// Below this many block rows a loop runs on one thread: the two barriers a step costs more
@@ -202,7 +206,7 @@ class Stepper {
   void build_implicit_slots();
 
   BlockCsrView stiffness_;
-  std::unique_ptr<SymmetricBlockCsr> symmetric_;  // owned upper triangle, when symmetric_storage
+  std::unique_ptr<SymmetricProduct> symmetric_;  // owned upper triangle, when symmetric_storage
   std::vector<double> Ku_, Kv_;                   // K u_{n+1}, K v_{n+1/2} for the symmetric path
   bool threaded_ = true;                          // n_nodes >= kMinRowsForThreads
   const double* mass_;

@@ -18,14 +18,30 @@
 
 namespace cavern {
 
-/// Owned upper-triangular block storage of a symmetric matrix given as a full BlockCsrView.
+/// The products the stepper needs of its stored stiffness (one virtual call per product).
+class SymmetricProduct {
+ public:
+  virtual ~SymmetricProduct() = default;
+  /// y = K x (x, y: 3 n values; y is overwritten); `threads` 0: as many as OpenMP would use.
+  virtual void multiply(const double* x, double* y, int threads = 0) const = 0;
+  /// y1 = K x1 and y2 = K x2 reading each stored block once.
+  virtual void multiply_dual(const double* x1, const double* x2, double* y1, double* y2,
+                             int threads = 0) const = 0;
+  /// Bytes streamed per product: blocks, column indices and row pointers.
+  virtual std::int64_t bytes() const = 0;
+};
+
+/// Owned upper-triangular block storage of a symmetric matrix given as a full BlockCsrView,
+/// its blocks stored as Scalar (double, or float: half the block bytes; the products
+/// accumulate in double, so the stored matrix is K rounded to float, exactly symmetric).
 /// Row i holds its diagonal block first, then the blocks of columns j > i (sorted).
 /// K x = U x + (strict U)^T x.
-class SymmetricBlockCsr {
+template <class Scalar>
+class SymmetricBlockCsrT : public SymmetricProduct {
  public:
   /// Copies the blocks with column >= row from K; a row without a diagonal block (a node
   /// held by nothing but its mass) gets a zero one, so every row starts with its diagonal.
-  explicit SymmetricBlockCsr(const BlockCsrView& K) : n_(K.n_block_rows) {
+  explicit SymmetricBlockCsrT(const BlockCsrView& K) : n_(K.n_block_rows) {
     indptr_.assign(n_ + 1, 0);
     for (std::int64_t i = 0; i < n_; ++i) {
       indptr_[i + 1] = 1;  // the diagonal
@@ -34,7 +50,7 @@ class SymmetricBlockCsr {
     }
     for (std::int64_t i = 0; i < n_; ++i) indptr_[i + 1] += indptr_[i];
     indices_.resize(indptr_[n_]);
-    blocks_.assign(9 * indptr_[n_], 0.0);
+    std::vector<double> blocks(9 * indptr_[n_], 0.0);
     for (std::int64_t i = 0; i < n_; ++i) {
       indices_[indptr_[i]] = static_cast<std::int32_t>(i);
       std::int64_t next = indptr_[i] + 1;  // slot indptr_[i] is the diagonal
@@ -44,36 +60,37 @@ class SymmetricBlockCsr {
         const std::int64_t slot = (j == i) ? indptr_[i] : next++;
         indices_[slot] = j;
         // A repeated block (duplicate column) adds, as it does in the full product.
-        for (int c = 0; c < 9; ++c) blocks_[9 * slot + c] += K.blocks[9 * k + c];
+        for (int c = 0; c < 9; ++c) blocks[9 * slot + c] += K.blocks[9 * k + c];
       }
       // Columns after the diagonal in increasing order keep the scattered writes local.
-      sort_row(i);
+      sort_row(i, blocks);
     }
+    blocks_.assign(blocks.begin(), blocks.end());  // rounded once, after the sums
   }
 
   std::int64_t n_block_rows() const { return n_; }
   std::int64_t n_blocks() const { return indptr_[n_]; }
   /// Bytes streamed per product: blocks, column indices and row pointers.
-  std::int64_t bytes() const {
-    return static_cast<std::int64_t>(blocks_.size() * sizeof(double) +
+  std::int64_t bytes() const override {
+    return static_cast<std::int64_t>(blocks_.size() * sizeof(Scalar) +
                                      indices_.size() * sizeof(std::int32_t) +
                                      indptr_.size() * sizeof(std::int64_t));
   }
 
   /// y = K x (x, y: 3 n values; y is overwritten). OpenMP over `threads` row ranges
   /// (0: as many as OpenMP would use now).
-  void multiply(const double* x, double* y, int threads = 0) const {
+  void multiply(const double* x, double* y, int threads = 0) const override {
     product<1>(x, nullptr, y, nullptr, threads);
   }
 
   /// y1 = K x1 and y2 = K x2 reading each stored block once.
   void multiply_dual(const double* x1, const double* x2, double* y1, double* y2,
-                     int threads = 0) const {
+                     int threads = 0) const override {
     product<2>(x1, x2, y1, y2, threads);
   }
 
  private:
-  void sort_row(std::int64_t i) {
+  void sort_row(std::int64_t i, std::vector<double>& all_blocks) {
     const std::int64_t begin = indptr_[i] + 1, end = indptr_[i + 1];
     std::vector<std::int64_t> order(end - begin);
     for (std::int64_t k = 0; k < end - begin; ++k) order[k] = begin + k;
@@ -83,11 +100,11 @@ class SymmetricBlockCsr {
     std::vector<double> blocks(9 * order.size());
     for (std::size_t k = 0; k < order.size(); ++k) {
       indices[k] = indices_[order[k]];
-      std::copy(blocks_.data() + 9 * order[k], blocks_.data() + 9 * order[k] + 9,
+      std::copy(all_blocks.data() + 9 * order[k], all_blocks.data() + 9 * order[k] + 9,
                 blocks.data() + 9 * k);
     }
     std::copy(indices.begin(), indices.end(), indices_.begin() + begin);
-    std::copy(blocks.begin(), blocks.end(), blocks_.begin() + 9 * begin);
+    std::copy(blocks.begin(), blocks.end(), all_blocks.begin() + 9 * begin);
   }
 
   // Row ranges with about equal numbers of blocks, and for each range the columns beyond
@@ -150,7 +167,7 @@ class SymmetricBlockCsr {
     for (std::int64_t i = r0; i < r1; ++i) {
       const double* xi = x1 + 3 * i;
       const double* wi = (kVectors == 2) ? x2 + 3 * i : nullptr;
-      const double* d = blocks_.data() + 9 * indptr_[i];
+      const Scalar* d = blocks_.data() + 9 * indptr_[i];
       double a0 = y1[3 * i] + d[0] * xi[0] + d[1] * xi[1] + d[2] * xi[2];
       double a1 = y1[3 * i + 1] + d[3] * xi[0] + d[4] * xi[1] + d[5] * xi[2];
       double a2 = y1[3 * i + 2] + d[6] * xi[0] + d[7] * xi[1] + d[8] * xi[2];
@@ -161,7 +178,7 @@ class SymmetricBlockCsr {
         b2 = y2[3 * i + 2] + d[6] * wi[0] + d[7] * wi[1] + d[8] * wi[2];
       }
       for (std::int64_t k = indptr_[i] + 1; k < indptr_[i + 1]; ++k) {
-        const double* b = blocks_.data() + 9 * k;
+        const Scalar* b = blocks_.data() + 9 * k;
         const std::int64_t j = indices_[k];
         const double* xj = x1 + 3 * j;
         a0 += b[0] * xj[0] + b[1] * xj[1] + b[2] * xj[2];
@@ -214,11 +231,14 @@ class SymmetricBlockCsr {
   std::int64_t n_;
   std::vector<std::int64_t> indptr_;
   std::vector<std::int32_t> indices_;
-  std::vector<double> blocks_;
+  std::vector<Scalar> blocks_;
   mutable int partition_threads_ = 0;
   mutable std::vector<std::int64_t> row_start_;
   mutable std::vector<std::int64_t> spill_end_;
   mutable std::vector<std::vector<double>> spill_;
 };
+
+using SymmetricBlockCsr = SymmetricBlockCsrT<double>;
+using SymmetricBlockCsrSingle = SymmetricBlockCsrT<float>;
 
 }  // namespace cavern

@@ -53,19 +53,20 @@ def stream_triad_bandwidth(n: int = 20_000_000, repeats: int = 5, threads: int =
 
 
 def kernel_seconds_per_step(stiffness, mass, dt: float, steps: int, threads: int,
-                            symmetric_storage: bool = True) -> float:
+                            symmetric_storage: bool = True, single: bool = False) -> float:
     """Best of three: seconds per step of the C++ stepper on the given matrix.
 
     Args:
         symmetric_storage: True: the stepper's upper-triangle copy of K (default of runs);
             False: the full block-CSR product fused into the update.
+        single: the upper triangle's blocks as float32 (`time.matrix_precision = "single"`).
     """
     from pyfem import _kernels
     from pyfem.solver import bsr_arrays
 
     _kernels.set_num_threads(threads)
     indptr, indices, blocks = bsr_arrays(stiffness)
-    stepper = _kernels.Stepper(indptr, indices, blocks, mass, dt, 0.0, 0.0, symmetric_storage)
+    stepper = _kernels.Stepper(indptr, indices, blocks, mass, dt, 0.0, 0.0, symmetric_storage, single)
     return stepper_seconds_per_step(stepper, stiffness.shape[0], steps)
 
 
@@ -118,20 +119,20 @@ def petsc_seconds_per_step(stiffness, mass, dt: float, steps: int, matrix_type: 
     return best, u.getArray().copy()
 
 
-def bytes_moved_per_step(stiffness, symmetric_storage: bool = True) -> int:
+def bytes_moved_per_step(stiffness, symmetric_storage: bool = True, single: bool = False) -> int:
     """Bytes the kernel must move per step: its matrix once and the vectors of both passes.
 
     pass A reads v, a, u and writes v, u (5 vectors); pass B reads u, v, f, mass/3 and writes
     v, a (about 6 vectors): 11 vectors of 8 bytes per dof. The upper-triangle format stores
-    the diagonal and the blocks above it (72 + 4 bytes each) and adds the K u buffer
-    (written, then read: 2 vectors).
+    the diagonal and the blocks above it (72 + 4 bytes each; 36 + 4 as float32 blocks) and adds
+    the K u buffer (written, then read: 2 vectors).
     """
     from pyfem.solver import upper_triangle_blocks
 
     if not symmetric_storage:
         return int(stiffness.data.nbytes + stiffness.indices.nbytes + stiffness.indptr.nbytes
                    + 11 * 8 * stiffness.shape[0])
-    return int(upper_triangle_blocks(stiffness) * (72 + 4) + 8 * (stiffness.shape[0] // 3 + 1)
+    return int(upper_triangle_blocks(stiffness) * ((36 if single else 72) + 4) + 8 * (stiffness.shape[0] // 3 + 1)
                + 13 * 8 * stiffness.shape[0])
 
 
@@ -270,10 +271,13 @@ def main(argv=None) -> int:
         v, a = np.zeros(n), np.zeros(n)
         check.run(u, v, a, args.steps, 0.0)
         agreement = float(np.linalg.norm(u - petsc_u) / np.linalg.norm(petsc_u))
-        for symmetric_storage, storage in ((True, "upper triangle"), (False, "full, fused")):
-            moved = bytes_moved_per_step(stiffness, symmetric_storage)
+        for symmetric_storage, single, storage in ((True, False, "upper triangle"),
+                                                   (True, True, "upper triangle, float32 blocks"),
+                                                   (False, False, "full, fused")):
+            moved = bytes_moved_per_step(stiffness, symmetric_storage, single)
             for threads in (1, 2):
-                seconds = kernel_seconds_per_step(stiffness, mass, dt, args.steps, threads, symmetric_storage)
+                seconds = kernel_seconds_per_step(stiffness, mass, dt, args.steps, threads, symmetric_storage,
+                                                  single)
                 bound = moved / bandwidth[threads]
                 rows.append({
                     "storage": storage, "dofs": n, "threads": threads,

@@ -533,6 +533,8 @@ SCHEMA = Table({
         "safety": Number("safety factor on the critical step", "(0, 1]", default=0.8),
         "dt": Number("fixed time step (s)", POSITIVE, default=None),
         "power_iteration": Flag("sharpen the critical step by power iteration", default=True),
+        "matrix_precision": Choice("storage of the stiffness matrix's blocks in the kernel", ("double", "single"),
+                                   default="double"),
     }, "[time]"),
     "wave": Table({
         "type": Choice("wave type", ("P", "SV", "SH"), default=None),  # or [[wave.component]]

@@ -492,8 +492,9 @@ def make_stepper(simulation: Simulation):
 
     kernel_threads()
     indptr, indices, blocks = bsr_arrays(simulation.stiffness)
+    single = simulation.scene["time"].get("matrix_precision", "double") == "single"
     stepper = _kernels.Stepper(indptr, indices, blocks, simulation.mass, simulation.time_step.dt,
-                               simulation.alpha, simulation.beta)
+                               simulation.alpha, simulation.beta, True, single)
     if len(simulation.dashpot_nodes):
         stepper.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
                              np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
