@@ -158,7 +158,9 @@ void ContactPairs::colour_pairs() {
     int c = 0;
     while (c < 64 && (taken >> c) & 1u) ++c;
     if (c == 64)
-      throw std::invalid_argument("contact pairs: a node is shared by more than 63 pairs");
+      throw std::invalid_argument(
+          "contact pairs: more than 64 colours needed (the pairs of one node and its partner "
+          "would meet more than 64 times)");
     colour[p] = c;
     used_by_node[slot_[2 * p]] |= std::uint64_t{1} << c;
     used_by_node[slot_[2 * p + 1]] |= std::uint64_t{1} << c;

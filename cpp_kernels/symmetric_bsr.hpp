@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "bsr.hpp"
@@ -65,7 +66,10 @@ class SymmetricBlockCsrT : public SymmetricProduct {
       // Columns after the diagonal in increasing order keep the scattered writes local.
       sort_row(i, blocks);
     }
-    blocks_.assign(blocks.begin(), blocks.end());  // rounded once, after the sums
+    if constexpr (std::is_same_v<Scalar, double>)
+      blocks_ = std::move(blocks);
+    else
+      blocks_.assign(blocks.begin(), blocks.end());  // rounded once, after the sums
   }
 
   std::int64_t n_block_rows() const { return n_; }

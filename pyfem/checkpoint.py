@@ -31,6 +31,11 @@ FORMAT = 1  # bumped when the content changes; an older checkpoint is refused, n
 # Scene keys a resumed run may change: they do not alter the computed state.
 RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
 
+# Keys added after checkpoints were first written, with the value that reproduces the run before
+# they existed: left out of the fingerprint at that value, so an earlier run's checkpoint still
+# continues (a run that sets another value is another model).
+LATER_KEYS = ((("time", "matrix_precision"), "double"),)
+
 
 def model_fingerprint(simulation) -> dict:
     """What must be equal for a checkpoint to continue on this prepared simulation: the scene
@@ -39,6 +44,9 @@ def model_fingerprint(simulation) -> dict:
     scene = simulation.scene.to_json()
     for table, key in RESUMABLE_CHANGES:
         scene.get(table, {}).pop(key, None)
+    for (table, key), old_behaviour in LATER_KEYS:
+        if scene.get(table, {}).get(key) == old_behaviour:
+            scene[table].pop(key)
     return {
         "format": FORMAT,
         "scene": scene,

@@ -376,6 +376,12 @@ def command_view(run_dir: Path, time: float | None, section_y: float | None, war
         result = subprocess.run(command, capture_output=True, text=True)
         if result.returncode == 0 or "bad X server connection" not in result.stderr:
             break
+    if result.returncode == EXIT_USAGE:
+        # The script's own one-line refusal (e.g. fields.xdmf without displacement).
+        lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+        print(f"error: view: {lines[-1].removeprefix('error: ')}" if lines else
+              "error: view: the run's fields cannot be shown", file=sys.stderr)
+        return EXIT_USAGE
     if result.returncode != 0:
         print(result.stderr.strip()[-2000:], file=sys.stderr)
         print(f"error: view: pvbatch failed with exit status {result.returncode}", file=sys.stderr)

@@ -5,9 +5,10 @@ Step 1, before dolfinx sees the mesh, duplicated the interface nodes
 (`pyfem.interface_split.split_topology`, numpy only; `pyfem.mesh` builds the
 dolfinx mesh from the split arrays). `interface_pairs` matches the nodes
 (dof blocks) of side i and side j of each interface by their coordinates and
-computes per pair the lumped area int phi_i ds over the side-i facets (HRZ-scaled
-on quadratic triangles, whose row sums vanish at the vertices), the unit normal
-from side i towards side j and both lumped masses.
+computes per pair the lumped area int phi_i ds over the side-i facets (row sums:
+positive on quadrilaterals of Q1/Q2 hexahedra and on linear triangles; contact on
+quadratic triangles, whose row sums vanish at the vertices, is refused by
+`pyfem.mesh`), the unit normal from side i towards side j and both lumped masses.
 
 The side rule (which side is i, which j, where the normal points) is
 `pyfem.interface_split`'s.
@@ -21,9 +22,7 @@ import numpy as np
 import ufl
 from scipy.spatial import cKDTree
 
-from dolfinx import fem
-
-from pyfem.assembly import assemble_nodal_vector, facet_measure, hrz_lumped_vector, uses_diagonal_scaling
+from pyfem.assembly import assemble_nodal_vector, facet_measure
 
 
 @dataclasses.dataclass
@@ -89,15 +88,8 @@ def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int
         lumped = []
         for tag in interface_tags[name]:
             ds = facet_measure(mesh, facet_tags.indices[facet_tags.values == tag], quadrature)
-            if uses_diagonal_scaling(V):
-                # Quadratic triangles: row sums vanish at the vertices; HRZ gives every node a share > 0
-                # (as the truncation faces, pyfem.operators.boundary_face).
-                area = hrz_lumped_vector(fem.Constant(mesh, 1.0), V, ds)
-                normal = np.column_stack([hrz_lumped_vector(ufl.FacetNormal(mesh)[c], V, ds, scale=False)
-                                          for c in range(3)])
-            else:
-                area = assemble_nodal_vector(ufl.inner(ufl.as_vector((1.0, 0.0, 0.0)), test) * ds, V)[:, 0]
-                normal = assemble_nodal_vector(ufl.inner(ufl.FacetNormal(mesh), test) * ds, V)
+            area = assemble_nodal_vector(ufl.inner(ufl.as_vector((1.0, 0.0, 0.0)), test) * ds, V)[:, 0]
+            normal = assemble_nodal_vector(ufl.inner(ufl.FacetNormal(mesh), test) * ds, V)
             lumped.append((np.flatnonzero(area != 0.0), area, normal))
         (nodes_i, area_i, normal_i), (nodes_j, _, _) = lumped
         if len(nodes_i) != len(nodes_j):

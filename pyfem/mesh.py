@@ -288,12 +288,19 @@ def _check_cell_types(cell_types: list[tuple[int, str]], key: str = "mesh.file",
 
 def _check_tetrahedra_uses(scene: typing.Mapping) -> None:
     """What a tetrahedral mesh cannot do yet (docs/tetrahedra.md): nonlinear materials (the kernel's
-    element loop has hexahedra only). Contact interfaces on triangle facets and excavation are
-    supported.
+    element loop has hexahedra only) and contact pairs on quadratic triangles (the consistent load
+    of a uniform traction vanishes at their vertices: a vertex pair would carry no static force
+    while its lumped area is positive, so its strength and the force it releases on opening would
+    not match the continuum). Contact on linear triangles and excavation are supported.
 
     Raises:
         SceneError naming the key.
     """
+    interfaces = list((scene.get("contact") or {}).get("interfaces") or [])
+    if interfaces and scene["mesh"].get("order", 1) == 2:
+        raise SceneError("contact.interfaces", interfaces, "linear tetrahedra (mesh.order = 1) or hexahedra: "
+                         "contact pairs on the quadratic triangles of P2 tetrahedra are not supported (their "
+                         "vertices carry no consistent load; docs/tetrahedra.md)")
     for name, material in (scene.get("materials") or {}).items():
         for table in ("plasticity", "damage"):
             if material.get(table) is not None:

@@ -5,7 +5,7 @@ interfaces coloured by their slip. Writes a picture and a ParaView state file.
 Run it with ParaView's own Python (Debian: paraview, python3-paraview; pvbatch needs an X server,
 hence xvfb-run), or through `python3 -m pyfem view RUN_DIR`, which does this for you:
 
-    xvfb-run -a pvbatch scripts/paraview_view.py RUN_DIR [--time T] [--section-y Y] [--warp F]
+    xvfb-run -a pvbatch pyfem/pvbatch_view.py RUN_DIR [--time T] [--section-y Y] [--warp F]
 
 Writes RUN_DIR/plots/paraview.png and RUN_DIR/paraview.pvsm (open the state in the ParaView GUI:
 File > Load State, "Search files under specified directory" = RUN_DIR), and prints one line
@@ -23,7 +23,7 @@ from paraview import simple as pv
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="paraview_view.py", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="pvbatch_view.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("run_dir", help="a pyfem run directory (holds fields.xdmf and run.json)")
     parser.add_argument("--time", type=float, default=None,
                         help="output time to show (s); default: the time of the largest displacement")

@@ -537,7 +537,8 @@ def memory_estimate(simulation: Simulation) -> int:
     k = simulation.stiffness
     n_dofs = k.shape[0]
     total = k.data.nbytes + k.indices.nbytes + k.indptr.nbytes + 6 * 8 * n_dofs + simulation.mass.nbytes
-    total += upper_triangle_blocks(k) * (72 + 4) + 8 * (n_dofs // 3 + 1)
+    block_bytes = 36 if simulation.scene["time"].get("matrix_precision") == "single" else 72
+    total += upper_triangle_blocks(k) * (block_bytes + 4) + 8 * (n_dofs // 3 + 1)
     if simulation.input_arrays is not None:
         total += sum(v.nbytes for v in simulation.input_arrays.values() if isinstance(v, np.ndarray))
     total += simulation.dashpot_matrices.nbytes * 2

@@ -377,9 +377,11 @@ def test_pair_csv_header_and_run_json_state_counts(tmp_path):
     assert all(f'Name="{name}"' in xdmf for name in ("pair_state", "pair_slip", "pair_D", "displacement"))
 
 
-def test_pair_updates_do_not_depend_on_threads_or_pair_order():
-    """The pair loop runs in parallel from 1024 pairs (pairs that share no node are independent):
-    one thread or two, pairs in the given order or reversed, the same bits, while pairs slide."""
+def test_pair_updates_do_not_depend_on_the_pair_order():
+    """The pair loop runs in parallel from 1024 pairs, colour by colour (pairs of one colour share no
+    node, so they are independent): pairs in the given order or reversed, the same bits, while pairs
+    slide and open. (One thread against two for the correction alone: tests/cpp/test_contact.cpp;
+    a whole run differs between thread counts in the last bits of the stiffness product's sums.)"""
     import dataclasses
 
     scene = hard_scene(mesh__size=[100.0, 10.0, 20.0], mesh__h=1.0,
@@ -393,27 +395,21 @@ def test_pair_updates_do_not_depend_on_threads_or_pair_order():
     reverse = np.arange(n_pairs)[::-1]
     reversed_arrays = {key: (np.ascontiguousarray(value[reverse]) if isinstance(value, np.ndarray)
                              and value.shape[:1] == (n_pairs,) else value) for key, value in arrays.items()}
-    threads = _kernels.max_threads()
     results = []
-    try:
-        for n_threads, contact_arrays in ((1, arrays), (2, arrays), (2, reversed_arrays)):
-            _kernels.set_num_threads(n_threads)
-            run_simulation = dataclasses.replace(simulation, contact_arrays=contact_arrays, contact_pairs=None)
-            stepper = make_stepper(run_simulation)
-            n = 3 * len(simulation.mass)
-            u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-            stepper.run(u, v, a, round(0.14 / simulation.time_step.dt), 0.0)
-            contact = run_simulation.contact_pairs
-            order = reverse if contact_arrays is reversed_arrays else np.arange(n_pairs)
-            states = np.empty(n_pairs, dtype=np.int8)
-            states[order] = np.asarray(contact.state())
-            forces = np.empty(n_pairs)
-            forces[order] = np.asarray(contact.normal_force())
-            results.append((u, v, states, forces, contact.state_counts()))
-    finally:
-        _kernels.set_num_threads(threads)
+    for contact_arrays, order in ((arrays, np.arange(n_pairs)), (reversed_arrays, reverse)):
+        run_simulation = dataclasses.replace(simulation, contact_arrays=contact_arrays, contact_pairs=None)
+        stepper = make_stepper(run_simulation)
+        n = 3 * len(simulation.mass)
+        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+        stepper.run(u, v, a, round(0.14 / simulation.time_step.dt), 0.0)
+        contact = run_simulation.contact_pairs
+        states = np.empty(n_pairs, dtype=np.int8)
+        states[order] = np.asarray(contact.state())
+        forces = np.empty(n_pairs)
+        forces[order] = np.asarray(contact.normal_force())
+        results.append((u, v, states, forces, contact.state_counts()))
     print("state counts (bonded, stick, sliding, separated):", results[0][4])
     assert results[0][4][0] < n_pairs  # the pulse broke bonds: pairs stick again, slide or opened
-    for other in results[1:]:
-        for mine, theirs in zip(results[0][:4], other[:4]):
-            assert np.array_equal(mine, theirs)
+    assert results[0][4][2] > 0 and results[0][4][3] > 0
+    for mine, theirs in zip(results[0][:4], results[1][:4]):
+        assert np.array_equal(mine, theirs)

@@ -103,6 +103,14 @@ def test_pyfem_view_renders_regions_and_interfaces_and_writes_a_state(case3_run)
     missing = subprocess.run([sys.executable, "-m", "pyfem", "view", str(case3_run / "nothing")],
                              capture_output=True, text=True, timeout=60, cwd=REPOSITORY)
     assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "run.json" in missing.stderr
+    # Fields without a displacement (output.fields leaves it out): the script's one line, exit 2.
+    no_displacement = case3_run.parent / "no_displacement"
+    shutil.copytree(case3_run, no_displacement)
+    xdmf = no_displacement / "fields.xdmf"
+    xdmf.write_text(xdmf.read_text().replace('Name="displacement"', 'Name="not_displacement"'))
+    refused = subprocess.run([sys.executable, "-m", "pyfem", "view", str(no_displacement)], capture_output=True,
+                             text=True, timeout=600, cwd=REPOSITORY)
+    assert refused.returncode == 2 and refused.stderr.count("\n") == 1 and "displacement" in refused.stderr
 
 
 def test_fields_xdmf_renders_in_pvbatch(case3_run, tmp_path):

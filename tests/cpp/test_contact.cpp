@@ -1,5 +1,6 @@
 // Interlayer contact (contact.hpp, deterioration.hpp) inside the stepper: exact answers only.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -280,4 +281,88 @@ TEST(Contact, RejectsBadPairs) {
   EXPECT_THROW(single_pair(0, 1, long_normal, F0, 1.0, {}), std::invalid_argument);
   EXPECT_THROW(single_pair(0, 1, normal, F0, -1.0, {}), std::invalid_argument);
   EXPECT_THROW(single_pair(0, 1, normal, F0, 1.0, {-1.0, 0.0, 0.0, 0.0}), std::invalid_argument);
+}
+
+namespace {
+
+// One contact correction of `pairs` (n, 2) on a random state with `threads` OpenMP threads:
+// v, a after it, then states, normal forces and the step's friction dissipation.
+struct CorrectionResult {
+  std::vector<double> v, a, normal_force;
+  std::vector<std::int8_t> state;
+  double dissipation = 0.0;
+};
+
+CorrectionResult correct_once(const std::vector<std::int32_t>& pairs, std::int64_t n_nodes, int threads) {
+  const std::int64_t n_pairs = static_cast<std::int64_t>(pairs.size() / 2);
+  std::mt19937_64 generator(5);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  // Per-pair data drawn per node (the pair's first node), so a reordered list has the same pairs.
+  std::vector<double> node_area(n_nodes), node_shear(n_nodes), node_normal(n_nodes);
+  for (std::int64_t i = 0; i < n_nodes; ++i) {
+    node_area[i] = 1.0 + 0.5 * uniform(generator);
+    node_shear[i] = 1e5 * uniform(generator);
+    node_normal[i] = 1e6 * uniform(generator);  // some pairs in tension, some in compression
+  }
+  std::vector<double> area(n_pairs), normal(3 * n_pairs), F0(3 * n_pairs);
+  for (std::int64_t p = 0; p < n_pairs; ++p) {
+    const std::int32_t i = pairs[2 * p];
+    area[p] = node_area[i];
+    normal[3 * p + 2] = 1.0;
+    F0[3 * p] = node_shear[i];
+    F0[3 * p + 2] = node_normal[i];
+  }
+  // Weak interface: many pairs slide or open in this one step.
+  ContactPairs contact(ContactGeometry{n_pairs, pairs.data(), area.data(), normal.data(), F0.data()},
+                       ContactStrength{1e5, 1e5, 0.5, 0.4});
+  contact.set_deterioration(DeteriorationParameters{0.75, 5.0, 20.0, 0.883, 0.02, 0.032});
+  std::vector<double> mass(n_nodes), u(3 * n_nodes), v(3 * n_nodes), a(3 * n_nodes);
+  std::generate(mass.begin(), mass.end(), [&] { return 1000.0 * (1.5 + uniform(generator)); });
+  for (auto* x : {&u, &v, &a})
+    std::generate(x->begin(), x->end(), [&] { return 1e-3 * uniform(generator); });
+  ImplicitNodeOperators operators;
+  operators.dt = 1e-3;
+  operators.mass = mass.data();
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(threads);
+  const ContactStepResult step = contact.correct(0.5, operators, u.data(), v.data(), a.data());
+  omp_set_num_threads(saved);
+  return {v, a, contact.normal_force(), contact.state(), step.friction_dissipation};
+}
+
+}  // namespace
+
+// From kMinPairsForThreads pairs the correction runs in parallel, colour by colour: one thread or
+// two, the same bits; with pairs sharing nodes (a chain i-j, j-k, ...: two colours) too; and pairs
+// that share no node give the same per-pair result in any order.
+TEST(ContactPairs, ParallelCorrectionIsIndependentOfThreadsAndOrder) {
+  const std::int64_t n = 3 * kMinPairsForThreads;
+  std::vector<std::int32_t> disjoint, chain;
+  for (std::int32_t p = 0; p < n; ++p) {
+    disjoint.insert(disjoint.end(), {2 * p, 2 * p + 1});
+    chain.insert(chain.end(), {p, p + 1});  // node p + 1 is shared by pairs p and p + 1
+  }
+  int checks = 0;
+  for (const auto* pairs : {&disjoint, &chain}) {
+    const std::int64_t n_nodes = 2 * n + 2;
+    const CorrectionResult one = correct_once(*pairs, n_nodes, 1);
+    const CorrectionResult two = correct_once(*pairs, n_nodes, 2);
+    EXPECT_EQ(one.v, two.v);
+    EXPECT_EQ(one.a, two.a);
+    EXPECT_EQ(one.state, two.state);
+    EXPECT_EQ(one.normal_force, two.normal_force);
+    EXPECT_EQ(one.dissipation, two.dissipation);
+    // Something happened: pairs left the bonded state and friction dissipated.
+    EXPECT_GT(std::count_if(one.state.begin(), one.state.end(), [](std::int8_t s) { return s != 0; }), n / 10);
+    EXPECT_GT(one.dissipation, 0.0);
+    checks += 1;
+  }
+  // Disjoint pairs reversed: each pair's result is the same.
+  std::vector<std::int32_t> reversed;
+  for (std::int64_t p = n - 1; p >= 0; --p) reversed.insert(reversed.end(), {disjoint[2 * p], disjoint[2 * p + 1]});
+  const CorrectionResult forward = correct_once(disjoint, 2 * n + 2, 2);
+  const CorrectionResult backward = correct_once(reversed, 2 * n + 2, 2);
+  EXPECT_EQ(forward.v, backward.v);
+  EXPECT_EQ(forward.a, backward.a);
+  EXPECT_EQ(checks, 2);
 }
