@@ -66,6 +66,16 @@ class BoundaryFace:
     kind: str = "viscoelastic"
     source: str = "named surface"
     n_facets: int = 0
+    traction_area: np.ndarray | None = None
+
+    @property
+    def load_area(self) -> np.ndarray:
+        """(k,) the weights int phi_i ds of the input's traction term A sigma_ff n (m^2): the row sums,
+        the consistent load of a uniform traction. Equal to `area` except on quadratic triangles,
+        where `area` is HRZ-lumped (positive springs and dashpots at every node) and the row sums
+        vanish at the vertices: a traction lumped with HRZ weights is not the load the interior's
+        stiffness balances, and the boundary nodes then followed the free field to first order only."""
+        return self.area if self.traction_area is None else self.traction_area
 
     @property
     def total_area(self) -> float:
@@ -370,6 +380,7 @@ def boundary_face(name: str, V: fem.FunctionSpace, facets: np.ndarray, materials
         shear = hrz_lumped_vector(materials.shear_modulus, V, ds)
         normal_integral = np.column_stack([hrz_lumped_vector(outward_normal[c], V, ds, scale=False)
                                            for c in range(3)])
+        row_sums = assemble_nodal_vector(ufl.inner(ufl.as_vector((1.0, 0.0, 0.0)), test) * ds, V)[:, 0]
     else:
         # One vector form carries three scalar integrals: component 0: 1, 1: rho c_p, 2: rho c_s.
         scalars = assemble_nodal_vector(
@@ -379,6 +390,7 @@ def boundary_face(name: str, V: fem.FunctionSpace, facets: np.ndarray, materials
 
     area = scalars[:, 0]
     nodes = np.flatnonzero(area != 0.0).astype(np.int32)
+    traction_area = row_sums[nodes].copy() if uses_diagonal_scaling(V) else None
     if np.any(area[nodes] < 0.0):
         raise ValueError(f"boundary {name!r}: negative lumped facet area at nodes {nodes[area[nodes] < 0.0][:5]}")
     normal = normal_integral[nodes]
@@ -390,7 +402,7 @@ def boundary_face(name: str, V: fem.FunctionSpace, facets: np.ndarray, materials
     return BoundaryFace(name=name, nodes=nodes, area=area[nodes].copy(), normal=normal,
                         rho_cp=scalars[nodes, 1].copy(), rho_cs=scalars[nodes, 2].copy(),
                         shear_modulus=shear[nodes].copy(), plane_distance=plane_distance, kind=kind,
-                        source=source, n_facets=int(len(facets)))
+                        source=source, n_facets=int(len(facets)), traction_area=traction_area)
 
 
 # Relative distance (of the model's extent) within which a facet lies on a bounding-box plane.

@@ -152,7 +152,7 @@ def equivalent_input_forces(faces, node_coords, freefield, boundary_type=None,
         traction = np.einsum("ksij,kj->ksi", arrays["stress"][rows], np.asarray(face.normal, dtype=float))
         np.add.at(P, rows, np.einsum("kij,ksj->ksi", stiffness, amplitude))
         np.add.at(Q, rows, np.einsum("kij,ksj->ksi", damping, amplitude)
-                  + np.asarray(face.area, dtype=float)[:, None, None] * traction)
+                  + np.asarray(face.load_area, dtype=float)[:, None, None] * traction)
     result.update(
         node_ptr=np.arange(0, len(unique_nodes) * n_slots + 1, n_slots, dtype=np.int64),
         nodes=unique_nodes.astype(np.int32),
@@ -180,7 +180,7 @@ def equivalent_input_forces_reference(faces, node_coords, freefield, t, boundary
                                       alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0):
     """f(t) (nt, n_nodes, 3), N, straight from FreeField.displacement/velocity/stress (slow, for tests).
 
-    f = K_b u_ff + C_b v_ff + A sigma_ff n per face node, summed over faces.
+    f = K_b u_ff + C_b v_ff + A sigma_ff n per face node, summed over faces (A: `load_area`).
     """
     node_coords = np.asarray(node_coords, dtype=float)
     t = np.atleast_1d(np.asarray(t, dtype=float))
@@ -192,7 +192,7 @@ def equivalent_input_forces_reference(faces, node_coords, freefield, t, boundary
         sigma = freefield.stress(points, t)
         stiffness, damping = face_node_operators(face, boundary_type, alpha_N, alpha_T)
         f = (np.einsum("kij,tkj->tki", stiffness, u) + np.einsum("kij,tkj->tki", damping, v)
-             + np.asarray(face.area)[None, :, None] * np.einsum("tkij,kj->tki", sigma, np.asarray(face.normal)))
+             + np.asarray(face.load_area)[None, :, None] * np.einsum("tkij,kj->tki", sigma, np.asarray(face.normal)))
         for step in range(len(t)):
             np.add.at(forces[step], np.asarray(face.nodes), f[step])
     return forces
