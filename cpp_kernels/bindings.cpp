@@ -14,6 +14,7 @@
 #include "bsr.hpp"
 #include "contact.hpp"
 #include "internal_force.hpp"
+#include "local_stepper.hpp"
 #include "parallel.hpp"
 #include "seismic_input.hpp"
 #include "stable_step.hpp"
@@ -894,6 +895,81 @@ is the laws' own energy error, round-off for linear_elastic).)")
       py::arg("iterations") = 50, py::arg("seed") = 1,
       "Estimate (from below) of omega_max^2 (1/s^2): Rayleigh quotient of power iteration on "
       "M^-1/2 K M^-1/2.");
+
+  py::class_<LocalStepper>(m, "LocalStepper", R"(Multi-rate explicit stepping (docs/lts_plan.md):
+each node steps at dt_fine 2^level; one run step is dt_fine 2^max(level). The linear part only:
+stiffness, mass-proportional damping, dashpots and SeismicInput providers (no element-loop
+components, contact or constraints yet). One level gives Stepper's steps.
+
+Args:
+    indptr, indices, blocks: the full block-CSR K (borrowed).
+    mass: float64 (n_nodes,) lumped masses (borrowed).
+    node_level: int32 (n_nodes,) rate level of each node, 0 the finest (copied).
+    dt_fine: step of level 0 (s).
+    alpha: mass-proportional Rayleigh coefficient (1/s).)")
+      .def(py::init([](const py::object& indptr, const py::object& indices, const py::object& blocks,
+                       const py::object& mass, const py::object& level_object, double dt_fine,
+                       double alpha) {
+             const std::int64_t n_nodes = node_count(mass);
+             const BlockCsrView K = checked_block_csr(indptr, indices, blocks, n_nodes);
+             auto mass_array = checked_array<double>(mass, "mass", {n_nodes});
+             auto levels = checked_array<std::int32_t>(level_object, "node_level", {n_nodes});
+             return std::make_unique<LocalStepper>(K, mass_array.data(), levels.data(), dt_fine, alpha);
+           }),
+           py::arg("indptr"), py::arg("indices"), py::arg("blocks"), py::arg("mass"),
+           py::arg("node_level"), py::arg("dt_fine"), py::arg("alpha") = 0.0, py::keep_alive<1, 2>(),
+           py::keep_alive<1, 3>(), py::keep_alive<1, 4>(), py::keep_alive<1, 5>())
+      .def(
+          "set_dashpots",
+          [](LocalStepper& stepper, const py::object& nodes_object, const py::object& C_object) {
+            auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
+            auto C = checked_array<double>(C_object, "C", {nodes.shape(0), 3, 3});
+            stepper.set_dashpots(nodes.data(), nodes.shape(0), C.data());
+          },
+          py::arg("nodes"), py::arg("C"), "Implicit per-node dashpots (Stepper.set_dashpots).")
+      .def(
+          "add_seismic_input",
+          [](LocalStepper& stepper, std::shared_ptr<SeismicInput> input) {
+            stepper.add_provider(std::move(input));
+          },
+          py::arg("input"), py::keep_alive<1, 2>(), "Adds a SeismicInput force provider.")
+      .def(
+          "run",
+          [](LocalStepper& stepper, const py::object& u_object, const py::object& v_object,
+             const py::object& a_object, std::int64_t n_steps, double t0) {
+            const py::ssize_t n_dofs = 3 * stepper.n_nodes();
+            auto u = checked_array<double>(u_object, "u", {n_dofs}, true);
+            auto v = checked_array<double>(v_object, "v", {n_dofs}, true);
+            auto a = checked_array<double>(a_object, "a", {n_dofs}, true);
+            if (n_steps < 0)
+              throw py::value_error("n_steps must be >= 0, got " + std::to_string(n_steps));
+            double* u_data = u.mutable_data();
+            double* v_data = v.mutable_data();
+            double* a_data = a.mutable_data();
+            if (u_data == v_data || u_data == a_data || v_data == a_data)
+              throw py::value_error("u, v and a must be three different arrays");
+            py::gil_scoped_release release;
+            return stepper.run(u_data, v_data, a_data, n_steps, t0);
+          },
+          py::arg("u").noconvert(), py::arg("v").noconvert(), py::arg("a").noconvert(),
+          py::arg("n_steps"), py::arg("t0"),
+          "Advances n_steps global steps of dt() from t0 (u, v, a in place); returns the end time.")
+      .def_property_readonly("dt", &LocalStepper::dt, "Global step dt_fine 2^max_level (s).")
+      .def_property_readonly("dt_fine", &LocalStepper::dt_fine)
+      .def_property_readonly("max_level", &LocalStepper::max_level)
+      .def("work_fraction", &LocalStepper::work_fraction,
+           "Stiffness blocks multiplied per simulated second relative to global stepping at dt_fine.")
+      .def("energy", [](const LocalStepper& stepper) {
+        const LocalStepper::Energy e = stepper.energy();
+        py::dict out;
+        out["kinetic"] = e.kinetic;
+        out["strain"] = e.strain;
+        out["initial"] = e.initial;
+        out["external_work"] = e.external_work;
+        out["damping_work"] = e.damping_work;
+        out["balance"] = e.balance;
+        return out;
+      }, "Plain energies and works of the last run (the balance is O(dt^2), not round-off).");
 
   m.def(
       "set_num_threads",

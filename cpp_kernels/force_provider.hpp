@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace cavern {
 
@@ -26,6 +27,9 @@ class ForceProvider {
 
   /// Short name used in the energy report.
   virtual std::string name() const = 0;
+
+  /// The nodes this provider writes (empty: not listed; LocalStepper needs them).
+  virtual std::vector<std::int32_t> nodes() const { return {}; }
 };
 
 }  // namespace cavern

@@ -67,6 +67,9 @@ class SeismicInput : public ForceProvider {
   double power(const double* v) const override;
   void check_nodes(std::int64_t n_nodes) const override;
   std::string name() const override { return "seismic_input"; }
+  std::vector<std::int32_t> nodes() const override {
+    return std::vector<std::int32_t>(entries_.nodes, entries_.nodes + entries_.n_input_nodes);
+  }
 
   std::int64_t n_input_nodes() const { return entries_.n_input_nodes; }
 

@@ -1,0 +1,289 @@
+#include "local_stepper.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "small_matrix.hpp"
+
+namespace cavern {
+
+namespace {
+constexpr std::int64_t kMinRowsForThreadsLocal = 4096;
+}
+
+LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
+                           const std::int32_t* node_level, double dt_fine, double alpha)
+    : stiffness_(stiffness), mass_(mass), dt_fine_(dt_fine), alpha_(alpha) {
+  if (!(std::isfinite(dt_fine) && dt_fine > 0.0))
+    throw std::invalid_argument("dt_fine must be finite and > 0, got " + std::to_string(dt_fine));
+  if (!(std::isfinite(alpha) && alpha >= 0.0))
+    throw std::invalid_argument("alpha must be finite and >= 0, got " + std::to_string(alpha));
+  const std::int64_t n = stiffness.n_block_rows;
+  level_.assign(node_level, node_level + n);
+  for (std::int64_t i = 0; i < n; ++i) {
+    if (!(mass[i] > 0.0 && std::isfinite(mass[i])))
+      throw std::invalid_argument("mass[" + std::to_string(i) + "] must be finite and > 0");
+    if (level_[i] < 0 || level_[i] >= kMaxLevels)
+      throw std::invalid_argument("node_level[" + std::to_string(i) + "] = " +
+                                  std::to_string(level_[i]) + " must be in [0, " +
+                                  std::to_string(kMaxLevels) + ")");
+    max_level_ = std::max(max_level_, level_[i]);
+  }
+  levels_.resize(max_level_ + 1);
+  // Rows touched by each level's columns, and each node's active (finest touching) level.
+  std::vector<int> active(n, 0);
+  for (int c = 0; c <= max_level_; ++c) {
+    Level& level = levels_[c];
+    const int k = max_level_ - c;
+    level.step = dt_fine_ * static_cast<double>(std::int64_t{1} << k);
+    level.row_ptr.push_back(0);
+    for (std::int64_t i = 0; i < n; ++i) {
+      const std::int64_t before = static_cast<std::int64_t>(level.columns.size());
+      for (std::int64_t b = stiffness.indptr[i]; b < stiffness.indptr[i + 1]; ++b) {
+        const std::int32_t j = stiffness.indices[b];
+        if (level_[j] != k) continue;
+        level.columns.push_back(j);
+        level.blocks.insert(level.blocks.end(), stiffness.blocks + 9 * b, stiffness.blocks + 9 * b + 9);
+      }
+      const bool own = level_[i] == k;
+      if (static_cast<std::int64_t>(level.columns.size()) > before || own) {
+        level.rows.push_back(static_cast<std::int32_t>(i));
+        level.row_ptr.push_back(static_cast<std::int64_t>(level.columns.size()));
+        level.own.push_back(own ? 1 : 0);
+        active[i] = std::max(active[i], c);
+      }
+    }
+    level.acceleration.assign(3 * level.rows.size(), 0.0);
+  }
+  for (std::int64_t i = 0; i < n; ++i) levels_[active[i]].drift.push_back(static_cast<std::int32_t>(i));
+  external_.assign(3 * n, 0.0);
+  own_power_.assign(2 * n, 0.0);
+  dashpot_slot_.assign(n, -1);
+}
+
+void LocalStepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
+  std::fill(dashpot_slot_.begin(), dashpot_slot_.end(), -1);
+  dashpot_C_.clear();
+  for (std::int64_t k = 0; k < count; ++k) {
+    const std::int32_t node = nodes[k];
+    if (node < 0 || node >= n_nodes())
+      throw std::invalid_argument("dashpot nodes[" + std::to_string(k) + "] is not a node");
+    if (dashpot_slot_[node] < 0) {
+      dashpot_slot_[node] = static_cast<std::int32_t>(dashpot_C_.size() / 9);
+      dashpot_C_.resize(dashpot_C_.size() + 9, 0.0);
+    }
+    for (int c = 0; c < 9; ++c) dashpot_C_[9 * dashpot_slot_[node] + c] += C[9 * k + c];
+  }
+  build_dashpot_inverses();
+}
+
+void LocalStepper::build_dashpot_inverses() {
+  for (Level& level : levels_) {
+    level.implicit_inverse.assign(dashpot_C_.size(), 0.0);
+    const double half = 0.5 * level.step;
+    for (std::size_t r = 0; r < level.rows.size(); ++r) {
+      if (!level.own[r]) continue;
+      const std::int32_t node = level.rows[r];
+      const std::int32_t slot = dashpot_slot_[node];
+      if (slot < 0) continue;
+      double A[9];
+      for (int c = 0; c < 9; ++c) A[c] = half * dashpot_C_[9 * slot + c];
+      const double diagonal = mass_[node] * (1.0 + half * alpha_);
+      A[0] += diagonal;
+      A[4] += diagonal;
+      A[8] += diagonal;
+      if (!(invert_3x3(A, level.implicit_inverse.data() + 9 * slot) > 0.0))
+        throw std::invalid_argument("dashpot C at node " + std::to_string(node) +
+                                    " is not positive semi-definite");
+    }
+  }
+}
+
+void LocalStepper::add_provider(std::shared_ptr<ForceProvider> provider) {
+  provider->check_nodes(n_nodes());
+  const std::vector<std::int32_t> nodes = provider->nodes();
+  if (nodes.empty())
+    throw std::invalid_argument("LocalStepper: provider '" + provider->name() +
+                                "' does not list its nodes");
+  provider_nodes_.insert(provider_nodes_.end(), nodes.begin(), nodes.end());
+  std::sort(provider_nodes_.begin(), provider_nodes_.end());
+  provider_nodes_.erase(std::unique(provider_nodes_.begin(), provider_nodes_.end()),
+                        provider_nodes_.end());
+  for (Level& level : levels_) {
+    level.provider_rows.clear();
+    for (std::size_t r = 0; r < level.rows.size(); ++r)
+      if (level.own[r] &&
+          std::binary_search(provider_nodes_.begin(), provider_nodes_.end(), level.rows[r]))
+        level.provider_rows.push_back(static_cast<std::int32_t>(r));
+  }
+  providers_.push_back(std::move(provider));
+  initialised_ = false;
+}
+
+double LocalStepper::work_fraction() const {
+  // Per global step level c does 2^c kicks' products over its blocks; global stepping at dt_fine
+  // does 2^L products over all blocks.
+  double work = 0.0;
+  for (int c = 0; c <= max_level_; ++c)
+    work += static_cast<double>(std::int64_t{1} << c) * static_cast<double>(levels_[c].columns.size());
+  return work / (static_cast<double>(std::int64_t{1} << max_level_) *
+                 static_cast<double>(stiffness_.n_blocks()));
+}
+
+void LocalStepper::start_kick(int c, double h, double* v) {
+  Level& level = levels_[c];
+  const double half = 0.5 * h;
+  const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
+#pragma omp parallel for schedule(static) if (n_rows >= kMinRowsForThreadsLocal)
+  for (std::int64_t r = 0; r < n_rows; ++r) {
+    double* vi = v + 3 * static_cast<std::int64_t>(level.rows[r]);
+    const double* ar = level.acceleration.data() + 3 * r;
+    for (int d = 0; d < 3; ++d) vi[d] += half * ar[d];
+  }
+}
+
+void LocalStepper::end_kick(int c, double h, double t, const double* u, double* v, bool initial) {
+  Level& level = levels_[c];
+  const double half = 0.5 * h;
+  // External forces of this level's own nodes at t.
+  if (!level.provider_rows.empty()) {
+    for (auto& provider : providers_) provider->add_forces(t, u, v, external_.data());
+  }
+  const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
+  double external_work = 0.0, damping_work = 0.0;
+#pragma omp parallel for schedule(static) if (n_rows >= kMinRowsForThreadsLocal) \
+    reduction(+ : external_work, damping_work)
+  for (std::int64_t r = 0; r < n_rows; ++r) {
+    const std::int64_t i = level.rows[r];
+    double f[3] = {0.0, 0.0, 0.0};
+    for (std::int64_t b = level.row_ptr[r]; b < level.row_ptr[r + 1]; ++b) {
+      const double* block = level.blocks.data() + 9 * b;
+      const double* uj = u + 3 * static_cast<std::int64_t>(level.columns[b]);
+      f[0] -= block[0] * uj[0] + block[1] * uj[1] + block[2] * uj[2];
+      f[1] -= block[3] * uj[0] + block[4] * uj[1] + block[5] * uj[2];
+      f[2] -= block[6] * uj[0] + block[7] * uj[1] + block[8] * uj[2];
+    }
+    const double m = mass_[i];
+    double* vi = v + 3 * i;
+    double* ar = level.acceleration.data() + 3 * r;
+    if (!level.own[r]) {
+      for (int d = 0; d < 3; ++d) {
+        ar[d] = f[d] / m;
+        vi[d] += half * ar[d];
+      }
+      continue;
+    }
+    double external[3] = {external_[3 * i], external_[3 * i + 1], external_[3 * i + 2]};
+    double rhs[3], v_new[3], damping[3];
+    for (int d = 0; d < 3; ++d) rhs[d] = m * vi[d] + half * (f[d] + external[d]);
+    const std::int32_t slot = dashpot_slot_[i];
+    if (initial) {  // the state's own force and damping at v, nothing stepped
+      double C_v[3] = {0.0, 0.0, 0.0};
+      if (slot >= 0) multiply_3x3(dashpot_C_.data() + 9 * slot, vi, C_v);
+      for (int d = 0; d < 3; ++d) {
+        v_new[d] = vi[d];
+        damping[d] = alpha_ * m * vi[d] + C_v[d];
+      }
+    } else if (slot < 0) {
+      const double inverse = 1.0 / (m * (1.0 + half * alpha_));
+      for (int d = 0; d < 3; ++d) {
+        v_new[d] = rhs[d] * inverse;
+        damping[d] = alpha_ * m * v_new[d];
+      }
+    } else {
+      multiply_3x3(level.implicit_inverse.data() + 9 * slot, rhs, v_new);
+      multiply_3x3(dashpot_C_.data() + 9 * slot, v_new, damping);
+      for (int d = 0; d < 3; ++d) damping[d] += alpha_ * m * v_new[d];
+    }
+    double external_power = 0.0, damping_power = 0.0;
+    for (int d = 0; d < 3; ++d) {
+      ar[d] = (f[d] + external[d] - damping[d]) / m;
+      vi[d] = v_new[d];
+      external_power += external[d] * v_new[d];
+      damping_power += damping[d] * v_new[d];
+    }
+    // Trapezoid rule over the node's own substep (its last end kick to this one).
+    external_work += half * (own_power_[2 * i] + external_power);
+    damping_work += half * (own_power_[2 * i + 1] + damping_power);
+    own_power_[2 * i] = external_power;
+    own_power_[2 * i + 1] = damping_power;
+  }
+  energy_.external_work += external_work;
+  energy_.damping_work += damping_work;
+  if (!level.provider_rows.empty())
+    for (const std::int32_t node : provider_nodes_)
+      for (int d = 0; d < 3; ++d) external_[3 * static_cast<std::int64_t>(node) + d] = 0.0;
+}
+
+void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
+  start_kick(c, h, v);
+  const std::vector<std::int32_t>& drift = levels_[c].drift;
+  const std::int64_t n_drift = static_cast<std::int64_t>(drift.size());
+#pragma omp parallel for schedule(static) if (n_drift >= kMinRowsForThreadsLocal)
+  for (std::int64_t k = 0; k < n_drift; ++k) {
+    const std::int64_t i = drift[k];
+    for (int d = 0; d < 3; ++d) u[3 * i + d] += h * v[3 * i + d];
+  }
+  if (c < max_level_) {
+    substep(c + 1, 0.5 * h, t, u, v);
+    substep(c + 1, 0.5 * h, t + 0.5 * h, u, v);
+  }
+  end_kick(c, h, t + h, u, v, false);
+}
+
+void LocalStepper::initialise(const double* u, const double* v, double t0) {
+  // Every level's force at (u, v, t0): an end kick of zero length that keeps v.
+  std::vector<double> v_copy(v, v + 3 * n_nodes());
+  for (int c = 0; c <= max_level_; ++c) end_kick(c, 0.0, t0, u, v_copy.data(), true);
+  // Initial powers for the trapezoid rule at each own node.
+  energy_.initial = 0.0;
+  double kinetic = 0.0;
+  for (std::int64_t i = 0; i < n_nodes(); ++i)
+    for (int d = 0; d < 3; ++d) kinetic += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
+  energy_.kinetic = kinetic;
+  energy_.strain = strain_energy(u);
+  energy_.initial = energy_.kinetic + energy_.strain;
+  energy_.external_work = energy_.damping_work = 0.0;
+  energy_.balance = 0.0;
+  initialised_ = true;
+}
+
+double LocalStepper::strain_energy(const double* u) const {
+  double twice = 0.0;
+  const std::int64_t n = n_nodes();
+#pragma omp parallel for schedule(static) if (n >= kMinRowsForThreadsLocal) reduction(+ : twice)
+  for (std::int64_t i = 0; i < n; ++i) {
+    double Ku[3];
+    block_row_product(stiffness_, i, u, Ku);
+    for (int d = 0; d < 3; ++d) twice += u[3 * i + d] * Ku[d];
+  }
+  return 0.5 * twice;
+}
+
+double LocalStepper::run(double* u, double* v, double* a, std::int64_t n_steps, double t0) {
+  if (!initialised_) initialise(u, v, t0);
+  const double step = dt();
+  for (std::int64_t s = 0; s < n_steps; ++s)
+    substep(0, step, t0 + static_cast<double>(s) * step, u, v);
+  // Total acceleration: the sum over the levels touching a node (every level's last end kick is
+  // at the end of the global step).
+  const std::int64_t n = n_nodes();
+  std::fill(a, a + 3 * n, 0.0);
+  for (const Level& level : levels_)
+    for (std::size_t r = 0; r < level.rows.size(); ++r)
+      for (int d = 0; d < 3; ++d) a[3 * static_cast<std::int64_t>(level.rows[r]) + d] += level.acceleration[3 * r + d];
+  double kinetic = 0.0;
+  for (std::int64_t i = 0; i < n; ++i)
+    for (int d = 0; d < 3; ++d) kinetic += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
+  energy_.kinetic = kinetic;
+  energy_.strain = strain_energy(u);
+  energy_.balance = energy_.kinetic + energy_.strain - energy_.initial - energy_.external_work +
+                    energy_.damping_work;
+  return t0 + static_cast<double>(n_steps) * step;
+}
+
+}  // namespace cavern

@@ -1,0 +1,115 @@
+// Multi-rate explicit stepping (local time stepping) for M a + d(v) + K u = f_ext(t), lumped M:
+// the scheme of docs/lts_plan.md (Diaz & Grote's leapfrog LTS in velocity-Verlet form, multi-level
+// by recursion). Groundwork: the linear part (stiffness, mass-proportional damping, dashpots,
+// force providers); element-loop components, contact pairs and constraints are not supported yet.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "bsr.hpp"
+#include "force_provider.hpp"
+
+namespace cavern {
+
+/// Each node has a rate level k >= 0 (0: the finest rate, step dt_fine; k: dt_fine 2^k). With
+/// L the largest level, one global step is Delta t = dt_fine 2^L; with c = L - k (0: coarsest) the
+/// step is the recursion S(0, Delta t, t) of
+///
+///   S(c, h, t):  v += h/2 a_c                        (start kick: the last end kick's a_c, FSAL)
+///                u += h v   on the nodes whose velocity only level-c kicks change
+///                if c < L: S(c+1, h/2, t), S(c+1, h/2, t + h/2)
+///                end kick at t + h: v += h/2 a_c with a_c from the level-c force at the new u,
+///
+/// where the level-c force on node i is -sum over the columns j of level c of K_ij u_j (the
+/// stiffness split by columns), plus, on the nodes of level c themselves, f_ext(t + h) and the
+/// damping -(alpha M + C_i) v, taken implicitly in the end kick as in Stepper's pass B:
+///   (M (1 + h/2 alpha) I + h/2 C_i) v_new = M v + h/2 r,  a = (r - (alpha M + C_i) v_new) / M.
+/// With one level this is Stepper's step (tests/cpp/test_local_stepper.cpp). Second order, and
+/// stable up to the global scheme's bound when every level's step is within its own cells' bound
+/// (the levels of pyfem/local_stepping.py put a node at the finest rate of its cells: the one-cell
+/// overlap of Diaz & Grote); checked on the user's model by a power iteration at set-up.
+///
+/// Energy: kinetic and strain energy of the state and the external and damping work by the
+/// trapezoid rule at each node's own kicks. The scheme conserves a modified energy, not this
+/// plain one: the reported balance oscillates at O(dt^2) (bounded), it is not round-off.
+class LocalStepper {
+ public:
+  /// K borrowed (full block CSR, symmetric), mass borrowed; node_level (n_nodes) copied. Throws
+  /// std::invalid_argument for a non-positive mass or dt_fine, a negative alpha or level, or more
+  /// than kMaxLevels levels.
+  LocalStepper(const BlockCsrView& stiffness, const double* mass, const std::int32_t* node_level,
+               double dt_fine, double alpha);
+
+  static constexpr int kMaxLevels = 10;
+
+  /// Implicit 3x3 dashpots C (count, 3, 3) at nodes (count) (Stepper::set_dashpots).
+  void set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C);
+
+  /// Adds a force provider; its nodes() must be listed (non-empty). Its forces act in the end
+  /// kicks of each node's own level at that kick's time.
+  void add_provider(std::shared_ptr<ForceProvider> provider);
+
+  /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
+  /// return each node's own-level acceleration of its last end kick (the FSAL value the next
+  /// start kick uses), a = -M^-1 K u + ... for a one-level model as Stepper's a. The first call
+  /// computes every level's force from (u, v) at t0 (a given is ignored then).
+  double run(double* u, double* v, double* a, std::int64_t n_steps, double t0);
+
+  double dt() const { return dt_fine_ * static_cast<double>(std::int64_t{1} << max_level_); }
+  double dt_fine() const { return dt_fine_; }
+  int max_level() const { return max_level_; }
+  std::int64_t n_nodes() const { return stiffness_.n_block_rows; }
+  /// Kicks of level-k forces per global step, summed over the rows they touch, relative to
+  /// global stepping at dt_fine (1: no saving): the work model of workflows/lts_clusters.py.
+  double work_fraction() const;
+
+  struct Energy {
+    double kinetic = 0.0, strain = 0.0, external_work = 0.0, damping_work = 0.0, initial = 0.0;
+    double balance = 0.0;  // kinetic + strain - initial - external_work + damping_work
+  };
+  /// Energies of the state of the last run() (strain by one product at the end of each run call).
+  Energy energy() const { return energy_; }
+
+ private:
+  struct Level {
+    // Rows touched by the level's columns, and per row the blocks of those columns.
+    std::vector<std::int32_t> rows;
+    std::vector<std::int64_t> row_ptr;
+    std::vector<std::int32_t> columns;
+    std::vector<double> blocks;
+    std::vector<double> acceleration;    // (rows, 3) a_c of the last end kick
+    std::vector<std::uint8_t> own;       // (rows) the row's node has this level
+    std::vector<std::int32_t> drift;     // nodes drifting once per substep of this level
+    std::vector<std::int32_t> provider_rows;  // rows (indices into rows) that providers load
+    double step = 0.0;                   // h of this level
+    std::vector<double> implicit_inverse;  // (own rows with a dashpot, 9), keyed by dashpot_slot
+  };
+
+  void substep(int c, double h, double t, double* u, double* v);
+  void start_kick(int c, double h, double* v);
+  // initial: evaluate the level's force at the state (v kept), for the first start kick.
+  void end_kick(int c, double h, double t, const double* u, double* v, bool initial);
+  void initialise(const double* u, const double* v, double t0);
+  void build_dashpot_inverses();
+  double strain_energy(const double* u) const;
+
+  BlockCsrView stiffness_;
+  const double* mass_;
+  std::vector<std::int32_t> level_;  // per node, fine index k
+  double dt_fine_;
+  double alpha_;
+  int max_level_ = 0;
+  std::vector<Level> levels_;  // by coarse index c = max_level_ - k
+  std::vector<std::int32_t> dashpot_slot_;  // per node, -1: none
+  std::vector<double> dashpot_C_;           // (slots, 9)
+  std::vector<std::shared_ptr<ForceProvider>> providers_;
+  std::vector<std::int32_t> provider_nodes_;  // union of the providers' nodes (sorted)
+  std::vector<double> external_;              // (3 n) scratch for the providers' forces
+  std::vector<double> own_power_;             // (n) f.v - d.v of each node at its last end kick
+  bool initialised_ = false;
+  Energy energy_;
+};
+
+}  // namespace cavern
