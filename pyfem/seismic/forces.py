@@ -105,6 +105,12 @@ def boundary_springs_and_dashpots(faces, n_nodes, boundary_type=None, alpha_N=4.
     return springs + dashpots
 
 
+def load_area(face) -> np.ndarray:
+    """The weights of the traction term A sigma_ff n: `BoundaryFace.load_area` (row sums, the
+    consistent load), or `area` for a face object that has no separate load weights."""
+    return getattr(face, "load_area", face.area)
+
+
 def equivalent_input_forces(faces, node_coords, freefield, boundary_type=None,
                             alpha_N=4.0 / 3.0, alpha_T=2.0 / 3.0) -> dict:
     """Arrays of the kernel's SeismicInput: f_node(t) = sum P y(t - tau) + Q y'(t - tau).
@@ -152,7 +158,7 @@ def equivalent_input_forces(faces, node_coords, freefield, boundary_type=None,
         traction = np.einsum("ksij,kj->ksi", arrays["stress"][rows], np.asarray(face.normal, dtype=float))
         np.add.at(P, rows, np.einsum("kij,ksj->ksi", stiffness, amplitude))
         np.add.at(Q, rows, np.einsum("kij,ksj->ksi", damping, amplitude)
-                  + np.asarray(face.load_area, dtype=float)[:, None, None] * traction)
+                  + np.asarray(load_area(face), dtype=float)[:, None, None] * traction)
     result.update(
         node_ptr=np.arange(0, len(unique_nodes) * n_slots + 1, n_slots, dtype=np.int64),
         nodes=unique_nodes.astype(np.int32),
@@ -192,7 +198,7 @@ def equivalent_input_forces_reference(faces, node_coords, freefield, t, boundary
         sigma = freefield.stress(points, t)
         stiffness, damping = face_node_operators(face, boundary_type, alpha_N, alpha_T)
         f = (np.einsum("kij,tkj->tki", stiffness, u) + np.einsum("kij,tkj->tki", damping, v)
-             + np.asarray(face.load_area)[None, :, None] * np.einsum("tkij,kj->tki", sigma, np.asarray(face.normal)))
+             + np.asarray(load_area(face))[None, :, None] * np.einsum("tkij,kj->tki", sigma, np.asarray(face.normal)))
         for step in range(len(t)):
             np.add.at(forces[step], np.asarray(face.nodes), f[step])
     return forces
