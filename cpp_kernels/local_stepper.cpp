@@ -57,7 +57,8 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
         active[i] = std::max(active[i], c);
       }
     }
-    level.acceleration.assign(3 * level.rows.size(), 0.0);
+    level.force.assign(3 * level.rows.size(), 0.0);
+    level.external.assign(3 * level.rows.size(), 0.0);
   }
   for (std::int64_t i = 0; i < n; ++i) levels_[active[i]].drift.push_back(static_cast<std::int32_t>(i));
   external_.assign(3 * n, 0.0);
@@ -140,9 +141,32 @@ void LocalStepper::start_kick(int c, double h, double* v) {
   const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
 #pragma omp parallel for schedule(static) if (n_rows >= kMinRowsForThreadsLocal)
   for (std::int64_t r = 0; r < n_rows; ++r) {
-    double* vi = v + 3 * static_cast<std::int64_t>(level.rows[r]);
-    const double* ar = level.acceleration.data() + 3 * r;
-    for (int d = 0; d < 3; ++d) vi[d] += half * ar[d];
+    const std::int64_t i = level.rows[r];
+    double* vi = v + 3 * i;
+    const double* force = level.force.data() + 3 * r;
+    const double m = mass_[i];
+    if (!level.own[r]) {
+      for (int d = 0; d < 3; ++d) vi[d] += half * force[d] / m;
+      continue;
+    }
+    // The node's own level: its damping at the velocity it has now (other levels' kicks may have
+    // changed it since this level's last end kick), explicit in this half as in Stepper's pass A.
+    double damping[3] = {alpha_ * m * vi[0], alpha_ * m * vi[1], alpha_ * m * vi[2]};
+    const std::int32_t slot = dashpot_slot_[i];
+    if (slot >= 0) {
+      double C_v[3];
+      multiply_3x3(dashpot_C_.data() + 9 * slot, vi, C_v);
+      for (int d = 0; d < 3; ++d) damping[d] += C_v[d];
+    }
+    const double* external = level.external.data() + 3 * r;
+    double external_power = 0.0, damping_power = 0.0;
+    for (int d = 0; d < 3; ++d) {
+      external_power += external[d] * vi[d];
+      damping_power += damping[d] * vi[d];
+    }
+    own_power_[2 * i] = external_power;
+    own_power_[2 * i + 1] = damping_power;
+    for (int d = 0; d < 3; ++d) vi[d] += half * (force[d] - damping[d]) / m;
   }
 }
 
@@ -169,15 +193,20 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
     }
     const double m = mass_[i];
     double* vi = v + 3 * i;
-    double* ar = level.acceleration.data() + 3 * r;
+    double* force = level.force.data() + 3 * r;
     if (!level.own[r]) {
       for (int d = 0; d < 3; ++d) {
-        ar[d] = f[d] / m;
-        vi[d] += half * ar[d];
+        force[d] = f[d];
+        vi[d] += half * f[d] / m;
       }
       continue;
     }
     double external[3] = {external_[3 * i], external_[3 * i + 1], external_[3 * i + 2]};
+    double* stored_external = level.external.data() + 3 * r;
+    for (int d = 0; d < 3; ++d) {
+      force[d] = f[d] + external[d];  // the start kick adds the damping at its own velocity
+      stored_external[d] = external[d];
+    }
     double rhs[3], v_new[3], damping[3];
     for (int d = 0; d < 3; ++d) rhs[d] = m * vi[d] + half * (f[d] + external[d]);
     const std::int32_t slot = dashpot_slot_[i];
@@ -201,16 +230,13 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
     }
     double external_power = 0.0, damping_power = 0.0;
     for (int d = 0; d < 3; ++d) {
-      ar[d] = (f[d] + external[d] - damping[d]) / m;
       vi[d] = v_new[d];
       external_power += external[d] * v_new[d];
       damping_power += damping[d] * v_new[d];
     }
-    // Trapezoid rule over the node's own substep (its last end kick to this one).
+    // Trapezoid rule over the node's own substep (its start kick to this end kick).
     external_work += half * (own_power_[2 * i] + external_power);
     damping_work += half * (own_power_[2 * i + 1] + damping_power);
-    own_power_[2 * i] = external_power;
-    own_power_[2 * i + 1] = damping_power;
   }
   energy_.external_work += external_work;
   energy_.damping_work += damping_work;
@@ -275,7 +301,16 @@ double LocalStepper::run(double* u, double* v, double* a, std::int64_t n_steps, 
   std::fill(a, a + 3 * n, 0.0);
   for (const Level& level : levels_)
     for (std::size_t r = 0; r < level.rows.size(); ++r)
-      for (int d = 0; d < 3; ++d) a[3 * static_cast<std::int64_t>(level.rows[r]) + d] += level.acceleration[3 * r + d];
+      for (int d = 0; d < 3; ++d) a[3 * static_cast<std::int64_t>(level.rows[r]) + d] += level.force[3 * r + d];
+  for (std::int64_t i = 0; i < n; ++i) {
+    double damping[3] = {alpha_ * mass_[i] * v[3 * i], alpha_ * mass_[i] * v[3 * i + 1], alpha_ * mass_[i] * v[3 * i + 2]};
+    if (dashpot_slot_[i] >= 0) {
+      double C_v[3];
+      multiply_3x3(dashpot_C_.data() + 9 * dashpot_slot_[i], v + 3 * i, C_v);
+      for (int d = 0; d < 3; ++d) damping[d] += C_v[d];
+    }
+    for (int d = 0; d < 3; ++d) a[3 * i + d] = (a[3 * i + d] - damping[d]) / mass_[i];
+  }
   double kinetic = 0.0;
   for (std::int64_t i = 0; i < n; ++i)
     for (int d = 0; d < 3; ++d) kinetic += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];

@@ -17,14 +17,17 @@ namespace cavern {
 /// L the largest level, one global step is Delta t = dt_fine 2^L; with c = L - k (0: coarsest) the
 /// step is the recursion S(0, Delta t, t) of
 ///
-///   S(c, h, t):  v += h/2 a_c                        (start kick: the last end kick's a_c, FSAL)
+///   S(c, h, t):  v += h/2 M^-1 F_c                   (start kick: the last end kick's force, FSAL;
+///                                                     own nodes add their damping at the current v)
 ///                u += h v   on the nodes whose velocity only level-c kicks change
 ///                if c < L: S(c+1, h/2, t), S(c+1, h/2, t + h/2)
 ///                end kick at t + h: v += h/2 a_c with a_c from the level-c force at the new u,
 ///
 /// where the level-c force on node i is -sum over the columns j of level c of K_ij u_j (the
 /// stiffness split by columns), plus, on the nodes of level c themselves, f_ext(t + h) and the
-/// damping -(alpha M + C_i) v, taken implicitly in the end kick as in Stepper's pass B:
+/// damping -(alpha M + C_i) v: explicit at the velocity the node has at the start kick (other
+/// levels' kicks may have changed it since its last end kick), implicit in the end kick as in
+/// Stepper's pass B:
 ///   (M (1 + h/2 alpha) I + h/2 C_i) v_new = M v + h/2 r,  a = (r - (alpha M + C_i) v_new) / M.
 /// With one level this is Stepper's step (tests/cpp/test_local_stepper.cpp). Second order, and
 /// stable up to the global scheme's bound when every level's step is within its own cells' bound
@@ -79,7 +82,8 @@ class LocalStepper {
     std::vector<std::int64_t> row_ptr;
     std::vector<std::int32_t> columns;
     std::vector<double> blocks;
-    std::vector<double> acceleration;    // (rows, 3) a_c of the last end kick
+    std::vector<double> force;           // (rows, 3) level-c force (+ f_ext on own rows) of the last end kick
+    std::vector<double> external;        // (rows, 3) f_ext of own rows at the last end kick
     std::vector<std::uint8_t> own;       // (rows) the row's node has this level
     std::vector<std::int32_t> drift;     // nodes drifting once per substep of this level
     std::vector<std::int32_t> provider_rows;  // rows (indices into rows) that providers load

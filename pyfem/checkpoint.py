@@ -34,7 +34,7 @@ RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
 # Keys added after checkpoints were first written, with the value that reproduces the run before
 # they existed: left out of the fingerprint at that value, so an earlier run's checkpoint still
 # continues (a run that sets another value is another model).
-LATER_KEYS = ((("time", "matrix_precision"), "double"),)
+LATER_KEYS = ((("time", "matrix_precision"), "double"), (("time", "local_stepping"), False))
 
 
 def model_fingerprint(simulation) -> dict:

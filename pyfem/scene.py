@@ -535,6 +535,8 @@ SCHEMA = Table({
         "power_iteration": Flag("sharpen the critical step by power iteration", default=True),
         "matrix_precision": Choice("storage of the stiffness matrix's blocks in the kernel", ("double", "single"),
                                    default="double"),
+        "local_stepping": Flag("multi-rate stepping: each cell at its own stable rate (linear models only; "
+                               "docs/lts_plan.md)", default=False),
     }, "[time]"),
     "wave": Table({
         "type": Choice("wave type", ("P", "SV", "SH"), default=None),  # or [[wave.component]]

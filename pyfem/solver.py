@@ -68,6 +68,7 @@ class Simulation:
     pair_monitor_names: list = field(default_factory=list)
     pair_monitor_pairs: np.ndarray | None = None  # (m,) pair index of each pair monitor
     nonlinear: "NonlinearRegions | None" = None  # element-loop regions (pyfem.elements), None: matrix only
+    node_levels: np.ndarray | None = None  # [time] local_stepping: rate level per node (pyfem.local_stepping)
     static: object = None                # pyfem.static.StaticState when a [static] stage ran
 
 
@@ -423,12 +424,21 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
     nonlinear = nonlinear_regions(scene, model, time_step)
     if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
         stiffness = add_block_diagonal(nonlinear.stiffness, spring_nodes, springs)
+    node_levels = None
+    if scene["time"].get("local_stepping"):
+        from pyfem import local_stepping
+
+        local_stepping.check_supported(scene, constraints is not None, beta)
+        cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
+        node_levels = local_stepping.node_levels(stiffness, mass, cell_nodes, pinned=np.unique(dashpot_nodes))
+        time_step, _ = local_stepping.local_time_step(time_step, node_levels)
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
     # Whole output intervals: the last sample lands on or just after the duration.
     n_steps = time_step.steps_per_output * math.ceil(n_steps / time_step.steps_per_output)
     simulation = Simulation(scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
                             time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
-                            constraints=constraints, n_steps=n_steps, nonlinear=nonlinear)
+                            constraints=constraints, n_steps=n_steps, nonlinear=nonlinear,
+                            node_levels=node_levels)
     if "seismic_input" in scene.effects:
         from pyfem.seismic.setup import seismic_input_from_scene
 
@@ -455,6 +465,30 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
 
         hand_over(simulation, solve=solve_static)
     return simulation
+
+
+def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
+    """The kernel's LocalStepper behind the Stepper calls of the run loop (linear models only)."""
+    from pyfem import _kernels
+    from pyfem.local_stepping import LocalSteppingAdapter
+
+    levels = np.ascontiguousarray(simulation.node_levels, dtype=np.int32)
+    kernel = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass, levels, simulation.time_step.dt,
+                                   simulation.alpha)
+    stepper = LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
+    if len(simulation.dashpot_nodes):
+        kernel.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
+                            np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
+    if simulation.input_arrays is not None:
+        a = simulation.input_arrays
+        kernel.add_seismic_input(_kernels.SeismicInput(
+            a["table_t0"], a["table_dt"], a["g"], a["dg"], a["ddg"], a["node_ptr"], a["nodes"],
+            a["table"], a["tau"], a["P"], a["Q"]))
+    if simulation.static is not None:  # the stage's out-of-balance, held constant (pyfem/static.py)
+        from pyfem.static import add_hand_over_force
+
+        add_hand_over_force(stepper, simulation)
+    return stepper
 
 
 def make_contact_pairs(arrays: dict):
@@ -492,6 +526,8 @@ def make_stepper(simulation: Simulation):
 
     kernel_threads()
     indptr, indices, blocks = bsr_arrays(simulation.stiffness)
+    if simulation.node_levels is not None:  # [time] local_stepping (pyfem/local_stepping.py)
+        return _make_local_stepper(simulation, indptr, indices, blocks)
     single = simulation.scene["time"].get("matrix_precision", "double") == "single"
     stepper = _kernels.Stepper(indptr, indices, blocks, simulation.mass, simulation.time_step.dt,
                                simulation.alpha, simulation.beta, True, single)
@@ -576,6 +612,9 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     nonlinear = simulation.nonlinear
     kept = None if nonlinear is None else nonlinear.components  # the trial's fresh ones must not replace them
     stepper = make_stepper(dataclasses.replace(simulation, static=None, contact_pairs=None))
+    if simulation.node_levels is not None:  # whole global steps of local time stepping
+        ratio = 2 ** int(simulation.node_levels.max())
+        trial_steps = ratio * max(1, -(-trial_steps // ratio))
     n = simulation.stiffness.shape[0]
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
     start = time.perf_counter()
@@ -711,7 +750,9 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         if on_plan is not None:
             on_plan(simulation_plan(simulation))
         writer = RunWriter(out_dir, simulation)
-        clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"])
+        # Local time stepping writes no checkpoints yet (pyfem/local_stepping.py).
+        clock = checkpoints.CheckpointClock(0.0 if simulation.node_levels is not None
+                                            else scene["output"]["checkpoint_interval"])
         write_checkpoint = None  # set once the state (u, v, a, t, kernel, writer) is whole
         try:
             stepper = make_stepper(simulation)

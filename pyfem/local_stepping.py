@@ -1,0 +1,129 @@
+"""Local time stepping from a scene (`[time] local_stepping = true`; docs/lts_plan.md): the rate
+level of every node, the time step made a whole number of global steps per output interval, and
+an adapter that gives the kernel's LocalStepper the interface the run loop uses.
+
+Levels: per node the Gershgorin bound of M^-1 K (springs of the viscoelastic boundary included)
+gives a stable step dt_i; a cell may step at dt_fine 2^k with k = floor(log2(min over its nodes of
+dt_i / min_i dt_i)), at most MAX_LEVEL; a node steps at the finest rate of its cells (the one-cell
+overlap of Diaz & Grote's scheme); the truncation faces' dashpot nodes step at the finest rate.
+dt_fine is the scene's step (safety x the power-iteration
+critical step of the whole model), so every level's step is within its own cells' bound.
+
+What is not supported yet, refused by key: element-loop materials (`plasticity`, `damage`),
+contact pairs, fixed and roller faces, stiffness-proportional damping; checkpoints are not written.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import time
+
+import numpy as np
+
+from pyfem.scene import SceneError
+
+MAX_LEVEL = 5
+KEY = "time.local_stepping"
+
+
+def check_supported(scene, has_constraints: bool, beta: float) -> None:
+    """Raises SceneError naming time.local_stepping when the scene asks for what the local stepper
+    does not do yet."""
+    allowed = ("false for scenes with {}: local time stepping covers the linear part only (stiffness, "
+               "mass-proportional damping, viscoelastic and viscous faces, seismic input; docs/lts_plan.md)")
+    for name, material in (scene.get("materials") or {}).items():
+        for table in ("plasticity", "damage"):
+            if material.get(table) is not None:
+                raise SceneError(KEY, True, allowed.format(f"materials.{name}.{table}"))
+    if "contact" in scene.effects:
+        raise SceneError(KEY, True, allowed.format("[contact]"))
+    if has_constraints:
+        raise SceneError(KEY, True, allowed.format("fixed or roller faces"))
+    if beta != 0.0:
+        raise SceneError(KEY, True, allowed.format("stiffness-proportional Rayleigh damping (beta > 0)"))
+
+
+def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: int = MAX_LEVEL,
+                pinned: np.ndarray | None = None) -> np.ndarray:
+    """int32 (n_nodes,) rate level per node, 0 the finest (module docstring). `pinned` nodes (the
+    truncation faces' dashpot nodes) and the cells they belong to step at the finest rate: a
+    boundary dashpot at a coarse node's own step is accurate only to (h C / M)^2, which is of order
+    the coarse cells' Courant number squared, and it degraded the free field several times
+    (docs/lts_plan.md)."""
+    csr = stiffness.tocsr()
+    row_sums = np.asarray(abs(csr).sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
+    dt_node = 2.0 / np.sqrt(row_sums / mass)
+    dt_min = dt_node.min()
+    if pinned is not None and len(pinned):
+        dt_node = dt_node.copy()
+        dt_node[np.asarray(pinned)] = dt_min
+    cell_level = np.minimum(np.floor(np.log2(dt_node[cell_nodes].min(axis=1) / dt_min) + 1e-12).astype(int),
+                            max_level)
+    levels = np.full(len(mass), max_level, dtype=np.int32)
+    np.minimum.at(levels, cell_nodes.ravel(), np.repeat(cell_level, cell_nodes.shape[1]).astype(np.int32))
+    return levels
+
+
+def local_time_step(time_step, levels: np.ndarray):
+    """The scene's TimeStep with whole global steps per output interval: dt_fine lowered (never
+    raised) so that steps_per_output is a multiple of 2^L. Returns (TimeStep, L)."""
+    top = int(levels.max())
+    ratio = 2 ** top
+    interval = time_step.dt * time_step.steps_per_output
+    global_steps = math.ceil(time_step.steps_per_output / ratio)
+    steps_per_output = global_steps * ratio
+    dt = interval / steps_per_output
+    counts = np.bincount(levels, minlength=top + 1)
+    reason = re.sub(r"\d+ steps per output interval", f"{steps_per_output} fine steps per output interval",
+                    time_step.reason)
+    reason = (reason + f"; local time stepping: {top + 1} rate levels (nodes per level, finest first: "
+              + ", ".join(str(int(c)) for c in counts) + f"), global step {dt * ratio:.6g} s")
+    return dataclasses.replace(time_step, dt=dt, steps_per_output=steps_per_output, reason=reason), top
+
+
+class LocalSteppingAdapter:
+    """The kernel's LocalStepper behind the Stepper calls of `pyfem.solver.run` and `simulation_plan`:
+    steps are counted in fine steps (dt_fine), whole global steps at a time."""
+
+    def __init__(self, kernel, ratio: int):
+        self.kernel = kernel
+        self.ratio = ratio
+        self._seconds = 0.0
+        self._steps = 0
+
+    def add_seismic_input(self, provider) -> None:
+        self.kernel.add_seismic_input(provider)
+
+    def run(self, u, v, a, n_steps: int, t0: float) -> float:
+        if n_steps % self.ratio:
+            raise ValueError(f"local time stepping advances whole global steps of {self.ratio} fine steps, "
+                             f"not {n_steps}")
+        start = time.perf_counter()
+        end = self.kernel.run(u, v, a, n_steps // self.ratio, t0)
+        self._seconds += time.perf_counter() - start
+        self._steps += n_steps
+        return end
+
+    def reset_energy(self, u, v, a, t0) -> None:
+        """The kernel starts its account at the first run."""
+
+    def energy(self) -> dict:
+        return self.kernel.energy()
+
+    def reactions(self):
+        return None
+
+    def phase_seconds(self) -> dict:
+        # The local stepper has no per-phase timers yet: its whole time is the stiffness kicks'.
+        return {"update": 0.0, "element_loop": 0.0, "input_forces": 0.0, "stiffness": self._seconds,
+                "contact": 0.0, "steps": self._steps}
+
+    def reset_phase_seconds(self) -> None:
+        self._seconds, self._steps = 0.0, 0
+
+    def save_state(self):
+        raise RuntimeError("checkpoints are not written with local time stepping")
+
+    def load_state(self, state):
+        raise RuntimeError("checkpoints are not written with local time stepping")

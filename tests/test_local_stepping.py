@@ -1,0 +1,97 @@
+"""Local time stepping from a scene (`[time] local_stepping = true`, pyfem/local_stepping.py,
+docs/lts_plan.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
+
+- A homogeneous box of tetrahedra refined around its centre (cells 1.5 m inside, 8 m outside)
+  under an oblique SV wave: several rate levels, and the monitors follow the free field as closely
+  as global stepping does (the truncation faces' nodes step at the finest rate).
+- One rate level (a uniform mesh) is global stepping: the same histories.
+- What the local stepper does not do yet is refused with one line naming time.local_stepping.
+"""
+import pathlib
+
+import numpy as np
+import pytest
+
+from pyfem import solver
+from pyfem.scene import SceneError, parse_scene
+
+GRADED_GEO = """SetFactory("OpenCASCADE");
+Box(1) = {0, 0, 0, 200, 60, 200};
+Physical Volume("rock") = {1};
+Field[1] = Box;
+Field[1].VIn = 1.5;
+Field[1].VOut = 8;
+Field[1].XMin = 80; Field[1].XMax = 120; Field[1].YMin = 20; Field[1].YMax = 40;
+Field[1].ZMin = 80; Field[1].ZMax = 120; Field[1].Thickness = 15;
+Background Field = 1;
+Mesh.MeshSizeExtendFromBoundary = 0;
+Mesh.MeshSizeFromPoints = 0;
+Mesh.MeshSizeFromCurvature = 0;
+"""
+
+
+def graded_scene(geo: pathlib.Path, local: bool, **extra):
+    data = {
+        "title": "graded tetrahedra, oblique SV",
+        "mesh": {"builder": "file", "file": str(geo), "order": 1},
+        "materials": {"rock": {"preset": "sandstone"}},
+        "time": {"duration": 1.0, "safety": 0.8, "local_stepping": local},
+        "wave": {"type": "SV", "angle": 30.0, "surface": 240.0, "medium": "rock",
+                 "motion": {"ricker": {"f0": 5.0, "amplitude": 1.0e-3}}},
+        "monitor": [{"name": "centre", "point": [100.0, 30.0, 100.0]}, {"name": "upper", "point": [60.0, 30.0, 160.0]},
+                    {"name": "lower", "point": [140.0, 30.0, 40.0]}],
+        "output": {"interval": 0.005, "xdmf_interval": 0.0},
+    }
+    data.update(extra)
+    return parse_scene(data, source="test")
+
+
+def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_stepping(tmp_path):
+    geo = tmp_path / "graded.geo"
+    geo.write_text(GRADED_GEO)
+    summaries = {local: solver.run(graded_scene(geo, local), tmp_path / f"run_{local}") for local in (False, True)}
+    local = summaries[True]
+    assert "local time stepping: 3 rate levels" in local["dt_reason"]
+    levels = solver.prepare(graded_scene(geo, True)).node_levels
+    counts = np.bincount(levels)
+    assert len(counts) == 3 and np.all(counts > 100)  # three rates, each with cells in it
+    for name in ("centre", "upper", "lower"):
+        glob, loc = (summaries[k]["monitors"][name]["freefield_error"] for k in (False, True))
+        print(f"{name}: free-field error global {100 * glob:.3f} %, local stepping {100 * loc:.3f} %")
+        assert summaries[True]["monitors"][name]["displacement"] > 1e-4  # the wave arrived
+        assert loc < 0.02                      # the free-field tests' tolerance (P1)
+        assert loc < 1.5 * glob + 0.001        # and no worse than global stepping, to 0.1 %
+    assert local["energy"]["balance_error"] < 1e-3
+
+
+def test_one_rate_level_is_global_stepping(tmp_path):
+    box = {"builder": "box", "size": [60.0, 10.0, 60.0], "h": 5.0}
+    runs = {}
+    for local in (False, True):
+        scene = graded_scene(pathlib.Path("unused.geo"), local, mesh=box,
+                             monitor=[{"name": "centre", "point": [30.0, 5.0, 30.0]}])
+        scene["wave"]["surface"] = 100.0
+        scene["time"]["duration"] = 0.4
+        simulation = solver.prepare(scene)
+        if local:
+            assert simulation.node_levels.max() == 0  # a uniform mesh: one rate
+        stepper = solver.make_stepper(simulation)
+        n = simulation.stiffness.shape[0]
+        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+        stepper.run(u, v, a, simulation.n_steps, 0.0)
+        runs[local] = u
+    assert np.max(np.abs(runs[False])) > 1e-5
+    assert np.linalg.norm(runs[True] - runs[False]) <= 1e-12 * np.linalg.norm(runs[False])
+
+
+@pytest.mark.parametrize("change, named", [
+    ({"materials": {"rock": {"preset": "sandstone", "plasticity": {}}}}, "materials.rock.plasticity"),
+    ({"boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}}}, "fixed or roller faces"),
+    ({"damping": {"alpha": 0.0, "beta": 1.0e-4}}, "stiffness-proportional"),
+])
+def test_what_local_stepping_does_not_do_yet_is_refused_by_key(change, named):
+    box = {"builder": "box", "size": [40.0, 10.0, 40.0], "h": 10.0}
+    scene = graded_scene(pathlib.Path("unused.geo"), True, mesh=box, monitor=[], **change)
+    with pytest.raises(SceneError, match=r"time\.local_stepping") as error:
+        solver.prepare(scene)
+    assert named in str(error.value)
