@@ -173,8 +173,9 @@ void LocalStepper::start_kick(int c, double h, double* v) {
 void LocalStepper::end_kick(int c, double h, double t, const double* u, double* v, bool initial) {
   Level& level = levels_[c];
   const double half = 0.5 * h;
-  // External forces of this level's own nodes at t.
-  if (!level.provider_rows.empty()) {
+  // External forces of this level's own nodes at t (not in the initial evaluation: the first start
+  // kick, like Stepper's first pass A from a_0 = M^-1 (-K u_0 - d(v_0)), has none).
+  if (!level.provider_rows.empty() && !initial) {
     for (auto& provider : providers_) provider->add_forces(t, u, v, external_.data());
   }
   const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
@@ -240,7 +241,7 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
   }
   energy_.external_work += external_work;
   energy_.damping_work += damping_work;
-  if (!level.provider_rows.empty())
+  if (!level.provider_rows.empty() && !initial)
     for (const std::int32_t node : provider_nodes_)
       for (int d = 0; d < 3; ++d) external_[3 * static_cast<std::int64_t>(node) + d] = 0.0;
 }

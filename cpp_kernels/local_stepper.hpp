@@ -57,7 +57,9 @@ class LocalStepper {
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
   /// return each node's own-level acceleration of its last end kick (the FSAL value the next
   /// start kick uses), a = -M^-1 K u + ... for a one-level model as Stepper's a. The first call
-  /// computes every level's force from (u, v) at t0 (a given is ignored then).
+  /// computes every level's stiffness and damping force from (u, v) (a given is ignored then); the
+  /// external forces enter from the first end kick on, as in a Stepper started from
+  /// a_0 = M^-1 (-K u_0 - d(v_0)) (the run loop starts from rest with a_0 = 0).
   double run(double* u, double* v, double* a, std::int64_t n_steps, double t0);
 
   double dt() const { return dt_fine_ * static_cast<double>(std::int64_t{1} << max_level_); }

@@ -430,7 +430,8 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
 
         local_stepping.check_supported(scene, constraints is not None, beta)
         cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
-        node_levels = local_stepping.node_levels(stiffness, mass, cell_nodes, pinned=np.unique(dashpot_nodes))
+        node_levels = local_stepping.node_levels(stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
+                                                 pinned=np.unique(dashpot_nodes))
         time_step, _ = local_stepping.local_time_step(time_step, node_levels)
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
     # Whole output intervals: the last sample lands on or just after the duration.
