@@ -6,8 +6,11 @@ Levels: per node the Gershgorin bound of M^-1 K (springs of the viscoelastic bou
 gives a stable step dt_i; a cell may step at dt_fine 2^k with k = floor(log2(min over its nodes of
 dt_i / min_i dt_i)), at most MAX_LEVEL; a node steps at the finest rate of its cells (the one-cell
 overlap of Diaz & Grote's scheme); the truncation faces' dashpot nodes step at the finest rate.
-dt_fine is the scene's step (safety x the power-iteration
-critical step of the whole model), so every level's step is within its own cells' bound.
+dt_fine is the scene's step (safety x the power-iteration critical step of the whole model); a
+level-k node's step dt_fine 2^k is then within safety x (power-iteration / Gershgorin ratio, 1.1-1.6
+here) of its own Gershgorin bound, which is itself conservative. Stability of the scheme on the
+user's mesh is not checked by a power iteration of the LTS map yet (docs/lts_plan.md: the 1D
+prototype and the kernel's tests are stable up to the global safety factor).
 
 What is not supported yet, refused by key: element-loop materials (`plasticity`, `damage`),
 contact pairs, fixed and roller faces, stiffness-proportional damping; checkpoints are not written.
@@ -42,6 +45,9 @@ def check_supported(scene, has_constraints: bool, beta: float) -> None:
         raise SceneError(KEY, True, allowed.format("fixed or roller faces"))
     if beta != 0.0:
         raise SceneError(KEY, True, allowed.format("stiffness-proportional Rayleigh damping (beta > 0)"))
+    if scene["time"].get("matrix_precision", "double") != "double":
+        raise SceneError(KEY, True, allowed.format('time.matrix_precision = "single" (the local stepper '
+                                                    "stores double blocks)"))
 
 
 def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: int = MAX_LEVEL,

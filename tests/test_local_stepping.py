@@ -88,6 +88,7 @@ def test_one_rate_level_is_global_stepping(tmp_path):
     ({"materials": {"rock": {"preset": "sandstone", "plasticity": {}}}}, "materials.rock.plasticity"),
     ({"boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}}}, "fixed or roller faces"),
     ({"damping": {"alpha": 0.0, "beta": 1.0e-4}}, "stiffness-proportional"),
+    ({"time": {"duration": 1.0, "local_stepping": True, "matrix_precision": "single"}}, "matrix_precision"),
 ])
 def test_what_local_stepping_does_not_do_yet_is_refused_by_key(change, named):
     box = {"builder": "box", "size": [40.0, 10.0, 40.0], "h": 10.0}
