@@ -264,9 +264,10 @@ inline ConcreteDamageStep concrete_damage_update(const ConcreteDamageMaterial& m
   // principal directions. Margin 1e-6 of the strain size, far above the estimate's error.
   const double tensile_weight_old =
       (1.0 - old.damage_compression) * (1.0 - m.stiffness_recovery) * old.damage_tension;
+  const Matrix3 strain_tensor = tensor_from_strain_voigt(strain);
+  const std::array<double, 3> values_estimate = symmetric_eigenvalues_estimate(strain_tensor);
   {
-    const detail::ConcreteMeasures estimate = detail::concrete_measures(
-        m, symmetric_eigenvalues_estimate(tensor_from_strain_voigt(strain)));
+    const detail::ConcreteMeasures estimate = detail::concrete_measures(m, values_estimate);
     const double margin = 1e-6 * estimate.size;
     const bool no_growth =
         estimate.tension + margin < std::max(m.threshold_tension, old.kappa_tension) &&
@@ -281,7 +282,8 @@ inline ConcreteDamageStep concrete_damage_update(const ConcreteDamageMaterial& m
     }
   }
 
-  const SymmetricEigen eigen = principal_strains(strain);
+  // Closed form where the spectrum is well separated, Jacobi otherwise (principal.hpp).
+  const SymmetricEigen eigen = symmetric_eigen_fast(strain_tensor, values_estimate);
   const detail::ConcreteMeasures measures = detail::concrete_measures(m, eigen.values);
   // "Tension first": above the tensile threshold the Mohr-Coulomb check is skipped.
   if (measures.tension > m.threshold_tension) {

@@ -29,6 +29,7 @@ struct Plane {
   double bound = 0.0;
   Vector3 flow{};
   Vector3 elastic_flow{};  // D N, D the principal-space elasticity lambda 1 1^T + 2 G I
+  double elastic_flow_norm = 0.0;  // |D N|
   bool tension = false;
 };
 
@@ -74,6 +75,7 @@ PlaneSet make_planes(const MohrCoulombMaterial& m) {
     const double volumetric = m.lambda * (plane.flow[0] + plane.flow[1] + plane.flow[2]);
     for (int i = 0; i < 3; ++i)
       plane.elastic_flow[i] = volumetric + 2.0 * m.shear_modulus * plane.flow[i];
+    plane.elastic_flow_norm = norm(plane.elastic_flow);
   }
   return set;
 }
@@ -103,7 +105,7 @@ double violation_of(const PlaneSet& set, const Return& r, double scale) {
   double worst = 0.0;
   for (int a = 0; a < set.count; ++a) {
     worst = std::max(worst, plane_value(set.planes[a], r.stress) / scale);
-    worst = std::max(worst, -r.multiplier[a] * norm(set.planes[a].elastic_flow) / scale);
+    worst = std::max(worst, -r.multiplier[a] * set.planes[a].elastic_flow_norm / scale);
   }
   return worst;
 }
@@ -285,23 +287,32 @@ double mohr_coulomb_yield(const MohrCoulombMaterial& m, const std::array<double,
 
 MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& m, const MohrCoulombState& old,
                                     const Voigt& strain_increment) {
-  MohrCoulombStep step;
-  step.state = old;
-  MohrCoulombState& next = step.state;
-
   const Voigt stress_increment = isotropic_stress(m.lambda, m.shear_modulus, strain_increment);
   Voigt trial_tensor = old.effective_stress;
   for (int k = 0; k < 6; ++k) trial_tensor[k] += stress_increment[k];
 
   // Screens, cheapest first; most points of a seismic run are elastic. (1) An upper bound of
   // the yield function from the invariants alone (one square root): a trial below it by a
-  // round-off margin is elastic. (2) A trial clearly inside by the trigonometric eigenvalue
-  // estimate (margin 1e-6 of the stress scale, far above the estimate's error). Neither screen
-  // accepts a trial that the exact principal stresses would reject.
+  // round-off margin is elastic. (2) (mohr_coulomb_update_screened) A trial clearly inside by
+  // the trigonometric eigenvalue estimate (margin 1e-6 of the stress scale, far above the
+  // estimate's error). Neither screen accepts a trial that the exact principal stresses would
+  // reject.
   if (elastic_by_invariants(m, trial_tensor)) {
-    next.effective_stress = trial_tensor;
+    MohrCoulombStep step;
+    step.state = old;
+    step.state.effective_stress = trial_tensor;
     return finish_step(m, old, strain_increment, step);
   }
+  return mohr_coulomb_update_screened(m, old, strain_increment, trial_tensor);
+}
+
+MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& m,
+                                             const MohrCoulombState& old,
+                                             const Voigt& strain_increment,
+                                             const Voigt& trial_tensor) {
+  MohrCoulombStep step;
+  step.state = old;
+  MohrCoulombState& next = step.state;
   const std::array<double, 3> estimate =
       symmetric_eigenvalues_estimate(tensor_from_stress_voigt(trial_tensor));
   double screen_scale = std::max({std::abs(estimate[0]), std::abs(estimate[2]), m.strength});
@@ -311,7 +322,9 @@ MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& m, const MohrCoul
     return finish_step(m, old, strain_increment, step);
   }
 
-  const SymmetricEigen eigen = principal_stresses(trial_tensor);
+  // Closed form where the spectrum is well separated, Jacobi near the edges (principal.hpp).
+  const SymmetricEigen eigen =
+      symmetric_eigen_fast(tensor_from_stress_voigt(trial_tensor), estimate);
   const Vector3& trial = eigen.values;  // sorted: trial[0] >= trial[1] >= trial[2]
 
   double scale = std::max({std::abs(trial[0]), std::abs(trial[2]), m.strength});
@@ -326,7 +339,7 @@ MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& m, const MohrCoul
     const PlaneSet set = make_planes(m);
     const double t = m.tensile_strength;
     const double sp = m.sin_phi;
-    std::array<Candidate, 10> candidates{};
+    std::array<Candidate, 10> candidates;  // the first n are assigned below
     int n = 0;
     candidates[n++] = {ReturnRegion::main_plane, {kMC02}, 1, false, {}};
     if (m.tension_cutoff) candidates[n++] = {ReturnRegion::tension_plane, {kR0}, 1, false, {}};

@@ -132,6 +132,14 @@ MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& material,
                                     const MohrCoulombState& old_state,
                                     const Voigt& strain_increment);
 
+/// mohr_coulomb_update after its first screen: trial_effective_stress = old.effective_stress +
+/// C : strain_increment, for which elastic_by_invariants was false (the same result as
+/// mohr_coulomb_update, without computing the trial and the screen twice).
+MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& material,
+                                             const MohrCoulombState& old_state,
+                                             const Voigt& strain_increment,
+                                             const Voigt& trial_effective_stress);
+
 /// The rock law in the element loop (material_law.hpp), law name "mohr_coulomb".
 ///
 /// The law is incremental; the loop gives the total strain eps of the dynamic displacement, so
@@ -222,7 +230,27 @@ struct MohrCoulombLaw {
       increment[c] = point.strain[c] - committed.strain[c];
       sigma0[c] = point.initial_stress[c];
     }
-    const MohrCoulombStep step = mohr_coulomb_update(m, committed, increment);
+    // Most points of a seismic run pass mohr_coulomb_update's first screen: the same trial,
+    // written straight into the trial state (the same bits as the update's elastic result),
+    // without the update's stored-energy terms, which an elastic step does not use.
+    const Voigt stress_increment = isotropic_stress(m.lambda, m.shear_modulus, increment);
+    Voigt trial_effective;
+    for (int c = 0; c < 6; ++c)
+      trial_effective[c] = committed.effective_stress[c] + stress_increment[c];
+    if (elastic_by_invariants(m, trial_effective)) {
+      trial = committed;
+      trial.effective_stress = trial_effective;
+      double work = 0.0;
+      for (int c = 0; c < 6; ++c) {
+        trial.stress[c] = (1.0 - committed.damage) * trial_effective[c];
+        trial.strain[c] = point.strain[c];
+        work += 0.5 * (committed.stress[c] + trial.stress[c] - 2.0 * sigma0[c]) * increment[c];
+      }
+      return history_point_energy(false, work, committed.stored, 0.0, committed.energy_offset,
+                                  point, trial.stored);
+    }
+    const MohrCoulombStep step =
+        mohr_coulomb_update_screened(m, committed, increment, trial_effective);
     static_cast<MohrCoulombState&>(trial) = step.state;
     trial.energy_offset = committed.energy_offset;
     double work = 0.0;

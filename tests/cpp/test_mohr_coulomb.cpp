@@ -180,6 +180,53 @@ TEST(MaterialPrincipal, ReproducesTensorsWithRepeatedEigenvalues) {
   EXPECT_EQ(checks, 120);
 }
 
+TEST(MaterialPrincipal, ClosedFormMatchesJacobiAcrossGaps) {
+  // symmetric_eigen_fast against symmetric_eigen on spectra from well separated down to gaps
+  // just above and below its threshold (1e-3 of the deviatoric size, here 2/3 of the spread) and repeated values: the
+  // values within 1e-14 of the size, the reconstructed tensor within 1e-13, the basis orthonormal
+  // and right-handed within 1e-13, whichever path it took. Every tensor is rotated arbitrarily.
+  std::mt19937_64 generator(23);
+  std::uniform_real_distribution<double> angle(0.0, 2.0 * kPi);
+  std::uniform_real_distribution<double> value(-10.0, 10.0);
+  const double gaps[] = {1.0, 1e-1, 1e-2, 2e-3, 1e-3, 0.5e-3, 1e-4, 1e-8, 0.0};
+  int checks = 0;
+  for (const double gap : gaps)
+    for (int sample = 0; sample < 40; ++sample) {
+      const double base = value(generator), size = 1.0 + std::abs(value(generator));
+      const bool low_pair = sample % 2 == 0;  // which two values are close
+      std::array<double, 3> spectrum =
+          low_pair ? std::array<double, 3>{base + 2.0 * size, base + gap * size, base}
+                   : std::array<double, 3>{base + gap * size, base, base - 2.0 * size};
+      const Matrix3 R = rotation(angle(generator), angle(generator), angle(generator));
+      const Matrix3 D{{{spectrum[0], 0.0, 0.0}, {0.0, spectrum[1], 0.0}, {0.0, 0.0, spectrum[2]}}};
+      const Matrix3 A = rotate_tensor(R, D);
+      const double scale = std::max(std::abs(base), 1.0) + 2.0 * size;
+      const auto estimate = symmetric_eigenvalues_estimate(A);
+      SymmetricEigen closed;
+      // The closed form is taken above the threshold and refused below it (Jacobi then).
+      EXPECT_EQ(symmetric_eigen_closed_form(A, estimate, closed), gap >= 1e-3) << gap;
+      const SymmetricEigen fast = symmetric_eigen_fast(A, estimate);
+      const SymmetricEigen jacobi = symmetric_eigen(A);
+      for (int k = 0; k < 3; ++k) EXPECT_NEAR(fast.values[k], jacobi.values[k], 1e-14 * scale);
+      EXPECT_GE(fast.values[0], fast.values[1]);
+      EXPECT_GE(fast.values[1], fast.values[2]);
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+          double product = 0.0;
+          for (int k = 0; k < 3; ++k) product += fast.vectors[i][k] * fast.vectors[j][k];
+          EXPECT_NEAR(product, i == j ? 1.0 : 0.0, 1e-13);
+        }
+      const auto& e = fast.vectors;  // right-handed: e0 x e1 = e2
+      EXPECT_NEAR(e[0][1] * e[1][2] - e[0][2] * e[1][1], e[2][0], 1e-13);
+      EXPECT_NEAR(e[0][0] * e[1][1] - e[0][1] * e[1][0], e[2][2], 1e-13);
+      const Voigt back = stress_voigt_from_principal(fast.values, fast.vectors);
+      const Voigt original = stress_voigt(A);
+      for (int k = 0; k < 6; ++k) EXPECT_NEAR(back[k], original[k], 1e-13 * scale);
+      ++checks;
+    }
+  EXPECT_EQ(checks, 9 * 40);
+}
+
 // ---------------------------------------------------------------- issue 9 reference returns
 
 TEST(MohrCoulomb, IssueReferenceReturns) {
