@@ -32,7 +32,8 @@ namespace cavern {
 /// With one level this is Stepper's step (tests/cpp/test_local_stepper.cpp). Second order, and
 /// stable up to the global scheme's bound when every level's step is within its own cells' bound
 /// (the levels of pyfem/local_stepping.py put a node at the finest rate of its cells: the one-cell
-/// overlap of Diaz & Grote); checked on the user's model by a power iteration at set-up.
+/// overlap of Diaz & Grote); checked on the user's model at set-up by iterating this map from a
+/// random state (pyfem/local_stepping.py check_stability).
 ///
 /// Energy: kinetic and strain energy of the state and the external and damping work by the
 /// trapezoid rule at each node's own kicks. The scheme conserves a modified energy, not this

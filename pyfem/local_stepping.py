@@ -9,8 +9,10 @@ overlap of Diaz & Grote's scheme); the truncation faces' dashpot nodes step at t
 dt_fine is the scene's step (safety x the power-iteration critical step of the whole model); a
 level-k node's step dt_fine 2^k is then within safety x (power-iteration / Gershgorin ratio, 1.1-1.6
 here) of its own Gershgorin bound, which is itself conservative. Stability of the scheme on the
-user's mesh is not checked by a power iteration of the LTS map yet (docs/lts_plan.md: the 1D
-prototype and the kernel's tests are stable up to the global safety factor).
+user's mesh is checked at set-up (`check_stability`): the LTS map itself, undamped and unforced
+but with the model's boundary dashpots, is iterated from a random state for STABILITY_STEPS global
+steps, and its energy must not grow (a growth of 0.2 % per global step or more is caught; the 1D
+prototype and the kernel's tests are stable up to the global safety factor, docs/lts_plan.md).
 
 What is not supported yet, refused by key: element-loop materials (`plasticity`, `damage`),
 contact pairs, fixed and roller faces, stiffness-proportional damping; checkpoints are not written.
@@ -28,6 +30,9 @@ from pyfem.scene import SceneError
 
 MAX_LEVEL = 5
 KEY = "time.local_stepping"
+STABILITY_STEPS = 240      # global steps of the set-up check
+STABILITY_CHUNK = 10       # global steps between energy readings
+STABILITY_RATIO = 2.0      # largest energy of the last third / of the first third, above: unstable
 
 
 def check_supported(scene, has_constraints: bool, beta: float) -> None:
@@ -133,3 +138,39 @@ class LocalSteppingAdapter:
 
     def load_state(self, state):
         raise RuntimeError("checkpoints are not written with local time stepping")
+
+
+def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chunk: int = STABILITY_CHUNK,
+                    seed: int = 0) -> dict:
+    """Iterates the LTS map on the user's model: `make_kernel()` gives a LocalStepper of the model
+    (same matrix, mass, levels, step and boundary dashpots) without forces and without mass-
+    proportional damping (damping only helps; the undamped map is the one to check). From a random
+    displacement at rest, `steps` global steps in chunks of `chunk`; the energy (kinetic + strain) is
+    read after each chunk. A stable map keeps it bounded (the dashpots drain it; the plain energy of
+    the scheme oscillates around its conserved modified energy, by a factor up to ~3 near the
+    stability limit); a mode the map amplifies by rho per global step grows it by rho^2 per step.
+    Returns {"global_steps", "growth" (largest energy of the last third / of the first third),
+    "growth_per_step" (its (1 / (2 n)) power, n the steps between the thirds' centres: the amplitude
+    factor per global step), "stable", "seconds"}; stable when growth < STABILITY_RATIO, which
+    catches amplitude growth of ~0.2 % per global step and more with the defaults."""
+    start = time.perf_counter()
+    kernel = make_kernel()
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(n_dofs)
+    v, a = np.zeros(n_dofs), np.zeros(n_dofs)
+    energies = []
+    t = 0.0
+    for _ in range(max(1, steps // chunk)):
+        t = kernel.run(u, v, a, chunk, t)
+        energy = kernel.energy()
+        energies.append(energy["kinetic"] + energy["strain"])
+    energies = np.asarray(energies)
+    third = max(1, len(energies) // 3)
+    first, last = energies[:third].max(), energies[-third:].max()
+    growth = float(last / first) if first > 0 else math.inf
+    if not math.isfinite(growth):
+        growth = math.inf
+    span = chunk * (len(energies) - third)  # global steps between the thirds' centres
+    per_step = growth ** (1.0 / (2.0 * span)) if math.isfinite(growth) and growth > 0 else math.inf
+    return {"global_steps": int(chunk * len(energies)), "growth": growth, "growth_per_step": float(per_step),
+            "stable": bool(growth < STABILITY_RATIO), "seconds": time.perf_counter() - start}

@@ -69,6 +69,7 @@ class Simulation:
     pair_monitor_pairs: np.ndarray | None = None  # (m,) pair index of each pair monitor
     nonlinear: "NonlinearRegions | None" = None  # element-loop regions (pyfem.elements), None: matrix only
     node_levels: np.ndarray | None = None  # [time] local_stepping: rate level per node (pyfem.local_stepping)
+    lts_stability: dict | None = None      # [time] local_stepping: check_stability's report, once per model
     static: object = None                # pyfem.static.StaticState when a [static] stage ran
 
 
@@ -474,12 +475,26 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
     from pyfem.local_stepping import LocalSteppingAdapter
 
     levels = np.ascontiguousarray(simulation.node_levels, dtype=np.int32)
-    kernel = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass, levels, simulation.time_step.dt,
-                                   simulation.alpha)
+
+    def bare_kernel(alpha):
+        kernel = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass, levels, simulation.time_step.dt,
+                                       alpha)
+        if len(simulation.dashpot_nodes):
+            kernel.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
+                                np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
+        return kernel
+
+    if simulation.lts_stability is None:  # the LTS map on this model, once (pyfem/local_stepping.py)
+        from pyfem.local_stepping import KEY, check_stability
+
+        report = check_stability(lambda: bare_kernel(0.0), simulation.stiffness.shape[0])
+        simulation.lts_stability = report
+        if not report["stable"]:
+            raise SceneError(KEY, True, "false for this model: its local time stepping map amplified a random "
+                             f"state's energy {report['growth']:.3g}x in {report['global_steps']} global steps "
+                             f"(unstable); lower time.safety or turn local stepping off")
+    kernel = bare_kernel(simulation.alpha)
     stepper = LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
-    if len(simulation.dashpot_nodes):
-        kernel.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
-                            np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
     if simulation.input_arrays is not None:
         a = simulation.input_arrays
         kernel.add_seismic_input(_kernels.SeismicInput(
@@ -612,7 +627,9 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     scene = simulation.scene
     nonlinear = simulation.nonlinear
     kept = None if nonlinear is None else nonlinear.components  # the trial's fresh ones must not replace them
-    stepper = make_stepper(dataclasses.replace(simulation, static=None, contact_pairs=None))
+    trial = dataclasses.replace(simulation, static=None, contact_pairs=None)
+    stepper = make_stepper(trial)
+    simulation.lts_stability = trial.lts_stability  # checked once per model (local time stepping)
     if simulation.node_levels is not None:  # whole global steps of local time stepping
         ratio = 2 ** int(simulation.node_levels.max())
         trial_steps = ratio * max(1, -(-trial_steps // ratio))
@@ -641,6 +658,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         "traction-free surfaces": ", ".join(f"{name} ({count} facets)" for name, count in
                                             model.free_surfaces.items()) or "none",
         "dt": f"{ts.dt:.6g} s ({ts.reason})",
+        **({"local stepping": lts_stability_line(simulation.lts_stability)} if simulation.lts_stability else {}),
         **element_loop,
         **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
         "steps": simulation.n_steps,
@@ -650,6 +668,13 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
                                      if name != "other" or entry["ms_per_step"] > 0.0),
         "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion",
     }
+
+
+def lts_stability_line(report: dict) -> str:
+    """check's line on the local time stepping map's stability check (pyfem/local_stepping.py)."""
+    return (f"stable on this model: a random state's energy changed {report['growth']:.3g}x over "
+            f"{report['global_steps']} global steps (amplitude factor {report['growth_per_step']:.6f} per "
+            f"step; unstable from 2x), {report['seconds']:.1f} s")
 
 
 PHASES = ("update", "element_loop", "input_forces", "stiffness", "contact")
