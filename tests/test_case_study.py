@@ -223,13 +223,19 @@ def test_case_study_report_reads_the_run(short_case3, tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["case1_vertical_coarse", "case2_oblique_coarse", "case3_contact_coarse"])
 def test_coarse_case_runs_to_its_end(case, tmp_path):
-    """Each of the paper's three coarse cases runs its whole scene (9 s of motion, ~10-15 min alone)."""
+    """Each of the paper's three coarse cases runs its whole scene with all physics: the static
+    stage, then 4.9 s of motion (the 1 s lead-in and the record's first 3.9 s; 20-40 min each on
+    2 cores). The stage converged, the rock yielded, the wave reached the lining, the balance
+    closed."""
     from pyfem import solver
 
     scene = load_scene(REPOSITORY / "workflows" / "scenes" / f"{case}.toml")
     summary = solver.run(scene, tmp_path / case)
     assert summary["status"] == "finished"
     assert summary["steps"] * summary["dt"] >= scene["time"]["duration"] - 1e-9
+    assert all(stage["converged"] for stage in summary["static"]["stages"])
+    assert sum(region["yielded_volume"] for name, region in summary["nonlinear_regions"].items()
+               if name != "lining") > 0.0
     assert summary["energy"]["balance_error"] < 0.01
-    peaks = [monitor["displacement"] for monitor in summary["monitors"].values()]
-    assert len(peaks) == 4 and all(math.isfinite(p) and p > 0.0 for p in peaks)
+    peaks = [summary["monitors"][name]["displacement"] for name in ("A", "B", "C", "D")]
+    assert all(math.isfinite(p) and p > 1e-3 for p in peaks), peaks  # centimetres of motion arrived
