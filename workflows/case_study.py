@@ -40,12 +40,16 @@ Quantities (all from the run directories; SI in the files, cm and MPa in the tab
 
 Sample runs (from the repository root, Debian's Python):
 
-    /usr/bin/python3 workflows/case_study.py                    # the three coarse cases (~35 min)
+    /usr/bin/python3 workflows/case_study.py                    # the three coarse cases (4.9 s each)
     /usr/bin/python3 workflows/case_study.py --case 3           # one case
     /usr/bin/python3 workflows/case_study.py --report-only      # figures from finished runs
+    /usr/bin/python3 workflows/case_study.py --preset paper --case 3 --report-only
+    # a variant in its own directory (figures in DIR/results, docs/case_study.md untouched):
+    /usr/bin/python3 workflows/case_study.py --runs runs/whole_record --set static.relaxation=1.0 \
+        --set time.duration=21.0
+
 A stopped run (session end, kill, Ctrl-C) continues from its checkpoint when the same command is
 given again (docs/checkpoint.md; --no-resume starts it again).
-    /usr/bin/python3 workflows/case_study.py --preset paper --case 3 --report-only
 """
 from __future__ import annotations
 
@@ -622,21 +626,29 @@ def main(argv=None) -> int:
                         help="scene size: the coarse mesh (default) or the paper's")
     parser.add_argument("--report-only", action="store_true", help="read finished run directories; run nothing")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="scene override for the runs, e.g. --set time.duration=25.2")
+                        help="scene override for the runs, e.g. --set time.duration=21.0")
     parser.add_argument("--no-resume", dest="resume", action="store_false",
                         help="start every run again even where a stopped run of the same settings left a "
                              "checkpoint (default: continue it)")
+    parser.add_argument("--runs", type=pathlib.Path, default=None, metavar="DIR",
+                        help=f"run directories caseN_PRESET here (default {RUNS}); with it, the figures go to "
+                             "DIR/results and docs/case_study.md is left alone (a variant, e.g. --set "
+                             "static.relaxation=1.0 --set time.duration=21.0)")
     args = parser.parse_args(argv)
     cases = args.case or sorted(CASES)
+    runs = args.runs if args.runs is not None else RUNS
     if not args.report_only:
         for case in cases:
             start = time.perf_counter()
-            summary = run_case(case, args.preset, args.overrides, resume=args.resume)
+            summary = run_case(case, args.preset, args.overrides, runs=runs, resume=args.resume)
             print(f"case {case}: {summary['steps']} steps, {summary['dofs']} dofs, "
                   f"{time.perf_counter() - start:.0f} s", flush=True)
     # The report always covers every finished run of both sizes, so one case's rerun
     # refreshes the figures without dropping the others.
-    report()
+    if args.runs is None:
+        report()
+    else:
+        report(runs_dir=runs, results=runs / "results", doc=False)
     return 0
 
 
