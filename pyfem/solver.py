@@ -674,7 +674,7 @@ def lts_stability_line(report: dict) -> str:
     """check's line on the local time stepping map's stability check (pyfem/local_stepping.py)."""
     return (f"stable on this model: a random state's energy changed {report['growth']:.3g}x over "
             f"{report['global_steps']} global steps (amplitude factor {report['growth_per_step']:.6f} per "
-            f"step; unstable from 2x), {report['seconds']:.1f} s")
+            f"step; unstable from 2x), {report['seconds']:.2f} s")
 
 
 PHASES = ("update", "element_loop", "input_forces", "stiffness", "contact")
