@@ -171,6 +171,6 @@ def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chun
     if not math.isfinite(growth):
         growth = math.inf
     span = chunk * (len(energies) - third)  # global steps between the thirds' centres
-    per_step = growth ** (1.0 / (2.0 * span)) if math.isfinite(growth) and growth > 0 else math.inf
+    per_step = growth ** (1.0 / (2.0 * span)) if math.isfinite(growth) else math.inf
     return {"global_steps": int(chunk * len(energies)), "growth": growth, "growth_per_step": float(per_step),
             "stable": bool(growth < STABILITY_RATIO), "seconds": time.perf_counter() - start}
