@@ -119,23 +119,26 @@ inline std::array<double, 3> symmetric_eigenvalues_estimate(const Matrix3& a) {
 }
 
 /// Eigen-decomposition by the closed form where it is as accurate as symmetric_eigen, else by
-/// symmetric_eigen. With the trigonometric eigenvalues (symmetric_eigenvalues_estimate) of a
-/// spectrum whose two gaps both exceed kClosedFormGap of the deviatoric size s, the vectors of
-/// the outer values come from the largest cross product of two rows of A - lambda I, each
-/// refined once (Rayleigh quotient, then the cross product again: vector error ~ 1e-16 s / gap,
-/// below 1e-13), the middle one completes the right-handed basis, and every value is the
-/// Rayleigh quotient of its vector. Nearly repeated values (the Mohr-Coulomb edges and apex, a
-/// hydrostatic state) go to Jacobi, whose vectors stay orthonormal whatever the spectrum.
-/// Several times faster than Jacobi for the well-separated spectra of most stress states.
+/// symmetric_eigen. It works on the deviator scaled to unit size, B = (A - m I) / s (m the mean
+/// of the diagonal, s = sqrt(|dev A|^2 / 6)): a rounding of m is a common shift that moves no
+/// vector, and B's entries are O(1) whatever the magnitude of A. With the trigonometric
+/// eigenvalues (symmetric_eigenvalues_estimate) of a spectrum whose two gaps both exceed
+/// kClosedFormGap s, the vectors of the outer values come from the largest cross product of two
+/// rows of B - mu I, each refined once (the Rayleigh quotient of B, then the cross product again:
+/// vector error about 1e-16 / (gap / s)), the middle one completes the right-handed basis, and
+/// each value is m + s times the Rayleigh quotient of its vector. Nearly repeated values (the
+/// Mohr-Coulomb edges and apex, a hydrostatic state), non-finite entries and unsound vectors go to
+/// Jacobi, whose vectors stay orthonormal whatever the spectrum. Several times faster than Jacobi
+/// for the well-separated spectra of most stress states.
 inline constexpr double kClosedFormGap = 1e-3;
 
 namespace detail {
-// Unit vector of the null space of A - lambda I (rank 2): the largest of the three cross
-// products of its rows, normalised. False when all three vanish.
-inline bool null_vector(const Matrix3& a, double lambda, std::array<double, 3>& out) {
-  const std::array<double, 3> r0{a[0][0] - lambda, a[0][1], a[0][2]};
-  const std::array<double, 3> r1{a[1][0], a[1][1] - lambda, a[1][2]};
-  const std::array<double, 3> r2{a[2][0], a[2][1], a[2][2] - lambda};
+// Unit vector of the null space of B - mu I (rank 2, B of O(1) entries): the largest of the three
+// cross products of its rows, normalised. False when none is of a sound, finite length.
+inline bool null_vector(const Matrix3& b, double mu, std::array<double, 3>& out) {
+  const std::array<double, 3> r0{b[0][0] - mu, b[0][1], b[0][2]};
+  const std::array<double, 3> r1{b[1][0], b[1][1] - mu, b[1][2]};
+  const std::array<double, 3> r2{b[2][0], b[2][1], b[2][2] - mu};
   auto cross = [](const std::array<double, 3>& x, const std::array<double, 3>& y) {
     return std::array<double, 3>{x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2],
                                  x[0] * y[1] - x[1] * y[0]};
@@ -147,7 +150,8 @@ inline bool null_vector(const Matrix3& a, double lambda, std::array<double, 3>& 
     const double n = c[i][0] * c[i][0] + c[i][1] * c[i][1] + c[i][2] * c[i][2];
     if (n > best) best = n, k = i;
   }
-  if (!(best > 0.0)) return false;
+  // B has unit size, so a sound null vector's cross product is far from under- or overflow.
+  if (!(best > 1e-200) || !std::isfinite(best)) return false;
   const double scale = 1.0 / std::sqrt(best);
   for (int i = 0; i < 3; ++i) out[i] = c[k][i] * scale;
   return true;
@@ -162,23 +166,26 @@ inline double rayleigh(const Matrix3& a, const std::array<double, 3>& v) {
 }  // namespace detail
 
 /// The closed form alone: true with `out` set when both gaps of the estimated spectrum exceed
-/// kClosedFormGap of the deviatoric size and the vectors came out sound; false (out unchanged
-/// in meaning) otherwise.
+/// kClosedFormGap of the deviatoric size and the vectors came out sound; false otherwise (out
+/// then unspecified).
 inline bool symmetric_eigen_closed_form(const Matrix3& a, const std::array<double, 3>& estimate,
                                         SymmetricEigen& out) {
   const double mean = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
   const double d0 = a[0][0] - mean, d1 = a[1][1] - mean, d2 = a[2][2] - mean;
   const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
   const double size = std::sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0);
-  const double min_gap = kClosedFormGap * size;
-  if (!(size > 0.0) || !(estimate[0] - estimate[1] > min_gap) ||
-      !(estimate[1] - estimate[2] > min_gap))
-    return false;
+  if (!(size > 0.0) || !std::isfinite(size) || !std::isfinite(mean)) return false;
+  const double inverse = 1.0 / size;
+  const double mu0 = (estimate[0] - mean) * inverse, mu1 = (estimate[1] - mean) * inverse,
+               mu2 = (estimate[2] - mean) * inverse;
+  if (!(mu0 - mu1 > kClosedFormGap) || !(mu1 - mu2 > kClosedFormGap)) return false;
+  const Matrix3 b{{{d0 * inverse, a[0][1] * inverse, a[0][2] * inverse},
+                   {a[1][0] * inverse, d1 * inverse, a[1][2] * inverse},
+                   {a[2][0] * inverse, a[2][1] * inverse, d2 * inverse}}};
   std::array<double, 3> v0, v2;
-  if (!detail::null_vector(a, estimate[0], v0) || !detail::null_vector(a, estimate[2], v2))
-    return false;
-  if (!detail::null_vector(a, detail::rayleigh(a, v0), v0) ||
-      !detail::null_vector(a, detail::rayleigh(a, v2), v2))
+  if (!detail::null_vector(b, mu0, v0) || !detail::null_vector(b, mu2, v2)) return false;
+  if (!detail::null_vector(b, detail::rayleigh(b, v0), v0) ||
+      !detail::null_vector(b, detail::rayleigh(b, v2), v2))
     return false;
   // v2 orthogonal to v0 (Gram-Schmidt), v1 = v2 x v0 (so that v0 x v1 = v2).
   const double along = v2[0] * v0[0] + v2[1] * v0[1] + v2[2] * v0[2];
@@ -190,7 +197,7 @@ inline bool symmetric_eigen_closed_form(const Matrix3& a, const std::array<doubl
                                  v2[0] * v0[1] - v2[1] * v0[0]};
   SymmetricEigen result;
   result.vectors = {v0, v1, v2};
-  for (int k = 0; k < 3; ++k) result.values[k] = detail::rayleigh(a, result.vectors[k]);
+  for (int k = 0; k < 3; ++k) result.values[k] = mean + size * detail::rayleigh(b, result.vectors[k]);
   if (!(result.values[0] >= result.values[1] && result.values[1] >= result.values[2]))
     return false;
   out = result;

@@ -182,49 +182,115 @@ TEST(MaterialPrincipal, ReproducesTensorsWithRepeatedEigenvalues) {
 
 TEST(MaterialPrincipal, ClosedFormMatchesJacobiAcrossGaps) {
   // symmetric_eigen_fast against symmetric_eigen on spectra from well separated down to gaps
-  // just above and below its threshold (1e-3 of the deviatoric size, here 2/3 of the spread) and repeated values: the
-  // values within 1e-14 of the size, the reconstructed tensor within 1e-13, the basis orthonormal
-  // and right-handed within 1e-13, whichever path it took. Every tensor is rotated arbitrarily.
+  // just above and below its threshold (1e-3 of the deviatoric size, here 2/3 of the spread) and
+  // repeated values, with a mean of the order of the spread and 1e3 times it, at magnitudes 1,
+  // 1e77 and 1e-77: the values within 1e-14 of the scale, each pair's residual |A v - l v| within
+  // 1e-13 of the scale (the closed form's vector error is ~1e-16 over the relative gap, ~1e-13 at
+  // the threshold; Jacobi's ~1e-15), the reconstructed tensor within 1e-13, the basis orthonormal and
+  // right-handed within 1e-13, whichever path it took. Every tensor is rotated arbitrarily.
   std::mt19937_64 generator(23);
   std::uniform_real_distribution<double> angle(0.0, 2.0 * kPi);
   std::uniform_real_distribution<double> value(-10.0, 10.0);
   const double gaps[] = {1.0, 1e-1, 1e-2, 2e-3, 1e-3, 0.5e-3, 1e-4, 1e-8, 0.0};
+  const double means[] = {1.0, 1e3};
+  const double magnitudes[] = {1.0, 1e77, 1e-77};
   int checks = 0;
-  for (const double gap : gaps)
-    for (int sample = 0; sample < 40; ++sample) {
-      const double base = value(generator), size = 1.0 + std::abs(value(generator));
-      const bool low_pair = sample % 2 == 0;  // which two values are close
-      std::array<double, 3> spectrum =
-          low_pair ? std::array<double, 3>{base + 2.0 * size, base + gap * size, base}
-                   : std::array<double, 3>{base + gap * size, base, base - 2.0 * size};
-      const Matrix3 R = rotation(angle(generator), angle(generator), angle(generator));
-      const Matrix3 D{{{spectrum[0], 0.0, 0.0}, {0.0, spectrum[1], 0.0}, {0.0, 0.0, spectrum[2]}}};
-      const Matrix3 A = rotate_tensor(R, D);
-      const double scale = std::max(std::abs(base), 1.0) + 2.0 * size;
-      const auto estimate = symmetric_eigenvalues_estimate(A);
-      SymmetricEigen closed;
-      // The closed form is taken above the threshold and refused below it (Jacobi then).
-      EXPECT_EQ(symmetric_eigen_closed_form(A, estimate, closed), gap >= 1e-3) << gap;
-      const SymmetricEigen fast = symmetric_eigen_fast(A, estimate);
-      const SymmetricEigen jacobi = symmetric_eigen(A);
-      for (int k = 0; k < 3; ++k) EXPECT_NEAR(fast.values[k], jacobi.values[k], 1e-14 * scale);
-      EXPECT_GE(fast.values[0], fast.values[1]);
-      EXPECT_GE(fast.values[1], fast.values[2]);
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) {
-          double product = 0.0;
-          for (int k = 0; k < 3; ++k) product += fast.vectors[i][k] * fast.vectors[j][k];
-          EXPECT_NEAR(product, i == j ? 1.0 : 0.0, 1e-13);
+  for (const double magnitude : magnitudes)
+    for (const double mean_factor : means)
+      for (const double gap : gaps)
+        for (int sample = 0; sample < 20; ++sample) {
+          const double size = magnitude * (1.0 + std::abs(value(generator)));
+          const double base = mean_factor * magnitude * value(generator);
+          const bool low_pair = sample % 2 == 0;  // which two values are close
+          std::array<double, 3> spectrum =
+              low_pair ? std::array<double, 3>{base + 2.0 * size, base + gap * size, base}
+                       : std::array<double, 3>{base + gap * size, base, base - 2.0 * size};
+          const Matrix3 R = rotation(angle(generator), angle(generator), angle(generator));
+          const Matrix3 D{
+              {{spectrum[0], 0.0, 0.0}, {0.0, spectrum[1], 0.0}, {0.0, 0.0, spectrum[2]}}};
+          const Matrix3 A = rotate_tensor(R, D);
+          const double scale = std::abs(base) + 2.0 * size;
+          const auto estimate = symmetric_eigenvalues_estimate(A);
+          SymmetricEigen closed;
+          // The closed form is taken above the threshold and refused below it (Jacobi then).
+          EXPECT_EQ(symmetric_eigen_closed_form(A, estimate, closed), gap >= 1e-3)
+              << gap << " " << magnitude << " " << mean_factor;
+          const SymmetricEigen fast = symmetric_eigen_fast(A, estimate);
+          const SymmetricEigen jacobi = symmetric_eigen(A);
+          for (int k = 0; k < 3; ++k) {
+            EXPECT_NEAR(fast.values[k], jacobi.values[k], 1e-14 * scale);
+            double residual = 0.0;
+            for (int i = 0; i < 3; ++i) {
+              double row = -fast.values[k] * fast.vectors[k][i];
+              for (int j = 0; j < 3; ++j) row += A[i][j] * fast.vectors[k][j];
+              residual += row * row;
+            }
+            EXPECT_LE(std::sqrt(residual), 1e-13 * scale) << gap << " " << magnitude << " " << mean_factor << " closed " << (gap >= 1e-3);
+          }
+          EXPECT_GE(fast.values[0], fast.values[1]);
+          EXPECT_GE(fast.values[1], fast.values[2]);
+          for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) {
+              double product = 0.0;
+              for (int k = 0; k < 3; ++k) product += fast.vectors[i][k] * fast.vectors[j][k];
+              EXPECT_NEAR(product, i == j ? 1.0 : 0.0, 1e-13);
+            }
+          const auto& e = fast.vectors;  // right-handed: e0 x e1 = e2
+          EXPECT_NEAR(e[0][1] * e[1][2] - e[0][2] * e[1][1], e[2][0], 1e-13);
+          EXPECT_NEAR(e[0][2] * e[1][0] - e[0][0] * e[1][2], e[2][1], 1e-13);
+          EXPECT_NEAR(e[0][0] * e[1][1] - e[0][1] * e[1][0], e[2][2], 1e-13);
+          const Voigt back = stress_voigt_from_principal(fast.values, fast.vectors);
+          const Voigt original = stress_voigt(A);
+          for (int k = 0; k < 6; ++k) EXPECT_NEAR(back[k], original[k], 1e-13 * scale);
+          ++checks;
         }
-      const auto& e = fast.vectors;  // right-handed: e0 x e1 = e2
-      EXPECT_NEAR(e[0][1] * e[1][2] - e[0][2] * e[1][1], e[2][0], 1e-13);
-      EXPECT_NEAR(e[0][0] * e[1][1] - e[0][1] * e[1][0], e[2][2], 1e-13);
-      const Voigt back = stress_voigt_from_principal(fast.values, fast.vectors);
-      const Voigt original = stress_voigt(A);
-      for (int k = 0; k < 6; ++k) EXPECT_NEAR(back[k], original[k], 1e-13 * scale);
-      ++checks;
+  EXPECT_EQ(checks, 3 * 2 * 9 * 20);
+}
+
+TEST(MohrCoulomb, ElasticFastPathGivesTheUpdatesBits) {
+  // MohrCoulombLaw::evaluate writes a trial that passes the invariant screen straight into the
+  // state; it must be the same bits as mohr_coulomb_update's elastic result (and its energy the
+  // same trapezoid work), and most of these small increments from a confined state take it.
+  const MohrCoulombMaterial m = mohr_coulomb_material(MohrCoulombParameters{});
+  std::mt19937_64 generator(5);
+  std::uniform_real_distribution<double> small(-2e-5, 2e-5);
+  const double sigma0[6] = {-6e6, -5e6, -7e6, 4e5, -2e5, 1e5};
+  int screened = 0;
+  for (int sample = 0; sample < 200; ++sample) {
+    MohrCoulombLaw::State committed = MohrCoulombLaw::initial_state(m, sigma0, 1.0);
+    for (int c = 0; c < 6; ++c) committed.strain[c] = small(generator);
+    committed.effective_stress = isotropic_stress(m.lambda, m.shear_modulus, committed.strain);
+    for (int c = 0; c < 6; ++c) {
+      committed.effective_stress[c] += sigma0[c];
+      committed.stress[c] = committed.effective_stress[c];
     }
-  EXPECT_EQ(checks, 9 * 40);
+    double strain[6];
+    Voigt increment;
+    for (int c = 0; c < 6; ++c) {
+      strain[c] = committed.strain[c] + small(generator);
+      increment[c] = strain[c] - committed.strain[c];
+    }
+    const PointStrain point{strain, sigma0, 1.0};
+    MohrCoulombLaw::State trial;
+    const PointEnergy energy = MohrCoulombLaw::evaluate(m, committed, point, trial);
+    const MohrCoulombStep step = mohr_coulomb_update(m, committed, increment);
+    ASSERT_EQ(step.region, ReturnRegion::elastic);
+    Voigt trial_effective = committed.effective_stress;
+    const Voigt change = isotropic_stress(m.lambda, m.shear_modulus, increment);
+    for (int c = 0; c < 6; ++c) trial_effective[c] += change[c];
+    if (elastic_by_invariants(m, trial_effective)) ++screened;
+    double work = 0.0;
+    for (int c = 0; c < 6; ++c) {
+      EXPECT_EQ(trial.stress[c], step.state.stress[c]);
+      EXPECT_EQ(trial.effective_stress[c], step.state.effective_stress[c]);
+      EXPECT_EQ(trial.plastic_strain[c], step.state.plastic_strain[c]);
+      work += 0.5 * (committed.stress[c] + step.state.stress[c] - 2.0 * sigma0[c]) * increment[c];
+    }
+    EXPECT_EQ(trial.damage, step.state.damage);
+    EXPECT_EQ(energy.stored, committed.stored + work);
+    EXPECT_EQ(energy.dissipation, 0.0);
+  }
+  EXPECT_GT(screened, 150);  // the fast path was the one taken
 }
 
 // ---------------------------------------------------------------- issue 9 reference returns
