@@ -154,6 +154,34 @@ py::array_t<T> point_output(const HexahedronElementsBase& elements,
   return out;
 }
 
+/// The run() of Stepper and LocalStepper: checks u, v, a (writeable float64 (n_dofs,), three
+/// different arrays) and n_steps >= 0, then advances the state in place without the GIL.
+template <class Kernel>
+double run_in_place(Kernel& kernel, py::ssize_t n_dofs, const py::object& u_object,
+                    const py::object& v_object, const py::object& a_object, std::int64_t n_steps,
+                    double t0) {
+  auto u = checked_array<double>(u_object, "u", {n_dofs}, true);
+  auto v = checked_array<double>(v_object, "v", {n_dofs}, true);
+  auto a = checked_array<double>(a_object, "a", {n_dofs}, true);
+  if (n_steps < 0) throw py::value_error("n_steps must be >= 0, got " + std::to_string(n_steps));
+  double* u_data = u.mutable_data();
+  double* v_data = v.mutable_data();
+  double* a_data = a.mutable_data();
+  if (u_data == v_data || u_data == a_data || v_data == a_data)
+    throw py::value_error("u, v and a must be three different arrays");
+  py::gil_scoped_release release;
+  return kernel.run(u_data, v_data, a_data, n_steps, t0);
+}
+
+/// The set_dashpots() of Stepper and LocalStepper: nodes int32 (k,), C float64 (k, 3, 3).
+template <class Kernel>
+void set_dashpots_checked(Kernel& kernel, const py::object& nodes_object,
+                          const py::object& C_object) {
+  auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
+  auto C = checked_array<double>(C_object, "C", {nodes.shape(0), 3, 3});
+  kernel.set_dashpots(nodes.data(), nodes.shape(0), C.data());
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_kernels, m) {
@@ -671,11 +699,7 @@ Borrowed arrays are kept alive by this object and must not be modified while it 
           py::keep_alive<1, 3>(), py::keep_alive<1, 4>(), py::keep_alive<1, 5>())
       .def(
           "set_dashpots",
-          [](Stepper& stepper, const py::object& nodes_object, const py::object& C_object) {
-            auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
-            auto C = checked_array<double>(C_object, "C", {nodes.shape(0), 3, 3});
-            stepper.set_dashpots(nodes.data(), nodes.shape(0), C.data());
-          },
+          &set_dashpots_checked<Stepper>,
           py::arg("nodes"), py::arg("C"),
           R"(Implicit per-node dashpots, replacing any previous set.
 
@@ -771,21 +795,9 @@ internal_stored, internal_dissipation and internal_work. ValueError names a node
 model. Without components nothing changes (not one operation per node).)")
       .def(
           "run",
-          [](Stepper& stepper, const py::object& u_object, const py::object& v_object,
-             const py::object& a_object, std::int64_t n_steps, double t0) {
-            const py::ssize_t n_dofs = stepper.n_dofs();
-            auto u = checked_array<double>(u_object, "u", {n_dofs}, true);
-            auto v = checked_array<double>(v_object, "v", {n_dofs}, true);
-            auto a = checked_array<double>(a_object, "a", {n_dofs}, true);
-            if (n_steps < 0)
-              throw py::value_error("n_steps must be >= 0, got " + std::to_string(n_steps));
-            double* u_data = u.mutable_data();
-            double* v_data = v.mutable_data();
-            double* a_data = a.mutable_data();
-            if (u_data == v_data || u_data == a_data || v_data == a_data)
-              throw py::value_error("u, v and a must be three different arrays");
-            py::gil_scoped_release release;
-            return stepper.run(u_data, v_data, a_data, n_steps, t0);
+          [](Stepper& stepper, const py::object& u, const py::object& v, const py::object& a,
+             std::int64_t n_steps, double t0) {
+            return run_in_place(stepper, stepper.n_dofs(), u, v, a, n_steps, t0);
           },
           py::arg("u").noconvert(), py::arg("v").noconvert(), py::arg("a").noconvert(),
           py::arg("n_steps"), py::arg("t0"),
@@ -921,11 +933,7 @@ Args:
            py::keep_alive<1, 3>(), py::keep_alive<1, 4>(), py::keep_alive<1, 5>())
       .def(
           "set_dashpots",
-          [](LocalStepper& stepper, const py::object& nodes_object, const py::object& C_object) {
-            auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
-            auto C = checked_array<double>(C_object, "C", {nodes.shape(0), 3, 3});
-            stepper.set_dashpots(nodes.data(), nodes.shape(0), C.data());
-          },
+          &set_dashpots_checked<LocalStepper>,
           py::arg("nodes"), py::arg("C"), "Implicit per-node dashpots (Stepper.set_dashpots).")
       .def(
           "add_seismic_input",
@@ -935,21 +943,9 @@ Args:
           py::arg("input"), py::keep_alive<1, 2>(), "Adds a SeismicInput force provider.")
       .def(
           "run",
-          [](LocalStepper& stepper, const py::object& u_object, const py::object& v_object,
-             const py::object& a_object, std::int64_t n_steps, double t0) {
-            const py::ssize_t n_dofs = 3 * stepper.n_nodes();
-            auto u = checked_array<double>(u_object, "u", {n_dofs}, true);
-            auto v = checked_array<double>(v_object, "v", {n_dofs}, true);
-            auto a = checked_array<double>(a_object, "a", {n_dofs}, true);
-            if (n_steps < 0)
-              throw py::value_error("n_steps must be >= 0, got " + std::to_string(n_steps));
-            double* u_data = u.mutable_data();
-            double* v_data = v.mutable_data();
-            double* a_data = a.mutable_data();
-            if (u_data == v_data || u_data == a_data || v_data == a_data)
-              throw py::value_error("u, v and a must be three different arrays");
-            py::gil_scoped_release release;
-            return stepper.run(u_data, v_data, a_data, n_steps, t0);
+          [](LocalStepper& stepper, const py::object& u, const py::object& v, const py::object& a,
+             std::int64_t n_steps, double t0) {
+            return run_in_place(stepper, 3 * stepper.n_nodes(), u, v, a, n_steps, t0);
           },
           py::arg("u").noconvert(), py::arg("v").noconvert(), py::arg("a").noconvert(),
           py::arg("n_steps"), py::arg("t0"),

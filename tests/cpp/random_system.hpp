@@ -1,6 +1,8 @@
 // Small random block-sparse systems for the kernel tests, kept as dense and block-CSR copies.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <random>
 #include <vector>
@@ -95,6 +97,16 @@ inline std::vector<double> dense_product(const BlockSystem& system, const std::v
   for (std::int64_t r = 0; r < n; ++r)
     for (std::int64_t c = 0; c < n; ++c) y[r] += system.dense[r * n + c] * x[c];
   return y;
+}
+
+/// max_k |a_k - b_k| / max_k |b_k|: the largest difference relative to the reference b.
+inline double max_relative_difference(const std::vector<double>& a, const std::vector<double>& b) {
+  double difference = 0.0, norm = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    difference = std::max(difference, std::abs(a[k] - b[k]));
+    norm = std::max(norm, std::abs(b[k]));
+  }
+  return difference / norm;
 }
 
 }  // namespace cavern::testing

@@ -13,15 +13,6 @@ using namespace cavern::testing;
 
 namespace {
 
-double relative_difference(const std::vector<double>& a, const std::vector<double>& b) {
-  double difference = 0.0, norm = 0.0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    difference = std::max(difference, std::abs(a[k] - b[k]));
-    norm = std::max(norm, std::abs(b[k]));
-  }
-  return difference / norm;
-}
-
 std::vector<double> random_vector(std::int64_t n, unsigned seed) {
   std::mt19937_64 generator(seed);
   std::uniform_real_distribution<double> uniform(-1.0, 1.0);
@@ -50,9 +41,9 @@ TEST(SymmetricBlockCsr, EqualsFullProductForAnyThreadCount) {
     std::vector<double> y(system.n_dofs(), 99.0), y1(system.n_dofs(), 99.0), y2(system.n_dofs(), 99.0);
     upper.multiply(x.data(), y.data());
     upper.multiply_dual(x.data(), w.data(), y1.data(), y2.data());
-    EXPECT_LT(relative_difference(y, full), 1e-13) << threads << " threads";
-    EXPECT_LT(relative_difference(y1, full), 1e-13) << threads << " threads";
-    EXPECT_LT(relative_difference(y2, full_w), 1e-13) << threads << " threads";
+    EXPECT_LT(max_relative_difference(y, full), 1e-13) << threads << " threads";
+    EXPECT_LT(max_relative_difference(y1, full), 1e-13) << threads << " threads";
+    EXPECT_LT(max_relative_difference(y2, full_w), 1e-13) << threads << " threads";
     checks += 3;
   }
   omp_set_num_threads(saved);
@@ -96,15 +87,15 @@ TEST(SymmetricBlockCsr, SinglePrecisionBlocksAreTheMatrixRoundedToFloat) {
     omp_set_num_threads(threads);
     std::vector<double> y(system.n_dofs(), 99.0);
     single.multiply(x.data(), y.data());
-    EXPECT_LT(relative_difference(y, reference), 1e-13) << threads << " threads";
-    const double rounding = relative_difference(y, exact);
+    EXPECT_LT(max_relative_difference(y, reference), 1e-13) << threads << " threads";
+    const double rounding = max_relative_difference(y, exact);
     EXPECT_GT(rounding, 0.0);  // the float storage is used, not a double copy
     EXPECT_LT(rounding, 1e-6);
     // Thread counts change only the order in which the spilled transposed blocks are added.
     if (first.empty())
       first = y;
     else
-      EXPECT_LT(relative_difference(y, first), 1e-14) << threads << " threads";
+      EXPECT_LT(max_relative_difference(y, first), 1e-14) << threads << " threads";
   }
   omp_set_num_threads(saved);
   EXPECT_LT(single.bytes(), upper.bytes());
