@@ -15,6 +15,7 @@
 #include "contact.hpp"
 #include "internal_force.hpp"
 #include "local_stepper.hpp"
+#include "mpi_exchange.hpp"
 #include "parallel.hpp"
 #include "seismic_input.hpp"
 #include "stable_step.hpp"
@@ -661,6 +662,22 @@ Returns:
 
   m.def("known_laws", &known_laws, "Names of the material laws HexahedronElements accepts.");
 
+  py::class_<MpiNodeExchange, std::shared_ptr<MpiNodeExchange>>(
+      m, "MpiNodeExchange",
+      "The ghost exchange of one MPI rank (cpp_kernels/mpi_exchange.hpp, pyfem/distributed.py).")
+      .def(py::init([](long fortran_comm, std::vector<int> neighbours,
+                       std::vector<std::vector<std::int32_t>> send_nodes,
+                       std::vector<std::vector<std::int32_t>> recv_nodes, std::int64_t n_nodes) {
+             return std::make_shared<MpiNodeExchange>(
+                 MPI_Comm_f2c(static_cast<MPI_Fint>(fortran_comm)), std::move(neighbours),
+                 std::move(send_nodes), std::move(recv_nodes), n_nodes);
+           }),
+           py::arg("comm_f2c"), py::arg("neighbours"), py::arg("send_nodes"),
+           py::arg("recv_nodes"), py::arg("n_nodes"),
+           "comm_f2c: mpi4py's comm.py2f(); per neighbour rank the local owned nodes it ghosts "
+           "and the local ghosts it owns, in ascending global order.")
+      .def_property_readonly("bytes_sent_per_step", &MpiNodeExchange::bytes_sent_per_step);
+
   py::class_<Stepper>(m, "Stepper", R"(Velocity-Verlet central difference with lumped mass.
 
 Per step: v_half = v + dt/2 a; u += dt v_half; f = f_ext(t_{n+1});
@@ -783,16 +800,26 @@ does not fit; then nothing may be assumed about the stepper's state.)")
           "node to itself. Without it contact costs nothing.")
       .def(
           "add_internal_force",
-          [](Stepper& stepper, std::shared_ptr<InternalForceComponent> component) {
-            stepper.add_internal_force(std::move(component));
-          },
-          py::arg("component"), py::keep_alive<1, 2>(),
+          [](Stepper& stepper, std::shared_ptr<InternalForceComponent> component,
+             bool count_energy) { stepper.add_internal_force(std::move(component), count_energy); },
+          py::arg("component"), py::arg("count_energy") = true, py::keep_alive<1, 2>(),
           R"(Adds an internal-force component (e.g. HexahedronElements; shared, kept alive).
 
 Its cells must not be in the stiffness matrix: r = f - K u - sum_components f_int(u). The energy
 account restarts at the next run() unless reset_energy is called after this; energy() then has
 internal_stored, internal_dissipation and internal_work. ValueError names a node outside the
-model. Without components nothing changes (not one operation per node).)")
+model. Without components nothing changes (not one operation per node). count_energy=False:
+its forces act, its stored energy and dissipation stay out of this account (an MPI rank's copy
+of cells another rank counts).)")
+      .def(
+          "set_partition",
+          [](Stepper& stepper, std::int64_t n_owned, std::shared_ptr<MpiNodeExchange> exchange) {
+            stepper.set_partition(n_owned, std::move(exchange));
+          },
+          py::arg("n_owned"), py::arg("exchange"), py::keep_alive<1, 3>(),
+          R"(One MPI rank's share of a distributed model (pyfem/distributed.py): the first n_owned
+nodes are this rank's, the others ghosts; the energy account sums the owned nodes only and after
+every step `exchange` (an MpiNodeExchange, or None) overwrites the ghosts' v and a.)")
       .def(
           "run",
           [](Stepper& stepper, const py::object& u, const py::object& v, const py::object& a,
@@ -868,12 +895,14 @@ is the laws' own energy error, round-off for linear_elastic).)")
             phases["input_forces"] = times.input_forces;
             phases["stiffness"] = times.stiffness;
             phases["contact"] = times.contact;
+            phases["exchange"] = times.exchange;
             phases["steps"] = times.steps;
             return phases;
           },
           "Wall time (s) of each part of the steps since construction or reset_phase_seconds(): "
           "update (pass A), element_loop (internal-force components), input_forces (force providers "
-          "and their work), stiffness (pass B: K u and the velocity update), contact; and steps.")
+          "and their work), stiffness (pass B: K u and the velocity update), contact, exchange (the MPI "
+          "ghost exchange); and steps.")
       .def("reset_phase_seconds", &Stepper::reset_phase_times, "Zeroes the phase times.")
       .def_property_readonly("dt", &Stepper::dt, "Time step (s).")
       .def_property_readonly("n_nodes", &Stepper::n_nodes)

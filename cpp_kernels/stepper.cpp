@@ -259,6 +259,14 @@ void Stepper::contact_post_pass(double t, const double* u, double* v, double* a)
   friction_dissipation_ += result.friction_dissipation;
 }
 
+void Stepper::set_partition(std::int64_t n_owned, std::shared_ptr<NodeExchange> exchange) {
+  if (n_owned < 0 || n_owned > n_nodes())
+    throw std::invalid_argument("n_owned = " + std::to_string(n_owned) +
+                                " must be in [0, " + std::to_string(n_nodes()) + "]");
+  n_owned_ = n_owned;
+  exchange_ = std::move(exchange);
+}
+
 void Stepper::add_provider(std::shared_ptr<ForceProvider> provider) {
   provider->check_nodes(n_nodes());
   providers_.push_back(std::move(provider));
@@ -267,9 +275,11 @@ void Stepper::add_provider(std::shared_ptr<ForceProvider> provider) {
   provider_power_.push_back(0.0);
 }
 
-void Stepper::add_internal_force(std::shared_ptr<InternalForceComponent> component) {
+void Stepper::add_internal_force(std::shared_ptr<InternalForceComponent> component,
+                                 bool count_energy) {
   component->check_nodes(n_nodes());
   components_.push_back(std::move(component));
+  component_counted_.push_back(count_energy ? 1 : 0);
   internal_force_.assign(n_dofs(), 0.0);
   if (parameters_.beta != 0.0) internal_damping_.assign(n_dofs(), 0.0);
   // g_n of the new component is unknown until reset_energy computes it.
@@ -303,6 +313,7 @@ void Stepper::pass_b(double* u, double* v, double* a) {
   double* reactions = reactions_.data();
   const double* g = internal_force_.data();
   const double* g_damping = internal_damping_.data();  // beta K0 v_{n+1/2} of the components
+  const std::int64_t owned = n_owned_nodes();
 
   double vMv = 0.0, uKu = 0.0, aMa = 0.0, Fa = 0.0, external_power = 0.0, damping_power = 0.0;
 #pragma omp parallel for schedule(static) if (threaded) \
@@ -367,12 +378,14 @@ void Stepper::pass_b(double* u, double* v, double* a) {
       double damping_force = implicit_damping[c] + beta * Kv[c];
       if constexpr (kInternal && kStiffnessDamping) damping_force += g_damping[3 * i + c];
       const double non_stiffness_force = fi[c] - damping_force;
-      vMv += m * v_next[c] * v_next[c];
-      uKu += ui[c] * Ku[c];
-      aMa += m * a_next * a_next;
-      Fa += non_stiffness_force * a_next;
-      external_power += fi[c] * v_next[c];
-      damping_power += damping_force * v_next[c];
+      if (i < owned) {  // a ghost's row is its owner's to count (set_partition)
+        vMv += m * v_next[c] * v_next[c];
+        uKu += ui[c] * Ku[c];
+        aMa += m * a_next * a_next;
+        Fa += non_stiffness_force * a_next;
+        external_power += fi[c] * v_next[c];
+        damping_power += damping_force * v_next[c];
+      }
       vi[c] = v_next[c];
       ai[c] = a_next;
       fi[c] = 0.0;  // ready for the providers of the next step
@@ -408,13 +421,14 @@ double Stepper::pass_a_with_internal(double* u, double* v, const double* a) {
   double* v_half = v_half_.data();
   double* g = internal_force_.data();
   double* g_damping = internal_damping_.data();
+  const std::int64_t owned_dofs = 3 * n_owned_nodes();
   double power = 0.0;
 #pragma omp parallel for schedule(static) if (threaded_) reduction(+ : power)
   for (std::int64_t d = 0; d < n; ++d) {
     const double velocity_half = v[d] + half_dt * a[d];
     v[d] = velocity_half;
     u[d] += dt * velocity_half;
-    power += g[d] * velocity_half;  // g_n.v_{n+1/2}
+    if (d < owned_dofs) power += g[d] * velocity_half;  // g_n.v_{n+1/2}
     g[d] = 0.0;
     if (stiffness_damping) {
       v_half[d] = velocity_half;
@@ -429,13 +443,22 @@ double Stepper::pass_a_with_internal(double* u, double* v, const double* a) {
 
 double Stepper::compute_internal_forces(const double* u) {
   double stored = 0.0;
-  for (auto& component : components_)
-    stored += component->compute(u, internal_force_.data()).stored;
+  for (std::size_t k = 0; k < components_.size(); ++k) {
+    const double component_stored = components_[k]->compute(u, internal_force_.data()).stored;
+    if (component_counted_[k]) stored += component_stored;
+  }
   return stored;
 }
 
+double Stepper::counted_dissipation() const {
+  double dissipation = 0.0;
+  for (std::size_t k = 0; k < components_.size(); ++k)
+    if (component_counted_[k]) dissipation += components_[k]->dissipation();
+  return dissipation;
+}
+
 double Stepper::internal_power(const double* v) const {
-  const std::int64_t n = n_dofs();
+  const std::int64_t n = 3 * n_owned_nodes();
   const double* g = internal_force_.data();
   double power = 0.0;
 #pragma omp parallel for schedule(static) if (threaded_) reduction(+ : power)
@@ -507,12 +530,13 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
       contact_post_pass(t_next, u, v, a);
       lap(times.contact);
     }
+    if (exchange_) {
+      exchange_->exchange(v, a);
+      lap(times.exchange);
+    }
     if (internal) {
-      double dissipation = 0.0;
-      for (auto& component : components_) {
-        component->commit();
-        dissipation += component->dissipation();
-      }
+      for (auto& component : components_) component->commit();
+      const double dissipation = counted_dissipation();
       internal_work_ += half_dt * (previous_internal_power + internal_power_);
       internal_stored_ = stored;
       internal_dissipation_ = dissipation - dissipation_at_reset_;
@@ -543,7 +567,7 @@ void Stepper::reset_energy(const double* u, const double* v, const double* a, do
   if (!components_.empty()) {
     std::fill(internal_force_.begin(), internal_force_.end(), 0.0);
     stored = compute_internal_forces(u);
-    for (const auto& component : components_) dissipation += component->dissipation();
+    dissipation = counted_dissipation();
     g = internal_force_.data();
   }
   double* f = external_force_.data();
@@ -559,9 +583,10 @@ void Stepper::reset_energy(const double* u, const double* v, const double* a, do
   const double* contact_f = contact_ ? contact_force.data() : nullptr;
 
   double vMv = 0.0, uKu = 0.0, aMa = 0.0, Fa = 0.0, external_power = 0.0, damping_power = 0.0;
+  const std::int64_t owned_dofs = 3 * n_owned_nodes();  // a ghost's energy is its owner's
 #pragma omp parallel for schedule(static) \
     reduction(+ : vMv, uKu, aMa, Fa, external_power, damping_power)
-  for (std::int64_t d = 0; d < n; ++d) {
+  for (std::int64_t d = 0; d < owned_dofs; ++d) {
     const double m = mass_[d / 3];
     // The non-stiffness force that a_0 implies: M a_0 = F_0 - K u_0 - g(u_0).
     const double non_stiffness_force = m * a[d] + Ku[d] + (g ? g[d] : 0.0);

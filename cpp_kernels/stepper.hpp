@@ -65,7 +65,20 @@ struct PhaseTimes {
   double input_forces = 0.0;   // the force providers (seismic input, held forces) and their work
   double stiffness = 0.0;      // pass B: K u (+ beta K v) and the per-node velocity/energy update
   double contact = 0.0;        // the contact pairs' correction
+  double exchange = 0.0;       // the ghost exchange between MPI ranks (NodeExchange)
   std::int64_t steps = 0;      // steps timed
+};
+
+/// The nodes a rank shares with other ranks (MPI, docs/scaling.md "The distributed step"): a
+/// rank numbers its owned nodes first, then its ghosts (the other ranks' nodes its matrix rows
+/// and cells touch). After every step, exchange() sends v_{n+1} and a_{n+1} of the owned nodes
+/// other ranks ghost and overwrites this rank's ghost rows with their owners' values; the next
+/// pass A then gives the ghosts the owners' u_{n+2} bit for bit. A serial run has none.
+class NodeExchange {
+ public:
+  virtual ~NodeExchange() = default;
+  /// v, a: (3 n_nodes) of this rank, owned first.
+  virtual void exchange(double* v, double* a) = 0;
 };
 
 /// Velocity-Verlet central difference for M a + d(v) + K u = f_ext(t), lumped M.
@@ -137,7 +150,18 @@ class Stepper {
   /// Adds an internal-force component (shared: the caller may keep and query it). Its cells
   /// must not be in the stiffness matrix. The energy account restarts at the next run() unless
   /// reset_energy is called after this. Throws std::invalid_argument for a node outside the model.
-  void add_internal_force(std::shared_ptr<InternalForceComponent> component);
+  /// count_energy = false: its forces act but its stored energy and dissipation are left out of
+  /// the account (an MPI rank's copy of cells another rank owns and counts, docs/scaling.md).
+  void add_internal_force(std::shared_ptr<InternalForceComponent> component,
+                          bool count_energy = true);
+
+  /// One MPI rank's share of a distributed model (docs/scaling.md): its first n_owned nodes are
+  /// its own, the rest ghosts whose rows it computes but does not keep. The energy account then
+  /// sums over the owned nodes only (the ranks' accounts add up to the model's), and after each
+  /// step `exchange` (null: none) overwrites the ghosts' v and a with their owners'. Dashpots,
+  /// constraints, providers and pairs must be on owned nodes. Throws std::invalid_argument for
+  /// n_owned outside [0, n_nodes].
+  void set_partition(std::int64_t n_owned, std::shared_ptr<NodeExchange> exchange);
 
   /// Attaches the interlayer contact pairs (shared). Throws std::invalid_argument for a pair node
   /// outside the model, a pair joining a node to itself, or a second ContactPairs.
@@ -171,6 +195,8 @@ class Stepper {
   double dt() const { return parameters_.dt; }
   std::int64_t n_nodes() const { return stiffness_.n_block_rows; }
   std::int64_t n_dofs() const { return 3 * stiffness_.n_block_rows; }
+  /// Nodes whose energy the account sums (all of them unless set_partition said otherwise).
+  std::int64_t n_owned_nodes() const { return n_owned_ < 0 ? n_nodes() : n_owned_; }
 
  private:
   template <bool kStiffnessDamping, bool kSymmetric, bool kInternal>
@@ -183,7 +209,9 @@ class Stepper {
   // One step's components: compute g(u_{n+1}) into internal_force_ (before pass B); returns
   // their stored energy.
   double compute_internal_forces(const double* u);
-  // g.v with g = internal_force_.
+  // Dissipation of the components whose energy this account counts.
+  double counted_dissipation() const;
+  // g.v with g = internal_force_ (owned dofs).
   double internal_power(const double* v) const;
   void accumulate_work(const double* v);
   void contact_post_pass(double t, const double* u, double* v, double* a);
@@ -227,6 +255,9 @@ class Stepper {
   std::vector<std::shared_ptr<ForceProvider>> providers_;
   std::shared_ptr<ContactPairs> contact_;  // null: no contact, no cost
   std::vector<std::shared_ptr<InternalForceComponent>> components_;  // empty: no cost
+  std::vector<char> component_counted_;  // per component: its energy is in this account
+  std::int64_t n_owned_ = -1;            // set_partition; -1: every node
+  std::shared_ptr<NodeExchange> exchange_;
   std::vector<double> internal_force_;  // g (3 n_nodes) of the last compute, with components
   std::vector<double> internal_damping_;  // beta K0 v_{n+1/2} of the components, when beta != 0
   std::vector<double> contact_scratch_;    // (unique pair nodes, 6): v, a before the correction

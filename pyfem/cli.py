@@ -101,6 +101,8 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     progress = None if sys.stdout.isatty() else ProgressLines(scene["time"]["duration"])
     summary = solver.run(scene, out_dir, on_plan=lambda plan: show_plan(scene, plan), progress=progress,
                          resume=resume)
+    if not summary:  # an MPI rank other than 0: rank 0 reports
+        return 0
     energy = summary["energy"]
     print(f"run finished in {summary['wall_seconds']:.1f} s: {summary['steps']} steps of "
           f"{summary['dt']:.4g} s, {summary['dofs']} dofs; energy balance error "
@@ -309,7 +311,24 @@ def _scene_error_text(error: SceneError, scene_path: Path | None = None) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python3 -m pyfem``; returns the exit status."""
+    """Entry point of ``python3 -m pyfem``; returns the exit status. Under ``mpirun -n N`` every
+    rank runs it and rank 0 speaks (pyfem/distributed.py): the others' lines are the same or
+    nothing, except a failure of their own, whose traceback they print."""
+    if int(os.environ.get("OMPI_COMM_WORLD_RANK", os.environ.get("PMI_RANK", "0"))) > 0:
+        import contextlib
+
+        with open(os.devnull, "w") as quiet, contextlib.redirect_stdout(quiet), contextlib.redirect_stderr(quiet):
+            try:
+                return _main(argv)
+            except BaseException:
+                import traceback
+
+                traceback.print_exc(file=sys.__stderr__)
+                raise
+    return _main(argv)
+
+
+def _main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "bench":
         # bench owns its arguments; argparse would reject its options.

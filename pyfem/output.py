@@ -695,6 +695,8 @@ class RunWriter:
             summary["time_per_step"] = phases
         if checkpoints is not None:
             summary["checkpoints"] = checkpoints
+        if getattr(self, "distributed", None):
+            summary["mpi"] = self.distributed  # pyfem.distributed.DistributedStepper.describe
         self._partial_summary()
         self._plots()
         _write_json(self.out_dir / "run.json", summary)

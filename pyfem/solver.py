@@ -415,7 +415,10 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
     the static stage and hands its state over (solve_static=False: only checks it, for `plan`)."""
     from pyfem.operators import build_model
 
-    model = build_model(scene)
+    from mpi4py import MPI
+
+    # Every rank builds the whole model (pyfem/distributed.py shares the stepping out).
+    model = build_model(scene, MPI.COMM_SELF)
     mass = np.array(model.mass, dtype=np.float64)
     check_input_faces(scene, model)
     spring_nodes, springs, dashpot_nodes, dashpots, constraints = boundary_operators(scene, model)
@@ -530,16 +533,31 @@ def kernel_threads() -> int:
 
     from pyfem import _kernels
 
+    from pyfem.distributed import threads_per_rank, world
+
     given = os.environ.get("OMP_NUM_THREADS", "")
     threads = int(given) if given.isdigit() and int(given) > 0 else len(os.sched_getaffinity(0))
+    shared = threads_per_rank(world())  # ranks on one machine share its cores
+    if shared is not None:
+        threads = shared
     _kernels.set_num_threads(threads)
     return threads
 
 
-def make_stepper(simulation: Simulation):
-    """The C++ stepper with the force providers the scene calls for, and nothing else."""
+def make_stepper(simulation: Simulation, distribute: bool = True):
+    """The C++ stepper with the force providers the scene calls for, and nothing else. Under
+    `mpirun -n N` (N > 1, `distribute`): a pyfem.distributed.DistributedStepper around it."""
     from pyfem import _kernels
+    from pyfem.distributed import world
 
+    comm = world()
+    if distribute and comm.size > 1:
+        from pyfem.distributed import DistributedStepper
+
+        if simulation.node_levels is not None:
+            raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs on one "
+                             "rank for now)")
+        return DistributedStepper(simulation, make_stepper(simulation, distribute=False), comm)
     kernel_threads()
     indptr, indices, blocks = bsr_arrays(simulation.stiffness)
     if simulation.node_levels is not None:  # [time] local_stepping (pyfem/local_stepping.py)
@@ -628,7 +646,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     nonlinear = simulation.nonlinear
     kept = None if nonlinear is None else nonlinear.components  # the trial's fresh ones must not replace them
     trial = dataclasses.replace(simulation, static=None, contact_pairs=None)
-    stepper = make_stepper(trial)
+    stepper = make_stepper(trial, distribute=False)  # rank 0 alone (the plan is printed there)
     simulation.lts_stability = trial.lts_stability  # checked once per model (local time stepping)
     if simulation.node_levels is not None:  # whole global steps of local time stepping
         ratio = 2 ** int(simulation.node_levels.max())
@@ -679,6 +697,8 @@ def lts_stability_line(report: dict) -> str:
 
 PHASES = ("update", "element_loop", "input_forces", "stiffness", "contact")
 """The kernel's phases of a step (Stepper.phase_seconds; cpp_kernels/stepper.hpp PhaseTimes)."""
+DISTRIBUTED_PHASES = ("exchange", "merge")
+"""Under mpirun: the ghost exchange of every step, and gathering the ranks' state at every sample."""
 
 
 def phase_split(phase_seconds: dict, loop_seconds: float, output_seconds: float | None = None) -> dict:
@@ -695,6 +715,9 @@ def phase_split(phase_seconds: dict, loop_seconds: float, output_seconds: float 
     """
     steps = max(1, int(phase_seconds["steps"]))
     seconds = {name: float(phase_seconds[name]) for name in PHASES}
+    for name in DISTRIBUTED_PHASES:  # under mpirun (rank 0's times)
+        if phase_seconds.get(name):
+            seconds[name] = float(phase_seconds[name])
     if output_seconds is not None:
         seconds["output"] = float(output_seconds)
     seconds["other"] = max(0.0, loop_seconds - sum(seconds.values()))
@@ -764,18 +787,21 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     from tqdm import tqdm
 
     from pyfem import checkpoint as checkpoints
+    from pyfem.distributed import SilentWriter, world
     from pyfem.interrupts import RunInterrupted, StopSignals
     from pyfem.output import RunWriter
 
+    comm = world()
+    root = comm.rank == 0  # under mpirun rank 0 writes everything (pyfem/distributed.py)
     wall_start = time.perf_counter()
     saved = checkpoints.read_checkpoint(out_dir) if resume else None  # refused before any work
     with StopSignals() as signals:
         simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
         if saved is not None:
             saved.check_model(simulation)
-        if on_plan is not None:
+        if on_plan is not None and root:
             on_plan(simulation_plan(simulation))
-        writer = RunWriter(out_dir, simulation)
+        writer = RunWriter(out_dir, simulation) if root else SilentWriter(out_dir)
         # Local time stepping writes no checkpoints yet (pyfem/local_stepping.py).
         clock = checkpoints.CheckpointClock(0.0 if simulation.node_levels is not None
                                             else scene["output"]["checkpoint_interval"])
@@ -789,7 +815,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             if saved is None:
                 with signals.deferred():
                     writer.start()
-                    if simulation.static is not None:  # static/ and the stage's stress in the fields
+                    if simulation.static is not None and root:  # static/ and the stage's stress in the fields
                         from pyfem.static_output import write_static_outputs
 
                         write_static_outputs(writer)
@@ -802,7 +828,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             else:
                 with signals.deferred():
                     writer.resume(saved.meta["writer"], saved.writer, saved.t)
-                    if simulation.static is not None:
+                    if simulation.static is not None and root:
                         from pyfem.static_output import static_stress_in_fields
 
                         static_stress_in_fields(writer)
@@ -824,6 +850,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                         "phases": {key: previous["phases"].get(key, 0.0) + value for key, value in phases.items()}}
 
             def checkpoint_now() -> None:
+                if not root:  # rank 0 holds the merged state of every rank
+                    return
                 began = time.perf_counter()
                 writer_meta, writer_arrays = writer.checkpoint_state()
                 meta = {"fingerprint": checkpoints.model_fingerprint(simulation), "t": t, "outputs_done": done,
@@ -847,17 +875,22 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                         output_start = time.perf_counter()
                         writer.sample(t, u, v, a, stepper.energy(), reactions)
                         output_seconds += time.perf_counter() - output_start
-                        if clock.due() and done < n_outputs:
+                        due = clock.due() if comm.size == 1 else comm.bcast(clock.due(), root=0)
+                        if due and done < n_outputs:
                             write_checkpoint()
                     bar.update()
                     if progress is not None:
                         progress(t)
             total = timing()
             phases = phase_split(total["phases"], total["loop_seconds"], total["output_seconds"])
+            distributed = stepper.describe() if comm.size > 1 else None
+            if distributed:
+                writer.distributed = distributed
             summary = writer.finish(wall_seconds=total["wall_seconds"], loop_seconds=total["loop_seconds"],
                                     phases=phases, checkpoints={"written": clock.count, "seconds": clock.seconds,
                                                                 "interval": clock.interval})
-            (Path(out_dir) / checkpoints.CHECKPOINT_NAME).unlink(missing_ok=True)  # finished: nothing to resume
+            if root:
+                (Path(out_dir) / checkpoints.CHECKPOINT_NAME).unlink(missing_ok=True)  # finished: nothing to resume
             return summary
         except KeyboardInterrupt as error:
             interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()

@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 packages=(
-  g++ cmake make libgtest-dev pybind11-dev
+  g++ cmake make libgtest-dev pybind11-dev libopenmpi-dev openmpi-bin
   python3-dolfinx-real python3-petsc4py python3-mpi4py python3-gmsh python3-meshio
   python3-numpy python3-scipy python3-matplotlib python3-h5py python3-tqdm python3-pytest
 )

@@ -1,0 +1,565 @@
+"""`mpirun -n N python3 -m pyfem run SCENE`: the explicit step distributed over MPI ranks.
+
+docs/scaling.md "The distributed step" is the design; this is its first implementation:
+
+- Every rank builds the whole serial model (mesh, matrices, static stage: the same bits on every
+  rank) and the serial stepper, whose state is the run's state in one place. The nodes are then
+  split among the ranks (recursive coordinate bisection; the nodes of pairs that share nodes go
+  to one rank together, so every contact pair is whole on one rank).
+- Each rank steps its share: its owned nodes numbered first, then its ghosts (the nodes its
+  owned rows and its cells touch). Its matrix holds the blocks with an owned index, so K u is
+  exact on the owned rows; its cells are those with an owned node (a cell another rank also
+  computes is "halo": its forces act, its energy is counted by the rank owning the cell's
+  lowest node); dashpots, constraints, input forces and pairs are those of owned nodes.
+- After every step one message per neighbour rank carries v and a of the shared nodes
+  (cpp_kernels/mpi_exchange.hpp); the next pass A then gives every ghost its owner's u.
+- At every output sample the ranks' states are gathered on rank 0 into the serial stepper
+  (`merge`), which the writer and checkpoints read as in a serial run; a checkpoint is the serial
+  one, and `--resume` slices it again (any rank count).
+
+Not done yet (docs/scaling.md): dolfinx's distributed mesh and assembly (the model is replicated,
+so memory does not fall with the ranks), the static stage in parallel (each rank solves it),
+merging only what the sample writes, overlapping the exchange with the interior rows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+
+
+def world() -> MPI.Comm:
+    """The communicator of an `mpirun` launch (one rank: a serial run)."""
+    return MPI.COMM_WORLD
+
+
+def is_root() -> bool:
+    return MPI.COMM_WORLD.rank == 0
+
+
+def bisection(points: np.ndarray, parts: int) -> np.ndarray:
+    """Part (0..parts-1) of every point by recursive coordinate bisection: the longest extent is
+    cut where the counts stay in proportion to the parts on each side (parts need not be a power
+    of two). Deterministic: ties in coordinate are broken by the point's index."""
+    owner = np.zeros(len(points), dtype=np.int32)
+
+    def split(index: np.ndarray, first: int, count: int) -> None:
+        if count == 1 or len(index) == 0:
+            owner[index] = first
+            return
+        extent = points[index].max(axis=0) - points[index].min(axis=0)
+        axis = int(np.argmax(extent))
+        order = index[np.lexsort((index, points[index, axis]))]
+        left = count // 2
+        cut = int(round(len(order) * left / count))
+        split(order[:cut], first, left)
+        split(order[cut:], first + left, count - left)
+
+    split(np.arange(len(points)), 0, parts)
+    return owner
+
+
+def pair_groups(pairs: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, group) of every node in a pair: pairs sharing a node form one group."""
+    nodes = np.unique(pairs)
+    local = np.searchsorted(nodes, pairs)
+    graph = sp.coo_matrix((np.ones(len(pairs)), (local[:, 0], local[:, 1])), shape=(len(nodes), len(nodes)))
+    _, group = sp.csgraph.connected_components(graph, directed=False)
+    return nodes, group
+
+
+@dataclasses.dataclass
+class Partition:
+    """Who owns what, the same on every rank (computed from the replicated model).
+
+    Attributes:
+        size: number of ranks.
+        node_owner: (n_nodes,) rank of every node.
+        pair_owner: (n_pairs,) rank of every contact pair (that of its nodes), or None.
+        cell_owner: region name -> (c,) rank counting each element-loop cell (that of its lowest node).
+    """
+
+    size: int
+    node_owner: np.ndarray
+    pair_owner: np.ndarray | None
+    cell_owner: dict
+
+    def owned(self, rank: int) -> np.ndarray:
+        return np.flatnonzero(self.node_owner == rank)
+
+
+def partition(simulation, size: int) -> Partition:
+    """Splits the nodes of the simulation's model among `size` ranks (docstring of the module)."""
+    coordinates = simulation.model.node_coords
+    owner = bisection(coordinates, size)
+    pair_owner = None
+    if simulation.contact_arrays is not None and len(simulation.contact_arrays["pairs"]):
+        pairs = simulation.contact_arrays["pairs"]
+        nodes, group = pair_groups(pairs, len(owner))
+        # A group goes to the owner of its lowest node.
+        first = np.full(group.max() + 1, len(owner), dtype=np.int64)
+        np.minimum.at(first, group, nodes)
+        owner[nodes] = owner[first[group]]
+        pair_owner = owner[pairs[:, 0]]
+    cell_owner = {}
+    if simulation.nonlinear is not None:
+        for name, arrays in simulation.nonlinear.arrays.items():
+            cell_owner[name] = owner[arrays.cell_nodes.min(axis=1)]
+    return Partition(size=size, node_owner=owner, pair_owner=pair_owner, cell_owner=cell_owner)
+
+
+@dataclasses.dataclass
+class Share:
+    """One rank's share: the owned-first local numbering and what it computes.
+
+    Attributes:
+        nodes: (n_local,) global node of every local node, owned first (ascending), then ghosts (ascending).
+        n_owned: owned nodes.
+        local_of: (n_nodes,) local number of every global node, -1 when not on this rank.
+        cells: per region, [(kind, indices into the region's cells)] with kind "counted" (cells this
+            rank owns) or "halo" (cells of other ranks touching an owned node); empty ones left out.
+        pairs: indices of this rank's contact pairs (None without contact).
+        constraints: indices of this rank's constraints in the serial list (None without).
+        dashpots: indices of this rank's dashpot entries in the serial list.
+    """
+
+    nodes: np.ndarray
+    n_owned: int
+    local_of: np.ndarray
+    cells: dict
+    pairs: np.ndarray | None
+    constraints: np.ndarray | None
+    dashpots: np.ndarray
+
+
+def _block_neighbours(stiffness: sp.bsr_matrix, rows: np.ndarray) -> np.ndarray:
+    """Block columns of the given block rows."""
+    indptr, indices = stiffness.indptr, stiffness.indices
+    starts, ends = indptr[rows], indptr[rows + 1]
+    counts = ends - starts
+    gather = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    return np.unique(indices[gather])
+
+
+def share(simulation, parts: Partition, rank: int) -> Share:
+    """Rank `rank`'s share of the simulation (`Share`)."""
+    n_nodes = len(parts.node_owner)
+    is_owned = parts.node_owner == rank
+    owned = np.flatnonzero(is_owned)
+    needed = [_block_neighbours(simulation.stiffness, owned)]
+    cells = {}
+    if simulation.nonlinear is not None:
+        for name, arrays in simulation.nonlinear.arrays.items():
+            touches = is_owned[arrays.cell_nodes].any(axis=1)
+            counted = parts.cell_owner[name] == rank
+            halo = touches & ~counted
+            cells[name] = [(kind, np.flatnonzero(mask)) for kind, mask in (("counted", counted), ("halo", halo))
+                           if mask.any()]
+            needed.append(arrays.cell_nodes[touches].reshape(-1))
+    ghosts = np.setdiff1d(np.concatenate(needed), owned)
+    nodes = np.concatenate([owned, ghosts]).astype(np.int64)
+    local_of = np.full(n_nodes, -1, dtype=np.int64)
+    local_of[nodes] = np.arange(len(nodes))
+    pairs = None if parts.pair_owner is None else np.flatnonzero(parts.pair_owner == rank)
+    constraints = None
+    if simulation.constraints is not None:
+        constraints = np.flatnonzero(is_owned[simulation.constraints.nodes])
+    dashpots = np.flatnonzero(is_owned[simulation.dashpot_nodes]) if len(simulation.dashpot_nodes) else \
+        np.zeros(0, dtype=np.int64)
+    return Share(nodes=nodes, n_owned=len(owned), local_of=local_of, cells=cells, pairs=pairs,
+                 constraints=constraints, dashpots=dashpots)
+
+
+def local_matrix(stiffness: sp.bsr_matrix, mine: Share) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(indptr, indices, blocks) of the rank's matrix in local numbering: every block (i, j) of
+    local nodes with i or j owned, and the ghosts' diagonal blocks. Symmetric as the serial one."""
+    n_rows = stiffness.shape[0] // 3
+    rows = np.repeat(np.arange(n_rows), np.diff(stiffness.indptr))
+    cols = stiffness.indices
+    li, lj = mine.local_of[rows], mine.local_of[cols]
+    keep = (li >= 0) & (lj >= 0) & ((li < mine.n_owned) | (lj < mine.n_owned) | (li == lj))
+    li, lj, blocks = li[keep], lj[keep], stiffness.data[keep]
+    order = np.lexsort((lj, li))
+    li, lj, blocks = li[order], lj[order], blocks[order]
+    indptr = np.zeros(len(mine.nodes) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(li, minlength=len(mine.nodes)), out=indptr[1:])
+    return (indptr, np.ascontiguousarray(lj, dtype=np.int32),
+            np.ascontiguousarray(blocks, dtype=np.float64))
+
+
+def _exchange(comm: MPI.Comm, parts: Partition, mine: Share):
+    """The kernel's MpiNodeExchange: each rank tells the owners which of their nodes it ghosts."""
+    from pyfem import _kernels
+
+    ghosts = mine.nodes[mine.n_owned:]
+    owners = parts.node_owner[ghosts]
+    requests = [ghosts[owners == q] for q in range(comm.size)]  # ascending: ghosts are sorted
+    asked = comm.alltoall(requests)
+    neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q]) or len(asked[q]))]
+    send = [mine.local_of[asked[q]].astype(np.int32) for q in neighbours]
+    recv = [mine.local_of[requests[q]].astype(np.int32) for q in neighbours]
+    return _kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(mine.nodes))
+
+
+def _local_seismic_input(arrays: dict, mine: Share):
+    from pyfem import _kernels
+
+    nodes = arrays["nodes"].astype(np.int64)
+    keep = np.flatnonzero(mine.local_of[nodes] >= 0)
+    keep = keep[mine.local_of[nodes[keep]] < mine.n_owned]
+    starts, ends = arrays["node_ptr"][keep], arrays["node_ptr"][keep + 1]
+    counts = ends - starts
+    entries = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    node_ptr = np.zeros(len(keep) + 1, dtype=np.int64)
+    np.cumsum(counts, out=node_ptr[1:])
+    return _kernels.SeismicInput(
+        arrays["table_t0"], arrays["table_dt"], arrays["g"], arrays["dg"], arrays["ddg"], node_ptr,
+        mine.local_of[nodes[keep]].astype(np.int32), np.ascontiguousarray(arrays["table"][entries]),
+        np.ascontiguousarray(arrays["tau"][entries]), np.ascontiguousarray(arrays["P"][entries]),
+        np.ascontiguousarray(arrays["Q"][entries]))
+
+
+def _local_contact(arrays: dict, mine: Share):
+    from pyfem.solver import make_contact_pairs
+
+    local = dict(arrays)
+    local["pairs"] = np.ascontiguousarray(mine.local_of[arrays["pairs"][mine.pairs]], dtype=np.int32)
+    for key in ("area", "normal", "static_force"):
+        local[key] = np.ascontiguousarray(np.asarray(arrays[key])[mine.pairs])
+    return make_contact_pairs(local)
+
+
+def _local_component(nonlinear, name: str, cells: np.ndarray, mine: Share):
+    from pyfem import _kernels
+
+    arrays = nonlinear.arrays[name]
+    options = nonlinear.options.get(name, {})
+    gradients = arrays.kernel_gradients(dense=bool(options.get("mean_dilatation")))
+    if isinstance(gradients, tuple):
+        gradients = (np.ascontiguousarray(gradients[0][cells]), *gradients[1:])
+    else:
+        gradients = np.ascontiguousarray(gradients[cells])
+    cell_nodes = np.ascontiguousarray(mine.local_of[arrays.cell_nodes[cells]], dtype=np.int32)
+    return _kernels.HexahedronElements(cell_nodes, gradients, np.ascontiguousarray(arrays.weights[cells]),
+                                       *nonlinear.laws[name], initial_stress=None, **options)
+
+
+def local_stepper(simulation, mine: Share, exchange):
+    """The kernel's Stepper of one rank's share (`make_stepper`'s objects, restricted)."""
+    from pyfem import _kernels
+
+    indptr, indices, blocks = local_matrix(simulation.stiffness, mine)
+    mass = np.ascontiguousarray(simulation.mass[mine.nodes])
+    single = simulation.scene["time"].get("matrix_precision", "double") == "single"
+    stepper = _kernels.Stepper(indptr, indices, blocks, mass, simulation.time_step.dt, simulation.alpha,
+                               simulation.beta, True, single)
+    keep = [indptr, indices, blocks, mass]  # the kernel borrows them
+    if len(mine.dashpots):
+        stepper.set_dashpots(np.ascontiguousarray(mine.local_of[simulation.dashpot_nodes[mine.dashpots]],
+                                                  dtype=np.int32),
+                             np.ascontiguousarray(simulation.dashpot_matrices[mine.dashpots]))
+    if simulation.constraints is not None:
+        c = simulation.constraints
+        stepper.set_constraints(np.ascontiguousarray(mine.local_of[c.nodes[mine.constraints]], dtype=np.int32),
+                                np.ascontiguousarray(c.projection[mine.constraints]))
+    if simulation.input_arrays is not None:
+        stepper.add_seismic_input(_local_seismic_input(simulation.input_arrays, mine))
+    contact = None
+    if simulation.contact_arrays is not None:
+        contact = _local_contact(simulation.contact_arrays, mine)
+        stepper.add_contact(contact)
+    components = []
+    if simulation.nonlinear is not None:
+        for name in simulation.nonlinear.arrays:
+            for kind, cells in mine.cells[name]:
+                component = _local_component(simulation.nonlinear, name, cells, mine)
+                stepper.add_internal_force(component, count_energy=kind == "counted")
+                components.append((name, kind, cells))
+    state = getattr(simulation, "static", None)
+    if state is not None and np.any(state.hand_over_force):  # pyfem/static.py add_hand_over_force
+        from pyfem.static import hand_over_force_provider
+
+        force = np.asarray(state.hand_over_force, dtype=np.float64).reshape(-1, 3)[mine.nodes].copy()
+        force[mine.n_owned:] = 0.0
+        stepper.add_seismic_input(hand_over_force_provider(force.reshape(-1)))
+    stepper.set_partition(mine.n_owned, exchange)
+    return stepper, components, keep
+
+
+# --- The serial stepper's state (save_state blocks) cut into shares and put together again ---
+
+def _rows(block: bytes, count: int) -> np.ndarray:
+    """A block of `count` equal rows as a (count, row bytes) uint8 array."""
+    data = np.frombuffer(block, dtype=np.uint8)
+    if count == 0:
+        return data.reshape(0, 0) if data.size == 0 else data.reshape(0, -1)
+    if data.size % count:
+        raise ValueError(f"a state block of {data.size} bytes is not {count} equal rows")
+    return data.reshape(count, -1)
+
+
+_CONTACT_PAIR_BLOCKS = ("state", "bond_intact", "normal_force", "tangential_force", "contact_force",
+                        "deterioration", "slip_rate", "gap_offset", "static_force")
+
+
+def _unique_slots(pair_nodes: np.ndarray, selected: np.ndarray) -> np.ndarray:
+    """Rows of the serial pairs' unique nodes that the selected pairs use (ascending)."""
+    unique = np.unique(pair_nodes)
+    return np.searchsorted(unique, np.unique(pair_nodes[selected]))
+
+
+def _region_points(nonlinear, name: str) -> int:
+    return int(nonlinear.arrays[name].weights.shape[1])
+
+
+def slice_state(serial: dict, template: dict, simulation, parts: Partition, mine: Share, rank: int,
+                components: list) -> dict:
+    """The serial stepper's state blocks as rank `rank`'s stepper needs them. `template`: that
+    stepper's own save_state() (names, sizes, its parameters). Scalars of the energy account and
+    of the components go to rank 0 (and to the first rank counting a region's cells): the
+    account is a sum over ranks."""
+    out = dict(template)
+    out["stepper/energy_started"] = serial["stepper/energy_started"]
+    for key in ("stepper/energy", "stepper/provider_work", "stepper/provider_power"):
+        out[key] = serial[key] if rank == 0 else np.zeros_like(np.frombuffer(serial[key], dtype=np.float64)).tobytes()
+    force = np.frombuffer(serial["stepper/internal_force"], dtype=np.float64).reshape(-1, 3)
+    if force.size:
+        out["stepper/internal_force"] = np.ascontiguousarray(force[mine.nodes]).tobytes()
+    if mine.constraints is not None:
+        out["stepper/reactions"] = np.ascontiguousarray(
+            np.frombuffer(serial["stepper/reactions"], dtype=np.float64).reshape(-1, 3)[mine.constraints]).tobytes()
+    if mine.pairs is not None:
+        pair_nodes = simulation.contact_arrays["pairs"]
+        n_pairs = len(pair_nodes)
+        for name in _CONTACT_PAIR_BLOCKS:
+            out["contact/" + name] = np.ascontiguousarray(_rows(serial["contact/" + name], n_pairs)[mine.pairs]).tobytes()
+        slots = _unique_slots(pair_nodes, mine.pairs)
+        node_force = np.frombuffer(serial["contact/node_force"], dtype=np.float64).reshape(-1, 3)
+        out["contact/node_force"] = np.ascontiguousarray(node_force[slots]).tobytes()
+    regions = list(simulation.nonlinear.arrays) if simulation.nonlinear is not None else []
+    for j, (name, kind, cells) in enumerate(components):
+        k = regions.index(name)
+        src, dst = f"component/{k}/", f"component/{j}/"
+        n_cells = len(simulation.nonlinear.arrays[name].cells)
+        out[dst + "state"] = np.ascontiguousarray(_rows(serial[src + "state"], n_cells)[cells]).tobytes()
+        sigma0 = serial[src + "initial_stress"]
+        out[dst + "initial_stress"] = (np.ascontiguousarray(_rows(sigma0, n_cells)[cells]).tobytes()
+                                       if len(sigma0) else b"")
+        first = kind == "counted" and rank == int(parts.cell_owner[name].min())
+        for scalar in ("stored_energy", "dissipation"):
+            out[dst + scalar] = serial[src + scalar] if first else np.zeros(1).tobytes()
+    return out
+
+
+def merge_states(serial_template: dict, states: list, simulation, parts: Partition, shares: list,
+                 components: list) -> dict:
+    """The serial stepper's state blocks from every rank's (`states`, `shares`, `components`
+    per rank): owned rows from their owner, counted cells from theirs, sums of the scalars."""
+    out = dict(serial_template)
+    out["stepper/energy_started"] = states[0]["stepper/energy_started"]
+    for key in ("stepper/energy", "stepper/provider_work", "stepper/provider_power"):
+        out[key] = np.sum([np.frombuffer(s[key], dtype=np.float64) for s in states], axis=0).tobytes()
+    force = np.frombuffer(serial_template["stepper/internal_force"], dtype=np.float64).reshape(-1, 3).copy()
+    if force.size:
+        for s, mine in zip(states, shares):
+            force[mine.nodes[:mine.n_owned]] = np.frombuffer(
+                s["stepper/internal_force"], dtype=np.float64).reshape(-1, 3)[:mine.n_owned]
+        out["stepper/internal_force"] = force.tobytes()
+    if shares[0].constraints is not None:
+        reactions = np.frombuffer(serial_template["stepper/reactions"], dtype=np.float64).reshape(-1, 3).copy()
+        for s, mine in zip(states, shares):
+            reactions[mine.constraints] = np.frombuffer(s["stepper/reactions"], dtype=np.float64).reshape(-1, 3)
+        out["stepper/reactions"] = reactions.tobytes()
+    if shares[0].pairs is not None:
+        pair_nodes = simulation.contact_arrays["pairs"]
+        n_pairs = len(pair_nodes)
+        for name in _CONTACT_PAIR_BLOCKS:
+            rows = _rows(serial_template["contact/" + name], n_pairs).copy()
+            for s, mine in zip(states, shares):
+                if len(mine.pairs):
+                    rows[mine.pairs] = _rows(s["contact/" + name], len(mine.pairs))
+            out["contact/" + name] = rows.tobytes()
+        node_force = np.frombuffer(serial_template["contact/node_force"], dtype=np.float64).reshape(-1, 3).copy()
+        for s, mine in zip(states, shares):
+            if not len(mine.pairs):
+                continue
+            node_force[_unique_slots(pair_nodes, mine.pairs)] = np.frombuffer(
+                s["contact/node_force"], dtype=np.float64).reshape(-1, 3)
+        out["contact/node_force"] = node_force.tobytes()
+    regions = list(simulation.nonlinear.arrays) if simulation.nonlinear is not None else []
+    for k, name in enumerate(regions):
+        src = f"component/{k}/"
+        n_cells = len(simulation.nonlinear.arrays[name].cells)
+        state = _rows(serial_template[src + "state"], n_cells).copy()
+        sigma0 = serial_template[src + "initial_stress"]
+        sigma0_rows = _rows(sigma0, n_cells).copy() if len(sigma0) else None
+        totals = {"stored_energy": 0.0, "dissipation": 0.0}
+        for s, rank_components in zip(states, components):
+            for j, (region, kind, cells) in enumerate(rank_components):
+                if region != name or kind != "counted":
+                    continue
+                state[cells] = _rows(s[f"component/{j}/state"], len(cells))
+                if sigma0_rows is not None:
+                    sigma0_rows[cells] = _rows(s[f"component/{j}/initial_stress"], len(cells))
+                for scalar in totals:
+                    totals[scalar] += float(np.frombuffer(s[f"component/{j}/{scalar}"], dtype=np.float64)[0])
+        out[src + "state"] = state.tobytes()
+        out[src + "initial_stress"] = sigma0_rows.tobytes() if sigma0_rows is not None else b""
+        for scalar, value in totals.items():
+            out[src + scalar] = np.array([value]).tobytes()
+    return out
+
+
+class DistributedStepper:
+    """The ranks' steppers behind the Stepper calls of `pyfem.solver.run` (which runs on every
+    rank). The u, v, a the run loop holds are the whole model's; they are exact on rank 0 after
+    every run() (gathered), and read by every rank only where the run starts (zeros, or a
+    checkpoint's). energy(), reactions() and save_state() are the serial stepper's after the
+    merge: meaningful on rank 0, which writes."""
+
+    def __init__(self, simulation, serial, comm: MPI.Comm):
+        self.simulation, self.serial, self.comm = simulation, serial, comm
+        began = time.perf_counter()
+        self.parts = partition(simulation, comm.size)
+        self.shares = [share(simulation, self.parts, q) for q in range(comm.size)] if comm.rank == 0 else None
+        self.mine = self.shares[0] if comm.rank == 0 else share(simulation, self.parts, comm.rank)
+        self.exchange = _exchange(comm, self.parts, self.mine)
+        self.kernel, self.components, self._borrowed = local_stepper(simulation, self.mine, self.exchange)
+        self.all_components = comm.gather(self.components, root=0)
+        self.template = self.kernel.save_state()
+        self.serial_template = serial.save_state()
+        self.setup_seconds = time.perf_counter() - began
+        self.merge_seconds = 0.0
+        self._load(self.serial_template)  # the stage's state (components, pairs), cut into shares
+
+    # The run loop's calls -----------------------------------------------------------------------
+    def add_seismic_input(self, provider) -> None:
+        raise NotImplementedError("a distributed run takes its providers from the simulation")
+
+    def _load(self, serial_state: dict) -> None:
+        local = slice_state(serial_state, self.template, self.simulation, self.parts, self.mine,
+                            self.comm.rank, self.components)
+        self.kernel.load_state(local)
+        self._pull = True
+
+    def _local_state(self, u, v, a):
+        if self._pull:
+            rows = (3 * self.mine.nodes[:, None] + np.arange(3)).reshape(-1)
+            self.u, self.v, self.a = (np.ascontiguousarray(x[rows]) for x in (u, v, a))
+            self._pull = False
+        return self.u, self.v, self.a
+
+    def _gather(self, u, v, a) -> None:
+        """Owned u, v, a into the whole-model arrays on rank 0; the ranks' state into the serial
+        stepper there. A non-finite value on any rank makes every rank's u non-finite (the run
+        loop's check then stops every rank alike)."""
+        began = time.perf_counter()
+        n = 3 * self.mine.n_owned
+        owned = np.stack([self.u[:n], self.v[:n], self.a[:n]])
+        finite = self.comm.allreduce(bool(np.isfinite(owned).all()), op=MPI.LAND)
+        pieces = self.comm.gather(owned, root=0)
+        states = self.comm.gather(self.kernel.save_state(), root=0)
+        if self.comm.rank == 0:
+            for piece, mine in zip(pieces, self.shares):
+                rows = (3 * mine.nodes[:mine.n_owned, None] + np.arange(3)).reshape(-1)
+                u[rows], v[rows], a[rows] = piece
+            self.serial.load_state(merge_states(self.serial_template, states, self.simulation, self.parts,
+                                                self.shares, self.all_components))
+        if not finite:
+            u[:] = np.nan
+        self.merge_seconds += time.perf_counter() - began
+
+    def reset_energy(self, u, v, a, t0: float) -> None:
+        self._pull = True
+        lu, lv, la = self._local_state(u, v, a)
+        self.kernel.reset_energy(lu, lv, la, t0)
+        self._gather(u, v, a)
+
+    def run(self, u, v, a, n_steps: int, t0: float) -> float:
+        lu, lv, la = self._local_state(u, v, a)
+        end = self.kernel.run(lu, lv, la, n_steps, t0)
+        self._gather(u, v, a)
+        return end
+
+    def energy(self):
+        return self.serial.energy() if self.comm.rank == 0 else self.kernel.energy()
+
+    def reactions(self):
+        return self.serial.reactions() if self.comm.rank == 0 else None
+
+    def save_state(self) -> dict:
+        return self.serial.save_state() if self.comm.rank == 0 else {}
+
+    def load_state(self, state: dict) -> None:
+        self.serial.load_state(state)
+        self._load(state)
+
+    def phase_seconds(self) -> dict:
+        phases = dict(self.kernel.phase_seconds())
+        phases["merge"] = self.merge_seconds
+        return phases
+
+    def reset_phase_seconds(self) -> None:
+        self.kernel.reset_phase_seconds()
+        self.merge_seconds = 0.0
+
+    def describe(self) -> dict:
+        """For run.json: ranks, nodes owned and ghosted per rank, bytes exchanged per step."""
+        counts = self.comm.gather((self.mine.n_owned, len(self.mine.nodes) - self.mine.n_owned,
+                                   int(self.exchange.bytes_sent_per_step)), root=0)
+        if self.comm.rank != 0:
+            return {}
+        return {"ranks": self.comm.size, "owned_nodes": [c[0] for c in counts],
+                "ghost_nodes": [c[1] for c in counts], "bytes_sent_per_step": [c[2] for c in counts],
+                "setup_seconds": round(self.setup_seconds, 3)}
+
+
+class SilentWriter:
+    """The writer of ranks other than 0: rank 0 writes every output of a distributed run."""
+
+    writes = False
+    show_progress = False
+    checkpoint_problem = None
+
+    def __init__(self, out_dir) -> None:
+        from pathlib import Path
+
+        self.out_dir = Path(out_dir)
+        self.times: list[float] = []
+
+    @property
+    def started(self) -> bool:
+        return False
+
+    def start(self) -> None:
+        pass
+
+    def resume(self, meta: dict, arrays: dict, resumed_at: float) -> None:
+        pass
+
+    def sample(self, t: float, *args, **kwargs) -> None:
+        self.times.append(t)
+
+    def checkpoint_state(self) -> tuple[dict, dict]:
+        return {}, {}
+
+    def fail(self, reason: str, interrupted: bool = False) -> None:
+        pass
+
+    def finish(self, **kwargs) -> dict:
+        return {}
+
+
+def threads_per_rank(comm: MPI.Comm) -> int | None:
+    """OpenMP threads for each of the ranks sharing this machine's cores (None: serial, the caller
+    decides), unless OMP_NUM_THREADS says otherwise."""
+    if comm.size == 1 or os.environ.get("OMP_NUM_THREADS", "").isdigit():
+        return None
+    # Not a collective (rank 0 alone builds the plan's trial stepper): mpirun's environment.
+    on_node = int(os.environ.get("OMPI_COMM_WORLD_LOCAL_SIZE", os.environ.get("MPI_LOCALNRANKS", comm.size)))
+    return max(1, min(len(os.sched_getaffinity(0)), (os.cpu_count() or 1) // on_node))
