@@ -685,7 +685,25 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
                          + ", ".join(f"{name} {entry['ms_per_step']:.3f} ms" for name, entry in phases.items()
                                      if name != "other" or entry["ms_per_step"] > 0.0),
         "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion",
+        **distributed_plan(simulation),
     }
+
+
+def distributed_plan(simulation: Simulation) -> dict:
+    """check's line under `mpirun -n N` (N > 1): how the ranks share the step (pyfem/distributed.py)."""
+    from pyfem import distributed
+
+    comm = distributed.world()
+    if comm.size == 1:
+        return {}
+    parts = distributed.partition(simulation, comm.size)
+    shares = [distributed.share(simulation, parts, rank) for rank in range(comm.size)]
+    owned = [mine.n_owned for mine in shares]
+    ghosts = [len(mine.nodes) - mine.n_owned for mine in shares]
+    return {"MPI ranks": f"{comm.size}: owned nodes {owned}, ghost nodes {ghosts} ({48 * max(ghosts):,} bytes "
+                         f"received per step by the busiest rank); every rank builds the whole model"
+                         + (" and solves the static stage" if "static" in simulation.scene else "")
+                         + "; the time estimate above is one rank's for the whole model"}
 
 
 def lts_stability_line(report: dict) -> str:

@@ -16,7 +16,6 @@ equal those of the uninterrupted 2-rank run.
 import json
 import os
 import random
-import re
 import shutil
 import signal
 import subprocess
@@ -28,6 +27,7 @@ import numpy as np
 import pytest
 
 from pyfem import checkpoint
+from pyfem.compare import histories, largest_difference, relative_difference, scales
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = "/usr/bin/python3"
@@ -39,6 +39,9 @@ SCENES = {
     "free_field": ("workflows/scenes/box_vertical_sv.toml", ()),
     "contact": ("tests/scenes/mpi_hard_contact.toml", ()),
     "damage": ("tests/scenes/mpi_weak_layer.toml", ()),
+    # Roller y faces (plane strain, kernel constraints with reactions) under a vertical P wave.
+    "rollers": ("workflows/scenes/box_vertical_sv.toml", ("--set", "boundary.face.ymin.type=roller", "--set",
+                                                          "boundary.face.ymax.type=roller", "--set", "wave.type=P")),
 }
 
 
@@ -64,56 +67,9 @@ def runs(tmp_path_factory):
     return out
 
 
-def dimension(name: str) -> str:
-    """What a history column measures: its differences are measured against the run's largest
-    value of that kind (a bonded pair's relative displacement is round-off of the mesh's
-    displacement, a dynamic stress at the first instants a trace of the static one)."""
-    if name in ("slip", "gap") or re.fullmatch(r"d?u[xyz](_ff)?", name):
-        return "length"
-    if re.fullmatch(r"v[xyz](_ff)?", name):
-        return "velocity"
-    if re.fullmatch(r"a[xyz](_ff)?", name):
-        return "acceleration"
-    if re.fullmatch(r"s(xx|yy|zz|xy|yz|xz|1|1_dynamic)", name):
-        return "stress"
-    if name in ("N", "T"):
-        return "force"
-    return name
-
-
-def read_history(path: Path) -> tuple[list[str], np.ndarray]:
-    return path.read_text().splitlines()[0].split(","), np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-
-
-def scales(run_dir: Path) -> dict:
-    """Largest |value| of each dimension over the run's histories; energy.csv: the largest energy."""
-    peaks: dict = {}
-    for name in histories(run_dir):
-        header, rows = read_history(run_dir / name)
-        for k, column in enumerate(header):
-            kind = "energy" if name.name == "energy.csv" and column != "t" else dimension(column)
-            peaks[kind] = max(peaks.get(kind, 0.0), float(np.abs(rows[:, k]).max()))
-    return peaks
-
-
-def relative_difference(path: Path, reference: Path, scale: dict) -> float:
-    """Largest |difference| / scale of its column's dimension over a CSV history's rows."""
-    header, x = read_history(reference)
-    _, y = read_history(path)
-    assert x.shape == y.shape, (path, x.shape, y.shape)
-    kinds = ["energy" if reference.name == "energy.csv" and h != "t" else dimension(h) for h in header]
-    return float((np.abs(x - y) / np.array([max(scale[kind], 1e-300) for kind in kinds])).max())
-
-
-def histories(out_dir: Path) -> list[Path]:
-    return sorted(p.relative_to(out_dir) for p in out_dir.rglob("*.csv"))
-
-
 def assert_equal_to_serial(run_dir: Path, serial: Path) -> float:
     """Every history to TOLERANCE; fields.h5 datasets too; returns the largest difference."""
-    assert histories(run_dir) == histories(serial)
-    scale = scales(serial)
-    worst = max(relative_difference(run_dir / name, serial / name, scale) for name in histories(serial))
+    worst = largest_difference(run_dir, serial)
     assert worst < TOLERANCE, worst
     if (serial / "fields.h5").exists():
         with h5py.File(serial / "fields.h5") as expected, h5py.File(run_dir / "fields.h5") as got:
@@ -141,6 +97,9 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
     if name == "contact":
         assert max(serial["pair_states"]["sliding"]) > 0 and max(serial["pair_states"]["separated"]) > 0
         assert parallel["pair_states"] == serial["pair_states"]
+    if name == "rollers":
+        reactions = np.loadtxt(runs[name, 1] / "reactions.csv", delimiter=",", skiprows=1)
+        assert np.abs(reactions[:, 2]).max() > 1e8  # the rollers hold the P wave's lateral stress
     if name == "damage":
         weak = serial["nonlinear_regions"]["weak"]
         assert weak["yielded_volume"] > 0.0 and weak["peak_damage"] > 0.0
@@ -161,6 +120,26 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
     assert parallel["energy"]["balance_error"] < 1e-12
     print(f"{name} on {ranks} ranks: largest difference from serial {worst:.2e}; owned {mpi['owned_nodes']}, "
           f"ghosts {mpi['ghost_nodes']}, bytes per step {mpi['bytes_sent_per_step']}")
+
+
+def test_check_under_mpirun_prints_the_plan_once_with_the_ranks_share():
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
+                             "check", SCENES["contact"][0]], cwd=REPO, env=ENV, capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert result.stdout.count("title:") == 1
+    line = next(text for text in result.stdout.splitlines() if text.startswith("MPI ranks:"))
+    assert "2: owned nodes [" in line and "ghost nodes" in line
+
+
+def test_a_bad_key_under_mpirun_is_one_line_and_exit_2():
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
+                             "run", SCENES["contact"][0], "--set", "time.duration=-1"], cwd=REPO, env=ENV,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2
+    errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "time.duration" in errors[0], result.stderr
+    assert "Traceback" not in result.stderr
 
 
 def test_kill_9_of_two_ranks_then_resume_on_two_gives_the_uninterrupted_run(runs, tmp_path):
