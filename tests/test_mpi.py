@@ -144,7 +144,7 @@ def test_a_bad_key_under_mpirun_is_one_line_and_exit_2():
 
 def test_kill_9_of_two_ranks_then_resume_on_two_gives_the_uninterrupted_run(runs, tmp_path):
     scene, _ = SCENES["contact"]
-    extra = ("--set", "output.checkpoint_interval=0.5", "--set", "time.duration=4.0")
+    extra = ("--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
     reference = tmp_path / "reference"
     pyfem_run(2, scene, reference, *extra)
     out = tmp_path / "killed"
@@ -172,3 +172,31 @@ def test_kill_9_of_two_ranks_then_resume_on_two_gives_the_uninterrupted_run(runs
             assert relative_difference(out / name, reference / name, scale) < 1e-13
         else:  # kinematics, pair and material states: their own values, restored
             assert (out / name).read_bytes() == (reference / name).read_bytes(), name
+
+
+def test_a_serial_checkpoint_resumes_on_three_ranks(tmp_path):
+    """A checkpoint is the serial stepper's state whatever the rank count that wrote it: a serial
+    run killed after its first checkpoint continues on 3 ranks to the uninterrupted serial run's
+    histories (to round-off: the rest of the run is distributed)."""
+    scene, _ = SCENES["contact"]
+    extra = ("--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
+    reference = tmp_path / "reference"
+    pyfem_run(1, scene, reference, *extra)
+    out = tmp_path / "killed"
+    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), *extra], cwd=REPO, env=ENV,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while not (out / checkpoint.CHECKPOINT_NAME).exists():
+        assert process.poll() is None, "the run ended before its first checkpoint"
+        assert time.monotonic() < deadline, "no checkpoint after 300 s"
+        time.sleep(0.05)
+    time.sleep(random.uniform(0.0, 0.5))
+    process.send_signal(signal.SIGKILL)
+    process.wait(timeout=60)
+    pyfem_run(3, scene, out, *extra, "--resume")
+    resumed = summary(out)
+    assert resumed["status"] == "finished" and resumed["mpi"]["ranks"] == 3
+    worst = largest_difference(out, reference)
+    print(f"serial run killed at t > {resumed['resumed'][0]['t']:.3f} s, resumed on 3 ranks: largest difference "
+          f"{worst:.2e}")
+    assert worst < TOLERANCE

@@ -1,12 +1,12 @@
 """The MPI scaling model of docs/scaling.md: per rank and per step, the work of the explicit
 step against the bytes and messages of the ghost exchange, for a mesh partitioned into compact
-subdomains of N nodes each (the plan for `mpirun -n N`, issue 13; not measured: there is no MPI
-run yet).
+subdomains of N nodes each (issue 13): the model for 100+ ranks. The first implementation
+(pyfem/distributed.py) is measured on this machine's 2 cores by workflows/strong_scaling.py.
 
     work      t_work = 3 N c                      c: kernel seconds per dof and step on one core
     ghosts    G = s N^(2/3)                        s ~ 6 for a cube-like subdomain (6 faces)
-    exchange  t_x = m L + 24 G / B                 m neighbour messages, L latency, B bandwidth,
-                                                   24 bytes = u (3 doubles) per ghost node
+    exchange  t_x = m L + 48 G / B                 m neighbour messages, L latency, B bandwidth,
+                                                   48 bytes = v, a (6 doubles) per ghost node
     share     t_x / t_work, and with the exchange overlapped by the interior product:
               max(0, t_x - t_interior) / t_work, t_interior = 3 (N - G) c
 
@@ -20,7 +20,7 @@ NETWORKS = (("InfiniBand HDR", 1.5e-6, 20.0e9), ("10 GbE, TCP", 30.0e-6, 1.1e9),
             ("shared memory (one machine)", 0.5e-6, 8.0e9))
 SURFACE_FACTOR = 6.0      # ghost nodes G = s N^(2/3) of a cube-like subdomain
 NEIGHBOURS = 14           # messages per step: faces and edges of a graph partition (26 at most)
-BYTES_PER_GHOST = 24.0    # u_{n+1}: 3 float64 per ghost node
+BYTES_PER_GHOST = 48.0    # v_{n+1}, a_{n+1}: 6 float64 per ghost node (cpp_kernels/mpi_exchange.hpp)
 
 
 def rows(cost_per_dof: float, element_factor: float, sizes=(1_000, 3_000, 10_000, 30_000, 100_000, 300_000)):
