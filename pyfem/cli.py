@@ -128,6 +128,12 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     """Validate the scene and print the solver's plan for it."""
     scene = load_scene(scene_path, overrides)
     report_warnings(scene)
+    from pyfem.distributed import launched_rank
+
+    if launched_rank() > 0:  # under mpirun rank 0 alone builds and times the plan
+        import dolfinx  # noqa: F401  (MPI and PETSc start collectively: rank 0's import waits for ours)
+
+        return 0
     from pyfem import solver  # heavy (dolfinx, kernels): only after validation
 
     show_plan(scene, solver.plan(scene))
@@ -314,12 +320,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python3 -m pyfem``; returns the exit status. Under ``mpirun -n N`` every
     rank runs it and rank 0 speaks (pyfem/distributed.py): the others' lines are the same or
     nothing, except a failure of their own, whose traceback they print."""
-    if int(os.environ.get("OMPI_COMM_WORLD_RANK", os.environ.get("PMI_RANK", "0"))) > 0:
+    from pyfem.distributed import launched_rank
+
+    if launched_rank() > 0:
         import contextlib
 
         with open(os.devnull, "w") as quiet, contextlib.redirect_stdout(quiet), contextlib.redirect_stderr(quiet):
             try:
                 return _main(argv)
+            except SystemExit:  # argparse's usage errors and --help: rank 0 has said it
+                raise
             except BaseException:
                 import traceback
 

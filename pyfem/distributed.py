@@ -30,16 +30,27 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-from mpi4py import MPI
 
 
-def world() -> MPI.Comm:
-    """The communicator of an `mpirun` launch (one rank: a serial run)."""
+def world():
+    """The communicator of an `mpirun` launch (one rank: a serial run): mpi4py's COMM_WORLD
+    (imported here: `launched_rank` and the command line need no MPI)."""
+    from mpi4py import MPI
+
     return MPI.COMM_WORLD
 
 
-def is_root() -> bool:
-    return MPI.COMM_WORLD.rank == 0
+# Set by the launchers for each rank: Open MPI, PMIx (Open MPI 4+, srun --mpi=pmix), MPICH/Hydra, Slurm.
+RANK_VARIABLES = ("OMPI_COMM_WORLD_RANK", "PMIX_RANK", "PMI_RANK", "SLURM_PROCID")
+
+
+def launched_rank() -> int:
+    """This process's rank as its launcher says, without initialising MPI (0: not launched as a rank)."""
+    for name in RANK_VARIABLES:
+        value = os.environ.get(name, "")
+        if value.isdigit():
+            return int(value)
+    return 0
 
 
 def bisection(points: np.ndarray, parts: int) -> np.ndarray:
@@ -64,7 +75,7 @@ def bisection(points: np.ndarray, parts: int) -> np.ndarray:
     return owner
 
 
-def pair_groups(pairs: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+def pair_groups(pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(nodes, group) of every node in a pair: pairs sharing a node form one group."""
     nodes = np.unique(pairs)
     local = np.searchsorted(nodes, pairs)
@@ -100,7 +111,7 @@ def partition(simulation, size: int) -> Partition:
     pair_owner = None
     if simulation.contact_arrays is not None and len(simulation.contact_arrays["pairs"]):
         pairs = simulation.contact_arrays["pairs"]
-        nodes, group = pair_groups(pairs, len(owner))
+        nodes, group = pair_groups(pairs)
         # A group goes to the owner of its lowest node.
         first = np.full(group.max() + 1, len(owner), dtype=np.int64)
         np.minimum.at(first, group, nodes)
@@ -137,13 +148,15 @@ class Share:
     dashpots: np.ndarray
 
 
+def _ranges(starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """The concatenated index ranges starts[k] .. ends[k]-1 (CSR rows gathered)."""
+    counts = ends - starts
+    return np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+
+
 def _block_neighbours(stiffness: sp.bsr_matrix, rows: np.ndarray) -> np.ndarray:
     """Block columns of the given block rows."""
-    indptr, indices = stiffness.indptr, stiffness.indices
-    starts, ends = indptr[rows], indptr[rows + 1]
-    counts = ends - starts
-    gather = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-    return np.unique(indices[gather])
+    return np.unique(stiffness.indices[_ranges(stiffness.indptr[rows], stiffness.indptr[rows + 1])])
 
 
 def share(simulation, parts: Partition, rank: int) -> Share:
@@ -214,7 +227,7 @@ def _local_seismic_input(arrays: dict, mine: Share):
     keep = keep[mine.local_of[nodes[keep]] < mine.n_owned]
     starts, ends = arrays["node_ptr"][keep], arrays["node_ptr"][keep + 1]
     counts = ends - starts
-    entries = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    entries = _ranges(starts, ends)
     node_ptr = np.zeros(len(keep) + 1, dtype=np.int64)
     np.cumsum(counts, out=node_ptr[1:])
     return _kernels.SeismicInput(
@@ -234,23 +247,9 @@ def _local_contact(arrays: dict, mine: Share):
     return make_contact_pairs(local)
 
 
-def _local_component(nonlinear, name: str, cells: np.ndarray, mine: Share):
-    from pyfem import _kernels
-
-    arrays = nonlinear.arrays[name]
-    options = nonlinear.options.get(name, {})
-    gradients = arrays.kernel_gradients(dense=bool(options.get("mean_dilatation")))
-    if isinstance(gradients, tuple):
-        gradients = (np.ascontiguousarray(gradients[0][cells]), *gradients[1:])
-    else:
-        gradients = np.ascontiguousarray(gradients[cells])
-    cell_nodes = np.ascontiguousarray(mine.local_of[arrays.cell_nodes[cells]], dtype=np.int32)
-    return _kernels.HexahedronElements(cell_nodes, gradients, np.ascontiguousarray(arrays.weights[cells]),
-                                       *nonlinear.laws[name], initial_stress=None, **options)
-
-
 def local_stepper(simulation, mine: Share, exchange):
-    """The kernel's Stepper of one rank's share (`make_stepper`'s objects, restricted)."""
+    """The kernel's Stepper of one rank's share: `pyfem.solver.make_stepper`'s objects restricted to
+    the share (an effect added there must be added here too; tests/test_mpi.py runs each)."""
     from pyfem import _kernels
 
     indptr, indices, blocks = local_matrix(simulation.stiffness, mine)
@@ -258,7 +257,6 @@ def local_stepper(simulation, mine: Share, exchange):
     single = simulation.scene["time"].get("matrix_precision", "double") == "single"
     stepper = _kernels.Stepper(indptr, indices, blocks, mass, simulation.time_step.dt, simulation.alpha,
                                simulation.beta, True, single)
-    keep = [indptr, indices, blocks, mass]  # the kernel borrows them
     if len(mine.dashpots):
         stepper.set_dashpots(np.ascontiguousarray(mine.local_of[simulation.dashpot_nodes[mine.dashpots]],
                                                   dtype=np.int32),
@@ -277,18 +275,18 @@ def local_stepper(simulation, mine: Share, exchange):
     if simulation.nonlinear is not None:
         for name in simulation.nonlinear.arrays:
             for kind, cells in mine.cells[name]:
-                component = _local_component(simulation.nonlinear, name, cells, mine)
+                # Fresh (no initial stress): the state comes with slice_state.
+                component = simulation.nonlinear.new_component(name, initial_stress=None, rows=cells,
+                                                               node_numbers=mine.local_of)
                 stepper.add_internal_force(component, count_energy=kind == "counted")
                 components.append((name, kind, cells))
-    state = getattr(simulation, "static", None)
-    if state is not None and np.any(state.hand_over_force):  # pyfem/static.py add_hand_over_force
-        from pyfem.static import hand_over_force_provider
+    if simulation.static is not None:  # the stage's out-of-balance on the owned nodes (pyfem/static.py)
+        from pyfem.static import add_hand_over_force
 
-        force = np.asarray(state.hand_over_force, dtype=np.float64).reshape(-1, 3)[mine.nodes].copy()
-        force[mine.n_owned:] = 0.0
-        stepper.add_seismic_input(hand_over_force_provider(force.reshape(-1)))
+        add_hand_over_force(stepper, simulation, nodes=mine.nodes[:mine.n_owned], local_of=mine.local_of,
+                            n_local=len(mine.nodes))
     stepper.set_partition(mine.n_owned, exchange)
-    return stepper, components, keep
+    return stepper, components
 
 
 # --- The serial stepper's state (save_state blocks) cut into shares and put together again ---
@@ -328,7 +326,7 @@ def slice_state(serial: dict, template: dict, simulation, parts: Partition, mine
     for key in ("stepper/energy", "stepper/provider_work", "stepper/provider_power"):
         out[key] = serial[key] if rank == 0 else np.zeros_like(np.frombuffer(serial[key], dtype=np.float64)).tobytes()
     force = np.frombuffer(serial["stepper/internal_force"], dtype=np.float64).reshape(-1, 3)
-    if force.size:
+    if len(template["stepper/internal_force"]):  # a rank without element-loop cells has none
         out["stepper/internal_force"] = np.ascontiguousarray(force[mine.nodes]).tobytes()
     if mine.constraints is not None:
         out["stepper/reactions"] = np.ascontiguousarray(
@@ -367,8 +365,11 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
     force = np.frombuffer(serial_template["stepper/internal_force"], dtype=np.float64).reshape(-1, 3).copy()
     if force.size:
         for s, mine in zip(states, shares):
-            force[mine.nodes[:mine.n_owned]] = np.frombuffer(
-                s["stepper/internal_force"], dtype=np.float64).reshape(-1, 3)[:mine.n_owned]
+            rows = mine.nodes[:mine.n_owned]
+            if len(s["stepper/internal_force"]):
+                force[rows] = np.frombuffer(s["stepper/internal_force"], dtype=np.float64).reshape(-1, 3)[:mine.n_owned]
+            else:  # no element-loop cell touches this rank's nodes
+                force[rows] = 0.0
         out["stepper/internal_force"] = force.tobytes()
     if shares[0].constraints is not None:
         reactions = np.frombuffer(serial_template["stepper/reactions"], dtype=np.float64).reshape(-1, 3).copy()
@@ -429,7 +430,7 @@ class DistributedStepper:
         self.shares = [share(simulation, self.parts, q) for q in range(comm.size)] if comm.rank == 0 else None
         self.mine = self.shares[0] if comm.rank == 0 else share(simulation, self.parts, comm.rank)
         self.exchange = _exchange(comm, self.parts, self.mine)
-        self.kernel, self.components, self._borrowed = local_stepper(simulation, self.mine, self.exchange)
+        self.kernel, self.components = local_stepper(simulation, self.mine, self.exchange)
         self.all_components = comm.gather(self.components, root=0)
         self.template = self.kernel.save_state()
         self.serial_template = serial.save_state()
@@ -438,9 +439,6 @@ class DistributedStepper:
         self._load(self.serial_template)  # the stage's state (components, pairs), cut into shares
 
     # The run loop's calls -----------------------------------------------------------------------
-    def add_seismic_input(self, provider) -> None:
-        raise NotImplementedError("a distributed run takes its providers from the simulation")
-
     def _load(self, serial_state: dict) -> None:
         local = slice_state(serial_state, self.template, self.simulation, self.parts, self.mine,
                             self.comm.rank, self.components)
@@ -461,6 +459,8 @@ class DistributedStepper:
         began = time.perf_counter()
         n = 3 * self.mine.n_owned
         owned = np.stack([self.u[:n], self.v[:n], self.a[:n]])
+        from mpi4py import MPI
+
         finite = self.comm.allreduce(bool(np.isfinite(owned).all()), op=MPI.LAND)
         pieces = self.comm.gather(owned, root=0)
         states = self.comm.gather(self.kernel.save_state(), root=0)
@@ -509,14 +509,32 @@ class DistributedStepper:
         self.merge_seconds = 0.0
 
     def describe(self) -> dict:
-        """For run.json: ranks, nodes owned and ghosted per rank, bytes exchanged per step."""
+        """For run.json, per rank: owned and ghost nodes, bytes sent per step, element-loop cells it
+        counts and halo cells it also computes, contact pairs; and the set-up time."""
+        cells = sum(len(rows) for region in self.mine.cells.values() for kind, rows in region if kind == "counted")
+        halo = sum(len(rows) for region in self.mine.cells.values() for kind, rows in region if kind == "halo")
+        pairs = 0 if self.mine.pairs is None else len(self.mine.pairs)
         counts = self.comm.gather((self.mine.n_owned, len(self.mine.nodes) - self.mine.n_owned,
-                                   int(self.exchange.bytes_sent_per_step)), root=0)
+                                   int(self.exchange.bytes_sent_per_step), cells, halo, pairs), root=0)
         if self.comm.rank != 0:
             return {}
-        return {"ranks": self.comm.size, "owned_nodes": [c[0] for c in counts],
-                "ghost_nodes": [c[1] for c in counts], "bytes_sent_per_step": [c[2] for c in counts],
+        columns = ("owned_nodes", "ghost_nodes", "bytes_sent_per_step", "element_loop_cells", "halo_cells", "pairs")
+        return {"ranks": self.comm.size, **{name: [c[k] for c in counts] for k, name in enumerate(columns)},
                 "setup_seconds": round(self.setup_seconds, 3)}
+
+
+def abort_all(error: BaseException) -> None:
+    """After a failure that not every rank shares (a write on rank 0, a kernel error on one rank):
+    one line on stderr, then MPI_Abort, which ends every rank of the job (the others would wait
+    forever in their next exchange). Exit status 1."""
+    import sys
+    import traceback
+
+    comm = world()
+    traceback.print_exception(error, file=sys.__stderr__)
+    print(f"error: rank {comm.rank} of {comm.size}: {type(error).__name__}: {error}; ending every rank",
+          file=sys.__stderr__, flush=True)
+    comm.Abort(1)
 
 
 class SilentWriter:

@@ -84,6 +84,17 @@ class ElementArrays:
             return (self.inverse_jacobians, *self.tensor)
         return np.ascontiguousarray(self.gradients)
 
+    def subset(self, rows: np.ndarray, node_numbers: np.ndarray | None = None) -> "ElementArrays":
+        """The arrays of the cells at `rows` (indices into `cells`); node_numbers: the new number of
+        every node (an MPI rank's local numbering, pyfem/distributed.py), None: unchanged."""
+        cell_nodes = self.cell_nodes[rows]
+        if node_numbers is not None:
+            cell_nodes = node_numbers[cell_nodes]
+        return dataclasses.replace(
+            self, cells=self.cells[rows], cell_nodes=np.ascontiguousarray(cell_nodes, dtype=np.int32),
+            inverse_jacobians=np.ascontiguousarray(self.inverse_jacobians[rows]),
+            weights=np.ascontiguousarray(self.weights[rows]), points=np.ascontiguousarray(self.points[rows]))
+
     @property
     def nbytes(self) -> int:
         """Bytes of the arrays (the kernel borrows them for the whole run)."""
@@ -137,13 +148,19 @@ class NonlinearRegions:
         self.components = [self.new_component(name) for name in self.arrays]
         return self.components
 
-    def new_component(self, name: str, initial_stress="scene"):
+    def new_component(self, name: str, initial_stress="scene", rows: np.ndarray | None = None,
+                      node_numbers: np.ndarray | None = None):
         """A fresh component of region `name` (not stored in `components`): its initial stress is
-        the region's `initial_stress` ("scene"), or the (c, q, 6) array given, or zero (None)."""
+        the region's `initial_stress` ("scene"), or the (c, q, 6) array given, or zero (None).
+        rows, node_numbers: only the region's cells at `rows`, nodes renumbered
+        (`ElementArrays.subset`; an MPI rank's share, whose state is loaded afterwards)."""
         from pyfem import _kernels
 
         arrays = self.arrays[name]
         sigma0 = self.initial_stress.get(name) if isinstance(initial_stress, str) else initial_stress
+        if rows is not None:
+            arrays = arrays.subset(rows, node_numbers)
+            sigma0 = None if sigma0 is None else np.ascontiguousarray(sigma0[rows])
         options = self.options.get(name, {})
         gradients = arrays.kernel_gradients(dense=bool(options.get("mean_dilatation")))
         return _kernels.HexahedronElements(arrays.cell_nodes, gradients, arrays.weights, *self.laws[name],

@@ -42,13 +42,16 @@ class RunInterrupted(KeyboardInterrupt):
 
 class StopSignals:
     """Context manager: SIGINT and SIGTERM raise RunInterrupted inside it; the previous handlers after.
+    always_defer: a signal only marks a stop, acted on at the end of the next deferred block (MPI
+    ranks stop together, `stop_together`).
 
     Only the main thread can receive Python signal handlers: elsewhere it does nothing.
     """
 
-    def __init__(self):
+    def __init__(self, always_defer: bool = False):
         self._previous: dict[int, object] = {}
         self._deferring = False
+        self._always_defer = always_defer
         self._pending: int | None = None
 
     def __enter__(self) -> "StopSignals":
@@ -63,10 +66,20 @@ class StopSignals:
         self._previous.clear()
 
     def _handler(self, signal_number: int, frame) -> None:
-        if self._deferring:
+        if self._deferring or self._always_defer:
             self._pending = signal_number
             return
         raise RunInterrupted(signal_number)
+
+    def stop_together(self, comm) -> None:
+        """Under mpirun (always_defer): if any rank has a stop signal pending, every rank gets it,
+        so all of them leave their deferred block at the same sample. A collective: every rank
+        calls it at the same point."""
+        from mpi4py import MPI
+
+        pending = comm.allreduce(self._pending or 0, op=MPI.MAX)
+        if pending:
+            self._pending = pending
 
     @contextlib.contextmanager
     def deferred(self, reraise: bool = True):

@@ -676,13 +676,14 @@ class RunWriter:
                                 np.asarray(contact.deterioration()), np.asarray(contact.state(), dtype=float)])
 
     def finish(self, wall_seconds: float, loop_seconds: float, phases: dict | None = None,
-               checkpoints: dict | None = None) -> dict:
+               checkpoints: dict | None = None, mpi: dict | None = None) -> dict:
         """Closes histories and fields, draws the plots, writes the final run.json; returns the summary.
 
         phases: pyfem.solver.phase_split of the time loop (run.json "time_per_step": ms per step and
         share of the loop for the kernel's update, element_loop, input_forces, stiffness, contact,
         and output (writing the samples) and other). checkpoints: run.json "checkpoints" (written,
-        seconds, interval) of this sitting. Times are over every sitting of a resumed run."""
+        seconds, interval) of this sitting. mpi: run.json "mpi" under mpirun (pyfem.distributed.
+        DistributedStepper.describe). Times are over every sitting of a resumed run."""
         self._close_histories()
         self._close_fields()
         summary = self._summary
@@ -695,8 +696,8 @@ class RunWriter:
             summary["time_per_step"] = phases
         if checkpoints is not None:
             summary["checkpoints"] = checkpoints
-        if getattr(self, "distributed", None):
-            summary["mpi"] = self.distributed  # pyfem.distributed.DistributedStepper.describe
+        if mpi:
+            summary["mpi"] = mpi
         self._partial_summary()
         self._plots()
         _write_json(self.out_dir / "run.json", summary)

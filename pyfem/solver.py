@@ -433,6 +433,9 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
         from pyfem import local_stepping
 
         local_stepping.check_supported(scene, constraints is not None, beta)
+        if MPI.COMM_WORLD.size > 1:  # before anything is distributed: every rank says the same
+            raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs on "
+                             "one rank for now)")
         cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
         node_levels = local_stepping.node_levels(stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
                                                  pinned=np.unique(dashpot_nodes))
@@ -551,12 +554,9 @@ def make_stepper(simulation: Simulation, distribute: bool = True):
     from pyfem.distributed import world
 
     comm = world()
-    if distribute and comm.size > 1:
+    if distribute and comm.size > 1:  # (local time stepping is refused under mpirun by `prepare`)
         from pyfem.distributed import DistributedStepper
 
-        if simulation.node_levels is not None:
-            raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs on one "
-                             "rank for now)")
         return DistributedStepper(simulation, make_stepper(simulation, distribute=False), comm)
     kernel_threads()
     indptr, indices, blocks = bsr_arrays(simulation.stiffness)
@@ -813,7 +813,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     root = comm.rank == 0  # under mpirun rank 0 writes everything (pyfem/distributed.py)
     wall_start = time.perf_counter()
     saved = checkpoints.read_checkpoint(out_dir) if resume else None  # refused before any work
-    with StopSignals() as signals:
+    # Under mpirun a stop signal is acted on by every rank at the same sample (`stop_together`).
+    with StopSignals(always_defer=comm.size > 1) as signals:
         simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
         if saved is not None:
             saved.check_model(simulation)
@@ -896,17 +897,17 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                         due = clock.due() if comm.size == 1 else comm.bcast(clock.due(), root=0)
                         if due and done < n_outputs:
                             write_checkpoint()
+                        if comm.size > 1:
+                            signals.stop_together(comm)
                     bar.update()
                     if progress is not None:
                         progress(t)
             total = timing()
             phases = phase_split(total["phases"], total["loop_seconds"], total["output_seconds"])
-            distributed = stepper.describe() if comm.size > 1 else None
-            if distributed:
-                writer.distributed = distributed
             summary = writer.finish(wall_seconds=total["wall_seconds"], loop_seconds=total["loop_seconds"],
                                     phases=phases, checkpoints={"written": clock.count, "seconds": clock.seconds,
-                                                                "interval": clock.interval})
+                                                                "interval": clock.interval},
+                                    mpi=stepper.describe() if comm.size > 1 else None)
             if root:
                 (Path(out_dir) / checkpoints.CHECKPOINT_NAME).unlink(missing_ok=True)  # finished: nothing to resume
             return summary
@@ -931,4 +932,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                     writer.fail(f"{type(error).__name__}: {error}")
                 reached = f"t = {writer.times[-1]:.6g} s" if writer.times else "no sample"
                 error.add_note(f"run failed; the results up to {reached} are kept in {writer.out_dir}")
+            if comm.size > 1:  # the other ranks wait in a message that will never come: end them all
+                from pyfem.distributed import abort_all
+
+                abort_all(error)
             raise

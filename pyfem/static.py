@@ -1058,12 +1058,19 @@ def hand_over_force_provider(force: np.ndarray, ramp: float = 0.0):
                                  np.ascontiguousarray(nodal[nodes]), np.zeros((len(nodes), 3)))
 
 
-def add_hand_over_force(stepper, simulation) -> None:
-    """Adds the stage's out-of-balance force to the stepper (nothing without a solved stage)."""
+def add_hand_over_force(stepper, simulation, nodes=None, local_of=None, n_local: int = 0) -> None:
+    """Adds the stage's out-of-balance force to the stepper (nothing without a solved stage). An MPI
+    rank's share (pyfem/distributed.py): only at `nodes` (its owned nodes), renumbered by
+    `local_of`, in a force vector of its n_local nodes."""
     state = getattr(simulation, "static", None)
     if state is None or not np.any(state.hand_over_force):
         return
-    stepper.add_seismic_input(hand_over_force_provider(state.hand_over_force))
+    force = state.hand_over_force
+    if nodes is not None:
+        local = np.zeros((n_local, 3))
+        local[local_of[nodes]] = np.asarray(force, dtype=np.float64).reshape(-1, 3)[nodes]
+        force = local.reshape(-1)
+    stepper.add_seismic_input(hand_over_force_provider(force))
 
 
 def plan_report(scene: typing.Mapping, model) -> dict:

@@ -1,13 +1,17 @@
 """`mpirun -n N python3 -m pyfem run SCENE` equals the serial run (issue 13, docs/scaling.md).
 
-The same command line on 1, 2 and 3 ranks (3: an odd partition), three scenes:
+The same command line on 1, 2 and 3 ranks (3: an odd partition), five scenes:
 - the free-field box under a vertical SV pulse (workflows/scenes/box_vertical_sv.toml);
 - a contact scene whose pairs break their bonds, slide and open (tests/scenes/mpi_hard_contact.toml);
-- a damage scene whose weak layer yields (tests/scenes/mpi_weak_layer.toml).
+- a damage scene whose weak layer yields (tests/scenes/mpi_weak_layer.toml);
+- the same layer in Q2 with Rayleigh damping, float32 matrix blocks and a plasticity zone that one
+  of 3 ranks does not reach (tests/scenes/mpi_q2_zone.toml);
+- roller faces (kernel constraints) with their reactions under a vertical P wave.
 Every monitor, pair and energy history agrees to 1e-10 relative to the size of the quantity
 (the largest value of its group of columns: u, v, a, stress, slip and gap, ...), and so do the
 fields and run.json's peaks; before that the test asserts that the wave arrived, the pairs slid
-and the layer yielded, and that the ranks did share the model (owned nodes, ghosts, messages).
+and the layer yielded, the rollers were loaded, and that the ranks did share the model (owned
+nodes, ghosts, messages, element-loop cells).
 The distributed run differs from the serial one only in the order of the sums (its matrix rows
 and the energy account are summed per rank): round-off, not an algorithmic difference.
 Then kill -9 of a 2-rank run after its first checkpoint, `--resume` on 2 ranks: the histories
@@ -39,6 +43,9 @@ SCENES = {
     "free_field": ("workflows/scenes/box_vertical_sv.toml", ()),
     "contact": ("tests/scenes/mpi_hard_contact.toml", ()),
     "damage": ("tests/scenes/mpi_weak_layer.toml", ()),
+    # Q2 (tensor-form element loop), stiffness-proportional Rayleigh damping (halo cells damp too),
+    # float32 matrix blocks, and a plasticity zone at x < 50 m that some ranks do not reach.
+    "zone": ("tests/scenes/mpi_q2_zone.toml", ()),
     # Roller y faces (plane strain, kernel constraints with reactions) under a vertical P wave.
     "rollers": ("workflows/scenes/box_vertical_sv.toml", ("--set", "boundary.face.ymin.type=roller", "--set",
                                                           "boundary.face.ymax.type=roller", "--set", "wave.type=P")),
@@ -100,6 +107,12 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
     if name == "rollers":
         reactions = np.loadtxt(runs[name, 1] / "reactions.csv", delimiter=",", skiprows=1)
         assert np.abs(reactions[:, 2]).max() > 1e8  # the rollers hold the P wave's lateral stress
+    if name == "zone":
+        assert serial["nonlinear_regions"]["weak"]["yielded_volume"] > 0.0
+        assert serial["energy"]["damping_work"] > 0.0
+        if ranks == 3:
+            assert 0 in parallel["mpi"]["element_loop_cells"], "a rank without element-loop cells"
+        assert sum(parallel["mpi"]["element_loop_cells"]) == serial["nonlinear_regions"]["weak"]["cells"]
     if name == "damage":
         weak = serial["nonlinear_regions"]["weak"]
         assert weak["yielded_volume"] > 0.0 and weak["peak_damage"] > 0.0
@@ -132,14 +145,33 @@ def test_check_under_mpirun_prints_the_plan_once_with_the_ranks_share():
     assert "2: owned nodes [" in line and "ghost nodes" in line
 
 
-def test_a_bad_key_under_mpirun_is_one_line_and_exit_2():
+@pytest.mark.parametrize("setting, key", [("time.duration=-1", "time.duration"),
+                                          ("time.local_stepping=true", "time.local_stepping")])
+def test_a_bad_key_under_mpirun_is_one_line_and_exit_2(setting, key):
     result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
-                             "run", SCENES["contact"][0], "--set", "time.duration=-1"], cwd=REPO, env=ENV,
+                             "run", SCENES["free_field"][0], "--set", setting], cwd=REPO, env=ENV,
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 2
     errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
-    assert len(errors) == 1 and "time.duration" in errors[0], result.stderr
+    assert len(errors) == 1 and key in errors[0], result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_a_failure_on_one_rank_ends_every_rank(tmp_path):
+    """Rank 0 cannot create the run's monitors/ (a file of that name is in the way) after the ranks
+    have shared the model: it says so and MPI_Abort ends the job, instead of rank 1 waiting forever
+    in its next exchange."""
+    out = tmp_path / "blocked"
+    out.mkdir()
+    (out / "monitors").write_text("in the way\n")
+    began = time.monotonic()
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
+                             "run", SCENES["free_field"][0], "--out", str(out)], cwd=REPO, env=ENV,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode != 0
+    assert "error: rank 0 of 2: FileExistsError" in result.stderr and "ending every rank" in result.stderr
+    assert time.monotonic() - began < 120
+    assert (out / "monitors").read_text() == "in the way\n"  # nothing of the user's overwritten
 
 
 def test_kill_9_of_two_ranks_then_resume_on_two_gives_the_uninterrupted_run(runs, tmp_path):
