@@ -174,28 +174,44 @@ def test_a_failure_on_one_rank_ends_every_rank(tmp_path):
     assert (out / "monitors").read_text() == "in the way\n"  # nothing of the user's overwritten
 
 
-def test_kill_9_of_two_ranks_then_resume_on_two_gives_the_uninterrupted_run(runs, tmp_path):
-    scene, _ = SCENES["contact"]
-    extra = ("--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
-    reference = tmp_path / "reference"
-    pyfem_run(2, scene, reference, *extra)
-    out = tmp_path / "killed"
-    process = subprocess.Popen([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
-                                "run", scene, "--out", str(out), *extra], cwd=REPO, env=ENV,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+CHECKPOINTED_RUN = ("--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
+
+
+def kill_after_first_checkpoint(ranks: int, scene: str, out: Path, window: float) -> None:
+    """Starts `pyfem run` on `ranks` ranks and kills it (kill -9: mpirun and every rank) at a random
+    time within `window` s after its first checkpoint."""
+    command = [PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), *CHECKPOINTED_RUN]
+    if ranks > 1:
+        command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)] + command
+    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
     deadline = time.monotonic() + 300
     while not (out / checkpoint.CHECKPOINT_NAME).exists():
         assert process.poll() is None, "the run ended before its first checkpoint"
         assert time.monotonic() < deadline, "no checkpoint after 300 s"
         time.sleep(0.05)
-    time.sleep(random.uniform(0.0, 1.0))
-    os.killpg(process.pid, signal.SIGKILL)  # mpirun and both ranks
+    time.sleep(random.uniform(0.0, window))
+    os.killpg(process.pid, signal.SIGKILL)
     process.wait(timeout=60)
-    assert json.loads((out / "run.json").read_text())["status"] == "running"
-    pyfem_run(2, scene, out, *extra, "--resume")
+    assert json.loads((out / "run.json").read_text())["status"] == "running"  # as a killed run leaves it
+
+
+def killed_and_resumed(tmp_path: Path, ranks: int, resumed_on: int, window: float) -> tuple[Path, Path, dict]:
+    """(the killed and resumed run, the uninterrupted run on `ranks`, the resumed run's run.json) of
+    the contact scene, killed on `ranks` ranks after its first checkpoint, resumed on `resumed_on`."""
+    scene, _ = SCENES["contact"]
+    reference, out = tmp_path / "reference", tmp_path / "killed"
+    pyfem_run(ranks, scene, reference, *CHECKPOINTED_RUN)
+    kill_after_first_checkpoint(ranks, scene, out, window)
+    pyfem_run(resumed_on, scene, out, *CHECKPOINTED_RUN, "--resume")
     resumed = summary(out)
-    print(f"killed at t > {resumed['resumed'][0]['t']:.3f} s; resumed on 2 ranks")
-    assert resumed["status"] == "finished"
+    assert resumed["status"] == "finished" and resumed.get("mpi", {}).get("ranks", 1) == resumed_on
+    print(f"killed on {ranks} rank(s) at t > {resumed['resumed'][0]['t']:.3f} s; resumed on {resumed_on}")
+    return out, reference, resumed
+
+
+def test_kill_9_of_two_ranks_then_resume_on_two_gives_the_uninterrupted_run(tmp_path):
+    out, reference, _ = killed_and_resumed(tmp_path, ranks=2, resumed_on=2, window=1.0)
     assert histories(out) == histories(reference)
     scale = scales(reference)
     for name in histories(reference):
@@ -210,25 +226,7 @@ def test_a_serial_checkpoint_resumes_on_three_ranks(tmp_path):
     """A checkpoint is the serial stepper's state whatever the rank count that wrote it: a serial
     run killed after its first checkpoint continues on 3 ranks to the uninterrupted serial run's
     histories (to round-off: the rest of the run is distributed)."""
-    scene, _ = SCENES["contact"]
-    extra = ("--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
-    reference = tmp_path / "reference"
-    pyfem_run(1, scene, reference, *extra)
-    out = tmp_path / "killed"
-    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), *extra], cwd=REPO, env=ENV,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 300
-    while not (out / checkpoint.CHECKPOINT_NAME).exists():
-        assert process.poll() is None, "the run ended before its first checkpoint"
-        assert time.monotonic() < deadline, "no checkpoint after 300 s"
-        time.sleep(0.05)
-    time.sleep(random.uniform(0.0, 0.5))
-    process.send_signal(signal.SIGKILL)
-    process.wait(timeout=60)
-    pyfem_run(3, scene, out, *extra, "--resume")
-    resumed = summary(out)
-    assert resumed["status"] == "finished" and resumed["mpi"]["ranks"] == 3
+    out, reference, _ = killed_and_resumed(tmp_path, ranks=1, resumed_on=3, window=0.5)
     worst = largest_difference(out, reference)
-    print(f"serial run killed at t > {resumed['resumed'][0]['t']:.3f} s, resumed on 3 ranks: largest difference "
-          f"{worst:.2e}")
+    print(f"largest difference from the uninterrupted serial run {worst:.2e}")
     assert worst < TOLERANCE
