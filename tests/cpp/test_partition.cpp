@@ -1,0 +1,189 @@
+// A model split into two ranks' shares (Stepper::set_partition, docs/scaling.md) and stepped in
+// two threads that exchange the ghosts' v and a through memory, as MPI ranks do through
+// messages: every owned node follows the whole model's stepper, and the shares' energy accounts
+// add up to the whole's.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <random>
+#include <thread>
+#include <vector>
+
+#include "random_system.hpp"
+#include "stable_step.hpp"
+#include "stepper.hpp"
+
+namespace cavern {
+namespace {
+
+/// Both threads wait here until both have arrived (reusable).
+class Barrier {
+ public:
+  void arrive_and_wait() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const int generation = generation_;
+    if (++arrived_ == 2) {
+      arrived_ = 0;
+      ++generation_;
+      condition_.notify_all();
+    } else {
+      condition_.wait(lock, [&] { return generation_ != generation; });
+    }
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable condition_;
+  int arrived_ = 0, generation_ = 0;
+};
+
+/// One share of a whole model: owned nodes first, then ghosts, both ascending.
+struct Share {
+  std::vector<std::int64_t> nodes;  // global node of each local node
+  std::int64_t n_owned = 0;
+  testing::BlockSystem system;      // blocks with an owned index (and the ghosts' diagonal)
+};
+
+Share make_share(const testing::BlockSystem& whole, std::int64_t first, std::int64_t end) {
+  const std::int64_t n = whole.n_nodes;
+  Share share;
+  std::vector<char> is_local(n, 0);
+  for (std::int64_t i = first; i < end; ++i) {
+    share.nodes.push_back(i);
+    is_local[i] = 1;
+  }
+  share.n_owned = end - first;
+  for (std::int64_t i = first; i < end; ++i)  // ghosts: the owned rows' columns
+    for (std::int64_t k = whole.indptr[i]; k < whole.indptr[i + 1]; ++k)
+      if (!is_local[whole.indices[k]]) is_local[whole.indices[k]] = 2;
+  for (std::int64_t j = 0; j < n; ++j)
+    if (is_local[j] == 2) share.nodes.push_back(j);
+  const std::int64_t m = static_cast<std::int64_t>(share.nodes.size());
+  share.system.n_nodes = m;
+  share.system.dense.assign(9 * m * m, 0.0);
+  std::vector<char> pattern(m * m, 0);
+  std::vector<std::int64_t> local(n, -1);
+  for (std::int64_t l = 0; l < m; ++l) local[share.nodes[l]] = l;
+  for (std::int64_t i = 0; i < n; ++i)
+    for (std::int64_t k = whole.indptr[i]; k < whole.indptr[i + 1]; ++k) {
+      const std::int64_t li = local[i], lj = local[whole.indices[k]];
+      if (li < 0 || lj < 0 || (li >= share.n_owned && lj >= share.n_owned && li != lj)) continue;
+      pattern[li * m + lj] = 1;
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+          share.system.dense[(3 * li + r) * 3 * m + 3 * lj + c] =
+              whole.dense[(3 * i + r) * 3 * n + 3 * whole.indices[k] + c];
+    }
+  testing::compress(share.system, pattern);
+  for (const std::int64_t node : share.nodes) share.system.mass.push_back(whole.mass[node]);
+  return share;
+}
+
+/// The two shares' ghost exchange through memory: each posts v, a of every node, the other reads
+/// its ghosts' values by global number.
+class MemoryExchange : public NodeExchange {
+ public:
+  MemoryExchange(const Share& mine, std::vector<double>& mailbox_out,
+                 const std::vector<double>& mailbox_in, Barrier& barrier)
+      : mine_(mine), out_(mailbox_out), in_(mailbox_in), barrier_(barrier) {}
+
+  void exchange(double* v, double* a) override {
+    for (std::int64_t l = 0; l < mine_.n_owned; ++l)
+      for (int c = 0; c < 3; ++c) {
+        out_[6 * mine_.nodes[l] + c] = v[3 * l + c];
+        out_[6 * mine_.nodes[l] + 3 + c] = a[3 * l + c];
+      }
+    barrier_.arrive_and_wait();  // both posted
+    for (std::size_t l = mine_.n_owned; l < mine_.nodes.size(); ++l)
+      for (int c = 0; c < 3; ++c) {
+        v[3 * l + c] = in_[6 * mine_.nodes[l] + c];
+        a[3 * l + c] = in_[6 * mine_.nodes[l] + 3 + c];
+      }
+    barrier_.arrive_and_wait();  // both read: the mailboxes may be written again
+  }
+
+ private:
+  const Share& mine_;
+  std::vector<double>& out_;
+  const std::vector<double>& in_;
+  Barrier& barrier_;
+};
+
+TEST(Partition, TwoSharesSteppedLikeRanksFollowTheWholeModel) {
+  const testing::BlockSystem whole = testing::random_spd_system(60, 3, 11);
+  const double dt = 0.8 * 2.0 / std::sqrt(gershgorin_bound(whole.view(), whole.mass.data()));
+  const StepperParameters parameters{dt, 0.05, 0.0};
+  const std::vector<std::int32_t> dashpot_nodes = {3, 41};  // one in each share
+  std::vector<double> C(18, 0.0);
+  for (int k = 0; k < 2; ++k)
+    for (int c = 0; c < 3; ++c) C[9 * k + 4 * c] = 0.7;
+
+  std::mt19937_64 generator(5);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  const std::int64_t n_dofs = whole.n_dofs();
+  std::vector<double> u0(n_dofs), v0(n_dofs), a0(n_dofs, 0.0);
+  for (double& value : u0) value = 0.01 * uniform(generator);
+  for (double& value : v0) value = 0.1 * uniform(generator);
+  constexpr std::int64_t kSteps = 400;
+
+  Stepper reference(whole.view(), whole.mass.data(), parameters);
+  reference.set_dashpots(dashpot_nodes.data(), 2, C.data());
+  std::vector<double> u = u0, v = v0, a = a0;
+  reference.reset_energy(u.data(), v.data(), a.data(), 0.0);
+  reference.run(u.data(), v.data(), a.data(), kSteps, 0.0);
+
+  const Share shares[2] = {make_share(whole, 0, 30), make_share(whole, 30, 60)};
+  ASSERT_GT(shares[0].nodes.size(), 30u);  // there are ghosts to exchange
+  std::vector<double> mailbox[2] = {std::vector<double>(2 * n_dofs), std::vector<double>(2 * n_dofs)};
+  Barrier barrier;
+  std::vector<double> lu[2], lv[2], la[2];
+  EnergyReport reports[2];
+  auto rank = [&](int r) {
+    const Share& share = shares[r];
+    Stepper stepper(share.system.view(), share.system.mass.data(), parameters);
+    const std::int32_t local_dashpot[1] = {r == 0 ? 3 : 41 - 30};
+    stepper.set_dashpots(local_dashpot, 1, C.data() + 9 * r);
+    stepper.set_partition(share.n_owned,
+                          std::make_shared<MemoryExchange>(share, mailbox[r], mailbox[1 - r], barrier));
+    for (const std::int64_t node : share.nodes)
+      for (int c = 0; c < 3; ++c) {
+        lu[r].push_back(u0[3 * node + c]);
+        lv[r].push_back(v0[3 * node + c]);
+        la[r].push_back(a0[3 * node + c]);
+      }
+    stepper.reset_energy(lu[r].data(), lv[r].data(), la[r].data(), 0.0);
+    stepper.run(lu[r].data(), lv[r].data(), la[r].data(), kSteps, 0.0);
+    reports[r] = stepper.energy();
+  };
+  std::thread first(rank, 0), second(rank, 1);
+  first.join();
+  second.join();
+
+  double largest = 0.0, difference = 0.0;
+  for (int r = 0; r < 2; ++r)
+    for (std::int64_t l = 0; l < static_cast<std::int64_t>(shares[r].nodes.size()); ++l)
+      for (int c = 0; c < 3; ++c) {  // owned and ghosts: a ghost holds its owner's state
+        const std::int64_t d = 3 * shares[r].nodes[l] + c;
+        largest = std::max(largest, std::abs(u[d]));
+        difference = std::max(difference, std::abs(lu[r][3 * l + c] - u[d]));
+      }
+  EXPECT_GT(largest, 1e-3);  // the model moved
+  EXPECT_LT(difference, 1e-13 * largest);
+
+  const EnergyReport whole_report = reference.energy();
+  const double scale = std::max(std::abs(whole_report.total), whole_report.damping_work);
+  EXPECT_GT(whole_report.damping_work, 1e-3 * scale);  // the dashpots and alpha did work
+  EXPECT_NEAR(reports[0].kinetic + reports[1].kinetic, whole_report.kinetic, 1e-12 * scale);
+  EXPECT_NEAR(reports[0].strain + reports[1].strain, whole_report.strain, 1e-12 * scale);
+  EXPECT_NEAR(reports[0].initial + reports[1].initial, whole_report.initial, 1e-12 * scale);
+  EXPECT_NEAR(reports[0].damping_work + reports[1].damping_work, whole_report.damping_work,
+              1e-12 * scale);
+  EXPECT_LT(std::abs(reports[0].balance + reports[1].balance), 1e-12 * scale);
+}
+
+}  // namespace
+}  // namespace cavern
