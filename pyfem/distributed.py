@@ -219,22 +219,17 @@ def _exchange(comm: MPI.Comm, parts: Partition, mine: Share):
     return _kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(mine.nodes))
 
 
-def _local_seismic_input(arrays: dict, mine: Share):
-    from pyfem import _kernels
-
+def _owned_input_arrays(arrays: dict, mine: Share) -> dict:
+    """`Simulation.input_arrays` of the share's owned input nodes, in local numbering."""
     nodes = arrays["nodes"].astype(np.int64)
-    keep = np.flatnonzero(mine.local_of[nodes] >= 0)
-    keep = keep[mine.local_of[nodes[keep]] < mine.n_owned]
+    local = mine.local_of[nodes]
+    keep = np.flatnonzero((local >= 0) & (local < mine.n_owned))
     starts, ends = arrays["node_ptr"][keep], arrays["node_ptr"][keep + 1]
-    counts = ends - starts
     entries = _ranges(starts, ends)
     node_ptr = np.zeros(len(keep) + 1, dtype=np.int64)
-    np.cumsum(counts, out=node_ptr[1:])
-    return _kernels.SeismicInput(
-        arrays["table_t0"], arrays["table_dt"], arrays["g"], arrays["dg"], arrays["ddg"], node_ptr,
-        mine.local_of[nodes[keep]].astype(np.int32), np.ascontiguousarray(arrays["table"][entries]),
-        np.ascontiguousarray(arrays["tau"][entries]), np.ascontiguousarray(arrays["P"][entries]),
-        np.ascontiguousarray(arrays["Q"][entries]))
+    np.cumsum(ends - starts, out=node_ptr[1:])
+    return dict(arrays, node_ptr=node_ptr, nodes=local[keep].astype(np.int32),
+                **{key: np.ascontiguousarray(arrays[key][entries]) for key in ("table", "tau", "P", "Q")})
 
 
 def _local_contact(arrays: dict, mine: Share):
@@ -251,6 +246,7 @@ def local_stepper(simulation, mine: Share, exchange):
     """The kernel's Stepper of one rank's share: `pyfem.solver.make_stepper`'s objects restricted to
     the share (an effect added there must be added here too; tests/test_mpi.py runs each)."""
     from pyfem import _kernels
+    from pyfem.solver import seismic_input_kernel
 
     indptr, indices, blocks = local_matrix(simulation.stiffness, mine)
     mass = np.ascontiguousarray(simulation.mass[mine.nodes])
@@ -266,7 +262,7 @@ def local_stepper(simulation, mine: Share, exchange):
         stepper.set_constraints(np.ascontiguousarray(mine.local_of[c.nodes[mine.constraints]], dtype=np.int32),
                                 np.ascontiguousarray(c.projection[mine.constraints]))
     if simulation.input_arrays is not None:
-        stepper.add_seismic_input(_local_seismic_input(simulation.input_arrays, mine))
+        stepper.add_seismic_input(seismic_input_kernel(_owned_input_arrays(simulation.input_arrays, mine)))
     contact = None
     if simulation.contact_arrays is not None:
         contact = _local_contact(simulation.contact_arrays, mine)

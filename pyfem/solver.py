@@ -502,15 +502,22 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
     kernel = bare_kernel(simulation.alpha)
     stepper = LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
     if simulation.input_arrays is not None:
-        a = simulation.input_arrays
-        kernel.add_seismic_input(_kernels.SeismicInput(
-            a["table_t0"], a["table_dt"], a["g"], a["dg"], a["ddg"], a["node_ptr"], a["nodes"],
-            a["table"], a["tau"], a["P"], a["Q"]))
+        kernel.add_seismic_input(seismic_input_kernel(simulation.input_arrays))
     if simulation.static is not None:  # the stage's out-of-balance, held constant (pyfem/static.py)
         from pyfem.static import add_hand_over_force
 
         add_hand_over_force(stepper, simulation)
     return stepper
+
+
+def seismic_input_kernel(arrays: dict):
+    """The kernel's SeismicInput from `Simulation.input_arrays` (pyfem/seismic/forces.py), or from
+    an MPI rank's share of them (pyfem/distributed.py)."""
+    from pyfem import _kernels
+
+    return _kernels.SeismicInput(arrays["table_t0"], arrays["table_dt"], arrays["g"], arrays["dg"], arrays["ddg"],
+                                 arrays["node_ptr"], arrays["nodes"], arrays["table"], arrays["tau"], arrays["P"],
+                                 arrays["Q"])
 
 
 def make_contact_pairs(arrays: dict):
@@ -572,10 +579,7 @@ def make_stepper(simulation: Simulation, distribute: bool = True):
         stepper.set_constraints(np.ascontiguousarray(simulation.constraints.nodes, dtype=np.int32),
                                 np.ascontiguousarray(simulation.constraints.projection, dtype=np.float64))
     if simulation.input_arrays is not None:
-        a = simulation.input_arrays
-        stepper.add_seismic_input(_kernels.SeismicInput(
-            a["table_t0"], a["table_dt"], a["g"], a["dg"], a["ddg"], a["node_ptr"], a["nodes"],
-            a["table"], a["tau"], a["P"], a["Q"]))
+        stepper.add_seismic_input(seismic_input_kernel(simulation.input_arrays))
     handed_over = getattr(simulation.static, "components", None) is not None  # a relaxation stage ran
     if simulation.contact_arrays is not None:
         contact = getattr(simulation.static, "contact", None)  # the stage's pairs, rebased, go on
