@@ -136,6 +136,16 @@ MohrCoulombStep drive_axisymmetric(const MohrCoulombMaterial& m, const MohrCoulo
   return step_for(e);
 }
 
+// Rows of `vectors` orthonormal within `tolerance`.
+void expect_orthonormal(const Matrix3& vectors, double tolerance) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      double product = 0.0;
+      for (int k = 0; k < 3; ++k) product += vectors[i][k] * vectors[j][k];
+      EXPECT_NEAR(product, i == j ? 1.0 : 0.0, tolerance) << "rows " << i << ", " << j;
+    }
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------- principal decomposition
@@ -162,12 +172,7 @@ TEST(MaterialPrincipal, ReproducesTensorsWithRepeatedEigenvalues) {
       EXPECT_GE(eigen.values[0], eigen.values[1]);
       EXPECT_GE(eigen.values[1], eigen.values[2]);
       // Orthonormal, right-handed basis that reproduces A.
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) {
-          double product = 0.0;
-          for (int k = 0; k < 3; ++k) product += eigen.vectors[i][k] * eigen.vectors[j][k];
-          EXPECT_NEAR(product, i == j ? 1.0 : 0.0, 1e-15 * 4.0);
-        }
+      expect_orthonormal(eigen.vectors, 1e-15 * 4.0);
       // The fast estimate used to screen elastic steps is within its documented 1e-8 of the
       // deviatoric size (here at most 7).
       const auto estimate = symmetric_eigenvalues_estimate(A);
@@ -229,12 +234,7 @@ TEST(MaterialPrincipal, ClosedFormMatchesJacobiAcrossGaps) {
           }
           EXPECT_GE(fast.values[0], fast.values[1]);
           EXPECT_GE(fast.values[1], fast.values[2]);
-          for (int i = 0; i < 3; ++i)
-            for (int j = 0; j < 3; ++j) {
-              double product = 0.0;
-              for (int k = 0; k < 3; ++k) product += fast.vectors[i][k] * fast.vectors[j][k];
-              EXPECT_NEAR(product, i == j ? 1.0 : 0.0, 1e-13);
-            }
+          expect_orthonormal(fast.vectors, 1e-13);
           const auto& e = fast.vectors;  // right-handed: e0 x e1 = e2
           EXPECT_NEAR(e[0][1] * e[1][2] - e[0][2] * e[1][1], e[2][0], 1e-13);
           EXPECT_NEAR(e[0][2] * e[1][0] - e[0][0] * e[1][2], e[2][1], 1e-13);
