@@ -54,11 +54,26 @@ def histories(out_dir: Path) -> list[Path]:
     return sorted(p.relative_to(out_dir) for p in out_dir.rglob("*.csv"))
 
 
-def largest_difference(run_dir: Path, reference: Path) -> float:
-    """The largest relative_difference over every history of `reference` (the same files in both)."""
+def largest_differences(run_dir: Path, reference: Path) -> dict:
+    """Per dimension (`dimension`; "energy" for energy.csv), the largest relative_difference over
+    every history of `reference` (the same files in both)."""
     names = histories(reference)
     if histories(run_dir) != names:
         raise ValueError(f"{run_dir} and {reference} hold different histories")
     scale = scales(reference)
-    return max(relative_difference(run_dir / name, reference / name, scale) for name in names)
+    worst: dict = {}
+    for name in names:
+        header, x = read_history(reference / name)
+        _, y = read_history(run_dir / name)
+        if x.shape != y.shape:
+            raise ValueError(f"{name}: {y.shape} rows and columns against {x.shape}")
+        for k, column in enumerate(header):
+            kind = "energy" if name.name == "energy.csv" and column != "t" else dimension(column)
+            difference = float(np.abs(x[:, k] - y[:, k]).max()) / max(scale[kind], 1e-300)
+            worst[kind] = max(worst.get(kind, 0.0), difference)
+    return worst
 
+
+def largest_difference(run_dir: Path, reference: Path) -> float:
+    """The largest of `largest_differences`: over every column of every history."""
+    return max(largest_differences(run_dir, reference).values())

@@ -1,11 +1,13 @@
 """`mpirun -n N python3 -m pyfem run SCENE` equals the serial run (issue 13, docs/scaling.md).
 
-The same command line on 1, 2 and 3 ranks (3: an odd partition), five scenes:
+The same command line on 1, 2 and 3 ranks (3: an odd partition), six scenes:
 - the free-field box under a vertical SV pulse (workflows/scenes/box_vertical_sv.toml);
 - a contact scene whose pairs break their bonds, slide and open (tests/scenes/mpi_hard_contact.toml);
 - a damage scene whose weak layer yields (tests/scenes/mpi_weak_layer.toml);
 - the same layer in Q2 with Rayleigh damping, float32 matrix blocks and a plasticity zone that one
   of 3 ranks does not reach (tests/scenes/mpi_q2_zone.toml);
+- a circular tunnel in the tetrahedral mesh of a user's gmsh script (meshes/tunnel_in_box_tet.geo),
+  its wall traction-free (tests/scenes/mpi_tunnel_tet.toml);
 - roller faces (kernel constraints) with their reactions under a vertical P wave.
 Every monitor, pair and energy history agrees to 1e-10 relative to the size of the quantity
 (the largest value of its group of columns: u, v, a, stress, slip and gap, ...), and so do the
@@ -31,7 +33,7 @@ import numpy as np
 import pytest
 
 from pyfem import checkpoint
-from pyfem.compare import histories, largest_difference, relative_difference, scales
+from pyfem.compare import histories, largest_difference, largest_differences, relative_difference, scales
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = "/usr/bin/python3"
@@ -46,6 +48,8 @@ SCENES = {
     # Q2 (tensor-form element loop), stiffness-proportional Rayleigh damping (halo cells damp too),
     # float32 matrix blocks, and a plasticity zone at x < 50 m that some ranks do not reach.
     "zone": ("tests/scenes/mpi_q2_zone.toml", ()),
+    # A cavity in a mesh of a user's gmsh script (tetrahedra, unnamed traction-free wall, rollers).
+    "cavity": ("tests/scenes/mpi_tunnel_tet.toml", ()),
     # Roller y faces (plane strain, kernel constraints with reactions) under a vertical P wave.
     "rollers": ("workflows/scenes/box_vertical_sv.toml", ("--set", "boundary.face.ymin.type=roller", "--set",
                                                           "boundary.face.ymax.type=roller", "--set", "wave.type=P")),
@@ -74,10 +78,20 @@ def runs(tmp_path_factory):
     return out
 
 
-def assert_equal_to_serial(run_dir: Path, serial: Path) -> float:
-    """Every history to TOLERANCE; fields.h5 datasets too; returns the largest difference."""
-    worst = largest_difference(run_dir, serial)
-    assert worst < TOLERANCE, worst
+# Net forces of a long wave on a fine mesh: a = (f - K u) / m, where K u is (omega_max / omega)^2
+# ~ 1e6 times m a for the cavity scene's 2 Hz wavelet and its 0.4 m tetrahedra at the wall, so
+# round-off of the sums in another order (1e-16 of K u) is ~1e-10 of the accelerations and of the
+# rollers' reactions there (measured 6e-10 and 3e-10; u 3e-15, v 3e-12, stress 5e-12).
+NET_FORCE_TOLERANCE = {"cavity": {"acceleration": 1.0e-9, "reaction": 1.0e-9}}
+
+
+def assert_equal_to_serial(run_dir: Path, serial: Path, tolerances: dict | None = None) -> float:
+    """Every history to TOLERANCE (or `tolerances` per dimension, pyfem.compare.dimension); fields.h5
+    datasets to TOLERANCE; returns the largest difference."""
+    differences = largest_differences(run_dir, serial)
+    for kind, difference in differences.items():
+        assert difference < (tolerances or {}).get(kind, TOLERANCE), (kind, difference)
+    worst = max(differences.values())
     if (serial / "fields.h5").exists():
         with h5py.File(serial / "fields.h5") as expected, h5py.File(run_dir / "fields.h5") as got:
             names = []
@@ -104,6 +118,10 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
     if name == "contact":
         assert max(serial["pair_states"]["sliding"]) > 0 and max(serial["pair_states"]["separated"]) > 0
         assert parallel["pair_states"] == serial["pair_states"]
+    if name == "cavity":
+        assert "(unnamed)" in serial["traction_free_surfaces"], "the tunnel's wall is free, not an input face"
+        crown = serial["monitors"]["crown"]
+        assert crown["displacement"] > 2e-4 and crown["s1_dynamic_max"] > 1e3, "the wave reached the wall"
     if name == "rollers":
         reactions = np.loadtxt(runs[name, 1] / "reactions.csv", delimiter=",", skiprows=1)
         assert np.abs(reactions[:, 2]).max() > 1e8  # the rollers hold the P wave's lateral stress
@@ -125,7 +143,7 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
     assert all(n > 0 for n in mpi["owned_nodes"]) and all(n > 0 for n in mpi["ghost_nodes"])
     assert all(b > 0 for b in mpi["bytes_sent_per_step"])
     assert "mpi" not in serial
-    worst = assert_equal_to_serial(runs[name, ranks], runs[name, 1])
+    worst = assert_equal_to_serial(runs[name, ranks], runs[name, 1], NET_FORCE_TOLERANCE.get(name))
     for monitor, peaks in serial["monitors"].items():
         for key, value in peaks.items():
             if isinstance(value, float):
