@@ -79,6 +79,21 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
   }
   element_force_.assign(3 * n_cells * k, 0.0);
   cell_energy_.assign(2 * n_cells, 0.0);
+  if (options.mean_dilatation && geometry.gradients) {
+    // Cell means of the basis gradients, sum_q w_q grad phi_a(x_q) / sum_q w_q: geometry, once.
+    mean_gradients_.assign(3 * n_cells * k, 0.0);
+    for (std::int64_t cell = 0; cell < n_cells; ++cell) {
+      double* mean = mean_gradients_.data() + 3 * cell * k;
+      double volume = 0.0;
+      for (std::int64_t q = 0; q < n_points; ++q) {
+        const double w = geometry.weights[cell * n_points + q];
+        const double* G = geometry.gradients + (cell * n_points + q) * k * 3;
+        volume += w;
+        for (std::int64_t j = 0; j < 3 * k; ++j) mean[j] += w * G[j];
+      }
+      for (std::int64_t j = 0; j < 3 * k; ++j) mean[j] /= volume;
+    }
+  }
 
   // Node -> slots (cell * k + a) by a counting sort over the slots in increasing order, so each
   // node's slots are increasing and the gather sums in a fixed order.
@@ -155,7 +170,8 @@ void HexahedronElementsBase::check_nodes(std::int64_t n_nodes) const {
 std::int64_t HexahedronElementsBase::owned_bytes() const {
   return static_cast<std::int64_t>(sizeof(double) *
                                        (initial_stress_.size() + characteristic_length_.size() +
-                                        element_force_.size() + cell_energy_.size()) +
+                                        element_force_.size() + cell_energy_.size() +
+                                        mean_gradients_.size()) +
                                    sizeof(std::int32_t) * unique_nodes_.size() +
                                    sizeof(std::int64_t) * (node_ptr_.size() + node_slots_.size()));
 }

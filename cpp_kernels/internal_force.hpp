@@ -180,6 +180,7 @@ class HexahedronElementsBase : public InternalForceComponent {
   ElementOptions options_;
   std::vector<double> initial_stress_;         // (c, q, 6) or empty
   std::vector<double> characteristic_length_;  // (c)
+  std::vector<double> mean_gradients_;         // (c, k, 3) cell means of grad phi_a (mean dilatation)
   std::vector<double> element_force_;          // (c, k, 3) of the last cell loop
   std::vector<double> cell_energy_;            // (c, 2): stored, dissipation increment
   std::vector<std::int32_t> unique_nodes_;     // sorted
@@ -343,28 +344,18 @@ class HexahedronElements final : public HexahedronElementsBase {
     for (int a = 0; a < kBasis; ++a)
       for (int i = 0; i < 3; ++i) x_cell[a][i] = x[3 * static_cast<std::int64_t>(nodes[a]) + i];
 
-    // Mean dilatation: cell means of grad phi_a and of tr eps.
+    // Mean dilatation: the cell means of grad phi_a (geometry, computed at construction) and of
+    // tr eps.
     const bool mean_dilatation = options_.mean_dilatation;
-    double mean_gradient[kBasis][3];
+    const double* mean_gradient = mean_dilatation ? mean_gradients_.data() + cell * kBasis * 3
+                                                  : nullptr;
     double mean_trace = 0.0;
-    if (mean_dilatation) {
-      double volume = 0.0;
+    if (mean_dilatation)
       for (int a = 0; a < kBasis; ++a)
-        for (int i = 0; i < 3; ++i) mean_gradient[a][i] = 0.0;
-      for (std::int64_t q = 0; q < n_points; ++q) {
-        const double* G = cell_gradients + q * kBasis * 3;
-        volume += weights[q];
-        for (int a = 0; a < kBasis; ++a)
-          for (int i = 0; i < 3; ++i) mean_gradient[a][i] += weights[q] * G[3 * a + i];
-      }
-      for (int a = 0; a < kBasis; ++a)
-        for (int i = 0; i < 3; ++i) {
-          mean_gradient[a][i] /= volume;
-          mean_trace += x_cell[a][i] * mean_gradient[a][i];
-        }
-    }
+        for (int i = 0; i < 3; ++i) mean_trace += x_cell[a][i] * mean_gradient[3 * a + i];
 
     double force[kBasis][3] = {};
+    double trace_sum = 0.0;  // mean dilatation: sum_q 1/3 tr(s_q), the weight of the mean gradient
     for (std::int64_t q = 0; q < n_points; ++q) {
       const double* G = cell_gradients + q * kBasis * 3;
       // H_il = dx_i/dx_l = sum_a x_a,i dphi_a/dx_l
@@ -389,16 +380,20 @@ class HexahedronElements final : public HexahedronElementsBase {
       s[0][1] = s[1][0] = w * voigt[kXY];
       s[1][2] = s[2][1] = w * voigt[kYZ];
       s[0][2] = s[2][0] = w * voigt[kXZ];
+      if (mean_dilatation) {
+        // 1/3 tr(s) (mean grad phi_a - grad phi_a): the point's part by the deviator of s
+        // below, the mean gradient's once per cell after the loop.
+        const double third_trace = (s[0][0] + s[1][1] + s[2][2]) / 3.0;
+        trace_sum += third_trace;
+        for (int i = 0; i < 3; ++i) s[i][i] -= third_trace;
+      }
       for (int a = 0; a < kBasis; ++a)
         for (int i = 0; i < 3; ++i)
           force[a][i] += s[i][0] * G[3 * a] + s[i][1] * G[3 * a + 1] + s[i][2] * G[3 * a + 2];
-      if (mean_dilatation) {
-        const double third_trace = (s[0][0] + s[1][1] + s[2][2]) / 3.0;
-        for (int a = 0; a < kBasis; ++a)
-          for (int i = 0; i < 3; ++i)
-            force[a][i] += third_trace * (mean_gradient[a][i] - G[3 * a + i]);
-      }
     }
+    if (mean_dilatation)
+      for (int a = 0; a < kBasis; ++a)
+        for (int i = 0; i < 3; ++i) force[a][i] += trace_sum * mean_gradient[3 * a + i];
     double* out = element_force_.data() + cell * kBasis * 3;
     for (int a = 0; a < kBasis; ++a)
       for (int i = 0; i < 3; ++i) out[3 * a + i] = force[a][i];

@@ -185,6 +185,27 @@ TEST(MaterialPrincipal, ReproducesTensorsWithRepeatedEigenvalues) {
   EXPECT_EQ(checks, 120);
 }
 
+TEST(MaterialPrincipal, CosThirdOfAcosMatchesTheTrigonometricForm) {
+  // cos_third_of_acos replaces cos(acos(r) / 3) in the eigenvalue estimate: its stated errors
+  // (principal.hpp) on a dense grid of t = sqrt((1 + r) / 2), the double root t -> 0 included,
+  // and the exact ends r = 1 (c = 1) and r = -1 (c = 1/2).
+  double worst_far = 0.0, worst_near = 0.0, worst = 0.0;
+  for (int i = 0; i <= 200000; ++i) {
+    const double t = i / 200000.0;
+    const double r = std::clamp(2.0 * t * t - 1.0, -1.0, 1.0);
+    const double error = std::abs(cos_third_of_acos(r) - std::cos(std::acos(r) / 3.0));
+    worst = std::max(worst, error);
+    if (t > 0.05) worst_far = std::max(worst_far, error);
+    if (t > 1e-3) worst_near = std::max(worst_near, error);
+  }
+  EXPECT_LT(worst_far, 1e-15);
+  EXPECT_LT(worst_near, 5e-14);
+  EXPECT_LT(worst, 5e-9);
+  EXPECT_NEAR(cos_third_of_acos(1.0), 1.0, 1e-15);
+  EXPECT_NEAR(cos_third_of_acos(-1.0), 0.5, 5e-9);
+  EXPECT_NEAR(cos_third_of_acos(0.0), std::cos(kPi / 6.0), 1e-15);
+}
+
 TEST(MaterialPrincipal, ClosedFormMatchesJacobiAcrossGaps) {
   // symmetric_eigen_fast against symmetric_eigen on spectra from well separated down to gaps
   // just above and below its threshold (1e-3 of the deviatoric size, here 2/3 of the spread) and
