@@ -180,7 +180,7 @@ class HexahedronElementsBase : public InternalForceComponent {
   ElementOptions options_;
   std::vector<double> initial_stress_;         // (c, q, 6) or empty
   std::vector<double> characteristic_length_;  // (c)
-  std::vector<double> mean_gradients_;         // (c, k, 3) cell means of grad phi_a (mean dilatation)
+  std::vector<double> mean_gradients_;         // (c, k, 3) cell means of grad phi_a (B-bar)
   std::vector<double> element_force_;          // (c, k, 3) of the last cell loop
   std::vector<double> cell_energy_;            // (c, 2): stored, dissipation increment
   std::vector<std::int32_t> unique_nodes_;     // sorted

@@ -45,6 +45,7 @@ Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
 }
 
 void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
+  partition_checked_ = false;  // check_partition again at the next run
   for (std::int64_t k = 0; k < count; ++k)
     if (nodes[k] < 0 || nodes[k] >= n_nodes())
       throw std::invalid_argument("dashpot nodes[" + std::to_string(k) +
@@ -65,6 +66,7 @@ void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const 
 
 void Stepper::set_constraints(const std::int32_t* nodes, std::int64_t count,
                               const double* projection) {
+  partition_checked_ = false;  // check_partition again at the next run
   std::vector<char> seen(n_nodes(), 0);
   for (std::int64_t k = 0; k < count; ++k) {
     const std::int32_t node = nodes[k];
@@ -164,6 +166,7 @@ void Stepper::build_implicit_slots() {
 }
 
 void Stepper::set_contact(std::shared_ptr<ContactPairs> contact) {
+  partition_checked_ = false;  // check_partition again at the next run
   if (contact_)
     throw std::invalid_argument(
         "contact: this Stepper already has a ContactPairs; pass all "
@@ -265,9 +268,28 @@ void Stepper::set_partition(std::int64_t n_owned, std::shared_ptr<NodeExchange> 
                                 " must be in [0, " + std::to_string(n_nodes()) + "]");
   n_owned_ = n_owned;
   exchange_ = std::move(exchange);
+  partition_checked_ = false;
+}
+
+void Stepper::check_partition() {
+  if (n_owned_ < 0 || partition_checked_) return;
+  auto require_owned = [this](const std::vector<std::int32_t>& nodes, const std::string& what) {
+    for (const std::int32_t node : nodes)
+      if (node >= n_owned_)
+        throw std::invalid_argument(what + " at node " + std::to_string(node) +
+                                    ", a ghost of this share (owned nodes: [0, " +
+                                    std::to_string(n_owned_) +
+                                    ")): a share's effects must be on its own nodes");
+  };
+  require_owned(dashpot_nodes_given_, "a dashpot");
+  require_owned(constraint_nodes_, "a constraint");
+  for (const auto& provider : providers_) require_owned(provider->nodes(), provider->name());
+  if (contact_) require_owned(contact_->unique_nodes(), "a contact pair");
+  partition_checked_ = true;
 }
 
 void Stepper::add_provider(std::shared_ptr<ForceProvider> provider) {
+  partition_checked_ = false;  // check_partition again at the next run
   provider->check_nodes(n_nodes());
   providers_.push_back(std::move(provider));
   // A provider added mid-run has done no work so far and applied no force at the last step.
@@ -476,6 +498,7 @@ void Stepper::accumulate_work(const double* v) {
 }
 
 double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, double t0) {
+  check_partition();
   if (!energy_started_) reset_energy(u, v, a, t0);
   const std::int64_t n = n_dofs();
   const double dt = parameters_.dt;
@@ -553,6 +576,7 @@ double Stepper::run(double* u, double* v, double* a, std::int64_t n_steps, doubl
 }
 
 void Stepper::reset_energy(const double* u, const double* v, const double* a, double t0) {
+  check_partition();
   const std::int64_t n = n_dofs();
   std::vector<double> Ku(n);
   // The product the steps use (with float blocks: K rounded to float), so that H_0 is the same

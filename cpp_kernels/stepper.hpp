@@ -159,8 +159,10 @@ class Stepper {
   /// its own, the rest ghosts whose rows it computes but does not keep. The energy account then
   /// sums over the owned nodes only (the ranks' accounts add up to the model's), and after each
   /// step `exchange` (null: none) overwrites the ghosts' v and a with their owners'. Dashpots,
-  /// constraints, providers and pairs must be on owned nodes. Throws std::invalid_argument for
-  /// n_owned outside [0, n_nodes].
+  /// constraints, providers and pairs must be on owned nodes: run() and reset_energy() throw
+  /// std::invalid_argument naming the first one on a ghost (a provider whose nodes() is empty
+  /// is not listed and cannot be checked). Throws std::invalid_argument for n_owned outside
+  /// [0, n_nodes].
   void set_partition(std::int64_t n_owned, std::shared_ptr<NodeExchange> exchange);
 
   /// Attaches the interlayer contact pairs (shared). Throws std::invalid_argument for a pair node
@@ -199,6 +201,9 @@ class Stepper {
   std::int64_t n_owned_nodes() const { return n_owned_ < 0 ? n_nodes() : n_owned_; }
 
  private:
+  // With a partition: throws unless dashpots, constraints, listed providers and pairs are on
+  // owned nodes (set_partition); once until an effect or the partition changes.
+  void check_partition();
   template <bool kStiffnessDamping, bool kSymmetric, bool kInternal>
   void pass_b(double* u, double* v, double* a);
   template <bool kInternal>
@@ -257,6 +262,7 @@ class Stepper {
   std::vector<std::shared_ptr<InternalForceComponent>> components_;  // empty: no cost
   std::vector<char> component_counted_;  // per component: its energy is in this account
   std::int64_t n_owned_ = -1;            // set_partition; -1: every node
+  bool partition_checked_ = false;       // the effects were found on owned nodes (check_partition)
   std::shared_ptr<NodeExchange> exchange_;
   std::vector<double> internal_force_;  // g (3 n_nodes) of the last compute, with components
   std::vector<double> internal_damping_;  // beta K0 v_{n+1/2} of the components, when beta != 0

@@ -107,7 +107,7 @@ double mohr_coulomb_yield(const MohrCoulombMaterial& material,
 /// True when the stress (Voigt, tensor shear components) is certainly inside the yield surface
 /// with a round-off margin, from an upper bound of mohr_coulomb_yield in the invariants p and
 /// sqrt(J2) (no eigenvalues): the update's cheapest elastic screen. False says nothing.
-/// Inline: it screens every point of every step (docs/ARCHITECTURE.md "Element loop").
+/// Inline: it screens every point of every step.
 inline bool elastic_by_invariants(const MohrCoulombMaterial& m, const Voigt& s) {
   // p the mean stress, r = sqrt(J2). The deviatoric principal values d1 >= d2 >= d3 obey
   // d1 - d3 <= 2 r, |d2| <= r / sqrt(3) and d1 <= 2 r / sqrt(3), so the worst M-C plane
@@ -118,8 +118,8 @@ inline bool elastic_by_invariants(const MohrCoulombMaterial& m, const Voigt& s) 
   constexpr double kInvRoot3 = 0.57735026918962576451;
   const double p = (s[0] + s[1] + s[2]) / 3.0;
   const double d0 = s[0] - p, d1 = s[1] - p, d2 = s[2] - p;
-  const double J2 = (0.5 * (d0 * d0 + d1 * d1 + d2 * d2) + s[3] * s[3] + s[4] * s[4] + s[5] * s[5]) *
-                    (1.0 + 1e-12);
+  const double J2 =
+      (0.5 * (d0 * d0 + d1 * d1 + d2 * d2) + s[3] * s[3] + s[4] * s[4] + s[5] * s[5]) * (1.0 + 1e-12);
   const double margin = 1e-13 * (m.strength + 4.0 * std::abs(p));
   const double shear_room = m.strength - 2.0 * p * m.sin_phi - margin;
   const double shear_slope = 2.0 + kInvRoot3 * m.sin_phi;

@@ -99,17 +99,21 @@ inline SymmetricEigen symmetric_eigen(const Matrix3& matrix) {
 
 /// cos(acos(r) / 3) for r in [-1, 1], without trigonometric calls: the largest root c in
 /// [1/2, 1] of 4 c^3 - 3 c = r (the triple-angle formula), from a degree-8 polynomial in
-/// t = sqrt((1 + r) / 2) = cos(acos(r) / 2) (a least-squares fit on [0, 1]; c is analytic in t),
-/// then one Newton step on the cubic (skipped where its slope vanishes). Error against std::cos(std::acos(r) / 3): 8e-16 for
-/// t > 0.05, 3e-14 for t > 1e-3, 3.3e-9 at worst as t -> 0, where the root is double (r -> -1,
-/// two repeated eigenvalues, where acos itself is ill-conditioned; tests/cpp/test_mohr_coulomb.cpp).
-/// About 5x cheaper than acos and two cos, which took 12 % of a case-study step.
+/// t = sqrt((1 + r) / 2) = cos(acos(r) / 2) with c(0) = 1/2 held exactly (a least-squares fit of
+/// c - 1/2 on [0, 1]; c is analytic in t), then one Newton step on the cubic (skipped where its
+/// slope vanishes, at the double root r -> -1). Error against std::cos(std::acos(r) / 3): 8e-16
+/// for t > 0.05, 3e-14 for t > 1e-3, 6e-12 at worst, exact at r = -1 and r = 1
+/// (tests/cpp/test_mohr_coulomb.cpp). acos and two cos took 12 % of a case-study step.
 inline double cos_third_of_acos(double r) {
-  static constexpr double kFit[9] = {0.5000000032577789,    0.5773497198231052,
-                                     -0.11109568329459418,  0.05328865598564235,
-                                     -0.03196129538803365,  0.019675718039222124,
-                                     -0.010325492858689753, 0.0037076863358278212,
-                                     -0.000639314329708174};
+  static constexpr double kFit[9] = {0.5,
+                                     0.5773498761953049,
+                                     -0.11109787250615882,
+                                     0.05330241674893086,
+                                     -0.03200716461525087,
+                                     0.01976245260868141,
+                                     -0.010418899351183557,
+                                     0.003761061493294471,
+                                     -0.000651873194735815};
   const double t = std::sqrt(0.5 * (1.0 + r));
   double c = kFit[8];
   for (int k = 7; k >= 0; --k) c = c * t + kFit[k];
@@ -122,7 +126,7 @@ inline double cos_third_of_acos(double r) {
 /// (Smith 1961, "Eigenvalues of a symmetric 3x3 matrix", Commun. ACM 4(4) 168). Several times
 /// faster than symmetric_eigen but, near repeated eigenvalues, accurate only to about 1e-8 of
 /// the deviatoric size |A - tr(A)/3 I| (the cubic's root is double there; cos(acos(r) / 3) by
-/// cos_third_of_acos, without trigonometric calls): use it to screen
+/// cos_third_of_acos, without trigonometric calls), a few 1e-8 at worst: use it to screen
 /// (decide "clearly elastic" with a margin), never for a returned stress.
 inline std::array<double, 3> symmetric_eigenvalues_estimate(const Matrix3& a) {
   const double mean = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
@@ -137,8 +141,8 @@ inline std::array<double, 3> symmetric_eigenvalues_estimate(const Matrix3& a) {
   const double c = cos_third_of_acos(std::clamp(half_det, -1.0, 1.0));
   const double largest = mean + 2.0 * size * c;
   // cos(angle + 2 pi / 3) = -c / 2 - sqrt(3) / 2 sin(angle), sin(angle) = sqrt(1 - c^2).
-  const double smallest =
-      mean + 2.0 * size * (-0.5 * c - 0.86602540378443864676 * std::sqrt(std::max(1.0 - c * c, 0.0)));
+  const double sine = std::sqrt(std::max(1.0 - c * c, 0.0));
+  const double smallest = mean + 2.0 * size * (-0.5 * c - 0.86602540378443864676 * sine);
   return {largest, 3.0 * mean - largest - smallest, smallest};
 }
 

@@ -185,5 +185,32 @@ TEST(Partition, TwoSharesSteppedLikeRanksFollowTheWholeModel) {
   EXPECT_LT(std::abs(reports[0].balance + reports[1].balance), 1e-12 * scale);
 }
 
+TEST(Partition, EffectsOnGhostNodesAreRefused) {
+  // A share's dashpots (and constraints, providers, pairs) must be on its owned nodes: its ghosts'
+  // rows are its owner's to load. Stepping one on a ghost is refused with the node named.
+  const testing::BlockSystem whole = testing::random_spd_system(60, 3, 11);
+  const Share share = make_share(whole, 0, 30);
+  ASSERT_GT(share.nodes.size(), 30u);
+  const double dt = 0.5 * 2.0 / std::sqrt(gershgorin_bound(whole.view(), whole.mass.data()));
+  const std::int64_t n_dofs = 3 * static_cast<std::int64_t>(share.nodes.size());
+  std::vector<double> u(n_dofs, 0.0), v(n_dofs, 0.0), a(n_dofs, 0.0);
+  const std::vector<double> C = {0.7, 0, 0, 0, 0.7, 0, 0, 0, 0.7};
+  Stepper stepper(share.system.view(), share.system.mass.data(), StepperParameters{dt, 0.0, 0.0});
+  const std::int32_t ghost[1] = {static_cast<std::int32_t>(share.n_owned)};
+  stepper.set_dashpots(ghost, 1, C.data());
+  stepper.set_partition(share.n_owned, nullptr);
+  try {
+    stepper.run(u.data(), v.data(), a.data(), 1, 0.0);
+    ADD_FAILURE() << "a dashpot on a ghost node was stepped";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("a dashpot at node 30"), std::string::npos)
+        << error.what();
+  }
+  // On an owned node the same share steps.
+  const std::int32_t owned[1] = {3};
+  stepper.set_dashpots(owned, 1, C.data());
+  EXPECT_NO_THROW(stepper.run(u.data(), v.data(), a.data(), 1, 0.0));
+}
+
 }  // namespace
 }  // namespace cavern
