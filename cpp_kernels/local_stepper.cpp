@@ -34,13 +34,34 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
     max_level_ = std::max(max_level_, level_[i]);
   }
   levels_.resize(max_level_ + 1);
-  // Rows touched by each level's columns, and each node's active (finest touching) level.
+  build_levels();
+  external_.assign(3 * n, 0.0);
+  internal_.assign(3 * n, 0.0);
+  own_power_.assign(2 * n, 0.0);
+  dashpot_slot_.assign(n, -1);
+}
+
+void LocalStepper::build_levels() {
+  const std::int64_t n = n_nodes();
+  const BlockCsrView& stiffness = stiffness_;
+  // Rows touched by each level's columns or components, and each node's active (finest
+  // touching) level.
   std::vector<int> active(n, 0);
+  std::vector<std::uint8_t> loaded(n);
   for (int c = 0; c <= max_level_; ++c) {
     Level& level = levels_[c];
     const int k = max_level_ - c;
     level.step = dt_fine_ * static_cast<double>(std::int64_t{1} << k);
-    level.row_ptr.push_back(0);
+    level.rows.clear();
+    level.row_ptr.assign(1, 0);
+    level.columns.clear();
+    level.blocks.clear();
+    level.own.clear();
+    level.drift.clear();
+    level.component_row.clear();
+    std::fill(loaded.begin(), loaded.end(), 0);
+    for (const auto& component : level.components)
+      for (const std::int32_t node : component->nodes()) loaded[node] = 1;
     for (std::int64_t i = 0; i < n; ++i) {
       const std::int64_t before = static_cast<std::int64_t>(level.columns.size());
       for (std::int64_t b = stiffness.indptr[i]; b < stiffness.indptr[i + 1]; ++b) {
@@ -50,10 +71,11 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
         level.blocks.insert(level.blocks.end(), stiffness.blocks + 9 * b, stiffness.blocks + 9 * b + 9);
       }
       const bool own = level_[i] == k;
-      if (static_cast<std::int64_t>(level.columns.size()) > before || own) {
+      if (static_cast<std::int64_t>(level.columns.size()) > before || own || loaded[i]) {
         level.rows.push_back(static_cast<std::int32_t>(i));
         level.row_ptr.push_back(static_cast<std::int64_t>(level.columns.size()));
         level.own.push_back(own ? 1 : 0);
+        level.component_row.push_back(loaded[i]);
         active[i] = std::max(active[i], c);
       }
     }
@@ -61,9 +83,25 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
     level.external.assign(3 * level.rows.size(), 0.0);
   }
   for (std::int64_t i = 0; i < n; ++i) levels_[active[i]].drift.push_back(static_cast<std::int32_t>(i));
-  external_.assign(3 * n, 0.0);
-  own_power_.assign(2 * n, 0.0);
-  dashpot_slot_.assign(n, -1);
+}
+
+void LocalStepper::add_internal_force(std::shared_ptr<HexahedronElementsBase> component,
+                                      int level) {
+  if (level < 0 || level > max_level_)
+    throw std::invalid_argument("component level " + std::to_string(level) + " must be in [0, " +
+                                std::to_string(max_level_) + "]");
+  component->check_nodes(n_nodes());
+  for (const std::int32_t node : component->nodes())
+    if (level_[node] > level)
+      throw std::invalid_argument("component '" + component->name() + "' at level " +
+                                  std::to_string(level) + " has node " + std::to_string(node) +
+                                  " of the coarser level " + std::to_string(level_[node]) +
+                                  ": a cell steps at the rate of its finest node or coarser");
+  levels_[max_level_ - level].components.push_back(std::move(component));
+  build_levels();
+  build_dashpot_inverses();
+  build_provider_rows();
+  initialised_ = false;
 }
 
 void LocalStepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
@@ -114,6 +152,12 @@ void LocalStepper::add_provider(std::shared_ptr<ForceProvider> provider) {
   std::sort(provider_nodes_.begin(), provider_nodes_.end());
   provider_nodes_.erase(std::unique(provider_nodes_.begin(), provider_nodes_.end()),
                         provider_nodes_.end());
+  providers_.push_back(std::move(provider));
+  build_provider_rows();
+  initialised_ = false;
+}
+
+void LocalStepper::build_provider_rows() {
   for (Level& level : levels_) {
     level.provider_rows.clear();
     for (std::size_t r = 0; r < level.rows.size(); ++r)
@@ -121,8 +165,6 @@ void LocalStepper::add_provider(std::shared_ptr<ForceProvider> provider) {
           std::binary_search(provider_nodes_.begin(), provider_nodes_.end(), level.rows[r]))
         level.provider_rows.push_back(static_cast<std::int32_t>(r));
   }
-  providers_.push_back(std::move(provider));
-  initialised_ = false;
 }
 
 double LocalStepper::work_fraction() const {
@@ -178,6 +220,8 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
   if (!level.provider_rows.empty() && !initial) {
     for (auto& provider : providers_) provider->add_forces(t, u, v, external_.data());
   }
+  // The level's element-loop cells at the new u (their trial state; committed below).
+  for (const auto& component : level.components) component->compute(u, internal_.data());
   const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
   double external_work = 0.0, damping_work = 0.0;
 #pragma omp parallel for schedule(static) if (n_rows >= kMinRowsForThreadsLocal) \
@@ -192,6 +236,11 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
       f[1] -= block[3] * uj[0] + block[4] * uj[1] + block[5] * uj[2];
       f[2] -= block[6] * uj[0] + block[7] * uj[1] + block[8] * uj[2];
     }
+    if (level.component_row[r])
+      for (int d = 0; d < 3; ++d) {
+        f[d] -= internal_[3 * i + d];
+        internal_[3 * i + d] = 0.0;  // ready for the next level's components
+      }
     const double m = mass_[i];
     double* vi = v + 3 * i;
     double* force = level.force.data() + 3 * r;
@@ -241,6 +290,9 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
   }
   energy_.external_work += external_work;
   energy_.damping_work += damping_work;
+  // The initial evaluation only reads the committed state (no step was taken).
+  if (!initial)
+    for (const auto& component : level.components) component->commit();
   if (!level.provider_rows.empty() && !initial)
     for (const std::int32_t node : provider_nodes_)
       for (int d = 0; d < 3; ++d) external_[3 * static_cast<std::int64_t>(node) + d] = 0.0;
@@ -273,7 +325,15 @@ void LocalStepper::initialise(const double* u, const double* v, double t0) {
     for (int d = 0; d < 3; ++d) kinetic += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
   energy_.kinetic = kinetic;
   energy_.strain = strain_energy(u);
-  energy_.initial = energy_.kinetic + energy_.strain;
+  energy_.internal_stored = 0.0;
+  dissipation_at_start_ = 0.0;
+  for (const Level& level : levels_)
+    for (const auto& component : level.components) {
+      energy_.internal_stored += component->stored_energy();
+      dissipation_at_start_ += component->dissipation();
+    }
+  energy_.internal_dissipation = 0.0;
+  energy_.initial = energy_.kinetic + energy_.strain + energy_.internal_stored;
   energy_.external_work = energy_.damping_work = 0.0;
   energy_.balance = 0.0;
   initialised_ = true;
@@ -317,8 +377,15 @@ double LocalStepper::run(double* u, double* v, double* a, std::int64_t n_steps, 
     for (int d = 0; d < 3; ++d) kinetic += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
   energy_.kinetic = kinetic;
   energy_.strain = strain_energy(u);
-  energy_.balance = energy_.kinetic + energy_.strain - energy_.initial - energy_.external_work +
-                    energy_.damping_work;
+  energy_.internal_stored = 0.0;
+  energy_.internal_dissipation = -dissipation_at_start_;
+  for (const Level& level : levels_)
+    for (const auto& component : level.components) {
+      energy_.internal_stored += component->stored_energy();
+      energy_.internal_dissipation += component->dissipation();
+    }
+  energy_.balance = energy_.kinetic + energy_.strain + energy_.internal_stored - energy_.initial -
+                    energy_.external_work + energy_.damping_work + energy_.internal_dissipation;
   return t0 + static_cast<double>(n_steps) * step;
 }
 

@@ -1,7 +1,8 @@
 // Multi-rate explicit stepping (local time stepping) for M a + d(v) + K u = f_ext(t), lumped M:
 // the scheme of docs/lts_plan.md (Diaz & Grote's leapfrog LTS in velocity-Verlet form, multi-level
-// by recursion). Groundwork: the linear part (stiffness, mass-proportional damping, dashpots,
-// force providers); element-loop components, contact pairs and constraints are not supported yet.
+// by recursion): the linear part (stiffness, mass-proportional damping, dashpots, force
+// providers) split by columns, element-loop components (nonlinear cells) split by cells, each at
+// its own level; contact pairs and constraints are not supported yet.
 #pragma once
 
 #include <cstdint>
@@ -10,6 +11,7 @@
 
 #include "bsr.hpp"
 #include "force_provider.hpp"
+#include "internal_force.hpp"
 
 namespace cavern {
 
@@ -55,6 +57,16 @@ class LocalStepper {
   /// kicks of each node's own level at that kick's time.
   void add_provider(std::shared_ptr<ForceProvider> provider);
 
+  /// Adds an element-loop component (internal_force.hpp: cells not in the stiffness) whose cells
+  /// step at rate level `level` (dt_fine 2^level): the cell split of docs/lts_plan.md "Nonlinear
+  /// cells at their own rates". Its force -f_int(u) joins the level's kicks: computed at the new
+  /// u in each of the level's end kicks and committed there (its history advances once per
+  /// substep of its level), reused by the next start kick. Every node of its cells must step at
+  /// that rate or a finer one (node_level <= level), so no node drifts slower than a cell that
+  /// loads it. Throws std::invalid_argument for a level outside [0, max_level()] or a cell node
+  /// of a coarser level.
+  void add_internal_force(std::shared_ptr<HexahedronElementsBase> component, int level);
+
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
   /// return each node's own-level acceleration of its last end kick (the FSAL value the next
   /// start kick uses), a = -M^-1 K u + ... for a one-level model as Stepper's a. The first call
@@ -73,7 +85,11 @@ class LocalStepper {
 
   struct Energy {
     double kinetic = 0.0, strain = 0.0, external_work = 0.0, damping_work = 0.0, initial = 0.0;
-    double balance = 0.0;  // kinetic + strain - initial - external_work + damping_work
+    double internal_stored = 0.0;       // the components' committed stored energy (J)
+    double internal_dissipation = 0.0;  // their dissipation since the run started (J)
+    // kinetic + strain + internal_stored - initial - external_work + damping_work
+    //   + internal_dissipation
+    double balance = 0.0;
   };
   /// Energies of the state of the last run() (strain by one product at the end of each run call).
   Energy energy() const { return energy_; }
@@ -92,6 +108,8 @@ class LocalStepper {
     std::vector<std::int32_t> provider_rows;  // rows (indices into rows) that providers load
     double step = 0.0;                   // h of this level
     std::vector<double> implicit_inverse;  // (own rows with a dashpot, 9), keyed by dashpot_slot
+    std::vector<std::shared_ptr<HexahedronElementsBase>> components;  // cells at this level
+    std::vector<std::uint8_t> component_row;  // (rows) a component of this level loads the row
   };
 
   void substep(int c, double h, double t, double* u, double* v);
@@ -99,7 +117,11 @@ class LocalStepper {
   // initial: evaluate the level's force at the state (v kept), for the first start kick.
   void end_kick(int c, double h, double t, const double* u, double* v, bool initial);
   void initialise(const double* u, const double* v, double t0);
+  // Rows, column blocks and drift lists of every level (the constructor; again when a
+  // component adds rows to its level).
+  void build_levels();
   void build_dashpot_inverses();
+  void build_provider_rows();
   double strain_energy(const double* u) const;
 
   BlockCsrView stiffness_;
@@ -115,6 +137,8 @@ class LocalStepper {
   std::vector<std::int32_t> provider_nodes_;  // union of the providers' nodes (sorted)
   std::vector<double> external_;              // (3 n) scratch for the providers' forces
   std::vector<double> own_power_;             // (n) f.v - d.v of each node at its last end kick
+  std::vector<double> internal_;              // (3 n) scratch: f_int of a level's components
+  double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
   Energy energy_;
 };
