@@ -938,9 +938,10 @@ is the laws' own energy error, round-off for linear_elastic).)")
       "M^-1/2 K M^-1/2.");
 
   py::class_<LocalStepper>(m, "LocalStepper", R"(Multi-rate explicit stepping (docs/lts_plan.md):
-each node steps at dt_fine 2^level; one run step is dt_fine 2^max(level). The linear part only:
-stiffness, mass-proportional damping, dashpots and SeismicInput providers (no element-loop
-components, contact or constraints yet). One level gives Stepper's steps.
+each node steps at dt_fine 2^level; one run step is dt_fine 2^max(level). Stiffness (split by
+columns), mass-proportional damping, dashpots, SeismicInput providers and element-loop
+components at their own levels (split by cells); no contact or constraints yet. One level gives
+Stepper's steps.
 
 Args:
     indptr, indices, blocks: the full block-CSR K (borrowed).
@@ -971,6 +972,14 @@ Args:
           },
           py::arg("input"), py::keep_alive<1, 2>(), "Adds a SeismicInput force provider.")
       .def(
+          "add_internal_force",
+          [](LocalStepper& stepper, std::shared_ptr<HexahedronElementsBase> component, int level) {
+            stepper.add_internal_force(std::move(component), level);
+          },
+          py::arg("component"), py::arg("level"), py::keep_alive<1, 2>(),
+          "Adds a HexahedronElements whose cells step at dt_fine 2^level (each of their nodes at that "
+          "level or a finer one): its force is computed and committed in the level's end kicks.")
+      .def(
           "run",
           [](LocalStepper& stepper, const py::object& u, const py::object& v, const py::object& a,
              std::int64_t n_steps, double t0) {
@@ -992,6 +1001,8 @@ Args:
         out["initial"] = e.initial;
         out["external_work"] = e.external_work;
         out["damping_work"] = e.damping_work;
+        out["internal_stored"] = e.internal_stored;
+        out["internal_dissipation"] = e.internal_dissipation;
         out["balance"] = e.balance;
         return out;
       }, "Plain energies and works of the last run (the balance is O(dt^2), not round-off).");

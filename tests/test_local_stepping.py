@@ -138,3 +138,38 @@ def test_stability_check_passes_the_levels_and_catches_levels_too_coarse(tmp_pat
     above = check_stability(kernel(simulation.node_levels, 1.07 * critical), n)
     print(f"finest step 0.97 x critical: growth {near['growth']:.3g}; 1.07 x: {above['growth']:.3g}")
     assert near["stable"] and not above["stable"]
+
+
+def test_kernel_local_stepper_takes_yielding_cells_at_their_level():
+    """The kernel's LocalStepper with a Mohr-Coulomb region's cells in the element loop
+    (`add_internal_force(component, level)`; docs/lts_plan.md "Nonlinear cells at their own rates"):
+    with one level it is the global Stepper with the same component, and the rock yielded."""
+    from pyfem import _kernels, bench
+    from pyfem.elements import nonlinear_component
+    from pyfem.solver import bsr_arrays
+
+    simulation = solver.prepare(bench._box_scene(3000))
+    law = {"law": "mohr_coulomb", "young_modulus": 8.0e9, "poisson_ratio": 0.24, "cohesion": 1.0e4,
+           "friction_angle": 30.0, "tensile_strength": 5.0e3}
+    regions = nonlinear_component(simulation.model, ["rock"], {"rock": law}, mean_dilatation=True)
+    indptr, indices, blocks = bsr_arrays(regions.stiffness)
+    dt, n = simulation.time_step.dt, simulation.stiffness.shape[0]
+    v0 = 0.5 * np.sin(np.arange(n) * 0.37)  # from u = 0, where a = 0 is both steppers' start
+    runs = []
+    for local in (False, True):
+        component = regions.new_component("rock")
+        if local:
+            stepper = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass,
+                                            np.zeros(n // 3, dtype=np.int32), dt, 0.0)
+            stepper.add_internal_force(component, 0)
+        else:
+            stepper = _kernels.Stepper(indptr, indices, blocks, simulation.mass, dt, 0.0, 0.0)
+            stepper.add_internal_force(component)
+        u, v, a = np.zeros(n), v0.copy(), np.zeros(n)
+        stepper.run(u, v, a, 60, 0.0)
+        runs.append((u, component.dissipation()))
+    (u_global, dissipated_global), (u_local, dissipated_local) = runs
+    kinetic = 0.5 * np.sum(np.repeat(simulation.mass, 3) * v0 ** 2)
+    assert dissipated_global > 0.1 * kinetic  # the rock yielded: a fair share of the energy dissipated
+    assert np.abs(u_local - u_global).max() <= 1e-11 * np.abs(u_global).max()
+    assert dissipated_local == pytest.approx(dissipated_global, rel=1e-9)
