@@ -418,6 +418,21 @@ struct SplitRun {
   EnergyReport energy;
 };
 
+/// The block's loads, on a Stepper or a LocalStepper: dashpots at kBlockDashpots and a sine
+/// force on the top layer of nodes.
+constexpr std::int32_t kBlockDashpots[3] = {0, 5, 9};
+template <class AnyStepper>
+void add_block_loads(AnyStepper& stepper, const HexMesh& mesh, double force_amplitude) {
+  std::vector<double> C(27, 0.0);
+  for (int k = 0; k < 3; ++k)
+    for (int c = 0; c < 3; ++c) C[9 * k + 4 * c] = 2.0e6 * (1 + k);
+  stepper.set_dashpots(kBlockDashpots, 3, C.data());
+  std::vector<std::int32_t> top;
+  for (std::int64_t node = 0; node < mesh.n_nodes; ++node)
+    if (mesh.coords[3 * node + 2] > 0.9) top.push_back(static_cast<std::int32_t>(node));
+  stepper.add_provider(std::make_shared<SineForce>(top, force_amplitude, 600.0));
+}
+
 /// Runs a jittered Q1 block with grounding springs, a sine force, dashpots, alpha and beta,
 /// with the elastic elements' stiffness in the matrix or not, and the component if any.
 SplitRun run_block(const HexMesh& mesh, bool elements_in_matrix,
@@ -433,15 +448,7 @@ SplitRun run_block(const HexMesh& mesh, bool elements_in_matrix,
   const BlockSystem system = block_system(dense, mass);  // borrowed by the stepper below
   const double dt = 2.0e-5, alpha = 5.0, beta = 2.0e-6;
   Stepper stepper(system.view(), system.mass.data(), {dt, alpha, beta, true});
-  const std::vector<std::int32_t> dashpot_nodes = {0, 5, 9};
-  std::vector<double> C(27, 0.0);
-  for (int k = 0; k < 3; ++k)
-    for (int c = 0; c < 3; ++c) C[9 * k + 4 * c] = 2.0e6 * (1 + k);
-  stepper.set_dashpots(dashpot_nodes.data(), 3, C.data());
-  std::vector<std::int32_t> top;
-  for (std::int64_t node = 0; node < mesh.n_nodes; ++node)
-    if (mesh.coords[3 * node + 2] > 0.9) top.push_back(static_cast<std::int32_t>(node));
-  stepper.add_provider(std::make_shared<SineForce>(top, force_amplitude, 600.0));
+  add_block_loads(stepper, mesh, force_amplitude);
   if (component) stepper.add_internal_force(component);
 
   SplitRun run;
@@ -572,15 +579,7 @@ LevelRun run_levels(const HexMesh& mesh, const std::vector<std::int64_t>& matrix
   }
   const BlockSystem system = block_system(dense, mass);
   LocalStepper stepper(system.view(), system.mass.data(), node_level.data(), dt_fine, 5.0);
-  const std::vector<std::int32_t> dashpot_nodes = {0, 5, 9};
-  std::vector<double> C(27, 0.0);
-  for (int k = 0; k < 3; ++k)
-    for (int c = 0; c < 3; ++c) C[9 * k + 4 * c] = 2.0e6 * (1 + k);
-  stepper.set_dashpots(dashpot_nodes.data(), 3, C.data());
-  std::vector<std::int32_t> top;
-  for (std::int64_t node = 0; node < mesh.n_nodes; ++node)
-    if (mesh.coords[3 * node + 2] > 0.9) top.push_back(static_cast<std::int32_t>(node));
-  stepper.add_provider(std::make_shared<SineForce>(top, 3.0e5, 600.0));
+  add_block_loads(stepper, mesh, 3.0e5);
   const HexMesh in_loop = cell_subset(mesh, component_cells);
   ElementOptions options;  // no mean dilatation: the loop's linear law is then the matrix
   options.min_cells_for_threads = 0;
@@ -629,7 +628,7 @@ TEST(InternalForce, LocalStepperRunsPlasticCellsAtTheirCoarserRate) {
     node_level[node] = mesh.coords[3 * node] > 1.0 ? 1 : 0;
   // The dashpots' nodes at the finest rate, as pyfem/local_stepping.py pins the truncation faces
   // (an implicit dashpot at a coarse rate is accurate only to (h C / M)^2, docs/lts_plan.md).
-  for (const std::int32_t node : {0, 5, 9}) node_level[node] = 0;
+  for (const std::int32_t node : kBlockDashpots) node_level[node] = 0;
   std::vector<std::int64_t> matrix_cells, loop_cells;
   for (std::int64_t cell = 0; cell < mesh.n_cells; ++cell) {
     bool coarse = true;
