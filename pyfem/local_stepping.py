@@ -14,8 +14,12 @@ but with the model's boundary dashpots, is iterated from a random state for STAB
 steps, and its energy must not grow (a growth of 0.2 % per global step or more is caught; the 1D
 prototype and the kernel's tests are stable up to the global safety factor, docs/lts_plan.md).
 
-What is not supported yet, refused by key: element-loop materials (`plasticity`, `damage`),
-contact pairs, fixed and roller faces, stiffness-proportional damping; checkpoints are not written.
+Element-loop materials (`plasticity`, `damage` tables) step at their cells' own rates: each cell at
+the coarsest level of its nodes, its region split into one kernel component per level (the cell
+split of docs/lts_plan.md "Nonlinear cells at their own rates"), read back as one region by
+`LevelComponents`. What is not supported yet, refused by key: element-loop materials after a static
+stage (the stage's state is not split by level), contact pairs, fixed and roller faces,
+stiffness-proportional damping; checkpoints are not written.
 """
 from __future__ import annotations
 
@@ -38,12 +42,14 @@ STABILITY_RATIO = 2.0      # largest energy of the last third / of the first thi
 def check_supported(scene, has_constraints: bool, beta: float) -> None:
     """Raises SceneError naming time.local_stepping when the scene asks for what the local stepper
     does not do yet."""
-    allowed = ("false for scenes with {}: local time stepping covers the linear part only (stiffness, "
-               "mass-proportional damping, viscoelastic and viscous faces, seismic input; docs/lts_plan.md)")
-    for name, material in (scene.get("materials") or {}).items():
-        for table in ("plasticity", "damage"):
-            if material.get(table) is not None:
-                raise SceneError(KEY, True, allowed.format(f"materials.{name}.{table}"))
+    allowed = ("false for scenes with {}: local time stepping covers the stiffness, mass-proportional "
+               "damping, viscoelastic and viscous faces, seismic input and element-loop materials without a "
+               "static stage (docs/lts_plan.md)")
+    if "static" in scene:
+        for name, material in (scene.get("materials") or {}).items():
+            for table in ("plasticity", "damage"):
+                if material.get(table) is not None:
+                    raise SceneError(KEY, True, allowed.format(f"materials.{name}.{table} and a [static] stage"))
     if "contact" in scene.effects:
         raise SceneError(KEY, True, allowed.format("[contact]"))
     if has_constraints:
@@ -74,6 +80,83 @@ def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: 
     levels = np.full(len(mass), max_level, dtype=np.int32)
     np.minimum.at(levels, cell_nodes.ravel(), np.repeat(cell_level, cell_nodes.shape[1]).astype(np.int32))
     return levels
+
+
+def cell_levels(node_levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
+    """int32 level of each cell (rows of cell_nodes): the coarsest level of its nodes. A cell is never
+    coarser than its own stable step allows (node_levels puts every node at the finest level of its
+    cells), and no node of it drifts slower than the cell loads it (LocalStepper.add_internal_force)."""
+    return node_levels[cell_nodes].max(axis=1).astype(np.int32)
+
+
+class LevelComponents:
+    """One region's element-loop cells split into kernel components by level, read as the region's one
+    component (the interface `pyfem.elements.NonlinearRegions` uses for monitors, fields and run.json):
+    parts [(rows, component)], rows the region's cell positions of each part."""
+
+    def __init__(self, n_cells: int, n_points: int, parts: list):
+        self.parts = parts
+        self.n_points = n_points
+        self.part_of = np.full(n_cells, -1, dtype=np.int64)
+        self.local = np.zeros(n_cells, dtype=np.int64)
+        for index, (rows, _) in enumerate(parts):
+            self.part_of[rows] = index
+            self.local[rows] = np.arange(len(rows))
+        self.name = parts[0][1].name if parts else ""
+
+    def _gather(self, method: str, points, shape_tail: tuple, dtype=float):
+        if points is None:
+            out = np.zeros((len(self.part_of), self.n_points, *shape_tail), dtype=dtype)
+            for rows, component in self.parts:
+                out[rows] = getattr(component, method)()
+            return out
+        points = np.asarray(points, dtype=np.int64)
+        cells, point = np.divmod(points, self.n_points)
+        out = np.zeros((len(points), *shape_tail), dtype=dtype)
+        for index, (_, component) in enumerate(self.parts):
+            mask = self.part_of[cells] == index
+            if mask.any():
+                local = self.local[cells[mask]] * self.n_points + point[mask]
+                out[mask] = getattr(component, method)(local)
+        return out
+
+    def stress(self, points=None):
+        return self._gather("stress", points, (6,))
+
+    def damage(self, points=None):
+        return self._gather("damage", points, ())
+
+    def damage_type(self, points=None):
+        return self._gather("damage_type", points, (), np.int32)
+
+    def plastic_strain(self, points=None):
+        return self._gather("plastic_strain", points, ())
+
+    def dissipation(self) -> float:
+        return float(sum(component.dissipation() for _, component in self.parts))
+
+    def stored_energy(self) -> float:
+        return float(sum(component.stored_energy() for _, component in self.parts))
+
+    @property
+    def owned_bytes(self) -> int:
+        return int(sum(component.owned_bytes for _, component in self.parts))
+
+
+def level_components(nonlinear, node_levels: np.ndarray) -> list:
+    """Per region of `nonlinear` (NonlinearRegions), fresh components of its cells split by level:
+    [(LevelComponents, [(component, level)])] in region order."""
+    result = []
+    for name, arrays in nonlinear.arrays.items():
+        levels = cell_levels(node_levels, arrays.cell_nodes)
+        parts, kernel_parts = [], []
+        for level in np.unique(levels):
+            rows = np.flatnonzero(levels == level)
+            component = nonlinear.new_component(name, rows=rows)
+            parts.append((rows, component))
+            kernel_parts.append((component, int(level)))
+        result.append((LevelComponents(len(levels), arrays.weights.shape[1], parts), kernel_parts))
+    return result
 
 
 def local_time_step(time_step, levels: np.ndarray):
@@ -126,7 +209,8 @@ class LocalSteppingAdapter:
         return None
 
     def phase_seconds(self) -> dict:
-        # The local stepper has no per-phase timers yet: its whole time is the stiffness kicks'.
+        # The local stepper has no per-phase timers yet: its whole time (the kicks: stiffness, element-loop
+        # cells, input) is reported as the stiffness..
         return {"update": 0.0, "element_loop": 0.0, "input_forces": 0.0, "stiffness": self._seconds,
                 "contact": 0.0, "steps": self._steps}
 
@@ -163,7 +247,7 @@ def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chun
     for _ in range(max(1, steps // chunk)):
         t = kernel.run(u, v, a, chunk, t)
         energy = kernel.energy()
-        energies.append(energy["kinetic"] + energy["strain"])
+        energies.append(energy["kinetic"] + energy["strain"] + energy.get("internal_stored", 0.0))
     energies = np.asarray(energies)
     third = max(1, len(energies) // 3)
     first, last = energies[:third].max(), energies[-third:].max()

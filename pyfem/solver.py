@@ -426,6 +426,7 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
     alpha, beta = damping_coefficients(scene)
     time_step = choose_time_step(scene, stiffness, mass, beta)
     nonlinear = nonlinear_regions(scene, model, time_step)
+    elastic_stiffness = stiffness  # of every cell: the rate levels of local stepping
     if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
         stiffness = add_block_diagonal(nonlinear.stiffness, spring_nodes, springs)
     node_levels = None
@@ -437,7 +438,7 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
             raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs on "
                              "one rank for now)")
         cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
-        node_levels = local_stepping.node_levels(stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
+        node_levels = local_stepping.node_levels(elastic_stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
                                                  pinned=np.unique(dashpot_nodes))
         time_step, _ = local_stepping.local_time_step(time_step, node_levels)
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
@@ -476,18 +477,30 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
 
 
 def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
-    """The kernel's LocalStepper behind the Stepper calls of the run loop (linear models only)."""
+    """The kernel's LocalStepper behind the Stepper calls of the run loop."""
     from pyfem import _kernels
     from pyfem.local_stepping import LocalSteppingAdapter
 
     levels = np.ascontiguousarray(simulation.node_levels, dtype=np.int32)
 
+    built = {}  # the regions' LevelComponents of the last kernel built
+
     def bare_kernel(alpha):
+        # With element-loop regions: fresh components of their cells, each at its level (the run's
+        # become simulation.nonlinear.components, one LevelComponents per region, for the outputs).
         kernel = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass, levels, simulation.time_step.dt,
                                        alpha)
         if len(simulation.dashpot_nodes):
             kernel.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
                                 np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
+        if simulation.nonlinear is not None:
+            from pyfem.local_stepping import level_components
+
+            regions = level_components(simulation.nonlinear, levels)
+            for _, parts in regions:
+                for component, level in parts:
+                    kernel.add_internal_force(component, level)
+            built["regions"] = [region for region, _ in regions]
         return kernel
 
     if simulation.lts_stability is None:  # the LTS map on this model, once (pyfem/local_stepping.py)
@@ -500,6 +513,8 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
                              f"state's energy {report['growth']:.3g}x in {report['global_steps']} global steps "
                              f"(unstable); lower time.safety or turn local stepping off")
     kernel = bare_kernel(simulation.alpha)
+    if simulation.nonlinear is not None:
+        simulation.nonlinear.components = built["regions"]
     stepper = LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
     if simulation.input_arrays is not None:
         kernel.add_seismic_input(seismic_input_kernel(simulation.input_arrays))

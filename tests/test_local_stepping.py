@@ -89,7 +89,8 @@ def test_one_rate_level_is_global_stepping(tmp_path):
 
 
 @pytest.mark.parametrize("change, named", [
-    ({"materials": {"rock": {"preset": "sandstone", "plasticity": {}}}}, "materials.rock.plasticity"),
+    ({"materials": {"rock": {"preset": "sandstone", "plasticity": {}}}, "static": {"gravity": True}},
+     "materials.rock.plasticity and a [static] stage"),
     ({"boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}}}, "fixed or roller faces"),
     ({"damping": {"alpha": 0.0, "beta": 1.0e-4}}, "stiffness-proportional"),
     ({"time": {"duration": 1.0, "local_stepping": True, "matrix_precision": "single"}}, "matrix_precision"),
@@ -173,3 +174,45 @@ def test_kernel_local_stepper_takes_yielding_cells_at_their_level():
     assert dissipated_global > 0.1 * kinetic  # the rock yielded: a fair share of the energy dissipated
     assert np.abs(u_local - u_global).max() <= 1e-11 * np.abs(u_global).max()
     assert dissipated_local == pytest.approx(dissipated_global, rel=1e-9)
+
+
+def two_layer_plastic_scene(local: bool):
+    """Hexahedra in two layers: stiff elastic sandstone below, soft Mohr-Coulomb mudstone above (a
+    coarser rate level: a slower wave in cells of the same size) that a vertical SV pulse yields."""
+    return parse_scene({
+        "title": "two layers, the soft one yielding, vertical SV",
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [50.0, 40.0, 60.0], "h": 5.0, "order": 1,
+                 "layers": [{"material": "stiff", "thickness": 30.0}, {"material": "soft", "thickness": 30.0}]},
+        "materials": {"stiff": {"E": 32.0e9, "nu": 0.25, "rho": 2600.0},
+                      "soft": {"E": 2.0e9, "nu": 0.25, "rho": 2600.0,
+                               "plasticity": {"cohesion": 4.0e5, "friction_angle": 30.0, "tensile_strength": 2.0e5}}},
+        "time": {"duration": 0.4, "safety": 0.8, "local_stepping": local},
+        "wave": {"type": "SV", "angle": 0.0, "surface": 100.0, "medium": "stiff",
+                 "motion": {"ricker": {"f0": 10.0, "amplitude": 1.0e-3}}},
+        "monitor": [{"name": "soft", "point": [25.0, 20.0, 45.0]}, {"name": "stiff", "point": [25.0, 20.0, 15.0]}],
+        "output": {"interval": 0.004, "xdmf_interval": 0.0},
+    }, source="test")
+
+
+def test_yielding_layer_at_its_own_rate_follows_global_stepping(tmp_path):
+    """The scene path of nonlinear local stepping (pyfem/local_stepping.py level_components): the
+    yielding soft layer's cells at their coarser level, read back as one region for the monitors and
+    run.json, against global stepping of the same scene."""
+    from pyfem.local_stepping import cell_levels
+
+    prepared = solver.prepare(two_layer_plastic_scene(True))
+    cells = cell_levels(prepared.node_levels, prepared.nonlinear.arrays["soft"].cell_nodes)
+    print("nodes per level:", np.bincount(prepared.node_levels), "soft cells per level:", np.bincount(cells))
+    assert np.count_nonzero(cells > 0) >= 20  # soft cells at a coarser rate than the finest
+    runs = {local: solver.run(two_layer_plastic_scene(local), tmp_path / f"run_{local}") for local in (False, True)}
+    glob, loc = runs[False], runs[True]
+    soft_global = glob["nonlinear_regions"]["soft"]
+    soft_local = loc["nonlinear_regions"]["soft"]
+    print("yielded volume global / local:", soft_global["yielded_volume"], soft_local["yielded_volume"],
+          "dissipated:", soft_global["dissipated_energy"], soft_local["dissipated_energy"],
+          "monitors:", {name: (glob["monitors"][name]["displacement"], loc["monitors"][name]["displacement"])
+                        for name in ("soft", "stiff")})
+    assert soft_global["yielded_volume"] > 0.1 * soft_global["volume"]  # the layer yielded
+    assert soft_local["dissipated_energy"] == pytest.approx(soft_global["dissipated_energy"], rel=0.05)
+    for name in ("soft", "stiff"):
+        assert loc["monitors"][name]["displacement"] == pytest.approx(glob["monitors"][name]["displacement"], rel=0.02)
