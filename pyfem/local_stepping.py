@@ -210,7 +210,7 @@ class LocalSteppingAdapter:
 
     def phase_seconds(self) -> dict:
         # The local stepper has no per-phase timers yet: its whole time (the kicks: stiffness, element-loop
-        # cells, input) is reported as the stiffness..
+        # cells, input) is reported as the stiffness.
         return {"update": 0.0, "element_loop": 0.0, "input_forces": 0.0, "stiffness": self._seconds,
                 "contact": 0.0, "steps": self._steps}
 
