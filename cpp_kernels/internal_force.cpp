@@ -58,8 +58,9 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
     require_finite(geometry.gradients, n_cells * n_points * k * 3, "gradients");
   }
   characteristic_length_.assign(n_cells, 0.0);
+  std::vector<double> volumes(n_cells);  // sum_q w_q of each cell
   for (std::int64_t cell = 0; cell < n_cells; ++cell) {
-    double volume = 0.0;
+    double& volume = volumes[cell];
     for (std::int64_t q = 0; q < n_points; ++q) {
       const double w = geometry.weights[cell * n_points + q];
       if (!(std::isfinite(w) && w > 0.0))
@@ -84,14 +85,12 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
     mean_gradients_.assign(3 * n_cells * k, 0.0);
     for (std::int64_t cell = 0; cell < n_cells; ++cell) {
       double* mean = mean_gradients_.data() + 3 * cell * k;
-      double volume = 0.0;
       for (std::int64_t q = 0; q < n_points; ++q) {
         const double w = geometry.weights[cell * n_points + q];
         const double* G = geometry.gradients + (cell * n_points + q) * k * 3;
-        volume += w;
         for (std::int64_t j = 0; j < 3 * k; ++j) mean[j] += w * G[j];
       }
-      for (std::int64_t j = 0; j < 3 * k; ++j) mean[j] /= volume;
+      for (std::int64_t j = 0; j < 3 * k; ++j) mean[j] /= volumes[cell];
     }
   }
 

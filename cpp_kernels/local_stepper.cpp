@@ -320,23 +320,28 @@ void LocalStepper::initialise(const double* u, const double* v, double t0) {
   for (int c = 0; c <= max_level_; ++c) end_kick(c, 0.0, t0, u, v_copy.data(), true);
   // Initial powers for the trapezoid rule at each own node.
   energy_.initial = 0.0;
+  dissipation_at_start_ = measure_state(u, v);
+  energy_.internal_dissipation = 0.0;
+  energy_.initial = energy_.kinetic + energy_.strain + energy_.internal_stored;
+  energy_.external_work = energy_.damping_work = 0.0;
+  energy_.balance = 0.0;
+  initialised_ = true;
+}
+
+double LocalStepper::measure_state(const double* u, const double* v) {
   double kinetic = 0.0;
   for (std::int64_t i = 0; i < n_nodes(); ++i)
     for (int d = 0; d < 3; ++d) kinetic += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
   energy_.kinetic = kinetic;
   energy_.strain = strain_energy(u);
   energy_.internal_stored = 0.0;
-  dissipation_at_start_ = 0.0;
+  double dissipation = 0.0;
   for (const Level& level : levels_)
     for (const auto& component : level.components) {
       energy_.internal_stored += component->stored_energy();
-      dissipation_at_start_ += component->dissipation();
+      dissipation += component->dissipation();
     }
-  energy_.internal_dissipation = 0.0;
-  energy_.initial = energy_.kinetic + energy_.strain + energy_.internal_stored;
-  energy_.external_work = energy_.damping_work = 0.0;
-  energy_.balance = 0.0;
-  initialised_ = true;
+  return dissipation;
 }
 
 double LocalStepper::strain_energy(const double* u) const {
@@ -372,18 +377,7 @@ double LocalStepper::run(double* u, double* v, double* a, std::int64_t n_steps, 
     }
     for (int d = 0; d < 3; ++d) a[3 * i + d] = (a[3 * i + d] - damping[d]) / mass_[i];
   }
-  double kinetic = 0.0;
-  for (std::int64_t i = 0; i < n; ++i)
-    for (int d = 0; d < 3; ++d) kinetic += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
-  energy_.kinetic = kinetic;
-  energy_.strain = strain_energy(u);
-  energy_.internal_stored = 0.0;
-  energy_.internal_dissipation = -dissipation_at_start_;
-  for (const Level& level : levels_)
-    for (const auto& component : level.components) {
-      energy_.internal_stored += component->stored_energy();
-      energy_.internal_dissipation += component->dissipation();
-    }
+  energy_.internal_dissipation = measure_state(u, v) - dissipation_at_start_;
   energy_.balance = energy_.kinetic + energy_.strain + energy_.internal_stored - energy_.initial -
                     energy_.external_work + energy_.damping_work + energy_.internal_dissipation;
   return t0 + static_cast<double>(n_steps) * step;

@@ -123,6 +123,9 @@ class LocalStepper {
   void build_dashpot_inverses();
   void build_provider_rows();
   double strain_energy(const double* u) const;
+  // The state's kinetic, strain and components' stored energy into energy_; returns the
+  // components' dissipation since their construction (initialise and the end of run).
+  double measure_state(const double* u, const double* v);
 
   BlockCsrView stiffness_;
   const double* mass_;
