@@ -940,7 +940,7 @@ is the laws' own energy error, round-off for linear_elastic).)")
   py::class_<LocalStepper>(m, "LocalStepper", R"(Multi-rate explicit stepping (docs/lts_plan.md):
 each node steps at dt_fine 2^level; one run step is dt_fine 2^max(level). Stiffness (split by
 columns), mass-proportional damping, dashpots, SeismicInput providers and element-loop
-components at their own levels (split by cells); no contact or constraints yet. One level gives
+components at their own levels (split by cells), ContactPairs at theirs; no constraints yet. One level gives
 Stepper's steps.
 
 Args:
@@ -980,6 +980,14 @@ Args:
           "Adds a HexahedronElements whose cells step at dt_fine 2^level (each of their nodes at that "
           "level or a finer one): its force is computed and committed in the level's end kicks.")
       .def(
+          "add_contact",
+          [](LocalStepper& stepper, std::shared_ptr<ContactPairs> pairs, int level) {
+            stepper.add_contact(std::move(pairs), level);
+          },
+          py::arg("pairs"), py::arg("level"), py::keep_alive<1, 2>(),
+          "Adds ContactPairs corrected in the end kicks of rate level `level` (every node around "
+          "them must step at that level: checked at the first run).")
+      .def(
           "run",
           [](LocalStepper& stepper, const py::object& u, const py::object& v, const py::object& a,
              std::int64_t n_steps, double t0) {
@@ -1003,6 +1011,8 @@ Args:
         out["damping_work"] = e.damping_work;
         out["internal_stored"] = e.internal_stored;
         out["internal_dissipation"] = e.internal_dissipation;
+        out["contact_work"] = e.contact_work;
+        out["friction_dissipation"] = e.friction_dissipation;
         out["balance"] = e.balance;
         return out;
       }, "Plain energies and works of the last run (the balance is O(dt^2), not round-off).");

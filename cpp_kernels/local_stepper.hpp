@@ -2,7 +2,8 @@
 // the scheme of docs/lts_plan.md (Diaz & Grote's leapfrog LTS in velocity-Verlet form, multi-level
 // by recursion): the linear part (stiffness, mass-proportional damping, dashpots, force
 // providers) split by columns, element-loop components (nonlinear cells) split by cells, each at
-// its own level; contact pairs and constraints are not supported yet.
+// its own level, contact pairs corrected in their level's end kicks; constraints are not
+// supported yet.
 #pragma once
 
 #include <cstdint>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "bsr.hpp"
+#include "contact.hpp"
 #include "force_provider.hpp"
 #include "internal_force.hpp"
 
@@ -67,6 +69,17 @@ class LocalStepper {
   /// of a coarser level.
   void add_internal_force(std::shared_ptr<HexahedronElementsBase> component, int level);
 
+  /// Adds contact pairs stepping at rate level `level`: their correction (ContactPairs::correct,
+  /// contact.hpp) runs at the end of each of the level's end kicks, with that substep's h as dt and
+  /// the level's implicit dashpot operators; the correction force R joins the pair nodes' level
+  /// force, so the next start kick uses it (FSAL), as Stepper's corrected a. Exact as in Stepper
+  /// only if nothing but this level's kicks moves a pair node: every pair node must be of that
+  /// level, with every column of its stiffness row and every component cell that loads it at that
+  /// level too (pyfem/local_stepping.py lowers the cells around each pair group so). Checked at
+  /// the first run: std::invalid_argument naming the node. Contact work (trapezoid over the
+  /// level's substeps) and friction dissipation enter the energy account.
+  void add_contact(std::shared_ptr<ContactPairs> pairs, int level);
+
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
   /// return each node's own-level acceleration of its last end kick (the FSAL value the next
   /// start kick uses), a = -M^-1 K u + ... for a one-level model as Stepper's a. The first call
@@ -87,8 +100,10 @@ class LocalStepper {
     double kinetic = 0.0, strain = 0.0, external_work = 0.0, damping_work = 0.0, initial = 0.0;
     double internal_stored = 0.0;       // the components' committed stored energy (J)
     double internal_dissipation = 0.0;  // their dissipation since the run started (J)
+    double contact_work = 0.0;          // work of the contact corrections' forces R (J)
+    double friction_dissipation = 0.0;  // of the slipping pairs (J; part of -contact_work)
     // kinetic + strain + internal_stored - initial - external_work + damping_work
-    //   + internal_dissipation
+    //   + internal_dissipation - contact_work
     double balance = 0.0;
   };
   /// Energies of the state of the last run() (strain by one product at the end of each run call).
@@ -110,6 +125,9 @@ class LocalStepper {
     std::vector<double> implicit_inverse;  // (own rows with a dashpot, 9), keyed by dashpot_slot
     std::vector<std::shared_ptr<HexahedronElementsBase>> components;  // cells at this level
     std::vector<std::uint8_t> component_row;  // (rows) a component of this level loads the row
+    std::vector<std::shared_ptr<ContactPairs>> contacts;  // pairs at this level
+    std::vector<std::vector<std::int32_t>> contact_rows;  // per contact: rows of its unique nodes
+    std::vector<double> contact_power;  // per contact: power of R at its last correction (W)
   };
 
   void substep(int c, double h, double t, double* u, double* v);
@@ -122,6 +140,11 @@ class LocalStepper {
   void build_levels();
   void build_dashpot_inverses();
   void build_provider_rows();
+  // Rows of every contact's nodes in its level; throws unless only that level moves them.
+  void build_contact_rows();
+  // The contact corrections of level c after its end kick at time t (contact.hpp).
+  void correct_contacts(int c, double t, const double* u, double* v, double& external_work,
+                        double& damping_work);
   double strain_energy(const double* u) const;
   // The state's kinetic, strain and components' stored energy into energy_; returns the
   // components' dissipation since their construction (initialise and the end of run).
@@ -141,6 +164,8 @@ class LocalStepper {
   std::vector<double> external_;              // (3 n) scratch for the providers' forces
   std::vector<double> own_power_;             // (n) f.v - d.v of each node at its last end kick
   std::vector<double> internal_;              // (3 n) scratch: f_int of a level's components
+  std::vector<double> contact_a_;             // (3 n) scratch: pair nodes' a for the correction
+  std::vector<double> contact_before_;        // (pair nodes, 6) v, a before the correction
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
   Energy energy_;

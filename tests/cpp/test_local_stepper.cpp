@@ -11,6 +11,7 @@
 #include "local_stepper.hpp"
 #include "random_system.hpp"
 #include "seismic_input.hpp"
+#include "stable_step.hpp"
 #include "stepper.hpp"
 
 using namespace cavern;
@@ -208,4 +209,193 @@ TEST(LocalStepper, LongRunKeepsTheEnergyBounded) {
   }
   EXPECT_GT(low, 0.9);
   EXPECT_LT(high, 1.1);
+}
+
+namespace {
+
+double max_abs(const std::vector<double>& x) {
+  double value = 0.0;
+  for (double y : x) value = std::max(value, std::abs(y));
+  return value;
+}
+
+double max_abs_difference(const std::vector<double>& x, const std::vector<double>& y) {
+  double value = 0.0;
+  for (std::size_t k = 0; k < x.size(); ++k) value = std::max(value, std::abs(x[k] - y[k]));
+  return value;
+}
+
+// Node p of a system split into p and p' = n (the last node), as at an interface: p's diagonal
+// block halved on each side, each coupling block kept at p or moved to p' (side), p's mass
+// divided 30/70. A bonded pair (p, p') must then reproduce the merged system.
+BlockSystem split_node(const BlockSystem& merged, std::int64_t p, const std::vector<char>& to_copy) {
+  const std::int64_t n = merged.n_nodes, nd = 3 * n, sd = 3 * (n + 1);
+  BlockSystem split;
+  split.n_nodes = n + 1;
+  split.dense.assign(sd * sd, 0.0);
+  std::vector<char> pattern((n + 1) * (n + 1), 0);
+  for (std::int64_t a = 0; a < n; ++a)
+    for (std::int64_t b = 0; b < n; ++b) {
+      bool present = false;
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) present |= merged.dense[(3 * a + r) * nd + 3 * b + c] != 0.0;
+      if (!present) continue;
+      auto put = [&](std::int64_t A, std::int64_t B, double scale) {
+        pattern[A * (n + 1) + B] = 1;
+        for (int r = 0; r < 3; ++r)
+          for (int c = 0; c < 3; ++c)
+            split.dense[(3 * A + r) * sd + 3 * B + c] += scale * merged.dense[(3 * a + r) * nd + 3 * b + c];
+      };
+      const std::int64_t side_b = to_copy[b] ? n : p, side_a = to_copy[a] ? n : p;
+      if (a == p && b == p) {
+        put(p, p, 0.5);
+        put(n, n, 0.5);
+      } else if (a == p) {
+        put(side_b, b, 1.0);
+      } else if (b == p) {
+        put(a, side_a, 1.0);
+      } else {
+        put(a, b, 1.0);
+      }
+    }
+  compress(split, pattern);
+  split.mass = merged.mass;
+  split.mass.push_back(0.7 * merged.mass[p]);
+  split.mass[p] *= 0.3;
+  return split;
+}
+
+std::shared_ptr<ContactPairs> bonded_pair(std::int32_t i, std::int32_t j) {
+  const std::int32_t pairs[2] = {i, j};
+  const double area = 1.0, normal[3] = {0.0, 0.6, 0.8}, F0[3] = {0.0, 0.0, 0.0};
+  return std::make_shared<ContactPairs>(ContactGeometry{1, pairs, &area, normal, F0},
+                                        ContactStrength{1e12, 1e12, 0.5, 0.4});
+}
+
+// The state's a = M^-1 (-K u - (alpha M + C) v) (Stepper's a_0; the LocalStepper makes its own).
+std::vector<double> initial_acceleration(const BlockSystem& s, const std::vector<double>& u,
+                                         const std::vector<double>& v, double alpha,
+                                         std::int32_t dashpot_node, const double* C) {
+  const std::int64_t nd = s.n_dofs();
+  std::vector<double> a(nd);
+  for (std::int64_t i = 0; i < nd; ++i) {
+    double Ku = 0.0;
+    for (std::int64_t j = 0; j < nd; ++j) Ku += s.dense[i * nd + j] * u[j];
+    a[i] = -Ku - alpha * s.mass[i / 3] * v[i];
+  }
+  if (C)
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) a[3 * dashpot_node + r] -= C[3 * r + c] * v[3 * dashpot_node + c];
+  for (std::int64_t i = 0; i < nd; ++i) a[i] /= s.mass[i / 3];
+  return a;
+}
+
+}  // namespace
+
+// One level with a contact pair (a bonded pair on a 3x3 dashpot, damping): Stepper's steps.
+TEST(LocalStepper, OneLevelWithContactIsTheStepper) {
+  const std::int64_t n = 20, p = 6;
+  const BlockSystem merged = random_spd_system(n, 3, 17);
+  std::mt19937_64 generator(3);
+  std::vector<char> to_copy(n, 0);
+  for (std::int64_t k = 0; k < n; ++k) to_copy[k] = generator() % 2;
+  const BlockSystem split = split_node(merged, p, to_copy);
+  const double dt = 0.5 * 2.0 / std::sqrt(gershgorin_bound(merged.view(), merged.mass.data()));
+  const double alpha = 0.4;
+  const double C[9] = {3.0, 1.0, -0.5, 1.0, 2.0, 0.3, -0.5, 0.3, 4.0};
+  const std::int32_t dashpot_node = static_cast<std::int32_t>(n);
+  Stepper stepper(split.view(), split.mass.data(), {dt, alpha, 0.0});
+  stepper.set_dashpots(&dashpot_node, 1, C);
+  auto global_pair = bonded_pair(p, n);
+  stepper.set_contact(global_pair);
+  const std::vector<std::int32_t> levels(n + 1, 0);
+  LocalStepper local(split.view(), split.mass.data(), levels.data(), dt, alpha);
+  local.set_dashpots(&dashpot_node, 1, C);
+  auto local_pair = bonded_pair(p, n);
+  local.add_contact(local_pair, 0);
+
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  std::vector<double> u(3 * (n + 1)), v(3 * (n + 1));
+  for (double& x : u) x = 0.1 * uniform(generator);
+  for (double& x : v) x = uniform(generator);
+  for (int c = 0; c < 3; ++c) {  // the pair starts closed and together
+    u[3 * n + c] = u[3 * p + c];
+    v[3 * n + c] = v[3 * p + c];
+  }
+  std::vector<double> a = initial_acceleration(split, u, v, alpha, dashpot_node, C);
+  std::vector<double> u2 = u, v2 = v, a2(u.size(), 0.0);
+  stepper.run(u.data(), v.data(), a.data(), 200, 0.0);
+  local.run(u2.data(), v2.data(), a2.data(), 200, 0.0);
+  EXPECT_LT(max_relative_difference(u2, u), 1e-12);
+  EXPECT_LT(max_relative_difference(v2, v), 1e-12);
+  EXPECT_LT(max_relative_difference(a2, a), 1e-11);
+  EXPECT_EQ(local_pair->state()[0], kBonded);
+  // The correction acted: it holds the normal gap closed although the halves' own forces differ
+  // (the tangential offset of the first step, taken before any correction, is kept: stick).
+  double largest_R = 0.0;
+  for (double R : local_pair->contact_force()) largest_R = std::max(largest_R, std::abs(R));
+  EXPECT_GT(largest_R, 1e-3);
+  const double gap = 0.6 * (u2[3 * n + 1] - u2[3 * p + 1]) + 0.8 * (u2[3 * n + 2] - u2[3 * p + 2]);
+  EXPECT_LT(std::abs(gap), 1e-12 * max_abs(u2));
+}
+
+// Several levels: a bonded pair split from a node of the chain's coarse part steps at that level
+// and reproduces the merged chain under the same local stepping; a pair next to a finer node is
+// refused (the correction could not predict the kicks of the finer level).
+TEST(LocalStepper, BondedPairAtACoarseLevelReproducesTheMergedChain) {
+  const Chain chain = graded_chain(161, 24, 64.0, 5);
+  const int max_level = *std::max_element(chain.level.begin(), chain.level.end());
+  ASSERT_GE(max_level, 2);
+  const std::int64_t n = 161, p = 20;
+  ASSERT_EQ(chain.level[p - 1], max_level);
+  ASSERT_EQ(chain.level[p + 1], max_level);
+  std::vector<char> to_copy(n, 0);
+  for (std::int64_t k = p + 1; k < n; ++k) to_copy[k] = 1;  // the links to the right go to p'
+  const BlockSystem split = split_node(chain.system, p, to_copy);
+  std::vector<std::int32_t> split_level = chain.level;
+  split_level.push_back(chain.level[p]);
+  const double dt_fine = 0.8 * chain.dt_min;
+  LocalStepper merged(chain.system.view(), chain.system.mass.data(), chain.level.data(), dt_fine, 0.0);
+  LocalStepper local(split.view(), split.mass.data(), split_level.data(), dt_fine, 0.0);
+  auto pair = bonded_pair(static_cast<std::int32_t>(p), static_cast<std::int32_t>(n));
+  local.add_contact(pair, max_level);
+  // From u = 0 with a velocity pulse: the halves' initial forces are equal (zero), as the merged
+  // node's, so the bonded pair is the merged node from the first step on.
+  std::vector<double> v = pulse(161), u(v.size(), 0.0), a(v.size(), 0.0);
+  std::vector<double> us = u, vs = v, as(3 * (n + 1), 0.0);
+  for (int c = 0; c < 3; ++c) {
+    us.push_back(0.0);
+    vs.push_back(v[3 * p + c]);
+  }
+  merged.run(u.data(), v.data(), a.data(), 60, 0.0);
+  local.run(us.data(), vs.data(), as.data(), 60, 0.0);
+  std::vector<double> on_merged(us.begin(), us.begin() + 3 * n), copy(us.begin() + 3 * n, us.end());
+  std::vector<double> merged_p(u.begin() + 3 * p, u.begin() + 3 * p + 3);
+  EXPECT_LT(max_relative_difference(on_merged, u), 1e-11);
+  EXPECT_LT(max_abs_difference(copy, merged_p), 1e-11 * max_abs(u));
+  EXPECT_GT(std::abs(u[3 * p]), 1e-3 * max_abs(u));  // the pulse reached the pair
+  EXPECT_EQ(pair->state()[0], kBonded);
+
+  // The same pair declared at a finer level than its nodes, and a pair beside the stiff part.
+  LocalStepper wrong_level(split.view(), split.mass.data(), split_level.data(), dt_fine, 0.0);
+  wrong_level.add_contact(bonded_pair(static_cast<std::int32_t>(p), static_cast<std::int32_t>(n)), 0);
+  std::vector<double> u3 = us, v3 = vs, a3 = as;
+  EXPECT_THROW(wrong_level.run(u3.data(), v3.data(), a3.data(), 1, 0.0), std::invalid_argument);
+  std::int64_t edge = 0;  // a node of the coarse level with a finer neighbour
+  for (std::int64_t k = 1; k + 1 < n; ++k)
+    if (chain.level[k] > chain.level[k + 1]) {
+      edge = k;
+      break;
+    }
+  ASSERT_GT(edge, 0);
+  std::vector<char> right(n, 0);
+  for (std::int64_t k = edge + 1; k < n; ++k) right[k] = 1;
+  const BlockSystem split_edge = split_node(chain.system, edge, right);
+  std::vector<std::int32_t> edge_level = chain.level;
+  edge_level.push_back(chain.level[edge]);
+  LocalStepper beside(split_edge.view(), split_edge.mass.data(), edge_level.data(), dt_fine, 0.0);
+  beside.add_contact(bonded_pair(static_cast<std::int32_t>(edge), static_cast<std::int32_t>(n)),
+                     chain.level[edge]);
+  std::vector<double> u4(3 * (n + 1), 0.0), v4(u4), a4(u4);
+  EXPECT_THROW(beside.run(u4.data(), v4.data(), a4.data(), 1, 0.0), std::invalid_argument);
 }
