@@ -82,7 +82,11 @@ void LocalStepper::build_levels() {
     level.force.assign(3 * level.rows.size(), 0.0);
     level.external.assign(3 * level.rows.size(), 0.0);
   }
-  for (std::int64_t i = 0; i < n; ++i) levels_[active[i]].drift.push_back(static_cast<std::int32_t>(i));
+  drift_level_.assign(n, 0);
+  for (std::int64_t i = 0; i < n; ++i) {
+    levels_[active[i]].drift.push_back(static_cast<std::int32_t>(i));
+    drift_level_[i] = max_level_ - active[i];
+  }
 }
 
 void LocalStepper::add_internal_force(std::shared_ptr<HexahedronElementsBase> component,
@@ -111,96 +115,53 @@ void LocalStepper::add_contact(std::shared_ptr<ContactPairs> pairs, int level) {
   pairs->check_nodes(n_nodes());
   Level& target = levels_[max_level_ - level];
   target.contacts.push_back(std::move(pairs));
-  target.contact_power.push_back(0.0);
   initialised_ = false;
 }
 
-void LocalStepper::build_contact_rows() {
-  std::size_t most = 0;
+void LocalStepper::check_contacts() const {
   for (int c = 0; c <= max_level_; ++c) {
-    Level& level = levels_[c];
     const int k = max_level_ - c;
-    level.contact_rows.assign(level.contacts.size(), {});
-    for (std::size_t q = 0; q < level.contacts.size(); ++q) {
-      const std::vector<std::int32_t>& nodes = level.contacts[q]->unique_nodes();
-      most = std::max(most, nodes.size());
-      for (const std::int32_t node : nodes) {
-        const auto found = std::lower_bound(level.rows.begin(), level.rows.end(), node);
-        const bool own = found != level.rows.end() && *found == node &&
-                         level.own[static_cast<std::size_t>(found - level.rows.begin())];
-        if (!own || level_[node] != k)
-          throw std::invalid_argument("contact pair node " + std::to_string(node) + " is of level " +
-                                      std::to_string(level_[node]) + ", its pairs of level " +
-                                      std::to_string(k) + ": a pair steps at its nodes' level");
-        for (int other = 0; other <= max_level_; ++other) {
-          if (other == c) continue;
-          const std::vector<std::int32_t>& rows = levels_[other].rows;
-          if (std::binary_search(rows.begin(), rows.end(), node))
-            throw std::invalid_argument(
-                "contact pair node " + std::to_string(node) + " (level " + std::to_string(k) +
-                ") is also moved by level " + std::to_string(max_level_ - other) +
-                " (a neighbour or cell of that level): every node around a pair must step at "
-                "the pair's level");
-        }
-        level.contact_rows[q].push_back(static_cast<std::int32_t>(found - level.rows.begin()));
-      }
-    }
-  }
-  if (most) {
-    contact_a_.assign(3 * n_nodes(), 0.0);
-    contact_before_.assign(6 * most, 0.0);
+    for (const auto& pairs : levels_[c].contacts)
+      for (const std::int32_t node : pairs->unique_nodes())
+        if (drift_level_[node] != k)
+          throw std::invalid_argument(
+              "contact pair node " + std::to_string(node) + " drifts at level " +
+              std::to_string(drift_level_[node]) + ", its pairs at level " + std::to_string(k) +
+              ": both nodes of a pair must drift at its level (pyfem/local_stepping.py "
+              "equalize_pair_drift)");
   }
 }
 
-void LocalStepper::correct_contacts(int c, double t, const double* u, double* v,
-                                    double& external_work, double& damping_work) {
+void LocalStepper::correct_contacts(int c, double t, const double* u, double* v) {
   Level& level = levels_[c];
-  const double half = 0.5 * level.step;
+  const double h = level.step;
+  // Stepper's operators at this level's step: correct() then gives dv = h/2 A^-1 R and
+  // da = (R - (alpha M + C) dv) / M with A = M (1 + h/2 alpha) + h/2 C, and dv + h/2 da = h A^-1 R
+  // is what Stepper's correction (in its end update) and its next start kick add to the drift's
+  // velocity; its prediction u + h v + h^2/2 a with v + h/2 a = the drift's velocity is exact here.
   ImplicitNodeOperators operators;
-  operators.dt = level.step;
+  operators.dt = h;
   operators.alpha = alpha_;
   operators.mass = mass_;
   operators.dashpot_slot = dashpot_C_.empty() ? nullptr : dashpot_slot_.data();
   operators.dashpot_C = dashpot_C_.data();
   operators.dashpot_inverse = level.implicit_inverse.data();
-  for (std::size_t q = 0; q < level.contacts.size(); ++q) {
-    ContactPairs& pairs = *level.contacts[q];
-    const std::vector<std::int32_t>& nodes = pairs.unique_nodes();
-    const std::vector<std::int32_t>& rows = level.contact_rows[q];
-    // Each pair node's a of this end kick (its level force and damping at the new v: Stepper's a).
-    for (std::size_t k = 0; k < nodes.size(); ++k) {
-      const std::int64_t i = nodes[k];
-      double D[9], Dv[3];
-      operators.damping(i, D);
-      multiply_3x3(D, v + 3 * i, Dv);
-      const double* force = level.force.data() + 3 * static_cast<std::size_t>(rows[k]);
+  for (const auto& pairs : level.contacts) {
+    const std::vector<std::int32_t>& nodes = pairs->unique_nodes();
+    double kinetic_before = 0.0;
+    for (const std::int32_t i : nodes)
       for (int d = 0; d < 3; ++d) {
-        contact_a_[3 * i + d] = (force[d] - Dv[d]) / mass_[i];
-        contact_before_[6 * k + d] = v[3 * i + d];
+        contact_a_[3 * i + d] = 0.0;  // v is the drift's velocity: u(t + h) = u + h v
+        kinetic_before += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
       }
-    }
-    const ContactStepResult result = pairs.correct(t, operators, u, v, contact_a_.data());
-    // R joins the level force (the next start kick's); the end kick's external and damping powers
-    // were taken at the velocity before the correction: add after minus before.
-    for (std::size_t k = 0; k < nodes.size(); ++k) {
-      const std::int64_t i = nodes[k];
-      const std::size_t r = static_cast<std::size_t>(rows[k]);
-      const double* R = pairs.net_force(k);
-      double* force = level.force.data() + 3 * r;
-      const double* external = level.external.data() + 3 * r;
-      const double* before = contact_before_.data() + 6 * k;
-      double D[9], D_before[3], D_after[3];
-      operators.damping(i, D);
-      multiply_3x3(D, before, D_before);
-      multiply_3x3(D, v + 3 * i, D_after);
+    const ContactStepResult result = pairs->correct(t, operators, u, v, contact_a_.data());
+    double kinetic_after = 0.0;
+    for (const std::int32_t i : nodes)
       for (int d = 0; d < 3; ++d) {
-        force[d] += R[d];
-        external_work += half * external[d] * (v[3 * i + d] - before[d]);
-        damping_work += half * (D_after[d] * v[3 * i + d] - D_before[d] * before[d]);
+        v[3 * i + d] += 0.5 * h * contact_a_[3 * i + d];
+        kinetic_after += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
       }
-    }
-    energy_.contact_work += half * (level.contact_power[q] + result.contact_power);
-    level.contact_power[q] = result.contact_power;
+    energy_.contact_work += kinetic_after - kinetic_before;
     energy_.friction_dissipation += result.friction_dissipation;
   }
 }
@@ -225,9 +186,9 @@ void LocalStepper::build_dashpot_inverses() {
   for (Level& level : levels_) {
     level.implicit_inverse.assign(dashpot_C_.size(), 0.0);
     const double half = 0.5 * level.step;
-    for (std::size_t r = 0; r < level.rows.size(); ++r) {
-      if (!level.own[r]) continue;
-      const std::int32_t node = level.rows[r];
+    // Every dashpot node at every level's step: the end kicks use their own level's, the contact
+    // impulses (correct_contacts) their drift level's.
+    for (std::int64_t node = 0; node < n_nodes(); ++node) {
       const std::int32_t slot = dashpot_slot_[node];
       if (slot < 0) continue;
       double A[9];
@@ -389,8 +350,6 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
     external_work += half * (own_power_[2 * i] + external_power);
     damping_work += half * (own_power_[2 * i + 1] + damping_power);
   }
-  if (!initial && !level.contacts.empty())
-    correct_contacts(c, t, u, v, external_work, damping_work);
   energy_.external_work += external_work;
   energy_.damping_work += damping_work;
   // The initial evaluation only reads the committed state (no step was taken).
@@ -403,6 +362,9 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
 
 void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
   start_kick(c, h, v);
+  // Every kick that moves this level's drift nodes before their drift ends has been given (coarser
+  // levels' start kicks at t came first, finer levels do not touch them): the pairs' impulses now.
+  if (!levels_[c].contacts.empty()) correct_contacts(c, t, u, v);
   const std::vector<std::int32_t>& drift = levels_[c].drift;
   const std::int64_t n_drift = static_cast<std::int64_t>(drift.size());
 #pragma omp parallel for schedule(static) if (n_drift >= kMinRowsForThreadsLocal)
@@ -418,21 +380,16 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
 }
 
 void LocalStepper::initialise(const double* u, const double* v, double t0) {
-  build_contact_rows();
+  check_contacts();
   // Every level's force at (u, v, t0): an end kick of zero length that keeps v.
   std::vector<double> v_copy(v, v + 3 * n_nodes());
   for (int c = 0; c <= max_level_; ++c) end_kick(c, 0.0, t0, u, v_copy.data(), true);
-  // The pairs' last correction force is part of the state's force (zero after a rebase), and their
-  // slip rate for D is that of the state (Stepper::reset_energy).
+  // The pairs' slip rate for D is that of the state (Stepper::reset_energy).
   for (Level& level : levels_)
-    for (std::size_t q = 0; q < level.contacts.size(); ++q) {
-      ContactPairs& pairs = *level.contacts[q];
-      const std::vector<std::int32_t>& rows = level.contact_rows[q];
-      for (std::size_t k = 0; k < rows.size(); ++k)
-        for (int d = 0; d < 3; ++d) level.force[3 * static_cast<std::size_t>(rows[k]) + d] += pairs.net_force(k)[d];
-      pairs.observe_velocity(v);
-      level.contact_power[q] = pairs.contact_power(v);
-    }
+    for (const auto& pairs : level.contacts) pairs->observe_velocity(v);
+  if (contact_a_.empty())
+    for (const Level& level : levels_)
+      if (!level.contacts.empty()) contact_a_.assign(3 * n_nodes(), 0.0);
   energy_.contact_work = energy_.friction_dissipation = 0.0;
   // Initial powers for the trapezoid rule at each own node.
   energy_.initial = 0.0;

@@ -2,7 +2,7 @@
 // the scheme of docs/lts_plan.md (Diaz & Grote's leapfrog LTS in velocity-Verlet form, multi-level
 // by recursion): the linear part (stiffness, mass-proportional damping, dashpots, force
 // providers) split by columns, element-loop components (nonlinear cells) split by cells, each at
-// its own level, contact pairs corrected in their level's end kicks; constraints are not
+// its own level, contact pairs corrected before their nodes' drifts; constraints are not
 // supported yet.
 #pragma once
 
@@ -69,15 +69,20 @@ class LocalStepper {
   /// of a coarser level.
   void add_internal_force(std::shared_ptr<HexahedronElementsBase> component, int level);
 
-  /// Adds contact pairs stepping at rate level `level`: their correction (ContactPairs::correct,
-  /// contact.hpp) runs at the end of each of the level's end kicks, with that substep's h as dt and
-  /// the level's implicit dashpot operators; the correction force R joins the pair nodes' level
-  /// force, so the next start kick uses it (FSAL), as Stepper's corrected a. Exact as in Stepper
-  /// only if nothing but this level's kicks moves a pair node: every pair node must be of that
-  /// level, with every column of its stiffness row and every component cell that loads it at that
-  /// level too (pyfem/local_stepping.py lowers the cells around each pair group so). Checked at
-  /// the first run: std::invalid_argument naming the node. Contact work (trapezoid over the
-  /// level's substeps) and friction dissipation enter the energy account.
+  /// Adds contact pairs whose nodes drift at rate level `level`: the finest level whose kicks move
+  /// them (the finest level among the nodes they share a cell with, themselves included; both nodes
+  /// of every pair must have it: pyfem/local_stepping.py equalize_pair_drift). Their correction
+  /// (ContactPairs::correct, contact.hpp) runs in each substep of that level after its start kick and
+  /// before its drift, when no kick will change the pair nodes' velocities until the next one: the
+  /// drift's end, u + h v, is then known exactly, and the correction is the impulse h A^-1 R (A the
+  /// implicit matrix M (1 + h/2 alpha) + h/2 C of the node at that step) that closes the pair there
+  /// (stick: the normal gap and the tangential offset; slip: friction), whatever the levels of the
+  /// pair's neighbours. It is what Stepper's correction and its next start kick add to the drift's
+  /// velocity: a one-level run gives Stepper's displacements; the velocities at a sample time lack
+  /// R's first half (h/2 A^-1 R, given with the next impulse) and the returned a has no R. The
+  /// contact work is the
+  /// kinetic energy the impulses add; friction dissipation as ContactPairs reports it. Checked at
+  /// the first run: std::invalid_argument naming a pair node of another drift level.
   void add_contact(std::shared_ptr<ContactPairs> pairs, int level);
 
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
@@ -100,7 +105,7 @@ class LocalStepper {
     double kinetic = 0.0, strain = 0.0, external_work = 0.0, damping_work = 0.0, initial = 0.0;
     double internal_stored = 0.0;       // the components' committed stored energy (J)
     double internal_dissipation = 0.0;  // their dissipation since the run started (J)
-    double contact_work = 0.0;          // work of the contact corrections' forces R (J)
+    double contact_work = 0.0;          // kinetic energy added by the contact impulses (J)
     double friction_dissipation = 0.0;  // of the slipping pairs (J; part of -contact_work)
     // kinetic + strain + internal_stored - initial - external_work + damping_work
     //   + internal_dissipation - contact_work
@@ -125,9 +130,7 @@ class LocalStepper {
     std::vector<double> implicit_inverse;  // (own rows with a dashpot, 9), keyed by dashpot_slot
     std::vector<std::shared_ptr<HexahedronElementsBase>> components;  // cells at this level
     std::vector<std::uint8_t> component_row;  // (rows) a component of this level loads the row
-    std::vector<std::shared_ptr<ContactPairs>> contacts;  // pairs at this level
-    std::vector<std::vector<std::int32_t>> contact_rows;  // per contact: rows of its unique nodes
-    std::vector<double> contact_power;  // per contact: power of R at its last correction (W)
+    std::vector<std::shared_ptr<ContactPairs>> contacts;  // pairs drifting at this level
   };
 
   void substep(int c, double h, double t, double* u, double* v);
@@ -140,11 +143,10 @@ class LocalStepper {
   void build_levels();
   void build_dashpot_inverses();
   void build_provider_rows();
-  // Rows of every contact's nodes in its level; throws unless only that level moves them.
-  void build_contact_rows();
-  // The contact corrections of level c after its end kick at time t (contact.hpp).
-  void correct_contacts(int c, double t, const double* u, double* v, double& external_work,
-                        double& damping_work);
+  // Throws unless every contact's nodes drift at its level.
+  void check_contacts() const;
+  // The contact impulses of the pairs drifting at level c, before its drift from time t.
+  void correct_contacts(int c, double t, const double* u, double* v);
   double strain_energy(const double* u) const;
   // The state's kinetic, strain and components' stored energy into energy_; returns the
   // components' dissipation since their construction (initialise and the end of run).
@@ -165,7 +167,7 @@ class LocalStepper {
   std::vector<double> own_power_;             // (n) f.v - d.v of each node at its last end kick
   std::vector<double> internal_;              // (3 n) scratch: f_int of a level's components
   std::vector<double> contact_a_;             // (3 n) scratch: pair nodes' a for the correction
-  std::vector<double> contact_before_;        // (pair nodes, 6) v, a before the correction
+  std::vector<std::int32_t> drift_level_;     // per node, fine index of the finest level moving it
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
   Energy energy_;

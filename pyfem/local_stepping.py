@@ -17,8 +17,11 @@ prototype and the kernel's tests are stable up to the global safety factor, docs
 Element-loop materials (`plasticity`, `damage` tables) step at their cells' own rates: each cell at
 the coarsest level of its nodes, its region split into one kernel component per level (the cell
 split of docs/lts_plan.md "Nonlinear cells at their own rates"), read back as one region by
-`LevelComponents`. What is not supported yet, refused by key: element-loop materials after a static
-stage (the stage's state is not split by level), contact pairs, fixed and roller faces,
+`LevelComponents`. Contact pairs step at their own rates too (LocalStepper.add_contact: an impulse
+before each drift of the level their nodes drift at): the two nodes of a pair are put at one level
+and one drift level (`equalize_pair_drift`), the pairs split into one kernel ContactPairs per drift
+level and read back as one set by `LevelPairs`. What is not supported yet, refused by key: element-loop materials or contact after a
+static stage (the stage's state is not split by level), fixed and roller faces,
 stiffness-proportional damping; checkpoints are not written.
 """
 from __future__ import annotations
@@ -43,15 +46,15 @@ def check_supported(scene, has_constraints: bool, beta: float) -> None:
     """Raises SceneError naming time.local_stepping when the scene asks for what the local stepper
     does not do yet."""
     allowed = ("false for scenes with {}: local time stepping covers the stiffness, mass-proportional "
-               "damping, viscoelastic and viscous faces, seismic input and element-loop materials without a "
-               "static stage (docs/lts_plan.md)")
+               "damping, viscoelastic and viscous faces, seismic input, element-loop materials and contact "
+               "without a static stage (docs/lts_plan.md)")
     if "static" in scene:
         for name, material in (scene.get("materials") or {}).items():
             for table in ("plasticity", "damage"):
                 if material.get(table) is not None:
                     raise SceneError(KEY, True, allowed.format(f"materials.{name}.{table} and a [static] stage"))
-    if "contact" in scene.effects:
-        raise SceneError(KEY, True, allowed.format("[contact]"))
+        if "contact" in scene.effects:
+            raise SceneError(KEY, True, allowed.format("[contact] and a [static] stage"))
     if has_constraints:
         raise SceneError(KEY, True, allowed.format("fixed or roller faces"))
     if beta != 0.0:
@@ -62,12 +65,13 @@ def check_supported(scene, has_constraints: bool, beta: float) -> None:
 
 
 def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: int = MAX_LEVEL,
-                pinned: np.ndarray | None = None) -> np.ndarray:
+                pinned: np.ndarray | None = None, pairs: np.ndarray | None = None) -> np.ndarray:
     """int32 (n_nodes,) rate level per node, 0 the finest (module docstring). `pinned` nodes (the
     truncation faces' dashpot nodes) and the cells they belong to step at the finest rate: a
     boundary dashpot at a coarse node's own step is accurate only to (h C / M)^2, which is of order
     the coarse cells' Courant number squared, and it degraded the free field several times
-    (docs/lts_plan.md)."""
+    (docs/lts_plan.md). `pairs` (n_pairs, 2): the two nodes of every contact pair are made to drift at
+    one rate (`equalize_pair_drift`)."""
     csr = stiffness.tocsr()
     row_sums = np.asarray(abs(csr).sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
     dt_node = 2.0 / np.sqrt(row_sums / mass)
@@ -77,9 +81,46 @@ def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: 
         dt_node[np.asarray(pinned)] = dt_min
     cell_level = np.minimum(np.floor(np.log2(dt_node[cell_nodes].min(axis=1) / dt_min) + 1e-12).astype(int),
                             max_level)
-    levels = np.full(len(mass), max_level, dtype=np.int32)
+    levels = _finest_of_cells(cell_level, cell_nodes, len(mass), max_level)
+    if pairs is not None and len(pairs):
+        levels = equalize_pair_drift(levels, cell_nodes, np.asarray(pairs))
+    return levels
+
+
+def _finest_of_cells(cell_level: np.ndarray, cell_nodes: np.ndarray, n_nodes: int, max_level: int) -> np.ndarray:
+    levels = np.full(n_nodes, max_level, dtype=np.int32)
     np.minimum.at(levels, cell_nodes.ravel(), np.repeat(cell_level, cell_nodes.shape[1]).astype(np.int32))
     return levels
+
+
+def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
+    """int32 (n_nodes,): the finest level whose kicks move each node (its drift level in the
+    LocalStepper: the finest level of the nodes it shares a cell with, itself included). Element-loop
+    cells load their nodes at the cell's level, never finer than their nodes, so they do not change it."""
+    finest_in_cell = levels[cell_nodes].min(axis=1)
+    drift = np.array(levels, dtype=np.int32, copy=True)
+    np.minimum.at(drift, cell_nodes.ravel(), np.repeat(finest_in_cell, cell_nodes.shape[1]).astype(np.int32))
+    return drift
+
+
+def equalize_pair_drift(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Node levels with the two nodes of every contact pair at one level and drifting at one rate
+    (LocalStepper.add_contact): a pair's nodes step at the finer of their two levels, and where they
+    drift at different levels (e.g. a soft layer's coarse cells above a stiff layer's fine ones) the
+    node with the coarser drift steps at its partner's drift level (a node may step finer than its
+    cells need). One level for both makes a bonded pair the unsplit node exactly. Lowering a node can
+    make a neighbour drift finer, so it is repeated until every pair agrees (levels only fall, so it
+    ends). Returns a new int32 array."""
+    levels = np.array(levels, dtype=np.int32, copy=True)
+    i, j = pairs[:, 0], pairs[:, 1]
+    while True:
+        drift = drift_levels(levels, cell_nodes)
+        target = np.minimum(np.minimum(levels[i], levels[j]), np.minimum(drift[i], drift[j]))
+        differ = (levels[i] != levels[j]) | (drift[i] != drift[j])
+        if not differ.any():
+            return levels
+        np.minimum.at(levels, i[differ], np.where(drift[i] != drift[j], target, np.minimum(levels[i], levels[j]))[differ])
+        np.minimum.at(levels, j[differ], np.where(drift[i] != drift[j], target, np.minimum(levels[i], levels[j]))[differ])
 
 
 def cell_levels(node_levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
@@ -141,6 +182,68 @@ class LevelComponents:
     @property
     def owned_bytes(self) -> int:
         return int(sum(component.owned_bytes for _, component in self.parts))
+
+
+class LevelPairs:
+    """The contact pairs split into one kernel ContactPairs per level, read as the model's one set of
+    pairs in its order (the interface pyfem/output.py uses): parts [(pairs, contact)], pairs the
+    model's pair indices of each part."""
+
+    def __init__(self, n_pairs: int, parts: list):
+        self.parts = parts
+        self.n_pairs = n_pairs
+
+    def _gather(self, method: str, shape_tail: tuple, dtype=float, *args):
+        out = np.zeros((self.n_pairs, *shape_tail), dtype=dtype)
+        for rows, contact in self.parts:
+            out[rows] = np.asarray(getattr(contact, method)(*args)).reshape(len(rows), *shape_tail)
+        return out
+
+    def state_counts(self):
+        return np.sum([np.asarray(contact.state_counts(), dtype=np.int64) for _, contact in self.parts], axis=0)
+
+    def relative_displacement(self, u):
+        return self._gather("relative_displacement", (3,), float, u)
+
+    def tangential_force(self):
+        return self._gather("tangential_force", (3,))
+
+    def contact_force(self):
+        return self._gather("contact_force", (3,))
+
+    def normal_force(self):
+        return self._gather("normal_force", ())
+
+    def deterioration(self):
+        return self._gather("deterioration", ())
+
+    def state(self):
+        return self._gather("state", (), np.int8)
+
+    def bond_intact(self):
+        return self._gather("bond_intact", (), np.uint8)
+
+
+def level_pairs(arrays: dict, node_levels: np.ndarray, cell_nodes: np.ndarray, make_contact_pairs) -> tuple:
+    """The pairs of `arrays` (pyfem.solver.contact_arguments) split by the level their nodes drift at
+    (`drift_levels`; equal for both nodes after `equalize_pair_drift`): (LevelPairs,
+    [(ContactPairs, level)])."""
+    pairs = np.asarray(arrays["pairs"])
+    drift = drift_levels(node_levels, cell_nodes)[pairs]
+    if np.any(drift[:, 0] != drift[:, 1]):
+        first = int(np.flatnonzero(drift[:, 0] != drift[:, 1])[0])
+        raise ValueError(f"contact pair {first} joins nodes drifting at levels {drift[first].tolist()}: "
+                         "the levels were not equalized (local_stepping.node_levels(..., pairs=))")
+    parts, kernel_parts = [], []
+    for level in np.unique(drift[:, 0]):
+        rows = np.flatnonzero(drift[:, 0] == level)
+        sliced = dict(arrays, pairs=np.ascontiguousarray(pairs[rows], dtype=np.int32),
+                      **{key: np.ascontiguousarray(np.asarray(arrays[key])[rows])
+                         for key in ("area", "normal", "static_force")})
+        contact = make_contact_pairs(sliced)
+        parts.append((rows, contact))
+        kernel_parts.append((contact, int(level)))
+    return LevelPairs(len(pairs), parts), kernel_parts
 
 
 def level_components(nonlinear, node_levels: np.ndarray) -> list:

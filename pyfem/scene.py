@@ -535,8 +535,9 @@ SCHEMA = Table({
         "power_iteration": Flag("sharpen the critical step by power iteration", default=True),
         "matrix_precision": Choice("storage of the stiffness matrix's blocks in the kernel", ("double", "single"),
                                    default="double"),
-        "local_stepping": Flag("multi-rate stepping: each cell at its own stable rate (not with contact, fixed or "
-                               "roller faces, or plasticity/damage after a static stage; docs/lts_plan.md)",
+        "local_stepping": Flag("multi-rate stepping: each cell and contact pair at its own stable rate (not with "
+                               "fixed or roller faces, or plasticity/damage/contact after a static stage; "
+                               "docs/lts_plan.md)",
                                default=False),
     }, "[time]"),
     "wave": Table({

@@ -438,8 +438,9 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
             raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs on "
                              "one rank for now)")
         cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
+        pairs = model.pairs.nodes if "contact" in scene.effects else None
         node_levels = local_stepping.node_levels(elastic_stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
-                                                 pinned=np.unique(dashpot_nodes))
+                                                 pinned=np.unique(dashpot_nodes), pairs=pairs)
         time_step, _ = local_stepping.local_time_step(time_step, node_levels)
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
     # Whole output intervals: the last sample lands on or just after the duration.
@@ -515,6 +516,14 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
     kernel = bare_kernel(simulation.alpha)
     if simulation.nonlinear is not None:
         simulation.nonlinear.components = built["regions"]
+    if simulation.contact_arrays is not None:  # the pairs at their levels, read back as one set
+        from pyfem.local_stepping import level_pairs
+
+        cell_nodes = simulation.model.V.dofmap.list.array.reshape(simulation.model.n_cells, -1)
+        simulation.contact_pairs, parts = level_pairs(simulation.contact_arrays, levels, cell_nodes,
+                                                      make_contact_pairs)
+        for contact, level in parts:
+            kernel.add_contact(contact, level)
     stepper = LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
     if simulation.input_arrays is not None:
         kernel.add_seismic_input(seismic_input_kernel(simulation.input_arrays))

@@ -7,8 +7,11 @@ docs/lts_plan.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
 - One rate level (a uniform mesh) is global stepping: the same histories.
 - The set-up check of the LTS map (a power iteration of the undamped map from a random state)
   passes on the graded mesh's own levels and catches levels one rate too coarse.
+- Contact pairs at their own rate: bonded pairs under local stepping are the unsplit mesh under
+  the same levels to round-off; a weak interface slides as under global stepping (within 5 %).
 - What the local stepper does not do yet is refused with one line naming time.local_stepping.
 """
+import json
 import pathlib
 
 import numpy as np
@@ -216,3 +219,100 @@ def test_yielding_layer_at_its_own_rate_follows_global_stepping(tmp_path):
     assert soft_local["dissipated_energy"] == pytest.approx(soft_global["dissipated_energy"], rel=0.05)
     for name in ("soft", "stiff"):
         assert loc["monitors"][name]["displacement"] == pytest.approx(glob["monitors"][name]["displacement"], rel=0.02)
+
+
+def two_layer_contact_scene(local: bool, contact: bool, cohesion: float = 1.0e15, friction_angle: float = 30.0):
+    """Two layers (stiff below, soft above: a coarser rate level) split at their interface into
+    contact pairs, a vertical SV pulse; `cohesion` 1e15 keeps every pair bonded."""
+    data = {
+        "title": "two layers, interface contact, vertical SV, local stepping",
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [50.0, 40.0, 60.0], "h": 5.0, "order": 1,
+                 "layers": [{"material": "stiff", "thickness": 30.0}, {"material": "soft", "thickness": 30.0}]},
+        "materials": {"stiff": {"E": 32.0e9, "nu": 0.25, "rho": 2600.0}, "soft": {"E": 2.0e9, "nu": 0.25, "rho": 2600.0}},
+        "time": {"duration": 0.3, "dt": 2.0e-4, "local_stepping": local},
+        "wave": {"type": "SV", "angle": 0.0, "surface": 100.0, "medium": "stiff",
+                 "motion": {"ricker": {"f0": 10.0, "amplitude": 1.0e-3}}},
+        "monitor": [{"name": "soft", "point": [25.0, 20.0, 45.0]}, {"name": "stiff", "point": [25.0, 20.0, 15.0]}],
+        "output": {"interval": 0.004, "xdmf_interval": 0.0},
+    }
+    if contact:
+        data["initial_stress"] = {"surface": 100.0, "rho": 2600.0, "k": [1.0, 1.0, 1.0]}
+        data["contact"] = {"interfaces": ["interface_1"], "cohesion": cohesion, "friction_angle": friction_angle,
+                           "dynamic_friction_angle": friction_angle, "tensile_strength": cohesion}
+        data["pair_monitor"] = [{"name": "middle", "point": [25.0, 20.0, 30.0]}]
+    return parse_scene(data, source="test")
+
+
+def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
+    """Contact pairs at their own rate (LocalStepper.add_contact: an impulse before each drift of
+    the pair's drift level; local_stepping.equalize_pair_drift): with every pair bonded, the split
+    mesh under local stepping is the unsplit mesh under local stepping with the same levels, to
+    round-off, while the soft layer steps at a coarser rate. Then the scene path end to end with a
+    weak interface that slides, against global stepping: within 5 % (the sliding pairs' difference
+    converges at first order in dt, docs/lts_plan.md "Contact pairs at their own rates")."""
+    from scipy.spatial import cKDTree
+
+    split = solver.prepare(two_layer_contact_scene(True, True))
+    whole = solver.prepare(two_layer_contact_scene(True, False))
+    levels = split.node_levels
+    pairs = split.contact_arrays["pairs"]
+    print("nodes per level:", np.bincount(levels), "pair levels:", np.unique(levels[pairs]))
+    assert levels.max() >= 1 and np.count_nonzero(levels > 0) > 100  # several rates
+    assert np.all(levels[pairs[:, 0]] == levels[pairs[:, 1]])
+    distance, unsplit_node = cKDTree(whole.model.node_coords).query(split.model.node_coords)
+    assert np.max(distance) < 1e-9
+    mapped = np.zeros(len(whole.mass), dtype=np.int32)
+    mapped[unsplit_node] = levels  # both copies of a pair node have one level
+    whole.node_levels = mapped
+    assert split.time_step.dt == whole.time_step.dt
+    histories = []
+    for simulation in (split, whole):
+        stepper = solver.make_stepper(simulation)
+        n = simulation.stiffness.shape[0]
+        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+        stepper.run(u, v, a, simulation.n_steps, 0.0)
+        histories.append(u.reshape(-1, 3))
+    split_u, whole_u = histories
+    assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
+    assert np.abs(split_u - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
+    counts = split.contact_pairs.state_counts()
+    assert counts[0] == len(pairs)  # all bonded
+    assert np.abs(np.asarray(split.contact_pairs.contact_force())).max() > 0.0  # the correction acted
+
+    # The scene path with a weak interface (no cohesion, 5 deg): pair histories, state counts, the
+    # energy account with contact work and friction, against global stepping.
+    runs = {}
+    for local in (True, False):
+        out = tmp_path / f"sliding_{local}"
+        summary = solver.run(two_layer_contact_scene(local, True, cohesion=0.0, friction_angle=5.0), out)
+        on_disk = json.loads((out / "run.json").read_text())
+        energy = np.genfromtxt(out / "energy.csv", delimiter=",", names=True)
+        runs[local] = (summary, on_disk, energy, np.loadtxt(out / "pairs" / "middle.csv", delimiter=",", skiprows=1))
+    (summary, on_disk, energy, pair_rows), (_, on_disk_global, energy_global, pair_rows_global) = runs[True], runs[False]
+    sliding = np.asarray(on_disk["pair_states"]["sliding"])
+    print("sliding pairs (local / global, max over samples):", sliding.max(),
+          np.asarray(on_disk_global["pair_states"]["sliding"]).max(), "friction dissipated:",
+          energy["friction_dissipation"][-1], energy_global["friction_dissipation"][-1],
+          "slip at the middle pair:", pair_rows[-1, 4], pair_rows_global[-1, 4])
+    assert sliding.max() > 0 and energy["friction_dissipation"][-1] > 0.0  # the interface slipped
+    work = max(np.abs(energy["external_work"]).max(), (energy["kinetic"] + energy["strain"]).max())
+    print("balance / work:", np.abs(energy["balance"]).max() / work, "global:",
+          np.abs(energy_global["balance"]).max() / work)
+    assert np.abs(energy["balance"]).max() < 0.05 * work  # the plain account of local stepping: O(dt^2)
+    assert pair_rows[-1, 4] == pytest.approx(pair_rows_global[-1, 4], rel=0.05)
+    assert energy["friction_dissipation"][-1] == pytest.approx(energy_global["friction_dissipation"][-1], rel=0.10)
+
+
+def test_contact_after_a_static_stage_is_refused_by_key():
+    base = {
+        "title": "contact and a static stage",
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [50.0, 40.0, 60.0], "h": 5.0, "order": 1,
+                 "layers": [{"material": "stiff", "thickness": 30.0}, {"material": "soft", "thickness": 30.0}]},
+        "materials": {"stiff": {"E": 32.0e9, "nu": 0.25, "rho": 2600.0}, "soft": {"E": 2.0e9, "nu": 0.25, "rho": 2600.0}},
+        "time": {"duration": 0.3, "local_stepping": True},
+        "contact": {"interfaces": ["interface_1"], "cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e6},
+        "static": {"gravity": True},
+    }
+    with pytest.raises(SceneError, match=r"time\.local_stepping") as error:
+        solver.prepare(parse_scene(base, source="test"))
+    assert "[contact] and a [static] stage" in str(error.value)
