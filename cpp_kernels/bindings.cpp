@@ -988,6 +988,15 @@ Args:
           "Adds ContactPairs corrected in the end kicks of rate level `level` (every node around "
           "them must step at that level: checked at the first run).")
       .def(
+          "step_rows_at_drift_level",
+          [](LocalStepper& stepper, const py::object& nodes_object) {
+            auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
+            stepper.step_rows_at_drift_level(
+                std::vector<std::int32_t>(nodes.data(), nodes.data() + nodes.shape(0)));
+          },
+          py::arg("nodes"),
+          "Steps the nodes' whole stiffness rows at their drift level (add_contact does it for pair nodes).")
+      .def(
           "run",
           [](LocalStepper& stepper, const py::object& u, const py::object& v, const py::object& a,
              std::int64_t n_steps, double t0) {

@@ -34,6 +34,7 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
     max_level_ = std::max(max_level_, level_[i]);
   }
   levels_.resize(max_level_ + 1);
+  row_cap_.assign(n, kMaxLevels);
   build_levels();
   external_.assign(3 * n, 0.0);
   internal_.assign(3 * n, 0.0);
@@ -66,7 +67,7 @@ void LocalStepper::build_levels() {
       const std::int64_t before = static_cast<std::int64_t>(level.columns.size());
       for (std::int64_t b = stiffness.indptr[i]; b < stiffness.indptr[i + 1]; ++b) {
         const std::int32_t j = stiffness.indices[b];
-        if (level_[j] != k) continue;
+        if (std::min(level_[j], row_cap_[i]) != k) continue;
         level.columns.push_back(j);
         level.blocks.insert(level.blocks.end(), stiffness.blocks + 9 * b, stiffness.blocks + 9 * b + 9);
       }
@@ -113,8 +114,24 @@ void LocalStepper::add_contact(std::shared_ptr<ContactPairs> pairs, int level) {
     throw std::invalid_argument("contact level " + std::to_string(level) + " must be in [0, " +
                                 std::to_string(max_level_) + "]");
   pairs->check_nodes(n_nodes());
+  step_rows_at_drift_level(pairs->unique_nodes());
   Level& target = levels_[max_level_ - level];
   target.contacts.push_back(std::move(pairs));
+  initialised_ = false;
+}
+
+void LocalStepper::step_rows_at_drift_level(const std::vector<std::int32_t>& nodes) {
+  for (const std::int32_t node : nodes) {
+    if (node < 0 || node >= n_nodes())
+      throw std::invalid_argument("step_rows_at_drift_level: " + std::to_string(node) + " is not a node");
+    std::int32_t finest = level_[node];
+    for (std::int64_t b = stiffness_.indptr[node]; b < stiffness_.indptr[node + 1]; ++b)
+      finest = std::min(finest, level_[stiffness_.indices[b]]);
+    row_cap_[node] = finest;
+  }
+  build_levels();
+  build_dashpot_inverses();
+  build_provider_rows();
   initialised_ = false;
 }
 

@@ -77,13 +77,22 @@ class LocalStepper {
   /// drift's end, u + h v, is then known exactly, and the correction is the impulse h A^-1 R (A the
   /// implicit matrix M (1 + h/2 alpha) + h/2 C of the node at that step) that closes the pair there
   /// (stick: the normal gap and the tangential offset; slip: friction), whatever the levels of the
-  /// pair's neighbours. It is what Stepper's correction and its next start kick add to the drift's
+  /// pair's neighbours; the pair nodes' rows are stepped at that level (step_rows_at_drift_level).
+  /// It is what Stepper's correction and its next start kick add to the drift's
   /// velocity: a one-level run gives Stepper's displacements; the velocities at a sample time lack
   /// R's first half (h/2 A^-1 R, given with the next impulse) and the returned a has no R. The
   /// contact work is the
   /// kinetic energy the impulses add; friction dissipation as ContactPairs reports it. Checked at
   /// the first run: std::invalid_argument naming a pair node of another drift level.
   void add_contact(std::shared_ptr<ContactPairs> pairs, int level);
+
+  /// Steps every block of the nodes' stiffness rows at the row's drift level (the finest level of
+  /// its columns) instead of its column's level: a coarser neighbour's force then reaches the node
+  /// at each of its substeps, not as kicks at the ends of the coarse step. add_contact does it for
+  /// the pair nodes (the friction threshold of a pair must not see a coarse level's force arrive
+  /// within one substep: that made sliding first order in dt, docs/lts_plan.md). The neighbour
+  /// already drifts at that level (the node is one of its columns), so its u is current there.
+  void step_rows_at_drift_level(const std::vector<std::int32_t>& nodes);
 
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
   /// return each node's own-level acceleration of its last end kick (the FSAL value the next
@@ -168,6 +177,7 @@ class LocalStepper {
   std::vector<double> internal_;              // (3 n) scratch: f_int of a level's components
   std::vector<double> contact_a_;             // (3 n) scratch: pair nodes' a for the correction
   std::vector<std::int32_t> drift_level_;     // per node, fine index of the finest level moving it
+  std::vector<std::int32_t> row_cap_;         // per node: its row's blocks at min(column level, cap)
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
   Energy energy_;

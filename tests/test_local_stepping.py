@@ -8,7 +8,7 @@ docs/lts_plan.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
 - The set-up check of the LTS map (a power iteration of the undamped map from a random state)
   passes on the graded mesh's own levels and catches levels one rate too coarse.
 - Contact pairs at their own rate: bonded pairs under local stepping are the unsplit mesh under
-  the same levels to round-off; a weak interface slides as under global stepping (within 5 %).
+  the same levels to round-off; a weak interface slides as under global stepping (second order).
 - What the local stepper does not do yet is refused with one line naming time.local_stepping.
 """
 import json
@@ -247,9 +247,9 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
     """Contact pairs at their own rate (LocalStepper.add_contact: an impulse before each drift of
     the pair's drift level; local_stepping.equalize_pair_drift): with every pair bonded, the split
     mesh under local stepping is the unsplit mesh under local stepping with the same levels, to
-    round-off, while the soft layer steps at a coarser rate. Then the scene path end to end with a
-    weak interface that slides, against global stepping: within 5 % (the sliding pairs' difference
-    converges at first order in dt, docs/lts_plan.md "Contact pairs at their own rates")."""
+    round-off, while the soft layer steps at a coarser rate. A weak interface that slides follows
+    global stepping at second order in dt; the scene path end to end (docs/lts_plan.md "Contact
+    pairs at their own rates")."""
     from scipy.spatial import cKDTree
 
     split = solver.prepare(two_layer_contact_scene(True, True))
@@ -268,6 +268,8 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
     histories = []
     for simulation in (split, whole):
         stepper = solver.make_stepper(simulation)
+        if simulation is whole:  # the interface rows as the pair nodes' (LocalStepper.add_contact)
+            stepper.kernel.step_rows_at_drift_level(np.unique(unsplit_node[pairs]).astype(np.int32))
         n = simulation.stiffness.shape[0]
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
         stepper.run(u, v, a, simulation.n_steps, 0.0)
@@ -279,16 +281,38 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
     assert counts[0] == len(pairs)  # all bonded
     assert np.abs(np.asarray(split.contact_pairs.contact_force())).max() > 0.0  # the correction acted
 
-    # The scene path with a weak interface (no cohesion, 5 deg): pair histories, state counts, the
-    # energy account with contact work and friction, against global stepping.
+    # A weak interface (no cohesion, 5 deg) slides: against global stepping at two steps, the
+    # difference falls at second order (the pair rows stepped at their drift level; with a coarse
+    # neighbour's force as kicks it was first order: 3.1 % and 1.8 %).
+    differences = []
+    for dt in (2.0e-4, 1.0e-4):
+        finals = []
+        for local in (False, True):
+            scene = two_layer_contact_scene(local, True, cohesion=0.0, friction_angle=5.0)
+            scene["time"]["dt"] = dt
+            simulation = solver.prepare(scene)
+            stepper = solver.make_stepper(simulation)
+            n = simulation.stiffness.shape[0]
+            u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+            stepper.run(u, v, a, simulation.n_steps, 0.0)
+            finals.append((u, simulation.contact_pairs.state_counts()))
+        (u_global, counts_global), (u_local, counts_local) = finals
+        assert counts_local[2] > 0 and counts_global[2] > 0  # pairs sliding at the end in both
+        differences.append(np.abs(u_local - u_global).max() / np.abs(u_global).max())
+    order = np.log2(differences[0] / differences[1])
+    print("sliding interface, local against global stepping:", differences, "order", order)
+    assert differences[0] < 0.01 and order > 1.7
+
+    # The scene path: pair histories, state counts, the energy account with contact work and
+    # friction, against global stepping.
     runs = {}
     for local in (True, False):
         out = tmp_path / f"sliding_{local}"
-        summary = solver.run(two_layer_contact_scene(local, True, cohesion=0.0, friction_angle=5.0), out)
+        solver.run(two_layer_contact_scene(local, True, cohesion=0.0, friction_angle=5.0), out)
         on_disk = json.loads((out / "run.json").read_text())
         energy = np.genfromtxt(out / "energy.csv", delimiter=",", names=True)
-        runs[local] = (summary, on_disk, energy, np.loadtxt(out / "pairs" / "middle.csv", delimiter=",", skiprows=1))
-    (summary, on_disk, energy, pair_rows), (_, on_disk_global, energy_global, pair_rows_global) = runs[True], runs[False]
+        runs[local] = (on_disk, energy, np.loadtxt(out / "pairs" / "middle.csv", delimiter=",", skiprows=1))
+    (on_disk, energy, pair_rows), (on_disk_global, energy_global, pair_rows_global) = runs[True], runs[False]
     sliding = np.asarray(on_disk["pair_states"]["sliding"])
     print("sliding pairs (local / global, max over samples):", sliding.max(),
           np.asarray(on_disk_global["pair_states"]["sliding"]).max(), "friction dissipated:",
@@ -299,8 +323,8 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
     print("balance / work:", np.abs(energy["balance"]).max() / work, "global:",
           np.abs(energy_global["balance"]).max() / work)
     assert np.abs(energy["balance"]).max() < 0.05 * work  # the plain account of local stepping: O(dt^2)
-    assert pair_rows[-1, 4] == pytest.approx(pair_rows_global[-1, 4], rel=0.05)
-    assert energy["friction_dissipation"][-1] == pytest.approx(energy_global["friction_dissipation"][-1], rel=0.10)
+    assert pair_rows[-1, 4] == pytest.approx(pair_rows_global[-1, 4], rel=0.01)
+    assert energy["friction_dissipation"][-1] == pytest.approx(energy_global["friction_dissipation"][-1], rel=0.02)
 
 
 def test_contact_after_a_static_stage_is_refused_by_key():

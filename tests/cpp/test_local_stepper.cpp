@@ -374,6 +374,7 @@ SplitChainRun bonded_split_chain(const Chain& chain, std::int64_t p, const std::
   std::vector<std::int32_t> split_level = level;
   split_level.push_back(level[p]);
   LocalStepper merged(chain.system.view(), chain.system.mass.data(), level.data(), dt_fine, 0.0);
+  merged.step_rows_at_drift_level({static_cast<std::int32_t>(p)});  // as add_contact does the halves'
   LocalStepper local(split.view(), split.mass.data(), split_level.data(), dt_fine, 0.0);
   auto pair = bonded_pair(static_cast<std::int32_t>(p), static_cast<std::int32_t>(n));
   local.add_contact(pair, pair_level);
