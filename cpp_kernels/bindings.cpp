@@ -183,6 +183,24 @@ void set_dashpots_checked(Kernel& kernel, const py::object& nodes_object,
   kernel.set_dashpots(nodes.data(), nodes.shape(0), C.data());
 }
 
+/// A StateArchive as a dict of named byte blocks (save_state of the bindings), and back.
+py::dict archive_dict(const StateArchive& archive) {
+  py::dict out;
+  for (const auto& [name, block] : archive.blocks())
+    out[py::str(name)] = py::bytes(reinterpret_cast<const char*>(block.data()),
+                                   static_cast<py::ssize_t>(block.size()));
+  return out;
+}
+
+StateArchive dict_archive(const py::dict& blocks) {
+  StateArchive::Blocks copy;
+  for (const auto& [name, value] : blocks) {
+    const std::string bytes = py::cast<py::bytes>(value);
+    copy[py::cast<std::string>(name)] = std::vector<std::uint8_t>(bytes.begin(), bytes.end());
+  }
+  return StateArchive(std::move(copy));
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_kernels, m) {
@@ -278,6 +296,21 @@ Args:
     tensile_strength: t_s (Pa), >= 0.
     friction_static: mu_s = tan(static friction angle), >= 0.
     friction_dynamic: mu_d = tan(dynamic friction angle), >= 0.)")
+      .def(
+          "save_state",
+          [](const ContactPairs& object) {
+            StateArchive archive;
+            object.save_state(archive, "");
+            return archive_dict(archive);
+          },
+          "The object's state as a dict of named byte blocks (the blocks a Stepper checkpoint holds "
+          "for it), a copy.")
+      .def(
+          "load_state",
+          [](ContactPairs& object, const py::dict& blocks) { object.load_state(dict_archive(blocks), ""); },
+          py::arg("state"),
+          "Restores save_state's dict (of an object of the same size; ValueError names a block that "
+          "does not fit).")
       .def(
           py::init([](const py::object& pairs_object, const py::object& area_object,
                       const py::object& normal_object, const py::object& static_force_object,
@@ -517,6 +550,21 @@ Args:
     mean_dilatation: replace the volumetric strain by its cell mean (B-bar, for Q1 plasticity).
     min_cells_for_threads: below this many cells the loops run on one thread.
 Borrowed arrays are kept alive by this object and must not be modified while it is in use.)")
+      .def(
+          "save_state",
+          [](const HexahedronElementsBase& object) {
+            StateArchive archive;
+            object.save_state(archive, "");
+            return archive_dict(archive);
+          },
+          "The object's state as a dict of named byte blocks (the blocks a Stepper checkpoint holds "
+          "for it), a copy.")
+      .def(
+          "load_state",
+          [](HexahedronElementsBase& object, const py::dict& blocks) { object.load_state(dict_archive(blocks), ""); },
+          py::arg("state"),
+          "Restores save_state's dict (of an object of the same size; ValueError names a block that "
+          "does not fit).")
       .def(py::init([](const py::object& cell_nodes_object, const py::object& gradients_object,
                        const py::object& weights_object, const std::string& law,
                        const ParameterMap& parameters, const py::object& initial_stress_object,
@@ -745,26 +793,14 @@ Args:
           [](const Stepper& stepper) {
             StateArchive archive;
             stepper.save_state(archive);
-            py::dict out;
-            for (const auto& [name, block] : archive.blocks())
-              out[py::str(name)] = py::bytes(reinterpret_cast<const char*>(block.data()),
-                                             static_cast<py::ssize_t>(block.size()));
-            return out;
+            return archive_dict(archive);
           },
           R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
 byte blocks (the energy account, the last internal force and reactions, the contact pairs'
 and every internal-force component's state), a copy.)")
       .def(
           "load_state",
-          [](Stepper& stepper, const py::dict& blocks) {
-            StateArchive::Blocks copy;
-            for (const auto& [name, value] : blocks) {
-              const std::string bytes = py::cast<py::bytes>(value);
-              copy[py::cast<std::string>(name)] =
-                  std::vector<std::uint8_t>(bytes.begin(), bytes.end());
-            }
-            stepper.load_state(StateArchive(std::move(copy)));
-          },
+          [](Stepper& stepper, const py::dict& blocks) { stepper.load_state(dict_archive(blocks)); },
           py::arg("state"),
           R"(Restores save_state's dict into a stepper built from the same scene (same dt, damping,
 dofs, providers, pairs and components, in the same order). ValueError names the first block that

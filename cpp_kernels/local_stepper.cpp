@@ -96,12 +96,6 @@ void LocalStepper::add_internal_force(std::shared_ptr<HexahedronElementsBase> co
     throw std::invalid_argument("component level " + std::to_string(level) + " must be in [0, " +
                                 std::to_string(max_level_) + "]");
   component->check_nodes(n_nodes());
-  for (const std::int32_t node : component->nodes())
-    if (level_[node] > level)
-      throw std::invalid_argument("component '" + component->name() + "' at level " +
-                                  std::to_string(level) + " has node " + std::to_string(node) +
-                                  " of the coarser level " + std::to_string(level_[node]) +
-                                  ": a cell steps at the rate of its finest node or coarser");
   levels_[max_level_ - level].components.push_back(std::move(component));
   build_levels();
   build_dashpot_inverses();

@@ -63,10 +63,10 @@ class LocalStepper {
   /// step at rate level `level` (dt_fine 2^level): the cell split of docs/lts_plan.md "Nonlinear
   /// cells at their own rates". Its force -f_int(u) joins the level's kicks: computed at the new
   /// u in each of the level's end kicks and committed there (its history advances once per
-  /// substep of its level), reused by the next start kick. Every node of its cells must step at
-  /// that rate or a finer one (node_level <= level), so no node drifts slower than a cell that
-  /// loads it. Throws std::invalid_argument for a level outside [0, max_level()] or a cell node
-  /// of a coarser level.
+  /// substep of its level), reused by the next start kick. Its nodes drift at that rate or a finer
+  /// one (a node drifts at the finest level that kicks it), so none drifts slower than a cell that
+  /// loads it; a cell may step finer than its nodes (pyfem/local_stepping.py does so for the cells
+  /// around contact pairs). Throws std::invalid_argument for a level outside [0, max_level()].
   void add_internal_force(std::shared_ptr<HexahedronElementsBase> component, int level);
 
   /// Adds contact pairs whose nodes drift at rate level `level`: the finest level whose kicks move

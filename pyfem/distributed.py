@@ -287,7 +287,7 @@ def local_stepper(simulation, mine: Share, exchange):
 
 # --- The serial stepper's state (save_state blocks) cut into shares and put together again ---
 
-def _rows(block: bytes, count: int) -> np.ndarray:
+def state_rows(block: bytes, count: int) -> np.ndarray:
     """A block of `count` equal rows as a (count, row bytes) uint8 array."""
     data = np.frombuffer(block, dtype=np.uint8)
     if count == 0:
@@ -297,11 +297,11 @@ def _rows(block: bytes, count: int) -> np.ndarray:
     return data.reshape(count, -1)
 
 
-_CONTACT_PAIR_BLOCKS = ("state", "bond_intact", "normal_force", "tangential_force", "contact_force",
+CONTACT_PAIR_BLOCKS = ("state", "bond_intact", "normal_force", "tangential_force", "contact_force",
                         "deterioration", "slip_rate", "gap_offset", "static_force")
 
 
-def _unique_slots(pair_nodes: np.ndarray, selected: np.ndarray) -> np.ndarray:
+def unique_slots(pair_nodes: np.ndarray, selected: np.ndarray) -> np.ndarray:
     """Rows of the serial pairs' unique nodes that the selected pairs use (ascending)."""
     unique = np.unique(pair_nodes)
     return np.searchsorted(unique, np.unique(pair_nodes[selected]))
@@ -330,9 +330,9 @@ def slice_state(serial: dict, template: dict, simulation, parts: Partition, mine
     if mine.pairs is not None:
         pair_nodes = simulation.contact_arrays["pairs"]
         n_pairs = len(pair_nodes)
-        for name in _CONTACT_PAIR_BLOCKS:
-            out["contact/" + name] = np.ascontiguousarray(_rows(serial["contact/" + name], n_pairs)[mine.pairs]).tobytes()
-        slots = _unique_slots(pair_nodes, mine.pairs)
+        for name in CONTACT_PAIR_BLOCKS:
+            out["contact/" + name] = np.ascontiguousarray(state_rows(serial["contact/" + name], n_pairs)[mine.pairs]).tobytes()
+        slots = unique_slots(pair_nodes, mine.pairs)
         node_force = np.frombuffer(serial["contact/node_force"], dtype=np.float64).reshape(-1, 3)
         out["contact/node_force"] = np.ascontiguousarray(node_force[slots]).tobytes()
     regions = list(simulation.nonlinear.arrays) if simulation.nonlinear is not None else []
@@ -340,9 +340,9 @@ def slice_state(serial: dict, template: dict, simulation, parts: Partition, mine
         k = regions.index(name)
         src, dst = f"component/{k}/", f"component/{j}/"
         n_cells = len(simulation.nonlinear.arrays[name].cells)
-        out[dst + "state"] = np.ascontiguousarray(_rows(serial[src + "state"], n_cells)[cells]).tobytes()
+        out[dst + "state"] = np.ascontiguousarray(state_rows(serial[src + "state"], n_cells)[cells]).tobytes()
         sigma0 = serial[src + "initial_stress"]
-        out[dst + "initial_stress"] = (np.ascontiguousarray(_rows(sigma0, n_cells)[cells]).tobytes()
+        out[dst + "initial_stress"] = (np.ascontiguousarray(state_rows(sigma0, n_cells)[cells]).tobytes()
                                        if len(sigma0) else b"")
         first = kind == "counted" and rank == int(parts.cell_owner[name].min())
         for scalar in ("stored_energy", "dissipation"):
@@ -375,34 +375,34 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
     if shares[0].pairs is not None:
         pair_nodes = simulation.contact_arrays["pairs"]
         n_pairs = len(pair_nodes)
-        for name in _CONTACT_PAIR_BLOCKS:
-            rows = _rows(serial_template["contact/" + name], n_pairs).copy()
+        for name in CONTACT_PAIR_BLOCKS:
+            rows = state_rows(serial_template["contact/" + name], n_pairs).copy()
             for s, mine in zip(states, shares):
                 if len(mine.pairs):
-                    rows[mine.pairs] = _rows(s["contact/" + name], len(mine.pairs))
+                    rows[mine.pairs] = state_rows(s["contact/" + name], len(mine.pairs))
             out["contact/" + name] = rows.tobytes()
         node_force = np.frombuffer(serial_template["contact/node_force"], dtype=np.float64).reshape(-1, 3).copy()
         for s, mine in zip(states, shares):
             if not len(mine.pairs):
                 continue
-            node_force[_unique_slots(pair_nodes, mine.pairs)] = np.frombuffer(
+            node_force[unique_slots(pair_nodes, mine.pairs)] = np.frombuffer(
                 s["contact/node_force"], dtype=np.float64).reshape(-1, 3)
         out["contact/node_force"] = node_force.tobytes()
     regions = list(simulation.nonlinear.arrays) if simulation.nonlinear is not None else []
     for k, name in enumerate(regions):
         src = f"component/{k}/"
         n_cells = len(simulation.nonlinear.arrays[name].cells)
-        state = _rows(serial_template[src + "state"], n_cells).copy()
+        state = state_rows(serial_template[src + "state"], n_cells).copy()
         sigma0 = serial_template[src + "initial_stress"]
-        sigma0_rows = _rows(sigma0, n_cells).copy() if len(sigma0) else None
+        sigma0_rows = state_rows(sigma0, n_cells).copy() if len(sigma0) else None
         totals = {"stored_energy": 0.0, "dissipation": 0.0}
         for s, rank_components in zip(states, components):
             for j, (region, kind, cells) in enumerate(rank_components):
                 if region != name or kind != "counted":
                     continue
-                state[cells] = _rows(s[f"component/{j}/state"], len(cells))
+                state[cells] = state_rows(s[f"component/{j}/state"], len(cells))
                 if sigma0_rows is not None:
-                    sigma0_rows[cells] = _rows(s[f"component/{j}/initial_stress"], len(cells))
+                    sigma0_rows[cells] = state_rows(s[f"component/{j}/initial_stress"], len(cells))
                 for scalar in totals:
                     totals[scalar] += float(np.frombuffer(s[f"component/{j}/{scalar}"], dtype=np.float64)[0])
         out[src + "state"] = state.tobytes()

@@ -20,9 +20,9 @@ split of docs/lts_plan.md "Nonlinear cells at their own rates"), read back as on
 `LevelComponents`. Contact pairs step at their own rates too (LocalStepper.add_contact: an impulse
 before each drift of the level their nodes drift at): the two nodes of a pair are put at one level
 and one drift level (`equalize_pair_drift`), the pairs split into one kernel ContactPairs per drift
-level and read back as one set by `LevelPairs`. What is not supported yet, refused by key: element-loop materials or contact after a
-static stage (the stage's state is not split by level), fixed and roller faces,
-stiffness-proportional damping; checkpoints are not written.
+level and read back as one set by `LevelPairs`. After a relaxation stage both continue the stage's state, cut by level
+(`load_component_parts`, `load_pair_parts`). What is not supported yet, refused by key: fixed and
+roller faces, stiffness-proportional damping; checkpoints are not written.
 """
 from __future__ import annotations
 
@@ -39,6 +39,7 @@ MAX_LEVEL = 5
 KEY = "time.local_stepping"
 STABILITY_STEPS = 240      # global steps of the set-up check
 STABILITY_CHUNK = 10       # global steps between energy readings
+STABILITY_AMPLITUDE = 1.0e-9  # m, the random state's scale
 STABILITY_RATIO = 2.0      # largest energy of the last third / of the first third, above: unstable
 
 
@@ -46,15 +47,8 @@ def check_supported(scene, has_constraints: bool, beta: float) -> None:
     """Raises SceneError naming time.local_stepping when the scene asks for what the local stepper
     does not do yet."""
     allowed = ("false for scenes with {}: local time stepping covers the stiffness, mass-proportional "
-               "damping, viscoelastic and viscous faces, seismic input, element-loop materials and contact "
-               "without a static stage (docs/lts_plan.md)")
-    if "static" in scene:
-        for name, material in (scene.get("materials") or {}).items():
-            for table in ("plasticity", "damage"):
-                if material.get(table) is not None:
-                    raise SceneError(KEY, True, allowed.format(f"materials.{name}.{table} and a [static] stage"))
-        if "contact" in scene.effects:
-            raise SceneError(KEY, True, allowed.format("[contact] and a [static] stage"))
+               "damping, viscoelastic and viscous faces, seismic input, element-loop materials, contact and "
+               "a static stage (docs/lts_plan.md)")
     if has_constraints:
         raise SceneError(KEY, True, allowed.format("fixed or roller faces"))
     if beta != 0.0:
@@ -65,13 +59,14 @@ def check_supported(scene, has_constraints: bool, beta: float) -> None:
 
 
 def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: int = MAX_LEVEL,
-                pinned: np.ndarray | None = None, pairs: np.ndarray | None = None) -> np.ndarray:
+                pinned: np.ndarray | None = None, pairs: np.ndarray | None = None,
+                loop_cells: np.ndarray | None = None) -> np.ndarray:
     """int32 (n_nodes,) rate level per node, 0 the finest (module docstring). `pinned` nodes (the
     truncation faces' dashpot nodes) and the cells they belong to step at the finest rate: a
     boundary dashpot at a coarse node's own step is accurate only to (h C / M)^2, which is of order
     the coarse cells' Courant number squared, and it degraded the free field several times
     (docs/lts_plan.md). `pairs` (n_pairs, 2): the two nodes of every contact pair are made to drift at
-    one rate (`equalize_pair_drift`)."""
+    one rate (`equalize_pair_drift`; `loop_cells`, bool per cell: the element-loop cells)."""
     csr = stiffness.tocsr()
     row_sums = np.asarray(abs(csr).sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
     dt_node = 2.0 / np.sqrt(row_sums / mass)
@@ -83,7 +78,7 @@ def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: 
                             max_level)
     levels = _finest_of_cells(cell_level, cell_nodes, len(mass), max_level)
     if pairs is not None and len(pairs):
-        levels = equalize_pair_drift(levels, cell_nodes, np.asarray(pairs))
+        levels = equalize_pair_drift(levels, cell_nodes, np.asarray(pairs), loop_cells)
     return levels
 
 
@@ -93,28 +88,61 @@ def _finest_of_cells(cell_level: np.ndarray, cell_nodes: np.ndarray, n_nodes: in
     return levels
 
 
-def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
+UNCAPPED = np.iinfo(np.int32).max
+
+
+def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray | None = None) -> np.ndarray:
     """int32 (n_nodes,): the finest level whose kicks move each node (its drift level in the
-    LocalStepper: the finest level of the nodes it shares a cell with, itself included). Element-loop
-    cells load their nodes at the cell's level, never finer than their nodes, so they do not change it."""
+    LocalStepper): the finest level of the nodes it shares a cell with, itself included, and of the
+    element-loop cells that load it. A loop cell steps at the coarsest level of its nodes
+    (`cell_levels`), which does not change this, unless `cell_cap` (per cell; `pair_cell_cap`) makes
+    it finer."""
     finest_in_cell = levels[cell_nodes].min(axis=1)
+    if cell_cap is not None:
+        finest_in_cell = np.minimum(finest_in_cell, cell_cap)
     drift = np.array(levels, dtype=np.int32, copy=True)
     np.minimum.at(drift, cell_nodes.ravel(), np.repeat(finest_in_cell, cell_nodes.shape[1]).astype(np.int32))
     return drift
 
 
-def equalize_pair_drift(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+def pair_cell_cap(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray,
+                  loop_cells: np.ndarray | None) -> np.ndarray:
+    """int32 per cell: the level an element-loop cell touching contact pair nodes must step at, the
+    finest drift level of those nodes (UNCAPPED for every other cell). Its force then reaches each pair
+    node at every substep of the pair's level, not as kicks at the ends of a coarser step (which a
+    friction threshold would feel within one substep; the stiffness rows of pair nodes are stepped at
+    their drift level for the same reason, LocalStepper.step_rows_at_drift_level). A cell stepped finer
+    can make its other nodes drift finer: repeated until nothing changes."""
+    cap = np.full(len(cell_nodes), UNCAPPED, dtype=np.int64)
+    if loop_cells is None or not np.any(loop_cells):
+        return cap
+    is_pair = np.zeros(len(levels), dtype=bool)
+    is_pair[np.asarray(pairs).ravel()] = True
+    touching = np.flatnonzero(np.asarray(loop_cells) & is_pair[cell_nodes].any(axis=1))
+    around = cell_nodes[touching]
+    while True:
+        drift = drift_levels(levels, cell_nodes, cap)
+        finest = np.where(is_pair[around], drift[around], UNCAPPED).min(axis=1)
+        lowered = np.minimum(cap[touching], finest)
+        if np.array_equal(lowered, cap[touching]):
+            return cap
+        cap[touching] = lowered
+
+
+def equalize_pair_drift(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray,
+                        loop_cells: np.ndarray | None = None) -> np.ndarray:
     """Node levels with the two nodes of every contact pair at one level and drifting at one rate
     (LocalStepper.add_contact): a pair's nodes step at the finer of their two levels, and where they
     drift at different levels (e.g. a soft layer's coarse cells above a stiff layer's fine ones) the
     node with the coarser drift steps at its partner's drift level (a node may step finer than its
-    cells need). One level for both makes a bonded pair the unsplit node exactly. Lowering a node can
-    make a neighbour drift finer, so it is repeated until every pair agrees (levels only fall, so it
-    ends). Returns a new int32 array."""
+    cells need). One level for both makes a bonded pair the unsplit node exactly. The element-loop
+    cells (`loop_cells`, per cell) touching pair nodes step as `pair_cell_cap` says. Lowering a node
+    can make a neighbour drift finer, so it is repeated until every pair agrees (levels only fall, so
+    it ends). Returns a new int32 array."""
     levels = np.array(levels, dtype=np.int32, copy=True)
     i, j = pairs[:, 0], pairs[:, 1]
     while True:
-        drift = drift_levels(levels, cell_nodes)
+        drift = drift_levels(levels, cell_nodes, pair_cell_cap(levels, cell_nodes, pairs, loop_cells))
         target = np.minimum(np.minimum(levels[i], levels[j]), np.minimum(drift[i], drift[j]))
         differ = (levels[i] != levels[j]) | (drift[i] != drift[j])
         if not differ.any():
@@ -224,12 +252,13 @@ class LevelPairs:
         return self._gather("bond_intact", (), np.uint8)
 
 
-def level_pairs(arrays: dict, node_levels: np.ndarray, cell_nodes: np.ndarray, make_contact_pairs) -> tuple:
+def level_pairs(arrays: dict, node_levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray,
+                make_contact_pairs) -> tuple:
     """The pairs of `arrays` (pyfem.solver.contact_arguments) split by the level their nodes drift at
-    (`drift_levels`; equal for both nodes after `equalize_pair_drift`): (LevelPairs,
-    [(ContactPairs, level)])."""
+    (`drift_levels` with the cells' `pair_cell_cap`; equal for both nodes after
+    `equalize_pair_drift`): (LevelPairs, [(ContactPairs, level)])."""
     pairs = np.asarray(arrays["pairs"])
-    drift = drift_levels(node_levels, cell_nodes)[pairs]
+    drift = drift_levels(node_levels, cell_nodes, cell_cap)[pairs]
     if np.any(drift[:, 0] != drift[:, 1]):
         first = int(np.flatnonzero(drift[:, 0] != drift[:, 1])[0])
         raise ValueError(f"contact pair {first} joins nodes drifting at levels {drift[first].tolist()}: "
@@ -246,20 +275,60 @@ def level_pairs(arrays: dict, node_levels: np.ndarray, cell_nodes: np.ndarray, m
     return LevelPairs(len(pairs), parts), kernel_parts
 
 
-def level_components(nonlinear, node_levels: np.ndarray) -> list:
-    """Per region of `nonlinear` (NonlinearRegions), fresh components of its cells split by level:
-    [(LevelComponents, [(component, level)])] in region order."""
+def level_components(nonlinear, node_levels: np.ndarray, cell_cap: np.ndarray | None = None,
+                     initial_stress="scene") -> list:
+    """Per region of `nonlinear` (NonlinearRegions), fresh components of its cells split by level
+    (`cell_levels`, made finer where `cell_cap`, per model cell, says: `pair_cell_cap`), with the
+    region's initial stress ("scene") or none (None): [(LevelComponents, [(component, level)])] in
+    region order."""
     result = []
     for name, arrays in nonlinear.arrays.items():
         levels = cell_levels(node_levels, arrays.cell_nodes)
+        if cell_cap is not None:
+            levels = np.minimum(levels, cell_cap[arrays.cells]).astype(np.int32)
         parts, kernel_parts = [], []
         for level in np.unique(levels):
             rows = np.flatnonzero(levels == level)
-            component = nonlinear.new_component(name, rows=rows)
+            component = nonlinear.new_component(name, initial_stress=initial_stress, rows=rows)
             parts.append((rows, component))
             kernel_parts.append((component, int(level)))
         result.append((LevelComponents(len(levels), arrays.weights.shape[1], parts), kernel_parts))
     return result
+
+
+def load_component_parts(whole, parts: list) -> None:
+    """Loads the state of `whole` (a component of a region's cells: the static stage's, rebased) into
+    `parts` [(rows, component)] (`LevelComponents.parts`): each part's cells' per-point state and
+    initial stress; the stored energy and dissipation go to the first part (the account is a sum)."""
+    from pyfem.distributed import state_rows
+
+    state = whole.save_state()
+    n_cells = sum(len(rows) for rows, _ in parts)
+    for index, (rows, component) in enumerate(parts):
+        out = dict(component.save_state())
+        out["state"] = np.ascontiguousarray(state_rows(state["state"], n_cells)[rows]).tobytes()
+        sigma0 = state["initial_stress"]
+        out["initial_stress"] = (np.ascontiguousarray(state_rows(sigma0, n_cells)[rows]).tobytes()
+                                 if len(sigma0) else b"")
+        for scalar in ("stored_energy", "dissipation"):
+            out[scalar] = state[scalar] if index == 0 else np.zeros(1).tobytes()
+        component.load_state(out)
+
+
+def load_pair_parts(whole, parts: list, pair_nodes: np.ndarray) -> None:
+    """Loads the state of `whole` (ContactPairs of all the model's pairs: the static stage's, rebased)
+    into `parts` [(pair rows, ContactPairs)] (`LevelPairs.parts`); pair_nodes (n_pairs, 2)."""
+    from pyfem.distributed import CONTACT_PAIR_BLOCKS, state_rows, unique_slots
+
+    state = whole.save_state()
+    n_pairs = len(pair_nodes)
+    node_force = np.frombuffer(state["node_force"], dtype=np.float64).reshape(-1, 3)
+    for rows, contact in parts:
+        out = dict(contact.save_state())
+        for name in CONTACT_PAIR_BLOCKS:
+            out[name] = np.ascontiguousarray(state_rows(state[name], n_pairs)[rows]).tobytes()
+        out["node_force"] = np.ascontiguousarray(node_force[unique_slots(pair_nodes, rows)]).tobytes()
+        contact.load_state(out)
 
 
 def local_time_step(time_step, levels: np.ndarray):
@@ -330,7 +399,8 @@ class LocalSteppingAdapter:
 def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chunk: int = STABILITY_CHUNK,
                     seed: int = 0) -> dict:
     """Iterates the LTS map on the user's model: `make_kernel()` gives a LocalStepper of the model
-    (same matrix, mass, levels, step and boundary dashpots) without forces and without mass-
+    (same matrix, mass, levels, step and boundary dashpots; element-loop cells without initial stress,
+    so that a tiny state keeps their laws elastic: the linear map) without forces and without mass-
     proportional damping (damping only helps; the undamped map is the one to check). From a random
     displacement at rest, `steps` global steps in chunks of `chunk`; the energy (kinetic + strain) is
     read after each chunk. A stable map keeps it bounded (the dashpots drain it; the plain energy of
@@ -343,7 +413,9 @@ def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chun
     start = time.perf_counter()
     kernel = make_kernel()
     rng = np.random.default_rng(seed)
-    u = rng.standard_normal(n_dofs)
+    # A tiny state (1e-9 m): the map is linear in it wherever the element-loop laws stay elastic, and
+    # their return mappings (every point yielding at a unit displacement) cost nothing extra.
+    u = STABILITY_AMPLITUDE * rng.standard_normal(n_dofs)
     v, a = np.zeros(n_dofs), np.zeros(n_dofs)
     energies = []
     t = 0.0

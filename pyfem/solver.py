@@ -439,8 +439,13 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
                              "one rank for now)")
         cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
         pairs = model.pairs.nodes if "contact" in scene.effects else None
+        loop_cells = None
+        if nonlinear is not None:
+            loop_cells = np.zeros(model.n_cells, dtype=bool)
+            for arrays in nonlinear.arrays.values():
+                loop_cells[arrays.cells] = True
         node_levels = local_stepping.node_levels(elastic_stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
-                                                 pinned=np.unique(dashpot_nodes), pairs=pairs)
+                                                 pinned=np.unique(dashpot_nodes), pairs=pairs, loop_cells=loop_cells)
         time_step, _ = local_stepping.local_time_step(time_step, node_levels)
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
     # Whole output intervals: the last sample lands on or just after the duration.
@@ -478,26 +483,36 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
 
 
 def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
-    """The kernel's LocalStepper behind the Stepper calls of the run loop."""
+    """The kernel's LocalStepper behind the Stepper calls of the run loop. After a relaxation stage
+    its element-loop components and pairs, split by level, continue the stage's state
+    (local_stepping.load_component_parts, load_pair_parts)."""
     from pyfem import _kernels
-    from pyfem.local_stepping import LocalSteppingAdapter
+    from pyfem import local_stepping
 
     levels = np.ascontiguousarray(simulation.node_levels, dtype=np.int32)
+    model = simulation.model
+    cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
+    cell_cap = None
+    if simulation.contact_arrays is not None and simulation.nonlinear is not None:
+        loop_cells = np.zeros(model.n_cells, dtype=bool)
+        for arrays in simulation.nonlinear.arrays.values():
+            loop_cells[arrays.cells] = True
+        cell_cap = local_stepping.pair_cell_cap(levels, cell_nodes, simulation.contact_arrays["pairs"], loop_cells)
 
     built = {}  # the regions' LevelComponents of the last kernel built
 
-    def bare_kernel(alpha):
+    def bare_kernel(alpha, initial_stress="scene"):
         # With element-loop regions: fresh components of their cells, each at its level (the run's
         # become simulation.nonlinear.components, one LevelComponents per region, for the outputs).
+        # The stability check's have no initial stress: its tiny state must keep the laws elastic (a
+        # fresh law at the stage's stress, without the stage's history, would yield or crack at once).
         kernel = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass, levels, simulation.time_step.dt,
                                        alpha)
         if len(simulation.dashpot_nodes):
             kernel.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
                                 np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
         if simulation.nonlinear is not None:
-            from pyfem.local_stepping import level_components
-
-            regions = level_components(simulation.nonlinear, levels)
+            regions = local_stepping.level_components(simulation.nonlinear, levels, cell_cap, initial_stress)
             for _, parts in regions:
                 for component, level in parts:
                     kernel.add_internal_force(component, level)
@@ -505,26 +520,31 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         return kernel
 
     if simulation.lts_stability is None:  # the LTS map on this model, once (pyfem/local_stepping.py)
-        from pyfem.local_stepping import KEY, check_stability
-
-        report = check_stability(lambda: bare_kernel(0.0), simulation.stiffness.shape[0])
+        report = local_stepping.check_stability(lambda: bare_kernel(0.0, None), simulation.stiffness.shape[0])
         simulation.lts_stability = report
         if not report["stable"]:
-            raise SceneError(KEY, True, "false for this model: its local time stepping map amplified a random "
-                             f"state's energy {report['growth']:.3g}x in {report['global_steps']} global steps "
-                             f"(unstable); lower time.safety or turn local stepping off")
+            raise SceneError(local_stepping.KEY, True, "false for this model: its local time stepping map amplified "
+                             f"a random state's energy {report['growth']:.3g}x in {report['global_steps']} global "
+                             "steps (unstable); lower time.safety or turn local stepping off")
     kernel = bare_kernel(simulation.alpha)
+    stage = simulation.static
     if simulation.nonlinear is not None:
+        stage_components = getattr(stage, "components", None)
+        if stage_components is not None:  # the relaxation stage's state, cut by level
+            for region, whole in zip(built["regions"], stage_components):
+                if whole is not None:
+                    local_stepping.load_component_parts(whole, region.parts)
         simulation.nonlinear.components = built["regions"]
     if simulation.contact_arrays is not None:  # the pairs at their levels, read back as one set
-        from pyfem.local_stepping import level_pairs
-
-        cell_nodes = simulation.model.V.dofmap.list.array.reshape(simulation.model.n_cells, -1)
-        simulation.contact_pairs, parts = level_pairs(simulation.contact_arrays, levels, cell_nodes,
-                                                      make_contact_pairs)
+        simulation.contact_pairs, parts = local_stepping.level_pairs(simulation.contact_arrays, levels, cell_nodes,
+                                                                     cell_cap, make_contact_pairs)
+        stage_contact = getattr(stage, "contact", None)
+        if stage_contact is not None:
+            local_stepping.load_pair_parts(stage_contact, simulation.contact_pairs.parts,
+                                           simulation.contact_arrays["pairs"])
         for contact, level in parts:
             kernel.add_contact(contact, level)
-    stepper = LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
+    stepper = local_stepping.LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
     if simulation.input_arrays is not None:
         kernel.add_seismic_input(seismic_input_kernel(simulation.input_arrays))
     if simulation.static is not None:  # the stage's out-of-balance, held constant (pyfem/static.py)

@@ -6,8 +6,9 @@ interlayer pairs with deterioration, oblique P + SV El Centro), with mesh overri
 model to a 90 x 74 x 110 m block around a 24 m long cavern (two layer interfaces cross it), so that
 the static stage and a short dynamic window take about a minute:
 
-- without the wave, the dynamic run after the stage stays at rest: peak velocity below 1e-6 m/s
-  and displacement below 1e-6 of the stage's largest displacement (docs/static.md "Hand-over"),
+- without the wave, the dynamic run after the stage stays at rest, with global and with local time
+  stepping: peak velocity below 1e-6 m/s and displacement below 1e-6 of the stage's largest
+  displacement (docs/static.md "Hand-over"),
   after the rock yielded and pairs slid in the stage. The wear factor of the deterioration is held
   at 1 (R0 = 1) there: with R0 < 1 the interfaces lose strength with time whether or not the
   ground shakes, and the pairs the stage left at their strength limit slide (measured: without a
@@ -52,10 +53,15 @@ def stage_checks(summary) -> None:
     assert yielded > 0.0, "the rock around the cavern yielded in the stage"
 
 
-def test_small_case3_without_wave_stays_at_rest(tmp_path):
-    scene = small_case3(["time.duration=0.02", "output.xdmf_interval=0.0", "contact.deterioration.R0=1.0"],
-                        wave=False)
+@pytest.mark.parametrize("local_stepping", [False, True])
+def test_small_case3_without_wave_stays_at_rest(tmp_path, local_stepping):
+    """Also with local time stepping: the stage's element-loop and pair state, cut by rate level
+    (pyfem/local_stepping.py load_component_parts, load_pair_parts), hands over in equilibrium."""
+    scene = small_case3(["time.duration=0.02", "output.xdmf_interval=0.0", "contact.deterioration.R0=1.0",
+                         f"time.local_stepping={'true' if local_stepping else 'false'}"], wave=False)
     summary = solver.run(scene, tmp_path / "rest")
+    if local_stepping:
+        assert "local time stepping: 5 rate levels" in summary["dt_reason"]
     stage_checks(summary)
     report = json.loads((tmp_path / "rest" / "static" / "static.json").read_text())
     assert report["pairs"]["states"]["sliding"] > 0, "pairs were left at their strength limit by the stage"

@@ -92,8 +92,6 @@ def test_one_rate_level_is_global_stepping(tmp_path):
 
 
 @pytest.mark.parametrize("change, named", [
-    ({"materials": {"rock": {"preset": "sandstone", "plasticity": {}}}, "static": {"gravity": True}},
-     "materials.rock.plasticity and a [static] stage"),
     ({"boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}}}, "fixed or roller faces"),
     ({"damping": {"alpha": 0.0, "beta": 1.0e-4}}, "stiffness-proportional"),
     ({"time": {"duration": 1.0, "local_stepping": True, "matrix_precision": "single"}}, "matrix_precision"),
@@ -326,17 +324,3 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
     assert pair_rows[-1, 4] == pytest.approx(pair_rows_global[-1, 4], rel=0.01)
     assert energy["friction_dissipation"][-1] == pytest.approx(energy_global["friction_dissipation"][-1], rel=0.02)
 
-
-def test_contact_after_a_static_stage_is_refused_by_key():
-    base = {
-        "title": "contact and a static stage",
-        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [50.0, 40.0, 60.0], "h": 5.0, "order": 1,
-                 "layers": [{"material": "stiff", "thickness": 30.0}, {"material": "soft", "thickness": 30.0}]},
-        "materials": {"stiff": {"E": 32.0e9, "nu": 0.25, "rho": 2600.0}, "soft": {"E": 2.0e9, "nu": 0.25, "rho": 2600.0}},
-        "time": {"duration": 0.3, "local_stepping": True},
-        "contact": {"interfaces": ["interface_1"], "cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e6},
-        "static": {"gravity": True},
-    }
-    with pytest.raises(SceneError, match=r"time\.local_stepping") as error:
-        solver.prepare(parse_scene(base, source="test"))
-    assert "[contact] and a [static] stage" in str(error.value)
