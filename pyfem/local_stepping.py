@@ -91,13 +91,16 @@ def _finest_of_cells(cell_level: np.ndarray, cell_nodes: np.ndarray, n_nodes: in
 UNCAPPED = np.iinfo(np.int32).max
 
 
-def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray | None = None) -> np.ndarray:
+def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray | None = None,
+                 loop_cells: np.ndarray | None = None) -> np.ndarray:
     """int32 (n_nodes,): the finest level whose kicks move each node (its drift level in the
-    LocalStepper): the finest level of the nodes it shares a cell with, itself included, and of the
-    element-loop cells that load it. A loop cell steps at the coarsest level of its nodes
-    (`cell_levels`), which does not change this, unless `cell_cap` (per cell; `pair_cell_cap`) makes
-    it finer."""
-    finest_in_cell = levels[cell_nodes].min(axis=1)
+    LocalStepper): the finest level of the nodes it shares a matrix cell with (its stiffness row's
+    columns), itself included, and of the element-loop cells (`loop_cells`, bool per cell) that load
+    it, each at its own level: the coarsest of its nodes (`cell_levels`), made finer by `cell_cap`
+    (per cell; `pair_cell_cap`)."""
+    finest_in_cell = levels[cell_nodes].min(axis=1).astype(np.int64)
+    if loop_cells is not None:
+        finest_in_cell = np.where(loop_cells, levels[cell_nodes].max(axis=1), finest_in_cell)
     if cell_cap is not None:
         finest_in_cell = np.minimum(finest_in_cell, cell_cap)
     drift = np.array(levels, dtype=np.int32, copy=True)
@@ -121,7 +124,7 @@ def pair_cell_cap(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray,
     touching = np.flatnonzero(np.asarray(loop_cells) & is_pair[cell_nodes].any(axis=1))
     around = cell_nodes[touching]
     while True:
-        drift = drift_levels(levels, cell_nodes, cap)
+        drift = drift_levels(levels, cell_nodes, cap, loop_cells)
         finest = np.where(is_pair[around], drift[around], UNCAPPED).min(axis=1)
         lowered = np.minimum(cap[touching], finest)
         if np.array_equal(lowered, cap[touching]):
@@ -142,7 +145,7 @@ def equalize_pair_drift(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.nd
     levels = np.array(levels, dtype=np.int32, copy=True)
     i, j = pairs[:, 0], pairs[:, 1]
     while True:
-        drift = drift_levels(levels, cell_nodes, pair_cell_cap(levels, cell_nodes, pairs, loop_cells))
+        drift = drift_levels(levels, cell_nodes, pair_cell_cap(levels, cell_nodes, pairs, loop_cells), loop_cells)
         target = np.minimum(np.minimum(levels[i], levels[j]), np.minimum(drift[i], drift[j]))
         differ = (levels[i] != levels[j]) | (drift[i] != drift[j])
         if not differ.any():
@@ -252,13 +255,13 @@ class LevelPairs:
         return self._gather("bond_intact", (), np.uint8)
 
 
-def level_pairs(arrays: dict, node_levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray,
-                make_contact_pairs) -> tuple:
+def level_pairs(arrays: dict, node_levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray | None,
+                loop_cells: np.ndarray | None, make_contact_pairs) -> tuple:
     """The pairs of `arrays` (pyfem.solver.contact_arguments) split by the level their nodes drift at
     (`drift_levels` with the cells' `pair_cell_cap`; equal for both nodes after
     `equalize_pair_drift`): (LevelPairs, [(ContactPairs, level)])."""
     pairs = np.asarray(arrays["pairs"])
-    drift = drift_levels(node_levels, cell_nodes, cell_cap)[pairs]
+    drift = drift_levels(node_levels, cell_nodes, cell_cap, loop_cells)[pairs]
     if np.any(drift[:, 0] != drift[:, 1]):
         first = int(np.flatnonzero(drift[:, 0] != drift[:, 1])[0])
         raise ValueError(f"contact pair {first} joins nodes drifting at levels {drift[first].tolist()}: "

@@ -492,12 +492,14 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
     levels = np.ascontiguousarray(simulation.node_levels, dtype=np.int32)
     model = simulation.model
     cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
-    cell_cap = None
-    if simulation.contact_arrays is not None and simulation.nonlinear is not None:
+    cell_cap = loop_cells = None
+    if simulation.nonlinear is not None:
         loop_cells = np.zeros(model.n_cells, dtype=bool)
         for arrays in simulation.nonlinear.arrays.values():
             loop_cells[arrays.cells] = True
-        cell_cap = local_stepping.pair_cell_cap(levels, cell_nodes, simulation.contact_arrays["pairs"], loop_cells)
+        if simulation.contact_arrays is not None:
+            cell_cap = local_stepping.pair_cell_cap(levels, cell_nodes, simulation.contact_arrays["pairs"],
+                                                    loop_cells)
 
     built = {}  # the regions' LevelComponents of the last kernel built
 
@@ -537,7 +539,7 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         simulation.nonlinear.components = built["regions"]
     if simulation.contact_arrays is not None:  # the pairs at their levels, read back as one set
         simulation.contact_pairs, parts = local_stepping.level_pairs(simulation.contact_arrays, levels, cell_nodes,
-                                                                     cell_cap, make_contact_pairs)
+                                                                     cell_cap, loop_cells, make_contact_pairs)
         stage_contact = getattr(stage, "contact", None)
         if stage_contact is not None:
             local_stepping.load_pair_parts(stage_contact, simulation.contact_pairs.parts,
