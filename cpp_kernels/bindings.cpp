@@ -201,6 +201,29 @@ StateArchive dict_archive(const py::dict& blocks) {
   return StateArchive(std::move(copy));
 }
 
+/// save_state() / load_state(dict) on a bound class whose C++ type has save_state(archive, prefix)
+/// and load_state(archive, prefix) (ContactPairs, the element-loop components): the blocks a
+/// Stepper checkpoint holds for the object, under no prefix.
+template <class Bound>
+Bound def_state_methods(Bound bound) {
+  using T = typename Bound::type;
+  bound.def(
+      "save_state",
+      [](const T& object) {
+        StateArchive archive;
+        object.save_state(archive, "");
+        return archive_dict(archive);
+      },
+      "The object's state as a dict of named byte blocks (the blocks a Stepper checkpoint holds for "
+      "it), a copy.");
+  bound.def(
+      "load_state", [](T& object, const py::dict& blocks) { object.load_state(dict_archive(blocks), ""); },
+      py::arg("state"),
+      "Restores save_state's dict (of an object of the same size; ValueError names a block that does "
+      "not fit).");
+  return bound;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_kernels, m) {
@@ -269,7 +292,7 @@ Borrowed arrays are kept alive by this object and must not be modified while it 
           "Forces (N) of every input node at time t (s): new float64 array (n_input_nodes, 3).")
       .def_property_readonly("n_input_nodes", &SeismicInput::n_input_nodes);
 
-  py::class_<ContactPairs, std::shared_ptr<ContactPairs>>(
+  def_state_methods(py::class_<ContactPairs, std::shared_ptr<ContactPairs>>(
       m, "ContactPairs",
       R"(Interlayer contact node pairs (paper Sec. 3, Eqs. 12-20; Liu & Sharan 1995).
 
@@ -295,22 +318,7 @@ Args:
     cohesion: c (Pa), >= 0.
     tensile_strength: t_s (Pa), >= 0.
     friction_static: mu_s = tan(static friction angle), >= 0.
-    friction_dynamic: mu_d = tan(dynamic friction angle), >= 0.)")
-      .def(
-          "save_state",
-          [](const ContactPairs& object) {
-            StateArchive archive;
-            object.save_state(archive, "");
-            return archive_dict(archive);
-          },
-          "The object's state as a dict of named byte blocks (the blocks a Stepper checkpoint holds "
-          "for it), a copy.")
-      .def(
-          "load_state",
-          [](ContactPairs& object, const py::dict& blocks) { object.load_state(dict_archive(blocks), ""); },
-          py::arg("state"),
-          "Restores save_state's dict (of an object of the same size; ValueError names a block that "
-          "does not fit).")
+    friction_dynamic: mu_d = tan(dynamic friction angle), >= 0.)"))
       .def(
           py::init([](const py::object& pairs_object, const py::object& area_object,
                       const py::object& normal_object, const py::object& static_force_object,
@@ -516,7 +524,7 @@ next displacement, its stored energy 0; plastic strain, damage and dissipation k
            "Dissipation accumulated over all commits (J).")
       .def_property_readonly("name", &InternalForceComponent::name);
 
-  py::class_<HexahedronElementsBase, InternalForceComponent,
+  def_state_methods(py::class_<HexahedronElementsBase, InternalForceComponent,
              std::shared_ptr<HexahedronElementsBase>>(
       m, "HexahedronElements",
       R"(Hexahedral cells of one region integrated point by point with a material law.
@@ -549,22 +557,7 @@ Args:
         strength is returned (damaged) at construction and released from t = 0.
     mean_dilatation: replace the volumetric strain by its cell mean (B-bar, for Q1 plasticity).
     min_cells_for_threads: below this many cells the loops run on one thread.
-Borrowed arrays are kept alive by this object and must not be modified while it is in use.)")
-      .def(
-          "save_state",
-          [](const HexahedronElementsBase& object) {
-            StateArchive archive;
-            object.save_state(archive, "");
-            return archive_dict(archive);
-          },
-          "The object's state as a dict of named byte blocks (the blocks a Stepper checkpoint holds "
-          "for it), a copy.")
-      .def(
-          "load_state",
-          [](HexahedronElementsBase& object, const py::dict& blocks) { object.load_state(dict_archive(blocks), ""); },
-          py::arg("state"),
-          "Restores save_state's dict (of an object of the same size; ValueError names a block that "
-          "does not fit).")
+Borrowed arrays are kept alive by this object and must not be modified while it is in use.)"))
       .def(py::init([](const py::object& cell_nodes_object, const py::object& gradients_object,
                        const py::object& weights_object, const std::string& law,
                        const ParameterMap& parameters, const py::object& initial_stress_object,

@@ -109,4 +109,44 @@ inline double max_relative_difference(const std::vector<double>& a, const std::v
   return difference / norm;
 }
 
+/// Node p of a system split into p and p' = n (the last node), as at an interface: p's diagonal
+/// block halved on each side, each coupling block kept at p or moved to p' (side), p's mass
+/// divided 30/70. A bonded pair (p, p') must then reproduce the merged system.
+inline BlockSystem split_node(const BlockSystem& merged, std::int64_t p, const std::vector<char>& to_copy) {
+  const std::int64_t n = merged.n_nodes, nd = 3 * n, sd = 3 * (n + 1);
+  BlockSystem split;
+  split.n_nodes = n + 1;
+  split.dense.assign(sd * sd, 0.0);
+  std::vector<char> pattern((n + 1) * (n + 1), 0);
+  for (std::int64_t a = 0; a < n; ++a)
+    for (std::int64_t b = 0; b < n; ++b) {
+      bool present = false;
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) present |= merged.dense[(3 * a + r) * nd + 3 * b + c] != 0.0;
+      if (!present) continue;
+      auto put = [&](std::int64_t A, std::int64_t B, double scale) {
+        pattern[A * (n + 1) + B] = 1;
+        for (int r = 0; r < 3; ++r)
+          for (int c = 0; c < 3; ++c)
+            split.dense[(3 * A + r) * sd + 3 * B + c] += scale * merged.dense[(3 * a + r) * nd + 3 * b + c];
+      };
+      const std::int64_t side_b = to_copy[b] ? n : p, side_a = to_copy[a] ? n : p;
+      if (a == p && b == p) {
+        put(p, p, 0.5);
+        put(n, n, 0.5);
+      } else if (a == p) {
+        put(side_b, b, 1.0);
+      } else if (b == p) {
+        put(a, side_a, 1.0);
+      } else {
+        put(a, b, 1.0);
+      }
+    }
+  compress(split, pattern);
+  split.mass = merged.mass;
+  split.mass.push_back(0.7 * merged.mass[p]);
+  split.mass[p] *= 0.3;
+  return split;
+}
+
 }  // namespace cavern::testing

@@ -67,55 +67,24 @@ BlockSystem free_pair(double mass_i, double mass_j) {
 }  // namespace
 
 TEST(Contact, BondedPairReproducesTheMergedSystemWithDampingAndA3x3Dashpot) {
-  // Merged random system; node p is split into p and p' = n: its diagonal block halved on each
-  // side, each coupling block moved to p' or kept at p, its mass divided 30/70.
+  // Merged random system; node p is split into p and p' = n (random_system.hpp split_node): its
+  // diagonal block halved on each side, each coupling block moved to p' or kept at p, its mass
+  // divided 30/70.
   const std::int64_t n = 20, p = 6;
   const BlockSystem merged = random_spd_system(n, 3, 17);
-  BlockSystem split;
-  split.n_nodes = n + 1;
-  const std::int64_t nd = 3 * n, sd = 3 * (n + 1);
-  split.dense.assign(sd * sd, 0.0);
-  std::vector<char> pattern((n + 1) * (n + 1), 0);
   std::mt19937_64 generator(3);
-  std::vector<std::int64_t> side(n, p);  // the split-side of the coupling of p with node k
-  for (std::int64_t k = 0; k < n; ++k) side[k] = (generator() % 2) ? p : n;
-  for (std::int64_t a = 0; a < n; ++a)
-    for (std::int64_t b = 0; b < n; ++b) {
-      bool present = false;
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) present |= merged.dense[(3 * a + r) * nd + 3 * b + c] != 0.0;
-      if (!present) continue;
-      auto put = [&](std::int64_t A, std::int64_t B, double scale) {
-        pattern[A * (n + 1) + B] = 1;
-        for (int r = 0; r < 3; ++r)
-          for (int c = 0; c < 3; ++c)
-            split.dense[(3 * A + r) * sd + 3 * B + c] +=
-                scale * merged.dense[(3 * a + r) * nd + 3 * b + c];
-      };
-      if (a == p && b == p) {
-        put(p, p, 0.5);
-        put(n, n, 0.5);
-      } else if (a == p) {
-        put(side[b], b, 1.0);
-      } else if (b == p) {
-        put(a, side[a], 1.0);
-      } else {
-        put(a, b, 1.0);
-      }
-    }
-  compress(split, pattern);
-  split.mass = merged.mass;
-  split.mass.push_back(0.7 * merged.mass[p]);
-  split.mass[p] *= 0.3;
+  std::vector<char> to_copy(n, 0);
+  for (std::int64_t k = 0; k < n; ++k) to_copy[k] = (generator() % 2) ? 0 : 1;
+  const BlockSystem split = split_node(merged, p, to_copy);
 
   const double dt = 0.5 * 2.0 / std::sqrt(gershgorin_bound(merged.view(), merged.mass.data()));
   const double alpha = 0.4;
   Stepper merged_stepper(merged.view(), merged.mass.data(), {dt, alpha, 0.0});
   Stepper split_stepper(split.view(), split.mass.data(), {dt, alpha, 0.0});
   const double C[9] = {3.0, 1.0, -0.5, 1.0, 2.0, 0.3, -0.5, 0.3, 4.0};
-  const std::int32_t merged_node = p, split_node = n;
+  const std::int32_t merged_node = p, copy_node = n;
   merged_stepper.set_dashpots(&merged_node, 1, C);
-  split_stepper.set_dashpots(&split_node, 1, C);
+  split_stepper.set_dashpots(&copy_node, 1, C);
   const double normal[3] = {0.0, 0.6, 0.8}, F0[3] = {1.0, -30.0, -40.0};
   auto contact = single_pair(p, n, normal, F0, 1.0, {1e9, 1e9, 0.5, 0.4});
   split_stepper.set_contact(contact);
