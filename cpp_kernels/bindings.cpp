@@ -201,6 +201,18 @@ StateArchive dict_archive(const py::dict& blocks) {
   return StateArchive(std::move(copy));
 }
 
+py::dict phase_dict(const PhaseTimes& times) {
+  py::dict phases;
+  phases["update"] = times.update;
+  phases["element_loop"] = times.element_loop;
+  phases["input_forces"] = times.input_forces;
+  phases["stiffness"] = times.stiffness;
+  phases["contact"] = times.contact;
+  phases["exchange"] = times.exchange;
+  phases["steps"] = times.steps;
+  return phases;
+}
+
 /// save_state() / load_state(dict) on a bound class whose C++ type has save_state(archive, prefix)
 /// and load_state(archive, prefix) (ContactPairs, the element-loop components): the blocks a
 /// Stepper checkpoint holds for the object, under no prefix.
@@ -915,19 +927,7 @@ is the laws' own energy error, round-off for linear_elastic).)")
           py::arg("u"), py::arg("v"), py::arg("a"), py::arg("t0"),
           "Sets H_0 from the state (u, v, a) at t0 (read only) and zeroes the accumulated work.")
       .def(
-          "phase_seconds",
-          [](const Stepper& stepper) {
-            const PhaseTimes& times = stepper.phase_times();
-            py::dict phases;
-            phases["update"] = times.update;
-            phases["element_loop"] = times.element_loop;
-            phases["input_forces"] = times.input_forces;
-            phases["stiffness"] = times.stiffness;
-            phases["contact"] = times.contact;
-            phases["exchange"] = times.exchange;
-            phases["steps"] = times.steps;
-            return phases;
-          },
+          "phase_seconds", [](const Stepper& stepper) { return phase_dict(stepper.phase_times()); },
           "Wall time (s) of each part of the steps since construction or reset_phase_seconds(): "
           "update (pass A), element_loop (internal-force components), input_forces (force providers "
           "and their work), stiffness (pass B: K u and the velocity update), contact, exchange (the MPI "
@@ -1025,6 +1025,10 @@ Args:
           },
           py::arg("nodes"),
           "Steps the nodes' whole stiffness rows at their drift level (add_contact does it for pair nodes).")
+      .def("phase_seconds", [](const LocalStepper& stepper) { return phase_dict(stepper.phase_times()); },
+           "Wall time (s) of each part of the steps (Stepper.phase_seconds; update: the drifts, stiffness: "
+           "the kicks); steps counts fine steps.")
+      .def("reset_phase_seconds", &LocalStepper::reset_phase_times, "Zeroes the phase times.")
       .def(
           "run",
           [](LocalStepper& stepper, const py::object& u, const py::object& v, const py::object& a,

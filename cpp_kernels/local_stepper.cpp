@@ -251,6 +251,7 @@ double LocalStepper::work_fraction() const {
 }
 
 void LocalStepper::start_kick(int c, double h, double* v) {
+  const double started = omp_get_wtime();
   Level& level = levels_[c];
   const double half = 0.5 * h;
   const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
@@ -283,6 +284,7 @@ void LocalStepper::start_kick(int c, double h, double* v) {
     own_power_[2 * i + 1] = damping_power;
     for (int d = 0; d < 3; ++d) vi[d] += half * (force[d] - damping[d]) / m;
   }
+  phase_times_.stiffness += omp_get_wtime() - started;
 }
 
 void LocalStepper::end_kick(int c, double h, double t, const double* u, double* v, bool initial) {
@@ -290,11 +292,19 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
   const double half = 0.5 * h;
   // External forces of this level's own nodes at t (not in the initial evaluation: the first start
   // kick, like Stepper's first pass A from a_0 = M^-1 (-K u_0 - d(v_0)), has none).
+  double clock = omp_get_wtime();
+  auto lap = [&clock](double& phase) {
+    const double now = omp_get_wtime();
+    phase += now - clock;
+    clock = now;
+  };
   if (!level.provider_rows.empty() && !initial) {
     for (auto& provider : providers_) provider->add_forces(t, u, v, external_.data());
   }
+  lap(phase_times_.input_forces);
   // The level's element-loop cells at the new u (their trial state; committed below).
   for (const auto& component : level.components) component->compute(u, internal_.data());
+  lap(phase_times_.element_loop);
   const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
   double external_work = 0.0, damping_work = 0.0;
 #pragma omp parallel for schedule(static) if (n_rows >= kMinRowsForThreadsLocal) \
@@ -363,19 +373,27 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
   }
   energy_.external_work += external_work;
   energy_.damping_work += damping_work;
+  lap(phase_times_.stiffness);
   // The initial evaluation only reads the committed state (no step was taken).
   if (!initial)
     for (const auto& component : level.components) component->commit();
+  lap(phase_times_.element_loop);
   if (!level.provider_rows.empty() && !initial)
     for (const std::int32_t node : provider_nodes_)
       for (int d = 0; d < 3; ++d) external_[3 * static_cast<std::int64_t>(node) + d] = 0.0;
+  lap(phase_times_.input_forces);
 }
 
 void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
   start_kick(c, h, v);
   // Every kick that moves this level's drift nodes before their drift ends has been given (coarser
   // levels' start kicks at t came first, finer levels do not touch them): the pairs' impulses now.
-  if (!levels_[c].contacts.empty()) correct_contacts(c, t, u, v);
+  if (!levels_[c].contacts.empty()) {
+    const double started = omp_get_wtime();
+    correct_contacts(c, t, u, v);
+    phase_times_.contact += omp_get_wtime() - started;
+  }
+  const double drift_started = omp_get_wtime();
   const std::vector<std::int32_t>& drift = levels_[c].drift;
   const std::int64_t n_drift = static_cast<std::int64_t>(drift.size());
 #pragma omp parallel for schedule(static) if (n_drift >= kMinRowsForThreadsLocal)
@@ -383,6 +401,7 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
     const std::int64_t i = drift[k];
     for (int d = 0; d < 3; ++d) u[3 * i + d] += h * v[3 * i + d];
   }
+  phase_times_.update += omp_get_wtime() - drift_started;
   if (c < max_level_) {
     substep(c + 1, 0.5 * h, t, u, v);
     substep(c + 1, 0.5 * h, t + 0.5 * h, u, v);
@@ -445,6 +464,7 @@ double LocalStepper::run(double* u, double* v, double* a, std::int64_t n_steps, 
   const double step = dt();
   for (std::int64_t s = 0; s < n_steps; ++s)
     substep(0, step, t0 + static_cast<double>(s) * step, u, v);
+  phase_times_.steps += n_steps * (std::int64_t{1} << max_level_);
   // Total acceleration: the sum over the levels touching a node (every level's last end kick is
   // at the end of the global step).
   const std::int64_t n = n_nodes();

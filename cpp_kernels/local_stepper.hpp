@@ -14,6 +14,7 @@
 #include "contact.hpp"
 #include "force_provider.hpp"
 #include "internal_force.hpp"
+#include "stepper.hpp"
 
 namespace cavern {
 
@@ -123,6 +124,13 @@ class LocalStepper {
   /// Energies of the state of the last run() (strain by one product at the end of each run call).
   Energy energy() const { return energy_; }
 
+  /// Wall time of each part of the steps run so far (s), as Stepper's phases: update (the drifts),
+  /// element_loop (the components' forces and commits), input_forces (the providers), stiffness
+  /// (the kicks' block products and velocity updates), contact (the pairs' impulses); steps counts
+  /// fine steps (dt_fine). Two clock reads per phase per kick, nothing per node.
+  const PhaseTimes& phase_times() const { return phase_times_; }
+  void reset_phase_times() { phase_times_ = PhaseTimes{}; }
+
  private:
   struct Level {
     // Rows touched by the level's columns, and per row the blocks of those columns.
@@ -181,6 +189,7 @@ class LocalStepper {
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
   Energy energy_;
+  PhaseTimes phase_times_;
 };
 
 }  // namespace cavern

@@ -219,7 +219,8 @@ def test_yielding_layer_at_its_own_rate_follows_global_stepping(tmp_path):
         assert loc["monitors"][name]["displacement"] == pytest.approx(glob["monitors"][name]["displacement"], rel=0.02)
 
 
-def two_layer_contact_scene(local: bool, contact: bool, cohesion: float = 1.0e15, friction_angle: float = 30.0):
+def two_layer_contact_scene(local: bool, contact: bool, cohesion: float = 1.0e15, friction_angle: float = 30.0,
+                            soft_plasticity: dict | None = None):
     """Two layers (stiff below, soft above: a coarser rate level) split at their interface into
     contact pairs, a vertical SV pulse; `cohesion` 1e15 keeps every pair bonded."""
     data = {
@@ -233,6 +234,8 @@ def two_layer_contact_scene(local: bool, contact: bool, cohesion: float = 1.0e15
         "monitor": [{"name": "soft", "point": [25.0, 20.0, 45.0]}, {"name": "stiff", "point": [25.0, 20.0, 15.0]}],
         "output": {"interval": 0.004, "xdmf_interval": 0.0},
     }
+    if soft_plasticity is not None:
+        data["materials"]["soft"]["plasticity"] = soft_plasticity
     if contact:
         data["initial_stress"] = {"surface": 100.0, "rho": 2600.0, "k": [1.0, 1.0, 1.0]}
         data["contact"] = {"interfaces": ["interface_1"], "cohesion": cohesion, "friction_angle": friction_angle,

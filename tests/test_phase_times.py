@@ -48,3 +48,20 @@ def test_plan_prints_the_phase_split():
     line = plan["time per step"]
     for name in ("update", "stiffness", "input_forces", "contact"):
         assert name in line
+
+
+def test_local_stepping_reports_its_phases(tmp_path):
+    """The local stepper's own timers (LocalStepper.phase_seconds): a yielding layer and a sliding
+    interface at their rates, every phase inside the loop, steps counted in fine steps."""
+    from test_local_stepping import two_layer_contact_scene
+
+    scene = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
+                                    soft_plasticity={"cohesion": 4.0e5, "friction_angle": 30.0, "tensile_strength": 2.0e5})
+    solver.run(scene, tmp_path / "run")
+    summary = time_per_step(tmp_path / "run")
+    split = summary["time_per_step"]
+    loop_ms = 1e3 * summary["loop_seconds"] / summary["steps"]
+    kernel = sum(split[name]["ms_per_step"] for name in PHASES)
+    assert 0.0 < kernel <= loop_ms * (1 + 1e-9)
+    for name in PHASES:  # every phase ran: drifts, cells, input, kicks, pair impulses
+        assert split[name]["ms_per_step"] > 0.0, name
