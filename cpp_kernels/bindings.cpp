@@ -1006,7 +1006,7 @@ Args:
             stepper.add_internal_force(std::move(component), level);
           },
           py::arg("component"), py::arg("level"), py::keep_alive<1, 2>(),
-          "Adds a HexahedronElements whose cells step at dt_fine 2^level (each of their nodes at that "
+          "Adds a HexahedronElements whose cells step at dt_fine 2^level (their nodes then drift at that "
           "level or a finer one): its force is computed and committed in the level's end kicks.")
       .def(
           "add_contact",
@@ -1014,8 +1014,9 @@ Args:
             stepper.add_contact(std::move(pairs), level);
           },
           py::arg("pairs"), py::arg("level"), py::keep_alive<1, 2>(),
-          "Adds ContactPairs corrected in the end kicks of rate level `level` (every node around "
-          "them must step at that level: checked at the first run).")
+          "Adds ContactPairs whose nodes step and drift at rate level `level`, corrected by an impulse "
+          "before each of the level's drifts; their rows step at that level (step_rows_at_drift_level). "
+          "Checked at the first run (ValueError naming the node).")
       .def(
           "step_rows_at_drift_level",
           [](LocalStepper& stepper, const py::object& nodes_object) {
@@ -1024,7 +1025,8 @@ Args:
                 std::vector<std::int32_t>(nodes.data(), nodes.data() + nodes.shape(0)));
           },
           py::arg("nodes"),
-          "Steps the nodes' whole stiffness rows at their drift level (add_contact does it for pair nodes).")
+          "Steps the nodes' whole stiffness rows at their drift level (add_contact does it for pair nodes); "
+          "each node must step at its drift level itself (checked at the first run).")
       .def("phase_seconds", [](const LocalStepper& stepper) { return phase_dict(stepper.phase_times()); },
            "Wall time (s) of each part of the steps (Stepper.phase_seconds; update: the drifts, stiffness: "
            "the kicks); steps counts fine steps.")

@@ -118,15 +118,30 @@ void LocalStepper::step_rows_at_drift_level(const std::vector<std::int32_t>& nod
   for (const std::int32_t node : nodes) {
     if (node < 0 || node >= n_nodes())
       throw std::invalid_argument("step_rows_at_drift_level: " + std::to_string(node) + " is not a node");
-    std::int32_t finest = level_[node];
-    for (std::int64_t b = stiffness_.indptr[node]; b < stiffness_.indptr[node + 1]; ++b)
-      finest = std::min(finest, level_[stiffness_.indices[b]]);
-    row_cap_[node] = finest;
+    capped_.push_back(node);
+  }
+  initialised_ = false;  // the caps are set at the next run, when every component is known
+}
+
+void LocalStepper::apply_row_caps() {
+  if (capped_.empty()) return;
+  // The drift levels of the levels without caps (a cap moves a row's blocks to a finer level than
+  // their columns', which changes no node's drift level: the capped node drifts there already,
+  // and its neighbours' rows are untouched), then each capped row at its node's drift level.
+  std::fill(row_cap_.begin(), row_cap_.end(), kMaxLevels);
+  build_levels();
+  for (const std::int32_t node : capped_) {
+    if (level_[node] != drift_level_[node])
+      throw std::invalid_argument(
+          "step_rows_at_drift_level: node " + std::to_string(node) + " steps at level " +
+          std::to_string(level_[node]) + " but drifts at level " + std::to_string(drift_level_[node]) +
+          ": its row can step at its drift level only if it steps there itself, so that every "
+          "neighbour it reads drifts there too (pyfem/local_stepping.py equalize_pair_drift)");
+    row_cap_[node] = drift_level_[node];
   }
   build_levels();
   build_dashpot_inverses();
   build_provider_rows();
-  initialised_ = false;
 }
 
 void LocalStepper::check_contacts() const {
@@ -134,11 +149,12 @@ void LocalStepper::check_contacts() const {
     const int k = max_level_ - c;
     for (const auto& pairs : levels_[c].contacts)
       for (const std::int32_t node : pairs->unique_nodes())
-        if (drift_level_[node] != k)
+        if (drift_level_[node] != k || level_[node] != k)
           throw std::invalid_argument(
-              "contact pair node " + std::to_string(node) + " drifts at level " +
+              "contact pair node " + std::to_string(node) + " steps at level " +
+              std::to_string(level_[node]) + " and drifts at level " +
               std::to_string(drift_level_[node]) + ", its pairs at level " + std::to_string(k) +
-              ": both nodes of a pair must drift at its level (pyfem/local_stepping.py "
+              ": both nodes of a pair must step and drift at its level (pyfem/local_stepping.py "
               "equalize_pair_drift)");
   }
 }
@@ -160,14 +176,14 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
   for (const auto& pairs : level.contacts) {
     const std::vector<std::int32_t>& nodes = pairs->unique_nodes();
     double kinetic_before = 0.0;
-    for (const std::int32_t i : nodes)
+    for (const std::int64_t i : nodes)
       for (int d = 0; d < 3; ++d) {
         contact_a_[3 * i + d] = 0.0;  // v is the drift's velocity: u(t + h) = u + h v
         kinetic_before += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
       }
     const ContactStepResult result = pairs->correct(t, operators, u, v, contact_a_.data());
     double kinetic_after = 0.0;
-    for (const std::int32_t i : nodes)
+    for (const std::int64_t i : nodes)
       for (int d = 0; d < 3; ++d) {
         v[3 * i + d] += 0.5 * h * contact_a_[3 * i + d];
         kinetic_after += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
@@ -410,6 +426,7 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
 }
 
 void LocalStepper::initialise(const double* u, const double* v, double t0) {
+  apply_row_caps();
   check_contacts();
   // Every level's force at (u, v, t0): an end kick of zero length that keeps v.
   std::vector<double> v_copy(v, v + 3 * n_nodes());

@@ -70,15 +70,17 @@ class LocalStepper {
   /// around contact pairs). Throws std::invalid_argument for a level outside [0, max_level()].
   void add_internal_force(std::shared_ptr<HexahedronElementsBase> component, int level);
 
-  /// Adds contact pairs whose nodes drift at rate level `level`: the finest level whose kicks move
-  /// them (the finest level among the nodes they share a cell with, themselves included; both nodes
-  /// of every pair must have it: pyfem/local_stepping.py equalize_pair_drift). Their correction
+  /// Adds contact pairs whose nodes step and drift at rate level `level` (the drift level: the
+  /// finest level whose kicks move a node, from its stiffness row's columns and the element-loop
+  /// cells that load it; both nodes of every pair must step and drift there:
+  /// pyfem/local_stepping.py equalize_pair_drift). Their correction
   /// (ContactPairs::correct, contact.hpp) runs in each substep of that level after its start kick and
   /// before its drift, when no kick will change the pair nodes' velocities until the next one: the
   /// drift's end, u + h v, is then known exactly, and the correction is the impulse h A^-1 R (A the
   /// implicit matrix M (1 + h/2 alpha) + h/2 C of the node at that step) that closes the pair there
   /// (stick: the normal gap and the tangential offset; slip: friction), whatever the levels of the
-  /// pair's neighbours; the pair nodes' rows are stepped at that level (step_rows_at_drift_level).
+  /// pair's neighbours; the pair nodes step at that level themselves and their rows are stepped
+  /// there too (step_rows_at_drift_level).
   /// It is what Stepper's correction and its next start kick add to the drift's
   /// velocity: a one-level run gives Stepper's displacements; the velocities at a sample time lack
   /// R's first half (h/2 A^-1 R, given with the next impulse) and the returned a has no R. The
@@ -87,12 +89,16 @@ class LocalStepper {
   /// the first run: std::invalid_argument naming a pair node of another drift level.
   void add_contact(std::shared_ptr<ContactPairs> pairs, int level);
 
-  /// Steps every block of the nodes' stiffness rows at the row's drift level (the finest level of
-  /// its columns) instead of its column's level: a coarser neighbour's force then reaches the node
-  /// at each of its substeps, not as kicks at the ends of the coarse step. add_contact does it for
-  /// the pair nodes (the friction threshold of a pair must not see a coarse level's force arrive
-  /// within one substep: that made sliding first order in dt, docs/lts_plan.md). The neighbour
-  /// already drifts at that level (the node is one of its columns), so its u is current there.
+  /// Steps every block of the nodes' stiffness rows at the node's drift level (the finest level
+  /// that kicks it, element-loop cells included) instead of its column's level: a coarser
+  /// neighbour's force then reaches the node at each of its substeps, not as kicks at the ends of
+  /// the coarse step. add_contact does it for the pair nodes (a pair's friction threshold must not
+  /// see a coarse level's force arrive within one substep: that made sliding first order in dt,
+  /// docs/lts_plan.md). Each such node must step at its drift level itself (checked at the first
+  /// run: std::invalid_argument), so that it is a column of that level in every neighbour's row and
+  /// every neighbour it reads drifts there too; otherwise a neighbour drifting coarser would be read
+  /// ahead of time (first order, and unstable). The caps are set at the first run. The moved
+  /// blocks break the column split's exact momentum balance at O(dt^2) (docs/lts_plan.md).
   void step_rows_at_drift_level(const std::vector<std::int32_t>& nodes);
 
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
@@ -160,8 +166,10 @@ class LocalStepper {
   void build_levels();
   void build_dashpot_inverses();
   void build_provider_rows();
-  // Throws unless every contact's nodes drift at its level.
+  // Throws unless every contact's nodes step and drift at its level.
   void check_contacts() const;
+  // The rows of capped_ at their nodes' drift levels (initialise).
+  void apply_row_caps();
   // The contact impulses of the pairs drifting at level c, before its drift from time t.
   void correct_contacts(int c, double t, const double* u, double* v);
   double strain_energy(const double* u) const;
@@ -186,6 +194,7 @@ class LocalStepper {
   std::vector<double> contact_a_;             // (3 n) scratch: pair nodes' a for the correction
   std::vector<std::int32_t> drift_level_;     // per node, fine index of the finest level moving it
   std::vector<std::int32_t> row_cap_;         // per node: its row's blocks at min(column level, cap)
+  std::vector<std::int32_t> capped_;          // nodes whose rows step at their drift level
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
   Energy energy_;

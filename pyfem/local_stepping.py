@@ -134,24 +134,24 @@ def pair_cell_cap(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray,
 
 def equalize_pair_drift(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray,
                         loop_cells: np.ndarray | None = None) -> np.ndarray:
-    """Node levels with the two nodes of every contact pair at one level and drifting at one rate
-    (LocalStepper.add_contact): a pair's nodes step at the finer of their two levels, and where they
-    drift at different levels (e.g. a soft layer's coarse cells above a stiff layer's fine ones) the
-    node with the coarser drift steps at its partner's drift level (a node may step finer than its
-    cells need). One level for both makes a bonded pair the unsplit node exactly. The element-loop
-    cells (`loop_cells`, per cell) touching pair nodes step as `pair_cell_cap` says. Lowering a node
-    can make a neighbour drift finer, so it is repeated until every pair agrees (levels only fall, so
-    it ends). Returns a new int32 array."""
+    """Node levels with the two nodes of every contact pair stepping and drifting at one level
+    (LocalStepper.add_contact): both take the finest of their two levels and their two drift levels
+    (a node may step finer than its cells need). Stepping at its drift level makes a pair node a column
+    of that level in each neighbour's row, so every neighbour its row reads drifts there too
+    (LocalStepper.step_rows_at_drift_level); one level for both makes a bonded pair the unsplit node
+    exactly. The element-loop cells (`loop_cells`, per cell) touching pair nodes step as
+    `pair_cell_cap` says. Lowering a node can make a neighbour drift finer, so it is repeated until
+    every pair agrees (levels only fall, so it ends). Returns a new int32 array."""
     levels = np.array(levels, dtype=np.int32, copy=True)
     i, j = pairs[:, 0], pairs[:, 1]
     while True:
         drift = drift_levels(levels, cell_nodes, pair_cell_cap(levels, cell_nodes, pairs, loop_cells), loop_cells)
         target = np.minimum(np.minimum(levels[i], levels[j]), np.minimum(drift[i], drift[j]))
-        differ = (levels[i] != levels[j]) | (drift[i] != drift[j])
+        differ = (levels[i] != target) | (levels[j] != target) | (drift[i] != target) | (drift[j] != target)
         if not differ.any():
             return levels
-        np.minimum.at(levels, i[differ], np.where(drift[i] != drift[j], target, np.minimum(levels[i], levels[j]))[differ])
-        np.minimum.at(levels, j[differ], np.where(drift[i] != drift[j], target, np.minimum(levels[i], levels[j]))[differ])
+        np.minimum.at(levels, i[differ], target[differ])
+        np.minimum.at(levels, j[differ], target[differ])
 
 
 def cell_levels(node_levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
@@ -231,7 +231,10 @@ class LevelPairs:
         return out
 
     def state_counts(self):
-        return np.sum([np.asarray(contact.state_counts(), dtype=np.int64) for _, contact in self.parts], axis=0)
+        counts = np.zeros(4, dtype=np.int64)
+        for _, contact in self.parts:
+            counts += np.asarray(contact.state_counts(), dtype=np.int64)
+        return counts
 
     def relative_displacement(self, u):
         return self._gather("relative_displacement", (3,), float, u)

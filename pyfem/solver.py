@@ -519,6 +519,8 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
                 for component, level in parts:
                     kernel.add_internal_force(component, level)
             built["regions"] = [region for region, _ in regions]
+        if simulation.contact_arrays is not None:  # the pair rows as add_contact steps them
+            kernel.step_rows_at_drift_level(np.unique(simulation.contact_arrays["pairs"]).astype(np.int32))
         return kernel
 
     if simulation.lts_stability is None:  # the LTS map on this model, once (pyfem/local_stepping.py)

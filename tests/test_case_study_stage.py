@@ -57,8 +57,10 @@ def stage_checks(summary) -> None:
 def test_small_case3_without_wave_stays_at_rest(tmp_path, local_stepping):
     """Also with local time stepping: the stage's element-loop and pair state, cut by rate level
     (pyfem/local_stepping.py load_component_parts, load_pair_parts), hands over in equilibrium."""
-    scene = small_case3(["time.duration=0.02", "output.xdmf_interval=0.0", "contact.deterioration.R0=1.0",
-                         f"time.local_stepping={'true' if local_stepping else 'false'}"], wave=False)
+    # Local stepping over 0.2 s (60 global steps): long enough for a mode its map amplified to show.
+    scene = small_case3([f"time.duration={0.2 if local_stepping else 0.02}", "output.xdmf_interval=0.0",
+                         "contact.deterioration.R0=1.0", f"time.local_stepping={'true' if local_stepping else 'false'}"],
+                        wave=False)
     summary = solver.run(scene, tmp_path / "rest")
     if local_stepping:
         assert "local time stepping: 5 rate levels" in summary["dt_reason"]
