@@ -91,6 +91,17 @@ def _finest_of_cells(cell_level: np.ndarray, cell_nodes: np.ndarray, n_nodes: in
 UNCAPPED = np.iinfo(np.int32).max
 
 
+def loop_cell_mask(nonlinear, n_cells: int) -> np.ndarray | None:
+    """bool per model cell: in an element-loop region of `nonlinear` (NonlinearRegions), or None
+    without element-loop materials."""
+    if nonlinear is None:
+        return None
+    mask = np.zeros(n_cells, dtype=bool)
+    for arrays in nonlinear.arrays.values():
+        mask[arrays.cells] = True
+    return mask
+
+
 def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray | None = None,
                  loop_cells: np.ndarray | None = None) -> np.ndarray:
     """int32 (n_nodes,): the finest level whose kicks move each node (its drift level in the

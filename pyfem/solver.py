@@ -439,13 +439,9 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
                              "one rank for now)")
         cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
         pairs = model.pairs.nodes if "contact" in scene.effects else None
-        loop_cells = None
-        if nonlinear is not None:
-            loop_cells = np.zeros(model.n_cells, dtype=bool)
-            for arrays in nonlinear.arrays.values():
-                loop_cells[arrays.cells] = True
         node_levels = local_stepping.node_levels(elastic_stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
-                                                 pinned=np.unique(dashpot_nodes), pairs=pairs, loop_cells=loop_cells)
+                                                 pinned=np.unique(dashpot_nodes), pairs=pairs,
+                                                 loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells))
         time_step, _ = local_stepping.local_time_step(time_step, node_levels)
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
     # Whole output intervals: the last sample lands on or just after the duration.
@@ -492,14 +488,10 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
     levels = np.ascontiguousarray(simulation.node_levels, dtype=np.int32)
     model = simulation.model
     cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
-    cell_cap = loop_cells = None
-    if simulation.nonlinear is not None:
-        loop_cells = np.zeros(model.n_cells, dtype=bool)
-        for arrays in simulation.nonlinear.arrays.values():
-            loop_cells[arrays.cells] = True
-        if simulation.contact_arrays is not None:
-            cell_cap = local_stepping.pair_cell_cap(levels, cell_nodes, simulation.contact_arrays["pairs"],
-                                                    loop_cells)
+    loop_cells = local_stepping.loop_cell_mask(simulation.nonlinear, model.n_cells)
+    cell_cap = None
+    if loop_cells is not None and simulation.contact_arrays is not None:
+        cell_cap = local_stepping.pair_cell_cap(levels, cell_nodes, simulation.contact_arrays["pairs"], loop_cells)
 
     built = {}  # the regions' LevelComponents of the last kernel built
 
