@@ -90,23 +90,23 @@ void LocalStepper::build_levels() {
   }
 }
 
+void LocalStepper::check_level(const char* what, int level) const {
+  if (level < 0 || level > max_level_)
+    throw std::invalid_argument(std::string(what) + " level " + std::to_string(level) + " must be in [0, " +
+                                std::to_string(max_level_) + "]");
+}
+
 void LocalStepper::add_internal_force(std::shared_ptr<HexahedronElementsBase> component,
                                       int level) {
-  if (level < 0 || level > max_level_)
-    throw std::invalid_argument("component level " + std::to_string(level) + " must be in [0, " +
-                                std::to_string(max_level_) + "]");
+  check_level("component", level);
   component->check_nodes(n_nodes());
   levels_[max_level_ - level].components.push_back(std::move(component));
-  build_levels();
-  build_dashpot_inverses();
-  build_provider_rows();
+  levels_stale_ = true;  // its rows join the level's at the next run (rebuild)
   initialised_ = false;
 }
 
 void LocalStepper::add_contact(std::shared_ptr<ContactPairs> pairs, int level) {
-  if (level < 0 || level > max_level_)
-    throw std::invalid_argument("contact level " + std::to_string(level) + " must be in [0, " +
-                                std::to_string(max_level_) + "]");
+  check_level("contact", level);
   pairs->check_nodes(n_nodes());
   step_rows_at_drift_level(pairs->unique_nodes());
   Level& target = levels_[max_level_ - level];
@@ -120,27 +120,34 @@ void LocalStepper::step_rows_at_drift_level(const std::vector<std::int32_t>& nod
       throw std::invalid_argument("step_rows_at_drift_level: " + std::to_string(node) + " is not a node");
     capped_.push_back(node);
   }
-  initialised_ = false;  // the caps are set at the next run, when every component is known
+  levels_stale_ = true;  // the caps are set at the next run, when every component is known
+  initialised_ = false;
 }
 
-void LocalStepper::apply_row_caps() {
-  if (capped_.empty()) return;
-  // The drift levels of the levels without caps (a cap moves a row's blocks to a finer level than
-  // their columns', which changes no node's drift level: the capped node drifts there already,
-  // and its neighbours' rows are untouched), then each capped row at its node's drift level.
+void LocalStepper::rebuild() {
+  // Rows, blocks and drift lists of the components added so far; the capped rows then take their
+  // nodes' drift levels from that build (a cap moves a row's blocks to a finer level than their
+  // columns', which changes no node's drift level: the capped node drifts there already, and its
+  // neighbours' rows are untouched) and the levels are built again with them.
+  if (!levels_stale_) {  // the constructor's build holds: only the providers' rows are new
+    build_provider_rows();
+    return;
+  }
+  levels_stale_ = false;
   std::fill(row_cap_.begin(), row_cap_.end(), kMaxLevels);
   build_levels();
-  for (const std::int32_t node : capped_) {
-    if (level_[node] != drift_level_[node])
-      throw std::invalid_argument(
-          "step_rows_at_drift_level: node " + std::to_string(node) + " steps at level " +
-          std::to_string(level_[node]) + " but drifts at level " + std::to_string(drift_level_[node]) +
-          ": its row can step at its drift level only if it steps there itself, so that every "
-          "neighbour it reads drifts there too (pyfem/local_stepping.py equalize_pair_drift)");
-    row_cap_[node] = drift_level_[node];
+  if (!capped_.empty()) {
+    for (const std::int32_t node : capped_) {
+      if (level_[node] != drift_level_[node])
+        throw std::invalid_argument(
+            "step_rows_at_drift_level: node " + std::to_string(node) + " steps at level " +
+            std::to_string(level_[node]) + " but drifts at level " + std::to_string(drift_level_[node]) +
+            ": its row can step at its drift level only if it steps there itself, so that every "
+            "neighbour it reads drifts there too (pyfem/local_stepping.py equalize_pair_drift)");
+      row_cap_[node] = drift_level_[node];
+    }
+    build_levels();
   }
-  build_levels();
-  build_dashpot_inverses();
   build_provider_rows();
 }
 
@@ -242,8 +249,7 @@ void LocalStepper::add_provider(std::shared_ptr<ForceProvider> provider) {
   provider_nodes_.erase(std::unique(provider_nodes_.begin(), provider_nodes_.end()),
                         provider_nodes_.end());
   providers_.push_back(std::move(provider));
-  build_provider_rows();
-  initialised_ = false;
+  initialised_ = false;  // its rows are found at the next run (rebuild)
 }
 
 void LocalStepper::build_provider_rows() {
@@ -426,7 +432,7 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
 }
 
 void LocalStepper::initialise(const double* u, const double* v, double t0) {
-  apply_row_caps();
+  rebuild();
   check_contacts();
   // Every level's force at (u, v, t0): an end kick of zero length that keeps v.
   std::vector<double> v_copy(v, v + 3 * n_nodes());

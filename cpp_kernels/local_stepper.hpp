@@ -161,15 +161,17 @@ class LocalStepper {
   // initial: evaluate the level's force at the state (v kept), for the first start kick.
   void end_kick(int c, double h, double t, const double* u, double* v, bool initial);
   void initialise(const double* u, const double* v, double t0);
-  // Rows, column blocks and drift lists of every level (the constructor; again when a
-  // component adds rows to its level).
+  // Rows, column blocks and drift lists of every level (the constructor; rebuild).
   void build_levels();
   void build_dashpot_inverses();
   void build_provider_rows();
   // Throws unless every contact's nodes step and drift at its level.
   void check_contacts() const;
-  // The rows of capped_ at their nodes' drift levels (initialise).
-  void apply_row_caps();
+  // Levels, row caps and provider rows from everything added so far (initialise: once, however
+  // many components, pairs and providers were added).
+  void rebuild();
+  // Throws std::invalid_argument unless 0 <= level <= max_level_.
+  void check_level(const char* what, int level) const;
   // The contact impulses of the pairs drifting at level c, before its drift from time t.
   void correct_contacts(int c, double t, const double* u, double* v);
   double strain_energy(const double* u) const;
@@ -195,6 +197,7 @@ class LocalStepper {
   std::vector<std::int32_t> drift_level_;     // per node, fine index of the finest level moving it
   std::vector<std::int32_t> row_cap_;         // per node: its row's blocks at min(column level, cap)
   std::vector<std::int32_t> capped_;          // nodes whose rows step at their drift level
+  bool levels_stale_ = false;                 // components or caps added since the last build
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
   Energy energy_;

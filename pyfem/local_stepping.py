@@ -76,14 +76,15 @@ def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: 
         dt_node[np.asarray(pinned)] = dt_min
     cell_level = np.minimum(np.floor(np.log2(dt_node[cell_nodes].min(axis=1) / dt_min) + 1e-12).astype(int),
                             max_level)
-    levels = _finest_of_cells(cell_level, cell_nodes, len(mass), max_level)
+    levels = _finest_of_cells(cell_level, cell_nodes, np.full(len(mass), max_level))
     if pairs is not None and len(pairs):
         levels = equalize_pair_drift(levels, cell_nodes, np.asarray(pairs), loop_cells)
     return levels
 
 
-def _finest_of_cells(cell_level: np.ndarray, cell_nodes: np.ndarray, n_nodes: int, max_level: int) -> np.ndarray:
-    levels = np.full(n_nodes, max_level, dtype=np.int32)
+def _finest_of_cells(cell_level: np.ndarray, cell_nodes: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """int32 per node: the finest of `start` (per node) and the levels of the cells it belongs to."""
+    levels = np.array(start, dtype=np.int32, copy=True)
     np.minimum.at(levels, cell_nodes.ravel(), np.repeat(cell_level, cell_nodes.shape[1]).astype(np.int32))
     return levels
 
@@ -114,9 +115,7 @@ def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarra
         finest_in_cell = np.where(loop_cells, levels[cell_nodes].max(axis=1), finest_in_cell)
     if cell_cap is not None:
         finest_in_cell = np.minimum(finest_in_cell, cell_cap)
-    drift = np.array(levels, dtype=np.int32, copy=True)
-    np.minimum.at(drift, cell_nodes.ravel(), np.repeat(finest_in_cell, cell_nodes.shape[1]).astype(np.int32))
-    return drift
+    return _finest_of_cells(finest_in_cell, cell_nodes, levels)
 
 
 def pair_cell_cap(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray,
