@@ -5,6 +5,14 @@ would kill the process at once, with no KeyboardInterrupt: run.json would stay "
 and the histories would be lost. Importing gmsh here puts the previous handler back.
 `initialize` does the same around ``gmsh.initialize`` (newer gmsh versions install a
 handler there unless told ``interruptible=False``).
+
+gmsh 4.8 has no ``isInitialized``, and no API call may probe it: before ``initialize`` every
+call reports "not initialized" through Msg::Error, which reads gmsh's option context before
+the options exist. That context's AbortOnError is then whatever the heap held, and when it
+happens to be 1 gmsh calls exit(1): the process ends with status 1 and prints nothing (a
+pytest run stopped that way, valgrind shows the uninitialised reads). So this module counts
+instead: ``gmsh.initialize`` and ``gmsh.finalize`` are wrapped, whoever calls them through
+the module, and `is_initialized` answers without calling gmsh.
 """
 from __future__ import annotations
 
@@ -37,6 +45,32 @@ _restore_sigint(_previous_handler)
 
 _INITIALIZE_TAKES_INTERRUPTIBLE = "interruptible" in inspect.signature(gmsh.initialize).parameters
 
+# Whether gmsh is initialized: known for certain when this module imported gmsh first; if gmsh
+# was imported before, someone may have initialized it already, and `initialize` (a no-op on a
+# running gmsh) settles it.
+_state = {"initialized": False}
+_gmsh_initialize, _gmsh_finalize = gmsh.initialize, gmsh.finalize
+
+
+def _tracked_initialize(*args, **kwargs):
+    _gmsh_initialize(*args, **kwargs)
+    _state["initialized"] = True
+
+
+def _tracked_finalize(*args, **kwargs):
+    _gmsh_finalize(*args, **kwargs)
+    _state["initialized"] = False
+
+
+_tracked_initialize.__doc__, _tracked_finalize.__doc__ = _gmsh_initialize.__doc__, _gmsh_finalize.__doc__
+gmsh.initialize, gmsh.finalize = _tracked_initialize, _tracked_finalize
+
+
+def is_initialized() -> bool:
+    """Whether gmsh.initialize has run (and finalize not since), without calling gmsh. False
+    also when gmsh was initialized before pyfem imported it: `initialize` is then a no-op."""
+    return _state["initialized"]
+
 
 def initialize(**options) -> None:
     """``gmsh.initialize(**options)`` that leaves the SIGINT handler as it was.
@@ -51,4 +85,4 @@ def initialize(**options) -> None:
     _restore_sigint(handler)
 
 
-__all__ = ["gmsh", "initialize"]
+__all__ = ["gmsh", "initialize", "is_initialized"]

@@ -126,6 +126,44 @@ def test_bad_mesh_settings_name_the_key(mesh_settings, key):
         create_mesh(scene)
 
 
+GMSH_STATE_WITHOUT_CALLING_GMSH = """
+from pyfem._gmsh import gmsh
+from pyfem.geometry.box import gmsh_is_initialized
+
+library = gmsh.lib
+calls = []
+
+
+class Untouchable:
+    def __getattr__(self, name):
+        calls.append(name)
+        raise RuntimeError(f"gmsh.lib.{name} called while gmsh is not initialized")
+
+
+gmsh.lib = Untouchable()
+assert not gmsh_is_initialized()
+gmsh.lib = library
+gmsh.initialize(readConfigFiles=False)
+assert gmsh_is_initialized()
+gmsh.finalize()
+gmsh.lib = Untouchable()
+assert not gmsh_is_initialized()
+assert not calls, calls
+print("ok")
+"""
+
+
+def test_whether_gmsh_runs_is_known_without_calling_it():
+    # gmsh 4.8 reads an uninitialised AbortOnError when called before initialize; when the
+    # heap happens to hold 1 there, it calls exit(1). A CI run ended that way, silently.
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-c", GMSH_STATE_WITHOUT_CALLING_GMSH], cwd=REPOSITORY,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0 and result.stdout.strip() == "ok", result.stderr
+
+
 def test_a_running_gmsh_session_is_left_alone():
     gmsh.initialize(readConfigFiles=False)  # a no-op if already running
     gmsh.model.add("user_model")

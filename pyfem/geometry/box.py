@@ -18,7 +18,7 @@ import contextlib
 import math
 import typing
 
-from pyfem._gmsh import gmsh, initialize as initialize_gmsh
+from pyfem._gmsh import gmsh, initialize as initialize_gmsh, is_initialized as gmsh_initialized
 import numpy as np
 
 BOX_REGION = "rock"
@@ -26,19 +26,9 @@ BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 
 
 def gmsh_is_initialized() -> bool:
-    """Whether the gmsh API is initialized in this process.
-
-    gmsh 4.8 has no `isInitialized`: before the first `initialize` the API
-    answers queries from static defaults (no model, AbortOnError 0), after
-    `finalize` it raises. `initialize` always creates one model and sets
-    AbortOnError to 2, which tells the states apart.
-    """
-    try:
-        models = gmsh.model.list()
-        abort_on_error = gmsh.option.getNumber("General.AbortOnError")
-    except Exception:  # gmsh raises a bare Exception once finalized
-        return False
-    return len(models) > 0 or abort_on_error != 0
+    """Whether the gmsh API is initialized in this process (pyfem._gmsh.is_initialized: gmsh
+    4.8 cannot be asked without risking exit(1), see that module)."""
+    return gmsh_initialized()
 
 
 @contextlib.contextmanager
