@@ -207,7 +207,7 @@ def mesh_advice(scene: Scene) -> str:
         except (ValueError, FileNotFoundError) as error:
             lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
     lines.append("wall stress advice (workflows/wall_stress_accuracy.py: hoop stress at a circular opening's "
-                 "wall, long wave, against Kirsch):")
+                 "wall against the exact dynamic answer, Pao & Mow's series):")
     for budget in (0.05, 0.01):
         try:
             advice = wall_size_for(budget)

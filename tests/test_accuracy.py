@@ -143,3 +143,28 @@ def test_quick_study_runs_and_writes_its_outputs(tmp_path):
     assert accuracy.recommend(0.05, tmp_path / "accuracy_cost.csv")["error"] <= 0.05
     assert "## Conclusion" in (tmp_path / "accuracy_cost.md").read_text()
     assert (tmp_path / "accuracy_cost.png").stat().st_size > 10000
+
+
+def test_the_wall_advice_is_the_largest_size_whose_peak_error_and_every_finer_one_meet_the_budget(tmp_path):
+    # Q1's error is not monotone in h (0.24 a met the budget by a cancellation, 0.12 a did not):
+    # the advice must not take the coarse size; the history error plays no part.
+    columns = ["order", "h_wall", "h_over_a", "f0", "reference", "peak_error", "history_error", "loop_seconds"]
+    rows = [(1, 0.24, 2.0, 0.004), (1, 0.12, 2.0, 0.018), (1, 0.06, 2.0, 0.005),
+            (1, 0.24, 8.0, 0.003), (1, 0.12, 8.0, 0.008), (1, 0.06, 8.0, 0.006),
+            (2, 0.24, 2.0, 0.028), (2, 0.12, 2.0, 0.006), (2, 0.24, 8.0, 0.030), (2, 0.12, 8.0, 0.009)]
+    path = tmp_path / "wall_stress.csv"
+    with open(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=columns)
+        writer.writeheader()
+        writer.writerow({"order": 1, "h_wall": 1.0, "h_over_a": 0.2, "f0": 2.0, "reference": "Kirsch",
+                         "peak_error": 0.0, "history_error": 0.0, "loop_seconds": 1.0})  # not the exact answer: ignored
+        for order, h_over_a, f0, peak in rows:
+            writer.writerow({"order": order, "h_wall": 5 * h_over_a, "h_over_a": h_over_a, "f0": f0,
+                             "reference": "Pao-Mow", "peak_error": peak, "history_error": 0.5, "loop_seconds": 1.0})
+    one, five = accuracy.wall_size_for(0.01, path), accuracy.wall_size_for(0.05, path)
+    assert [(a["order"], a["h_over_a"]) for a in one] == [(1, 0.06), (2, 0.12)]
+    assert [(a["order"], a["h_over_a"]) for a in five] == [(1, 0.24), (2, 0.24)]
+    assert one[0]["error"] == 0.006 and five[1]["error"] == 0.030
+    tight = accuracy.wall_size_for(0.001, path)
+    assert [a["h_over_a"] for a in tight] == [None, None] and "not reached" in tight[0]["text"]
+    assert "k_s a = 0.56" in one[0]["text"]

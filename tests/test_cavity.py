@@ -10,7 +10,8 @@ far-field shear tau = sigma_xz, Kirsch's solution (theta from +x towards +z) giv
     sigma_rr   =  tau (1 + 3 a^4/r^4 - 4 a^2/r^2) sin 2 theta,
     sigma_rth  =  tau (1 - 3 a^4/r^4 + 2 a^2/r^2) cos 2 theta,
 a hoop-stress concentration of 4 at the wall (1 if the cavity were "filled" by the free field,
-as when its wall was driven as an input boundary).
+as when its wall was driven as an input boundary). The hoop stress is also held to the exact
+dynamic answer, Pao & Mow's series (pyfem/scattering.py), of which Kirsch is the long-wave limit.
 """
 import json
 import math
@@ -29,6 +30,10 @@ CENTRE = np.array([SECTION / 2, THICKNESS / 2, SECTION / 2])
 ANGLES = (45.0, 135.0)
 RADII = (1.05, 2.0)
 KIRSCH_TOLERANCE = 0.10  # the issue's 10 %
+# History error against the exact answer, per order: measured 0.54-2.95 % (Q1; the first element
+# row's stress is the gradient of a bilinear field) and 0.46-0.82 % (Q2) at the four monitors,
+# the Q2 error mostly the truncation faces' reflections (docs/wall_stress_accuracy.md).
+EXACT_TOLERANCE = {1: 0.04, 2: 0.015}
 
 
 @pytest.fixture(scope="module")
@@ -112,6 +117,20 @@ def free_field_shear(scene, times, point=CENTRE):
     return freefield.stress(np.asarray(point)[None, :], times)[:, 0, 0, 2]
 
 
+def exact_hoop(scene, times, r_over_a, theta):
+    """Pao & Mow's sigma_thth(t) (Pa) at (r, theta) for the scene's incident wave: its displacement
+    at the centre over three times the run (the wavelet whole) through the series."""
+    from pyfem.operators import build_model
+    from pyfem.scattering import CavitySV
+    from pyfem.seismic.setup import seismic_input_from_scene
+
+    freefield, _ = seismic_input_from_scene(scene, build_model(scene))
+    long = np.arange(3 * len(times)) * (times[1] - times[0]) + times[0]
+    u_centre = freefield.displacement(CENTRE[None, :], long)[:, 0, 0]
+    cavity = CavitySV(RADIUS, 8.0e9, 0.24, 2600.0)
+    return cavity.hoop_stress_history(long, u_centre, RADIUS * r_over_a, math.radians(theta))[:len(times)]
+
+
 @pytest.mark.parametrize("order", [1, 2])
 def test_cavity_wall_follows_kirsch(tmp_path, tunnel_meshes, order):
     scene, out, summary = run_tunnel(tmp_path, tunnel_meshes[True], order)
@@ -138,10 +157,14 @@ def test_cavity_wall_follows_kirsch(tmp_path, tunnel_meshes, order):
         # The Ricker's shear has two lobes of nearly equal size: compare magnitudes and the history.
         peak_ratio = np.max(np.abs(tt)) / (abs(k_tt) * tau_peak)
         history_error = np.linalg.norm(tt - k_tt * tau_here) / np.linalg.norm(k_tt * tau_here)
+        exact = exact_hoop(scene, times, r, theta)
+        exact_error = np.linalg.norm(tt - exact) / np.linalg.norm(exact)
         print(f"Q{order} {name}: hoop peak / Kirsch = {peak_ratio:.4f}, history error {history_error:.3%}, "
-              f"concentration {np.max(np.abs(tt)) / tau_peak:.3f} (Kirsch {abs(k_tt):.3f})")
+              f"concentration {np.max(np.abs(tt)) / tau_peak:.3f} (Kirsch {abs(k_tt):.3f}); against the exact "
+              f"answer: history error {exact_error:.3%}, peak {np.max(np.abs(tt)) / np.max(np.abs(exact)):.4f}")
         assert abs(peak_ratio - 1.0) < KIRSCH_TOLERANCE, name
         assert history_error < KIRSCH_TOLERANCE, name
+        assert exact_error < EXACT_TOLERANCE[order], name
         # The wall is traction-free: radial and shear stress as Kirsch says (near 0 at the wall).
         scale = 4.0 * tau_peak
         assert np.max(np.abs(rr - k_rr * tau)) < KIRSCH_TOLERANCE * scale, name

@@ -1,0 +1,126 @@
+"""Plane SV waves scattered by an unlined circular cavity in a full plane: Pao & Mow's series.
+
+The exact dynamic answer for the stress at a cavern wall (plane strain, linear elastic,
+homogeneous, no free surface). docs/wall_stress_accuracy.md "The exact dynamic answer" states
+the problem and the checks; workflows/wall_stress_accuracy.py compares the mesh's wall stress with
+it.
+
+The problem, in the plane (x1, x2) = (x, z) with polar coordinates x1 = r cos(theta),
+x2 = r sin(theta) about the cavity's centre, time factor exp(-i omega t):
+- the incident wave is SV travelling along +x2 with its motion along x1:
+  u1 = U exp(i k_s x2), u2 = 0, so the free field's shear stress at the centre is
+  sigma_12 = i mu k_s U;
+- u = grad(phi) + curl(psi e3); the incident psi = U / (i k_s) exp(i k_s r sin(theta)) =
+  U / (i k_s) sum_n J_n(k_s r) exp(i n theta) (Jacobi-Anger);
+- the scattered potentials are outgoing: phi = sum_n A_n H_n(k_p r) exp(i n theta),
+  psi = sum_n B_n H_n(k_s r) exp(i n theta), H_n Hankel's function of the first kind;
+- the wall r = a is free: sigma_rr = sigma_rtheta = 0, one 2 x 2 system per n.
+
+For one term F(r) exp(i n theta) of phi and G(r) exp(i n theta) of psi (F, G solving Bessel's
+equation of order n in k_p r and k_s r):
+- u_r = F' + i n G / r, u_theta = i n F / r - G';
+- sigma_rr = -lambda k_p^2 F + 2 mu (F'' + i n (G' / r - G / r^2));
+- sigma_thth = -lambda k_p^2 F + 2 mu (F' / r - n^2 F / r^2 + i n (G / r^2 - G' / r));
+- sigma_rth = mu (2 i n (F' / r - F / r^2) - G'' + G' / r - n^2 G / r^2).
+
+A time history is the series' transfer function applied to the spectrum of the incident
+displacement at the centre (`hoop_stress_history`).
+
+Reference: Y.-H. Pao and C.-C. Mow, Diffraction of Elastic Waves and Dynamic Stress
+Concentrations, Crane Russak, 1973, ch. 4 (cylindrical cavity, incident P and SV).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import special
+
+_STRESSES = ("rr", "thth", "rth")
+
+
+def _radial(kind: str, n: np.ndarray, k: float, r: float):
+    """(Z, Z', Z'') of Z_n(k r) in r for kind "J" (Bessel) or "H" (Hankel, first kind)."""
+    if kind == "J":
+        z, dz = special.jv(n, k * r), k * special.jvp(n, k * r)
+    else:
+        z, dz = special.hankel1(n, k * r), k * special.h1vp(n, k * r)
+    ddz = -dz / r - (k * k - n * n / (r * r)) * z
+    return z, dz, ddz
+
+
+def _term_stresses(n, r, lam, mu, kp, f=None, g=None) -> dict:
+    """Stresses of the terms F exp(i n theta) (phi) and G exp(i n theta) (psi) at radius r;
+    f and g are (Z, Z', Z'') triples or None (that potential absent)."""
+    zero = (0.0, 0.0, 0.0)
+    F, dF, ddF = f if f is not None else zero
+    G, dG, ddG = g if g is not None else zero
+    return {
+        "rr": -lam * kp * kp * F + 2 * mu * (ddF + 1j * n * (dG / r - G / r ** 2)),
+        "thth": -lam * kp * kp * F + 2 * mu * (dF / r - n * n * F / r ** 2 + 1j * n * (G / r ** 2 - dG / r)),
+        "rth": mu * (2j * n * (dF / r - F / r ** 2) - ddG + dG / r - n * n * G / r ** 2),
+    }
+
+
+class CavitySV:
+    """Vertically travelling SV scattered by a circular cavity of radius `a` (m) in rock of
+    Young's modulus E (Pa), Poisson's ratio nu and density rho (kg/m^3), plane strain."""
+
+    def __init__(self, a: float, E: float, nu: float, rho: float):
+        self.a = a
+        self.mu = E / (2.0 * (1.0 + nu))
+        self.lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+        self.cs = math.sqrt(self.mu / rho)
+        self.cp = math.sqrt((self.lam + 2.0 * self.mu) / rho)
+
+    def terms(self, omega: float) -> int:
+        """Number of orders kept on each side of n = 0: the series converges once n exceeds
+        k_s a by a margin (the terms then fall like (a / r)^n at r > a)."""
+        return int(2.0 * omega / self.cs * self.a) + 16
+
+    def stresses(self, omega: float, r: float, theta, U: complex = 1.0) -> dict:
+        """Total (incident + scattered) stresses sigma_rr, sigma_thth, sigma_rth (Pa) at
+        (r, theta) for the incident amplitude U (m) at the centre, angular frequency omega > 0."""
+        theta = np.atleast_1d(np.asarray(theta, dtype=float))
+        kp, ks = omega / self.cp, omega / self.cs
+        n = np.arange(-self.terms(omega), self.terms(omega) + 1)
+        incident_g = tuple(U / (1j * ks) * z for z in _radial("J", n, ks, self.a))
+        inc = _term_stresses(n, self.a, self.lam, self.mu, kp, g=incident_g)
+        phi = _term_stresses(n, self.a, self.lam, self.mu, kp, f=_radial("H", n, kp, self.a))
+        psi = _term_stresses(n, self.a, self.lam, self.mu, kp, g=_radial("H", n, ks, self.a))
+        # The free wall, per n: [phi_rr psi_rr; phi_rth psi_rth] [A; B] = -[inc_rr; inc_rth].
+        det = phi["rr"] * psi["rth"] - psi["rr"] * phi["rth"]
+        A = (-inc["rr"] * psi["rth"] + psi["rr"] * inc["rth"]) / det
+        B = (-phi["rr"] * inc["rth"] + inc["rr"] * phi["rth"]) / det
+        incident_g = tuple(U / (1j * ks) * z for z in _radial("J", n, ks, r))
+        inc = _term_stresses(n, r, self.lam, self.mu, kp, g=incident_g)
+        phi = _term_stresses(n, r, self.lam, self.mu, kp, f=_radial("H", n, kp, r))
+        psi = _term_stresses(n, r, self.lam, self.mu, kp, g=_radial("H", n, ks, r))
+        modes = np.exp(1j * np.outer(theta, n))
+        return {key: modes @ (inc[key] + A * phi[key] + B * psi[key]) for key in _STRESSES}
+
+    def free_field_shear(self, omega: float, U: complex = 1.0) -> complex:
+        """sigma_12 of the incident wave at the centre (Pa): i mu k_s U."""
+        return 1j * self.mu * omega / self.cs * U
+
+    def hoop_stress_history(self, t: np.ndarray, u_centre: np.ndarray, r: float, theta: float,
+                            pad: float = 4.0) -> np.ndarray:
+        """sigma_thth(t) at (r, theta) (Pa) for the incident displacement history u_centre(t)
+        (m, along x1, at the centre, uniformly sampled, zero before and after the wave).
+
+        The record is padded with zeros to `pad` times its length so the periodic synthesis does
+        not wrap; frequencies where the incident spectrum is below 1e-12 of its peak are left out.
+        """
+        t = np.asarray(t, dtype=float)
+        dt = float(t[1] - t[0])
+        n_fft = int(2 ** math.ceil(math.log2(pad * len(t))))
+        spectrum = np.fft.rfft(np.asarray(u_centre, dtype=float), n_fft)
+        omega = 2.0 * math.pi * np.fft.rfftfreq(n_fft, dt)
+        hoop = np.zeros_like(spectrum)
+        keep = np.abs(spectrum) > 1e-12 * np.abs(spectrum).max()
+        for j in np.flatnonzero(keep):
+            if omega[j] > 0.0:
+                # numpy's synthesis runs on exp(+i omega t): the transfer of exp(-i omega t) conjugated.
+                hoop[j] = spectrum[j] * np.conj(self.stresses(omega[j], r, theta)["thth"][0])
+        history = np.fft.irfft(hoop, n_fft)[:len(t)]
+        return history
