@@ -3,7 +3,9 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <unordered_map>
 #include <stdexcept>
 #include <string>
 
@@ -49,6 +51,24 @@ void LocalStepper::build_levels() {
   // touching) level.
   std::vector<int> active(n, 0);
   std::vector<std::uint8_t> loaded(n);
+  // A capped row i moves its block K_ij from column j's level to the cap's finer one. The column
+  // split conserves momentum because every level holds whole columns (sum_i K_ij = 0, the
+  // rigid translation); the moved block breaks that at both levels. A diagonal block on node j
+  // puts it back: -K_ij at the cap's level, +K_ij at column j's level (the matrix is unchanged).
+  std::unordered_map<std::int64_t, std::array<double, 9>> balance;  // key: node * kMaxLevels + level
+  for (std::int64_t i = 0; i < n; ++i) {
+    if (row_cap_[i] >= kMaxLevels) continue;
+    for (std::int64_t b = stiffness.indptr[i]; b < stiffness.indptr[i + 1]; ++b) {
+      const std::int32_t j = stiffness.indices[b];
+      if (j == i || level_[j] <= row_cap_[i]) continue;
+      std::array<double, 9>& finer = balance.try_emplace(std::int64_t{j} * kMaxLevels + row_cap_[i]).first->second;
+      std::array<double, 9>& own = balance.try_emplace(std::int64_t{j} * kMaxLevels + level_[j]).first->second;
+      for (int e = 0; e < 9; ++e) {
+        finer[e] -= stiffness.blocks[9 * b + e];
+        own[e] += stiffness.blocks[9 * b + e];
+      }
+    }
+  }
   for (int c = 0; c <= max_level_; ++c) {
     Level& level = levels_[c];
     const int k = max_level_ - c;
@@ -65,11 +85,24 @@ void LocalStepper::build_levels() {
       for (const std::int32_t node : component->nodes()) loaded[node] = 1;
     for (std::int64_t i = 0; i < n; ++i) {
       const std::int64_t before = static_cast<std::int64_t>(level.columns.size());
+      std::int64_t diagonal = -1;
       for (std::int64_t b = stiffness.indptr[i]; b < stiffness.indptr[i + 1]; ++b) {
         const std::int32_t j = stiffness.indices[b];
         if (std::min(level_[j], row_cap_[i]) != k) continue;
+        if (j == i) diagonal = static_cast<std::int64_t>(level.columns.size());
         level.columns.push_back(j);
         level.blocks.insert(level.blocks.end(), stiffness.blocks + 9 * b, stiffness.blocks + 9 * b + 9);
+      }
+      if (!balance.empty()) {
+        const auto found = balance.find(i * kMaxLevels + k);
+        if (found != balance.end()) {
+          if (diagonal < 0) {
+            diagonal = static_cast<std::int64_t>(level.columns.size());
+            level.columns.push_back(static_cast<std::int32_t>(i));
+            level.blocks.insert(level.blocks.end(), 9, 0.0);
+          }
+          for (int e = 0; e < 9; ++e) level.blocks[9 * diagonal + e] += found->second[e];
+        }
       }
       const bool own = level_[i] == k;
       if (static_cast<std::int64_t>(level.columns.size()) > before || own || loaded[i]) {
@@ -127,8 +160,9 @@ void LocalStepper::step_rows_at_drift_level(const std::vector<std::int32_t>& nod
 void LocalStepper::rebuild() {
   // Rows, blocks and drift lists of the components added so far; the capped rows then take their
   // nodes' drift levels from that build (a cap moves a row's blocks to a finer level than their
-  // columns', which changes no node's drift level: the capped node drifts there already, and its
-  // neighbours' rows are untouched) and the levels are built again with them.
+  // columns', which changes no node's drift level: the capped node drifts there already, and the
+  // balance blocks it puts on its neighbours' diagonals sit at levels where they drift already)
+  // and the levels are built again with them.
   if (!levels_stale_) {  // the constructor's build holds: only the providers' rows are new
     build_provider_rows();
     return;
