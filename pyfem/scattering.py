@@ -124,3 +124,11 @@ class CavitySV:
                 hoop[j] = spectrum[j] * np.conj(self.stresses(omega[j], r, theta)["thth"][0])
         history = np.fft.irfft(hoop, n_fft)[:len(t)]
         return history
+
+    def hoop_stress_from_free_field(self, freefield, centre, times: np.ndarray, r: float, theta: float) -> np.ndarray:
+        """sigma_thth(t) at (r, theta) (Pa) for a scene's incident wave: its free field's displacement
+        along x at the cavity's `centre` (m, 3) over three times the `times` (uniform, the wavelet
+        whole) through the series (`hoop_stress_history`), cut to `times`."""
+        long = np.arange(3 * len(times)) * (times[1] - times[0]) + times[0]
+        u_centre = freefield.displacement(np.asarray(centre, dtype=float)[None, :], long)[:, 0, 0]
+        return self.hoop_stress_history(long, u_centre, r, theta)[:len(times)]

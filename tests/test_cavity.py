@@ -118,17 +118,14 @@ def free_field_shear(scene, times, point=CENTRE):
 
 
 def exact_hoop(scene, times, r_over_a, theta):
-    """Pao & Mow's sigma_thth(t) (Pa) at (r, theta) for the scene's incident wave: its displacement
-    at the centre over three times the run (the wavelet whole) through the series."""
+    """Pao & Mow's sigma_thth(t) (Pa) at (r, theta) for the scene's incident wave (pyfem.scattering)."""
     from pyfem.operators import build_model
     from pyfem.scattering import CavitySV
     from pyfem.seismic.setup import seismic_input_from_scene
 
     freefield, _ = seismic_input_from_scene(scene, build_model(scene))
-    long = np.arange(3 * len(times)) * (times[1] - times[0]) + times[0]
-    u_centre = freefield.displacement(CENTRE[None, :], long)[:, 0, 0]
-    cavity = CavitySV(RADIUS, 8.0e9, 0.24, 2600.0)
-    return cavity.hoop_stress_history(long, u_centre, RADIUS * r_over_a, math.radians(theta))[:len(times)]
+    return CavitySV(RADIUS, 8.0e9, 0.24, 2600.0).hoop_stress_from_free_field(freefield, CENTRE, times,
+                                                                             RADIUS * r_over_a, math.radians(theta))
 
 
 @pytest.mark.parametrize("order", [1, 2])

@@ -120,16 +120,11 @@ def free_field_shear(freefield, times: np.ndarray) -> np.ndarray:
 
 
 def exact_hoop(freefield, times: np.ndarray) -> np.ndarray:
-    """Pao & Mow's sigma_thth(t) at the monitor (Pa) for the scene's incident wave: the incident
-    displacement at the tunnel's centre over three times the run (the wavelet whole), through
-    the series' transfer function (pyfem.scattering)."""
+    """Pao & Mow's sigma_thth(t) at the monitor (Pa) for the scene's incident wave (pyfem.scattering)."""
     from pyfem.scattering import CavitySV
 
-    dt = float(times[1] - times[0])
-    long = np.arange(3 * len(times)) * dt + times[0]
-    u_centre = freefield.displacement(CENTRE[None, :], long)[:, 0, 0]
-    cavity = CavitySV(RADIUS, E, NU, RHO)
-    return cavity.hoop_stress_history(long, u_centre, RADIUS * R_OVER_A, math.radians(THETA))[:len(times)]
+    return CavitySV(RADIUS, E, NU, RHO).hoop_stress_from_free_field(freefield, CENTRE, times, RADIUS * R_OVER_A,
+                                                                    math.radians(THETA))
 
 
 def mesh(folder: Path, h_wall: float) -> Path:
