@@ -1040,6 +1040,23 @@ Args:
           py::arg("u").noconvert(), py::arg("v").noconvert(), py::arg("a").noconvert(),
           py::arg("n_steps"), py::arg("t0"),
           "Advances n_steps global steps of dt() from t0 (u, v, a in place); returns the end time.")
+      .def(
+          "save_state",
+          [](const LocalStepper& stepper) {
+            StateArchive archive;
+            stepper.save_state(archive);
+            return archive_dict(archive);
+          },
+          R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
+byte blocks (each level's last force, the energy account, every level's components and contact
+pairs), a copy.)")
+      .def(
+          "load_state",
+          [](LocalStepper& stepper, const py::dict& blocks) { stepper.load_state(dict_archive(blocks)); },
+          py::arg("state"),
+          R"(Restores save_state's dict into a stepper built from the same scene (same levels, dt_fine,
+damping, providers, components and pairs at the same levels in the same order); the next run
+continues without initialising. ValueError names the first block that does not fit.)")
       .def_property_readonly("dt", &LocalStepper::dt, "Global step dt_fine 2^max_level (s).")
       .def_property_readonly("dt_fine", &LocalStepper::dt_fine)
       .def_property_readonly("max_level", &LocalStepper::max_level)

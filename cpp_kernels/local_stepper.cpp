@@ -465,18 +465,22 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
   end_kick(c, h, t + h, u, v, false);
 }
 
-void LocalStepper::initialise(const double* u, const double* v, double t0) {
+void LocalStepper::prepare_structure() {
   rebuild();
   check_contacts();
+  if (contact_a_.empty())
+    for (const Level& level : levels_)
+      if (!level.contacts.empty()) contact_a_.assign(3 * n_nodes(), 0.0);
+}
+
+void LocalStepper::initialise(const double* u, const double* v, double t0) {
+  prepare_structure();
   // Every level's force at (u, v, t0): an end kick of zero length that keeps v.
   std::vector<double> v_copy(v, v + 3 * n_nodes());
   for (int c = 0; c <= max_level_; ++c) end_kick(c, 0.0, t0, u, v_copy.data(), true);
   // The pairs' slip rate for D is that of the state (Stepper::reset_energy).
   for (Level& level : levels_)
     for (const auto& pairs : level.contacts) pairs->observe_velocity(v);
-  if (contact_a_.empty())
-    for (const Level& level : levels_)
-      if (!level.contacts.empty()) contact_a_.assign(3 * n_nodes(), 0.0);
   energy_.contact_work = energy_.friction_dissipation = 0.0;
   // Initial powers for the trapezoid rule at each own node.
   energy_.initial = 0.0;
@@ -543,6 +547,99 @@ double LocalStepper::run(double* u, double* v, double* a, std::int64_t n_steps, 
                     energy_.external_work + energy_.damping_work + energy_.internal_dissipation -
                     energy_.contact_work;
   return t0 + static_cast<double>(n_steps) * step;
+}
+
+namespace {
+// The energy account's terms in a checkpoint, in this order.
+std::vector<double*> energy_terms(LocalStepper::Energy& e) {
+  return {&e.kinetic,       &e.strain,          &e.external_work,        &e.damping_work,
+          &e.initial,       &e.internal_stored, &e.internal_dissipation, &e.contact_work,
+          &e.friction_dissipation, &e.balance};
+}
+
+std::string level_prefix(int c) { return "lts/level/" + std::to_string(c) + "/"; }
+}  // namespace
+
+std::vector<double> LocalStepper::checkpoint_parameters() const {
+  std::vector<double> parameters{dt_fine_, alpha_, static_cast<double>(n_nodes()),
+                                 static_cast<double>(max_level_), static_cast<double>(providers_.size())};
+  for (const Level& level : levels_) {
+    parameters.push_back(static_cast<double>(level.components.size()));
+    parameters.push_back(static_cast<double>(level.contacts.size()));
+  }
+  return parameters;
+}
+
+void LocalStepper::save_state(StateArchive& archive) const {
+  archive.put("lts/parameters", checkpoint_parameters());
+  archive.put("lts/node_level", level_);
+  archive.put_value<std::uint8_t>("lts/started", initialised_ ? 1 : 0);
+  if (!initialised_) return;  // the first run() computes everything from (u, v)
+  Energy energy = energy_;
+  std::vector<double> terms;
+  for (const double* term : energy_terms(energy)) terms.push_back(*term);
+  archive.put("lts/energy", terms);
+  archive.put_value("lts/dissipation_at_start", dissipation_at_start_);
+  for (int c = 0; c <= max_level_; ++c) {
+    const Level& level = levels_[c];
+    const std::string prefix = level_prefix(c);
+    archive.put(prefix + "force", level.force);
+    archive.put(prefix + "external", level.external);
+    for (std::size_t k = 0; k < level.components.size(); ++k) {
+      const std::string component = prefix + "component/" + std::to_string(k) + "/";
+      archive.put_text(component + "name", level.components[k]->name());
+      level.components[k]->save_state(archive, component);
+    }
+    for (std::size_t k = 0; k < level.contacts.size(); ++k)
+      level.contacts[k]->save_state(archive, prefix + "contact/" + std::to_string(k) + "/");
+  }
+}
+
+void LocalStepper::load_state(const StateArchive& archive) {
+  const std::vector<double> expected = checkpoint_parameters();
+  std::vector<double> saved;
+  archive.get_resized("lts/parameters", saved);
+  if (saved != expected)
+    throw std::invalid_argument(
+        "checkpoint block 'lts/parameters': dt_fine, alpha, nodes, levels, providers or the "
+        "components and pairs per level differ from the model's (a checkpoint of another scene?)");
+  std::vector<std::int32_t> levels(level_.size());
+  archive.get("lts/node_level", levels);
+  if (levels != level_)
+    throw std::invalid_argument("checkpoint block 'lts/node_level': the nodes' rate levels differ "
+                                "from the model's (another mesh or time step?)");
+  for (int c = 0; c <= max_level_; ++c)
+    for (std::size_t k = 0; k < levels_[c].components.size(); ++k) {
+      const std::string name =
+          archive.text(level_prefix(c) + "component/" + std::to_string(k) + "/name");
+      if (name != levels_[c].components[k]->name())
+        throw std::invalid_argument("checkpoint: level " + std::to_string(c) + " component " +
+                                    std::to_string(k) + " is a " + name + ", the model's is a " +
+                                    levels_[c].components[k]->name());
+    }
+  std::uint8_t started = 0;
+  archive.get_value("lts/started", started);
+  if (!started) {
+    initialised_ = false;
+    return;
+  }
+  prepare_structure();  // the levels' force arrays are sized by the build
+  std::vector<double*> terms = energy_terms(energy_);
+  std::vector<double> values(terms.size());
+  archive.get("lts/energy", values);
+  archive.get_value("lts/dissipation_at_start", dissipation_at_start_);
+  for (int c = 0; c <= max_level_; ++c) {
+    Level& level = levels_[c];
+    const std::string prefix = level_prefix(c);
+    archive.get(prefix + "force", level.force);
+    archive.get(prefix + "external", level.external);
+    for (std::size_t k = 0; k < level.components.size(); ++k)
+      level.components[k]->load_state(archive, prefix + "component/" + std::to_string(k) + "/");
+    for (std::size_t k = 0; k < level.contacts.size(); ++k)
+      level.contacts[k]->load_state(archive, prefix + "contact/" + std::to_string(k) + "/");
+  }
+  for (std::size_t j = 0; j < terms.size(); ++j) *terms[j] = values[j];
+  initialised_ = true;
 }
 
 }  // namespace cavern

@@ -14,6 +14,7 @@
 #include "contact.hpp"
 #include "force_provider.hpp"
 #include "internal_force.hpp"
+#include "state_archive.hpp"
 #include "stepper.hpp"
 
 namespace cavern {
@@ -130,6 +131,19 @@ class LocalStepper {
   /// Energies of the state of the last run() (strain by one product at the end of each run call).
   Energy energy() const { return energy_; }
 
+  /// The run's state beyond u, v, a and t (checkpoint, docs/checkpoint.md): each level's force of
+  /// its last end kick (the FSAL force the next start kick uses) and own external force (its power
+  /// at the next start kick), the energy account, and the state of every
+  /// element-loop component and contact pair of every level. A stepper not yet run saves only
+  /// that it has not started (its first run() computes everything from u, v).
+  void save_state(StateArchive& archive) const;
+  /// Restores save_state's blocks into a stepper built the same way (same matrix size, levels,
+  /// dt_fine, alpha, providers, and components and pairs at the same levels in the same order):
+  /// the next run() continues without initialising, bit for bit as the stepper that was saved.
+  /// Throws std::invalid_argument naming the first block that does not fit (then nothing may be
+  /// assumed about the stepper's state).
+  void load_state(const StateArchive& archive);
+
   /// Wall time of each part of the steps run so far (s), as Stepper's phases: update (the drifts),
   /// element_loop (the components' forces and commits), input_forces (the providers), stiffness
   /// (the kicks' block products and velocity updates), contact (the pairs' impulses); steps counts
@@ -161,6 +175,12 @@ class LocalStepper {
   // initial: evaluate the level's force at the state (v kept), for the first start kick.
   void end_kick(int c, double h, double t, const double* u, double* v, bool initial);
   void initialise(const double* u, const double* v, double t0);
+  // The structure the first run needs whatever the state: levels, row caps, provider rows, the
+  // contacts' checks and scratch (initialise, load_state).
+  void prepare_structure();
+  // What a checkpoint must match: dt_fine, alpha, nodes, levels, providers, and the components
+  // and pairs per level.
+  std::vector<double> checkpoint_parameters() const;
   // Rows, column blocks and drift lists of every level (the constructor; rebuild).
   void build_levels();
   void build_dashpot_inverses();

@@ -40,7 +40,7 @@ LATER_KEYS = ((("time", "matrix_precision"), "double"), (("time", "local_steppin
 def model_fingerprint(simulation) -> dict:
     """What must be equal for a checkpoint to continue on this prepared simulation: the scene
     (without the keys in RESUMABLE_CHANGES), dofs, dt, steps and a hash of the nodal masses (the
-    mesh and the materials)."""
+    mesh and the materials); with local time stepping also a hash of the nodes' rate levels."""
     scene = simulation.scene.to_json()
     for table, key in RESUMABLE_CHANGES:
         scene.get(table, {}).pop(key, None)
@@ -54,6 +54,8 @@ def model_fingerprint(simulation) -> dict:
         "dt": float(simulation.time_step.dt),
         "steps": int(simulation.n_steps),
         "mass_sha256": hashlib.sha256(np.ascontiguousarray(simulation.mass).tobytes()).hexdigest(),
+        **({"levels_sha256": hashlib.sha256(np.ascontiguousarray(simulation.node_levels, dtype=np.int32).tobytes())
+            .hexdigest()} if getattr(simulation, "node_levels", None) is not None else {}),
     }
 
 

@@ -865,9 +865,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         if on_plan is not None and root:
             on_plan(simulation_plan(simulation))
         writer = RunWriter(out_dir, simulation) if root else SilentWriter(out_dir)
-        # Local time stepping writes no checkpoints yet (pyfem/local_stepping.py).
-        clock = checkpoints.CheckpointClock(0.0 if simulation.node_levels is not None
-                                            else scene["output"]["checkpoint_interval"])
+        clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"])
         write_checkpoint = None  # set once the state (u, v, a, t, kernel, writer) is whole
         try:
             stepper = make_stepper(simulation)

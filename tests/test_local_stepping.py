@@ -327,3 +327,53 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
     assert pair_rows[-1, 4] == pytest.approx(pair_rows_global[-1, 4], rel=0.01)
     assert energy["friction_dissipation"][-1] == pytest.approx(energy_global["friction_dissipation"][-1], rel=0.02)
 
+
+
+def test_a_local_stepping_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_path, monkeypatch):
+    """Checkpoint and resume under local time stepping (LocalStepper.save_state, docs/checkpoint.md):
+    a crash three samples after a periodic checkpoint, then --resume, gives the uninterrupted run's
+    histories, fields and run.json peaks bit for bit, on a scene with several rate levels whose
+    state matters across the checkpoint: a weak deteriorating interface sliding and a yielding soft
+    layer (both before and after it)."""
+    from pyfem import checkpoint
+    from pyfem.scene import parse_scene
+    from test_checkpoint import StopAt, assert_same_run
+
+    MPa = 1.0e6
+    data = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
+                                   soft_plasticity={"cohesion": 0.05 * MPa, "friction_angle": 25.0,
+                                                    "tensile_strength": 0.02 * MPa}).to_json()
+    data["contact"]["deterioration"] = {"R0": 0.75, "lambda": 5.0}
+    data["output"]["checkpoint_interval"] = 1.0e-9
+    scene = parse_scene(data, source="test")
+    reference = tmp_path / "reference"
+    summary = solver.run(scene, reference)
+    assert "local_stepping_stability" in summary
+    levels = solver.prepare(scene).node_levels
+    assert levels.max() >= 1 and np.count_nonzero(levels > 0) > 100  # several rates
+
+    checkpoint_t = 0.20  # the soft layer is yielding (0.18-0.22 s), the interface slides (0.14 s on)
+    energy = np.genfromtxt(reference / "energy.csv", delimiter=",", names=True)
+    at = int(np.argmin(np.abs(energy["t"] - checkpoint_t)))
+    for name in ("internal_dissipation", "friction_dissipation"):
+        assert 0.0 < energy[name][at] < 0.9 * energy[name][-1], f"{name} grows before and after the checkpoint"
+    sliding = np.asarray(summary["pair_states"]["sliding"])
+    assert sliding[:at + 1].max() > 0 and sliding[at + 1:].max() > 0
+
+    calls = {"n": 0}
+
+    def every_tenth(self):
+        calls["n"] += 1
+        return calls["n"] % 10 == 0
+
+    monkeypatch.setattr(checkpoint.CheckpointClock, "due", every_tenth)
+    out = tmp_path / "crashed"
+    with pytest.raises(RuntimeError, match="simulated crash"):
+        solver.run(scene, out, progress=StopAt(checkpoint_t + 0.012, RuntimeError("simulated crash")))
+    saved = checkpoint.read_checkpoint(out)
+    assert saved.t == pytest.approx(checkpoint_t)
+    assert (out / "energy.csv").read_text().count("\n") == 1 + saved.outputs_done + 1 + 3, "rows past the checkpoint"
+    monkeypatch.undo()
+    resumed = solver.run(scene, out, resume=True)
+    assert resumed["resumed"][0]["t"] == pytest.approx(checkpoint_t)
+    assert_same_run(out, reference)

@@ -463,3 +463,112 @@ TEST(LocalStepper, RowsSteppedAtTheirDriftLevelKeepMomentumAndSecondOrder) {
   }
   EXPECT_GT(errors[0], 1e-6);  // the pulse moved
 }
+
+namespace {
+
+// The graded chain split at node p with a weak deteriorating pair between the halves (its bond
+// breaks, it opens, closes and slides) at the pair's level, a dashpot on the last node and mass-proportional damping:
+// every part of the state a checkpoint must hold.
+struct WeakPairChain {
+  BlockSystem split;
+  std::vector<std::int32_t> level;
+  std::unique_ptr<LocalStepper> stepper;
+  std::shared_ptr<ContactPairs> pair;
+};
+
+WeakPairChain weak_pair_chain(const Chain& chain, std::int32_t p, double dt_fine) {
+  WeakPairChain out;
+  const std::int64_t n = chain.system.n_nodes;
+  std::vector<char> to_copy(n, 0);
+  for (std::int64_t k = p + 1; k < n; ++k) to_copy[k] = 1;
+  out.split = split_node(chain.system, p, to_copy);
+  out.level = chain.level;
+  out.level.push_back(chain.level[p]);
+  out.stepper = std::make_unique<LocalStepper>(out.split.view(), out.split.mass.data(), out.level.data(),
+                                               dt_fine, 0.05);
+  const std::int32_t pairs[2] = {p, static_cast<std::int32_t>(n)};
+  const double area = 1.0, normal[3] = {0.0, 0.6, 0.8}, F0[3] = {0.0, 0.0, 0.0};
+  out.pair = std::make_shared<ContactPairs>(ContactGeometry{1, pairs, &area, normal, F0},
+                                            ContactStrength{0.05, 0.02, 0.5, 0.4});
+  // Deteriorating with time and with the slip rate the pair remembers from its last correction.
+  out.pair->set_deterioration(DeteriorationParameters{0.75, 5.0, 100.0, 0.883, 0.02, 0.3});
+  out.stepper->add_contact(out.pair, chain.level[p]);
+  const std::int32_t dashpot_node = static_cast<std::int32_t>(n - 1);
+  const double C[9] = {0.5, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 1.0};
+  out.stepper->set_dashpots(&dashpot_node, 1, C);
+  return out;
+}
+
+}  // namespace
+
+// Checkpoint (docs/checkpoint.md): the state saved after some steps and loaded into a stepper built
+// the same way continues bit for bit as the stepper that was saved, with a pair that has broken and
+// slid, several levels and damping; an unstarted stepper's state restarts from (u, v); a stepper
+// with other levels refuses the state.
+TEST(LocalStepper, SavedStateContinuesBitForBit) {
+  const Chain chain = graded_chain(81, 12, 64.0, 4);
+  const int max_level = *std::max_element(chain.level.begin(), chain.level.end());
+  ASSERT_GE(max_level, 2);
+  const std::int32_t p = 20;
+  ASSERT_EQ(chain.level[p - 1], chain.level[p]);
+  ASSERT_EQ(chain.level[p + 1], chain.level[p]);
+  const double dt_fine = 0.8 * chain.dt_min;
+  WeakPairChain first = weak_pair_chain(chain, p, dt_fine);
+  std::vector<double> v = pulse(81);
+  v.insert(v.end(), {v[3 * p], v[3 * p + 1], v[3 * p + 2]});
+  for (double& x : v) x *= 2.0;
+  std::vector<double> u(v.size(), 0.0), a(v.size(), 0.0);
+  double t = first.stepper->run(u.data(), v.data(), a.data(), 70, 0.0);  // opened, now sliding
+  StateArchive saved;
+  first.stepper->save_state(saved);
+  std::vector<double> u_saved = u, v_saved = v, a_saved = a;
+  const double t_saved = t;
+  const LocalStepper::Energy energy_saved = first.stepper->energy();
+  const std::int8_t state_saved = first.pair->state()[0];
+  t = first.stepper->run(u.data(), v.data(), a.data(), 40, t);
+  // The pair broke, opened and closed again before the save and slides across it: the state
+  // restored is one that matters.
+  EXPECT_EQ(state_saved, kSliding);
+  EXPECT_GT(energy_saved.friction_dissipation, 0.0);
+  EXPECT_GT(first.stepper->energy().friction_dissipation, energy_saved.friction_dissipation);
+
+  WeakPairChain second = weak_pair_chain(chain, p, dt_fine);
+  second.stepper->load_state(saved);
+  const double t_resumed = second.stepper->run(u_saved.data(), v_saved.data(), a_saved.data(), 40, t_saved);
+  EXPECT_EQ(t_resumed, t);
+  EXPECT_EQ(u_saved, u);
+  EXPECT_EQ(v_saved, v);
+  EXPECT_EQ(a_saved, a);
+  const LocalStepper::Energy e1 = first.stepper->energy(), e2 = second.stepper->energy();
+  EXPECT_EQ(e1.balance, e2.balance);
+  EXPECT_EQ(e1.external_work, e2.external_work);
+  EXPECT_EQ(e1.damping_work, e2.damping_work);
+  EXPECT_EQ(e1.contact_work, e2.contact_work);
+  EXPECT_EQ(e1.friction_dissipation, e2.friction_dissipation);
+  EXPECT_EQ(first.pair->state()[0], second.pair->state()[0]);
+
+  // A stepper that has not run saves "not started": the loaded one initialises from (u, v).
+  WeakPairChain fresh = weak_pair_chain(chain, p, dt_fine), loaded = weak_pair_chain(chain, p, dt_fine);
+  StateArchive unstarted;
+  fresh.stepper->save_state(unstarted);
+  loaded.stepper->load_state(unstarted);
+  std::vector<double> v0 = pulse(81), u0, u1;
+  v0.insert(v0.end(), {v0[3 * p], v0[3 * p + 1], v0[3 * p + 2]});
+  std::vector<double> v1 = v0, a0(v0.size(), 0.0), a1(v0.size(), 0.0);
+  u0.assign(v0.size(), 0.0);
+  u1 = u0;
+  fresh.stepper->run(u0.data(), v0.data(), a0.data(), 10, 0.0);
+  loaded.stepper->run(u1.data(), v1.data(), a1.data(), 10, 0.0);
+  EXPECT_EQ(u0, u1);
+
+  // Other levels (one node moved to the finest): refused, naming the block.
+  Chain other = chain;
+  other.level[5] = 0;
+  WeakPairChain regraded = weak_pair_chain(other, p, dt_fine);
+  try {
+    regraded.stepper->load_state(saved);
+    ADD_FAILURE() << "a state of other levels was accepted";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("lts/"), std::string::npos) << error.what();
+  }
+}
