@@ -57,7 +57,6 @@ from pyfem.scene import parse_scene  # noqa: E402
 
 # ----------------------------------------------------------------------------- parameters
 RADIUS, SECTION, THICKNESS = 5.0, 120.0, 2.0
-CENTRE = np.array([SECTION / 2, THICKNESS / 2, SECTION / 2])
 E, NU, RHO = 8.0e9, 0.24, 2600.0
 THETA, R_OVER_A = 45.0, 1.02
 WALL_SIZES = [1.2, 0.6, 0.3]
@@ -73,9 +72,17 @@ COLUMNS = ["order", "h_wall", "h_over_a", "f0", "reference", "peak_error", "hist
 REFERENCE = "Pao-Mow"
 
 
-def monitor_point() -> np.ndarray:
+def centre_of(section: float) -> np.ndarray:
+    """The tunnel's centre in a square section of side `section` (m)."""
+    return np.array([section / 2, THICKNESS / 2, section / 2])
+
+
+CENTRE = centre_of(SECTION)  # in the study's section
+
+
+def monitor_point(centre: np.ndarray = CENTRE) -> np.ndarray:
     t = math.radians(THETA)
-    return CENTRE + RADIUS * R_OVER_A * np.array([math.cos(t), 0.0, math.sin(t)])
+    return centre + RADIUS * R_OVER_A * np.array([math.cos(t), 0.0, math.sin(t)])
 
 
 def kirsch_hoop_factor(r_over_a: float, theta: float) -> float:
@@ -83,7 +90,7 @@ def kirsch_hoop_factor(r_over_a: float, theta: float) -> float:
     return -(1.0 + 3.0 * r_over_a ** -4) * math.sin(math.radians(2.0 * theta))
 
 
-def scene_for(mesh_file: Path, order: int, f0: float) -> dict:
+def scene_for(mesh_file: Path, order: int, f0: float, centre: np.ndarray = CENTRE) -> dict:
     return parse_scene({
         "title": f"tunnel wall stress, Q{order}, f0 {f0:g} Hz",
         "mesh": {"builder": "file", "file": str(mesh_file), "order": order},
@@ -91,7 +98,7 @@ def scene_for(mesh_file: Path, order: int, f0: float) -> dict:
         "time": {"duration": DURATION[f0]},
         "wave": {"type": "SV", "angle": 0.0, "motion": {"ricker": {"f0": f0, "amplitude": 1.0e-3 * (2.0 / f0)}}},
         "boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}},
-        "monitor": [{"name": "wall", "point": monitor_point().tolist()}],
+        "monitor": [{"name": "wall", "point": monitor_point(centre).tolist()}],
         "output": {"interval": 0.0025, "xdmf_interval": 0.0},
     })
 
@@ -119,11 +126,11 @@ def free_field_shear(freefield, times: np.ndarray) -> np.ndarray:
     return freefield.stress(monitor_point()[None, :], times)[:, 0, 0, 2]
 
 
-def exact_hoop(freefield, times: np.ndarray) -> np.ndarray:
+def exact_hoop(freefield, times: np.ndarray, centre: np.ndarray = CENTRE) -> np.ndarray:
     """Pao & Mow's sigma_thth(t) at the monitor (Pa) for the scene's incident wave (pyfem.scattering)."""
     from pyfem.scattering import CavitySV
 
-    return CavitySV(RADIUS, E, NU, RHO).hoop_stress_from_free_field(freefield, CENTRE, times, RADIUS * R_OVER_A,
+    return CavitySV(RADIUS, E, NU, RHO).hoop_stress_from_free_field(freefield, centre, times, RADIUS * R_OVER_A,
                                                                     math.radians(THETA))
 
 
@@ -143,31 +150,26 @@ def floor_study(work: Path, order: int = 2, h_wall: float = 0.6) -> list[str]:
     its far size 8 m, with a far size of 4 m (the incident wave's own discretisation), and in a
     section twice as wide (the truncation faces' reflections: farther away, later and weaker).
     Returns the table's lines; the runs stay in `work`."""
-    global SECTION, CENTRE
-    saved = SECTION, CENTRE
     lines = ["| f0 (Hz) | section (m) | h_far (m) | peak error | history error | time loop (s) | dofs |",
              "|---:|---:|---:|---:|---:|---:|---:|"]
     work.mkdir(parents=True, exist_ok=True)
-    try:
-        for f0 in FREQUENCIES:
-            for section, h_far in FLOOR_VARIANTS:
-                SECTION, CENTRE = section, np.array([section / 2, THICKNESS / 2, section / 2])
-                path = work / f"tunnel_h{h_wall:g}_s{section:g}_far{h_far:g}.msh"
-                if not path.exists():
-                    subprocess.run([sys.executable, str(ROOT / "meshes" / "tunnel_in_box.py"), str(path), "--radius",
-                                    str(RADIUS), "--h-wall", str(h_wall), "--h-far", str(h_far), "--size",
-                                    str(section)], check=True, timeout=600)
-                scene = scene_for(path, order, f0)
-                out = work / f"q{order}_h{h_wall:g}_f{f0:g}_s{section:g}_far{h_far:g}"
-                summary = finished_run(out) or solver.run(scene, out)
-                t, hoop = hoop_history(out)
-                exact = exact_hoop(free_field(scene), t)
-                peak, history = errors(t, hoop, exact)
-                lines.append(f"| {f0:g} | {section:g} | {h_far:g} | {100 * peak:.2f} % | {100 * history:.2f} % | "
-                             f"{summary['loop_seconds']:.1f} | {summary['dofs']} |")
-                print(lines[-1], flush=True)
-    finally:
-        SECTION, CENTRE = saved
+    for f0 in FREQUENCIES:
+        for section, h_far in FLOOR_VARIANTS:
+            centre = centre_of(section)
+            path = work / f"tunnel_h{h_wall:g}_s{section:g}_far{h_far:g}.msh"
+            if not path.exists():
+                subprocess.run([sys.executable, str(ROOT / "meshes" / "tunnel_in_box.py"), str(path), "--radius",
+                                str(RADIUS), "--h-wall", str(h_wall), "--h-far", str(h_far), "--size",
+                                str(section)], check=True, timeout=600)
+            scene = scene_for(path, order, f0, centre)
+            out = work / f"q{order}_h{h_wall:g}_f{f0:g}_s{section:g}_far{h_far:g}"
+            summary = finished_run(out) or solver.run(scene, out)
+            t, hoop = hoop_history(out)
+            exact = exact_hoop(free_field(scene), t, centre)
+            peak, history = errors(t, hoop, exact)
+            lines.append(f"| {f0:g} | {section:g} | {h_far:g} | {100 * peak:.2f} % | {100 * history:.2f} % | "
+                         f"{summary['loop_seconds']:.1f} | {summary['dofs']} |")
+            print(lines[-1], flush=True)
     return lines
 
 
