@@ -349,6 +349,47 @@ def load_pair_parts(whole, parts: list, pair_nodes: np.ndarray) -> None:
         contact.load_state(out)
 
 
+def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, stiffness, pairs: np.ndarray | None,
+                       time_step, phases_ms: dict) -> dict:
+    """What local stepping would save on a model, from its rate levels and the measured phases of one
+    global step (`phases_ms`: ms per step of element_loop, stiffness, contact, update, input_forces). Each phase's work per simulated second relative to global stepping at time_step.dt:
+    - element loop: its points weighted by 2^-k of their cell's level (`cell_levels`, made finer
+      around contact pairs by `pair_cell_cap`), times dt / dt_fine;
+    - contact: the pairs weighted by their level;
+    - the rest (stiffness kicks, drifts, input): the matrix's blocks weighted by their column's level.
+    Returns {"speed_up" (global time / predicted local time per simulated second), "element_loop",
+    "matrix", "contact" (the relative work of each), "levels" (nodes per level)}. A model: it leaves out
+    the pair rows stepped at their drift level and the kicks' own overhead: it over-predicts the
+    measured speed-up by 6 % on the coarse case 1 and 18 % on the coarse case 3 (docs/lts_plan.md
+    "Where it pays")."""
+    levels = np.asarray(levels)
+    fine_step, top = local_time_step(time_step, levels)
+    scale = time_step.dt / fine_step.dt
+    weight = 2.0 ** -levels.astype(float)
+    blocks_per_column = np.diff(stiffness.indptr).astype(float)
+    matrix = scale * float(np.sum(blocks_per_column * weight) / np.sum(blocks_per_column))
+    loop = 0.0
+    loop_cells = loop_cell_mask(nonlinear, len(cell_nodes))
+    if loop_cells is not None:
+        cap = pair_cell_cap(levels, cell_nodes, pairs, loop_cells) if pairs is not None and len(pairs) else None
+        cell_level = cell_levels(levels, cell_nodes).astype(np.int64)
+        if cap is not None:
+            cell_level = np.minimum(cell_level, cap)
+        points = np.zeros(len(cell_nodes))
+        for arrays in nonlinear.arrays.values():
+            points[arrays.cells] = arrays.weights.shape[1]
+        loop = scale * float(np.sum(points * 2.0 ** -cell_level) / np.sum(points))
+    contact = scale * float(np.mean(weight[np.asarray(pairs)[:, 0]])) if pairs is not None and len(pairs) else 0.0
+    # The kernel's phases only: a trial from rest spends milliseconds of "other" (first calls) that a
+    # run does not (run.json: ~0.02 ms per step).
+    global_ms = sum(phases_ms.get(name, 0.0) for name in ("element_loop", "stiffness", "contact", "update",
+                                                           "input_forces"))
+    local_ms = (phases_ms.get("element_loop", 0.0) * loop + phases_ms.get("contact", 0.0) * contact
+                + sum(phases_ms.get(name, 0.0) for name in ("stiffness", "update", "input_forces")) * matrix)
+    return {"speed_up": global_ms / local_ms if local_ms > 0 else math.inf, "element_loop": loop, "matrix": matrix,
+            "contact": contact, "levels": np.bincount(levels, minlength=top + 1).tolist()}
+
+
 def local_time_step(time_step, levels: np.ndarray):
     """The scene's TimeStep with whole global steps per output interval: dt_fine lowered (never
     raised) so that steps_per_output is a multiple of 2^L. Returns (TimeStep, L)."""

@@ -70,6 +70,7 @@ class Simulation:
     nonlinear: "NonlinearRegions | None" = None  # element-loop regions (pyfem.elements), None: matrix only
     node_levels: np.ndarray | None = None  # [time] local_stepping: rate level per node (pyfem.local_stepping)
     lts_stability: dict | None = None      # [time] local_stepping: check_stability's report, once per model
+    lts_preview: np.ndarray | None = None  # local stepping off: the levels it would use (prepare(preview_levels=True))
     static: object = None                # pyfem.static.StaticState when a [static] stage ran
 
 
@@ -410,9 +411,11 @@ def face_report(model) -> list[dict]:
             for face in model.faces]
 
 
-def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
+def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = False) -> Simulation:
     """Builds the model and every operator the kernel needs (no time stepping); with [static], runs
-    the static stage and hands its state over (solve_static=False: only checks it, for `plan`)."""
+    the static stage and hands its state over (solve_static=False: only checks it, for `plan`).
+    preview_levels: with local stepping off, also the rate levels it would use where the scene allows
+    it (Simulation.lts_preview, for `plan`'s prediction)."""
     from pyfem.operators import build_model
 
     from mpi4py import MPI
@@ -429,27 +432,37 @@ def prepare(scene: Scene, solve_static: bool = True) -> Simulation:
     elastic_stiffness = stiffness  # of every cell: the rate levels of local stepping
     if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
         stiffness = add_block_diagonal(nonlinear.stiffness, spring_nodes, springs)
-    node_levels = None
-    if scene["time"].get("local_stepping"):
+    node_levels = preview = None
+    local = scene["time"].get("local_stepping")
+    if local or preview_levels:
         from pyfem import local_stepping
 
-        local_stepping.check_supported(scene, constraints is not None, beta)
-        if MPI.COMM_WORLD.size > 1:  # before anything is distributed: every rank says the same
-            raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs on "
-                             "one rank for now)")
-        cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
-        pairs = model.pairs.nodes if "contact" in scene.effects else None
-        node_levels = local_stepping.node_levels(elastic_stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
-                                                 pinned=np.unique(dashpot_nodes), pairs=pairs,
-                                                 loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells))
-        time_step, _ = local_stepping.local_time_step(time_step, node_levels)
+        try:
+            local_stepping.check_supported(scene, constraints is not None, beta)
+            if MPI.COMM_WORLD.size > 1:  # before anything is distributed: every rank says the same
+                raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs "
+                                 "on one rank for now)")
+        except SceneError:
+            if local:
+                raise
+        else:
+            cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
+            pairs = model.pairs.nodes if "contact" in scene.effects else None
+            levels = local_stepping.node_levels(elastic_stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
+                                                pinned=np.unique(dashpot_nodes), pairs=pairs,
+                                                loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells))
+            if local:
+                node_levels = levels
+                time_step, _ = local_stepping.local_time_step(time_step, node_levels)
+            else:
+                preview = levels
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
     # Whole output intervals: the last sample lands on or just after the duration.
     n_steps = time_step.steps_per_output * math.ceil(n_steps / time_step.steps_per_output)
     simulation = Simulation(scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
                             time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
                             constraints=constraints, n_steps=n_steps, nonlinear=nonlinear,
-                            node_levels=node_levels)
+                            node_levels=node_levels, lts_preview=preview)
     if "seismic_input" in scene.effects:
         from pyfem.seismic.setup import seismic_input_from_scene
 
@@ -671,7 +684,7 @@ def plan(scene: Scene) -> dict:
     The time estimate comes from timing a few kernel steps on the real matrices. A static stage is
     described, not solved.
     """
-    return simulation_plan(prepare(scene, solve_static=False))
+    return simulation_plan(prepare(scene, solve_static=False, preview_levels=True))
 
 
 def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
@@ -721,6 +734,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
                                             model.free_surfaces.items()) or "none",
         "dt": f"{ts.dt:.6g} s ({ts.reason})",
         **({"local stepping": lts_stability_line(simulation.lts_stability)} if simulation.lts_stability else {}),
+        **lts_preview_plan(simulation, {name: entry["ms_per_step"] for name, entry in phases.items()}),
         **element_loop,
         **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
         "steps": simulation.n_steps,
@@ -748,6 +762,30 @@ def distributed_plan(simulation: Simulation) -> dict:
                          f"received per step by the busiest rank); every rank builds the whole model"
                          + (" and solves the static stage" if "static" in simulation.scene else "")
                          + "; the time estimate above is one rank's for the whole model"}
+
+
+def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
+    """check's line with local stepping off where the scene allows it: the speed-up its rate levels
+    and this step's measured phases predict (local_stepping.predicted_speed_up), and how to turn it on."""
+    if simulation.lts_preview is None:
+        return {}
+    from pyfem import local_stepping
+
+    model = simulation.model
+    cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
+    pairs = simulation.contact_arrays["pairs"] if simulation.contact_arrays is not None else None
+    p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
+                                          simulation.stiffness, pairs, simulation.time_step, phases_ms)
+    verdict = ("set time.local_stepping = true to use it" if p["speed_up"] >= 1.2
+               else "not worth it on this model")
+    return {"local stepping (off)": (
+        f"predicted {p['speed_up']:.2f}x the speed of global stepping per simulated second ({len(p['levels'])} "
+        f"rate level{'s' if len(p['levels']) != 1 else ''}, nodes per level {p['levels']}; work against global "
+        "stepping: "
+        + (f"element loop {p['element_loop']:.2f}, " if simulation.nonlinear is not None else "")
+        + f"matrix {p['matrix']:.2f}"
+        + (f", contact {p['contact']:.2f}" if pairs is not None else "")
+        + f"); {verdict} (docs/lts_plan.md \"Where it pays\")")}
 
 
 def lts_stability_line(report: dict) -> str:

@@ -91,6 +91,40 @@ def test_one_rate_level_is_global_stepping(tmp_path):
     assert np.linalg.norm(runs[True] - runs[False]) <= 1e-12 * np.linalg.norm(runs[False])
 
 
+def test_check_predicts_what_local_stepping_would_save_where_the_scene_allows_it(tmp_path):
+    """`check` with local stepping off (pyfem.local_stepping.predicted_speed_up): one rate level
+    predicts exactly global stepping's speed; the preview's levels are those a run with it on uses;
+    the graded mesh, whose finest level holds most nodes, is not worth it; the coarse case 1 (its rock
+    zone's element loop at coarser rates than the lining's) is, as measured (1.68x, docs/lts_plan.md
+    "Where it pays"); a scene it does not support (roller faces) gets no prediction."""
+    box = {"builder": "box", "size": [60.0, 10.0, 60.0], "h": 5.0}
+    uniform = solver.plan(graded_scene(pathlib.Path("unused.geo"), False, mesh=box,
+                                       monitor=[{"name": "centre", "point": [30.0, 5.0, 30.0]}]))
+    line = uniform["local stepping (off)"]
+    print(line)
+    assert "predicted 1.00x" in line and "nodes per level [" in line and "not worth it" in line
+
+    geo = tmp_path / "graded.geo"
+    geo.write_text(GRADED_GEO)
+    preview = solver.prepare(graded_scene(geo, False), solve_static=False, preview_levels=True)
+    assert preview.node_levels is None  # off: the run steps globally
+    assert np.array_equal(preview.lts_preview, solver.prepare(graded_scene(geo, True)).node_levels)
+    graded = solver.plan(graded_scene(geo, False))["local stepping (off)"]
+    print(graded)
+    assert "3 rate levels" in graded and "not worth it" in graded
+
+    from pyfem.scene import load_scene
+
+    case1 = solver.plan(load_scene(pathlib.Path(__file__).resolve().parents[1] / "workflows" / "scenes"
+                                   / "case1_vertical_coarse.toml"))["local stepping (off)"]
+    print(case1)
+    speed_up = float(case1.split("predicted ")[1].split("x")[0])
+    assert 1.5 < speed_up < 2.5 and "set time.local_stepping = true" in case1
+
+    rollers = graded_scene(geo, False, boundary={"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}})
+    assert "local stepping (off)" not in solver.plan(rollers)
+
+
 @pytest.mark.parametrize("change, named", [
     ({"boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}}}, "fixed or roller faces"),
     ({"damping": {"alpha": 0.0, "beta": 1.0e-4}}, "stiffness-proportional"),
