@@ -19,7 +19,8 @@ from setuptools.command.build_py import build_py
 ROOT = Path(__file__).resolve().parent
 # The accuracy studies' results (workflows/accuracy_cost.py, workflows/wall_stress_accuracy.py), read
 # by pyfem.accuracy.
-ACCURACY_RESULTS = [ROOT / "workflows" / "results" / name for name in ("accuracy_cost.csv", "wall_stress.csv")]
+ACCURACY_RESULTS = [ROOT / "workflows" / "results" / name for name in ("accuracy_cost.csv", "wall_stress.csv",
+                                                                        "lining_stress.csv")]
 
 
 class CMakeExtension(Extension):

@@ -12,7 +12,10 @@ the run took. This module turns that table into advice:
   from the shortest shear wavelength of its materials and its wave's frequency content;
 * `wall_size_for(error_budget)`: the element size at a cavern's wall, as a fraction of the
   opening's radius, that keeps the wall's hoop stress within the budget (the wall-stress study,
-  workflows/wall_stress_accuracy.py, workflows/results/wall_stress.csv).
+  workflows/wall_stress_accuracy.py, workflows/results/wall_stress.csv);
+* `lining_elements_for(error_budget)`: the elements through a lining that keep the peak hoop stress
+  read off its cells within the budget of the true peak at its face (the lining study,
+  workflows/lining_stress_accuracy.py, workflows/results/lining_stress.csv, docs/lined_tunnel.md).
 
 Errors transfer between scenes through the elements per shortest wavelength (the
 dispersion error of a given element depends on h / wavelength); seconds do not
@@ -28,9 +31,11 @@ from pyfem.material import Material
 
 DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "accuracy_cost.csv"
 WALL_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "wall_stress.csv"
+LINING_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "lining_stress.csv"
 if not DEFAULT_RESULTS.is_file():  # an installed package (pip install .) carries a copy (setup.py)
     DEFAULT_RESULTS = Path(__file__).resolve().parent / "data" / "accuracy_cost.csv"
     WALL_RESULTS = Path(__file__).resolve().parent / "data" / "wall_stress.csv"
+    LINING_RESULTS = Path(__file__).resolve().parent / "data" / "lining_stress.csv"
 # The highest frequency with energy in a Ricker wavelet, in units of its peak frequency f0:
 # the amplitude spectrum (f/f0)^2 exp(-(f/f0)^2) at 2.5 f0 is 3 % of its peak at f0.
 RICKER_MAX_FREQUENCY_FACTOR = 2.5
@@ -252,3 +257,42 @@ def wall_size_for(error_budget: float, results_csv=WALL_RESULTS) -> list[dict]:
                                    f"{100 * float(smallest['peak_error']):.2g} % at "
                                    f"{float(smallest['h_over_a']):.3g} x the radius)"})
     return advice
+
+
+def lining_elements_for(error_budget: float, results_csv=LINING_RESULTS) -> dict:
+    """The fewest elements through a lining, per order, whose cells' largest hoop stress read the true
+    peak at the lining's face within a budget, in the lining study (a bending lining after the static
+    stage against the closed form, docs/lined_tunnel.md), every finer mesh studied included.
+
+    Args:
+        error_budget: largest acceptable relative error of the peak read (e.g. 0.05).
+        results_csv: the study's CSV (workflows/results/lining_stress.csv).
+
+    Returns:
+        {"per_order": [{"order", "through" (None: not reached), "error", "text"}], "text": one line
+        for ``pyfem check``}.
+
+    Raises:
+        ValueError: a budget that is not a positive number, or no study results.
+    """
+    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
+        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+    with open(results_csv, newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    if not rows:
+        raise ValueError(f"{results_csv}: no rows; run workflows/lining_stress_accuracy.py")
+    per_order = []
+    for order in sorted({int(row["order"]) for row in rows}):
+        errors = {int(row["through"]): abs(float(row["peak_error"])) for row in rows if int(row["order"]) == order}
+        meeting = [n for n in errors if all(errors[finer] <= error_budget for finer in errors if finer >= n)]
+        if meeting:
+            through = min(meeting)
+            text = f"Q{order}: {through} elements through the lining (peak read {100 * errors[through]:.2g} % low)"
+            per_order.append({"order": order, "through": through, "error": errors[through], "text": text})
+        else:
+            finest = max(errors)
+            per_order.append({"order": order, "through": None, "error": errors[finest],
+                              "text": f"Q{order}: not reached with {finest} (peak read {100 * errors[finest]:.2g} % "
+                                      "low): read the face's stress from the field's gradient"})
+    return {"per_order": per_order, "text": "; ".join(item["text"] for item in per_order)}
+

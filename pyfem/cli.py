@@ -197,7 +197,7 @@ def check_out_dir(out_dir: Path) -> None:
 
 def mesh_advice(scene: Scene) -> str:
     """What the accuracy-versus-cost study says this scene's waves need (h, order) for 5 % and 1 %."""
-    from pyfem.accuracy import element_size_for, wall_size_for
+    from pyfem.accuracy import element_size_for, lining_elements_for, wall_size_for
 
     lines = [f"mesh advice (workflows/accuracy_cost.py; scene h = {scene['mesh'].get('h')}, "
              f"order {scene['mesh']['order']}):"]
@@ -214,6 +214,15 @@ def mesh_advice(scene: Scene) -> str:
             lines.append(f"  for a {100 * budget:g} % error: " + "; ".join(item["text"] for item in advice))
         except (ValueError, FileNotFoundError) as error:
             lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
+    if scene.get("static", {}).get("install"):
+        lines.append("lining stress advice (workflows/lining_stress_accuracy.py: the largest hoop stress read off "
+                     "a bending lining's cells after the static stage against the true peak at its face; "
+                     "docs/lined_tunnel.md):")
+        for budget in (0.05, 0.02):
+            try:
+                lines.append(f"  for a {100 * budget:g} % error: {lining_elements_for(budget)['text']}")
+            except (ValueError, FileNotFoundError) as error:
+                lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
     return "\n".join(lines)
 
 

@@ -168,3 +168,25 @@ def test_the_wall_advice_is_the_largest_size_whose_peak_error_and_every_finer_on
     tight = accuracy.wall_size_for(0.001, path)
     assert [a["h_over_a"] for a in tight] == [None, None] and "not reached" in tight[0]["text"]
     assert "k_s a = 0.56" in one[0]["text"]
+
+
+def test_lining_advice_takes_the_fewest_elements_that_read_the_peak_within_the_budget(tmp_path):
+    """accuracy.lining_elements_for on a table whose finer meshes all meet the budget above the
+    advised count, and on the study's own results (docs/lined_tunnel.md): 4 Q1 elements for 5 %,
+    8 not enough for 2 %."""
+    columns = ["order", "through", "h_wall", "peak_error"]
+    path = tmp_path / "lining_stress.csv"
+    with open(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=columns)
+        writer.writeheader()
+        for order, through, error in ((1, 2, -0.063), (1, 4, -0.036), (1, 8, -0.021), (2, 2, -0.062), (2, 4, -0.033)):
+            writer.writerow({"order": order, "through": through, "h_wall": 0.5 / through, "peak_error": error})
+    five = accuracy.lining_elements_for(0.05, path)["per_order"]
+    assert [(a["order"], a["through"]) for a in five] == [(1, 4), (2, 4)]
+    two = accuracy.lining_elements_for(0.02, path)["per_order"]
+    assert [a["through"] for a in two] == [None, None] and "not reached with 8" in two[0]["text"]
+    study = accuracy.lining_elements_for(0.05)
+    assert study["per_order"][0]["through"] == 4, study["text"]
+    with pytest.raises(ValueError, match="error_budget"):
+        accuracy.lining_elements_for(-1.0, path)
+

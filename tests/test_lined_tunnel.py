@@ -1,0 +1,109 @@
+"""The lined tunnel's closed form (pyfem/lined_tunnel.py, docs/lined_tunnel.md), checked against
+independent answers before the static stage is held to it (tests/test_static.py):
+- each Airy term's displacement satisfies plane-strain Hooke's law with its stress (numerical
+  derivatives), so bonding at r = b is imposed on true displacements;
+- a lining of negligible stiffness leaves Kirsch's unlined solution in the rock (Brady & Brown);
+- a lining installed after the whole release (lambda = 1) carries nothing;
+- under a hydrostatic far field it is the thick ring of tests/test_static.py's closed form;
+- the inner face is free and the traction is continuous across the bond;
+- a shear far field sigma_xz is the biaxial one turned by 45 degrees.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from pyfem.lined_tunnel import LinedTunnel, _deviatoric_terms, _lame
+
+P, K = 10.0e6, 0.5
+FAR = (-K * P, -P, 0.0)
+TUNNEL = LinedTunnel(5.0, 0.5, 28.0e9, 0.167, 8.0e9, 0.24)
+
+
+def kirsch(r_over_a, theta):
+    """(sigma_rr, sigma_tt), tension positive, far field sigma_zz = -P, sigma_xx = -K P."""
+    q2, q4, c2 = r_over_a ** -2, r_over_a ** -4, math.cos(2 * theta)
+    rr = 0.5 * P * ((1 + K) * (1 - q2) - (1 - K) * (1 - 4 * q2 + 3 * q4) * c2)
+    tt = 0.5 * P * ((1 + K) * (1 + q2) + (1 - K) * (1 + 3 * q4) * c2)
+    return -rr, -tt
+
+
+@pytest.mark.parametrize("term", range(4))
+def test_each_airy_terms_displacement_obeys_hookes_law(term):
+    lam, mu, kappa = _lame(8.0e9, 0.24)
+    coefficients = np.zeros(4)
+    coefficients[term] = 1.0
+
+    def fields(r, t):
+        values = _deviatoric_terms(r, kappa) @ coefficients
+        c, s = math.cos(2 * t), math.sin(2 * t)
+        return values[0] * c, values[1] * s, values[2] * c, values[3] * c / (2 * mu), values[4] * s / (2 * mu)
+
+    r, t, h = 3.7, 0.61, 1.0e-6
+    srr, srt, stt, ur, ut = fields(r, t)
+    dr = [(a - b) / (2 * h) for a, b in zip(fields(r + h, t), fields(r - h, t))]
+    dt = [(a - b) / (2 * h) for a, b in zip(fields(r, t + h), fields(r, t - h))]
+    e_rr, e_tt, g_rt = dr[3], (ur + dt[4]) / r, dt[3] / r + dr[4] - ut / r
+    hooke = ((lam + 2 * mu) * e_rr + lam * e_tt, lam * e_rr + (lam + 2 * mu) * e_tt, mu * g_rt)
+    scale = max(abs(srr), abs(stt), abs(srt))
+    assert scale > 0
+    assert max(abs(a - b) for a, b in zip(hooke, (srr, stt, srt))) < 1e-8 * scale
+
+
+def test_a_lining_of_no_stiffness_leaves_kirsch():
+    soft = LinedTunnel(5.0, 0.5, 1.0e-3, 0.2, 8.0e9, 0.24)
+    for r_over_a in (1.0, 1.3, 2.0, 5.0):
+        for theta in (0.0, 0.4, 1.2, math.pi / 2):
+            s = soft.stresses(5.0 * r_over_a, theta, FAR, relaxation=0.3)
+            rr, tt = kirsch(r_over_a, theta)
+            assert s["rr"] == pytest.approx(rr, abs=1e-6 * P)
+            assert s["tt"] == pytest.approx(tt, abs=1e-6 * P)
+
+
+def test_a_lining_installed_after_the_whole_release_carries_nothing():
+    for r in (4.5, 4.8, 4.99):
+        s = TUNNEL.stresses(r, 0.3, FAR, relaxation=1.0)
+        assert max(abs(s["rr"]), abs(s["tt"]), abs(s["rt"])) < 1e-6
+    assert TUNNEL.hoop_stress(5.0, 0.0, FAR, 1.0) == pytest.approx(kirsch(1.0, 0.0)[1], rel=1e-12)
+    assert TUNNEL.hoop_stress(4.7, 0.0, FAR, 0.0) < -1.0e6  # installed before: it carries the load
+
+
+@pytest.mark.parametrize("relaxation", [0.3, 0.7])
+def test_hydrostatic_far_field_is_the_thick_ring(relaxation):
+    b, a_i = 5.0, 4.5
+    G_r = 8.0e9 / (2 * 1.24)
+    nu_l = 0.167
+    C_l = (1 + nu_l) * ((1 - 2 * nu_l) * b * b + a_i * a_i) / (28.0e9 * (b * b - a_i * a_i))
+    support = (1 - relaxation) * P / (1 + 2 * G_r * C_l)
+    for r in (4.5, 4.75, 4.99):
+        exact = -support * b * b / (b * b - a_i * a_i) * (1 + (a_i / r) ** 2)
+        assert TUNNEL.hoop_stress(r, 0.2, (-P, -P, 0.0), relaxation) == pytest.approx(exact, rel=1e-10)
+
+
+def test_free_inner_face_bonded_outer_face_and_a_bending_lining():
+    for relaxation in (0.0, 0.5):
+        for theta in (0.0, 0.7, 2.0):
+            face = TUNNEL.stresses(4.5, theta, FAR, relaxation)
+            assert abs(face["rr"]) < 1e-6 * P and abs(face["rt"]) < 1e-6 * P
+            lining = TUNNEL.stresses(5.0 * (1 - 1e-12), theta, FAR, relaxation)
+            rock = TUNNEL.stresses(5.0, theta, FAR, relaxation)
+            assert lining["rr"] == pytest.approx(rock["rr"], abs=1e-6 * P)
+            assert lining["rt"] == pytest.approx(rock["rt"], abs=1e-6 * P)
+    # K = 0.5 bends the ring: the inner face's hoop stress varies around it by more than 3x.
+    inner = TUNNEL.hoop_stress(np.full(73, 4.5), np.linspace(0, math.pi, 73), FAR, 0.5)
+    assert inner.min() < 3 * inner.max() < 0.0
+
+
+def test_a_shear_far_field_is_the_biaxial_one_turned():
+    turned = TUNNEL.stresses(4.6, 0.3 + math.pi / 4, (0.0, 0.0, 1.0e6), 0.4)
+    biaxial = TUNNEL.stresses(4.6, 0.3, (1.0e6, -1.0e6, 0.0), 0.4)
+    for key in ("rr", "tt", "rt"):
+        assert turned[key] == pytest.approx(biaxial[key], rel=1e-12)
+    assert abs(biaxial["tt"]) > 1e5
+
+
+def test_bad_geometry_is_refused():
+    with pytest.raises(ValueError, match="thickness"):
+        LinedTunnel(5.0, 5.0, 28.0e9, 0.167, 8.0e9, 0.24)
+    with pytest.raises(ValueError, match="relaxation"):
+        TUNNEL.stresses(4.7, 0.0, FAR, relaxation=1.5)
