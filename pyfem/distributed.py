@@ -4,8 +4,9 @@ docs/scaling.md "The distributed step" is the design; this is its first implemen
 
 - Every rank builds the whole serial model (mesh, matrices, static stage: the same bits on every
   rank) and the serial stepper, whose state is the run's state in one place. The nodes are then
-  split among the ranks (recursive coordinate bisection; the nodes of pairs that share nodes go
-  to one rank together, so every contact pair is whole on one rank).
+  split among the ranks (recursive coordinate bisection weighted by each node's work, `node_work`:
+  the element loop's points and the pairs count; the nodes of pairs that share nodes go to one
+  rank together, so every contact pair is whole on one rank).
 - Each rank steps its share: its owned nodes numbered first, then its ghosts (the nodes its
   owned rows and its cells touch). Its matrix holds the blocks with an owned index, so K u is
   exact on the owned rows; its cells are those with an owned node (a cell another rank also
@@ -53,10 +54,19 @@ def launched_rank() -> int:
     return 0
 
 
-def bisection(points: np.ndarray, parts: int) -> np.ndarray:
+# The work of one node in a step, in units of a matrix row (its ~27 blocks), for weighted
+# partitions (`node_work`). Measured on the coarse case 1 and 3 (2026-11-25, 2 threads, from rest,
+# `pyfem check`): the element loop 61 ns per quadrature point at rest (a yielding point costs
+# several times more), the stiffness product ~1 ns per block (27 per row), contact 156 ns per pair.
+POINT_WORK = 2.3   # rows per element-loop quadrature point
+PAIR_WORK = 6.0    # rows per contact pair
+
+
+def bisection(points: np.ndarray, parts: int, weights: np.ndarray | None = None) -> np.ndarray:
     """Part (0..parts-1) of every point by recursive coordinate bisection: the longest extent is
-    cut where the counts stay in proportion to the parts on each side (parts need not be a power
-    of two). Deterministic: ties in coordinate are broken by the point's index."""
+    cut where the counts (with `weights`, the summed weights) stay in proportion to the parts on
+    each side (parts need not be a power of two). Deterministic: ties in coordinate are broken by
+    the point's index."""
     owner = np.zeros(len(points), dtype=np.int32)
 
     def split(index: np.ndarray, first: int, count: int) -> None:
@@ -67,7 +77,14 @@ def bisection(points: np.ndarray, parts: int) -> np.ndarray:
         axis = int(np.argmax(extent))
         order = index[np.lexsort((index, points[index, axis]))]
         left = count // 2
-        cut = int(round(len(order) * left / count))
+        if weights is None:
+            cut = int(round(len(order) * left / count))
+        else:
+            # the left part's size whose summed weight is nearest its share (unit weights: the count's cut)
+            cumulative = np.concatenate([[0.0], np.cumsum(weights[order])])
+            target = cumulative[-1] * left / count
+            above = int(np.searchsorted(cumulative, target))
+            cut = above if above == 0 or cumulative[above] - target < target - cumulative[above - 1] else above - 1
         split(order[:cut], first, left)
         split(order[cut:], first + left, count - left)
 
@@ -104,10 +121,28 @@ class Partition:
         return np.flatnonzero(self.node_owner == rank)
 
 
-def partition(simulation, size: int) -> Partition:
-    """Splits the nodes of the simulation's model among `size` ranks (docstring of the module)."""
+def node_work(simulation) -> np.ndarray:
+    """(n_nodes,) the work of each node in a step, in matrix rows: 1, plus POINT_WORK per element-loop
+    quadrature point of its cells (each cell's points shared among its nodes), plus PAIR_WORK per
+    contact pair shared between its two nodes. The element loop, where it is on, is most of a step
+    (README benchmark), so a partition by node count leaves the rank with the cavern's zone waiting
+    for nothing and the other waiting for it."""
+    work = np.ones(len(simulation.mass))
+    if simulation.nonlinear is not None:
+        for arrays in simulation.nonlinear.arrays.values():
+            cell_nodes = np.asarray(arrays.cell_nodes)
+            share = POINT_WORK * arrays.weights.shape[1] / cell_nodes.shape[1]
+            np.add.at(work, cell_nodes.ravel(), share)
+    if simulation.contact_arrays is not None and len(simulation.contact_arrays["pairs"]):
+        np.add.at(work, np.asarray(simulation.contact_arrays["pairs"]).ravel(), 0.5 * PAIR_WORK)
+    return work
+
+
+def partition(simulation, size: int, weighted: bool = True) -> Partition:
+    """Splits the nodes of the simulation's model among `size` ranks (docstring of the module); with
+    `weighted`, in proportion to their work (`node_work`), else to their count."""
     coordinates = simulation.model.node_coords
-    owner = bisection(coordinates, size)
+    owner = bisection(coordinates, size, node_work(simulation) if weighted else None)
     pair_owner = None
     if simulation.contact_arrays is not None and len(simulation.contact_arrays["pairs"]):
         pairs = simulation.contact_arrays["pairs"]
@@ -186,6 +221,23 @@ def share(simulation, parts: Partition, rank: int) -> Share:
         np.zeros(0, dtype=np.int64)
     return Share(nodes=nodes, n_owned=len(owned), local_of=local_of, cells=cells, pairs=pairs,
                  constraints=constraints, dashpots=dashpots)
+
+
+def rank_work(simulation, parts: Partition) -> np.ndarray:
+    """(size,) each rank's work in a step by the model of `node_work` (matrix rows), counted as the
+    ranks do it: its owned rows, every element-loop cell with an owned node (counted and halo: a
+    cell on a rank boundary is computed by each rank it touches) and its pairs."""
+    work = np.zeros(parts.size)
+    for rank in range(parts.size):
+        mine = share(simulation, parts, rank)
+        work[rank] = mine.n_owned
+        if simulation.nonlinear is not None:
+            for name, arrays in simulation.nonlinear.arrays.items():
+                cells = sum(len(indices) for _, indices in mine.cells.get(name, []))
+                work[rank] += POINT_WORK * cells * arrays.weights.shape[1]
+        if mine.pairs is not None:
+            work[rank] += PAIR_WORK * len(mine.pairs)
+    return work
 
 
 def local_matrix(stiffness: sp.bsr_matrix, mine: Share) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
