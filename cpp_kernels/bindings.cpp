@@ -201,6 +201,22 @@ StateArchive dict_archive(const py::dict& blocks) {
   return StateArchive(std::move(copy));
 }
 
+/// The save_state() / load_state(dict) of a stepper (Stepper, LocalStepper: save_state(archive) and
+/// load_state(archive) without a prefix).
+template <class T>
+auto stepper_save_state() {
+  return [](const T& stepper) {
+    StateArchive archive;
+    stepper.save_state(archive);
+    return archive_dict(archive);
+  };
+}
+
+template <class T>
+auto stepper_load_state() {
+  return [](T& stepper, const py::dict& blocks) { stepper.load_state(dict_archive(blocks)); };
+}
+
 py::dict phase_dict(const PhaseTimes& times) {
   py::dict phases;
   phases["update"] = times.update;
@@ -794,18 +810,12 @@ Args:
     nodes: int32 (k,) distinct nodes. Copied.
     projection: float64 (k, 3, 3) symmetric idempotent matrices P. Copied.)")
       .def(
-          "save_state",
-          [](const Stepper& stepper) {
-            StateArchive archive;
-            stepper.save_state(archive);
-            return archive_dict(archive);
-          },
+          "save_state", stepper_save_state<Stepper>(),
           R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
 byte blocks (the energy account, the last internal force and reactions, the contact pairs'
 and every internal-force component's state), a copy.)")
       .def(
-          "load_state",
-          [](Stepper& stepper, const py::dict& blocks) { stepper.load_state(dict_archive(blocks)); },
+          "load_state", stepper_load_state<Stepper>(),
           py::arg("state"),
           R"(Restores save_state's dict into a stepper built from the same scene (same dt, damping,
 dofs, providers, pairs and components, in the same order). ValueError names the first block that
@@ -1041,18 +1051,12 @@ Args:
           py::arg("n_steps"), py::arg("t0"),
           "Advances n_steps global steps of dt() from t0 (u, v, a in place); returns the end time.")
       .def(
-          "save_state",
-          [](const LocalStepper& stepper) {
-            StateArchive archive;
-            stepper.save_state(archive);
-            return archive_dict(archive);
-          },
+          "save_state", stepper_save_state<LocalStepper>(),
           R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
 byte blocks (each level's last force, the energy account, every level's components and contact
 pairs), a copy.)")
       .def(
-          "load_state",
-          [](LocalStepper& stepper, const py::dict& blocks) { stepper.load_state(dict_archive(blocks)); },
+          "load_state", stepper_load_state<LocalStepper>(),
           py::arg("state"),
           R"(Restores save_state's dict into a stepper built from the same scene (same levels, dt_fine,
 damping, providers, components and pairs at the same levels in the same order); the next run

@@ -200,25 +200,31 @@ def test_the_stateful_scene_slides_yields_and_damages(reference_run):
     assert summary["energy"]["balance_error"] < 1e-6
 
 
+def crash_after_a_periodic_checkpoint(monkeypatch, scene, out: Path, every: int, crash_at: float):
+    """Runs `scene` into `out` writing a checkpoint at every `every`-th sample only, and crashes it (a
+    RuntimeError) at the first sample at or after `crash_at`; returns the checkpoint read back."""
+    calls = {"n": 0}
+
+    def every_nth(self):
+        calls["n"] += 1
+        return calls["n"] % every == 0
+
+    with monkeypatch.context() as patched:
+        patched.setattr(checkpoint.CheckpointClock, "due", every_nth)
+        with pytest.raises(RuntimeError, match="simulated crash"):
+            solver.run(scene, out, progress=StopAt(crash_at, RuntimeError("simulated crash")))
+    return checkpoint.read_checkpoint(out)
+
+
 def test_crash_after_a_periodic_checkpoint_then_resume_gives_the_uninterrupted_run(reference_run, tmp_path,
                                                                                       monkeypatch):
     """Checkpoints every 5th sample only; the run crashes 3 samples after the one at t = 0.30 s, so
     its files hold rows past the checkpoint that the resumed run must drop and recompute."""
-    calls = {"n": 0}
-
-    def every_fifth(self):
-        calls["n"] += 1
-        return calls["n"] % 5 == 0
-
-    monkeypatch.setattr(checkpoint.CheckpointClock, "due", every_fifth)
     out = tmp_path / "crashed"
-    with pytest.raises(RuntimeError, match="simulated crash"):
-        solver.run(stateful_scene(), out, progress=StopAt(CHECKPOINT_T + 0.03, RuntimeError("simulated crash")))
-    saved = checkpoint.read_checkpoint(out)
+    saved = crash_after_a_periodic_checkpoint(monkeypatch, stateful_scene(), out, 5, CHECKPOINT_T + 0.03)
     assert saved.t == pytest.approx(CHECKPOINT_T) and saved.outputs_done == 30
     assert json.loads((out / "run.json").read_text())["status"] == "failed"
     assert (out / "energy.csv").read_text().count("\n") == 1 + 34, "rows past the checkpoint are on disk"
-    monkeypatch.undo()
     summary = solver.run(stateful_scene(), out, resume=True)
     assert summary["resumed"][0]["t"] == pytest.approx(CHECKPOINT_T)
     assert_same_run(out, reference_run[0])

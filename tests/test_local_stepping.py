@@ -369,9 +369,8 @@ def test_a_local_stepping_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_p
     histories, fields and run.json peaks bit for bit, on a scene with several rate levels whose
     state matters across the checkpoint: a weak deteriorating interface sliding and a yielding soft
     layer (both before and after it)."""
-    from pyfem import checkpoint
     from pyfem.scene import parse_scene
-    from test_checkpoint import StopAt, assert_same_run
+    from test_checkpoint import assert_same_run, crash_after_a_periodic_checkpoint
 
     MPa = 1.0e6
     data = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
@@ -394,20 +393,10 @@ def test_a_local_stepping_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_p
     sliding = np.asarray(summary["pair_states"]["sliding"])
     assert sliding[:at + 1].max() > 0 and sliding[at + 1:].max() > 0
 
-    calls = {"n": 0}
-
-    def every_tenth(self):
-        calls["n"] += 1
-        return calls["n"] % 10 == 0
-
-    monkeypatch.setattr(checkpoint.CheckpointClock, "due", every_tenth)
     out = tmp_path / "crashed"
-    with pytest.raises(RuntimeError, match="simulated crash"):
-        solver.run(scene, out, progress=StopAt(checkpoint_t + 0.012, RuntimeError("simulated crash")))
-    saved = checkpoint.read_checkpoint(out)
+    saved = crash_after_a_periodic_checkpoint(monkeypatch, scene, out, 10, checkpoint_t + 0.012)
     assert saved.t == pytest.approx(checkpoint_t)
     assert (out / "energy.csv").read_text().count("\n") == 1 + saved.outputs_done + 1 + 3, "rows past the checkpoint"
-    monkeypatch.undo()
     resumed = solver.run(scene, out, resume=True)
     assert resumed["resumed"][0]["t"] == pytest.approx(checkpoint_t)
     assert_same_run(out, reference)
