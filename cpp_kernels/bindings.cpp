@@ -1005,6 +1005,25 @@ Args:
           &set_dashpots_checked<LocalStepper>,
           py::arg("nodes"), py::arg("C"), "Implicit per-node dashpots (Stepper.set_dashpots).")
       .def(
+          "set_constraints",
+          [](LocalStepper& stepper, const py::object& nodes_object, const py::object& P_object) {
+            auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
+            auto P = checked_array<double>(P_object, "projection", {nodes.shape(0), 3, 3});
+            stepper.set_constraints(nodes.data(), nodes.shape(0), P.data());
+          },
+          py::arg("nodes"), py::arg("projection"),
+          "Kinematic constraints (fixed, roller; Stepper.set_constraints): every kick of a constrained "
+          "node projected.")
+      .def(
+          "reactions",
+          [](const LocalStepper& stepper) {
+            const std::vector<double>& r = stepper.reactions();
+            py::array_t<double> out({static_cast<py::ssize_t>(r.size() / 3), static_cast<py::ssize_t>(3)});
+            std::copy(r.begin(), r.end(), out.mutable_data());
+            return out;
+          },
+          "The supports' reactions (k, 3) at the end of the last run (N), as Stepper.reactions.")
+      .def(
           "add_seismic_input",
           [](LocalStepper& stepper, std::shared_ptr<SeismicInput> input) {
             stepper.add_provider(std::move(input));

@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "constraints.hpp"
 #include "small_matrix.hpp"
 
 namespace cavern {
@@ -42,6 +43,34 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
   internal_.assign(3 * n, 0.0);
   own_power_.assign(2 * n, 0.0);
   dashpot_slot_.assign(n, -1);
+  constraint_slot_.assign(n, -1);
+}
+
+void LocalStepper::set_constraints(const std::int32_t* nodes, std::int64_t count,
+                                   const double* projection) {
+  std::vector<std::int32_t> slots(n_nodes(), -1);
+  for (std::int64_t k = 0; k < count; ++k) {
+    const std::int32_t node = nodes[k];
+    if (node < 0 || node >= n_nodes())
+      throw std::invalid_argument("constraint nodes[" + std::to_string(k) + "] is not a node");
+    if (slots[node] >= 0)
+      throw std::invalid_argument("constraint nodes[" + std::to_string(k) + "] = " +
+                                  std::to_string(node) + " is repeated");
+    check_projection(projection + 9 * k, k);
+    slots[node] = static_cast<std::int32_t>(k);
+  }
+  constraint_slot_ = std::move(slots);
+  constraint_P_.assign(projection, projection + 9 * count);
+  reactions_.assign(3 * count, 0.0);
+  initialised_ = false;
+}
+
+void LocalStepper::project(std::int64_t i, double* dv) const {
+  const std::int32_t k = constraint_slot_[i];
+  if (k < 0) return;
+  double projected[3];
+  multiply_3x3(constraint_P_.data() + 9 * k, dv, projected);
+  for (int d = 0; d < 3; ++d) dv[d] = projected[d];
 }
 
 void LocalStepper::build_levels() {
@@ -189,7 +218,11 @@ void LocalStepper::check_contacts() const {
   for (int c = 0; c <= max_level_; ++c) {
     const int k = max_level_ - c;
     for (const auto& pairs : levels_[c].contacts)
-      for (const std::int32_t node : pairs->unique_nodes())
+      for (const std::int32_t node : pairs->unique_nodes()) {
+        if (constraint_slot_[node] >= 0)
+          throw std::invalid_argument("contact pair node " + std::to_string(node) +
+                                      " is constrained: local time stepping does not take contact "
+                                      "pairs on fixed or roller faces");
         if (drift_level_[node] != k || level_[node] != k)
           throw std::invalid_argument(
               "contact pair node " + std::to_string(node) + " steps at level " +
@@ -197,6 +230,7 @@ void LocalStepper::check_contacts() const {
               std::to_string(drift_level_[node]) + ", its pairs at level " + std::to_string(k) +
               ": both nodes of a pair must step and drift at its level (pyfem/local_stepping.py "
               "equalize_pair_drift)");
+      }
   }
 }
 
@@ -318,7 +352,9 @@ void LocalStepper::start_kick(int c, double h, double* v) {
     const double* force = level.force.data() + 3 * r;
     const double m = mass_[i];
     if (!level.own[r]) {
-      for (int d = 0; d < 3; ++d) vi[d] += half * force[d] / m;
+      double dv[3] = {half * force[0] / m, half * force[1] / m, half * force[2] / m};
+      project(i, dv);  // a constrained node's held part goes to the support
+      for (int d = 0; d < 3; ++d) vi[d] += dv[d];
       continue;
     }
     // The node's own level: its damping at the velocity it has now (other levels' kicks may have
@@ -338,7 +374,10 @@ void LocalStepper::start_kick(int c, double h, double* v) {
     }
     own_power_[2 * i] = external_power;
     own_power_[2 * i + 1] = damping_power;
-    for (int d = 0; d < 3; ++d) vi[d] += half * (force[d] - damping[d]) / m;
+    double dv[3];
+    for (int d = 0; d < 3; ++d) dv[d] = half * (force[d] - damping[d]) / m;
+    project(i, dv);  // the held part goes to the support
+    for (int d = 0; d < 3; ++d) vi[d] += dv[d];
   }
   phase_times_.stiffness += omp_get_wtime() - started;
 }
@@ -384,9 +423,11 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
     double* vi = v + 3 * i;
     double* force = level.force.data() + 3 * r;
     if (!level.own[r]) {
+      double dv[3] = {half * f[0] / m, half * f[1] / m, half * f[2] / m};
+      project(i, dv);  // a constrained node's held part goes to the support
       for (int d = 0; d < 3; ++d) {
         force[d] = f[d];
-        vi[d] += half * f[d] / m;
+        vi[d] += dv[d];
       }
       continue;
     }
@@ -406,6 +447,17 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
         v_new[d] = vi[d];
         damping[d] = alpha_ * m * vi[d] + C_v[d];
       }
+    } else if (constraint_slot_[i] >= 0) {  // P A P v_new = P rhs (constraints.hpp)
+      double A[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, A_inverse[9], C_v[3] = {0.0, 0.0, 0.0};
+      if (slot >= 0)
+        for (int k = 0; k < 9; ++k) A[k] = half * dashpot_C_[9 * slot + k];
+      for (int d = 0; d < 3; ++d) A[4 * d] += m * (1.0 + half * alpha_);
+      // A is positive definite (m > 0, C positive semi-definite: set_dashpots checks it), so the
+      // restricted matrix is regular.
+      constrained_inverse(A, constraint_P_.data() + 9 * constraint_slot_[i], A_inverse);
+      multiply_3x3(A_inverse, rhs, v_new);
+      if (slot >= 0) multiply_3x3(dashpot_C_.data() + 9 * slot, v_new, C_v);
+      for (int d = 0; d < 3; ++d) damping[d] = alpha_ * m * v_new[d] + C_v[d];
     } else if (slot < 0) {
       const double inverse = 1.0 / (m * (1.0 + half * alpha_));
       for (int d = 0; d < 3; ++d) {
@@ -540,7 +592,17 @@ double LocalStepper::run(double* u, double* v, double* a, std::int64_t n_steps, 
       multiply_3x3(dashpot_C_.data() + 9 * dashpot_slot_[i], v + 3 * i, C_v);
       for (int d = 0; d < 3; ++d) damping[d] += C_v[d];
     }
-    for (int d = 0; d < 3; ++d) a[3 * i + d] = (a[3 * i + d] - damping[d]) / mass_[i];
+    for (int d = 0; d < 3; ++d) a[3 * i + d] -= damping[d];
+    const std::int32_t k = constraint_slot_[i];
+    if (k >= 0) {  // the held part of the net force is the support's reaction, R = -(I - P)(r - d)
+      double free_part[3];
+      multiply_3x3(constraint_P_.data() + 9 * k, a + 3 * i, free_part);
+      for (int d = 0; d < 3; ++d) {
+        reactions_[3 * k + d] = free_part[d] - a[3 * i + d];
+        a[3 * i + d] = free_part[d];
+      }
+    }
+    for (int d = 0; d < 3; ++d) a[3 * i + d] /= mass_[i];
   }
   energy_.internal_dissipation = measure_state(u, v) - dissipation_at_start_;
   energy_.balance = energy_.kinetic + energy_.strain + energy_.internal_stored - energy_.initial -
@@ -562,7 +624,8 @@ std::string level_prefix(int c) { return "lts/level/" + std::to_string(c) + "/";
 
 std::vector<double> LocalStepper::checkpoint_parameters() const {
   std::vector<double> parameters{dt_fine_, alpha_, static_cast<double>(n_nodes()),
-                                 static_cast<double>(max_level_), static_cast<double>(providers_.size())};
+                                 static_cast<double>(max_level_), static_cast<double>(providers_.size()),
+                                 static_cast<double>(constraint_P_.size() / 9)};
   for (const Level& level : levels_) {
     parameters.push_back(static_cast<double>(level.components.size()));
     parameters.push_back(static_cast<double>(level.contacts.size()));
@@ -601,8 +664,8 @@ void LocalStepper::load_state(const StateArchive& archive) {
   archive.get_resized("lts/parameters", saved);
   if (saved != expected)
     throw std::invalid_argument(
-        "checkpoint block 'lts/parameters': dt_fine, alpha, nodes, levels, providers or the "
-        "components and pairs per level differ from the model's (a checkpoint of another scene?)");
+        "checkpoint block 'lts/parameters': dt_fine, alpha, nodes, levels, providers, constraints or "
+        "the components and pairs per level differ from the model's (a checkpoint of another scene?)");
   std::vector<std::int32_t> levels(level_.size());
   archive.get("lts/node_level", levels);
   if (levels != level_)

@@ -57,6 +57,15 @@ class LocalStepper {
   /// Implicit 3x3 dashpots C (count, 3, 3) at nodes (count) (Stepper::set_dashpots).
   void set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C);
 
+  /// Kinematic constraints (constraints.hpp, Stepper::set_constraints): node k moves only in the
+  /// range of the orthogonal projection P_k (count, 3, 3; fixed: 0, roller: I - n n^T). Every kick
+  /// of a constrained node is projected (its own end kick solves the constrained implicit update,
+  /// P A P v = P rhs, as Stepper's pass B), so from a state in the range of P its u and v stay
+  /// there at every level; the held part of the force is the support's reaction, which does no
+  /// work (reactions()). A contact pair node may not be constrained (checked at the first run). Throws std::invalid_argument for a node outside the mesh, a repeated node or a P that is
+  /// not an orthogonal projection.
+  void set_constraints(const std::int32_t* nodes, std::int64_t count, const double* projection);
+
   /// Adds a force provider; its nodes() must be listed (non-empty). Its forces act in the end
   /// kicks of each node's own level at that kick's time.
   void add_provider(std::shared_ptr<ForceProvider> provider);
@@ -130,6 +139,11 @@ class LocalStepper {
   };
   /// Energies of the state of the last run() (strain by one product at the end of each run call).
   Energy energy() const { return energy_; }
+
+  /// The supports' reactions (constraints, 3) at the end of the last run(): the held part of each
+  /// constrained node's net force, R = -(I - P)(r - d), r the sum of its levels' last forces (all
+  /// levels end together at a global step's end), as Stepper::reactions.
+  const std::vector<double>& reactions() const { return reactions_; }
 
   /// The run's state beyond u, v, a and t (checkpoint, docs/checkpoint.md): each level's force of
   /// its last end kick (the FSAL force the next start kick uses) and own external force (its power
@@ -207,6 +221,11 @@ class LocalStepper {
   int max_level_ = 0;
   std::vector<Level> levels_;  // by coarse index c = max_level_ - k
   std::vector<std::int32_t> dashpot_slot_;  // per node, -1: none
+  std::vector<std::int32_t> constraint_slot_;  // per node, -1: none
+  std::vector<double> constraint_P_;           // (constraints, 9) projections
+  std::vector<double> reactions_;              // (constraints, 3) of the last run()
+  // v += P dv at node i (dv unchanged without a constraint); in place on dv.
+  void project(std::int64_t i, double* dv) const;
   std::vector<double> dashpot_C_;           // (slots, 9)
   std::vector<std::shared_ptr<ForceProvider>> providers_;
   std::vector<std::int32_t> provider_nodes_;  // union of the providers' nodes (sorted)

@@ -21,8 +21,9 @@ split of docs/lts_plan.md "Nonlinear cells at their own rates"), read back as on
 before each drift of the level their nodes drift at): the two nodes of a pair are put at one level
 and one drift level (`equalize_pair_drift`), the pairs split into one kernel ContactPairs per drift
 level and read back as one set by `LevelPairs`. After a relaxation stage both continue the stage's state, cut by level
-(`load_component_parts`, `load_pair_parts`). What is not supported yet, refused by key: fixed and
-roller faces, stiffness-proportional damping. Checkpoints hold the LocalStepper's own state
+(`load_component_parts`, `load_pair_parts`). Fixed and roller faces project every kick of their
+nodes (LocalStepper.set_constraints; their pairs are refused). What is not supported yet, refused by
+key: stiffness-proportional damping. Checkpoints hold the LocalStepper's own state
 (each level's last force, the energy account, every level's components and pairs) and resume bit for
 bit (docs/checkpoint.md).
 """
@@ -45,14 +46,12 @@ STABILITY_AMPLITUDE = 1.0e-9  # m, the random state's scale
 STABILITY_RATIO = 2.0      # largest energy of the last third / of the first third, above: unstable
 
 
-def check_supported(scene, has_constraints: bool, beta: float) -> None:
+def check_supported(scene, beta: float) -> None:
     """Raises SceneError naming time.local_stepping when the scene asks for what the local stepper
     does not do yet."""
     allowed = ("false for scenes with {}: local time stepping covers the stiffness, mass-proportional "
-               "damping, viscoelastic and viscous faces, seismic input, element-loop materials, contact and "
-               "a static stage (docs/lts_plan.md)")
-    if has_constraints:
-        raise SceneError(KEY, True, allowed.format("fixed or roller faces"))
+               "damping, viscoelastic, viscous, fixed and roller faces, seismic input, element-loop materials, "
+               "contact and a static stage (docs/lts_plan.md)")
     if beta != 0.0:
         raise SceneError(KEY, True, allowed.format("stiffness-proportional Rayleigh damping (beta > 0)"))
     if scene["time"].get("matrix_precision", "double") != "double":
@@ -431,7 +430,8 @@ class LocalSteppingAdapter:
         return self.kernel.energy()
 
     def reactions(self):
-        return None
+        """The supports' reactions (k, 3) of the fixed and roller faces (LocalStepper.reactions)."""
+        return self.kernel.reactions()
 
     def phase_seconds(self) -> dict:
         return self.kernel.phase_seconds()  # steps in fine steps, as the run loop counts them

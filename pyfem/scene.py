@@ -536,7 +536,7 @@ SCHEMA = Table({
         "matrix_precision": Choice("storage of the stiffness matrix's blocks in the kernel", ("double", "single"),
                                    default="double"),
         "local_stepping": Flag("multi-rate stepping: each cell and contact pair at its own stable rate (not with "
-                               "fixed or roller faces or stiffness-proportional damping; docs/lts_plan.md)",
+                               "stiffness-proportional damping; docs/lts_plan.md)",
                                default=False),
     }, "[time]"),
     "wave": Table({

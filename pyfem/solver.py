@@ -438,7 +438,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         from pyfem import local_stepping
 
         try:
-            local_stepping.check_supported(scene, constraints is not None, beta)
+            local_stepping.check_supported(scene, beta)
             if MPI.COMM_WORLD.size > 1:  # before anything is distributed: every rank says the same
                 raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs "
                                  "on one rank for now)")
@@ -518,6 +518,9 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         if len(simulation.dashpot_nodes):
             kernel.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
                                 np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
+        if simulation.constraints is not None:
+            kernel.set_constraints(np.ascontiguousarray(simulation.constraints.nodes, dtype=np.int32),
+                                   np.ascontiguousarray(simulation.constraints.projection, dtype=np.float64))
         if simulation.nonlinear is not None:
             regions = local_stepping.level_components(simulation.nonlinear, levels, cell_cap, initial_stress)
             for _, parts in regions:
@@ -776,8 +779,9 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
     pairs = simulation.contact_arrays["pairs"] if simulation.contact_arrays is not None else None
     p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
                                           simulation.stiffness, pairs, simulation.time_step, phases_ms)
-    verdict = ("set time.local_stepping = true to use it" if p["speed_up"] >= 1.2
-               else "not worth it on this model")
+    verdict = ("it would pay (time.local_stepping = true), but stresses where a finer level meets a coarser "
+               "one can be far off (a cavity test: 168 % at one point; docs/lts_plan.md \"The cavity under local "
+               "stepping\")" if p["speed_up"] >= 1.2 else "not worth it on this model")
     return {"local stepping (off)": (
         f"predicted {p['speed_up']:.2f}x the speed of global stepping per simulated second ({len(p['levels'])} "
         f"rate level{'s' if len(p['levels']) != 1 else ''}, nodes per level {p['levels']}; work against global "
@@ -785,7 +789,7 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
         + (f"element loop {p['element_loop']:.2f}, " if simulation.nonlinear is not None else "")
         + f"matrix {p['matrix']:.2f}"
         + (f", contact {p['contact']:.2f}" if pairs is not None else "")
-        + f"); {verdict} (docs/lts_plan.md \"Where it pays\")")}
+        + f"); {verdict}")}
 
 
 def lts_stability_line(report: dict) -> str:

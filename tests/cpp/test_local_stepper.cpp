@@ -572,3 +572,96 @@ TEST(LocalStepper, SavedStateContinuesBitForBit) {
     EXPECT_NE(std::string(error.what()).find("lts/"), std::string::npos) << error.what();
   }
 }
+
+// Kinematic constraints (constraints.hpp): with one level the local stepper is Stepper with the same
+// fixed and roller nodes (one roller also carrying a dashpot that couples the held and the free
+// directions, so the constrained implicit update matters); with several levels a roller node's held
+// component stays zero to round-off at every level and the energy stays bounded.
+TEST(LocalStepper, ConstrainedNodesAsStepperAndHeldAtEveryLevel) {
+  const BlockSystem system = random_spd_system(40, 3, 23);
+  const double dt = 0.02, alpha = 0.3;
+  std::mt19937_64 generator(5);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  const std::vector<std::int32_t> dashpot_nodes = {4, 11};
+  const std::vector<double> C = {2.0, 0.7, 0.0, 0.7, 1.0, 0.3, 0.0, 0.3, 1.5,
+                                 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+  const double s = 1.0 / std::sqrt(2.0);
+  const double n[3] = {s, s, 0.0};  // a roller with a slanted normal
+  std::vector<double> P(27, 0.0);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      P[3 * r + c] = (r == c ? 1.0 : 0.0) - n[r] * n[c];        // node 4: roller, with the dashpot
+      P[18 + 3 * r + c] = (r == c ? 1.0 : 0.0) - (r == 2 && c == 2 ? 1.0 : 0.0);  // node 30: roller z
+    }
+  // node 17: fixed (P = 0)
+  const std::vector<std::int32_t> constrained = {4, 17, 30};
+  Stepper stepper(system.view(), system.mass.data(), StepperParameters{dt, alpha, 0.0, false});
+  stepper.set_dashpots(dashpot_nodes.data(), 2, C.data());
+  stepper.set_constraints(constrained.data(), 3, P.data());
+  const std::vector<std::int32_t> levels(system.n_nodes, 0);
+  LocalStepper local(system.view(), system.mass.data(), levels.data(), dt, alpha);
+  local.set_dashpots(dashpot_nodes.data(), 2, C.data());
+  local.set_constraints(constrained.data(), 3, P.data());
+
+  // u in the free range of every constrained node, at rest; Stepper's a_0 = P M^-1 (-K u).
+  std::vector<double> u(system.n_dofs()), v(system.n_dofs(), 0.0), a(system.n_dofs(), 0.0);
+  for (double& value : u) value = 0.01 * uniform(generator);
+  auto project = [&](std::vector<double>& x) {
+    for (std::size_t k = 0; k < constrained.size(); ++k) {
+      double y[3];
+      multiply_3x3(P.data() + 9 * k, x.data() + 3 * constrained[k], y);
+      for (int d = 0; d < 3; ++d) x[3 * constrained[k] + d] = y[d];
+    }
+  };
+  project(u);
+  for (std::int64_t i = 0; i < system.n_dofs(); ++i) {
+    double Ku = 0.0;
+    for (std::int64_t j = 0; j < system.n_dofs(); ++j) Ku += system.dense[i * system.n_dofs() + j] * u[j];
+    a[i] = -Ku / system.mass[i / 3];
+  }
+  project(a);
+  std::vector<double> u2 = u, v2 = v, a2(system.n_dofs(), 0.0);
+  stepper.run(u.data(), v.data(), a.data(), 300, 0.0);
+  local.run(u2.data(), v2.data(), a2.data(), 300, 0.0);
+  EXPECT_LT(max_relative_difference(u2, u), 1e-12);
+  EXPECT_LT(max_relative_difference(v2, v), 1e-12);
+  EXPECT_LT(max_relative_difference(a2, a), 1e-11);
+  EXPECT_GT(max_abs(u), 1e-3);
+  EXPECT_EQ(u2[3 * 17], 0.0);
+  EXPECT_LT(std::abs(n[0] * u2[12] + n[1] * u2[13]), 1e-15);
+  EXPECT_GT(std::hypot(u2[12], u2[13], u2[14]), 1e-5);  // node 4 moved, along its face
+  const std::vector<double>& R = local.reactions();
+  ASSERT_EQ(R.size(), 9u);
+  EXPECT_LT(max_relative_difference(R, stepper.reactions()), 1e-11);
+  EXPECT_GT(max_abs(R), 1e-4);
+
+  // Several levels: rollers (held along x) on nodes of the coarse and the fine part of a graded chain.
+  const Chain chain = graded_chain(81, 12, 64.0, 4);
+  ASSERT_GE(*std::max_element(chain.level.begin(), chain.level.end()), 2);
+  std::vector<std::int32_t> rollers;
+  std::vector<double> held_x;
+  for (std::int32_t node = 3; node < 81; node += 6) {
+    rollers.push_back(node);
+    const double roller[9] = {0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+    held_x.insert(held_x.end(), roller, roller + 9);
+  }
+  LocalStepper graded(chain.system.view(), chain.system.mass.data(), chain.level.data(), 0.8 * chain.dt_min, 0.0);
+  graded.set_constraints(rollers.data(), static_cast<std::int64_t>(rollers.size()), held_x.data());
+  std::vector<double> vp = pulse(81), up(vp.size(), 0.0), ap(vp.size(), 0.0);
+  for (const std::int32_t node : rollers) vp[3 * node] = 0.0;
+  double kinetic0 = 0.0;
+  for (int i = 0; i < 81; ++i)
+    for (int d = 0; d < 3; ++d) kinetic0 += 0.5 * chain.system.mass[i] * vp[3 * i + d] * vp[3 * i + d];
+  double worst_held = 0.0, moved = 0.0;
+  for (int chunk = 0; chunk < 20; ++chunk) {
+    graded.run(up.data(), vp.data(), ap.data(), 25, 0.0);
+    for (const std::int32_t node : rollers) {
+      worst_held = std::max({worst_held, std::abs(up[3 * node]), std::abs(vp[3 * node])});
+      moved = std::max(moved, std::abs(up[3 * node + 1]));
+    }
+    const LocalStepper::Energy e = graded.energy();
+    EXPECT_LT(e.kinetic + e.strain, 3.0 * kinetic0);  // bounded (the plain energy of the scheme)
+  }
+  EXPECT_EQ(worst_held, 0.0);
+  EXPECT_GT(moved, 1e-3);  // the rollers' free components moved
+}
