@@ -520,6 +520,24 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
 void LocalStepper::prepare_structure() {
   rebuild();
   check_contacts();
+  // Each constrained node's implicit update at every level's step (its own end kicks use its own
+  // level's; checked at all, before any OpenMP loop can meet a singular one).
+  for (std::int64_t i = 0; i < n_nodes(); ++i) {
+    const std::int32_t k = constraint_slot_[i];
+    if (k < 0) continue;
+    const std::int32_t slot = dashpot_slot_[i];
+    for (const Level& level : levels_) {
+      const double half = 0.5 * level.step;
+      double A[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, A_inverse[9];
+      if (slot >= 0)
+        for (int c = 0; c < 9; ++c) A[c] = half * dashpot_C_[9 * slot + c];
+      for (int d = 0; d < 3; ++d) A[4 * d] += mass_[i] * (1.0 + half * alpha_);
+      if (!constrained_inverse(A, constraint_P_.data() + 9 * k, A_inverse))
+        throw std::invalid_argument("constraint at node " + std::to_string(i) +
+                                    ": the implicit update restricted to its free directions is singular "
+                                    "(a dashpot C that is not symmetric positive semi-definite?)");
+    }
+  }
   if (contact_a_.empty())
     for (const Level& level : levels_)
       if (!level.contacts.empty()) contact_a_.assign(3 * n_nodes(), 0.0);
@@ -622,6 +640,19 @@ std::vector<double*> energy_terms(LocalStepper::Energy& e) {
 std::string level_prefix(int c) { return "lts/level/" + std::to_string(c) + "/"; }
 }  // namespace
 
+namespace {
+// What checkpoint_parameters() holds, in order; then two per level (components, pairs).
+constexpr const char* kLocalParameterNames[] = {"dt_fine", "alpha", "nodes", "max_level", "providers",
+                                                "constraints"};
+
+std::string local_parameter_name(std::size_t j) {
+  constexpr std::size_t fixed = sizeof(kLocalParameterNames) / sizeof(kLocalParameterNames[0]);
+  if (j < fixed) return kLocalParameterNames[j];
+  return std::string((j - fixed) % 2 ? "contact pair sets" : "element-loop components") + " at coarse level " +
+         std::to_string((j - fixed) / 2);
+}
+}  // namespace
+
 std::vector<double> LocalStepper::checkpoint_parameters() const {
   std::vector<double> parameters{dt_fine_, alpha_, static_cast<double>(n_nodes()),
                                  static_cast<double>(max_level_), static_cast<double>(providers_.size()),
@@ -643,6 +674,7 @@ void LocalStepper::save_state(StateArchive& archive) const {
   for (const double* term : energy_terms(energy)) terms.push_back(*term);
   archive.put("lts/energy", terms);
   archive.put_value("lts/dissipation_at_start", dissipation_at_start_);
+  archive.put("lts/reactions", reactions_);
   for (int c = 0; c <= max_level_; ++c) {
     const Level& level = levels_[c];
     const std::string prefix = level_prefix(c);
@@ -662,15 +694,20 @@ void LocalStepper::load_state(const StateArchive& archive) {
   const std::vector<double> expected = checkpoint_parameters();
   std::vector<double> saved;
   archive.get_resized("lts/parameters", saved);
-  if (saved != expected)
-    throw std::invalid_argument(
-        "checkpoint block 'lts/parameters': dt_fine, alpha, nodes, levels, providers, constraints or "
-        "the components and pairs per level differ from the model's (a checkpoint of another scene?)");
+  for (std::size_t j = 0; j < std::max(saved.size(), expected.size()); ++j)
+    if (j >= saved.size() || j >= expected.size() || saved[j] != expected[j])
+      throw std::invalid_argument(
+          "checkpoint: " + local_parameter_name(j) + " was " +
+          (j < saved.size() ? std::to_string(saved[j]) : std::string("absent")) + ", the model's is " +
+          (j < expected.size() ? std::to_string(expected[j]) : std::string("absent")) +
+          " (a checkpoint of another scene?)");
   std::vector<std::int32_t> levels(level_.size());
   archive.get("lts/node_level", levels);
-  if (levels != level_)
-    throw std::invalid_argument("checkpoint block 'lts/node_level': the nodes' rate levels differ "
-                                "from the model's (another mesh or time step?)");
+  for (std::size_t i = 0; i < levels.size(); ++i)
+    if (levels[i] != level_[i])
+      throw std::invalid_argument("checkpoint block 'lts/node_level': node " + std::to_string(i) +
+                                  " was at rate level " + std::to_string(levels[i]) + ", the model's is " +
+                                  std::to_string(level_[i]) + " (another mesh or time step?)");
   for (int c = 0; c <= max_level_; ++c)
     for (std::size_t k = 0; k < levels_[c].components.size(); ++k) {
       const std::string name =
@@ -691,6 +728,7 @@ void LocalStepper::load_state(const StateArchive& archive) {
   std::vector<double> values(terms.size());
   archive.get("lts/energy", values);
   archive.get_value("lts/dissipation_at_start", dissipation_at_start_);
+  archive.get("lts/reactions", reactions_);
   for (int c = 0; c <= max_level_; ++c) {
     Level& level = levels_[c];
     const std::string prefix = level_prefix(c);

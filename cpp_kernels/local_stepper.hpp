@@ -1,9 +1,11 @@
 // Multi-rate explicit stepping (local time stepping) for M a + d(v) + K u = f_ext(t), lumped M:
-// the scheme of docs/lts_plan.md (Diaz & Grote's leapfrog LTS in velocity-Verlet form, multi-level
-// by recursion): the linear part (stiffness, mass-proportional damping, dashpots, force
+// the scheme of docs/lts_plan.md (multi-level by recursion, velocity-Verlet kicks and drifts; a
+// coarser level's force reaches finer nodes as kicks at the ends of its step, the impulse form of
+// multiple time stepping, not Diaz & Grote's force held over the substeps: docs/lts_plan.md "The
+// cavity under local stepping" for what that costs in stress where levels meet): the linear part (stiffness, mass-proportional damping, dashpots, force
 // providers) split by columns, element-loop components (nonlinear cells) split by cells, each at
-// its own level, contact pairs corrected before their nodes' drifts; constraints are not
-// supported yet.
+// its own level, contact pairs corrected before their nodes' drifts, fixed and roller nodes
+// projected at every kick.
 #pragma once
 
 #include <cstdint>

@@ -85,6 +85,8 @@ def bisection(points: np.ndarray, parts: int, weights: np.ndarray | None = None)
             target = cumulative[-1] * left / count
             above = int(np.searchsorted(cumulative, target))
             cut = above if above == 0 or cumulative[above] - target < target - cumulative[above - 1] else above - 1
+            if len(order) >= count:  # every part keeps at least one node, however heavy one node is
+                cut = min(max(cut, left), len(order) - (count - left))
         split(order[:cut], first, left)
         split(order[cut:], first + left, count - left)
 

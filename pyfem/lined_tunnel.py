@@ -65,10 +65,10 @@ class LinedTunnel:
             raise ValueError(f"thickness {self.thickness!r} must lie in (0, radius {self.radius!r})")
         for name in ("lining_E", "rock_E"):
             if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0")
+                raise ValueError(f"{name} = {getattr(self, name)!r} must be > 0")
         for name in ("lining_nu", "rock_nu"):
             if not -1.0 < getattr(self, name) < 0.5:
-                raise ValueError(f"{name} must lie in (-1, 0.5)")
+                raise ValueError(f"{name} = {getattr(self, name)!r} must lie in (-1, 0.5)")
 
     @property
     def inner_radius(self) -> float:

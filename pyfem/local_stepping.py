@@ -22,7 +22,7 @@ before each drift of the level their nodes drift at): the two nodes of a pair ar
 and one drift level (`equalize_pair_drift`), the pairs split into one kernel ContactPairs per drift
 level and read back as one set by `LevelPairs`. After a relaxation stage both continue the stage's state, cut by level
 (`load_component_parts`, `load_pair_parts`). Fixed and roller faces project every kick of their
-nodes (LocalStepper.set_constraints; their pairs are refused). What is not supported yet, refused by
+nodes (LocalStepper.set_constraints; contact pairs on them are refused by key, `pyfem.solver.prepare`). What is not supported yet, refused by
 key: stiffness-proportional damping. Checkpoints hold the LocalStepper's own state
 (each level's last force, the energy account, every level's components and pairs) and resume bit for
 bit (docs/checkpoint.md).
@@ -359,7 +359,7 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
     Returns {"speed_up" (global time / predicted local time per simulated second), "element_loop",
     "matrix", "contact" (the relative work of each), "levels" (nodes per level)}. A model: it leaves out
     the pair rows stepped at their drift level and the kicks' own overhead: it over-predicts the
-    measured speed-up by 6 % on the coarse case 1 and 18 % on the coarse case 3 (docs/lts_plan.md
+    measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured) (docs/lts_plan.md
     "Where it pays")."""
     levels = np.asarray(levels)
     fine_step, top = local_time_step(time_step, levels)

@@ -439,6 +439,13 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
 
         try:
             local_stepping.check_supported(scene, beta)
+            if constraints is not None and "contact" in scene.effects:
+                held = np.intersect1d(constraints.nodes, model.pairs.nodes)
+                if len(held):
+                    raise SceneError("time.local_stepping", True,
+                                     "false for scenes with contact pairs on fixed or roller faces (node "
+                                     f"{int(held[0])} at {np.round(model.node_coords[held[0]], 3).tolist()} is both): "
+                                     "local time stepping does not correct a held pair node (docs/lts_plan.md)")
             if MPI.COMM_WORLD.size > 1:  # before anything is distributed: every rank says the same
                 raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs "
                                  "on one rank for now)")

@@ -140,7 +140,8 @@ def exact_hoop(scene, times, r_over_a, theta):
 @pytest.mark.parametrize("order, local", [(1, False), (2, False), (1, True)])
 def test_cavity_wall_follows_kirsch(tmp_path, tunnel_meshes, order, local):
     """The wall's stress against Kirsch and the exact answer; with local time stepping too (its roller
-    faces held at every level, several rate levels active), to the same tolerances."""
+    faces held at every level, several rate levels active): the wall row to the same tolerances, the
+    monitors at 2 a xfail (the known defect above, bounded at 250 %)."""
     scene, out, summary = run_tunnel(tmp_path, tunnel_meshes[True], order, local)
     if local:
         levels = int(summary["dt_reason"].split("local time stepping: ")[1].split(" rate levels")[0])
@@ -177,6 +178,7 @@ def test_cavity_wall_follows_kirsch(tmp_path, tunnel_meshes, order, local):
               f"concentration {np.max(np.abs(tt)) / tau_peak:.3f} (Kirsch {abs(k_tt):.3f}); against the exact "
               f"answer: history error {exact_error:.3%}, peak {np.max(np.abs(tt)) / np.max(np.abs(exact)):.4f}")
         if local and r > 1.5:
+            assert np.isfinite(tt).all() and exact_error < 2.5, name  # the known defect, not a worse one
             if exact_error >= EXACT_TOLERANCE[order] or abs(peak_ratio - 1.0) >= KIRSCH_TOLERANCE:
                 known_failures.append(f"{name}: {exact_error:.1%} off the exact history")
             checks += 1

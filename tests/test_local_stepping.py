@@ -401,3 +401,18 @@ def test_a_local_stepping_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_p
     resumed = solver.run(scene, out, resume=True)
     assert resumed["resumed"][0]["t"] == pytest.approx(checkpoint_t)
     assert_same_run(out, reference)
+
+
+def test_contact_pairs_on_roller_faces_are_refused_by_key():
+    """Local stepping holds fixed and roller nodes, but does not correct a pair node that is held: a
+    scene with both is refused before anything is solved, with one line naming time.local_stepping
+    and a node that is both."""
+    from pyfem.scene import parse_scene
+
+    data = two_layer_contact_scene(True, True).to_json()
+    data["boundary"] = {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}}
+    with pytest.raises(SceneError, match=r"time\.local_stepping") as error:
+        solver.prepare(parse_scene(data, source="test"))
+    assert "contact pairs on fixed or roller faces" in str(error.value) and "node" in str(error.value)
+    data["time"]["local_stepping"] = False  # without local stepping the same scene is a model
+    assert solver.prepare(parse_scene(data, source="test"), solve_static=False).constraints is not None
