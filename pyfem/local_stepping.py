@@ -119,6 +119,21 @@ def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarra
     return _finest_of_cells(finest_in_cell, cell_nodes, levels)
 
 
+def interface_rows(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray | None = None,
+                   loop_cells: np.ndarray | None = None) -> np.ndarray:
+    """int32 nodes on the fine side of a level boundary: a node that shares a cell with a node of a
+    coarser level and drifts at its own level (`drift_levels`). The run steps their stiffness rows at
+    that level (LocalStepper.step_rows_at_drift_level): a coarser neighbour's force then reaches them
+    at each of their substeps, read from its drifting position, instead of as two kicks at the ends of
+    the coarse step, which rang the fine cells' modes (docs/lts_plan.md "Interface rows")."""
+    coarsest_in_cell = levels[cell_nodes].max(axis=1)
+    coarser = np.zeros(len(levels), dtype=bool)
+    for k in range(cell_nodes.shape[1]):
+        coarser[cell_nodes[:, k]] |= coarsest_in_cell > levels[cell_nodes[:, k]]
+    drift = drift_levels(levels, cell_nodes, cell_cap, loop_cells)
+    return np.flatnonzero(coarser & (drift == levels)).astype(np.int32)
+
+
 def pair_cell_cap(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray,
                   loop_cells: np.ndarray | None) -> np.ndarray:
     """int32 per cell: the level an element-loop cell touching contact pair nodes must step at, the

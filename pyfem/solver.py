@@ -534,8 +534,13 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
                 for component, level in parts:
                     kernel.add_internal_force(component, level)
             built["regions"] = [region for region, _ in regions]
-        if simulation.contact_arrays is not None:  # the pair rows as add_contact steps them
-            kernel.step_rows_at_drift_level(np.unique(simulation.contact_arrays["pairs"]).astype(np.int32))
+        # Rows stepped at their drift level: the pair nodes (add_contact), and the fine side of every
+        # level boundary, so that a coarser neighbour's force reaches them at each of their substeps
+        # instead of as kicks at the ends of the coarse step (docs/lts_plan.md "Interface rows").
+        rows = [local_stepping.interface_rows(levels, cell_nodes, cell_cap, loop_cells)]
+        if simulation.contact_arrays is not None:
+            rows.append(np.unique(simulation.contact_arrays["pairs"]))
+        kernel.step_rows_at_drift_level(np.unique(np.concatenate(rows)).astype(np.int32))
         return kernel
 
     if simulation.lts_stability is None:  # the LTS map on this model, once (pyfem/local_stepping.py)
