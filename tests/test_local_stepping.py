@@ -416,3 +416,16 @@ def test_contact_pairs_on_roller_faces_are_refused_by_key():
     assert "contact pairs on fixed or roller faces" in str(error.value) and "node" in str(error.value)
     data["time"]["local_stepping"] = False  # without local stepping the same scene is a model
     assert solver.prepare(parse_scene(data, source="test"), solve_static=False).constraints is not None
+
+
+def test_interface_rows_are_the_fine_side_of_each_level_boundary():
+    """A chain of 2-node cells with levels 0 0 0 1 1 2 2: the rows stepped at their own rate are the
+    last level-0 node before level 1 and the last level-1 node before level 2 (each shares a cell with
+    a coarser node and drifts at its own level); the coarse side (nodes 3 and 5, which drift finer
+    than they step) is not."""
+    from pyfem.local_stepping import drift_levels, interface_rows
+
+    levels = np.array([0, 0, 0, 1, 1, 2, 2], dtype=np.int32)
+    cells = np.array([[k, k + 1] for k in range(6)])
+    assert list(drift_levels(levels, cells)) == [0, 0, 0, 0, 1, 1, 2]
+    assert list(interface_rows(levels, cells)) == [2, 4]
