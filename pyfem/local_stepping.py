@@ -373,7 +373,7 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
     - the rest (stiffness kicks, drifts, input): the matrix's blocks weighted by their column's level.
     Returns {"speed_up" (global time / predicted local time per simulated second), "element_loop",
     "matrix", "contact" (the relative work of each), "levels" (nodes per level)}. A model: it leaves out
-    the pair rows stepped at their drift level and the kicks' own overhead: it over-predicts the
+    the pair and interface rows stepped at their drift level and the kicks' own overhead: it over-predicts the
     measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured) (docs/lts_plan.md
     "Where it pays")."""
     levels = np.asarray(levels)
