@@ -24,23 +24,11 @@ double dot(const Vector3& a, const Vector3& b) { return a[0] * b[0] + a[1] * b[1
 double norm(const Vector3& a) { return std::sqrt(dot(a, a)); }
 
 // A yield plane n . sigma <= bound in principal stress space with plastic flow direction N.
-struct Plane {
-  Vector3 normal{};
-  double bound = 0.0;
-  Vector3 flow{};
-  Vector3 elastic_flow{};  // D N, D the principal-space elasticity lambda 1 1^T + 2 G I
-  double elastic_flow_norm = 0.0;  // |D N|
-  bool tension = false;
-};
+using Plane = detail::MohrCoulombPlane;
 
-// Planes in the order used by the candidates: Mohr-Coulomb (i, j) for the sorted principal
-// stresses, then the Rankine planes. kMC01 etc. name them by (i, j).
 enum PlaneIndex { kMC02 = 0, kMC12, kMC01, kMC10, kMC20, kMC21, kR0, kR1, kR2, kPlaneCount };
 
-struct PlaneSet {
-  std::array<Plane, kPlaneCount> planes;
-  int count = 6;  // 9 with the Rankine planes
-};
+using PlaneSet = detail::MohrCoulombPlanes;
 
 PlaneSet make_planes(const MohrCoulombMaterial& m) {
   PlaneSet set;
@@ -244,6 +232,7 @@ MohrCoulombMaterial mohr_coulomb_material(const MohrCoulombParameters& p) {
   m.tensile_strength = std::min(p.tensile_strength, m.apex);
   m.damage_max = p.damage_max;
   m.damage_plastic_strain = p.damage_plastic_strain;
+  m.planes = make_planes(m);  // once per material, not per return mapping
   return m;
 }
 
@@ -313,7 +302,7 @@ MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& m,
     next.effective_stress = trial_tensor;
     step.region = ReturnRegion::elastic;
   } else {
-    const PlaneSet set = make_planes(m);
+    const PlaneSet& set = m.planes;
     const double t = m.tensile_strength;
     const double sp = m.sin_phi;
     std::array<Candidate, 10> candidates;  // the first n are assigned below

@@ -39,6 +39,25 @@ struct MohrCoulombParameters {
 };
 
 /// Constants of the return mapping, computed once per region by mohr_coulomb_material().
+namespace detail {
+/// A plane of the yield surface in principal stress space, N . s <= bound, with its flow
+/// direction and D N (D the principal-space elasticity): mohr_coulomb.cpp's return mapping.
+struct MohrCoulombPlane {
+  std::array<double, 3> normal{};
+  double bound = 0.0;
+  std::array<double, 3> flow{};
+  std::array<double, 3> elastic_flow{};  // D N, D = lambda 1 1^T + 2 G I
+  double elastic_flow_norm = 0.0;        // |D N|
+  bool tension = false;
+};
+/// The six Mohr-Coulomb planes, then the three Rankine ones when the cut-off or the apex needs
+/// them (count 6 or 9); built once per material by mohr_coulomb_material.
+struct MohrCoulombPlanes {
+  std::array<MohrCoulombPlane, 9> planes{};
+  int count = 6;
+};
+}  // namespace detail
+
 struct MohrCoulombMaterial {
   double young_modulus, poisson_ratio;
   double lambda, shear_modulus;  // Lame constants (Pa)
@@ -48,6 +67,7 @@ struct MohrCoulombMaterial {
   bool tension_cutoff;           // t < apex: the Rankine planes cut the M-C pyramid
   double apex;                   // c cot(phi) (+inf for phi = 0)
   double damage_max, damage_plastic_strain;
+  detail::MohrCoulombPlanes planes;  // the yield surface's planes (a return mapping reads them)
 };
 
 /// Validates the parameters (throws std::invalid_argument naming the first bad one) and
