@@ -916,6 +916,10 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
         if saved is not None:
             saved.check_model(simulation)
+            if saved.meta.get("lts_stability") and simulation.node_levels is not None:
+                # The same model and levels (the fingerprint): the LTS map's check is not run again
+                # (852 s on the paper-scale case 1); run.json keeps the first sitting's report.
+                simulation.lts_stability = saved.meta["lts_stability"]
         if on_plan is not None and root:
             on_plan(simulation_plan(simulation))
         writer = RunWriter(out_dir, simulation) if root else SilentWriter(out_dir)
@@ -971,6 +975,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                 writer_meta, writer_arrays = writer.checkpoint_state()
                 meta = {"fingerprint": checkpoints.model_fingerprint(simulation), "t": t, "outputs_done": done,
                         "timing": timing(), "writer": writer_meta}
+                if simulation.lts_stability:
+                    meta["lts_stability"] = simulation.lts_stability
                 checkpoints.write_checkpoint(out_dir, meta, u, v, a, stepper.save_state(), writer_arrays)
                 clock.written(time.perf_counter() - began)
 

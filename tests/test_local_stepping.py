@@ -398,9 +398,16 @@ def test_a_local_stepping_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_p
     saved = crash_after_a_periodic_checkpoint(monkeypatch, scene, out, 10, checkpoint_t + 0.012)
     assert saved.t == pytest.approx(checkpoint_t)
     assert (out / "energy.csv").read_text().count("\n") == 1 + saved.outputs_done + 1 + 3, "rows past the checkpoint"
+    from pyfem import local_stepping
+
+    def not_again(*args, **kwargs):
+        raise AssertionError("the LTS map's stability check ran again on resume")
+
+    monkeypatch.setattr(local_stepping, "check_stability", not_again)
     resumed = solver.run(scene, out, resume=True)
     assert resumed["resumed"][0]["t"] == pytest.approx(checkpoint_t)
     assert_same_run(out, reference)
+    assert resumed["local_stepping_stability"]["stable"]  # the first sitting's report, kept
 
 
 def test_contact_pairs_on_roller_faces_are_refused_by_key():
