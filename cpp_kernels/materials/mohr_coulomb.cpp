@@ -26,6 +26,8 @@ double norm(const Vector3& a) { return std::sqrt(dot(a, a)); }
 // A yield plane n . sigma <= bound in principal stress space with plastic flow direction N.
 using Plane = detail::MohrCoulombPlane;
 
+// Planes in the order used by the candidates: Mohr-Coulomb (i, j) for the sorted principal
+// stresses, then the Rankine planes. kMC01 etc. name them by (i, j).
 enum PlaneIndex { kMC02 = 0, kMC12, kMC01, kMC10, kMC20, kMC21, kR0, kR1, kR2, kPlaneCount };
 
 using PlaneSet = detail::MohrCoulombPlanes;

@@ -38,7 +38,6 @@ struct MohrCoulombParameters {
   double damage_plastic_strain = 0.005;  // kappa_ref, > 0
 };
 
-/// Constants of the return mapping, computed once per region by mohr_coulomb_material().
 namespace detail {
 /// A plane of the yield surface in principal stress space, N . s <= bound, with its flow
 /// direction and D N (D the principal-space elasticity): mohr_coulomb.cpp's return mapping.
@@ -58,6 +57,7 @@ struct MohrCoulombPlanes {
 };
 }  // namespace detail
 
+/// Constants of the return mapping, computed once per region by mohr_coulomb_material().
 struct MohrCoulombMaterial {
   double young_modulus, poisson_ratio;
   double lambda, shear_modulus;  // Lame constants (Pa)
