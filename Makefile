@@ -19,7 +19,7 @@ run: setup
 
 test: setup
 	ctest --test-dir build --output-on-failure
-	$(PYTHON) -m pytest -q
+	$(PYTHON) -m pytest -q --durations=25
 
 test-slow:
 	@bash scripts/setup.sh --with-paraview

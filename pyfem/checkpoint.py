@@ -142,13 +142,20 @@ def write_checkpoint(out_dir, meta: dict, u: np.ndarray, v: np.ndarray, a: np.nd
     arrays.update({f"writer_{name}": value for name, value in writer.items()})
     meta = dict(meta, format=FORMAT, kernel_blocks=names, writer_arrays=sorted(writer), written=time.time())
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    return write_atomically(path, arrays)
+
+
+def write_atomically(path: Path, arrays: dict) -> Path:
+    """np.savez of `arrays` to `path` through a temporary file, synced, then renamed: a crash
+    leaves the old file or the new one, never a part."""
+    path = Path(path)
     temporary = path.with_name(path.name + ".tmp")
     with open(temporary, "wb") as handle:
         np.savez(handle, **arrays)
         handle.flush()
         os.fsync(handle.fileno())
     os.replace(temporary, path)
-    directory = os.open(out_dir, os.O_RDONLY)
+    directory = os.open(path.parent, os.O_RDONLY)
     try:
         os.fsync(directory)  # the rename itself survives a crash
     finally:

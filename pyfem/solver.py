@@ -913,7 +913,13 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     saved = checkpoints.read_checkpoint(out_dir) if resume else None  # refused before any work
     # Under mpirun a stop signal is acted on by every rank at the same sample (`stop_together`).
     with StopSignals(always_defer=comm.size > 1) as signals:
-        simulation = prepare(scene)  # every scene/mesh error surfaces before the directory is touched
+        from pyfem import static_output
+
+        # A resumed run takes the stage from static/hand_over.npz instead of solving it again.
+        stage = static_output.read_hand_over(out_dir) if saved is not None and "static" in scene else None
+        simulation = prepare(scene, solve_static=stage is None)  # every scene/mesh error surfaces here
+        if stage is not None and not static_output.restore_hand_over(simulation, stage):
+            simulation = prepare(scene)  # the file is of another model: the stage is solved again
         if saved is not None:
             saved.check_model(simulation)
             if saved.meta.get("lts_stability") and simulation.node_levels is not None:
@@ -948,9 +954,9 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                 with signals.deferred():
                     writer.resume(saved.meta["writer"], saved.writer, saved.t)
                     if simulation.static is not None and root:
-                        from pyfem.static_output import static_stress_in_fields
-
-                        static_stress_in_fields(writer)
+                        static_output.static_stress_in_fields(writer)
+                        if not isinstance(simulation.static, static_output.SavedStage):  # solved again:
+                            static_output.write_hand_over(Path(out_dir) / "static", simulation)  # once
                 stepper.load_state(saved.kernel)
                 u, v, a = saved.u.copy(), saved.v.copy(), saved.a.copy()
                 t, done = saved.t, saved.outputs_done

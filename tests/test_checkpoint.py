@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyfem import checkpoint, solver
+from pyfem import checkpoint, solver, static, static_output
 from pyfem.interrupts import RunInterrupted
 from pyfem.scene import SceneError, parse_scene
 
@@ -50,6 +50,11 @@ def assert_same_run(resumed: Path, reference: Path) -> None:
     assert summary["status"] == "finished" and summary["resumed"]
     for key in ("monitors", "energy", "pairs", "pair_states", "nonlinear_regions", "time_reached"):
         assert summary.get(key) == summary_expected.get(key), key
+    if "static" in summary_expected:  # the stage as the first sitting solved it
+        def solved(stages):  # wall times apart
+            return [{key: value for key, value in stage.items() if key != "seconds"} for stage in stages]
+
+        assert solved(summary["static"]["stages"]) == solved(summary_expected["static"]["stages"])
     assert not (resumed / checkpoint.CHECKPOINT_NAME).exists(), "a finished run keeps no checkpoint"
     if (reference / "fields.xdmf").exists():
         import meshio
@@ -225,8 +230,27 @@ def test_crash_after_a_periodic_checkpoint_then_resume_gives_the_uninterrupted_r
     assert saved.t == pytest.approx(CHECKPOINT_T) and saved.outputs_done == 30
     assert json.loads((out / "run.json").read_text())["status"] == "failed"
     assert (out / "energy.csv").read_text().count("\n") == 1 + 34, "rows past the checkpoint are on disk"
-    summary = solver.run(stateful_scene(), out, resume=True)
+    assert (out / "static" / static_output.HAND_OVER_NAME).exists()
+
+    def solve_again(*args, **kwargs):
+        raise AssertionError("a resumed run solved the static stage again")
+
+    with monkeypatch.context() as patched:
+        patched.setattr(static, "solve_relaxation_stage", solve_again)
+        summary = solver.run(stateful_scene(), out, resume=True)
     assert summary["resumed"][0]["t"] == pytest.approx(CHECKPOINT_T)
+    assert_same_run(out, reference_run[0])
+
+
+def test_a_run_without_its_saved_stage_solves_it_again_and_saves_it(reference_run, tmp_path, monkeypatch):
+    """A run directory from before static/hand_over.npz (or with it deleted): the resume solves the
+    stage again (deterministic: the same run) and writes the file for the next resume."""
+    out = tmp_path / "crashed"
+    crash_after_a_periodic_checkpoint(monkeypatch, stateful_scene(), out, 5, CHECKPOINT_T + 0.03)
+    saved_stage = out / "static" / static_output.HAND_OVER_NAME
+    saved_stage.unlink()
+    solver.run(stateful_scene(), out, resume=True)
+    assert saved_stage.exists()
     assert_same_run(out, reference_run[0])
 
 
@@ -257,3 +281,4 @@ def test_checkpoint_of_another_model_is_refused_before_anything_is_touched(refer
     changed_interval["output"]["checkpoint_interval"] = 600.0  # allowed: it changes nothing computed
     solver.run(changed_interval, out, resume=True)
     assert_same_run(out, reference_run[0])
+

@@ -436,3 +436,42 @@ def test_interface_rows_are_the_fine_side_of_each_level_boundary():
     cells = np.array([[k, k + 1] for k in range(6)])
     assert list(drift_levels(levels, cells)) == [0, 0, 0, 0, 1, 1, 2]
     assert list(interface_rows(levels, cells)) == [2, 4]
+
+
+def test_local_stepping_after_a_static_stage_resumes_without_solving_it_again(tmp_path, monkeypatch):
+    """The paper-scale case study's path: a relaxation stage, then local time stepping. A crash
+    after a periodic checkpoint, then --resume: the stage comes from static/hand_over.npz (its
+    solver is never called), the components and pairs are rebuilt at their rate levels and take the
+    checkpoint's state, and the histories are the uninterrupted run's bit for bit."""
+    from pyfem import static
+    from pyfem.scene import parse_scene
+    from test_checkpoint import assert_same_run, crash_after_a_periodic_checkpoint
+
+    MPa = 1.0e6
+    data = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
+                                   soft_plasticity={"cohesion": 0.05 * MPa, "friction_angle": 25.0,
+                                                    "tensile_strength": 0.02 * MPa}).to_json()
+    data["static"] = {"solver": "relaxation"}
+    data["time"]["duration"] = 0.24
+    data["output"]["checkpoint_interval"] = 1.0e-9
+    scene = parse_scene(data, source="test")
+    reference = tmp_path / "reference"
+    summary = solver.run(scene, reference)
+    assert summary["static"]["stages"][-1]["converged"]
+    assert np.count_nonzero(solver.prepare(scene, solve_static=False).node_levels > 0) > 100  # several rates
+    checkpoint_t = 0.16
+    energy = np.genfromtxt(reference / "energy.csv", delimiter=",", names=True)
+    at = int(np.argmin(np.abs(energy["t"] - checkpoint_t)))
+    # The interface slides before the checkpoint and after it; the soft layer yields after it (0.18 s).
+    assert energy["friction_dissipation"][-1] > energy["friction_dissipation"][at] > 0.0
+    assert energy["internal_dissipation"][-1] > energy["internal_dissipation"][at]
+    out = tmp_path / "crashed"
+    saved = crash_after_a_periodic_checkpoint(monkeypatch, scene, out, 10, checkpoint_t + 0.012)
+    assert saved.t == pytest.approx(checkpoint_t)
+
+    def solve_again(*args, **kwargs):
+        raise AssertionError("a resumed run solved the static stage again")
+
+    monkeypatch.setattr(static, "solve_relaxation_stage", solve_again)
+    solver.run(scene, out, resume=True)
+    assert_same_run(out, reference)
