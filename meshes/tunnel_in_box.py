@@ -12,9 +12,11 @@ With `filled` (`--filled`) the hole is meshed too, as the volume "excavation", f
 that removes it (`[static] excavate = ["excavation"]`, docs/static.md); with `lining` = t
 (`--lining t`) a ring of thickness t inside the radius is the volume "lining" (the size near the
 wall is then at most t/2: two elements through it) and the rest of the hole "excavation".
-Without either option the script writes the mesh it always has.
+With `lining` and `hollow` (`--hollow`) the core is left out: the lined tunnel in place, for a
+dynamic run without a static stage (workflows/lined_wall_dynamic.py). Without any option the
+script writes the mesh it always has.
 
-    /usr/bin/python3 meshes/tunnel_in_box.py out.msh [--radius 5] [--unnamed] [--filled] [--lining 0.5]
+    /usr/bin/python3 meshes/tunnel_in_box.py out.msh [--radius 5] [--unnamed] [--filled] [--lining 0.5 [--hollow]]
                                                  [--size 120] [--h-wall 0.6] [--h-far 8]
 """
 from __future__ import annotations
@@ -26,7 +28,7 @@ import signal
 
 def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 120.0), thickness: float = 2.0,
                         h_wall: float = 0.6, h_far: float = 8.0, layers: int = 1, name_surfaces: bool = True,
-                        filled: bool = False, lining: float = 0.0) -> None:
+                        filled: bool = False, lining: float = 0.0, hollow: bool = False) -> None:
     """Mesh the tunnel-in-box model and write it to `path` (gmsh .msh 4.1).
 
     Args:
@@ -40,6 +42,8 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
         filled: mesh the hole as the volume "excavation" (the wall is then inside the mesh).
         lining: thickness (m) of a ring inside the radius meshed as the volume "lining" (implies
             `filled`; 0: none).
+        hollow: with `lining`, leave the core out: the lined tunnel already in place, its inner face
+            free (a dynamic run without a static stage).
     """
     handler = signal.getsignal(signal.SIGINT)
     import gmsh  # resets SIGINT: restored below
@@ -65,7 +69,11 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
             if lining > 0.0:
                 core = occ.addDisk(lx / 2, lz / 2, 0.0, radius - lining, radius - lining)
                 ring, _ = occ.cut(tools, [(2, occ.copy([(2, core)])[0][1])])
-                tools = [(2, core)]
+                tools = []
+                if hollow:  # the section without the core; the ring's quarters fragment it below
+                    box = occ.cut([(2, box)], [(2, core)])[0][0][1]
+                else:
+                    tools = [(2, core)]
                 for x0, z0 in ((0.0, 0.0), (-radius, 0.0), (-radius, -radius), (0.0, -radius)):
                     quadrant = occ.addRectangle(lx / 2 + x0, lz / 2 + z0, 0.0, radius, radius)
                     quarter, _ = occ.intersect(occ.copy(ring), [(2, quadrant)])
@@ -172,9 +180,12 @@ def main() -> None:
     parser.add_argument("--filled", action="store_true", help="mesh the hole as the volume \"excavation\"")
     parser.add_argument("--lining", type=float, default=0.0,
                         help="thickness (m) of a ring inside the radius meshed as the volume \"lining\"")
+    parser.add_argument("--hollow", action="store_true",
+                        help="with --lining: no core, the lined tunnel in place (a dynamic run without a static stage)")
     args = parser.parse_args()
     build_tunnel_in_box(args.out, radius=args.radius, size=(args.size, args.size), h_wall=args.h_wall,
-                        h_far=args.h_far, name_surfaces=not args.unnamed, filled=args.filled, lining=args.lining)
+                        h_far=args.h_far, name_surfaces=not args.unnamed, filled=args.filled, lining=args.lining,
+                        hollow=args.hollow)
 
 
 if __name__ == "__main__":

@@ -164,6 +164,40 @@ class LinedTunnel:
             out["rt"][index] = dev[1] * s2[index]
         return out
 
+    def loaded_stresses(self, r, theta, far_field) -> dict:
+        """sigma_rr, sigma_tt, sigma_rt (Pa, tension positive) at polar points (r, theta) when the far
+        field changes by `far_field` = (sigma_xx, sigma_zz, sigma_xz) (Pa) with the lining already in
+        place and stress-free: a wave much longer than the tunnel loads it this way (quasi-static
+        far-field shear, the no-slip lining of Wang 1993 / Penzien 2000). Unlike the excavation of
+        `stresses`, the rock's displacement includes the far field's own, so the lining strains with
+        it: the composite's response is the far field in the rock plus what the lined opening
+        scatters. Points with r < a are in the opening (nan), a <= r < b in the lining, r >= b in the
+        rock."""
+        r, theta = np.broadcast_arrays(np.asarray(r, dtype=float), np.asarray(theta, dtype=float))
+        sxx, szz, sxz = far_field
+        mean = 0.5 * (sxx + szz)
+        amplitude = math.hypot(0.5 * (sxx - szz), sxz)
+        direction = 0.5 * math.atan2(sxz, 0.5 * (sxx - szz)) if amplitude > 0.0 else 0.0
+        lining0, rock0 = self.axisymmetric(mean, 0.0)
+        lining2, rock2 = self.deviatoric(amplitude, 0.0, 0.0)
+        out = {key: np.full(r.shape, np.nan) for key in ("rr", "tt", "rt")}
+        c2, s2 = np.cos(2.0 * (theta - direction)), np.sin(2.0 * (theta - direction))
+        a, b = self.inner_radius, self.radius
+        lam_l, mu_l, kappa_l = _lame(self.lining_E, self.lining_nu)
+        lam_r, mu_r, kappa_r = _lame(self.rock_E, self.rock_nu)
+        for index in np.ndindex(r.shape):
+            radius = r[index]
+            if radius < a * (1.0 - 1e-12):
+                continue
+            inside = radius < b
+            rr0, tt0 = self._lame_stress(lining0 if inside else rock0, radius, lam_l if inside else lam_r,
+                                         mu_l if inside else mu_r)
+            dev = _deviatoric_terms(radius, kappa_l if inside else kappa_r)[:3] @ (lining2 if inside else rock2)
+            out["rr"][index] = rr0 + dev[0] * c2[index]
+            out["tt"][index] = tt0 + dev[2] * c2[index]
+            out["rt"][index] = dev[1] * s2[index]
+        return out
+
     def _unlined(self, mean: float, amplitude: float) -> tuple[np.ndarray, np.ndarray]:
         """Kirsch's solution in the same form: rock Lame (c1, c2) and Airy (A, 0, C, D) with the wall
         r = b free."""

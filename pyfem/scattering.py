@@ -23,6 +23,12 @@ equation of order n in k_p r and k_s r):
 - sigma_thth = -lambda k_p^2 F + 2 mu (F' / r - n^2 F / r^2 + i n (G / r^2 - G' / r));
 - sigma_rth = mu (2 i n (F' / r - F / r^2) - G'' + G' / r - n^2 G / r^2).
 
+The crown's motion relative to the invert's (`racking`) is the displacement the case study reads
+"relative to D"; a long wave gives Kirsch's displacement field for the far-field shear
+gamma = du1/dx2 plus the incident wave's rotation gamma / 2:
+u1(r, 90) - u1(r, 270) = gamma (2 r + a^2 (kappa - 1) / r + a^4 / r^3), kappa = 3 - 4 nu (plane
+strain); at the wall gamma a (kappa + 2), (5 - 4 nu) / 2 times the free field's 2 gamma a.
+
 A time history is the series' transfer function applied to the spectrum of the incident
 displacement at the centre (`hoop_stress_history`).
 
@@ -37,6 +43,7 @@ import numpy as np
 from scipy import special
 
 _STRESSES = ("rr", "thth", "rth")
+_FIELDS = _STRESSES + ("ur", "uth")
 
 
 def _radial(kind: str, n: np.ndarray, k: float, r: float):
@@ -49,9 +56,9 @@ def _radial(kind: str, n: np.ndarray, k: float, r: float):
     return z, dz, ddz
 
 
-def _term_stresses(n, r, lam, mu, kp, f=None, g=None) -> dict:
-    """Stresses of the terms F exp(i n theta) (phi) and G exp(i n theta) (psi) at radius r;
-    f and g are (Z, Z', Z'') triples or None (that potential absent)."""
+def _term_fields(n, r, lam, mu, kp, f=None, g=None) -> dict:
+    """Stresses and displacements of the terms F exp(i n theta) (phi) and G exp(i n theta) (psi)
+    at radius r; f and g are (Z, Z', Z'') triples or None (that potential absent)."""
     zero = (0.0, 0.0, 0.0)
     F, dF, ddF = f if f is not None else zero
     G, dG, ddG = g if g is not None else zero
@@ -59,6 +66,8 @@ def _term_stresses(n, r, lam, mu, kp, f=None, g=None) -> dict:
         "rr": -lam * kp * kp * F + 2 * mu * (ddF + 1j * n * (dG / r - G / r ** 2)),
         "thth": -lam * kp * kp * F + 2 * mu * (dF / r - n * n * F / r ** 2 + 1j * n * (G / r ** 2 - dG / r)),
         "rth": mu * (2j * n * (dF / r - F / r ** 2) - ddG + dG / r - n * n * G / r ** 2),
+        "ur": dF + 1j * n * G / r,
+        "uth": 1j * n * F / r - dG,
     }
 
 
@@ -78,35 +87,54 @@ class CavitySV:
         k_s a by a margin (the terms then fall like (a / r)^n at r > a)."""
         return int(2.0 * omega / self.cs * self.a) + 16
 
-    def stresses(self, omega: float, r: float, theta, U: complex = 1.0) -> dict:
-        """Total (incident + scattered) stresses sigma_rr, sigma_thth, sigma_rth (Pa) at
-        (r, theta) for the incident amplitude U (m) at the centre, angular frequency omega > 0."""
+    def fields(self, omega: float, r: float, theta, U: complex = 1.0) -> dict:
+        """Total (incident + scattered) sigma_rr, sigma_thth, sigma_rth (Pa, keys rr, thth, rth)
+        and u_r, u_theta (m, keys ur, uth) at (r, theta) for the incident amplitude U (m) at the
+        centre, angular frequency omega > 0."""
         theta = np.atleast_1d(np.asarray(theta, dtype=float))
         kp, ks = omega / self.cp, omega / self.cs
         n = np.arange(-self.terms(omega), self.terms(omega) + 1)
         incident_g = tuple(U / (1j * ks) * z for z in _radial("J", n, ks, self.a))
-        inc = _term_stresses(n, self.a, self.lam, self.mu, kp, g=incident_g)
-        phi = _term_stresses(n, self.a, self.lam, self.mu, kp, f=_radial("H", n, kp, self.a))
-        psi = _term_stresses(n, self.a, self.lam, self.mu, kp, g=_radial("H", n, ks, self.a))
+        inc = _term_fields(n, self.a, self.lam, self.mu, kp, g=incident_g)
+        phi = _term_fields(n, self.a, self.lam, self.mu, kp, f=_radial("H", n, kp, self.a))
+        psi = _term_fields(n, self.a, self.lam, self.mu, kp, g=_radial("H", n, ks, self.a))
         # The free wall, per n: [phi_rr psi_rr; phi_rth psi_rth] [A; B] = -[inc_rr; inc_rth].
         det = phi["rr"] * psi["rth"] - psi["rr"] * phi["rth"]
         A = (-inc["rr"] * psi["rth"] + psi["rr"] * inc["rth"]) / det
         B = (-phi["rr"] * inc["rth"] + inc["rr"] * phi["rth"]) / det
         incident_g = tuple(U / (1j * ks) * z for z in _radial("J", n, ks, r))
-        inc = _term_stresses(n, r, self.lam, self.mu, kp, g=incident_g)
-        phi = _term_stresses(n, r, self.lam, self.mu, kp, f=_radial("H", n, kp, r))
-        psi = _term_stresses(n, r, self.lam, self.mu, kp, g=_radial("H", n, ks, r))
+        inc = _term_fields(n, r, self.lam, self.mu, kp, g=incident_g)
+        phi = _term_fields(n, r, self.lam, self.mu, kp, f=_radial("H", n, kp, r))
+        psi = _term_fields(n, r, self.lam, self.mu, kp, g=_radial("H", n, ks, r))
         modes = np.exp(1j * np.outer(theta, n))
-        return {key: modes @ (inc[key] + A * phi[key] + B * psi[key]) for key in _STRESSES}
+        return {key: modes @ (inc[key] + A * phi[key] + B * psi[key]) for key in _FIELDS}
+
+    def stresses(self, omega: float, r: float, theta, U: complex = 1.0) -> dict:
+        """sigma_rr, sigma_thth, sigma_rth (Pa) of `fields`."""
+        fields = self.fields(omega, r, theta, U)
+        return {key: fields[key] for key in _STRESSES}
+
+    def horizontal_displacement(self, omega: float, r: float, theta, U: complex = 1.0) -> np.ndarray:
+        """u_1 = u_r cos(theta) - u_theta sin(theta) (m) at (r, theta): along the incident motion."""
+        theta = np.atleast_1d(np.asarray(theta, dtype=float))
+        fields = self.fields(omega, r, theta, U)
+        return fields["ur"] * np.cos(theta) - fields["uth"] * np.sin(theta)
+
+    def racking(self, omega: float, r: float, U: complex = 1.0) -> complex:
+        """u_1(r, 90 deg) - u_1(r, 270 deg) (m): the crown's motion relative to the invert's along
+        the incident motion, at distance r from the centre (the case study's "relative to D")."""
+        top, bottom = self.horizontal_displacement(omega, r, [0.5 * math.pi, 1.5 * math.pi], U)
+        return complex(top - bottom)
 
     def free_field_shear(self, omega: float, U: complex = 1.0) -> complex:
         """sigma_12 of the incident wave at the centre (Pa): i mu k_s U."""
         return 1j * self.mu * omega / self.cs * U
 
-    def hoop_stress_history(self, t: np.ndarray, u_centre: np.ndarray, r: float, theta: float,
-                            pad: float = 4.0) -> np.ndarray:
-        """sigma_thth(t) at (r, theta) (Pa) for the incident displacement history u_centre(t)
-        (m, along x1, at the centre, uniformly sampled, zero before and after the wave).
+    def history(self, t: np.ndarray, u_centre: np.ndarray, transfer, pad: float = 4.0) -> np.ndarray:
+        """The time history of a quantity whose response to the incident amplitude U = 1 at angular
+        frequency omega is transfer(omega) (complex, time factor exp(-i omega t)), for the
+        incident displacement history u_centre(t) (m, along x1, at the centre, uniformly sampled,
+        zero before and after the wave).
 
         The record is padded with zeros to `pad` times its length so the periodic synthesis does
         not wrap; frequencies where the incident spectrum is below 1e-12 of its peak are left out.
@@ -116,19 +144,37 @@ class CavitySV:
         n_fft = int(2 ** math.ceil(math.log2(pad * len(t))))
         spectrum = np.fft.rfft(np.asarray(u_centre, dtype=float), n_fft)
         omega = 2.0 * math.pi * np.fft.rfftfreq(n_fft, dt)
-        hoop = np.zeros_like(spectrum)
+        response = np.zeros_like(spectrum)
         keep = np.abs(spectrum) > 1e-12 * np.abs(spectrum).max()
         for j in np.flatnonzero(keep):
             if omega[j] > 0.0:
                 # numpy's synthesis runs on exp(+i omega t): the transfer of exp(-i omega t) conjugated.
-                hoop[j] = spectrum[j] * np.conj(self.stresses(omega[j], r, theta)["thth"][0])
-        history = np.fft.irfft(hoop, n_fft)[:len(t)]
-        return history
+                response[j] = spectrum[j] * np.conj(transfer(omega[j]))
+        return np.fft.irfft(response, n_fft)[:len(t)]
+
+    def hoop_stress_history(self, t: np.ndarray, u_centre: np.ndarray, r: float, theta: float,
+                            pad: float = 4.0) -> np.ndarray:
+        """sigma_thth(t) at (r, theta) (Pa) for the incident displacement history u_centre(t) (`history`)."""
+        return self.history(t, u_centre, lambda omega: self.stresses(omega, r, theta)["thth"][0], pad)
+
+    def racking_history(self, t: np.ndarray, u_centre: np.ndarray, r: float, pad: float = 4.0) -> np.ndarray:
+        """u_1(r, 90 deg, t) - u_1(r, 270 deg, t) (m, `racking`) for the incident displacement
+        history u_centre(t) (`history`)."""
+        return self.history(t, u_centre, lambda omega: self.racking(omega, r), pad)
+
+    def _from_free_field(self, freefield, centre, times: np.ndarray, synthesis) -> np.ndarray:
+        long = np.arange(3 * len(times)) * (times[1] - times[0]) + times[0]
+        u_centre = freefield.displacement(np.asarray(centre, dtype=float)[None, :], long)[:, 0, 0]
+        return synthesis(long, u_centre)[:len(times)]
 
     def hoop_stress_from_free_field(self, freefield, centre, times: np.ndarray, r: float, theta: float) -> np.ndarray:
         """sigma_thth(t) at (r, theta) (Pa) for a scene's incident wave: its free field's displacement
         along x at the cavity's `centre` (m, 3) over three times the `times` (uniform, the wavelet
         whole) through the series (`hoop_stress_history`), cut to `times`."""
-        long = np.arange(3 * len(times)) * (times[1] - times[0]) + times[0]
-        u_centre = freefield.displacement(np.asarray(centre, dtype=float)[None, :], long)[:, 0, 0]
-        return self.hoop_stress_history(long, u_centre, r, theta)[:len(times)]
+        return self._from_free_field(freefield, centre, times,
+                                     lambda long, u: self.hoop_stress_history(long, u, r, theta))
+
+    def racking_from_free_field(self, freefield, centre, times: np.ndarray, r: float) -> np.ndarray:
+        """The crown's horizontal displacement relative to the invert's at distance r (m, `racking`)
+        for a scene's incident wave, as `hoop_stress_from_free_field`."""
+        return self._from_free_field(freefield, centre, times, lambda long, u: self.racking_history(long, u, r))

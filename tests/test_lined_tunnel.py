@@ -22,7 +22,7 @@ TUNNEL = LinedTunnel(5.0, 0.5, 28.0e9, 0.167, 8.0e9, 0.24)
 
 def kirsch(r_over_a, theta):
     """(sigma_rr, sigma_tt), tension positive, far field sigma_zz = -P, sigma_xx = -K P."""
-    q2, q4, c2 = r_over_a ** -2, r_over_a ** -4, math.cos(2 * theta)
+    q2, q4, c2 = r_over_a ** -2, r_over_a ** -4, np.cos(2 * theta)
     rr = 0.5 * P * ((1 + K) * (1 - q2) - (1 - K) * (1 - 4 * q2 + 3 * q4) * c2)
     tt = 0.5 * P * ((1 + K) * (1 + q2) + (1 - K) * (1 + 3 * q4) * c2)
     return -rr, -tt
@@ -107,3 +107,45 @@ def test_bad_geometry_is_refused():
         LinedTunnel(5.0, 5.0, 28.0e9, 0.167, 8.0e9, 0.24)
     with pytest.raises(ValueError, match="relaxation"):
         TUNNEL.stresses(4.7, 0.0, FAR, relaxation=1.5)
+
+
+# ------------------------------------------------------------------ a far field applied to the lined tunnel
+
+def test_a_lining_of_the_rocks_own_stiffness_loaded_is_kirsch_at_the_inner_radius():
+    """With the lining's constants equal to the rock's, the lined tunnel loaded by a far-field change is
+    an unlined hole of the inner radius: Kirsch at r / a, through the lining and the rock (the bond
+    then joins one material, so displacement continuity must carry the far field's own strain)."""
+    same = LinedTunnel(5.0, 0.5, 8.0e9, 0.24, 8.0e9, 0.24)
+    a = same.inner_radius
+    r = np.array([a, 4.7, 4.99, 5.0, 5.5, 8.0, 20.0])
+    theta = np.radians([0.0, 30.0, 45.0, 90.0, 120.0, 200.0, 310.0])
+    out = same.loaded_stresses(r[:, None], theta[None, :], FAR)
+    rr, tt = kirsch(r[:, None] / a, theta[None, :])
+    assert np.allclose(out["rr"], rr, rtol=0, atol=1e-9 * P)
+    assert np.allclose(out["tt"], tt, rtol=0, atol=1e-9 * P)
+    tau = 1.0e6  # a far-field shear sigma_xz: the long SV wave's
+    shear = same.loaded_stresses(r[:, None], theta[None, :], (0.0, 0.0, tau))
+    assert np.allclose(shear["tt"], -tau * (1.0 + 3.0 * (a / r[:, None]) ** 4) * np.sin(2 * theta[None, :]),
+                       rtol=0, atol=1e-9 * tau)
+
+
+def test_a_loaded_stiff_lining_is_free_inside_bonded_outside_and_attracts_the_load():
+    """The concrete lining (28 GPa in 8 GPa rock) under a far-field shear: its inner face is free, the
+    traction is continuous at the bond, and the hoop stress at its inner face exceeds the unlined
+    hole's 4 tau (Kirsch): a ring stiffer than the rock attracts the load (Wang's no-slip case). The
+    rock far away carries the far field."""
+    tau = 1.0e6
+    far = (0.0, 0.0, tau)
+    a, b = TUNNEL.inner_radius, TUNNEL.radius
+    theta = np.radians(np.arange(0.0, 360.0, 15.0))
+    inner = TUNNEL.loaded_stresses(a, theta, far)
+    assert np.abs(inner["rr"]).max() < 1e-9 * tau and np.abs(inner["rt"]).max() < 1e-9 * tau
+    lining_b = TUNNEL.loaded_stresses(b * (1 - 1e-12), theta, far)
+    rock_b = TUNNEL.loaded_stresses(b, theta, far)
+    assert np.allclose(lining_b["rr"], rock_b["rr"], atol=1e-6 * tau)
+    assert np.allclose(lining_b["rt"], rock_b["rt"], atol=1e-6 * tau)
+    hoop = TUNNEL.loaded_stresses(a, math.radians(45.0), far)["tt"]
+    assert -hoop > 4.0 * tau
+    far_away = TUNNEL.loaded_stresses(1.0e4, math.radians(45.0), far)
+    assert far_away["rt"] == pytest.approx(0.0, abs=1e-6 * tau)  # along 45 deg the shear is principal
+    assert far_away["rr"] == pytest.approx(tau, rel=1e-6)

@@ -78,3 +78,65 @@ def test_the_history_is_causal_and_quasi_static_for_a_long_wavelet():
     early = t < 0.3
     assert np.abs(u[early]).max() < 1e-7 * np.abs(u).max()
     assert np.abs(hoop[early]).max() < 1e-5 * peak
+
+
+def kirsch_racking(r):
+    """u1(r, 90 deg) - u1(r, 270 deg) / gamma for a far-field shear strain gamma = du1/dx2 with its
+    rotation (the incident wave's), from Kirsch's displacement field (plane strain)."""
+    kappa = 3.0 - 4.0 * NU
+    return 2.0 * r + A * A * (kappa - 1.0) / r + A ** 4 / r ** 3
+
+
+@pytest.mark.parametrize("r_over_a", [1.0, 1.02, 1.5, 3.0])
+def test_a_long_wave_racks_the_opening_as_kirsch_displacements(r_over_a):
+    """The crown's motion relative to the invert's: gamma a (kappa + 2) at the wall, twice the free
+    field's 2 gamma a for nu = 0.25 (Wang's unlined ratio 4 (1 - nu) is the same field's ovaling)."""
+    cavity = CavitySV(A, E, NU, RHO)
+    omega = 2 * math.pi * 0.02
+    ks = omega / cavity.cs
+    gamma = 1j * ks  # du1/dx2 of U exp(i k_s x2) at the centre, U = 1 m
+    ratio = cavity.racking(omega, A * r_over_a) / gamma
+    assert abs(ratio.real / kirsch_racking(A * r_over_a) - 1.0) < 1e-5
+    assert abs(ratio.imag) < 10.0 * ks * A * r_over_a * abs(ratio)
+    if r_over_a == 1.0:  # the cavity racks more than the ground it replaces
+        assert ratio.real / (2.0 * A) == pytest.approx((5.0 - 4.0 * NU) / 2.0, rel=1e-5)
+
+
+@pytest.mark.parametrize("f", [2.0, 8.0, 20.0])
+def test_the_displacements_strain_to_the_series_stresses(f):
+    """The displacement series, differentiated numerically in r and theta and put through plane-strain
+    Hooke, gives the stress series (an independent path through the same coefficients)."""
+    cavity = CavitySV(A, E, NU, RHO)
+    omega = 2 * math.pi * f
+    r, thetas, h = 1.5 * A, np.radians([10.0, 45.0, 100.0, 250.0]), 1e-4
+
+    def u(radius, theta):
+        fields = cavity.fields(omega, radius, theta)
+        return fields["ur"], fields["uth"]
+
+    ur, ut = u(r, thetas)
+    ur_r = (u(r + h * A, thetas)[0] - u(r - h * A, thetas)[0]) / (2 * h * A)
+    ut_r = (u(r + h * A, thetas)[1] - u(r - h * A, thetas)[1]) / (2 * h * A)
+    ur_t = (u(r, thetas + h)[0] - u(r, thetas - h)[0]) / (2 * h)
+    ut_t = (u(r, thetas + h)[1] - u(r, thetas - h)[1]) / (2 * h)
+    e_rr, e_tt, g_rt = ur_r, (ur + ut_t) / r, ur_t / r + ut_r - ut / r
+    trace = cavity.lam * (e_rr + e_tt)
+    stresses = cavity.stresses(omega, r, thetas)
+    tau = abs(cavity.free_field_shear(omega))
+    assert np.abs(stresses["thth"]).max() > tau
+    for key, strained in (("rr", trace + 2 * cavity.mu * e_rr), ("thth", trace + 2 * cavity.mu * e_tt),
+                          ("rth", cavity.mu * g_rt)):
+        assert np.abs(strained - stresses[key]).max() < 1e-6 * tau, key
+
+
+def test_the_racking_history_is_quasi_static_for_a_long_wavelet():
+    cavity = CavitySV(A, E, NU, RHO)
+    dt, f0, t0 = 0.004, 0.25, 6.0
+    t = np.arange(0.0, 14.0, dt)
+    u = 1e-3 * ricker(t, f0, t0)
+    racking = cavity.racking_history(t, u, A)
+    gamma = -1.0 / cavity.cs * np.gradient(u, dt)  # du/dz of u(t - z / c_s) at the centre
+    expected = kirsch_racking(A) * gamma
+    peak = np.abs(racking).max()
+    assert peak > 0.9 * np.abs(expected).max(), "the wave arrived and racked the opening"
+    assert np.abs(racking - expected).max() < 0.01 * peak
