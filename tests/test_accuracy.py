@@ -170,6 +170,25 @@ def test_the_wall_advice_is_the_largest_size_whose_peak_error_and_every_finer_on
     assert "k_s a = 0.56" in one[0]["text"]
 
 
+def test_the_wall_advice_also_holds_the_racking_to_the_budget(tmp_path):
+    """With the racking's peak error in the study (the crown relative to the invert), a size whose
+    stress meets the budget but whose racking does not is not advised."""
+    columns = ["order", "h_wall", "h_over_a", "f0", "reference", "peak_error", "racking_peak_error", "loop_seconds"]
+    rows = [(1, 0.24, 0.004, 0.024), (1, 0.12, 0.005, 0.011), (1, 0.06, 0.004, 0.007)]
+    path = tmp_path / "wall_stress.csv"
+    with open(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=columns)
+        writer.writeheader()
+        for order, h_over_a, peak, racking in rows:
+            writer.writerow({"order": order, "h_wall": 5 * h_over_a, "h_over_a": h_over_a, "f0": 2.0,
+                             "reference": "Pao-Mow", "peak_error": peak, "racking_peak_error": racking,
+                             "loop_seconds": 1.0})
+    one = accuracy.wall_size_for(0.01, path)
+    assert [(a["order"], a["h_over_a"]) for a in one] == [(1, 0.06)]  # the stress alone would allow 0.24
+    assert one[0]["error"] == 0.007 and "racking" in one[0]["text"]
+    assert accuracy.wall_size_for(0.03, path)[0]["h_over_a"] == 0.24
+
+
 def test_lining_advice_takes_the_fewest_elements_that_read_the_peak_within_the_budget(tmp_path):
     """accuracy.lining_elements_for on a table whose finer meshes all meet the budget above the
     advised count, and on the study's own results (docs/lined_tunnel.md): 4 Q1 elements for 5 %,
