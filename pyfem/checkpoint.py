@@ -15,6 +15,7 @@ bit (tests/test_checkpoint.py).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -37,19 +38,56 @@ RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
 LATER_KEYS = ((("time", "matrix_precision"), "double"), (("time", "local_stepping"), False))
 
 
+# The scene's file keys (resolved to absolute paths by the scene): a checkpoint holds a hash of
+# each file's content, not its path, so a run continues from another clone or a moved project.
+FILE_KEYS = (("mesh", "file"), ("wave", "motion", "record", "file"))
+
+
+def _file_content(path) -> str:
+    """'sha256:<hex>' of a file's bytes, or the path itself when it cannot be read."""
+    try:
+        status = os.stat(path)
+    except OSError:
+        return str(path)
+    return _hash_file(str(path), status.st_mtime_ns, status.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _hash_file(path: str, mtime_ns: int, size: int) -> str:
+    """The hash of a file's bytes, once per (path, modification time, size): every checkpoint
+    repeats the fingerprint."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 22), b""):
+            digest.update(block)
+    return "sha256:" + digest.hexdigest()
+
+
+def scene_fingerprint(scene) -> dict:
+    """The scene part of the fingerprint: its JSON without the keys a resume may change
+    (RESUMABLE_CHANGES), without later keys at their old behaviour (LATER_KEYS), files by content."""
+    data = scene.to_json()
+    for table, key in RESUMABLE_CHANGES:
+        data.get(table, {}).pop(key, None)
+    for (table, key), old_behaviour in LATER_KEYS:
+        if data.get(table, {}).get(key) == old_behaviour:
+            data[table].pop(key)
+    for keys in FILE_KEYS:
+        holder = data
+        for key in keys[:-1]:
+            holder = holder.get(key) if isinstance(holder, dict) else None
+        if isinstance(holder, dict) and isinstance(holder.get(keys[-1]), str):
+            holder[keys[-1]] = _file_content(holder[keys[-1]])
+    return data
+
+
 def model_fingerprint(simulation) -> dict:
     """What must be equal for a checkpoint to continue on this prepared simulation: the scene
-    (without the keys in RESUMABLE_CHANGES), dofs, dt, steps and a hash of the nodal masses (the
-    mesh and the materials); with local time stepping also a hash of the nodes' rate levels."""
-    scene = simulation.scene.to_json()
-    for table, key in RESUMABLE_CHANGES:
-        scene.get(table, {}).pop(key, None)
-    for (table, key), old_behaviour in LATER_KEYS:
-        if scene.get(table, {}).get(key) == old_behaviour:
-            scene[table].pop(key)
+    (`scene_fingerprint`), dofs, dt, steps and a hash of the nodal masses (the mesh and the
+    materials); with local time stepping also a hash of the nodes' rate levels."""
     return {
         "format": FORMAT,
-        "scene": scene,
+        "scene": scene_fingerprint(simulation.scene),
         "dofs": int(simulation.stiffness.shape[0]),
         "dt": float(simulation.time_step.dt),
         "steps": int(simulation.n_steps),
@@ -107,12 +145,33 @@ class Checkpoint:
     def outputs_done(self) -> int:
         return int(self.meta["outputs_done"])
 
+    def saved_fingerprint(self) -> dict:
+        """The checkpoint's fingerprint, its scene's files by content (a checkpoint written before
+        FILE_KEYS held their paths: hashed now, from the path it names, if that file still exists)."""
+        saved = json.loads(json.dumps(self.meta["fingerprint"]))
+        for keys in FILE_KEYS:
+            holder = saved.get("scene", {})
+            for key in keys[:-1]:
+                holder = holder.get(key) if isinstance(holder, dict) else None
+            value = holder.get(keys[-1]) if isinstance(holder, dict) else None
+            if isinstance(value, str) and not value.startswith("sha256:"):
+                holder[keys[-1]] = _file_content(value)
+        return saved
+
+    def check_scene(self, scene) -> None:
+        """Raises SceneError (key --resume) when this checkpoint is not of `scene`: checked before
+        the model is built (and a static stage solved), so another scene is refused at once."""
+        self._refuse_difference(_first_difference(self.saved_fingerprint()["scene"], scene_fingerprint(scene)),
+                                prefix="scene.")
+
     def check_model(self, simulation) -> None:
         """Raises SceneError (key --resume) when this checkpoint is not of the simulation's model."""
-        saved, current = self.meta["fingerprint"], model_fingerprint(simulation)
-        where = _first_difference(saved, current)
+        self._refuse_difference(_first_difference(self.saved_fingerprint(), model_fingerprint(simulation)))
+
+    def _refuse_difference(self, where: str | None, prefix: str = "") -> None:
         if where is None:
             return
+        where = prefix + where
         if where.startswith("scene."):
             key = where[len("scene."):]
             reason = f"the scene's {key} differs from the checkpoint's"

@@ -911,6 +911,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     root = comm.rank == 0  # under mpirun rank 0 writes everything (pyfem/distributed.py)
     wall_start = time.perf_counter()
     saved = checkpoints.read_checkpoint(out_dir) if resume else None  # refused before any work
+    if saved is not None:
+        saved.check_scene(scene)  # another scene is refused before the model is built
     # Under mpirun a stop signal is acted on by every rank at the same sample (`stop_together`).
     with StopSignals(always_defer=comm.size > 1) as signals:
         from pyfem import static_output

@@ -266,7 +266,7 @@ def test_ctrl_c_writes_a_checkpoint_and_resume_continues_from_it(reference_run, 
     assert_same_run(out, reference_run[0])
 
 
-def test_checkpoint_of_another_model_is_refused_before_anything_is_touched(reference_run, tmp_path):
+def test_checkpoint_of_another_model_is_refused_before_anything_is_touched(reference_run, tmp_path, monkeypatch):
     out = tmp_path / "run"
     scene = stateful_scene()
     with pytest.raises(RunInterrupted):
@@ -274,11 +274,50 @@ def test_checkpoint_of_another_model_is_refused_before_anything_is_touched(refer
     before = history_files(out)
     other = stateful_scene()
     other["contact"]["deterioration"]["R0"] = 0.8
-    with pytest.raises(SceneError, match=r"contact\.deterioration\.R0"):
-        solver.run(other, out, resume=True)
+
+    def not_built(*args, **kwargs):
+        raise AssertionError("the model was built (and its static stage solved) before the refusal")
+
+    with monkeypatch.context() as patched:
+        patched.setattr(solver, "prepare", not_built)
+        with pytest.raises(SceneError, match=r"contact\.deterioration\.R0"):
+            solver.run(other, out, resume=True)
     assert history_files(out) == before
     changed_interval = stateful_scene()
     changed_interval["output"]["checkpoint_interval"] = 600.0  # allowed: it changes nothing computed
     solver.run(changed_interval, out, resume=True)
     assert_same_run(out, reference_run[0])
 
+
+
+def test_a_checkpoint_knows_its_files_by_content_not_by_path(tmp_path):
+    """A record file copied elsewhere (another clone, a moved project) is the same model; a file with
+    other content at the same path is not. A checkpoint written before files were hashed (the path
+    in its fingerprint) is compared by the content of the file that path names."""
+    import shutil
+
+    record = REPO / "data" / "elcentro_1940_ns.txt"
+    moved = tmp_path / "elsewhere" / record.name
+    moved.parent.mkdir()
+    shutil.copy(record, moved)
+
+    def scene_with(path):
+        return parse_scene({
+            "title": "record by content", "mesh": {"builder": "box", "size": [20.0, 20.0, 20.0], "h": 10.0},
+            "materials": {"rock": {"E": 8.0e9, "nu": 0.25, "rho": 2600.0}}, "time": {"duration": 0.1},
+            "wave": {"type": "SV", "motion": {"record": {"file": str(path), "units": "g", "pga": 0.32}}},
+        }, source="test")
+
+    here = checkpoint.scene_fingerprint(scene_with(record))
+    assert here["wave"]["motion"]["record"]["file"].startswith("sha256:")
+    assert checkpoint.scene_fingerprint(scene_with(moved)) == here
+    saved = checkpoint.Checkpoint(path=tmp_path / "checkpoint.npz", meta={"fingerprint": {"scene": here}},
+                                  u=np.zeros(1), v=np.zeros(1), a=np.zeros(1))
+    saved.check_scene(scene_with(moved))
+    older = json.loads(json.dumps(here))
+    older["wave"]["motion"]["record"]["file"] = str(record)  # as written before FILE_KEYS
+    checkpoint.Checkpoint(path=saved.path, meta={"fingerprint": {"scene": older}}, u=saved.u, v=saved.v,
+                          a=saved.a).check_scene(scene_with(moved))
+    moved.write_text(moved.read_text().replace("0", "1", 1))
+    with pytest.raises(SceneError, match=r"wave\.motion\.record\.file"):
+        saved.check_scene(scene_with(moved))

@@ -107,20 +107,19 @@ def run_dir(case: int, preset: str, runs: pathlib.Path = RUNS) -> pathlib.Path:
 def run_case(case: int, preset: str, overrides=(), runs: pathlib.Path = RUNS, resume: bool = True) -> dict:
     """Runs one case's scene into RUNS/caseN_PRESET; returns run.json. A run stopped before (a
     checkpoint.npz in the directory, docs/checkpoint.md) of the same scene and overrides is
-    continued (resume=False: started again; a checkpoint of other settings: started again, the
-    stopped run moved aside to caseN_PRESET.previous)."""
+    continued. A checkpoint of other settings is refused (SceneError naming the first key that
+    differs: hours of a long run are not started again by a typo); resume=False starts the run
+    again, the stopped one moved aside to caseN_PRESET.previous."""
     from pyfem import checkpoint, solver
-    from pyfem.scene import SceneError, load_scene
+    from pyfem.scene import load_scene
 
     scene = load_scene(scene_path(case, preset), overrides)
     out = run_dir(case, preset, runs)
     if resume and (out / checkpoint.CHECKPOINT_NAME).exists():
-        try:
-            saved = checkpoint.read_checkpoint(out)
-            print(f"resuming {scene_path(case, preset).name} in {out} from t = {saved.t:.4g} s", flush=True)
-            return solver.run(scene, out, resume=True)
-        except SceneError as error:
-            print(f"not resuming ({error}); starting again", flush=True)
+        saved = checkpoint.read_checkpoint(out)
+        saved.check_scene(scene)  # before the model is built: another scene is refused at once
+        print(f"resuming {scene_path(case, preset).name} in {out} from t = {saved.t:.4g} s", flush=True)
+        return solver.run(scene, out, resume=True)
     print(f"running {scene_path(case, preset).name} -> {out}", flush=True)
     return solver.run(scene, out)
 
@@ -638,9 +637,15 @@ def main(argv=None) -> int:
     cases = args.case or sorted(CASES)
     runs = args.runs if args.runs is not None else RUNS
     if not args.report_only:
+        from pyfem.scene import SceneError
+
         for case in cases:
             start = time.perf_counter()
-            summary = run_case(case, args.preset, args.overrides, runs=runs, resume=args.resume)
+            try:
+                summary = run_case(case, args.preset, args.overrides, runs=runs, resume=args.resume)
+            except SceneError as error:  # one line, exit 2; --no-resume starts a stopped run again
+                print(f"case {case}: {error} (or --no-resume)", file=sys.stderr)
+                return 2
             print(f"case {case}: {summary['steps']} steps, {summary['dofs']} dofs, "
                   f"{time.perf_counter() - start:.0f} s", flush=True)
     # The report always covers every finished run of both sizes, so one case's rerun
