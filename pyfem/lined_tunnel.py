@@ -48,6 +48,16 @@ def _deviatoric_terms(r: float, kappa: float) -> np.ndarray:
     ])
 
 
+def _far_parts(far_field) -> tuple[float, float, float]:
+    """(mean p, deviatoric amplitude R, direction theta_0) of a far field (sigma_xx, sigma_zz,
+    sigma_xz): p = (sigma_xx + sigma_zz) / 2, R = |((sigma_xx - sigma_zz) / 2, sigma_xz)|,
+    2 theta_0 = atan2(sigma_xz, (sigma_xx - sigma_zz) / 2)."""
+    sxx, szz, sxz = far_field
+    amplitude = math.hypot(0.5 * (sxx - szz), sxz)
+    direction = 0.5 * math.atan2(sxz, 0.5 * (sxx - szz)) if amplitude > 0.0 else 0.0
+    return 0.5 * (sxx + szz), amplitude, direction
+
+
 @dataclass(frozen=True)
 class LinedTunnel:
     """The lined tunnel: excavation radius b (m), lining thickness (m), lining and rock elastic
@@ -126,43 +136,25 @@ class LinedTunnel:
         staged excavation: `far_field` = (sigma_xx, sigma_zz, sigma_xz) (Pa), `relaxation` lambda in
         [0, 1] (0: the lining installed before any release, 1: after all of it, stress-free). Points
         with r < a are in the opening (nan), a <= r < b in the lining, r >= b in the rock."""
-        r, theta = np.broadcast_arrays(np.asarray(r, dtype=float), np.asarray(theta, dtype=float))
         if not 0.0 <= relaxation <= 1.0:
             raise ValueError(f"relaxation {relaxation!r} must lie in [0, 1]")
-        sxx, szz, sxz = far_field
-        mean = 0.5 * (sxx + szz)
-        amplitude = math.hypot(0.5 * (sxx - szz), sxz)
-        direction = 0.5 * math.atan2(sxz, 0.5 * (sxx - szz)) if amplitude > 0.0 else 0.0
+        mean, amplitude, direction = _far_parts(far_field)
         rest = 1.0 - relaxation
         # Kirsch: the unlined hole (rock only, free at b), and the composite's share Delta.
         kirsch_mean, kirsch_dev = self._unlined(mean, amplitude)
         lining0, rock0 = self.axisymmetric(0.0, -rest * mean)
         lining2, rock2 = self.deviatoric(0.0, -rest * amplitude, rest * amplitude)
-        out = {key: np.full(r.shape, np.nan) for key in ("rr", "tt", "rt")}
-        c2, s2 = np.cos(2.0 * (theta - direction)), np.sin(2.0 * (theta - direction))
-        a, b = self.inner_radius, self.radius
-        lam_l, mu_l, kappa_l = _lame(self.lining_E, self.lining_nu)
         lam_r, mu_r, kappa_r = _lame(self.rock_E, self.rock_nu)
-        for index in np.ndindex(r.shape):
-            radius = r[index]
-            if radius < a * (1.0 - 1e-12):
-                continue
-            if radius < b:
-                rr0, tt0 = self._lame_stress(lining0, radius, lam_l, mu_l)
-                terms = _deviatoric_terms(radius, kappa_l)
-                dev = terms[:3] @ lining2
-            else:
-                k_rr, k_tt = self._lame_stress(kirsch_mean, radius, lam_r, mu_r)
-                d_rr, d_tt = self._lame_stress(rock0, radius, lam_r, mu_r)
-                rr0 = mean + relaxation * (k_rr - mean) + d_rr
-                tt0 = mean + relaxation * (k_tt - mean) + d_tt
-                terms = _deviatoric_terms(radius, kappa_r)
-                far_dev = np.array([amplitude, -amplitude, -amplitude])  # rr, rt, tt of the uniform field
-                dev = far_dev + relaxation * (terms[:3] @ kirsch_dev - far_dev) + terms[:3] @ rock2
-            out["rr"][index] = rr0 + dev[0] * c2[index]
-            out["tt"][index] = tt0 + dev[2] * c2[index]
-            out["rt"][index] = dev[1] * s2[index]
-        return out
+
+        def rock(radius):
+            k_rr, k_tt = self._lame_stress(kirsch_mean, radius, lam_r, mu_r)
+            d_rr, d_tt = self._lame_stress(rock0, radius, lam_r, mu_r)
+            terms = _deviatoric_terms(radius, kappa_r)[:3]
+            far_dev = np.array([amplitude, -amplitude, -amplitude])  # rr, rt, tt of the uniform field
+            return ((mean + relaxation * (k_rr - mean) + d_rr, mean + relaxation * (k_tt - mean) + d_tt),
+                    far_dev + relaxation * (terms @ kirsch_dev - far_dev) + terms @ rock2)
+
+        return self._field(r, theta, direction, lambda radius: self._part(lining0, lining2, radius, True), rock)
 
     def loaded_stresses(self, r, theta, far_field) -> dict:
         """sigma_rr, sigma_tt, sigma_rt (Pa, tension positive) at polar points (r, theta) when the far
@@ -173,26 +165,30 @@ class LinedTunnel:
         it: the composite's response is the far field in the rock plus what the lined opening
         scatters. Points with r < a are in the opening (nan), a <= r < b in the lining, r >= b in the
         rock."""
-        r, theta = np.broadcast_arrays(np.asarray(r, dtype=float), np.asarray(theta, dtype=float))
-        sxx, szz, sxz = far_field
-        mean = 0.5 * (sxx + szz)
-        amplitude = math.hypot(0.5 * (sxx - szz), sxz)
-        direction = 0.5 * math.atan2(sxz, 0.5 * (sxx - szz)) if amplitude > 0.0 else 0.0
+        mean, amplitude, direction = _far_parts(far_field)
         lining0, rock0 = self.axisymmetric(mean, 0.0)
         lining2, rock2 = self.deviatoric(amplitude, 0.0, 0.0)
+        return self._field(r, theta, direction, lambda radius: self._part(lining0, lining2, radius, True),
+                           lambda radius: self._part(rock0, rock2, radius, False))
+
+    def _part(self, lame: np.ndarray, airy: np.ndarray, radius: float, lining: bool) -> tuple:
+        """((sigma_rr, sigma_tt) of Lame's part, (rr, rt, tt) amplitudes of the Airy part) at `radius`
+        from one region's coefficients (the lining's, or the rock's)."""
+        lam, mu, kappa = _lame(*((self.lining_E, self.lining_nu) if lining else (self.rock_E, self.rock_nu)))
+        return self._lame_stress(lame, radius, lam, mu), _deviatoric_terms(radius, kappa)[:3] @ airy
+
+    def _field(self, r, theta, direction: float, lining, rock) -> dict:
+        """sigma_rr, sigma_tt, sigma_rt at polar points: lining(radius) / rock(radius) give the
+        axisymmetric (rr, tt) and the deviatoric amplitudes (rr, rt, tt, of cos / sin 2(theta -
+        direction)) where a <= r < b / r >= b; nan in the opening."""
+        r, theta = np.broadcast_arrays(np.asarray(r, dtype=float), np.asarray(theta, dtype=float))
         out = {key: np.full(r.shape, np.nan) for key in ("rr", "tt", "rt")}
         c2, s2 = np.cos(2.0 * (theta - direction)), np.sin(2.0 * (theta - direction))
-        a, b = self.inner_radius, self.radius
-        lam_l, mu_l, kappa_l = _lame(self.lining_E, self.lining_nu)
-        lam_r, mu_r, kappa_r = _lame(self.rock_E, self.rock_nu)
         for index in np.ndindex(r.shape):
             radius = r[index]
-            if radius < a * (1.0 - 1e-12):
+            if radius < self.inner_radius * (1.0 - 1e-12):
                 continue
-            inside = radius < b
-            rr0, tt0 = self._lame_stress(lining0 if inside else rock0, radius, lam_l if inside else lam_r,
-                                         mu_l if inside else mu_r)
-            dev = _deviatoric_terms(radius, kappa_l if inside else kappa_r)[:3] @ (lining2 if inside else rock2)
+            (rr0, tt0), dev = (lining if radius < self.radius else rock)(radius)
             out["rr"][index] = rr0 + dev[0] * c2[index]
             out["tt"][index] = tt0 + dev[2] * c2[index]
             out["rt"][index] = dev[1] * s2[index]
