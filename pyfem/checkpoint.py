@@ -72,13 +72,20 @@ def scene_fingerprint(scene) -> dict:
     for (table, key), old_behaviour in LATER_KEYS:
         if data.get(table, {}).get(key) == old_behaviour:
             data[table].pop(key)
+    return _files_by_content(data)
+
+
+def _files_by_content(scene_json: dict) -> dict:
+    """`scene_json` with each FILE_KEYS path replaced by the hash of its file (in place; a value
+    that is a hash already is kept)."""
     for keys in FILE_KEYS:
-        holder = data
+        holder = scene_json
         for key in keys[:-1]:
             holder = holder.get(key) if isinstance(holder, dict) else None
-        if isinstance(holder, dict) and isinstance(holder.get(keys[-1]), str):
-            holder[keys[-1]] = _file_content(holder[keys[-1]])
-    return data
+        value = holder.get(keys[-1]) if isinstance(holder, dict) else None
+        if isinstance(value, str) and not value.startswith("sha256:"):
+            holder[keys[-1]] = _file_content(value)
+    return scene_json
 
 
 def model_fingerprint(simulation) -> dict:
@@ -148,14 +155,8 @@ class Checkpoint:
     def saved_fingerprint(self) -> dict:
         """The checkpoint's fingerprint, its scene's files by content (a checkpoint written before
         FILE_KEYS held their paths: hashed now, from the path it names, if that file still exists)."""
-        saved = json.loads(json.dumps(self.meta["fingerprint"]))
-        for keys in FILE_KEYS:
-            holder = saved.get("scene", {})
-            for key in keys[:-1]:
-                holder = holder.get(key) if isinstance(holder, dict) else None
-            value = holder.get(keys[-1]) if isinstance(holder, dict) else None
-            if isinstance(value, str) and not value.startswith("sha256:"):
-                holder[keys[-1]] = _file_content(value)
+        saved = json.loads(json.dumps(self.meta["fingerprint"]))  # a copy
+        _files_by_content(saved.get("scene", {}))
         return saved
 
     def check_scene(self, scene) -> None:
