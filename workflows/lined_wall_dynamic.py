@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import math
 import subprocess
 import sys
@@ -43,14 +42,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pyfem import solver  # noqa: E402
-from pyfem.lined_tunnel import LinedTunnel  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
+# The static lining study's tunnel (constants and closed form), the wall study's run reuse and
+# monitor reading (this script's folder is on sys.path when it runs).
+from lining_stress_accuracy import CENTRE, LINING, LINING_T, RADIUS, ROCK, SECTION, closed_form  # noqa: E402
+from wall_stress_accuracy import THETA, finished_run, hoop_history  # noqa: E402
 
-RADIUS, LINING_T, SECTION, THICKNESS = 5.0, 0.5, 240.0, 2.0
-CENTRE = np.array([SECTION / 2, THICKNESS / 2, SECTION / 2])
-ROCK = {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}
-LINING = {"E": 28.0e9, "nu": 0.167, "rho": 2500.0}
-THETA = 45.0
 OFFSET = 0.01  # m: the monitors' distance from the lining's inner face and from the bond
 RUNS = [(1, 2), (1, 4), (2, 2)]  # (order, elements through the lining): about 15 min on this machine
 FULL_RUNS = RUNS + [(1, 8), (2, 4)]  # --full: 20 min and about 1 h more (the wall's grading follows h_wall)
@@ -61,10 +58,6 @@ QUASI_STATIC = 1.0  # Hz: the wave held to the closed form
 RESULTS_CSV = ROOT / "workflows" / "results" / "lined_wall_dynamic.csv"
 COLUMNS = ["f0", "order", "through", "h_wall", "place", "peak_mpa", "closed_form_peak_mpa", "peak_error",
            "history_error", "history_error_vs_finest", "loop_seconds", "steps", "dofs"]
-
-
-def closed_form() -> LinedTunnel:
-    return LinedTunnel(RADIUS, LINING_T, LINING["E"], LINING["nu"], ROCK["E"], ROCK["nu"])
 
 
 PLACES = {"lining": RADIUS - LINING_T + OFFSET, "rock": RADIUS + OFFSET}  # radius of each monitor (m)
@@ -98,16 +91,6 @@ def scene(mesh_file: Path, order: int, f0: float):
     })
 
 
-def hoop_history(out: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(t, sigma_thth(t)) at monitor `name` (Pa)."""
-    with open(out / "monitors" / f"{name}.csv") as handle:
-        header = handle.readline().strip().split(",")
-    data = np.loadtxt(out / "monitors" / f"{name}.csv", delimiter=",", skiprows=1)
-    column = {key: data[:, k] for k, key in enumerate(header)}
-    c, s = math.cos(math.radians(THETA)), math.sin(math.radians(THETA))
-    return column["t"], column["sxx"] * s * s + column["szz"] * c * c - 2 * column["sxz"] * s * c
-
-
 def closed_form_history(scene_, times: np.ndarray, name: str) -> np.ndarray:
     """The quasi-static hoop stress at monitor `name` (Pa): the closed form's hoop stress per unit
     far-field shear times the free field's sigma_xz(t) at the monitor."""
@@ -118,14 +101,6 @@ def closed_form_history(scene_, times: np.ndarray, name: str) -> np.ndarray:
     tau = freefield.stress(point(PLACES[name])[None, :], times)[:, 0, 0, 2]
     factor = float(closed_form().loaded_stresses(PLACES[name], math.radians(THETA), (0.0, 0.0, 1.0))["tt"])
     return factor * tau
-
-
-def finished_run(out: Path) -> dict | None:
-    try:
-        summary = json.loads((out / "run.json").read_text())
-    except (OSError, ValueError):
-        return None
-    return summary if summary.get("status") == "finished" else None
 
 
 def run_study(work: Path, runs=RUNS, frequencies=FREQUENCIES) -> list[dict]:

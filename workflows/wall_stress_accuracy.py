@@ -105,12 +105,17 @@ def scene_for(mesh_file: Path, order: int, f0: float, centre: np.ndarray = CENTR
     })
 
 
-def hoop_history(out: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(t, sigma_thth(t)) at the monitor from monitors/wall.csv (Pa)."""
-    with open(out / "monitors" / "wall.csv") as handle:
+def monitor_columns(out: Path, name: str) -> dict:
+    """Column name -> values of monitors/NAME.csv of a run directory."""
+    with open(out / "monitors" / f"{name}.csv") as handle:
         header = handle.readline().strip().split(",")
-    data = np.loadtxt(out / "monitors" / "wall.csv", delimiter=",", skiprows=1)
-    column = {key: data[:, k] for k, key in enumerate(header)}
+    data = np.loadtxt(out / "monitors" / f"{name}.csv", delimiter=",", skiprows=1)
+    return {key: data[:, k] for k, key in enumerate(header)}
+
+
+def hoop_history(out: Path, name: str = "wall") -> tuple[np.ndarray, np.ndarray]:
+    """(t, sigma_thth(t)) at the monitor `name` (at THETA from +x towards +z) (Pa)."""
+    column = monitor_columns(out, name)
     c, s = math.cos(math.radians(THETA)), math.sin(math.radians(THETA))
     # The dynamic part (no initial stress here): sigma_thth in the x-z plane.
     return column["t"], column["sxx"] * s * s + column["szz"] * c * c - 2 * column["sxz"] * s * c
@@ -119,13 +124,8 @@ def hoop_history(out: Path) -> tuple[np.ndarray, np.ndarray]:
 def racking_history(out: Path) -> tuple[np.ndarray, np.ndarray]:
     """(t, u_x(crown) - u_x(invert)) from monitors/crown.csv and invert.csv (m): the crown's motion
     relative to the invert's, at 1.02 a above and below the centre."""
-    columns = []
-    for name in ("crown", "invert"):
-        with open(out / "monitors" / f"{name}.csv") as handle:
-            header = handle.readline().strip().split(",")
-        data = np.loadtxt(out / "monitors" / f"{name}.csv", delimiter=",", skiprows=1)
-        columns.append((data[:, header.index("t")], data[:, header.index("ux")]))
-    return columns[0][0], columns[0][1] - columns[1][1]
+    crown, invert = monitor_columns(out, "crown"), monitor_columns(out, "invert")
+    return crown["t"], crown["ux"] - invert["ux"]
 
 
 def exact_racking(freefield, times: np.ndarray, centre: np.ndarray = CENTRE) -> np.ndarray:
