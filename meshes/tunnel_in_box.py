@@ -13,11 +13,12 @@ that removes it (`[static] excavate = ["excavation"]`, docs/static.md); with `li
 (`--lining t`) a ring of thickness t inside the radius is the volume "lining" (the size near the
 wall is then at most t/2: two elements through it) and the rest of the hole "excavation".
 With `lining` and `hollow` (`--hollow`) the core is left out: the lined tunnel in place, for a
-dynamic run without a static stage (workflows/lined_wall_dynamic.py). Without any option the
-script writes the mesh it always has.
+dynamic run without a static stage (workflows/lined_wall_dynamic.py). With `height` (`--height b`) the
+opening is an ellipse of half-width `radius` along x and half-height b along z (not with a lining;
+docs/elliptical_opening.md). Without any option the script writes the mesh it always has.
 
-    /usr/bin/python3 meshes/tunnel_in_box.py out.msh [--radius 5] [--unnamed] [--filled] [--lining 0.5 [--hollow]]
-                                                 [--size 120] [--h-wall 0.6] [--h-far 8]
+    /usr/bin/python3 meshes/tunnel_in_box.py out.msh [--radius 5] [--height 10] [--unnamed] [--filled]
+                                                 [--lining 0.5 [--hollow]] [--size 120] [--h-wall 0.6] [--h-far 8]
 """
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ import signal
 
 def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 120.0), thickness: float = 2.0,
                         h_wall: float = 0.6, h_far: float = 8.0, layers: int = 1, name_surfaces: bool = True,
-                        filled: bool = False, lining: float = 0.0, hollow: bool = False) -> None:
+                        filled: bool = False, lining: float = 0.0, hollow: bool = False,
+                        height: float | None = None) -> None:
     """Mesh the tunnel-in-box model and write it to `path` (gmsh .msh 4.1).
 
     Args:
@@ -44,6 +46,8 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
             `filled`; 0: none).
         hollow: with `lining`, leave the core out: the lined tunnel already in place, its inner face
             free (a dynamic run without a static stage).
+        height: the opening's half-height along z (m): an ellipse of half-width `radius` along x
+            (None: a circle of `radius`); not with `lining`.
     """
     handler = signal.getsignal(signal.SIGINT)
     import gmsh  # resets SIGINT: restored below
@@ -58,11 +62,18 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
         # The section in the x-y plane of gmsh, then turned about x so that y becomes z.
         if not 0.0 <= lining < radius:
             raise ValueError(f"tunnel_in_box: lining = {lining!r} must lie in [0, radius = {radius!r})")
+        height = radius if height is None else height
+        if not height > 0.0 or (lining > 0.0 and height != radius):
+            raise ValueError(f"tunnel_in_box: height = {height!r} must be > 0, and equal to the radius with a lining")
+        extent = (radius, height)  # the opening's half-extents along x and z
         filled = filled or lining > 0.0
         if lining > 0.0:
             h_wall = min(h_wall, 0.5 * lining)
         box = occ.addRectangle(0.0, 0.0, 0.0, lx, lz)
-        hole = occ.addDisk(lx / 2, lz / 2, 0.0, radius, radius)
+        # gmsh wants the first radius the larger: a tall ellipse is drawn wide and turned.
+        hole = occ.addDisk(lx / 2, lz / 2, 0.0, max(extent), min(extent))
+        if height > radius:
+            occ.rotate([(2, hole)], lx / 2, lz / 2, 0.0, 0.0, 0.0, 1.0, math.pi / 2)
         if filled:
             # The hole's pieces (core, lining ring in quarters) share their curves with the rock.
             tools = [(2, hole)]
@@ -90,7 +101,7 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
         # Sort the volumes by where they lie: in the core, in the lining ring, or in the rock.
         pieces = {"rock": [], "lining": [], "excavation": []}
         for tag in (tag for dim, tag in extruded if dim == 3):
-            if not _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius, dim=3):
+            if not _is_on_circle(gmsh, tag, lx / 2, lz / 2, extent, dim=3):
                 pieces["rock"].append(tag)
             elif lining > 0.0 and not _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius - lining, dim=3):
                 pieces["lining"].append(tag)
@@ -98,9 +109,9 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
                 pieces["excavation"].append(tag)
         volumes = pieces["rock"]
         rock_section = [(dim, tag) for dim, tag in section
-                        if not _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius, dim=dim)]
+                        if not _is_on_circle(gmsh, tag, lx / 2, lz / 2, extent, dim=dim)]
         for dim, tag in section:
-            if (lining > 0.0 and _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius, dim=dim)
+            if (lining > 0.0 and _is_on_circle(gmsh, tag, lx / 2, lz / 2, extent, dim=dim)
                     and not _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius - lining, dim=dim)):
                 # A quarter of the thin ring: structured (transfinite) quadrilaterals, as many
                 # through the thickness as h_wall asks (the unstructured mesher leaves triangles).
@@ -112,7 +123,7 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
                 gmsh.model.mesh.setTransfiniteSurface(tag)
 
         wall_curves = [tag for dim, tag in gmsh.model.getBoundary(rock_section, oriented=False)
-                       if dim == 1 and _is_on_circle(gmsh, tag, lx / 2, lz / 2, radius)]
+                       if dim == 1 and _is_on_circle(gmsh, tag, lx / 2, lz / 2, extent)]
         if not wall_curves:
             raise RuntimeError("tunnel_in_box: the tunnel wall curves were not found")
         distance = gmsh.model.mesh.field.add("Distance")
@@ -160,19 +171,22 @@ def build_tunnel_in_box(path: str, radius: float = 5.0, size: tuple = (120.0, 12
         signal.signal(signal.SIGINT, handler)
 
 
-def _is_on_circle(gmsh, curve: int, xc: float, zc: float, radius: float, dim: int = 1) -> bool:
-    """Whether the bounding box of an entity (a curve by default) lies within the tunnel's (after
-    the turn to x-z)."""
+def _is_on_circle(gmsh, curve: int, xc: float, zc: float, radius, dim: int = 1) -> bool:
+    """Whether the bounding box of an entity (a curve by default) lies within the opening's (after
+    the turn to x-z): `radius` a number for a circle, or the half-extents (along x, along z)."""
+    rx, rz = (radius, radius) if isinstance(radius, (int, float)) else radius
     x0, _, z0, x1, _, z1 = gmsh.model.getBoundingBox(dim, curve)
-    margin = 1e-6 * radius + 1e-9
-    return (x0 >= xc - radius - margin and x1 <= xc + radius + margin
-            and z0 >= zc - radius - margin and z1 <= zc + radius + margin)
+    margin = 1e-6 * max(rx, rz) + 1e-9
+    return (x0 >= xc - rx - margin and x1 <= xc + rx + margin
+            and z0 >= zc - rz - margin and z1 <= zc + rz + margin)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", help="output .msh file")
     parser.add_argument("--radius", type=float, default=5.0)
+    parser.add_argument("--height", type=float, default=None,
+                        help="the opening's half-height along z (m): an ellipse of half-width --radius")
     parser.add_argument("--unnamed", action="store_true", help="name no surface (bounding-box faces)")
     parser.add_argument("--size", type=float, default=120.0, help="side of the square x-z section (m)")
     parser.add_argument("--h-wall", type=float, default=0.6, help="element size at the wall (m)")
@@ -185,7 +199,7 @@ def main() -> None:
     args = parser.parse_args()
     build_tunnel_in_box(args.out, radius=args.radius, size=(args.size, args.size), h_wall=args.h_wall,
                         h_far=args.h_far, name_surfaces=not args.unnamed, filled=args.filled, lining=args.lining,
-                        hollow=args.hollow)
+                        hollow=args.hollow, height=args.height)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,11 @@ the run took. This module turns that table into advice:
   workflows/wall_stress_accuracy.py, workflows/results/wall_stress.csv);
 * `lining_elements_for(error_budget)`: the elements through a lining that keep the peak hoop stress
   read off its cells within the budget of the true peak at its face (the lining study,
-  workflows/lining_stress_accuracy.py, workflows/results/lining_stress.csv, docs/lined_tunnel.md).
+  workflows/lining_stress_accuracy.py, workflows/results/lining_stress.csv, docs/lined_tunnel.md);
+* `curved_wall_size_for(error_budget)`: the element size at a non-circular wall, as a fraction of its
+  smallest radius of curvature, that kept an elliptical opening's wall stress within the budget (the
+  static excavation study, workflows/elliptical_opening.py, workflows/results/elliptical_opening.csv,
+  docs/elliptical_opening.md).
 
 Errors transfer between scenes through the elements per shortest wavelength (the
 dispersion error of a given element depends on h / wavelength); seconds do not
@@ -32,10 +36,12 @@ from pyfem.material import Material
 DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "accuracy_cost.csv"
 WALL_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "wall_stress.csv"
 LINING_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "lining_stress.csv"
+ELLIPSE_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "elliptical_opening.csv"
 if not DEFAULT_RESULTS.is_file():  # an installed package (pip install .) carries a copy (setup.py)
     DEFAULT_RESULTS = Path(__file__).resolve().parent / "data" / "accuracy_cost.csv"
     WALL_RESULTS = Path(__file__).resolve().parent / "data" / "wall_stress.csv"
     LINING_RESULTS = Path(__file__).resolve().parent / "data" / "lining_stress.csv"
+    ELLIPSE_RESULTS = Path(__file__).resolve().parent / "data" / "elliptical_opening.csv"
 # The highest frequency with energy in a Ricker wavelet, in units of its peak frequency f0:
 # the amplitude spectrum (f/f0)^2 exp(-(f/f0)^2) at 2.5 f0 is 3 % of its peak at f0.
 RICKER_MAX_FREQUENCY_FACTOR = 2.5
@@ -263,6 +269,39 @@ def wall_size_for(error_budget: float, results_csv=WALL_RESULTS) -> list[dict]:
                            "text": f"Q{order}: not reached in the study (smallest peak error "
                                    f"{100 * _wall_peak_error(smallest):.2g} % at "
                                    f"{float(smallest['h_over_a']):.3g} x the radius)"})
+    return advice
+
+
+def curved_wall_size_for(error_budget: float, results_csv=ELLIPSE_RESULTS) -> list[dict]:
+    """The largest element size at a non-circular wall, per order, as a fraction of the wall's smallest
+    radius of curvature rho, that kept the hoop stress of every wall cell of an elliptical opening within
+    a budget of the exact answer (relative to the exact peak) in the static excavation study, every
+    smaller size studied included (docs/elliptical_opening.md).
+
+    Args:
+        error_budget: largest acceptable relative error (e.g. 0.05).
+        results_csv: the study's CSV (workflows/results/elliptical_opening.csv).
+
+    Returns:
+        per order (ascending) a dict: order, h_over_rho (None: no size studied met the budget) and
+        error (the worst wall cell's at that size, or the smallest studied).
+
+    Raises:
+        ValueError: a budget that is not a positive number, or no ellipse rows in the results.
+    """
+    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
+        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+    with open(results_csv, newline="") as stream:
+        rows = [row for row in csv.DictReader(stream) if row["shape"] == "ellipse"]
+    if not rows:
+        raise ValueError(f"{results_csv}: no ellipse rows; run workflows/elliptical_opening.py")
+    advice = []
+    for order in sorted({int(row["order"]) for row in rows}):
+        errors = {float(row["h_over_rho"]): float(row["worst"]) for row in rows if int(row["order"]) == order}
+        meeting = [h for h in errors if all(errors[finer] <= error_budget for finer in errors if finer <= h)]
+        h_over_rho = max(meeting) if meeting else None
+        error = errors[h_over_rho] if meeting else min(errors.values())
+        advice.append({"order": order, "h_over_rho": h_over_rho, "error": error})
     return advice
 
 

@@ -197,7 +197,7 @@ def check_out_dir(out_dir: Path) -> None:
 
 def mesh_advice(scene: Scene) -> str:
     """What the accuracy-versus-cost study says this scene's waves need (h, order) for 5 % and 1 %."""
-    from pyfem.accuracy import element_size_for, lining_elements_for, wall_size_for
+    from pyfem.accuracy import curved_wall_size_for, element_size_for, lining_elements_for, wall_size_for
 
     lines = [f"mesh advice (workflows/accuracy_cost.py; scene h = {scene['mesh'].get('h')}, "
              f"order {scene['mesh']['order']}):"]
@@ -214,6 +214,17 @@ def mesh_advice(scene: Scene) -> str:
             lines.append(f"  for a {100 * budget:g} % error: " + "; ".join(item["text"] for item in advice))
         except (ValueError, FileNotFoundError) as error:
             lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
+    try:
+        sizes = {budget: curved_wall_size_for(budget) for budget in (0.05, 0.01)}
+        measured = "; ".join(
+            f"Q{five['order']} " + " / ".join("not reached" if a["h_over_rho"] is None else f"{a['h_over_rho']:g}"
+                                              for a in (five, one))
+            for five, one in zip(sizes[0.05], sizes[0.01]))
+        lines.append("  a non-circular wall: read the radius as the wall's smallest radius of curvature (an "
+                     "elliptical opening's static excavation against the exact answer kept 5 % / 1 % with h / rho "
+                     f"at most {measured}; docs/elliptical_opening.md)")
+    except (ValueError, FileNotFoundError) as error:
+        lines.append(f"  a non-circular wall: no advice ({error})")
     if scene.get("static", {}).get("install"):
         lines.append("lining stress advice (workflows/lining_stress_accuracy.py: the largest hoop stress read off "
                      "a bending lining's cells after the static stage against the true peak at its face; "

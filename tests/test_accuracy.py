@@ -209,3 +209,26 @@ def test_lining_advice_takes_the_fewest_elements_that_read_the_peak_within_the_b
     with pytest.raises(ValueError, match="error_budget"):
         accuracy.lining_elements_for(-1.0, path)
 
+
+
+def test_curved_wall_advice_takes_the_largest_size_whose_finer_sizes_all_met_the_budget(tmp_path):
+    """accuracy.curved_wall_size_for on a table where a coarser size happens to meet a budget a finer
+    one misses (that size is not advised), ignoring the circle rows; and on the study's own results
+    (docs/elliptical_opening.md): Q1 0.24 / 0.06 and Q2 0.24 / 0.12 of rho for 5 % / 1 %."""
+    columns = ["shape", "order", "h_over_rho", "worst"]
+    path = tmp_path / "elliptical_opening.csv"
+    with open(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=columns)
+        writer.writeheader()
+        for shape, order, ratio, worst in (("ellipse", 1, 0.24, 0.009), ("ellipse", 1, 0.12, 0.012),
+                                           ("ellipse", 1, 0.06, 0.008), ("circle", 1, 0.24, 0.001),
+                                           ("ellipse", 2, 0.24, 0.03), ("ellipse", 2, 0.12, 0.02)):
+            writer.writerow({"shape": shape, "order": order, "h_over_rho": ratio, "worst": worst})
+    one = accuracy.curved_wall_size_for(0.01, path)
+    assert [(a["order"], a["h_over_rho"]) for a in one] == [(1, 0.06), (2, None)]
+    assert one[1]["error"] == 0.02
+    study = {budget: [(a["order"], a["h_over_rho"]) for a in accuracy.curved_wall_size_for(budget)]
+             for budget in (0.05, 0.01)}
+    assert study == {0.05: [(1, 0.24), (2, 0.24)], 0.01: [(1, 0.06), (2, 0.12)]}
+    with pytest.raises(ValueError, match="error_budget"):
+        accuracy.curved_wall_size_for(0.0, path)
