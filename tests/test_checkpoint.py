@@ -262,6 +262,9 @@ def test_ctrl_c_writes_a_checkpoint_and_resume_continues_from_it(reference_run, 
         solver.run(scene, out, progress=StopAt(0.32, RunInterrupted(signal.SIGINT)))
     assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
     assert checkpoint.read_checkpoint(out).t == pytest.approx(0.32)
+    head = checkpoint.read_checkpoint(out, state=False)  # what workflows/case_study.py reads before resuming
+    assert head.t == pytest.approx(0.32) and head.u is None and not head.kernel
+    head.check_scene(scene)
     solver.run(scene, out, resume=True)
     assert_same_run(out, reference_run[0])
 

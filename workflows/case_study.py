@@ -116,7 +116,7 @@ def run_case(case: int, preset: str, overrides=(), runs: pathlib.Path = RUNS, re
     scene = load_scene(scene_path(case, preset), overrides)
     out = run_dir(case, preset, runs)
     if resume and (out / checkpoint.CHECKPOINT_NAME).exists():
-        saved = checkpoint.read_checkpoint(out)
+        saved = checkpoint.read_checkpoint(out, state=False)  # t and the fingerprint; solver.run reads the state
         saved.check_scene(scene)  # before the model is built: another scene is refused at once
         print(f"resuming {scene_path(case, preset).name} in {out} from t = {saved.t:.4g} s", flush=True)
         return solver.run(scene, out, resume=True)
