@@ -47,9 +47,12 @@ _FIELDS = _STRESSES + ("ur", "uth")
 
 
 def _radial(kind: str, n: np.ndarray, k: float, r: float):
-    """(Z, Z', Z'') of Z_n(k r) in r for kind "J" (Bessel) or "H" (Hankel, first kind)."""
+    """(Z, Z', Z'') of Z_n(k r) in r for kind "J" (Bessel), "Y" (Neumann) or "H" (Hankel, first
+    kind)."""
     if kind == "J":
         z, dz = special.jv(n, k * r), k * special.jvp(n, k * r)
+    elif kind == "Y":
+        z, dz = special.yv(n, k * r), k * special.yvp(n, k * r)
     else:
         z, dz = special.hankel1(n, k * r), k * special.h1vp(n, k * r)
     ddz = -dz / r - (k * k - n * n / (r * r)) * z
@@ -178,3 +181,86 @@ class CavitySV:
         """The crown's horizontal displacement relative to the invert's at distance r (m, `racking`)
         for a scene's incident wave, as `hoop_stress_from_free_field`."""
         return self._from_free_field(freefield, centre, times, lambda long, u: self.racking_history(long, u, r))
+
+
+class LinedCavitySV(CavitySV):
+    """Vertically travelling SV scattered by a lined circular tunnel: rock (E, nu, rho) outside the
+    excavation radius `b`, an elastic lining (lining_E, lining_nu, lining_rho) in a <= r <= b
+    (a = b - thickness) bonded to it (traction and displacement continuous at b), its inner face
+    r = a free; plane strain (docs/lined_tunnel.md "The exact dynamic answer").
+
+    Per order n, six unknowns: the rock's outgoing A_n H_n(k_p r), B_n H_n(k_s r) and the lining's
+    standing C_n J_n(k_pl r) + D_n Y_n(k_pl r) (phi), E_n J_n(k_sl r) + F_n Y_n(k_sl r) (psi); six
+    conditions: sigma_rr, sigma_rtheta, u_r, u_theta continuous at b, sigma_rr = sigma_rtheta = 0 at
+    a. The system is solved with its rows and columns scaled to unit size (the Neumann and Hankel
+    terms of high order grow like (2 n / k r)^n). The incident wave and the history synthesis are
+    CavitySV's (the incident amplitude U at the centre, the rock's wave numbers)."""
+
+    def __init__(self, b: float, thickness: float, lining_E: float, lining_nu: float, lining_rho: float,
+                 E: float, nu: float, rho: float):
+        if not 0.0 < thickness < b:
+            raise ValueError(f"LinedCavitySV: thickness = {thickness!r} must lie in (0, b = {b!r})")
+        super().__init__(b, E, nu, rho)
+        self.inner = b - thickness
+        self.lining_mu = lining_E / (2.0 * (1.0 + lining_nu))
+        self.lining_lam = lining_E * lining_nu / ((1.0 + lining_nu) * (1.0 - 2.0 * lining_nu))
+        self.lining_cs = math.sqrt(self.lining_mu / lining_rho)
+        self.lining_cp = math.sqrt((self.lining_lam + 2.0 * self.lining_mu) / lining_rho)
+
+    def _lining_terms(self, n, r, omega) -> list[dict]:
+        """The lining's four standing terms (phi J, phi Y, psi J, psi Y) at radius r."""
+        kp, ks = omega / self.lining_cp, omega / self.lining_cs
+        lam, mu = self.lining_lam, self.lining_mu
+        return [_term_fields(n, r, lam, mu, kp, f=_radial("J", n, kp, r)),
+                _term_fields(n, r, lam, mu, kp, f=_radial("Y", n, kp, r)),
+                _term_fields(n, r, lam, mu, kp, g=_radial("J", n, ks, r)),
+                _term_fields(n, r, lam, mu, kp, g=_radial("Y", n, ks, r))]
+
+    def _rock_terms(self, n, r, omega, U) -> tuple[dict, list[dict]]:
+        """The incident term and the rock's two outgoing terms at radius r."""
+        kp, ks = omega / self.cp, omega / self.cs
+        incident = _term_fields(n, r, self.lam, self.mu, kp,
+                                g=tuple(U / (1j * ks) * z for z in _radial("J", n, ks, r)))
+        return incident, [_term_fields(n, r, self.lam, self.mu, kp, f=_radial("H", n, kp, r)),
+                          _term_fields(n, r, self.lam, self.mu, kp, g=_radial("H", n, ks, r))]
+
+    def coefficients(self, omega: float, U: complex = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """(orders n, (len(n), 6) coefficients A, B, C, D, E, F) at angular frequency omega > 0."""
+        n = np.arange(-self.terms(omega), self.terms(omega) + 1)
+        a, b = self.inner, self.a
+        incident, rock = self._rock_terms(n, b, omega, U)
+        lining_b = self._lining_terms(n, b, omega)
+        lining_a = self._lining_terms(n, a, omega)
+        matrix = np.zeros((len(n), 6, 6), dtype=complex)
+        rhs = np.zeros((len(n), 6), dtype=complex)
+        for row, key in enumerate(("rr", "rth", "ur", "uth")):   # continuity at b: rock - lining = 0
+            for column, term in enumerate(rock):
+                matrix[:, row, column] = term[key]
+            for column, term in enumerate(lining_b):
+                matrix[:, row, 2 + column] = -term[key]
+            rhs[:, row] = -incident[key]
+        for row, key in ((4, "rr"), (5, "rth")):                  # the free inner face
+            for column, term in enumerate(lining_a):
+                matrix[:, row, 2 + column] = term[key]
+        columns = np.abs(matrix).max(axis=1, keepdims=True)
+        columns[columns == 0.0] = 1.0
+        matrix = matrix / columns
+        rows = np.abs(matrix).max(axis=2, keepdims=True)
+        rows[rows == 0.0] = 1.0
+        solution = np.linalg.solve(matrix / rows, (rhs / rows[..., 0])[..., None])[..., 0]
+        return n, solution / columns[:, 0, :]
+
+    def fields(self, omega: float, r: float, theta, U: complex = 1.0) -> dict:
+        """Total sigma_rr, sigma_thth, sigma_rth (Pa) and u_r, u_theta (m) at (r, theta): in the rock
+        (incident + scattered) for r >= b, in the lining for a <= r < b."""
+        if not r >= self.inner:
+            raise ValueError(f"LinedCavitySV.fields: r = {r!r} lies in the opening (r < a = {self.inner!r})")
+        theta = np.atleast_1d(np.asarray(theta, dtype=float))
+        n, x = self.coefficients(omega, U)
+        modes = np.exp(1j * np.outer(theta, n))
+        if r >= self.a:
+            incident, rock = self._rock_terms(n, r, omega, U)
+            return {key: modes @ (incident[key] + x[:, 0] * rock[0][key] + x[:, 1] * rock[1][key])
+                    for key in _FIELDS}
+        lining = self._lining_terms(n, r, omega)
+        return {key: modes @ sum(x[:, 2 + k] * lining[k][key] for k in range(4)) for key in _FIELDS}

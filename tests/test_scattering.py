@@ -1,12 +1,16 @@
 """Pao & Mow's series for SV scattered by a circular cavity (pyfem/scattering.py): the wall is
 free, a long wave gives Kirsch's static concentration everywhere around the opening, and the
-time synthesis is causal and quasi-static for a long wavelet."""
+time synthesis is causal and quasi-static for a long wavelet. The lined tunnel's series
+(LinedCavitySV): a lining of the rock's constants is the unlined cavity of the inner radius, a long
+wave gives the quasi-static closed form of pyfem/lined_tunnel.py, the bond is continuous and the
+inner face free at every frequency."""
 import math
 
 import numpy as np
 import pytest
 
-from pyfem.scattering import CavitySV
+from pyfem.lined_tunnel import LinedTunnel
+from pyfem.scattering import CavitySV, LinedCavitySV
 
 A, E, NU, RHO = 5.0, 8.0e9, 0.24, 2600.0
 THETAS = np.radians([0.0, 20.0, 45.0, 70.0, 90.0, 135.0, 200.0, 300.0])
@@ -140,3 +144,61 @@ def test_the_racking_history_is_quasi_static_for_a_long_wavelet():
     peak = np.abs(racking).max()
     assert peak > 0.9 * np.abs(expected).max(), "the wave arrived and racked the opening"
     assert np.abs(racking - expected).max() < 0.01 * peak
+
+
+LINING_T, LINING_E, LINING_NU, LINING_RHO = 0.5, 28.0e9, 0.167, 2500.0
+
+
+@pytest.mark.parametrize("f", [0.5, 4.0, 20.0])
+def test_a_lining_of_rock_is_the_cavity_of_its_inner_radius(f):
+    """The lined series with the lining's constants those of the rock: the unlined series of radius
+    b - t, in the lining and in the rock (every term of both solutions, the Neumann terms included)."""
+    lined = LinedCavitySV(A, LINING_T, E, NU, RHO, E, NU, RHO)
+    cavity = CavitySV(A - LINING_T, E, NU, RHO)
+    omega = 2 * math.pi * f
+    tau = abs(cavity.free_field_shear(omega))
+    u_scale = tau / cavity.mu * A
+    for r in (A - LINING_T, A - 0.2, A, 1.2 * A, 2.0 * A):
+        got, expected = lined.fields(omega, r, THETAS), cavity.fields(omega, r, THETAS)
+        assert np.abs(expected["thth"]).max() > 0.5 * tau
+        for key in ("rr", "thth", "rth"):
+            assert np.abs(got[key] - expected[key]).max() < 1e-8 * tau, (r, key)
+        for key in ("ur", "uth"):
+            assert np.abs(got[key] - expected[key]).max() < 1e-8 * u_scale, (r, key)
+
+
+@pytest.mark.parametrize("r", [A - LINING_T, A - 0.25, A - 1e-9, A, 1.2 * A, 2.0 * A])
+def test_a_long_wave_loads_the_lined_tunnel_as_the_quasi_static_closed_form(r):
+    """k_s b = 2.8e-4: the series' stresses in the concrete lining and the rock equal the closed form of
+    the lined tunnel under a far-field shear tau (LinedTunnel.loaded_stresses) to 1e-5 of the peak,
+    the lining carrying 5-9 tau; the phase is of order k_s r."""
+    lined = LinedCavitySV(A, LINING_T, LINING_E, LINING_NU, LINING_RHO, E, NU, RHO)
+    closed = LinedTunnel(A, LINING_T, LINING_E, LINING_NU, E, NU)
+    omega = 2 * math.pi * 0.01
+    tau = lined.free_field_shear(omega)
+    series = lined.fields(omega, r, THETAS)
+    quasi_static = closed.loaded_stresses(np.full(len(THETAS), r), THETAS, (0.0, 0.0, 1.0))
+    peak = np.abs(closed.loaded_stresses(np.full(len(THETAS), A - LINING_T), THETAS, (0.0, 0.0, 1.0))["tt"]).max()
+    assert peak > 5.0
+    for key, closed_key in (("rr", "rr"), ("thth", "tt"), ("rth", "rt")):
+        ratio = series[key] / tau
+        assert np.abs(ratio.imag).max() < 1e-3 * peak
+        assert np.abs(ratio.real - quasi_static[closed_key]).max() < 1e-5 * peak, key
+
+
+@pytest.mark.parametrize("f", [1.0, 4.0, 16.0])
+def test_the_lining_is_bonded_and_its_inner_face_free(f):
+    """Traction and displacement continuous across the bond r = b (the lining's side just inside), the
+    inner face r = a traction-free; the lining concentrates the shear (its hoop stress above 2 tau)."""
+    lined = LinedCavitySV(A, LINING_T, LINING_E, LINING_NU, LINING_RHO, E, NU, RHO)
+    omega = 2 * math.pi * f
+    tau = abs(lined.free_field_shear(omega))
+    u_scale = tau / lined.mu * A
+    inside, outside = lined.fields(omega, A * (1 - 1e-13), THETAS), lined.fields(omega, A, THETAS)
+    for key in ("rr", "rth"):
+        assert np.abs(inside[key] - outside[key]).max() < 1e-8 * tau, key
+    for key in ("ur", "uth"):
+        assert np.abs(inside[key] - outside[key]).max() < 1e-8 * u_scale, key
+    face = lined.fields(omega, A - LINING_T, THETAS)
+    assert np.abs(face["thth"]).max() > 2.0 * tau
+    assert np.abs(face["rr"]).max() < 1e-8 * tau and np.abs(face["rth"]).max() < 1e-8 * tau
