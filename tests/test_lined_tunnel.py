@@ -17,10 +17,15 @@ import numpy as np
 import pytest
 
 from pyfem.lined_tunnel import LinedTunnel, _deviatoric_terms, _lame
+from pyfem.scattering import LinedCavitySV
 
 P, K = 10.0e6, 0.5
 FAR = (-K * P, -P, 0.0)
 TUNNEL = LinedTunnel(5.0, 0.5, 28.0e9, 0.167, 8.0e9, 0.24)
+# The lined tunnel in place under a 2 Hz wave, two Q1 elements through the lining, against the exact
+# dynamic answer (pyfem.scattering.LinedCavitySV): measured +0.25 / +0.24 % in the peak and 0.38 / 0.41 %
+# over the history (lining / rock), where the quasi-static closed form is 1.2 % and 1.6-1.8 % away.
+EXACT_PEAK_TOLERANCE, EXACT_HISTORY_TOLERANCE = 0.015, 0.02
 
 
 def kirsch(r_over_a, theta):
@@ -162,7 +167,8 @@ def test_a_long_wave_loads_the_lining_in_place_as_the_closed_form(tmp_path):
     shear tau(t): the peak within 3 % (the quasi-static answer is itself ~1.5 % off the dynamic peak
     at 2 Hz for the unlined opening, docs/wall_stress_accuracy.md; workflows/lined_wall_dynamic.py
     measures 0.7 % at 1 Hz; measured here 1.2 %), and the concrete takes about five times the rock's hoop
-    stress."""
+    stress. Against the exact dynamic answer (the lined tunnel's series) the peak and the history are
+    within 0.25 % and 0.4 %."""
     import subprocess
     import sys
     from pathlib import Path
@@ -213,4 +219,12 @@ def test_a_long_wave_loads_the_lining_in_place_as_the_closed_form(tmp_path):
               f"history error {np.linalg.norm(hoop - exact) / np.linalg.norm(exact):.4f}")
         assert peaks[name] == pytest.approx(np.abs(exact).max(), rel=0.03), name
         assert np.linalg.norm(hoop - exact) < 0.05 * np.linalg.norm(exact), name  # measured 1.6-1.8 %
+        # The exact dynamic answer (the lined tunnel's series): the mesh's error alone.
+        series = LinedCavitySV(b, t, 28.0e9, 0.167, 2500.0, 8.0e9, 0.24, 2600.0)
+        dynamic = series.hoop_stress_from_free_field(freefield, centre, data["t"], radius, math.radians(45.0))
+        peak_error = peaks[name] / np.abs(dynamic).max() - 1.0
+        history_error = np.linalg.norm(hoop - dynamic) / np.linalg.norm(dynamic)
+        print(f"{name}: exact peak {np.abs(dynamic).max() / 1e6:.4f} MPa ({peak_error:+.2%}), "
+              f"history error {history_error:.4f}")
+        assert abs(peak_error) < EXACT_PEAK_TOLERANCE and history_error < EXACT_HISTORY_TOLERANCE, name
     assert 4.0 < peaks["lining"] / peaks["rock"] < 6.0
