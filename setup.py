@@ -18,10 +18,11 @@ from setuptools.command.build_py import build_py
 
 ROOT = Path(__file__).resolve().parent
 # The accuracy studies' results (workflows/accuracy_cost.py, wall_stress_accuracy.py, lining_stress_accuracy.py,
-# elliptical_opening.py), read by pyfem.accuracy.
+# elliptical_opening.py, interface_slip_accuracy.py), read by pyfem.accuracy.
 ACCURACY_RESULTS = [ROOT / "workflows" / "results" / name for name in ("accuracy_cost.csv", "wall_stress.csv",
                                                                         "lining_stress.csv",
-                                                                        "elliptical_opening.csv")]
+                                                                        "elliptical_opening.csv",
+                                                                        "interface_slip.csv")]
 
 
 class CMakeExtension(Extension):

@@ -19,7 +19,11 @@ the run took. This module turns that table into advice:
 * `curved_wall_size_for(error_budget)`: the element size at a non-circular wall, as a fraction of its
   smallest radius of curvature, that kept an elliptical opening's wall stress within the budget (the
   static excavation study, workflows/elliptical_opening.py, workflows/results/elliptical_opening.csv,
-  docs/elliptical_opening.md).
+  docs/elliptical_opening.md);
+* `interface_slip_advice(scene, model)`: per contact interface, its element size in elements per
+  shortest wavelength and what the slip study measured at that resolution for alike or dissimilar
+  rocks on its two sides (workflows/interface_slip_accuracy.py, workflows/results/interface_slip.csv,
+  docs/interface_slip_accuracy.md).
 
 Errors transfer between scenes through the elements per shortest wavelength (the
 dispersion error of a given element depends on h / wavelength); seconds do not
@@ -31,17 +35,21 @@ import csv
 import math
 from pathlib import Path
 
+import numpy as np
+
 from pyfem.material import Material
 
 DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "accuracy_cost.csv"
 WALL_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "wall_stress.csv"
 LINING_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "lining_stress.csv"
 ELLIPSE_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "elliptical_opening.csv"
+SLIP_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "interface_slip.csv"
 if not DEFAULT_RESULTS.is_file():  # an installed package (pip install .) carries a copy (setup.py)
     DEFAULT_RESULTS = Path(__file__).resolve().parent / "data" / "accuracy_cost.csv"
     WALL_RESULTS = Path(__file__).resolve().parent / "data" / "wall_stress.csv"
     LINING_RESULTS = Path(__file__).resolve().parent / "data" / "lining_stress.csv"
     ELLIPSE_RESULTS = Path(__file__).resolve().parent / "data" / "elliptical_opening.csv"
+    SLIP_RESULTS = Path(__file__).resolve().parent / "data" / "interface_slip.csv"
 # The highest frequency with energy in a Ricker wavelet, in units of its peak frequency f0:
 # the amplitude spectrum (f/f0)^2 exp(-(f/f0)^2) at 2.5 f0 is 3 % of its peak at f0.
 RICKER_MAX_FREQUENCY_FACTOR = 2.5
@@ -303,6 +311,101 @@ def curved_wall_size_for(error_budget: float, results_csv=ELLIPSE_RESULTS) -> li
         error = errors[h_over_rho] if meeting else min(errors.values())
         advice.append({"order": order, "h_over_rho": h_over_rho, "error": error})
     return advice
+
+
+def slip_error_at(per_wavelength: float, dissimilar: bool, results_csv=SLIP_RESULTS) -> dict:
+    """What the interface-slip study measured for Q1 at a resolution: the peak slip's error against
+    its finest mesh, interpolated in log(elements per wavelength) between the sizes studied (held at
+    the ends), for an interface between dissimilar rocks ("bimaterial") or alike ones.
+
+    Returns:
+        {"peak_error": signed relative error, "history_error", "per_wavelength": the resolution
+        asked, "studied": (smallest, largest) resolution of the rows used}.
+
+    Raises:
+        ValueError: a resolution that is not a positive number, or no such rows in the results.
+    """
+    if not (isinstance(per_wavelength, (int, float)) and math.isfinite(per_wavelength) and per_wavelength > 0):
+        raise ValueError(f"per_wavelength = {per_wavelength!r}: allowed is a positive number")
+    contrast = "bimaterial" if dissimilar else "homogeneous"
+    with open(results_csv, newline="") as stream:
+        rows = [row for row in csv.DictReader(stream) if row["contrast"] == contrast and int(row["order"]) == 1
+                and float(row["safety"]) == 0.8 and row["peak_error"] not in ("", "nan")
+                and float(row["history_error"]) > 0.0]
+    if not rows:
+        raise ValueError(f"{results_csv}: no Q1 {contrast} rows; run workflows/interface_slip_accuracy.py")
+    rows.sort(key=lambda row: float(row["per_wavelength"]))
+    x = [math.log(float(row["per_wavelength"])) for row in rows]
+    where = min(max(math.log(per_wavelength), x[0]), x[-1])
+    peak = float(np.interp(where, x, [float(row["peak_error"]) for row in rows]))
+    history = float(np.interp(where, x, [float(row["history_error"]) for row in rows]))
+    return {"peak_error": peak, "history_error": history, "per_wavelength": per_wavelength,
+            "studied": (float(rows[0]["per_wavelength"]), float(rows[-1]["per_wavelength"]))}
+
+
+def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
+    """Per contact interface of a prepared model: the rocks on its two sides, its element size (the
+    median spacing of its pairs times the order), the elements per shortest shear wavelength of
+    the slower side at the wave's highest frequency, and what the slip study measured at that
+    resolution (`slip_error_at`). {} without contact pairs or a wave.
+
+    Returns:
+        interface names (comma-separated where their lines are the same) -> one line for ``pyfem check``.
+    """
+    pairs = getattr(model, "pairs", None)
+    if pairs is None or len(pairs) == 0 or scene.get("wave") is None:
+        return {}
+    frequency = highest_frequency(scene)
+    n_basis = model.V.element.basix_element.dim
+    cells = model.V.dofmap.list.array.reshape(-1, n_basis)
+    region_of_cell = np.full(len(cells), -1, dtype=np.int64)
+    names = {tag: name for name, tag in model.regions.items()}
+    region_of_cell[model.cell_tags.indices[model.cell_tags.indices < len(cells)]] = \
+        model.cell_tags.values[model.cell_tags.indices < len(cells)]
+    node_region = np.full(int(cells.max()) + 1, -1, dtype=np.int64)
+    node_region[cells.ravel()] = np.repeat(region_of_cell, n_basis)
+    order = int(scene["mesh"]["order"])
+    advice = {}
+    for name in pairs.names:
+        chosen = pairs.of_interface(name)
+        if len(chosen) == 0:
+            continue
+        sides = [names.get(int(tag)) for tag in (np.bincount(node_region[pairs.nodes[chosen, k]] + 1).argmax() - 1
+                                                 for k in (0, 1))]
+        tables = [scene["materials"].get(side) or {} for side in sides]
+        constants = [tuple(table.get(key) for key in ("E", "nu", "rho")) for table in tables]
+        if any(value is None for values in constants for value in values):
+            continue
+        dissimilar = constants[0] != constants[1]
+        speed = min(Material.from_scene(side, table).s_wave_speed for side, table in zip(sides, tables))
+        if len(chosen) < 2:
+            continue
+        # The node spacing along the interface: the median distance from each pair to its nearest
+        # neighbour of the same interface (h for Q1, h / 2 for Q2).
+        from scipy.spatial import cKDTree
+        spacing = cKDTree(pairs.coords[chosen]).query(pairs.coords[chosen], k=2)[0][:, 1]
+        h, coarse = float(np.median(spacing)) * order, float(np.percentile(spacing, 90)) * order
+        per_wavelength = speed / frequency / h
+        try:
+            measured = slip_error_at(per_wavelength, dissimilar, results_csv)
+        except (ValueError, FileNotFoundError) as error:
+            advice[name] = f"{sides[0]} | {sides[1]}: no slip advice ({error})"
+            continue
+        low, high = measured["studied"]
+        clipped = "" if low * (1 - 1e-3) <= per_wavelength <= high * (1 + 1e-3) else f" (outside the {low:.3g}-{high:.3g} studied: its end)"
+        kind = "dissimilar rocks" if dissimilar else "alike rocks"
+        coarser = f" (a tenth of its pairs above {coarse:.3g} m)" if coarse > 1.5 * h else ""
+        advice[name] = (f"{sides[0]} | {sides[1]} ({kind}), h ~ {h:.3g} m{coarser}, {per_wavelength:.3g} elements per shortest "
+                        f"wavelength {speed / frequency:.4g} m: the slip study measured the peak slip "
+                        f"{100 * measured['peak_error']:+.2g} % and its history {100 * measured['history_error']:.2g} % "
+                        f"off at this resolution{clipped}"
+                        + ("; between dissimilar rocks slip converges slowly" if dissimilar else "")
+                        + " (docs/interface_slip_accuracy.md)")
+    # Interfaces with the same line are named together.
+    grouped = {}
+    for name, text in advice.items():
+        grouped.setdefault(text, []).append(name)
+    return {", ".join(names): text for text, names in grouped.items()}
 
 
 def lining_elements_for(error_budget: float, results_csv=LINING_RESULTS) -> dict:

@@ -702,6 +702,15 @@ def plan(scene: Scene) -> dict:
     return simulation_plan(prepare(scene, solve_static=False, preview_levels=True))
 
 
+def interface_slip_plan(scene: Scene, model) -> dict:
+    """{"interface slip": {name: what the slip study says at its resolution}} of a contact scene with
+    a wave (pyfem.accuracy.interface_slip_advice), else {}."""
+    from pyfem.accuracy import interface_slip_advice
+
+    advice = interface_slip_advice(scene, model)
+    return {"interface slip": advice} if advice else {}
+
+
 def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     """The plan of a prepared simulation (`plan`; `run` prints it before the time loop).
 
@@ -752,6 +761,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         **lts_preview_plan(simulation, {name: entry["ms_per_step"] for name, entry in phases.items()}),
         **element_loop,
         **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
+        **interface_slip_plan(scene, model),
         "steps": simulation.n_steps,
         "memory": f"{memory_estimate(simulation) / 2**20:.1f} MiB",
         "time per step": f"{per_step * 1e3:.3f} ms (measured over {trial_steps} steps, from rest): "

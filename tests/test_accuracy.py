@@ -232,3 +232,40 @@ def test_curved_wall_advice_takes_the_largest_size_whose_finer_sizes_all_met_the
     assert study == {0.05: [(1, 0.24), (2, 0.24)], 0.01: [(1, 0.06), (2, 0.12)]}
     with pytest.raises(ValueError, match="error_budget"):
         accuracy.curved_wall_size_for(0.0, path)
+
+
+def test_slip_advice_reads_the_interface_resolution_and_the_rocks_on_its_sides(tmp_path):
+    """pyfem check's interface line: the two-layer contact scene (sandstone under the softer rock, 5 m
+    elements) is 9.06 elements per shortest wavelength, dissimilar, where the slip study measured the
+    peak slip 25 % low; the same interface between layers of one rock is called alike. slip_error_at
+    interpolates in log(resolution) between the rows of a table and holds its ends."""
+    from pyfem import solver
+    from pyfem.scene import load_scene
+
+    columns = ["contrast", "order", "safety", "per_wavelength", "peak_error", "history_error"]
+    path = tmp_path / "interface_slip.csv"
+    with open(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=columns)
+        writer.writeheader()
+        for per_wavelength, peak in ((10.0, -0.2), (40.0, -0.05), (160.0, -0.01)):
+            writer.writerow({"contrast": "bimaterial", "order": 1, "safety": 0.8, "per_wavelength": per_wavelength,
+                             "peak_error": peak, "history_error": 2.0 * abs(peak)})
+        writer.writerow({"contrast": "bimaterial", "order": 1, "safety": 0.8, "per_wavelength": 320.0,
+                         "peak_error": 0.0, "history_error": 0.0})   # the reference row: not used
+    assert accuracy.slip_error_at(20.0, True, path)["peak_error"] == pytest.approx(-0.125)
+    assert accuracy.slip_error_at(5.0, True, path)["peak_error"] == pytest.approx(-0.2)
+    assert accuracy.slip_error_at(640.0, True, path) == {"peak_error": -0.01, "history_error": 0.02,
+                                                          "per_wavelength": 640.0, "studied": (10.0, 160.0)}
+    with pytest.raises(ValueError, match="homogeneous"):
+        accuracy.slip_error_at(20.0, False, path)
+
+    scene_path = accuracy.DEFAULT_RESULTS.parents[1] / "scenes" / "contact_two_layer_sv.toml"
+    scene = load_scene(scene_path)
+    advice = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model)
+    (names, text), = advice.items()
+    print(names, text)
+    assert names == "interface_1" and "sandstone | mudstone (dissimilar rocks), h ~ 5 m" in text
+    assert "9.06 elements per shortest wavelength" in text and "peak slip -25 %" in text
+    scene["materials"]["mudstone"] = dict(scene["materials"]["sandstone"])
+    (_, text), = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model).items()
+    assert "(alike rocks)" in text and "converges slowly" not in text
