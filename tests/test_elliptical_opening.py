@@ -12,15 +12,13 @@ curvature is 2.5 m) in a plane-strain slab 480 x 480 m, 2 m thick, meshed by mes
 most 3.9 p.
 """
 import math
-import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from pyfem import solver
 from pyfem.elliptical_opening import EllipticalOpening, wall_errors
-from pyfem.scene import parse_scene
 
 ROCK = {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}
 P = 10.0e6
@@ -110,35 +108,24 @@ def test_displacements_through_hooke_give_the_stresses():
 
 
 @pytest.fixture(scope="module")
-def elliptical_mesh(tmp_path_factory):
-    path = tmp_path_factory.mktemp("ellipse") / "ellipse.msh"
-    subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(path), "--radius", str(HALF_WIDTH),
-                    "--height", str(HALF_HEIGHT), "--size", str(SECTION), "--filled", "--h-wall", "0.3"],
-                   check=True, timeout=300)
-    return path
+def study(tmp_path_factory):
+    """workflows/elliptical_opening.py (its mesh and scene) and a folder for its meshes."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflows"))
+    import elliptical_opening
 
-
-def excavated(mesh_file, order):
-    scene = parse_scene({
-        "title": "elliptical opening",
-        "mesh": {"builder": "file", "file": str(mesh_file), "order": order},
-        "materials": {"rock": dict(ROCK)},
-        "time": {"duration": 0.01},
-        "boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}},
-        "initial_stress": {"stress": [FAR[0], 0.5 * (FAR[0] + FAR[1]), FAR[1], 0.0, FAR[2], 0.0]},
-        "static": {"excavate": ["excavation"], "relaxation": 0.0},
-        "output": {"xdmf_interval": 0.0},
-    })
-    return solver.prepare(scene)
+    assert elliptical_opening.FAR_FIELD == FAR and elliptical_opening.SECTION == SECTION
+    assert elliptical_opening.SHAPES["ellipse"] == (HALF_WIDTH, HALF_HEIGHT)
+    return elliptical_opening, tmp_path_factory.mktemp("ellipse")
 
 
 @pytest.mark.parametrize("order", [1, pytest.param(2, marks=pytest.mark.slow)])
-def test_excavated_elliptical_opening_follows_the_closed_form(elliptical_mesh, order):
+def test_excavated_elliptical_opening_follows_the_closed_form(study, order):
     """Hoop stress in every cell on the wall (at its centroid) and the wall's displacement against the
     exact answer. Measured (h = 0.3 m at the wall, 0.12 of the crown's radius of curvature): Q1 1.19 %
     of the peak in the worst cell, the peak cell 0.67 %, the wall's displacement 1.14 %; Q2 0.92 %,
     0.97 %, 0.41 % (docs/elliptical_opening.md)."""
-    simulation = excavated(elliptical_mesh, order)
+    workflow, folder = study
+    simulation = workflow.excavate(workflow.mesh(folder, "ellipse", 0.3), order)   # h = 0.12 rho at the crown
     assert "excavation" not in simulation.model.regions
     opening = EllipticalOpening(HALF_WIDTH, HALF_HEIGHT, ROCK["E"], ROCK["nu"], centre=(SECTION / 2, SECTION / 2))
     errors = wall_errors(simulation, opening, FAR)

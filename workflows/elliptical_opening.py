@@ -17,7 +17,6 @@ Usage: /usr/bin/python3 workflows/elliptical_opening.py [--work DIR]
 from __future__ import annotations
 
 import argparse
-import csv
 import subprocess
 import sys
 import tempfile
@@ -30,6 +29,7 @@ sys.path.insert(0, str(ROOT))
 from pyfem import solver  # noqa: E402
 from pyfem.elliptical_opening import EllipticalOpening, wall_errors  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
+from study_csv import write_rows  # noqa: E402  (this script's folder is on sys.path)
 
 SECTION = 480.0
 ROCK = {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}
@@ -108,12 +108,7 @@ def main(argv=None) -> int:
     work = args.work or Path(tempfile.mkdtemp(prefix="elliptical_opening_"))
     work.mkdir(parents=True, exist_ok=True)
     rows = run(work)
-    RESULTS_CSV.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS_CSV, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({key: row[key] for key in COLUMNS})
+    write_rows(RESULTS_CSV, rows, COLUMNS)
     print(table(rows))
     return 0
 

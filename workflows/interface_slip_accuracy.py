@@ -29,8 +29,6 @@ of docs/interface_slip_accuracy.md (printed).
 from __future__ import annotations
 
 import argparse
-import csv
-import math
 import sys
 import tempfile
 from pathlib import Path
@@ -44,6 +42,7 @@ from pyfem import solver  # noqa: E402
 from pyfem.accuracy import highest_frequency, slowest_shear_speed  # noqa: E402
 from pyfem.scene import load_scene  # noqa: E402
 from wall_stress_accuracy import finished_run  # noqa: E402  (this script's folder is on sys.path)
+from study_csv import write_rows  # noqa: E402  (this script's folder is on sys.path)
 
 SCENE = ROOT / "workflows" / "scenes" / "contact_two_layer_sv.toml"
 CENTRE = (30.0, 0.0, 30.0)
@@ -130,12 +129,7 @@ def main(argv=None) -> int:
     work = args.work or Path(tempfile.mkdtemp(prefix="interface_slip_"))
     work.mkdir(parents=True, exist_ok=True)
     rows = run_study(work)
-    RESULTS_CSV.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS_CSV, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({key: (f"{row[key]:.6g}" if isinstance(row[key], float) else row[key]) for key in COLUMNS})
+    write_rows(RESULTS_CSV, rows, COLUMNS, compact=True)
     print(table(rows))
     return 0
 

@@ -32,7 +32,6 @@ Outputs: workflows/results/lined_wall_dynamic.csv and the table of docs/lined_tu
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import subprocess
 import sys
@@ -51,6 +50,7 @@ from pyfem.scene import parse_scene  # noqa: E402
 # monitor reading (this script's folder is on sys.path when it runs).
 from lining_stress_accuracy import CENTRE, LINING, LINING_T, RADIUS, ROCK, SECTION, closed_form  # noqa: E402
 from wall_stress_accuracy import THETA, finished_run, hoop_history  # noqa: E402
+from study_csv import write_rows  # noqa: E402  (this script's folder is on sys.path)
 
 OFFSET = 0.01  # m: the monitors' distance from the lining's inner face and from the bond
 RUNS = [(1, 2), (1, 4), (2, 2)]  # (order, elements through the lining): about 15 min on this machine
@@ -206,12 +206,7 @@ def main(argv=None) -> int:
         rows = run_study(work, runs=FULL_RUNS)
     else:
         rows = run_study(work)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    with open(args.out, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({key: (f"{row[key]:.6g}" if isinstance(row[key], float) else row[key]) for key in COLUMNS})
+    write_rows(args.out, rows, COLUMNS, compact=True)
     print(table(rows))
     return 0
 

@@ -18,7 +18,6 @@ Usage: /usr/bin/python3 workflows/lining_stress_accuracy.py [--work DIR]
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import subprocess
 import sys
@@ -35,6 +34,7 @@ from pyfem import solver  # noqa: E402
 from pyfem.elements import region_cells  # noqa: E402
 from pyfem.lined_tunnel import LinedTunnel  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
+from study_csv import write_rows  # noqa: E402  (this script's folder is on sys.path)
 
 RADIUS, SECTION, THICKNESS, LINING_T = 5.0, 240.0, 2.0, 0.5
 CENTRE = np.array([SECTION / 2, THICKNESS / 2, SECTION / 2])
@@ -128,12 +128,7 @@ def main(argv=None) -> int:
     work = args.work or Path(tempfile.mkdtemp(prefix="lining_stress_"))
     work.mkdir(parents=True, exist_ok=True)
     rows = run(work)
-    RESULTS_CSV.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS_CSV, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({key: row[key] for key in COLUMNS})
+    write_rows(RESULTS_CSV, rows, COLUMNS)
     print(table(rows))
     return 0
 

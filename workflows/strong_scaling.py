@@ -82,7 +82,7 @@ def main() -> None:
     record = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.machine()}, {os.cpu_count()} cores",
               "rows": rows}
     RESULTS.write_text(json.dumps(record, indent=1) + "\n")
-    print(f"\n| case | ranks x threads | ms per step | speed-up | exchange ms | merge ms | bytes/rank/step |")
+    print("\n| case | ranks x threads | ms per step | speed-up | exchange ms | merge ms | bytes/rank/step |")
     print("|---|---|---|---|---|---|---|")
     for row in rows:
         mpi = row["mpi"] or {}

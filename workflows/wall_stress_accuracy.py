@@ -39,7 +39,6 @@ Sample runs (from the repository root):
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import subprocess
@@ -54,6 +53,7 @@ sys.path.insert(0, str(ROOT))
 
 from pyfem import solver  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
+from study_csv import write_rows  # noqa: E402  (this script's folder is on sys.path)
 
 # ----------------------------------------------------------------------------- parameters
 RADIUS, SECTION, THICKNESS = 5.0, 120.0, 2.0
@@ -257,12 +257,7 @@ def run_study(sizes=WALL_SIZES, orders=ORDERS, frequencies=tuple(FREQUENCIES), w
 
 
 def write_csv(rows: list[dict], path: Path = RESULTS_CSV) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as stream:
-        writer = csv.DictWriter(stream, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({key: (f"{row[key]:.6g}" if isinstance(row[key], float) else row[key]) for key in COLUMNS})
+    write_rows(path, rows, COLUMNS, compact=True)
 
 
 def observed_orders(rows: list[dict], key: str = "history_error") -> dict:

@@ -1,0 +1,18 @@
+"""Writing a study's rows to its results CSV (workflows/results/), one helper for every accuracy study."""
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+
+def write_rows(path: Path, rows: list[dict], columns: list[str], compact: bool = False) -> None:
+    """Writes `rows` (dicts holding at least `columns`) to the CSV `path` (its folder made if needed),
+    the columns in that order; compact: floats with 6 significant digits, else in full."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=columns)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({key: (f"{row[key]:.6g}" if compact and isinstance(row[key], float) else row[key])
+                             for key in columns})
