@@ -381,6 +381,23 @@ clamped at 0, dv_t = |P_t (v_j - v_i)| (m/s) at the previous step (after its con
 Args:
     R0: limit of eta, in (0, 1].  lam: decay rate, >= 0.  duration: t_s (s), > 0.
     m: > 0.  n: slip-rate offset (m/s), > 0.  p: exponent, >= 0.)")
+      .def("set_normal_lag", &ContactPairs::set_normal_lag, py::arg("length"), py::arg("velocity"),
+           R"(Switches the normal-stress lag of the friction on (Prakash & Clifton; Cochard & Rice
+2000): each pair's effective normal force N* follows N as dN*/dt = -(|dv_t| + velocity) / length
+(N* - N), integrated exactly over a step; the friction limit and the sliding force use max(N*, 0).
+N* starts at the current N.
+
+Args:
+    length: L (m), > 0.  velocity: V* (m/s), >= 0.)")
+      .def(
+          "effective_normal",
+          [](const ContactPairs& contact) {
+            const auto& values = contact.effective_normal();
+            py::array_t<double> out(static_cast<py::ssize_t>(values.size()));
+            std::copy(values.begin(), values.end(), out.mutable_data());
+            return out;
+          },
+          "N* of every pair (N) with the normal lag on, else an empty array.")
       .def(
           "rebase",
           [](ContactPairs& contact, const py::object& u_object) {

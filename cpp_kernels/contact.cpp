@@ -180,6 +180,19 @@ void ContactPairs::set_deterioration(const DeteriorationParameters& parameters) 
   deterioration_on_ = true;
 }
 
+void ContactPairs::set_normal_lag(double length, double velocity) {
+  if (!(std::isfinite(length) && length > 0.0))
+    throw std::invalid_argument("normal lag length = " + std::to_string(length) +
+                                " must be finite and > 0 (m)");
+  if (!(std::isfinite(velocity) && velocity >= 0.0))
+    throw std::invalid_argument("normal lag velocity = " + std::to_string(velocity) +
+                                " must be finite and >= 0 (m/s)");
+  lag_on_ = true;
+  lag_length_ = length;
+  lag_velocity_ = velocity;
+  effective_normal_ = normal_force_;  // the current (static) state: no lag yet
+}
+
 void ContactPairs::check_nodes(std::int64_t n_nodes) const {
   for (std::int64_t p = 0; p < n_pairs_; ++p) {
     for (int side = 0; side < 2; ++side) {
@@ -250,6 +263,13 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
   double R[3];
   bool slipping = false;
   bool separated = false;
+  // N* of the normal lag over this step towards a target normal force (set_normal_lag).
+  const auto lagged = [&](double target) {
+    const double decay = std::exp(-(slip_rate_[p] + lag_velocity_) * dt / lag_length_);
+    return target + (effective_normal_[p] - target) * decay;
+  };
+  double effective_normal = 0.0;  // N* after this step (lag on), set in compression
+  bool in_compression = false;     // else (tension, open) N* goes towards 0
 
   if (state == kSeparated) {
     // Gap at n+2 if the pair keeps carrying nothing (R = -F0).
@@ -282,8 +302,15 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
         separated = true;
       }
     } else {
+      // The normal force the friction sees: N, or with the lag on N* (>= 0).
+      double N_friction = N;
+      if (lag_on_) {
+        effective_normal = lagged(N);
+        in_compression = true;
+        N_friction = std::max(effective_normal, 0.0);
+      }
       const double limit =
-          strength_.friction_static * N * D + (bond ? strength_.cohesion * D * area : 0.0);
+          strength_.friction_static * N_friction * D + (bond ? strength_.cohesion * D * area : 0.0);
       if (T_magnitude <= limit) {
         std::copy(R_stick, R_stick + 3, R);
         state = bond ? kBonded : kStick;
@@ -293,7 +320,7 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
         slipping = true;
         state = kSliding;
         bond = false;
-        const double slip_force = std::min(strength_.friction_dynamic * N * D, T_magnitude);
+        const double slip_force = std::min(strength_.friction_dynamic * N_friction * D, T_magnitude);
         double R_tangential[3], F0_tangential[3], W_inverse_R[3], W_inverse_n[3];
         tangential_part(n, F0, F0_tangential);
         for (int c = 0; c < 3; ++c)
@@ -363,6 +390,7 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
   normal_force_[p] = -dot(n, F);
   deterioration_[p] = D;
   dissipation_[p] = dissipation;
+  if (lag_on_) effective_normal_[p] = in_compression ? effective_normal : lagged(0.0);
 }
 
 void ContactPairs::rebase(const double* u) {
@@ -375,6 +403,7 @@ void ContactPairs::rebase(const double* u) {
       gap_offset_[p] += n[c] * (u[3 * j + c] - u[3 * i + c]);
     }
     slip_rate_[p] = 0.0;
+    if (lag_on_) effective_normal_[p] = -dot(n, static_force_.data() + 3 * p);
   }
   std::fill(node_force_.begin(), node_force_.end(), 0.0);
 }
@@ -391,6 +420,7 @@ void ContactPairs::save_state(StateArchive& archive, const std::string& prefix) 
   archive.put(prefix + "gap_offset", gap_offset_);
   archive.put(prefix + "static_force", static_force_);
   archive.put(prefix + "node_force", node_force_);
+  if (lag_on_) archive.put(prefix + "effective_normal", effective_normal_);
 }
 
 void ContactPairs::load_state(const StateArchive& archive, const std::string& prefix) {
@@ -409,6 +439,7 @@ void ContactPairs::load_state(const StateArchive& archive, const std::string& pr
   archive.get(prefix + "gap_offset", gap_offset_);
   archive.get(prefix + "static_force", static_force_);
   archive.get(prefix + "node_force", node_force_);
+  if (lag_on_) archive.get(prefix + "effective_normal", effective_normal_);
 }
 
 void ContactPairs::observe_velocity(const double* v) {

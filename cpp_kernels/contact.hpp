@@ -111,6 +111,17 @@ class ContactPairs {
   /// Switches D(t) on (absent: D = 1). Throws std::invalid_argument for a bad parameter.
   void set_deterioration(const DeteriorationParameters& parameters);
 
+  /// Switches the normal-stress lag of the friction on (Prakash & Clifton 1993, in the form of
+  /// Cochard & Rice 2000; absent: the friction limit uses the current N): each pair carries an
+  /// effective normal force N* that follows N as dN*/dt = -(|dv_t| + velocity) / length (N* - N),
+  /// integrated exactly over each step with N and dv_t held (N* = N + (N*_n - N) exp(-(|dv_t| +
+  /// velocity) dt / length)), and the friction limit and the sliding force use max(N*, 0) in place
+  /// of N; a tensile or separated pair pulls N* towards 0. N* starts at the pairs' current N (the
+  /// static state). length > 0 (m), velocity >= 0 (m/s), both finite; throws std::invalid_argument
+  /// otherwise. It regularises sliding between dissimilar solids, ill-posed with a friction that
+  /// follows N at once (docs/interface_slip_accuracy.md).
+  void set_normal_lag(double length, double velocity);
+
   /// Throws std::invalid_argument for a pair node outside [0, n_nodes) or a pair with i == j.
   void check_nodes(std::int64_t n_nodes) const;
 
@@ -122,7 +133,7 @@ class ContactPairs {
   /// Makes the current state the static state of a new run (the static stage's hand-over,
   /// pyfem/static.py): F0 becomes the total force F0 + R of the last correction, R 0, the normal
   /// gap n.(u_j - u_i) at u is kept as an offset (the new run's u starts from 0; an open pair
-  /// stays open by that gap), the slip rate 0; states, bonds and deterioration kept.
+  /// stays open by that gap), the slip rate 0, N* the new static N; states, bonds and deterioration kept.
   void rebase(const double* u);
 
   /// Normal gap offset g0 of every pair (m): the gap is g0 + n.(u_j - u_i); 0 unless rebased.
@@ -140,7 +151,7 @@ class ContactPairs {
   void add_last_forces(double* f) const;
 
   /// Writes every pair's state (bond, contact state, forces, D, slip rate, the rebased gap and
-  /// static force) under `prefix` (checkpoint, docs/checkpoint.md); load_state reads it back
+  /// static force, N* with the normal lag on) under `prefix` (checkpoint, docs/checkpoint.md); load_state reads it back
   /// into pairs built from the same interfaces. Throws std::invalid_argument for a missing block
   /// or one of another size.
   void save_state(StateArchive& archive, const std::string& prefix) const;
@@ -157,6 +168,8 @@ class ContactPairs {
   const std::vector<double>& tangential_force() const { return tangential_force_; }  // T (n,3)
   const std::vector<double>& contact_force() const { return contact_force_; }        // R (n,3)
   const std::vector<double>& deterioration() const { return deterioration_; }        // D
+  /// N* of every pair (N) with the normal lag on (set_normal_lag), else empty.
+  const std::vector<double>& effective_normal() const { return effective_normal_; }
   /// Delta = u_j - u_i of every pair into out (n_pairs, 3).
   void relative_displacement(const double* u, double* out) const;
   /// Number of pairs in each state 0..3.
@@ -179,6 +192,9 @@ class ContactPairs {
   ContactStrength strength_;
   bool deterioration_on_ = false;
   DeteriorationParameters deterioration_parameters_;
+  bool lag_on_ = false;
+  double lag_length_ = 0.0, lag_velocity_ = 0.0;
+  std::vector<double> effective_normal_;  // N* (N), with the normal lag on
 
   std::vector<std::int32_t> unique_nodes_;
   std::vector<std::int32_t> slot_;  // (n_pairs, 2): index of i and j in unique_nodes_

@@ -197,9 +197,12 @@ def main() -> None:
     parser.add_argument("--hollow", action="store_true",
                         help="with --lining: no core, the lined tunnel in place (a dynamic run without a static stage)")
     args = parser.parse_args()
-    build_tunnel_in_box(args.out, radius=args.radius, size=(args.size, args.size), h_wall=args.h_wall,
-                        h_far=args.h_far, name_surfaces=not args.unnamed, filled=args.filled, lining=args.lining,
-                        hollow=args.hollow, height=args.height)
+    try:
+        build_tunnel_in_box(args.out, radius=args.radius, size=(args.size, args.size), h_wall=args.h_wall,
+                            h_far=args.h_far, name_surfaces=not args.unnamed, filled=args.filled, lining=args.lining,
+                            hollow=args.hollow, height=args.height)
+    except ValueError as error:  # one line and exit 2
+        parser.error(str(error))
 
 
 if __name__ == "__main__":

@@ -214,15 +214,20 @@ def mesh_advice(scene: Scene) -> str:
             lines.append(f"  for a {100 * budget:g} % error: " + "; ".join(item["text"] for item in advice))
         except (ValueError, FileNotFoundError) as error:
             lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
+    has_opening = scene["mesh"]["builder"] != "box" or "static" in scene
     try:
+        if not has_opening:
+            raise LookupError("a box has no opening")
         sizes = {budget: curved_wall_size_for(budget) for budget in (0.05, 0.01)}
         measured = "; ".join(
             f"Q{five['order']} " + " / ".join("not reached" if a["h_over_rho"] is None else f"{a['h_over_rho']:g}"
                                               for a in (five, one))
             for five, one in zip(sizes[0.05], sizes[0.01]))
-        lines.append("  a non-circular wall: read the radius as the wall's smallest radius of curvature (an "
-                     "elliptical opening's static excavation against the exact answer kept 5 % / 1 % with h / rho "
+        lines.append("  a non-circular wall: read the radius as the wall's smallest radius of curvature (a static "
+                     "study: an elliptical opening's excavation against the exact answer kept 5 % / 1 % with h / rho "
                      f"at most {measured}; docs/elliptical_opening.md)")
+    except LookupError:
+        pass
     except (ValueError, FileNotFoundError) as error:
         lines.append(f"  a non-circular wall: no advice ({error})")
     if scene.get("static", {}).get("install"):

@@ -352,7 +352,13 @@ def state_rows(block: bytes, count: int) -> np.ndarray:
 
 
 CONTACT_PAIR_BLOCKS = ("state", "bond_intact", "normal_force", "tangential_force", "contact_force",
-                        "deterioration", "slip_rate", "gap_offset", "static_force")
+                        "deterioration", "slip_rate", "gap_offset", "static_force", "effective_normal")
+
+
+def pair_blocks(state: dict, prefix: str = "") -> list[str]:
+    """The per-pair blocks of CONTACT_PAIR_BLOCKS that a ContactPairs state holds (effective_normal
+    only with the normal lag on)."""
+    return [name for name in CONTACT_PAIR_BLOCKS if prefix + name in state]
 
 
 def unique_slots(pair_nodes: np.ndarray, selected: np.ndarray) -> np.ndarray:
@@ -384,7 +390,7 @@ def slice_state(serial: dict, template: dict, simulation, parts: Partition, mine
     if mine.pairs is not None:
         pair_nodes = simulation.contact_arrays["pairs"]
         n_pairs = len(pair_nodes)
-        for name in CONTACT_PAIR_BLOCKS:
+        for name in pair_blocks(serial, "contact/"):
             out["contact/" + name] = np.ascontiguousarray(state_rows(serial["contact/" + name], n_pairs)[mine.pairs]).tobytes()
         slots = unique_slots(pair_nodes, mine.pairs)
         node_force = np.frombuffer(serial["contact/node_force"], dtype=np.float64).reshape(-1, 3)
@@ -429,7 +435,7 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
     if shares[0].pairs is not None:
         pair_nodes = simulation.contact_arrays["pairs"]
         n_pairs = len(pair_nodes)
-        for name in CONTACT_PAIR_BLOCKS:
+        for name in pair_blocks(serial_template, "contact/"):
             rows = state_rows(serial_template["contact/" + name], n_pairs).copy()
             for s, mine in zip(states, shares):
                 if len(mine.pairs):

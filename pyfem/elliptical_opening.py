@@ -43,6 +43,8 @@ class EllipticalOpening:
         if not (half_width > 0.0 and half_height > 0.0):
             raise ValueError(f"EllipticalOpening: half_width = {half_width!r} and half_height = "
                              f"{half_height!r} must be > 0 (m)")
+        if not (E > 0.0 and -1.0 < nu < 0.5):
+            raise ValueError(f"EllipticalOpening: E = {E!r} must be > 0 (Pa) and nu = {nu!r} in (-1, 0.5)")
         self.a, self.b = float(half_width), float(half_height)
         self.R = 0.5 * (self.a + self.b)
         self.m = (self.a - self.b) / (self.a + self.b)
@@ -61,7 +63,11 @@ class EllipticalOpening:
         w = np.asarray(x, dtype=float) - self.centre.real + 1j * (np.asarray(z, dtype=float) - self.centre.imag)
         root = np.sqrt(w * w - 4.0 * self.R * self.R * self.m)
         plus, minus = (w + root) / (2.0 * self.R), (w - root) / (2.0 * self.R)
-        return np.where(np.abs(plus) >= np.abs(minus), plus, minus)
+        zeta = np.where(np.abs(plus) >= np.abs(minus), plus, minus)
+        if np.any(np.abs(zeta) < 1.0 - 1e-9):
+            raise ValueError("EllipticalOpening: a point lies inside the opening (the closed form holds on "
+                             "and outside its wall)")
+        return zeta
 
     def wall_point(self, theta) -> tuple[np.ndarray, np.ndarray]:
         """(x, z) of the wall point omega(e^{i theta}) = (x_c + a cos theta, z_c + b sin theta)."""
@@ -79,6 +85,8 @@ class EllipticalOpening:
     # -- the potentials -----------------------------------------------------------------------------
     @staticmethod
     def _far(far_field) -> tuple[float, complex]:
+        if len(far_field) != 3:
+            raise ValueError(f"EllipticalOpening: far_field = {far_field!r} must be (sigma_xx, sigma_zz, sigma_xz) (Pa)")
         sxx, szz, sxz = (float(value) for value in far_field)
         return 0.25 * (sxx + szz), complex(0.5 * (szz - sxx), sxz)
 
@@ -137,6 +145,7 @@ class EllipticalOpening:
         """The hoop stress (Pa) at the wall points omega(e^{i theta}) from Inglis' formula for a
         uniaxial far field, summed over the far field's two principal stresses (independent of the
         potentials above)."""
+        gamma, gamma_prime = self._far(far_field)   # checks it
         sxx, szz, sxz = (float(value) for value in far_field)
         mean, radius = 0.5 * (sxx + szz), math.hypot(0.5 * (sxx - szz), sxz)
         beta = 0.5 * math.atan2(sxz, 0.5 * (sxx - szz)) if radius > 0.0 else 0.0

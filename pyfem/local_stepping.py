@@ -350,14 +350,14 @@ def load_component_parts(whole, parts: list) -> None:
 def load_pair_parts(whole, parts: list, pair_nodes: np.ndarray) -> None:
     """Loads the state of `whole` (ContactPairs of all the model's pairs: the static stage's, rebased)
     into `parts` [(pair rows, ContactPairs)] (`LevelPairs.parts`); pair_nodes (n_pairs, 2)."""
-    from pyfem.distributed import CONTACT_PAIR_BLOCKS, state_rows, unique_slots
+    from pyfem.distributed import pair_blocks, state_rows, unique_slots
 
     state = whole.save_state()
     n_pairs = len(pair_nodes)
     node_force = np.frombuffer(state["node_force"], dtype=np.float64).reshape(-1, 3)
     for rows, contact in parts:
         out = dict(contact.save_state())
-        for name in CONTACT_PAIR_BLOCKS:
+        for name in pair_blocks(state):
             out[name] = np.ascontiguousarray(state_rows(state[name], n_pairs)[rows]).tobytes()
         out["node_force"] = np.ascontiguousarray(node_force[unique_slots(pair_nodes, rows)]).tobytes()
         contact.load_state(out)

@@ -200,7 +200,13 @@ class LinedCavitySV(CavitySV):
                  E: float, nu: float, rho: float):
         if not 0.0 < thickness < b:
             raise ValueError(f"LinedCavitySV: thickness = {thickness!r} must lie in (0, b = {b!r})")
-        super().__init__(b, E, nu, rho)
+        for name, value, allowed in (("E", E, E > 0.0), ("lining_E", lining_E, lining_E > 0.0),
+                                     ("nu", nu, -1.0 < nu < 0.5), ("lining_nu", lining_nu, -1.0 < lining_nu < 0.5),
+                                     ("rho", rho, rho > 0.0), ("lining_rho", lining_rho, lining_rho > 0.0)):
+            if not allowed:
+                raise ValueError(f"LinedCavitySV: {name} = {value!r} is out of range (E, rho > 0; nu in (-1, 0.5))")
+        super().__init__(b, E, nu, rho)   # self.a: the excavation radius b, which sets the number of terms
+        self.outer = b
         self.inner = b - thickness
         self.lining_mu = lining_E / (2.0 * (1.0 + lining_nu))
         self.lining_lam = lining_E * lining_nu / ((1.0 + lining_nu) * (1.0 - 2.0 * lining_nu))
@@ -227,7 +233,7 @@ class LinedCavitySV(CavitySV):
     def coefficients(self, omega: float, U: complex = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """(orders n, (len(n), 6) coefficients A, B, C, D, E, F) at angular frequency omega > 0."""
         n = np.arange(-self.terms(omega), self.terms(omega) + 1)
-        a, b = self.inner, self.a
+        a, b = self.inner, self.outer
         incident, rock = self._rock_terms(n, b, omega, U)
         lining_b = self._lining_terms(n, b, omega)
         lining_a = self._lining_terms(n, a, omega)
@@ -258,7 +264,7 @@ class LinedCavitySV(CavitySV):
         theta = np.atleast_1d(np.asarray(theta, dtype=float))
         n, x = self.coefficients(omega, U)
         modes = np.exp(1j * np.outer(theta, n))
-        if r >= self.a:
+        if r >= self.outer:
             incident, rock = self._rock_terms(n, r, omega, U)
             return {key: modes @ (incident[key] + x[:, 0] * rock[0][key] + x[:, 1] * rock[1][key])
                     for key in _FIELDS}

@@ -652,6 +652,10 @@ SCHEMA = Table({
             "n": Number("velocity offset n (m/s)", POSITIVE, default=0.02),
             "p": Number("velocity exponent p", NON_NEGATIVE, default=0.032),
         }, "[contact.deterioration]", presence="optional"),
+        "normal_lag": Table({
+            "length": Number("slip length L of the normal-stress lag (m)", POSITIVE),
+            "velocity": Number("reference velocity V* of the normal-stress lag (m/s)", NON_NEGATIVE),
+        }, "[contact.normal_lag]", presence="optional"),
     }, "[contact]", presence="optional"),
     "pair_monitor": TableList(Table({
         "name": Text("pair monitor name", filename_safe=True),

@@ -224,6 +224,9 @@ SWITCHES = {
     "wave.motion.record": "the input motion g(t) is a processed accelerogram",
     "static": "a static stage before the dynamic run: excavation, relaxation, support "
               "(docs/static.md)",
+    "contact.normal_lag": "the friction sees an effective normal force N* that follows N with a lag, "
+                          "dN*/dt = -(slip rate + velocity) / length (N* - N) (Prakash-Clifton; "
+                          "docs/interface_slip_accuracy.md)",
 }
 """What an optional table switches on when it is no effect of `EFFECT_ORDER`."""
 
@@ -250,6 +253,8 @@ PURPOSE = {
     "static.boundary.face.NAME": "the type of one truncation face during the static stage",
     "contact": "contact on the named interfaces (docs/method.md section 9)",
     "contact.deterioration": "the decay of the interfaces' strength",
+    "contact.normal_lag": "the lag of the normal force the friction sees (regularises sliding between "
+                          "dissimilar rocks)",
     "pair_monitor.0": "the contact pair nearest a point, its histories in pairs/NAME.csv",
 }
 """What each table is for (its description in the schema is only its name)."""

@@ -193,7 +193,8 @@ def contact_arguments(scene: Scene, model) -> dict:
 
     Returns:
         dict with pairs, area, normal, static_force, cohesion, tensile_strength,
-        friction_static, friction_dynamic and deterioration (R0, lam, duration, m, n, p) or None.
+        friction_static, friction_dynamic, deterioration (R0, lam, duration, m, n, p) or None and
+        normal_lag (length, velocity) or None.
     """
     from pyfem.initial_stress import pair_static_forces, stress_field_from_scene
 
@@ -214,6 +215,8 @@ def contact_arguments(scene: Scene, model) -> dict:
     if deterioration is not None:
         arguments["deterioration"] = (deterioration["R0"], deterioration["lambda"], earthquake_duration(scene),
                                       deterioration["m"], deterioration["n"], deterioration["p"])
+    lag = contact.get("normal_lag")
+    arguments["normal_lag"] = None if lag is None else (float(lag["length"]), float(lag["velocity"]))
     return arguments
 
 
@@ -600,6 +603,8 @@ def make_contact_pairs(arrays: dict):
                                     arrays["friction_dynamic"])
     if arrays["deterioration"] is not None:
         contact.set_deterioration(*arrays["deterioration"])
+    if arrays.get("normal_lag") is not None:
+        contact.set_normal_lag(*arrays["normal_lag"])
     return contact
 
 
@@ -707,7 +712,10 @@ def interface_slip_plan(scene: Scene, model) -> dict:
     a wave (pyfem.accuracy.interface_slip_advice), else {}."""
     from pyfem.accuracy import interface_slip_advice
 
-    advice = interface_slip_advice(scene, model)
+    try:
+        advice = interface_slip_advice(scene, model)
+    except Exception as error:  # advice only: it must never stop a run
+        return {"interface slip": f"no advice ({type(error).__name__}: {error})"}
     return {"interface slip": advice} if advice else {}
 
 

@@ -254,10 +254,13 @@ def test_slip_advice_reads_the_interface_resolution_and_the_rocks_on_its_sides(t
                          "peak_error": 0.0, "history_error": 0.0})   # the reference row: not used
     assert accuracy.slip_error_at(20.0, True, path)["peak_error"] == pytest.approx(-0.125)
     assert accuracy.slip_error_at(5.0, True, path)["peak_error"] == pytest.approx(-0.2)
-    assert accuracy.slip_error_at(640.0, True, path) == {"peak_error": -0.01, "history_error": 0.02,
-                                                          "per_wavelength": 640.0, "studied": (10.0, 160.0)}
+    assert accuracy.slip_error_at(640.0, True, path, order=2) == {
+        "peak_error": -0.01, "history_error": 0.02, "per_wavelength": 640.0, "studied": (10.0, 160.0),
+        "order": 1, "contrast": "bimaterial"}                      # no Q2 rows: Q1's, and it says so
     with pytest.raises(ValueError, match="homogeneous"):
         accuracy.slip_error_at(20.0, False, path)
+    with pytest.raises(ValueError, match="bimaterial, lag"):
+        accuracy.slip_error_at(20.0, True, path, lag=True)
 
     scene_path = accuracy.DEFAULT_RESULTS.parents[1] / "scenes" / "contact_two_layer_sv.toml"
     scene = load_scene(scene_path)
@@ -268,4 +271,8 @@ def test_slip_advice_reads_the_interface_resolution_and_the_rocks_on_its_sides(t
     assert "9.06 elements per shortest wavelength" in text and "peak slip -25 %" in text
     scene["materials"]["mudstone"] = dict(scene["materials"]["sandstone"])
     (_, text), = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model).items()
-    assert "(alike rocks)" in text and "converges slowly" not in text
+    assert "(alike rocks)" in text and "converges slowly" not in text and "(homogeneous, Q1)" in text
+    scene["materials"]["mudstone"]["E"] = 2.0e9
+    scene["contact"]["normal_lag"] = {"length": 0.01, "velocity": 1.0}
+    (_, text), = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model).items()
+    assert "(bimaterial, lag, Q1)" in text and "converges slowly" not in text

@@ -11,7 +11,9 @@ Tiny synthetic systems built here, each with an exact or independent answer:
   slip force is mu_d N D(t);
 - (e) the energy balance with contact_work is zero to round-off and friction dissipation >= 0;
 - (f) a 100:1 mass ratio and a chattering pair stay finite with bounded energy;
-- (g) bad arguments raise ValueError naming the parameter.
+- (g) bad arguments raise ValueError naming the parameter;
+- (h) the normal-stress lag (set_normal_lag): the friction follows the lagged N*, which obeys its
+  exact exponential while the pair sticks, and a lag too short to matter changes nothing.
 External forces enter through SeismicInput with tau = 0, P = force direction, Q = 0.
 """
 import numpy as np
@@ -523,3 +525,85 @@ def test_queries_before_any_step_report_the_static_state():
     assert np.array_equal(contact.state_counts(), [2, 0, 0, 0])
     u = np.arange(12.0)
     assert np.array_equal(contact.relative_displacement(u), [[3.0, 3.0, 3.0], [3.0, 3.0, 3.0]])
+
+
+# ---------------------------------------------------------------------------------------------
+# (h) the normal-stress lag of the friction (Prakash-Clifton; set_normal_lag)
+
+
+def pressed_and_sheared(lag=None, n_steps=None) -> tuple:
+    """The shear test's anchored pair (N0 = 100 N static) pressed by 100 N more along -z from t = 0
+    and sheared by a slow sin^2 load up to 150 N along x; mu_s 0.5, mu_d 0.4, no cohesion. Returns the
+    history and the pairs (`lag` = (length, velocity) or None)."""
+    dt, period = 1e-3, 2.0
+    stepper = anchored_pair_system(1.0, 1.0, 1e5, dt)
+    stepper.set_dashpots(np.array([0, 1], dtype=np.int32), np.array([300.0 * np.eye(3), 50.0 * np.eye(3)]))
+    stepper.add_seismic_input(force_input(*constant_history(), [(1, -100.0 * EZ)]))
+    stepper.add_seismic_input(force_input(*sin2_history(period, period), [(1, 150.0 * EX)]))
+    contact = one_pair(EZ, -100.0 * EZ, 1.0, 0.0, 0.0, 0.5, 0.4)
+    if lag is not None:
+        contact.set_normal_lag(*lag)
+    stepper.add_contact(contact)
+    return step_history(stepper, contact, n_steps or int(0.5 * period / dt), 6), contact
+
+
+def first_slip_load(history):
+    sliding = np.flatnonzero(history["state"] == 2)
+    assert len(sliding), "the pair slid"
+    return 150.0 * np.sin(np.pi * history["t"][sliding[0]] / 2.0) ** 2
+
+
+def test_normal_lag_sets_the_friction_by_the_lagged_normal_force():
+    """Pressed to N = 200 N, the pair slips at mu_s N = 100 N of shear without the lag; with a lag too
+    long to follow (L = 1e9 m, V* = 0) the friction still sees the static 100 N and it slips at 50 N;
+    with a lag too short to matter (L = 1e-12 m) the run is the lag-free run bit for bit."""
+    plain, _ = pressed_and_sheared()
+    assert np.abs(plain["N"][-200:] - 200.0).max() < 0.5        # the extra load arrived
+    assert first_slip_load(plain) == pytest.approx(100.0, rel=0.01)
+    held, contact = pressed_and_sheared(lag=(1.0e9, 0.0))
+    assert first_slip_load(held) == pytest.approx(50.0, rel=0.01)
+    assert contact.effective_normal()[0] == pytest.approx(100.0, rel=1e-6)
+    instant, contact = pressed_and_sheared(lag=(1.0e-12, 1.0))
+    for key in ("u", "v", "state", "N", "T", "R"):
+        assert np.array_equal(instant[key], plain[key]), key
+    assert contact.effective_normal()[0] == contact.normal_force()[0]
+    assert len(one_pair(EZ, -EZ).effective_normal()) == 0          # off: no state
+
+
+def test_normal_lag_follows_the_normal_force_as_its_exact_exponential():
+    """While the pair sticks (slip rate 0) N* obeys dN*/dt = -V*/L (N* - N): over each step with N
+    held, N*_{k+1} = N_{k+1} + (N*_k - N_{k+1}) exp(-V* dt / L), from N*_0 = 100 N; the recorded
+    normal forces give it to round-off."""
+    length, velocity, dt = 0.01, 0.2, 1e-3   # time constant 0.05 s: 50 steps
+    stepper = anchored_pair_system(1.0, 1.0, 1e5, dt)
+    stepper.set_dashpots(np.array([0, 1], dtype=np.int32), np.array([300.0 * np.eye(3), 50.0 * np.eye(3)]))
+    stepper.add_seismic_input(force_input(*constant_history(), [(1, -100.0 * EZ)]))
+    contact = one_pair(EZ, -100.0 * EZ, 1.0, 0.0, 0.0, 0.5, 0.4)
+    contact.set_normal_lag(length, velocity)
+    stepper.add_contact(contact)
+    u, v, a = np.zeros(6), np.zeros(6), np.zeros(6)
+    expected, got, t = 100.0, [], 0.0
+    decay = np.exp(-velocity * dt / length)
+    for _ in range(300):
+        t = stepper.run(u, v, a, 1, t)
+        N = contact.normal_force()[0]
+        expected = N + (expected - N) * decay
+        got.append((contact.effective_normal()[0], expected))
+    got = np.array(got)
+    assert np.all(contact.state() == 0)
+    assert got[-1, 0] > 190.0 and got[10, 0] < 150.0            # it rose to 200 N over ~0.05 s
+    assert np.abs(got[:, 0] - got[:, 1]).max() < 1e-12 * 200.0
+
+
+def test_normal_lag_is_saved_and_refused_when_bad():
+    contact = one_pair(EZ, -100.0 * EZ)
+    contact.set_normal_lag(0.01, 0.1)
+    state = contact.save_state()
+    assert "effective_normal" in state
+    other = one_pair(EZ, -100.0 * EZ)
+    other.set_normal_lag(0.01, 0.1)
+    other.load_state(state)
+    assert other.effective_normal()[0] == 100.0
+    for length, velocity, match in ((0.0, 0.1, "length"), (float("nan"), 0.1, "length"), (0.01, -1.0, "velocity")):
+        with pytest.raises(ValueError, match=match):
+            one_pair(EZ, -EZ).set_normal_lag(length, velocity)

@@ -25,7 +25,8 @@ TUNNEL = LinedTunnel(5.0, 0.5, 28.0e9, 0.167, 8.0e9, 0.24)
 # The lined tunnel in place under a 2 Hz wave, two Q1 elements through the lining, against the exact
 # dynamic answer (pyfem.scattering.LinedCavitySV): measured +0.25 / +0.24 % in the peak and 0.38 / 0.41 %
 # over the history (lining / rock), where the quasi-static closed form is 1.2 % and 1.6-1.8 % away.
-EXACT_PEAK_TOLERANCE, EXACT_HISTORY_TOLERANCE = 0.015, 0.02
+# Tighter than the quasi-static form's distance, so the series is what the test holds it to.
+EXACT_PEAK_TOLERANCE, EXACT_HISTORY_TOLERANCE = 0.006, 0.008
 
 
 def kirsch(r_over_a, theta):

@@ -13,7 +13,9 @@ carrying the free field of a vertically incident SV Ricker wavelet (f0 = 5 Hz, 5
 one element thick. The wave's shear exceeds the friction: the upper layer slides on the lower one,
 back and forth, and keeps a residual offset. As a control, the same interface between two layers of the
 same rock (the upper layer given the sandstone's constants: "homogeneous"): no material contrast across
-the sliding surface.
+the sliding surface. And the bimaterial interface with the friction's normal-stress lag on
+([contact.normal_lag], Prakash-Clifton: L = 1 cm, V* = 1 m/s, a lag of at most 10 ms): "bimaterial,
+lag"; and with a ten times shorter lag, L = 1 mm, on the three finest meshes: "bimaterial, lag 1 mm".
 
 Measured: the slip history (the tangential relative displacement along x) of the pair at the box's
 centre (x = 30 m, z = 30 m: a node of every mesh; pairs/I1.csv dux), its peak and its final value, against the finest
@@ -51,8 +53,15 @@ RUNS = [("bimaterial", 1, 5.0, 0.8), ("bimaterial", 1, 2.5, 0.8), ("bimaterial",
         ("bimaterial", 1, 0.625, 0.8), ("bimaterial", 1, 0.3125, 0.8), ("bimaterial", 1, 0.625, 0.4),
         ("bimaterial", 2, 5.0, 0.8), ("bimaterial", 2, 2.5, 0.8), ("bimaterial", 2, 1.25, 0.8),
         ("homogeneous", 1, 5.0, 0.8), ("homogeneous", 1, 2.5, 0.8), ("homogeneous", 1, 1.25, 0.8),
-        ("homogeneous", 1, 0.625, 0.8), ("homogeneous", 1, 0.3125, 0.8), ("homogeneous", 1, 0.625, 0.4)]
-REFERENCE = {"bimaterial": (1, 0.3125, 0.8), "homogeneous": (1, 0.3125, 0.8)}  # (order, h, safety)
+        ("homogeneous", 1, 0.625, 0.8), ("homogeneous", 1, 0.3125, 0.8), ("homogeneous", 1, 0.625, 0.4),
+        ("bimaterial, lag", 1, 5.0, 0.8), ("bimaterial, lag", 1, 2.5, 0.8), ("bimaterial, lag", 1, 1.25, 0.8),
+        ("bimaterial, lag", 1, 0.625, 0.8), ("bimaterial, lag", 1, 0.3125, 0.8), ("bimaterial, lag", 1, 0.625, 0.4),
+        ("bimaterial, lag 1 mm", 1, 1.25, 0.8), ("bimaterial, lag 1 mm", 1, 0.625, 0.8),
+        ("bimaterial, lag 1 mm", 1, 0.3125, 0.8)]
+REFERENCE = {"bimaterial": (1, 0.3125, 0.8), "homogeneous": (1, 0.3125, 0.8),
+             "bimaterial, lag": (1, 0.3125, 0.8), "bimaterial, lag 1 mm": (1, 0.3125, 0.8)}  # (order, h, safety)
+LAG = {"bimaterial, lag": {"length": 0.01, "velocity": 1.0},       # [contact.normal_lag] of those runs
+       "bimaterial, lag 1 mm": {"length": 0.001, "velocity": 1.0}}
 RESULTS_CSV = ROOT / "workflows" / "results" / "interface_slip.csv"
 COLUMNS = ["contrast", "order", "h", "safety", "per_wavelength", "peak_slip_cm", "final_slip_cm", "peak_error",
            "final_error", "history_error", "dofs", "steps", "loop_seconds"]
@@ -66,6 +75,8 @@ def scene(order: int, h: float, safety: float, contrast: str = "bimaterial"):
                  f"pair_monitor.0.point=[{CENTRE[0]}, {CENTRE[1]}, {CENTRE[2]}]"]
     for k, z in enumerate((20.0, 45.0, 60.0)):
         overrides.append(f"monitor.{k}.point=[30.0, 0.0, {z}]")
+    if contrast in LAG:
+        overrides += [f"contact.normal_lag.{key}={value}" for key, value in LAG[contrast].items()]
     scene_ = load_scene(SCENE, overrides)
     if contrast == "homogeneous":
         scene_["materials"]["mudstone"] = dict(scene_["materials"]["sandstone"])
@@ -87,7 +98,7 @@ def run_study(work: Path) -> list[dict]:
     rows, histories = [], {}
     for contrast, order, h, safety in RUNS:
         scene_ = scene(order, h, safety, contrast)
-        out = work / f"{contrast}_q{order}_h{h:g}_s{safety:g}"
+        out = work / f"{contrast.replace(', ', '_').replace(' ', '_')}_q{order}_h{h:g}_s{safety:g}"
         summary = finished_run(out) or solver.run(scene_, out)
         t, slip = slip_history(out)
         histories[(contrast, order, h, safety)] = (t, slip)
