@@ -216,6 +216,24 @@ def _wall_peak_error(row: dict) -> float:
     return max(float(row["peak_error"]), float(row.get("racking_peak_error") or 0.0))
 
 
+def coarsest_within(errors: dict, error_budget: float, finer_is_smaller: bool = True):
+    """The coarsest mesh of a study whose error, and the error of every finer mesh studied, is within
+    the budget (an error is not always monotone in the size, so a coarse size that happens to meet it
+    is not advised if a finer one misses it); None when even the finest misses it.
+
+    Args:
+        errors: size -> error; the size is an element size (finer: smaller) or, with
+            finer_is_smaller=False, a count such as elements through a lining (finer: larger).
+        error_budget: the largest acceptable error.
+    """
+    best = None
+    for size in sorted(errors, reverse=not finer_is_smaller):   # finest first
+        if errors[size] > error_budget:
+            break
+        best = size
+    return best
+
+
 def wall_size_for(error_budget: float, results_csv=WALL_RESULTS) -> list[dict]:
     """The largest element size at a cavern wall, per order, that kept the peaks of the wall's hoop
     stress and of the opening's racking (the crown relative to the invert, where the study's CSV has
@@ -258,10 +276,8 @@ def wall_size_for(error_budget: float, results_csv=WALL_RESULTS) -> list[dict]:
                 by_size.setdefault(float(row["h_over_a"]), []).append(row)
         complete = {h: series for h, series in by_size.items() if len(series) == len(waves)}
         worst = {h: max(series, key=_wall_peak_error) for h, series in complete.items()}
-        meeting = [h for h in worst if all(_wall_peak_error(worst[finer]) <= error_budget
-                                           for finer in worst if finer <= h)]
-        if meeting:
-            h_over_a = max(meeting)
+        h_over_a = coarsest_within({h: _wall_peak_error(row) for h, row in worst.items()}, error_budget)
+        if h_over_a is not None:
             error = _wall_peak_error(worst[h_over_a])
             what = "hoop stress and racking" if rows[0].get("racking_peak_error") else "hoop stress"
             text = (f"Q{order}: at most {h_over_a:.3g} x the opening's radius at the wall (peak error of the "
@@ -306,9 +322,8 @@ def curved_wall_size_for(error_budget: float, results_csv=ELLIPSE_RESULTS) -> li
     advice = []
     for order in sorted({int(row["order"]) for row in rows}):
         errors = {float(row["h_over_rho"]): float(row["worst"]) for row in rows if int(row["order"]) == order}
-        meeting = [h for h in errors if all(errors[finer] <= error_budget for finer in errors if finer <= h)]
-        h_over_rho = max(meeting) if meeting else None
-        error = errors[h_over_rho] if meeting else min(errors.values())
+        h_over_rho = coarsest_within(errors, error_budget)
+        error = errors[h_over_rho] if h_over_rho is not None else min(errors.values())
         advice.append({"order": order, "h_over_rho": h_over_rho, "error": error})
     return advice
 
@@ -362,14 +377,13 @@ def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
     if pairs is None or len(pairs) == 0 or scene.get("wave") is None:
         return {}
     frequency = highest_frequency(scene)
+    from pyfem.output import cell_regions
+
     n_basis = model.V.element.basix_element.dim
     cells = model.V.dofmap.list.array.reshape(-1, n_basis)
-    region_of_cell = np.full(len(cells), -1, dtype=np.int64)
     names = {tag: name for name, tag in model.regions.items()}
-    region_of_cell[model.cell_tags.indices[model.cell_tags.indices < len(cells)]] = \
-        model.cell_tags.values[model.cell_tags.indices < len(cells)]
     node_region = np.full(int(cells.max()) + 1, -1, dtype=np.int64)
-    node_region[cells.ravel()] = np.repeat(region_of_cell, n_basis)
+    node_region[cells.ravel()] = np.repeat(cell_regions(model).astype(np.int64), n_basis)
     order = int(scene["mesh"]["order"])
     advice = {}
     for name in pairs.names:
@@ -443,9 +457,8 @@ def lining_elements_for(error_budget: float, results_csv=LINING_RESULTS) -> dict
     per_order = []
     for order in sorted({int(row["order"]) for row in rows}):
         errors = {int(row["through"]): abs(float(row["peak_error"])) for row in rows if int(row["order"]) == order}
-        meeting = [n for n in errors if all(errors[finer] <= error_budget for finer in errors if finer >= n)]
-        if meeting:
-            through = min(meeting)
+        through = coarsest_within(errors, error_budget, finer_is_smaller=False)
+        if through is not None:
             text = f"Q{order}: {through} elements through the lining (peak read {100 * errors[through]:.2g} % low)"
             per_order.append({"order": order, "through": through, "error": errors[through], "text": text})
         else:
