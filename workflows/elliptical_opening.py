@@ -16,10 +16,8 @@ Usage: /usr/bin/python3 workflows/elliptical_opening.py [--work DIR]
 """
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -29,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 from pyfem import solver  # noqa: E402
 from pyfem.elliptical_opening import EllipticalOpening, wall_errors  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
-from study_csv import write_rows  # noqa: E402  (this script's folder is on sys.path)
+from study_csv import run_study_main  # noqa: E402  (this script's folder is on sys.path)
 
 SECTION = 480.0
 ROCK = {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}
@@ -102,15 +100,8 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--work", type=Path, default=None, help="folder for the meshes (kept)")
-    args = parser.parse_args(argv)
-    work = args.work or Path(tempfile.mkdtemp(prefix="elliptical_opening_"))
-    work.mkdir(parents=True, exist_ok=True)
-    rows = run(work)
-    write_rows(RESULTS_CSV, rows, COLUMNS)
-    print(table(rows))
-    return 0
+    return run_study_main(__doc__.splitlines()[0], run, table, RESULTS_CSV, COLUMNS, "elliptical_opening_",
+                          argv)
 
 
 if __name__ == "__main__":

@@ -30,9 +30,7 @@ of docs/interface_slip_accuracy.md (printed).
 """
 from __future__ import annotations
 
-import argparse
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +42,7 @@ from pyfem import solver  # noqa: E402
 from pyfem.accuracy import highest_frequency, slowest_shear_speed  # noqa: E402
 from pyfem.scene import load_scene  # noqa: E402
 from wall_stress_accuracy import finished_run  # noqa: E402  (this script's folder is on sys.path)
-from study_csv import write_rows  # noqa: E402  (this script's folder is on sys.path)
+from study_csv import run_study_main  # noqa: E402  (this script's folder is on sys.path)
 
 SCENE = ROOT / "workflows" / "scenes" / "contact_two_layer_sv.toml"
 CENTRE = (30.0, 0.0, 30.0)
@@ -134,15 +132,8 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--work", type=Path, default=None, help="folder of the runs")
-    args = parser.parse_args(argv)
-    work = args.work or Path(tempfile.mkdtemp(prefix="interface_slip_"))
-    work.mkdir(parents=True, exist_ok=True)
-    rows = run_study(work)
-    write_rows(RESULTS_CSV, rows, COLUMNS, compact=True)
-    print(table(rows))
-    return 0
+    return run_study_main(__doc__.splitlines()[0], run_study, table, RESULTS_CSV, COLUMNS, "interface_slip_",
+                          argv, compact=True)
 
 
 if __name__ == "__main__":

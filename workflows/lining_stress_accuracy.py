@@ -17,11 +17,9 @@ Usage: /usr/bin/python3 workflows/lining_stress_accuracy.py [--work DIR]
 """
 from __future__ import annotations
 
-import argparse
 import math
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -34,7 +32,7 @@ from pyfem import solver  # noqa: E402
 from pyfem.elements import region_cells  # noqa: E402
 from pyfem.lined_tunnel import LinedTunnel  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
-from study_csv import write_rows  # noqa: E402  (this script's folder is on sys.path)
+from study_csv import run_study_main  # noqa: E402  (this script's folder is on sys.path)
 
 RADIUS, SECTION, THICKNESS, LINING_T = 5.0, 240.0, 2.0, 0.5
 CENTRE = np.array([SECTION / 2, THICKNESS / 2, SECTION / 2])
@@ -122,15 +120,8 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--work", type=Path, default=None, help="folder for the meshes (kept)")
-    args = parser.parse_args(argv)
-    work = args.work or Path(tempfile.mkdtemp(prefix="lining_stress_"))
-    work.mkdir(parents=True, exist_ok=True)
-    rows = run(work)
-    write_rows(RESULTS_CSV, rows, COLUMNS)
-    print(table(rows))
-    return 0
+    return run_study_main(__doc__.splitlines()[0], run, table, RESULTS_CSV, COLUMNS, "lining_stress_",
+                          argv)
 
 
 if __name__ == "__main__":

@@ -16,3 +16,22 @@ def write_rows(path: Path, rows: list[dict], columns: list[str], compact: bool =
         for row in rows:
             writer.writerow({key: (f"{row[key]:.6g}" if compact and isinstance(row[key], float) else row[key])
                              for key in columns})
+
+
+def run_study_main(description: str, run, table, results_csv: Path, columns: list[str], prefix: str,
+                   argv=None, compact: bool = False) -> int:
+    """The command line of a study whose only option is --work (the folder of its meshes and runs, a
+    temporary one by default): runs `run(work)`, writes its rows to `results_csv` and prints
+    `table(rows)`."""
+    import argparse
+    import tempfile
+
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--work", type=Path, default=None, help="folder for the meshes and runs (kept)")
+    args = parser.parse_args(argv)
+    work = args.work or Path(tempfile.mkdtemp(prefix=prefix))
+    work.mkdir(parents=True, exist_ok=True)
+    rows = run(work)
+    write_rows(results_csv, rows, columns, compact)
+    print(table(rows))
+    return 0
