@@ -217,6 +217,13 @@ auto stepper_load_state() {
   return [](T& stepper, const py::dict& blocks) { stepper.load_state(dict_archive(blocks)); };
 }
 
+/// A new float64 array (n,) holding a copy of `values` (the per-pair outputs of ContactPairs).
+py::array_t<double> array_copy(const std::vector<double>& values) {
+  py::array_t<double> out(static_cast<py::ssize_t>(values.size()));
+  std::copy(values.begin(), values.end(), out.mutable_data());
+  return out;
+}
+
 py::dict phase_dict(const PhaseTimes& times) {
   py::dict phases;
   phases["update"] = times.update;
@@ -391,12 +398,7 @@ Args:
     length: L (m), > 0.  velocity: V* (m/s), >= 0.)")
       .def(
           "effective_normal",
-          [](const ContactPairs& contact) {
-            const auto& values = contact.effective_normal();
-            py::array_t<double> out(static_cast<py::ssize_t>(values.size()));
-            std::copy(values.begin(), values.end(), out.mutable_data());
-            return out;
-          },
+          [](const ContactPairs& contact) { return array_copy(contact.effective_normal()); },
           "N* of every pair (N) with the normal lag on, else an empty array.")
       .def(
           "rebase",
@@ -414,12 +416,7 @@ F0 becomes the total force F0 + R of the last step, R 0, the normal gap n.(u_j -
 slip rate 0; states, bonds and deterioration settings kept.)")
       .def(
           "gap_offset",
-          [](const ContactPairs& contact) {
-            const auto& values = contact.gap_offset();
-            py::array_t<double> out(static_cast<py::ssize_t>(values.size()));
-            std::copy(values.begin(), values.end(), out.mutable_data());
-            return out;
-          },
+          [](const ContactPairs& contact) { return array_copy(contact.gap_offset()); },
           "Normal gap at u = 0 of every pair (m; 0 unless rebased): new float64 array (n_pairs,).")
       .def(
           "static_force",
@@ -453,12 +450,7 @@ slip rate 0; states, bonds and deterioration settings kept.)")
           "Whether cohesion and tensile strength are intact: new bool array (n_pairs,).")
       .def(
           "normal_force",
-          [](const ContactPairs& contact) {
-            const auto& N = contact.normal_force();
-            py::array_t<double> out(static_cast<py::ssize_t>(N.size()));
-            std::copy(N.begin(), N.end(), out.mutable_data());
-            return out;
-          },
+          [](const ContactPairs& contact) { return array_copy(contact.normal_force()); },
           "Total (static + dynamic) normal force N = -n.F on node i (N), compression positive: "
           "new float64 array (n_pairs,).")
       .def(
@@ -484,12 +476,7 @@ slip rate 0; states, bonds and deterioration settings kept.)")
           "force being F0 + R: new float64 array (n_pairs, 3).")
       .def(
           "deterioration",
-          [](const ContactPairs& contact) {
-            const auto& D = contact.deterioration();
-            py::array_t<double> out(static_cast<py::ssize_t>(D.size()));
-            std::copy(D.begin(), D.end(), out.mutable_data());
-            return out;
-          },
+          [](const ContactPairs& contact) { return array_copy(contact.deterioration()); },
           "Deterioration coefficient D of the last step (1 before any step or when off): new "
           "float64 array (n_pairs,).")
       .def(
