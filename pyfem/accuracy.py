@@ -134,8 +134,7 @@ def recommend(error_budget: float, results_csv=DEFAULT_RESULTS, order: int | Non
         ValueError: the budget is not a positive number, the study has no run of `order`, or no
             run of the study meets it (the message gives the smallest error measured).
     """
-    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
-        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+    require_budget(error_budget)
     rows = [r for r in read_results(results_csv) if order is None or r["order"] == order]
     if not rows:
         raise ValueError(f"order = {order!r}: the study has no run of this order; allowed: "
@@ -216,6 +215,12 @@ def _wall_peak_error(row: dict) -> float:
     return max(float(row["peak_error"]), float(row.get("racking_peak_error") or 0.0))
 
 
+def require_budget(error_budget) -> None:
+    """Raises ValueError unless the error budget is a positive finite number (e.g. 0.05)."""
+    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
+        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+
+
 def coarsest_within(errors: dict, error_budget: float, finer_is_smaller: bool = True):
     """The coarsest mesh of a study whose error, and the error of every finer mesh studied, is within
     the budget (an error is not always monotone in the size, so a coarse size that happens to meet it
@@ -257,8 +262,7 @@ def wall_size_for(error_budget: float, results_csv=WALL_RESULTS) -> list[dict]:
     Raises:
         ValueError: a budget that is not a positive number, or no study results.
     """
-    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
-        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+    require_budget(error_budget)
     with open(results_csv, newline="") as stream:
         rows = [row for row in csv.DictReader(stream) if row["reference"] == "Pao-Mow"]
     if not rows:
@@ -313,8 +317,7 @@ def curved_wall_size_for(error_budget: float, results_csv=ELLIPSE_RESULTS) -> li
     Raises:
         ValueError: a budget that is not a positive number, or no ellipse rows in the results.
     """
-    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
-        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+    require_budget(error_budget)
     with open(results_csv, newline="") as stream:
         rows = [row for row in csv.DictReader(stream) if row["shape"] == "ellipse"]
     if not rows:
@@ -366,7 +369,8 @@ def slip_error_at(per_wavelength: float, dissimilar: bool, results_csv=SLIP_RESU
 
 def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
     """Per contact interface of a prepared model: the rocks on its two sides, its element size (the
-    median spacing of its pairs times the order), the elements per shortest shear wavelength of
+    median over its pairs of sqrt(nearest x third-nearest neighbour distance), times the order), the
+    elements per shortest shear wavelength of
     the slower side at the wave's highest frequency, and what the slip study measured at that
     resolution (`slip_error_at`). {} without contact pairs or a wave.
 
@@ -388,7 +392,7 @@ def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
     advice = {}
     for name in pairs.names:
         chosen = pairs.of_interface(name)
-        if len(chosen) == 0:
+        if len(chosen) < 2:   # no spacing to measure
             continue
         sides = [names.get(int(tag)) for tag in (np.bincount(node_region[pairs.nodes[chosen, k]] + 1).argmax() - 1
                                                  for k in (0, 1))]
@@ -398,8 +402,6 @@ def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
             continue
         dissimilar = constants[0] != constants[1]
         speed = min(Material.from_scene(side, table).s_wave_speed for side, table in zip(sides, tables))
-        if len(chosen) < 2:
-            continue
         # The node spacing along the interface: per pair the geometric mean of the distances to its
         # nearest and third-nearest neighbours of the same interface (the two edges of a stretched
         # face: sqrt of the face's area), its median over the pairs (h for Q1, h / 2 for Q2).
@@ -448,8 +450,7 @@ def lining_elements_for(error_budget: float, results_csv=LINING_RESULTS) -> dict
     Raises:
         ValueError: a budget that is not a positive number, or no study results.
     """
-    if not (isinstance(error_budget, (int, float)) and math.isfinite(error_budget) and error_budget > 0):
-        raise ValueError(f"error_budget = {error_budget!r}: allowed is a positive relative error, e.g. 0.05")
+    require_budget(error_budget)
     with open(results_csv, newline="") as stream:
         rows = list(csv.DictReader(stream))
     if not rows:
