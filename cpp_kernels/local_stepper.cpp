@@ -248,6 +248,11 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
   operators.dashpot_slot = dashpot_C_.empty() ? nullptr : dashpot_slot_.data();
   operators.dashpot_C = dashpot_C_.data();
   operators.dashpot_inverse = level.implicit_inverse.data();
+  // The slip rate the pairs keep for their next correction (the deterioration's gamma, the normal
+  // lag's decay) is Stepper's: that of v(t) + dv, the velocity at the step's start with half the
+  // impulse, not the drift's velocity half a step later (a first-order difference in dt).
+  // contact_observed_v_ holds v(t) (substep); minus the drift's velocity, plus the corrected one.
+  double* observed = contact_observed_v_.data();
   for (const auto& pairs : level.contacts) {
     const std::vector<std::int32_t>& nodes = pairs->unique_nodes();
     double kinetic_before = 0.0;
@@ -255,14 +260,17 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
       for (int d = 0; d < 3; ++d) {
         contact_a_[3 * i + d] = 0.0;  // v is the drift's velocity: u(t + h) = u + h v
         kinetic_before += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
+        observed[3 * i + d] -= v[3 * i + d];
       }
     const ContactStepResult result = pairs->correct(t, operators, u, v, contact_a_.data());
     double kinetic_after = 0.0;
     for (const std::int64_t i : nodes)
       for (int d = 0; d < 3; ++d) {
+        observed[3 * i + d] += v[3 * i + d];  // v(t) + dv
         v[3 * i + d] += 0.5 * h * contact_a_[3 * i + d];
         kinetic_after += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
       }
+    pairs->observe_velocity(observed);
     energy_.contact_work += kinetic_after - kinetic_before;
     energy_.friction_dissipation += result.friction_dissipation;
   }
@@ -493,6 +501,9 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
 }
 
 void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
+  for (const auto& pairs : levels_[c].contacts)  // v(t) of the pair nodes (correct_contacts)
+    for (const std::int64_t i : pairs->unique_nodes())
+      for (int d = 0; d < 3; ++d) contact_observed_v_[3 * i + d] = v[3 * i + d];
   start_kick(c, h, v);
   // Every kick that moves this level's drift nodes before their drift ends has been given (coarser
   // levels' start kicks at t came first, finer levels do not touch them): the pairs' impulses now.
@@ -540,7 +551,10 @@ void LocalStepper::prepare_structure() {
   }
   if (contact_a_.empty())
     for (const Level& level : levels_)
-      if (!level.contacts.empty()) contact_a_.assign(3 * n_nodes(), 0.0);
+      if (!level.contacts.empty()) {
+        contact_a_.assign(3 * n_nodes(), 0.0);
+        contact_observed_v_.assign(3 * n_nodes(), 0.0);
+      }
 }
 
 void LocalStepper::initialise(const double* u, const double* v, double t0) {

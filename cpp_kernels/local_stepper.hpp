@@ -235,6 +235,9 @@ class LocalStepper {
   std::vector<double> own_power_;             // (n) f.v - d.v of each node at its last end kick
   std::vector<double> internal_;              // (3 n) scratch: f_int of a level's components
   std::vector<double> contact_a_;             // (3 n) scratch: pair nodes' a for the correction
+  // (3 n) scratch: pair nodes' v(t) before their level's start kick, then the velocity whose slip
+  // rate the pairs observe (correct_contacts).
+  std::vector<double> contact_observed_v_;
   std::vector<std::int32_t> drift_level_;     // per node, fine index of the finest level moving it
   std::vector<std::int32_t> row_cap_;         // per node: its row's blocks at min(column level, cap)
   std::vector<std::int32_t> capped_;          // nodes whose rows step at their drift level
