@@ -1,8 +1,9 @@
 """`mpirun -n N python3 -m pyfem run SCENE` equals the serial run (issue 13, docs/scaling.md).
 
-The same command line on 1, 2 and 3 ranks (3: an odd partition), six scenes:
+The same command line on 1, 2 and 3 ranks (3: an odd partition), seven scenes:
 - the free-field box under a vertical SV pulse (workflows/scenes/box_vertical_sv.toml);
-- a contact scene whose pairs break their bonds, slide and open (tests/scenes/mpi_hard_contact.toml);
+- a contact scene whose pairs break their bonds, slide and open (tests/scenes/mpi_hard_contact.toml),
+  and the same with the friction's normal-stress lag;
 - a damage scene whose weak layer yields (tests/scenes/mpi_weak_layer.toml);
 - the same layer in Q2 with Rayleigh damping, float32 matrix blocks and a plasticity zone that one
   of 3 ranks does not reach (tests/scenes/mpi_q2_zone.toml);
@@ -44,6 +45,10 @@ MPIRUN = shutil.which("mpirun")
 SCENES = {
     "free_field": ("workflows/scenes/box_vertical_sv.toml", ()),
     "contact": ("tests/scenes/mpi_hard_contact.toml", ()),
+    # The same pairs with the friction's normal-stress lag ([contact.normal_lag]): each pair's N* is
+    # sliced to the rank that owns the pair and merged back with the other per-pair blocks.
+    "contact_lag": ("tests/scenes/mpi_hard_contact.toml", ("--set", "contact.normal_lag.length=0.01",
+                                                           "--set", "contact.normal_lag.velocity=0.1")),
     "damage": ("tests/scenes/mpi_weak_layer.toml", ()),
     # Q2 (tensor-form element loop), stiffness-proportional Rayleigh damping (halo cells damp too),
     # float32 matrix blocks, and a plasticity zone at x < 50 m that some ranks do not reach.
@@ -117,6 +122,12 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
         assert serial["monitors"]["centre"]["displacement"] > 5.0e-4  # the 1 mm pulse arrived
     if name == "contact":
         assert max(serial["pair_states"]["sliding"]) > 0 and max(serial["pair_states"]["separated"]) > 0
+    if name == "contact_lag":
+        # The pairs slid (with the lag none of them opens in this scene), and the lag
+        # acted: the histories differ from the lag-free run's by more than round-off.
+        assert max(serial["pair_states"]["sliding"]) > 0
+        assert largest_difference(runs[name, 1], runs["contact", 1]) > 1e-4
+    if name in ("contact", "contact_lag"):
         assert parallel["pair_states"] == serial["pair_states"]
     if name == "cavity":
         assert "(unnamed)" in serial["traction_free_surfaces"], "the tunnel's wall is free, not an input face"
