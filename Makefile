@@ -1,6 +1,7 @@
 # The two commands of the README:
 #   make run    set up, then run the main job on its default scene
-#   make test   set up, then run the C++ unit tests and the default pytest tier
+#   make test   set up, then run the C++ unit tests and the default pytest tier (one pytest-xdist
+#               worker per core, a test file's tests on one worker so that its module fixtures run once)
 PYTHON := /usr/bin/python3
 # The main job: the paper's case 3 with all of its physics (static excavation stage with the
 # lining installed, Mohr-Coulomb rock around the cavern, concrete lining damage, oblique P + SV
@@ -19,7 +20,7 @@ run: setup
 
 test: setup
 	ctest --test-dir build --output-on-failure
-	$(PYTHON) -m pytest -q --durations=25
+	$(PYTHON) -m pytest -q -n auto --dist loadfile --durations=25
 
 test-slow:
 	@bash scripts/setup.sh --with-paraview

@@ -11,6 +11,7 @@ packages=(
   g++ cmake make libgtest-dev pybind11-dev libopenmpi-dev openmpi-bin
   python3-dolfinx-real python3-petsc4py python3-mpi4py python3-gmsh python3-meshio
   python3-numpy python3-scipy python3-matplotlib python3-h5py python3-tqdm python3-pytest
+  python3-pytest-xdist
 )
 if [ "${1:-}" = "--with-paraview" ]; then
   packages+=(paraview python3-paraview xvfb xauth python3-venv)

@@ -1,10 +1,17 @@
 """Shared test helpers: one place for tolerances."""
+import os
 from pathlib import Path
 
 import numpy as np
 
 ROUNDOFF = 1e-10  # relative agreement expected between two evaluations of the same arithmetic
 EXACT = 1e-12  # relative agreement of two arrangements of the same sums over a few hundred steps
+
+# `make test` runs the tier in two pytest-xdist workers, one per core: each worker's kernel (and
+# the runs it starts) then takes one OpenMP thread, not both cores twice over. A test that needs
+# two threads sets them itself (tests/test_threads.py, tests/test_internal_force.py).
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
 def rel_error(a, b):
