@@ -407,8 +407,9 @@ def test_rate_dependent_pairs_on_one_level_are_global_stepping():
 
 
 def test_the_normal_lag_under_local_stepping_follows_global_stepping_at_second_order():
-    """[contact.normal_lag] with the pairs at their own rate: each level's ContactPairs carries the
-    lag and integrates N* over its own substeps. Local against global stepping, both with the lag,
+    """[contact.normal_lag] with the pairs at their own rate (here the finest of three levels; their
+    ContactPairs carries the lag and integrates N* over its substeps, the soft layer's nodes step at
+    coarser rates around them). Local against global stepping, both with the lag,
     falls at second order in dt as without it (the test above); and the lag acted (the motion
     differs from the lag-free run's by far more). Global stepping of a sliding pair is itself first
     order in dt (its dt -> dt/2 differences fall at order 1.0 with and without the lag: the
