@@ -127,8 +127,9 @@ def recommend(error_budget: float, results_csv=DEFAULT_RESULTS, order: int | Non
     Returns:
         dict: order (1 or 2), elements_per_wavelength (elements per shortest shear
         wavelength), safety (fraction of the critical time step), boundary, error (the
-        measured one), seconds (measured cost, s, of the study's run), and "runs" (how
-        many runs of the study met the budget).
+        measured one), seconds (measured cost, s, of the study's run), "runs" (how
+        many runs of the study met the budget) and "coarsest_studied" (True when that is the
+        coarsest mesh the study ran at that order: coarser ones may meet the budget too, unmeasured).
 
     Raises:
         ValueError: the budget is not a positive number, the study has no run of `order`, or no
@@ -147,9 +148,11 @@ def recommend(error_budget: float, results_csv=DEFAULT_RESULTS, order: int | Non
                          f"elements per wavelength); allowed is a budget >= {best['error']:.3g} "
                          "or a finer study")
     best = min(meeting, key=lambda r: (r[COST_COLUMN], r["error"]))
+    coarsest = min(r["elements_per_wavelength"] for r in rows if r["order"] == best["order"])
     return {"order": best["order"], "elements_per_wavelength": best["elements_per_wavelength"],
             "safety": best["safety"], "boundary": best["boundary"], "error": best["error"],
-            "seconds": best[COST_COLUMN], "runs": len(meeting)}
+            "seconds": best[COST_COLUMN], "runs": len(meeting),
+            "coarsest_studied": best["elements_per_wavelength"] <= coarsest}
 
 
 def highest_frequency(scene) -> float:
@@ -186,8 +189,8 @@ def element_size_for(scene, error_budget: float, results_csv=DEFAULT_RESULTS,
     Returns:
         dict: h (largest element size, m), order, elements_per_wavelength,
         shortest_wavelength (m), highest_frequency (Hz), shear_speed (m/s, slowest),
-        safety, boundary, expected_error (measured in the study), and "text", one
-        sentence for ``pyfem check``.
+        safety, boundary, expected_error (measured in the study), coarsest_studied (recommend),
+        and "text", one sentence for ``pyfem check``.
 
     Raises:
         ValueError: the scene has no wave, or the study cannot meet the budget.
@@ -203,11 +206,14 @@ def element_size_for(scene, error_budget: float, results_csv=DEFAULT_RESULTS,
     text = (f"for a {100 * error_budget:g} % error: Q{advice['order']} elements of at most h = {h:.3g} m "
             f"({advice['elements_per_wavelength']:.3g} per shortest wavelength {wavelength:.4g} m = "
             f"{speed:.4g} m/s / {frequency:.3g} Hz), time.safety = {advice['safety']:g} "
-            f"(study error {100 * advice['error']:.2g} %)")
+            f"(study error {100 * advice['error']:.2g} %"
+            + ("; the coarsest mesh the study ran, so not a measured limit: a wave that carries more of "
+               "its energy near its highest frequency than the study's Ricker pulse needs finer)"
+               if advice["coarsest_studied"] else ")"))
     return {"h": h, "order": advice["order"], "elements_per_wavelength": advice["elements_per_wavelength"],
             "shortest_wavelength": wavelength, "highest_frequency": frequency, "shear_speed": speed,
             "safety": advice["safety"], "boundary": advice["boundary"], "expected_error": advice["error"],
-            "text": text}
+            "coarsest_studied": advice["coarsest_studied"], "text": text}
 
 
 def _wall_peak_error(row: dict) -> float:

@@ -104,24 +104,47 @@ def model_fingerprint(simulation) -> dict:
     }
 
 
-def _first_difference(saved, current, path: str = "") -> str | None:
-    """The first key path (dotted) where two JSON values differ, None when equal."""
+def _differences(saved, current, path: str = ""):
+    """Yields (key path, saved value, current value) for every leaf where two JSON values differ
+    (a key on one side only: the other value is None)."""
     if isinstance(saved, dict) and isinstance(current, dict):
         for key in sorted(set(saved) | set(current)):
             where = f"{path}.{key}" if path else str(key)
             if key not in saved or key not in current:
-                return where
-            found = _first_difference(saved[key], current[key], where)
-            if found is not None:
-                return found
-        return None
-    if isinstance(saved, list) and isinstance(current, list) and len(saved) == len(current):
+                yield where, saved.get(key), current.get(key)
+            else:
+                yield from _differences(saved[key], current[key], where)
+    elif isinstance(saved, list) and isinstance(current, list) and len(saved) == len(current):
         for index, (a, b) in enumerate(zip(saved, current)):
-            found = _first_difference(a, b, f"{path}.{index}")
-            if found is not None:
-                return found
+            yield from _differences(a, b, f"{path}.{index}")
+    elif saved != current:
+        yield path or "(value)", saved, current
+
+
+def _scene_difference_text(saved: dict, current: dict, shown: int = 3) -> str | None:
+    """One clause for a refused resume: another scene (its title differs), or the first `shown`
+    keys whose values differ, each with the scene's and the checkpoint's value; None when equal.
+    Defaults and derived values are part of the fingerprint, so a changed key may show together with
+    the keys that follow it (contact.dynamic_friction_angle with contact.friction_angle)."""
+    found = list(_differences(saved, current))
+    if not found:
         return None
-    return None if saved == current else (path or "(value)")
+    if saved.get("title") != current.get("title"):
+        return (f"the checkpoint is of another scene (title {saved.get('title')!r}; this scene's is "
+                f"{current.get('title')!r}; {len(found)} keys differ)")
+
+    def short(value) -> str:
+        text = json.dumps(value)
+        return text if len(text) <= 40 else text[:37] + "..."
+
+    listed = "; ".join(f"{key} = {short(now)} (the checkpoint's: {short(then)})" for key, then, now in found[:shown])
+    more = f"; and {len(found) - shown} more" if len(found) > shown else ""
+    return f"the scene differs from the checkpoint's: {listed}{more}"
+
+
+def _first_difference(saved, current) -> str | None:
+    """The first key path (dotted) where two JSON values differ, None when equal."""
+    return next((where for where, _, _ in _differences(saved, current)), None)
 
 
 @dataclass
@@ -162,22 +185,23 @@ class Checkpoint:
     def check_scene(self, scene) -> None:
         """Raises SceneError (key --resume) when this checkpoint is not of `scene`: checked before
         the model is built (and a static stage solved), so another scene is refused at once."""
-        self._refuse_difference(_first_difference(self.saved_fingerprint()["scene"], scene_fingerprint(scene)),
-                                prefix="scene.")
+        self._refuse(_scene_difference_text(self.saved_fingerprint()["scene"], scene_fingerprint(scene)))
 
     def check_model(self, simulation) -> None:
         """Raises SceneError (key --resume) when this checkpoint is not of the simulation's model."""
         self._refuse_difference(_first_difference(self.saved_fingerprint(), model_fingerprint(simulation)))
 
-    def _refuse_difference(self, where: str | None, prefix: str = "") -> None:
+    def _refuse_difference(self, where: str | None) -> None:
         if where is None:
             return
-        where = prefix + where
         if where.startswith("scene."):
-            key = where[len("scene."):]
-            reason = f"the scene's {key} differs from the checkpoint's"
+            self._refuse(f"the scene's {where[len('scene.'):]} differs from the checkpoint's")
         else:
-            reason = f"the model's {where} differs from the checkpoint's (another mesh or build?)"
+            self._refuse(f"the model's {where} differs from the checkpoint's (another mesh or build?)")
+
+    def _refuse(self, reason: str | None) -> None:
+        if reason is None:
+            return
         raise SceneError("--resume", str(self.path), "the checkpoint of this scene's run",
                          f"--resume {self.path}: {reason}; resume with the scene and --set "
                          f"overrides of the interrupted run, or start a new run without --resume")

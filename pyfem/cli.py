@@ -120,7 +120,11 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
         print(f"  input motion (g(t) x wave.scale, as the kernel is driven): PGA {motion['pga']:.4g} m/s^2 "
               f"({motion['pga_g']:.3g} g), PGV {motion['pgv']:.4g} m/s, PGD {motion['pgd']:.4g} m; "
               f"plots/input.png")
-    print(f"outputs: {out_dir}/ (run.json, monitors/, plots/, fields.xdmf for ParaView)")
+    out = Path(out_dir)
+    written = [name for name in ("run.json", "monitors/", "pairs/", "energy.csv", "reactions.csv", "static/",
+                                 "plots/", "fields.xdmf") if (out / name.rstrip("/")).exists()]
+    paraview = "; fields.xdmf opens in ParaView" if "fields.xdmf" in written else ""
+    print(f"outputs: {out_dir}/ ({', '.join(written)}{paraview})")
     return 0
 
 
@@ -199,22 +203,25 @@ def mesh_advice(scene: Scene) -> str:
     """What the accuracy-versus-cost study says this scene's waves need (h, order) for 5 % and 1 %."""
     from pyfem.accuracy import curved_wall_size_for, element_size_for, lining_elements_for, wall_size_for
 
-    lines = [f"mesh advice (workflows/accuracy_cost.py; scene h = {scene['mesh'].get('h')}, "
+    h = scene["mesh"].get("h")
+    lines = [f"mesh advice (workflows/accuracy_cost.py; scene h = {'set by the mesh builder' if h is None else h}, "
              f"order {scene['mesh']['order']}):"]
     for budget in (0.05, 0.01):
         try:
             lines.append(f"  {element_size_for(scene, budget)['text']}")
         except (ValueError, FileNotFoundError) as error:
             lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
-    lines.append("wall stress advice (workflows/wall_stress_accuracy.py: hoop stress at a circular opening's "
-                 "wall against the exact dynamic answer, Pao & Mow's series):")
-    for budget in (0.05, 0.01):
-        try:
-            advice = wall_size_for(budget)
-            lines.append(f"  for a {100 * budget:g} % error: " + "; ".join(item["text"] for item in advice))
-        except (ValueError, FileNotFoundError) as error:
-            lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
+    # A box without a static stage has no opening: no wall advice for it.
     has_opening = scene["mesh"]["builder"] != "box" or "static" in scene
+    if has_opening:
+        lines.append("wall stress advice (workflows/wall_stress_accuracy.py: hoop stress at a circular opening's "
+                     "wall against the exact dynamic answer, Pao & Mow's series):")
+        for budget in (0.05, 0.01):
+            try:
+                advice = wall_size_for(budget)
+                lines.append(f"  for a {100 * budget:g} % error: " + "; ".join(item["text"] for item in advice))
+            except (ValueError, FileNotFoundError) as error:
+                lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
     try:
         if not has_opening:
             raise LookupError("a box has no opening")

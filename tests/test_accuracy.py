@@ -99,6 +99,25 @@ def test_element_size_for_a_ricker_scene(results_csv):
     assert f"h = {c_s / 22.0:.3g} m" in advice["text"] and "Q2" in advice["text"]
 
 
+def test_check_says_when_its_advice_is_the_coarsest_mesh_studied_and_gives_wall_advice_only_for_openings():
+    """The study's coarsest Q2 mesh (2.23 elements per shortest wavelength) already met 5 % and 1 %:
+    the advice says that this is where the study stopped, not a measured limit. A box without a
+    static stage has no opening: no wall-stress advice; a case scene (an opening, a mesh builder
+    that sets h) has it."""
+    from pyfem.cli import mesh_advice
+    from pyfem.scene import load_scene
+
+    box = _scene({"ricker": {"f0": 5.0, "amplitude": 1e-3}}, {"rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}})
+    advice = accuracy.element_size_for(box, 0.01)
+    assert advice["order"] == 2 and advice["coarsest_studied"]
+    assert "the coarsest mesh the study ran, so not a measured limit" in advice["text"]
+    text = mesh_advice(box)
+    assert "mesh advice" in text and "scene h = 10.0" in text and "wall stress advice" not in text
+    case = load_scene(accuracy.DEFAULT_RESULTS.parents[1] / "scenes" / "case3_contact_coarse.toml")
+    text = mesh_advice(case)
+    assert "wall stress advice" in text and "scene h = set by the mesh builder" in text
+
+
 def test_element_size_for_a_record_uses_the_band_and_the_slowest_material(results_csv):
     """Two materials: the softer sets c_s = sqrt(2e9 / 2.6 / 2400) = 566 m/s; the record's band[1] = 8 Hz."""
     # The rule reads only the materials and the wave's frequency content: a plain dict will do.

@@ -127,6 +127,7 @@ def test_resume_refuses_another_scene_a_finished_run_and_no_checkpoint(tmp_path)
     assert other.returncode == 2, other.stderr
     lines = other.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "materials.rock.E" in lines[0], other.stderr
+    assert "materials.rock.E = 10000000000.0 (the checkpoint's: " in lines[0], other.stderr  # both values
     assert history_files(out) == before, "a refused resume touches nothing"
 
     missing = pyfem_run(tmp_path / "nothing_here", "--resume", check=False)
@@ -135,6 +136,26 @@ def test_resume_refuses_another_scene_a_finished_run_and_no_checkpoint(tmp_path)
     pyfem_run(tmp_path / "finished", "--set", "time.duration=0.05")
     finished = pyfem_run(tmp_path / "finished", "--set", "time.duration=0.05", "--resume", check=False)
     assert finished.returncode == 2 and "finished" in finished.stderr and finished.stderr.count("\n") == 1
+
+
+def test_a_refused_resume_names_every_changed_key_with_both_values_or_another_scene():
+    """The fingerprint holds defaults and derived values: a changed friction_angle also changes
+    the dynamic_friction_angle that defaults to it, so the refusal lists each differing key (up to
+    three) with the scene's and the checkpoint's value, not only the first in alphabetical order;
+    a checkpoint of another scene (another title) says so instead of naming its first key."""
+    from pyfem.checkpoint import _scene_difference_text
+
+    saved = {"title": "mine", "contact": {"friction_angle": 30.0, "dynamic_friction_angle": 30.0},
+             "time": {"duration": 2.0}}
+    changed = {"title": "mine", "contact": {"friction_angle": 10.0, "dynamic_friction_angle": 10.0},
+               "time": {"duration": 2.0}}
+    text = _scene_difference_text(saved, changed)
+    assert "contact.friction_angle = 10.0 (the checkpoint's: 30.0)" in text
+    assert "contact.dynamic_friction_angle = 10.0 (the checkpoint's: 30.0)" in text
+    assert "another scene" in _scene_difference_text(saved, dict(changed, title="default"))
+    assert _scene_difference_text(saved, saved) is None
+    many = {"title": "mine", "time": {f"k{i}": i for i in range(5)}}
+    assert _scene_difference_text({"title": "mine", "time": {}}, many).endswith("; and 2 more")
 
 
 # --------------------------------------------------------------------------- every stateful effect, in process
