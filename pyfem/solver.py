@@ -494,6 +494,14 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         simulation.pair_monitor_names = [m["name"] for m in pair_monitors]
         simulation.pair_monitor_pairs = np.array([model.pairs.nearest(m["point"]) for m in pair_monitors],
                                                  dtype=np.int64)
+        area = np.asarray(simulation.contact_arrays["area"], dtype=float)
+        for monitor, pair in zip(pair_monitors, simulation.pair_monitor_pairs):
+            at = model.pairs.coords[pair]
+            distance = float(np.linalg.norm(at - np.asarray(monitor["point"], dtype=float)))
+            if distance > 2.0 * np.sqrt(area[pair]):  # farther than about two faces from any pair
+                scene.warn(f"pair_monitor '{monitor['name']}' at {list(monitor['point'])} is {distance:.3g} m from "
+                           f"the nearest contact pair (at {[round(float(x), 3) for x in at]}), which it reports: "
+                           "is the point on an interface of contact.interfaces?")
     if "static" in scene:  # the stage's stress and pair forces become the initial state (pyfem/static.py)
         from pyfem.static import hand_over
 

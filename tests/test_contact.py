@@ -469,3 +469,17 @@ def test_slip_between_dissimilar_rocks_converges_with_the_normal_lag(tmp_path):
         peaks[h] = np.abs(data["dux"]).max()
     print(f"peak slip with the lag: {peaks}")
     assert peaks[1.25] > 0.07 and abs(peaks[2.5] - peaks[1.25]) < 1e-3 * peaks[1.25]
+
+
+def test_a_pair_monitor_far_from_every_interface_is_warned_about():
+    """A pair monitor reports the pair nearest its point; a point 14.6 m from the interface (a typo
+    in z, say) is accepted, but with a warning naming the monitor, the distance and the pair."""
+    data = tomllib.loads((REPOSITORY / "tests" / "scenes" / "mpi_hard_contact.toml").read_text())
+    data["time"]["duration"] = 0.001
+    near = prepare(parse_scene(data, source="test"))
+    assert not any("pair_monitor" in warning for warning in near.scene.warnings)
+    data["pair_monitor"][0]["point"] = [20.0, 2.0, 35.0]
+    far = parse_scene(data, source="test")
+    prepare(far)
+    warning = next(warning for warning in far.warnings if "pair_monitor 'upper'" in warning)
+    assert "14.6 m from the nearest contact pair" in warning
