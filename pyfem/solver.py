@@ -404,6 +404,28 @@ def check_input_faces(scene: Scene, model) -> None:
                      f"the input (faces found: {found}; fixed, roller and free faces carry none)")
 
 
+def warn_input_medium(scene: Scene, model) -> None:
+    """Warns when other materials than `[wave] medium` reach the input faces: they receive the free
+    field of the medium's homogeneous half-space, not their own (docs/method.md section 5, "Limit").
+    A node's material is read off its face's lumped impedance, rho c_s over its area."""
+    from pyfem.material import Material
+    from pyfem.seismic.forces import INPUT_TYPES
+
+    if "seismic_input" not in scene.effects:
+        return
+    medium = scene["wave"]["medium"]
+    table = scene["materials"][medium]
+    reference = table["rho"] * Material.from_scene(medium, table).s_wave_speed
+    faces = [face for face in model.faces if face.kind in INPUT_TYPES]
+    total = sum(float(np.sum(face.area)) for face in faces)
+    other = sum(float(np.sum(face.area[np.abs(face.rho_cs / face.area / reference - 1.0) > 0.01]))
+                for face in faces)
+    if total > 0.0 and other > 0.01 * total:
+        scene.warn(f"wave.medium = '{medium}': {100 * other / total:.0f} % of the input faces' area lies in other "
+                   f"materials, which receive the free field of a homogeneous '{medium}' half-space, not their "
+                   "own (the input is approximate there; docs/method.md section 5, \"Limit\")")
+
+
 def face_report(model) -> list[dict]:
     """Per truncation face: name, type, nodes, facets, area (m^2), whether it carries input, how
     it was found; for `check`, run.json and the README."""
@@ -427,6 +449,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
     model = build_model(scene, MPI.COMM_SELF)
     mass = np.array(model.mass, dtype=np.float64)
     check_input_faces(scene, model)
+    warn_input_medium(scene, model)
     spring_nodes, springs, dashpot_nodes, dashpots, constraints = boundary_operators(scene, model)
     stiffness = add_block_diagonal(model.stiffness, spring_nodes, springs)
     alpha, beta = damping_coefficients(scene)

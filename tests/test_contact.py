@@ -473,11 +473,16 @@ def test_slip_between_dissimilar_rocks_converges_with_the_normal_lag(tmp_path):
 
 def test_a_pair_monitor_far_from_every_interface_is_warned_about():
     """A pair monitor reports the pair nearest its point; a point 14.6 m from the interface (a typo
-    in z, say) is accepted, but with a warning naming the monitor, the distance and the pair."""
+    in z, say) is accepted, but with a warning naming the monitor, the distance and the pair. And a
+    layer of another material than wave.medium on the input faces is warned about."""
     data = tomllib.loads((REPOSITORY / "tests" / "scenes" / "mpi_hard_contact.toml").read_text())
     data["time"]["duration"] = 0.001
     near = prepare(parse_scene(data, source="test"))
     assert not any("pair_monitor" in warning for warning in near.scene.warnings)
+    # The 1 m stiff layer reaches the side faces: 1 / 40 of their height, 2 % of the input area,
+    # which receives the soft medium's free field (a homogeneous box warns nothing: test_bad_input).
+    assert any(warning.startswith("wave.medium = 'soft': 2 % of the input faces' area lies in other materials")
+               for warning in near.scene.warnings), near.scene.warnings
     data["pair_monitor"][0]["point"] = [20.0, 2.0, 35.0]
     far = parse_scene(data, source="test")
     prepare(far)
