@@ -211,7 +211,8 @@ void ContactPairs::check_nodes(std::int64_t n_nodes) const {
 }
 
 ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& operators,
-                                        const double* u, double* v, double* a) {
+                                        const double* u, double* v, double* a,
+                                        bool observe) {
   std::fill(node_force_.begin(), node_force_.end(), 0.0);
   // eta(t) is one number per step (Eq. 9); gamma depends on each pair's slip rate.
   const double wear = deterioration_on_ ? wear_factor(deterioration_parameters_, t) : 1.0;
@@ -227,7 +228,7 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
   ContactStepResult result;
   for (std::int64_t p = 0; p < n_pairs_; ++p) result.friction_dissipation += dissipation_[p];
   result.contact_power = contact_power(v);
-  observe_velocity(v);
+  if (observe) observe_velocity(v);
   return result;
 }
 

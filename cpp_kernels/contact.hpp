@@ -127,8 +127,11 @@ class ContactPairs {
 
   /// The contact correction at t = t_{n+1}: modifies v, a (3 n_nodes) of the pair nodes in place.
   /// u is u_{n+1}. Records R, N, T, D, state of every pair and the net force of each pair node.
+  /// With observe (Stepper) it then records the slip rate of the corrected v for the next
+  /// correction; a caller that hands the pairs another velocity (LocalStepper: v(t) + dv of its
+  /// level) passes false and calls observe_velocity itself, so the pairs are not read twice.
   ContactStepResult correct(double t, const ImplicitNodeOperators& operators, const double* u,
-                            double* v, double* a);
+                            double* v, double* a, bool observe = true);
 
   /// Makes the current state the static state of a new run (the static stage's hand-over,
   /// pyfem/static.py): F0 becomes the total force F0 + R of the last correction, R 0, the normal

@@ -262,7 +262,7 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
         kinetic_before += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
         observed[3 * i + d] -= v[3 * i + d];
       }
-    const ContactStepResult result = pairs->correct(t, operators, u, v, contact_a_.data());
+    const ContactStepResult result = pairs->correct(t, operators, u, v, contact_a_.data(), false);
     double kinetic_after = 0.0;
     for (const std::int64_t i : nodes)
       for (int d = 0; d < 3; ++d) {

@@ -8,7 +8,8 @@ docs/lts_plan.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
 - The set-up check of the LTS map (a power iteration of the undamped map from a random state)
   passes on the graded mesh's own levels and catches levels one rate too coarse.
 - Contact pairs at their own rate: bonded pairs under local stepping are the unsplit mesh under
-  the same levels to round-off; a weak interface slides as under global stepping (second order).
+  the same levels to round-off; a weak interface slides as under global stepping (second order);
+  pairs at a coarser level than the finest are global stepping at their own step.
 - What the local stepper does not do yet is refused with one line naming time.local_stepping.
 """
 import json
@@ -423,6 +424,96 @@ def test_the_normal_lag_under_local_stepping_follows_global_stepping_at_second_o
     print("lagged sliding, local against global stepping:", differences, "order", order, "the lag's effect", effect)
     assert effect > 20 * differences[1]  # the lag changed the motion by far more than local stepping
     assert differences[0] < 0.01 and order > 1.7
+
+
+def three_layer_pairs_scene(local: bool, dt: float, cohesion: float, normal_lag: dict | None = None):
+    """The two-layer scene with the soft layer cut in two at z = 45 m and the contact pairs on that
+    cut (interface_2, soft against soft): an interface inside the coarse region."""
+    scene = two_layer_contact_scene(local, True, cohesion=cohesion, friction_angle=5.0, normal_lag=normal_lag)
+    scene["mesh"]["layers"] = [{"material": "stiff", "thickness": 30.0}, {"material": "soft", "thickness": 15.0},
+                               {"material": "soft", "thickness": 15.0}]
+    scene["contact"]["interfaces"] = ["interface_2"]
+    scene["pair_monitor"] = [{"name": "middle", "point": [25.0, 20.0, 45.0]}]
+    scene["time"]["dt"] = dt
+    return scene
+
+
+def pairs_at_a_coarse_level(simulation) -> np.ndarray:
+    """Two rate levels by hand: level 1 (2 dt) above z = 22.5 m, truncation faces included, level 0
+    below, made consistent for the pairs (local_stepping.equalize_pair_drift). An interface that
+    reaches a truncation face steps at the finest rate (its pairs share one level along the
+    interface, and the faces' dashpot nodes are pinned at level 0), so the automatic levels never
+    put these pairs at a coarser level; this is the case of an interface inside coarse rock."""
+    from pyfem import local_stepping
+
+    cell_nodes = simulation.model.V.dofmap.list.array.reshape(simulation.model.n_cells, -1)
+    levels = np.where(simulation.model.node_coords[:, 2] >= 22.5, 1, 0).astype(np.int32)
+    return local_stepping.equalize_pair_drift(levels, cell_nodes, simulation.contact_arrays["pairs"], None)
+
+
+def run_to_the_end(simulation) -> np.ndarray:
+    stepper = solver.make_stepper(simulation)
+    n = simulation.stiffness.shape[0]
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    stepper.run(u, v, a, simulation.n_steps, 0.0)
+    return u
+
+
+@pytest.mark.parametrize("normal_lag", [None, LAG], ids=["instant", "lagged"])
+def test_pairs_at_a_coarser_level_than_the_finest_are_global_stepping_at_their_own_step(normal_lag):
+    """Contact pairs at level 1 of two (their ContactPairs corrects at 2 dt, the stiff layer below
+    steps at dt). Bonded, the split mesh is the unsplit mesh under the same levels to round-off. A weak
+    interface (no cohesion, 5 deg) that slips is as accurate as global stepping at the pairs' own step:
+    against a converged reference (global stepping at dt / 8) local stepping's error at dt is global
+    stepping's at 2 dt within 2 %, and halves with dt as that does (stick-slip makes a sliding pair
+    first order in dt under global stepping too). So local stepping against global stepping at the
+    same dt falls at first order here, not second: the pairs' own step, not the level split."""
+    from scipy.spatial import cKDTree
+
+    def final(local, dt, cohesion=0.0):
+        simulation = solver.prepare(three_layer_pairs_scene(local, dt, cohesion, normal_lag))
+        if local:
+            levels = pairs_at_a_coarse_level(simulation)
+            pair_levels = np.unique(levels[simulation.contact_arrays["pairs"]])
+            assert list(pair_levels) == [1] and np.count_nonzero(levels == 0) > 100  # coarser than the finest
+            simulation.node_levels = levels
+        u = run_to_the_end(simulation)
+        return u, simulation
+
+    # Bonded: the split mesh against the unsplit mesh under the same levels.
+    bonded, split = final(True, 2.0e-4, cohesion=1.0e15)
+    assert split.contact_pairs.state_counts()[0] == len(split.contact_arrays["pairs"])  # all bonded
+    whole_scene = three_layer_pairs_scene(True, 2.0e-4, 1.0e15, normal_lag).to_json()
+    del whole_scene["contact"], whole_scene["pair_monitor"]
+    whole = solver.prepare(parse_scene(whole_scene, source="test"))
+    distance, unsplit_node = cKDTree(whole.model.node_coords).query(split.model.node_coords)
+    assert np.max(distance) < 1e-9
+    mapped = np.zeros(len(whole.mass), dtype=np.int32)
+    mapped[unsplit_node] = split.node_levels
+    whole.node_levels = mapped
+    stepper = solver.make_stepper(whole)
+    stepper.kernel.step_rows_at_drift_level(np.unique(unsplit_node[split.contact_arrays["pairs"]]).astype(np.int32))
+    n = whole.stiffness.shape[0]
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    stepper.run(u, v, a, whole.n_steps, 0.0)
+    whole_u = u.reshape(-1, 3)
+    assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
+    assert np.abs(bonded.reshape(-1, 3) - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
+
+    # Sliding: errors against the converged reference.
+    reference, _ = final(False, 2.5e-5)
+    scale = np.abs(reference).max()
+    print("the weak interface against the bonded one:", np.abs(reference - bonded).max() / scale)
+    assert np.abs(reference - bonded).max() > 0.3 * scale  # the weak interface slipped (60-65 % of the motion)
+    error = {}
+    for dt in (4.0e-4, 2.0e-4, 1.0e-4):
+        error["global", dt] = np.abs(final(False, dt)[0] - reference).max() / scale
+        if dt < 4.0e-4:
+            error["local", dt] = np.abs(final(True, dt)[0] - reference).max() / scale
+    print("errors against global stepping at dt / 8:", error)
+    for dt in (2.0e-4, 1.0e-4):
+        assert error["local", dt] == pytest.approx(error["global", 2 * dt], rel=0.02)
+    assert np.log2(error["local", 2.0e-4] / error["local", 1.0e-4]) > 0.9  # converges, at first order
 
 
 def test_a_local_stepping_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_path, monkeypatch):
