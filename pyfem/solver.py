@@ -1045,8 +1045,11 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                 while done < n_outputs:
                     # One block: a stop signal waits for the sample, so the state is whole for a checkpoint.
                     with signals.deferred():
-                        t = stepper.run(u, v, a, ts.steps_per_output, t)
+                        # The block's start and end times as products, not sums: no drift over a
+                        # long record (2.0 is written 2.0, not 1.9999999999999793), the same on resume.
+                        stepper.run(u, v, a, ts.steps_per_output, done * ts.steps_per_output * ts.dt)
                         done += 1
+                        t = done * ts.steps_per_output * ts.dt
                         reactions = stepper.reactions() if simulation.constraints is not None else None
                         if not np.isfinite(u).all():
                             raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")

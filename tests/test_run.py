@@ -203,6 +203,12 @@ def test_run_directory_contents(tmp_path):
             assert point_data["displacement"].shape == (len(points), 3)
     assert len(times) == 7 and times[0] == 0.0
     assert np.isclose(times[-1], 0.3)
+    # Sample times are products of the step, not sums: the energy history's last row is 0.3 as
+    # written in full precision (summing the 30 intervals gave 0.3000000000000001).
+    energy_t = np.loadtxt(out / "energy.csv", delimiter=",", skiprows=1)[:, 0]
+    steps_per_output = round(0.01 / run_json["dt"])
+    assert energy_t[-1] == 30 * steps_per_output * run_json["dt"]
+    assert float((out / "energy.csv").read_text().splitlines()[-1].split(",")[0]) == energy_t[-1]
 
 
 def test_user_dt_above_stable_is_an_error_naming_both(tmp_path):
