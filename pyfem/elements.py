@@ -61,6 +61,9 @@ class ElementArrays:
         points: (c, q, 3) float64 physical coordinates of the quadrature points (m).
         tensor: for Q2 with its 27-point Gauss rule, the tensor-product tables of the kernel's
             sum factorisation (tensor_tables; cpp_kernels/tensor_q2.hpp), else None.
+        uniform_gradients: (c, k, 3) float64 or None: one-point cells (q = 1,
+            pyfem/reduced_integration.py) whose gradient is the cell's mean gradient (1/m), which
+            `gradients` then returns in place of the centre point's.
     """
 
     cells: np.ndarray
@@ -70,10 +73,13 @@ class ElementArrays:
     weights: np.ndarray
     points: np.ndarray
     tensor: tuple | None = None
+    uniform_gradients: np.ndarray | None = None
 
     @property
     def gradients(self) -> np.ndarray:
         """(c, q, k, 3) basis gradients dphi/dx at the quadrature points (1/m), computed."""
+        if self.uniform_gradients is not None:
+            return self.uniform_gradients[:, None]
         return np.einsum("qkm,cqml->cqkl", self.reference_gradients, self.inverse_jacobians)
 
     def kernel_gradients(self, dense: bool = False):
@@ -93,7 +99,9 @@ class ElementArrays:
         return dataclasses.replace(
             self, cells=self.cells[rows], cell_nodes=np.ascontiguousarray(cell_nodes, dtype=np.int32),
             inverse_jacobians=np.ascontiguousarray(self.inverse_jacobians[rows]),
-            weights=np.ascontiguousarray(self.weights[rows]), points=np.ascontiguousarray(self.points[rows]))
+            weights=np.ascontiguousarray(self.weights[rows]), points=np.ascontiguousarray(self.points[rows]),
+            uniform_gradients=(None if self.uniform_gradients is None
+                               else np.ascontiguousarray(self.uniform_gradients[rows])))
 
     @property
     def nbytes(self) -> int:
@@ -117,6 +125,9 @@ class NonlinearRegions:
         options: region name -> keyword options of HexahedronElements (mean_dilatation, ...).
         zones: region name -> box [xmin, ymin, zmin, xmax, ymax, zmax] (m) its cells were taken from
             (`[plasticity] zone`), absent for a whole region.
+        integration: region name -> "full" or "reduced" (one point per cell; its arrays then have
+            q = 1 and its hourglass stiffness is in `stiffness`, pyfem/reduced_integration.py).
+        hourglass: region name -> BSR K_hg of its cells, for the "reduced" regions (N/m).
     """
 
     stiffness: scipy.sparse.bsr_matrix
@@ -126,6 +137,8 @@ class NonlinearRegions:
     initial_stress: dict = dataclasses.field(default_factory=dict)
     options: dict = dataclasses.field(default_factory=dict)
     zones: dict = dataclasses.field(default_factory=dict)
+    integration: dict = dataclasses.field(default_factory=dict)
+    hourglass: dict = dataclasses.field(default_factory=dict)
 
     @property
     def memory_bytes(self) -> int:
@@ -408,6 +421,16 @@ def linear_stiffness(model, removed_cells: np.ndarray) -> scipy.sparse.bsr_matri
     return stiffness
 
 
+def add_matrices(first: scipy.sparse.bsr_matrix, *others) -> scipy.sparse.bsr_matrix:
+    """The sum of BSR matrices with (3, 3) blocks, as BSR (3, 3) with sorted indices (N/m)."""
+    total = first.tocsr()
+    for other in others:
+        total = total + other.tocsr()
+    total = total.tobsr(blocksize=(3, 3))
+    total.sort_indices()
+    return total
+
+
 def cells_in_zone(model, cells: np.ndarray, zone) -> np.ndarray:
     """The cells (sorted) whose centroid (mean of the geometry nodes) lies in the box zone =
     [xmin, ymin, zmin, xmax, ymax, zmax] (m); all of them for zone None."""
@@ -452,7 +475,8 @@ def quadrature_initial_stress(points: np.ndarray, field) -> np.ndarray:
 def initial_warnings(regions: NonlinearRegions, scene: typing.Mapping) -> list[str]:
     """One line per thing a user should know about the regions' initial state: points whose initial
     stress is beyond the law's strength (returned or damaged at t = 0, the excess released as
-    motion), and concrete cells too large for the crack band (h > 2 E G_f / f_t^2: brittle)."""
+    motion), concrete cells too large for the crack band (h > 2 E G_f / f_t^2: brittle), and
+    concrete with one point per cell (blind to bending within a cell)."""
     messages = []
     for component, (name, arrays) in zip(regions.components, regions.arrays.items()):
         law, parameters = regions.laws[name]
@@ -475,6 +499,11 @@ def initial_warnings(regions: NonlinearRegions, scene: typing.Mapping) -> list[s
                 messages.append(f"materials.{name}.damage: {int(np.count_nonzero(h >= largest))} cells are larger "
                                 f"than 2 E G_f / f_t^2 = {largest:.3g} m (up to {h.max():.3g} m): the crack band "
                                 "cannot regularise them and they crack brittly; refine the mesh there")
+        if law == "concrete_damage" and regions.integration.get(name) == "reduced":
+            messages.append(f"materials.{name}.damage.integration = \"reduced\": a one-point cell's law sees its "
+                            "mean strain only, so bending within a cell never cracks it; a lining a few cells "
+                            "thick then cracks late or not at all (measured on the small case 3: no damage where "
+                            "\"full\" cracked 3 700 m^3; docs/materials.md \"One point per cell\")")
     return messages
 
 
@@ -515,7 +544,8 @@ def scene_laws(scene: typing.Mapping) -> tuple[dict, dict]:
             settings = material.get(table)
             if settings is None:
                 continue
-            parameters = {key: value for key, value in settings.items() if key not in ("mean_dilatation", "zone")}
+            parameters = {key: value for key, value in settings.items()
+                          if key not in ("mean_dilatation", "zone", "integration")}
             if settings.get("zone") is not None:
                 parameters["zone"] = list(settings["zone"])
             law_parameters[name] = {"law": law, "young_modulus": material["E"],
@@ -524,10 +554,17 @@ def scene_laws(scene: typing.Mapping) -> tuple[dict, dict]:
     return law_parameters, mean_dilatation
 
 
+def scene_integration(scene: typing.Mapping) -> dict:
+    """Region -> "full" or "reduced" of a validated scene's [plasticity] / [damage] tables."""
+    return {name: material[table].get("integration") or "full" for name, material in scene["materials"].items()
+            for table in LAW_OF_TABLE if material.get(table) is not None}
+
+
 def nonlinear_component(model, region_names: typing.Sequence[str],
                         law_parameters: typing.Mapping[str, typing.Mapping] | None = None,
                         initial_stress=None, mean_dilatation: bool | typing.Mapping[str, bool] = False,
-                        min_cells_for_threads: int | None = None) -> NonlinearRegions:
+                        min_cells_for_threads: int | None = None,
+                        integration: str | typing.Mapping[str, str] = "full") -> NonlinearRegions:
     """Kernel components for the regions whose material the element loop integrates, and the
     stiffness of all other cells.
 
@@ -546,6 +583,9 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
             region -> bool (absent: False).
         min_cells_for_threads: kernel threshold below which a component runs on one thread
             (None: the kernel's default).
+        integration: "full" (the quadrature of the matrix) or "reduced" (Q1 only: one point per cell
+            at its mean strain, the rest of the cells' elastic stiffness, K_hg, in the matrix;
+            pyfem/reduced_integration.py) in every component, or region -> scheme (absent: "full").
 
     Returns:
         NonlinearRegions: stiffness (the kernel's K without springs), components, arrays, laws.
@@ -555,7 +595,9 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
     unknown = sorted(set(law_parameters) - set(region_names))
     if unknown:
         raise ValueError(f"law_parameters: regions {unknown} are not among region_names {region_names}")
-    arrays, laws, stresses, options, removed, zones = {}, {}, {}, {}, [], {}
+    from pyfem.reduced_integration import hourglass_stiffness, lame_moduli, one_point_arrays
+
+    arrays, laws, stresses, options, removed, zones, schemes, hourglass = {}, {}, {}, {}, [], {}, {}, {}
     for name in region_names:
         given = dict(law_parameters.get(name) or {"law": "linear_elastic", **region_elastic_parameters(model, name)})
         law = given.pop("law", "linear_elastic")
@@ -570,15 +612,34 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
         region_arrays = element_arrays(model.V, cells)
         stresses[name] = (None if initial_stress is None
                           else quadrature_initial_stress(region_arrays.points, initial_stress))
-        options[name] = {"mean_dilatation": bool(mean_dilatation if isinstance(mean_dilatation, bool)
-                                                 else mean_dilatation.get(name, False))}
+        b_bar = bool(mean_dilatation if isinstance(mean_dilatation, bool) else mean_dilatation.get(name, False))
+        options[name] = {"mean_dilatation": b_bar}
+        schemes[name] = integration if isinstance(integration, str) else integration.get(name, "full")
+        if schemes[name] == "reduced":  # one point per cell, K_hg in the matrix (pyfem/reduced_integration.py)
+            if law == "linear_elastic":
+                lame = (parameters["lame_lambda"], parameters["shear_modulus"])
+            else:
+                lame = lame_moduli(parameters["young_modulus"], parameters["poisson_ratio"])
+            hourglass[name] = hourglass_stiffness(region_arrays, *lame, b_bar, model.n_nodes)
+            if stresses[name] is not None:  # the cell's mean initial stress, sum_q w_q sigma0_q / V
+                stresses[name] = np.ascontiguousarray(
+                    np.einsum("cq,cqk->ck", region_arrays.weights, stresses[name])[:, None, :]
+                    / region_arrays.weights.sum(axis=1)[:, None, None])
+            region_arrays = one_point_arrays(region_arrays)
+            options[name]["mean_dilatation"] = False  # one point: its volumetric strain is the mean
+        elif schemes[name] != "full":
+            raise ValueError(f"integration of region {name!r}: {schemes[name]!r}, not 'full' or 'reduced'")
         if min_cells_for_threads is not None:
             options[name]["min_cells_for_threads"] = int(min_cells_for_threads)
         arrays[name] = region_arrays
         laws[name] = (law, parameters)
         removed.append(cells)
     removed_cells = np.concatenate(removed) if removed else np.zeros(0, dtype=np.int32)
-    regions = NonlinearRegions(stiffness=linear_stiffness(model, removed_cells), components=[], arrays=arrays,
-                               laws=laws, initial_stress=stresses, options=options, zones=zones)
+    stiffness = linear_stiffness(model, removed_cells)
+    if hourglass:
+        stiffness = add_matrices(stiffness, *hourglass.values())
+    regions = NonlinearRegions(stiffness=stiffness, components=[], arrays=arrays, laws=laws,
+                               initial_stress=stresses, options=options, zones=zones, integration=schemes,
+                               hourglass=hourglass)
     regions.new_components()
     return regions

@@ -466,6 +466,12 @@ _STRENGTH_NOT_READ = (
     "cohesion, friction_angle, tensile_strength, fracture_energy); a material without either "
     "table is linear elastic; interface strengths go in [contact]")
 
+# Where the law is evaluated: at every quadrature point, or once per Q1 cell at its mean strain with
+# the rest of the cells' elastic stiffness in the matrix (pyfem/reduced_integration.py).
+_INTEGRATION = Choice("points of the law per cell: \"full\" (the matrix's quadrature, 8 per Q1 cell) or "
+                      "\"reduced\" (one at the cell's mean strain, Q1 only; the elastic stiffness of the strain's "
+                      "variation in the cell stays in the matrix)", ("full", "reduced"), default="full")
+
 # Rock: Mohr-Coulomb with tension cut-off and plastic-strain damage (docs/materials.md). The three
 # strengths default to PRESET_STRENGTHS of the material's preset (required without a preset).
 _PLASTICITY = Table({
@@ -483,6 +489,7 @@ _PLASTICITY = Table({
     # elastic in the stiffness matrix (the far field of a cavern model, which does not yield).
     "zone": Vector("box [xmin, ymin, zmin, xmax, ymax, zmax] (m) of the cells with the law; the region's other "
                    "cells stay linear elastic", 6, default=None),
+    "integration": _INTEGRATION,
 }, "[materials.NAME.plasticity]", presence="optional")
 
 # Lining concrete: Eq. 21 of the paper with crack band (docs/materials.md). Strengths as above.
@@ -497,6 +504,7 @@ _DAMAGE = Table({
     "B_c": Number("Eq. 21 compression constant B_c", POSITIVE, default=1.5e3),
     "stiffness_recovery": Number("share s of d_t acting in compression", "[0, 1]", default=0.0),
     "damage_max": Number("cap of the damage (stiffness floor)", "[0, 1)", default=0.9999),
+    "integration": _INTEGRATION,
 }, "[materials.NAME.damage]", presence="optional")
 
 _MATERIAL = Table({
@@ -892,6 +900,9 @@ def _check_nonlinear_material(name: str, material: dict, order: int) -> None:
                            "preset: " + ", ".join(_show(p) for p in PRESET_STRENGTHS) + ")")
     for strength in ("cohesion", "tensile_strength"):
         _check_strength(f"{key}.{strength}", values[strength], "a material strength")
+    if values["integration"] == "reduced" and order != 1:
+        raise SceneError(f"{key}.integration", "reduced", "\"full\" with mesh.order = 2 (one point per cell is "
+                         "for Q1 hexahedra: a Q2 cell's mean strain misses strain modes its centre carries)")
     if table == "plasticity":
         if values["dilation_angle"] > values["friction_angle"]:
             raise SceneError(f"{key}.dilation_angle", values["dilation_angle"], "the dilation angle must "

@@ -778,7 +778,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     Returns:
         StaticState, with `components` and `contact` for the dynamic run.
     """
-    from pyfem.elements import linear_stiffness, plastic_frequency_factor, scene_laws
+    from pyfem.elements import add_matrices, linear_stiffness, plastic_frequency_factor, scene_laws
     from pyfem.relaxation import probe_frequency, ramp_length, relax, scaled_mass
     from pyfem.solver import make_contact_pairs
 
@@ -805,8 +805,12 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     element_cells = (np.concatenate([nonlinear.arrays[name].cells for name in element_regions])
                      if element_regions else np.zeros(0, dtype=np.int32))
     K_support = (nonlinear.stiffness if nonlinear is not None else model.stiffness).tocsr()
-    K_excavation = (linear_stiffness(model, np.union1d(element_cells, installed_cells)).tocsr()
-                    if len(installed_cells) else K_support)
+    if len(installed_cells):  # the hourglass stiffness of the one-point regions not installed yet stays
+        K_excavation = add_matrices(linear_stiffness(model, np.union1d(element_cells, installed_cells)),
+                                    *[K for name, K in (nonlinear.hourglass if nonlinear else {}).items()
+                                      if name not in installed_regions]).tocsr()
+    else:
+        K_excavation = K_support
     laws, _ = scene_laws(scene)
     factor = max([plastic_frequency_factor(p["poisson_ratio"], p["friction_angle"], p["dilation_angle"])
                   for p in laws.values() if p["law"] == "mohr_coulomb"], default=1.0)
