@@ -67,7 +67,7 @@ def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: 
     boundary dashpot at a coarse node's own step is accurate only to (h C / M)^2, which is of order
     the coarse cells' Courant number squared, and it degraded the free field several times
     (docs/lts_plan.md). `pairs` (n_pairs, 2): the two nodes of every contact pair are made to drift at
-    one rate (`equalize_pair_drift`; `loop_cells`, bool per cell: the element-loop cells)."""
+    one rate (`equalize_pair_drift`; `loop_cells`: `loop_cell_mask` of the element-loop cells)."""
     csr = stiffness.tocsr()
     row_sums = np.asarray(abs(csr).sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
     dt_node = 2.0 / np.sqrt(row_sums / mass)
@@ -93,14 +93,19 @@ def _finest_of_cells(cell_level: np.ndarray, cell_nodes: np.ndarray, start: np.n
 UNCAPPED = np.iinfo(np.int32).max
 
 
+MATRIX_CELL, LOOP_CELL, LOOP_AND_MATRIX_CELL = 0, 1, 2
+"""Codes of `loop_cell_mask`: a cell in the stiffness matrix only; in the element loop only; in both
+(a one-point cell, integration = "reduced": its hourglass stiffness stays in the matrix)."""
+
+
 def loop_cell_mask(nonlinear, n_cells: int) -> np.ndarray | None:
-    """bool per model cell: in an element-loop region of `nonlinear` (NonlinearRegions), or None
-    without element-loop materials."""
+    """int8 per model cell, MATRIX_CELL, LOOP_CELL or LOOP_AND_MATRIX_CELL (`nonlinear`:
+    NonlinearRegions), or None without element-loop materials. Nonzero = the element loop loads it."""
     if nonlinear is None:
         return None
-    mask = np.zeros(n_cells, dtype=bool)
-    for arrays in nonlinear.arrays.values():
-        mask[arrays.cells] = True
+    mask = np.full(n_cells, MATRIX_CELL, dtype=np.int8)
+    for name, arrays in nonlinear.arrays.items():
+        mask[arrays.cells] = LOOP_AND_MATRIX_CELL if name in nonlinear.hourglass else LOOP_CELL
     return mask
 
 
@@ -108,12 +113,14 @@ def drift_levels(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarra
                  loop_cells: np.ndarray | None = None) -> np.ndarray:
     """int32 (n_nodes,): the finest level whose kicks move each node (its drift level in the
     LocalStepper): the finest level of the nodes it shares a matrix cell with (its stiffness row's
-    columns), itself included, and of the element-loop cells (`loop_cells`, bool per cell) that load
-    it, each at its own level: the coarsest of its nodes (`cell_levels`), made finer by `cell_cap`
-    (per cell; `pair_cell_cap`)."""
+    columns), itself included, and of the element-loop cells (`loop_cells`, `loop_cell_mask`'s codes)
+    that load it, each at its own level: the coarsest of its nodes (`cell_levels`), made finer by
+    `cell_cap` (per cell; `pair_cell_cap`). A one-point cell is also a matrix cell (its hourglass
+    stiffness), so the matrix's finest level rules it."""
     finest_in_cell = levels[cell_nodes].min(axis=1).astype(np.int64)
     if loop_cells is not None:
-        finest_in_cell = np.where(loop_cells, levels[cell_nodes].max(axis=1), finest_in_cell)
+        finest_in_cell = np.where(np.asarray(loop_cells) == LOOP_CELL, levels[cell_nodes].max(axis=1),
+                                  finest_in_cell)
     if cell_cap is not None:
         finest_in_cell = np.minimum(finest_in_cell, cell_cap)
     return _finest_of_cells(finest_in_cell, cell_nodes, levels)
@@ -147,7 +154,7 @@ def pair_cell_cap(levels: np.ndarray, cell_nodes: np.ndarray, pairs: np.ndarray,
         return cap
     is_pair = np.zeros(len(levels), dtype=bool)
     is_pair[np.asarray(pairs).ravel()] = True
-    touching = np.flatnonzero(np.asarray(loop_cells) & is_pair[cell_nodes].any(axis=1))
+    touching = np.flatnonzero((np.asarray(loop_cells) != MATRIX_CELL) & is_pair[cell_nodes].any(axis=1))
     around = cell_nodes[touching]
     while True:
         drift = drift_levels(levels, cell_nodes, cap, loop_cells)

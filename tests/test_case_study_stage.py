@@ -53,14 +53,17 @@ def stage_checks(summary) -> None:
     assert yielded > 0.0, "the rock around the cavern yielded in the stage"
 
 
-@pytest.mark.parametrize("local_stepping", [False, True])
-def test_small_case3_without_wave_stays_at_rest(tmp_path, local_stepping):
+@pytest.mark.parametrize("local_stepping, integration", [(False, "full"), (True, "full"), (True, "reduced")])
+def test_small_case3_without_wave_stays_at_rest(tmp_path, local_stepping, integration):
     """Also with local time stepping: the stage's element-loop and pair state, cut by rate level
-    (pyfem/local_stepping.py load_component_parts, load_pair_parts), hands over in equilibrium."""
+    (pyfem/local_stepping.py load_component_parts, load_pair_parts), hands over in equilibrium; and
+    so with one-point rock cells (integration = "reduced", their hourglass stiffness in the matrix)."""
     # Local stepping over 0.2 s (60 global steps): long enough for a mode its map amplified to show.
+    one_point = ([f'materials.{name}.plasticity.integration="reduced"' for name in ("sandstone", "non_sandstone")]
+                 if integration == "reduced" else [])
     scene = small_case3([f"time.duration={0.2 if local_stepping else 0.02}", "output.xdmf_interval=0.0",
-                         "contact.deterioration.R0=1.0", f"time.local_stepping={'true' if local_stepping else 'false'}"],
-                        wave=False)
+                         "contact.deterioration.R0=1.0", f"time.local_stepping={'true' if local_stepping else 'false'}",
+                         *one_point], wave=False)
     summary = solver.run(scene, tmp_path / "rest")
     if local_stepping:
         assert "local time stepping: 5 rate levels" in summary["dt_reason"]

@@ -50,6 +50,9 @@ SCENES = {
     "contact_lag": ("tests/scenes/mpi_hard_contact.toml", ("--set", "contact.normal_lag.length=0.01",
                                                            "--set", "contact.normal_lag.velocity=0.1")),
     "damage": ("tests/scenes/mpi_weak_layer.toml", ()),
+    # The same layer with one point per cell (integration = "reduced"): the hourglass stiffness is in
+    # the matrix rows each rank owns, the one-point cells on their owner.
+    "one_point": ("tests/scenes/mpi_weak_layer.toml", ("--set", 'materials.weak.plasticity.integration="reduced"')),
     # Q2 (tensor-form element loop), stiffness-proportional Rayleigh damping (halo cells damp too),
     # float32 matrix blocks, and a plasticity zone at x < 50 m that some ranks do not reach.
     "zone": ("tests/scenes/mpi_q2_zone.toml", ()),
@@ -142,7 +145,9 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
         if ranks == 3:
             assert 0 in parallel["mpi"]["element_loop_cells"], "a rank without element-loop cells"
         assert sum(parallel["mpi"]["element_loop_cells"]) == serial["nonlinear_regions"]["weak"]["cells"]
-    if name == "damage":
+    if name == "one_point":
+        assert serial["nonlinear_regions"]["weak"]["points"] == serial["nonlinear_regions"]["weak"]["cells"]
+    if name in ("damage", "one_point"):
         weak = serial["nonlinear_regions"]["weak"]
         assert weak["yielded_volume"] > 0.0 and weak["peak_damage"] > 0.0
         for key, value in weak.items():
