@@ -200,14 +200,18 @@ def element_loop_rows(target_dofs: int, steps: int, threads: int = 2) -> list[di
     return rows
 
 
-def case_study_rows(presets, steps: int, threads: int = 2) -> list[dict]:
+ONE_POINT_ROCK = tuple(f'materials.{name}.plasticity.integration="reduced"' for name in ("sandstone", "non_sandstone"))
+"""Overrides of the case-3 scenes for one-point rock cells (the lining stays fully integrated)."""
+
+
+def case_study_rows(presets, steps: int, threads: int = 2, one_point: bool = True) -> list[dict]:
     """The case-3 scene's step (workflows/scenes/case3_contact_PRESET.toml) split into the kernel's
     phases: stiffness product, element loop (Mohr-Coulomb rock zone and concrete lining, at rest:
-    a yielding point costs several times more), input forces, contact pairs, update. The static
+    a yielding point costs several times more), input forces, contact pairs, update; with
+    `one_point` a second row of the same scene with one-point rock cells (ONE_POINT_ROCK). The static
     stage is not solved (the step's cost does not depend on it; its minutes are in run.json)."""
     from pathlib import Path
 
-    from pyfem import _kernels, solver
     from pyfem.scene import load_scene
 
     scenes = Path(__file__).resolve().parents[1] / "workflows" / "scenes"
@@ -216,24 +220,33 @@ def case_study_rows(presets, steps: int, threads: int = 2) -> list[dict]:
         path = scenes / f"case3_contact_{preset}.toml"
         if not path.is_file():  # an installed package carries no workflows
             continue
-        simulation = solver.prepare(load_scene(path), solve_static=False)
-        stepper = solver.make_stepper(simulation)
-        _kernels.set_num_threads(threads)
-        n = simulation.stiffness.shape[0]
-        stepper_seconds_per_step(stepper, n, 2, amplitude=1.0e-9)  # warm-up
-        stepper.reset_phase_seconds()
-        rng = np.random.default_rng(0)
-        u, v, a = 1.0e-9 * rng.standard_normal(n), np.zeros(n), np.zeros(n)
-        start = time.perf_counter()
-        stepper.run(u, v, a, steps, 0.0)
-        seconds = time.perf_counter() - start
-        split = solver.phase_split(stepper.phase_seconds(), seconds)
-        rows.append({"case": f"case 3 {preset} (contact, Mohr-Coulomb zone, concrete lining, oblique input)",
-                     "dofs": n, "threads": threads, "ms": 1e3 * seconds / steps,
-                     "points": simulation.nonlinear.n_points if simulation.nonlinear is not None else 0,
-                     "pairs": len(simulation.contact_arrays["area"]) if simulation.contact_arrays else 0,
-                     "phases": {name: entry["ms_per_step"] for name, entry in split.items()}})
+        for overrides in ((), ONE_POINT_ROCK) if one_point else ((),):
+            rows.append(_case_row(load_scene(path, list(overrides)), preset, bool(overrides), steps, threads))
     return rows
+
+
+def _case_row(scene, preset: str, one_point: bool, steps: int, threads: int) -> dict:
+    """One row of `case_study_rows`."""
+    from pyfem import _kernels, solver
+
+    simulation = solver.prepare(scene, solve_static=False)
+    stepper = solver.make_stepper(simulation)
+    _kernels.set_num_threads(threads)
+    n = simulation.stiffness.shape[0]
+    stepper_seconds_per_step(stepper, n, 2, amplitude=1.0e-9)  # warm-up
+    stepper.reset_phase_seconds()
+    rng = np.random.default_rng(0)
+    u, v, a = 1.0e-9 * rng.standard_normal(n), np.zeros(n), np.zeros(n)
+    start = time.perf_counter()
+    stepper.run(u, v, a, steps, 0.0)
+    seconds = time.perf_counter() - start
+    split = solver.phase_split(stepper.phase_seconds(), seconds)
+    rock = "one-point Mohr-Coulomb zone" if one_point else "Mohr-Coulomb zone"
+    return {"case": f"case 3 {preset} (contact, {rock}, concrete lining, oblique input)",
+            "dofs": n, "threads": threads, "ms": 1e3 * seconds / steps,
+            "points": simulation.nonlinear.n_points if simulation.nonlinear is not None else 0,
+            "pairs": len(simulation.contact_arrays["area"]) if simulation.contact_arrays else 0,
+            "phases": {name: entry["ms_per_step"] for name, entry in split.items()}}
 
 
 def main(argv=None) -> int:
