@@ -237,7 +237,7 @@ class NonlinearRegions:
         return result
 
     def region_summary(self, components=None) -> dict:
-        """Per region, for run.json: law, cells, points, volume (m^3), damaged_volume (d > DAMAGED,
+        """Per region, for run.json: law, integration, cells, points, volume (m^3), damaged_volume (d > DAMAGED,
         m^3, by points), peak_damage, yielded_volume (plastic strain > 0, m^3), peak_plastic_strain,
         tension_points / shear_points (damage_type 1 / 2), dissipated_energy (J since the start).
         `components` as in `cell_averages`."""
@@ -246,6 +246,7 @@ class NonlinearRegions:
             damage, plastic, kind = component.damage(), component.plastic_strain(), component.damage_type()
             summary[name] = {
                 "law": self.laws[name][0],
+                "integration": self.integration.get(name, "full"),
                 "cells": int(arrays.weights.shape[0]),
                 "points": int(arrays.weights.size),
                 "volume": float(arrays.weights.sum()),

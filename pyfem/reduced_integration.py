@@ -52,14 +52,14 @@ def one_point_arrays(full):
     Returns:
         ElementArrays with q = 1: weights (c, 1) the cell volumes V (m^3), points (c, 1, 3) the
         centroids sum_q w_q x_q / V (m), uniform_gradients (c, 8, 3) the mean gradients (1/m), which
-        the kernel uses; reference_gradients and inverse_jacobians of the reference centre.
+        the kernel uses; reference_gradients and inverse_jacobians the averages of the full points'
+        (kept so the arrays keep their shapes; not used by the kernel).
     """
     if full.cell_nodes.shape[1] != 8:
         raise ValueError(f"one-point integration is for Q1 hexahedra (8 nodes per cell), not {full.cell_nodes.shape[1]}")
     volume = full.weights.sum(axis=1)
     mean_gradients = np.einsum("cq,cqkl->ckl", full.weights, full.gradients) / volume[:, None, None]
     centroids = np.einsum("cq,cqi->ci", full.weights, full.points) / volume[:, None]
-    # The centre point's own (not used by the kernel, kept so the arrays stay self-describing).
     centre_reference = full.reference_gradients.mean(axis=0, keepdims=True)
     centre_inverse = full.inverse_jacobians.mean(axis=1, keepdims=True)
     return dataclasses.replace(
