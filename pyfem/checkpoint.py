@@ -36,6 +36,8 @@ RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
 # they existed: left out of the fingerprint at that value, so an earlier run's checkpoint still
 # continues (a run that sets another value is another model).
 LATER_KEYS = ((("time", "matrix_precision"), "double"), (("time", "local_stepping"), False))
+# The same for keys of every [materials.NAME.TABLE] table (TABLE one of the nonlinear tables).
+LATER_MATERIAL_KEYS = ((("plasticity", "damage"), "integration", "full"),)
 
 
 # The scene's file keys (resolved to absolute paths by the scene): a checkpoint holds a hash of
@@ -65,13 +67,20 @@ def _hash_file(path: str, mtime_ns: int, size: int) -> str:
 
 def scene_fingerprint(scene) -> dict:
     """The scene part of the fingerprint: its JSON without the keys a resume may change
-    (RESUMABLE_CHANGES), without later keys at their old behaviour (LATER_KEYS), files by content."""
+    (RESUMABLE_CHANGES), without later keys at their old behaviour (LATER_KEYS, LATER_MATERIAL_KEYS),
+    files by content."""
     data = scene.to_json()
     for table, key in RESUMABLE_CHANGES:
         data.get(table, {}).pop(key, None)
     for (table, key), old_behaviour in LATER_KEYS:
         if data.get(table, {}).get(key) == old_behaviour:
             data[table].pop(key)
+    for tables, key, old_behaviour in LATER_MATERIAL_KEYS:
+        for material in data.get("materials", {}).values():
+            for table in tables:
+                settings = material.get(table)
+                if isinstance(settings, dict) and settings.get(key) == old_behaviour:
+                    settings.pop(key)
     return _files_by_content(data)
 
 

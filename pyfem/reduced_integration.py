@@ -18,14 +18,14 @@ full-integration element:
   minus the one-point one. It is symmetric and positive semi-definite: u^T K_full u is the cell's
   integral of the strain energy density, a convex quadratic of the strain, and the mean strain's
   energy V W(eps_bar) is below it (Jensen's inequality; with B-bar the volumetric strain is the
-  mean at every point and only the deviatoric part enters). K_hg is linear and goes into the
-  stiffness matrix with the region's other cells.
+  mean at every point and only the deviatoric part enters), so it adds no unstable mode. K_hg is
+  linear and goes into the stiffness matrix with the region's other cells (its blocks fill the
+  region's rows again: the stiffness product grows, the element loop shrinks).
 - **What it means.** In the elastic range the one-point cell plus K_hg *is* the full-integration
   cell: same K, same stable step, the same run to round-off while nothing yields (tested). Once
   the law yields or damages, it acts on the mean strain of the cell only; the strain's variation
-  within the cell (the hourglass modes, about a tenth of a cell's strain energy in a smooth field)
-  stays elastic with the initial moduli, so a yielded or cracked cell is somewhat stiffer than the
-  full-integration one. Outputs of such a region (monitors, fields, run.json volumes) are the
+  within the cell (the hourglass modes) stays elastic with the initial moduli, so a yielded or
+  cracked cell is stiffer than the full-integration one. Outputs of such a region (monitors, fields, run.json volumes) are the
   cell's one point, at its centroid.
 
 Q1 hexahedra only (a Q2 cell's 27 points are not reducible this way: its mean gradient misses

@@ -902,7 +902,9 @@ def element_loop_plan(nonlinear, u: np.ndarray, per_step: float, time_step: Time
                                 "matrix)"}
     regions, stiffening = {}, 1.0
     for component, (name, (law, parameters)) in zip(nonlinear.components, nonlinear.laws.items()):
+        one_point = nonlinear.integration.get(name) == "reduced"
         regions[name] = (f"{law}, {component.n_cells} cells, {component.n_cells * component.n_points} points"
+                         + (", one point per cell (its hourglass stiffness in the matrix)" if one_point else "")
                          + (", mean dilatation" if component.mean_dilatation else "")
                          + f", {component.owned_bytes / 2**20:.1f} MiB of state and buffers")
         if law == "mohr_coulomb":

@@ -365,3 +365,27 @@ def test_the_normal_lag_resumes_bit_for_bit(tmp_path, monkeypatch):
     assert "contact/effective_normal" in saved.kernel or any("effective_normal" in name for name in saved.kernel)
     solver.run(scene(1, 2.5, 0.8, "bimaterial, lag"), out, resume=True)
     assert_same_run(out, reference)
+
+
+def test_a_checkpoint_from_before_the_integration_key_still_resumes(tmp_path):
+    """`integration` was added to [materials.NAME.plasticity] / [damage] after checkpoints were first
+    written: at its old behaviour ("full") it stays out of the fingerprint, so such a checkpoint
+    continues; a scene asking for "reduced" is another model and is refused, naming the key."""
+    def scene_with(integration=None):
+        plasticity = {"cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e6}
+        if integration is not None:
+            plasticity["integration"] = integration
+        return parse_scene({
+            "title": "later key", "mesh": {"builder": "box", "size": [20.0, 20.0, 20.0], "h": 10.0},
+            "materials": {"rock": {"E": 8.0e9, "nu": 0.25, "rho": 2600.0, "plasticity": plasticity}},
+            "time": {"duration": 0.1}}, source="test")
+
+    assert scene_with().to_json()["materials"]["rock"]["plasticity"]["integration"] == "full"  # the default
+    older = checkpoint.scene_fingerprint(scene_with())
+    assert "integration" not in older["materials"]["rock"]["plasticity"]  # as a checkpoint before the key
+    saved = checkpoint.Checkpoint(path=tmp_path / "checkpoint.npz", meta={"fingerprint": {"scene": older}},
+                                  u=np.zeros(1), v=np.zeros(1), a=np.zeros(1))
+    saved.check_scene(scene_with())
+    saved.check_scene(scene_with("full"))
+    with pytest.raises(SceneError, match=r"materials\.rock\.plasticity\.integration"):
+        saved.check_scene(scene_with("reduced"))

@@ -77,6 +77,12 @@ def test_one_point_stiffness_plus_hourglass_is_the_full_element_on_distorted_cel
           eigenvalues.min() / np.abs(whole).max(), eigenvalues.max() / np.abs(whole).max())
     assert eigenvalues.min() >= -EXACT * np.abs(whole).max()
     assert np.all(eigenvalues.max(axis=1) > 0.05 * np.linalg.eigvalsh(whole).max(axis=1))  # hourglass stiffness
+    # The same for B-bar's element (the default of Q1 plasticity): only the deviatoric part enters.
+    b_bar = element_matrices(gradients[:200], full.weights[:200], lame, G, True).reshape(-1, 24, 24)
+    eigenvalues = np.linalg.eigvalsh(b_bar - single)
+    print("K_hg of B-bar per cell: smallest eigenvalue over the largest of K:", eigenvalues.min() / np.abs(b_bar).max())
+    assert eigenvalues.min() >= -EXACT * np.abs(b_bar).max()
+    assert np.all(eigenvalues.max(axis=1) > 0.05 * np.linalg.eigvalsh(b_bar).max(axis=1))
 
     # Mean dilatation: the kernel's B-bar linear-elastic loop is one point + B-bar's K_hg.
     component = _kernels.HexahedronElements(full.cell_nodes, np.ascontiguousarray(gradients), full.weights,
