@@ -215,6 +215,21 @@ void LocalStepper::rebuild() {
 }
 
 void LocalStepper::check_contacts() const {
+  // A pair node's element-loop force must reach it at every substep of its pairs' level: no
+  // component at a coarser level may hold it (pyfem/local_stepping.py pair_cell_cap).
+  std::vector<int> pair_level(static_cast<std::size_t>(n_nodes()), -1);
+  for (int c = 0; c <= max_level_; ++c)
+    for (const auto& pairs : levels_[c].contacts)
+      for (const std::int32_t node : pairs->unique_nodes()) pair_level[node] = max_level_ - c;
+  for (int c = 0; c <= max_level_; ++c)
+    for (const auto& component : levels_[c].components)
+      for (const std::int32_t node : component->nodes())
+        if (pair_level[node] >= 0 && max_level_ - c > pair_level[node])
+          throw std::invalid_argument(
+              "contact pair node " + std::to_string(node) + " (pairs at level " +
+              std::to_string(pair_level[node]) + ") is loaded by an element-loop component at the coarser "
+              "level " + std::to_string(max_level_ - c) + ": its force would reach the pair as kicks at the "
+              "ends of the coarse step (pyfem/local_stepping.py pair_cell_cap)");
   for (int c = 0; c <= max_level_; ++c) {
     const int k = max_level_ - c;
     for (const auto& pairs : levels_[c].contacts)

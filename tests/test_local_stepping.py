@@ -627,3 +627,25 @@ def test_local_stepping_after_a_static_stage_resumes_without_solving_it_again(tm
     monkeypatch.setattr(static, "solve_relaxation_stage", solve_again)
     solver.run(scene, out, resume=True)
     assert_same_run(out, reference)
+
+
+def test_the_kernel_refuses_a_coarser_element_loop_cell_on_a_pair_node(monkeypatch):
+    """The kernel's own check (LocalStepper::check_contacts) of what pyfem/local_stepping.py's
+    pair_cell_cap guarantees: an element-loop component at a level coarser than the pairs it touches
+    would load their nodes with kicks at the ends of its coarse step. With the cap switched off the
+    soft layer's yielding cells at the interface fall to their own coarser level, and the first run
+    is refused with one line naming the node and both levels."""
+    from pyfem import local_stepping
+
+    MPa = 1.0e6
+    scene = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
+                                    soft_plasticity={"cohesion": 0.05 * MPa, "friction_angle": 25.0,
+                                                     "tensile_strength": 0.02 * MPa})
+    simulation = solver.prepare(scene)
+    monkeypatch.setattr(local_stepping, "pair_cell_cap",
+                        lambda levels, cell_nodes, pairs, loop_cells: np.full(len(cell_nodes), local_stepping.UNCAPPED))
+    stepper = solver.make_stepper(simulation)
+    n = simulation.stiffness.shape[0]
+    with pytest.raises(ValueError, match=r"contact pair node \d+ \(pairs at level 0\) is loaded by an element-loop "
+                                         r"component at the coarser level [1-9]"):
+        stepper.run(np.zeros(n), np.zeros(n), np.zeros(n), 2 ** int(simulation.node_levels.max()), 0.0)
