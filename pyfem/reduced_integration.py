@@ -25,12 +25,11 @@ full-integration element:
   cell: same K, same stable step, the same run to round-off while nothing yields (tested). Once
   the law yields or damages, it acts on the mean strain of the cell only; the strain's variation
   within the cell (the hourglass modes) stays elastic with the initial moduli, so a yielded or
-  cracked cell is stiffer than the full-integration one. Outputs of such a region (monitors, fields, run.json volumes) are the
-  cell's one point, at its centroid.
+  cracked cell is stiffer than the full-integration one. Outputs of such a region (monitors,
+  fields, run.json volumes) are the cell's one point, at its centroid.
 
-Q1 hexahedra only (a Q2 cell's 27 points are not reducible this way: its mean gradient misses
-modes that carry strain at the centre); the scene refuses `integration = "reduced"` with
-`mesh.order = 2`.
+Q1 hexahedra only: a Q2 cell's strain varies quadratically within it, too much for one law point
+to stand for (not built); the scene refuses `integration = "reduced"` with `mesh.order = 2`.
 """
 from __future__ import annotations
 

@@ -902,7 +902,8 @@ def _check_nonlinear_material(name: str, material: dict, order: int) -> None:
         _check_strength(f"{key}.{strength}", values[strength], "a material strength")
     if values["integration"] == "reduced" and order != 1:
         raise SceneError(f"{key}.integration", "reduced", "\"full\" with mesh.order = 2 (one point per cell is "
-                         "for Q1 hexahedra: a Q2 cell's mean strain misses strain modes its centre carries)")
+                         "for Q1 hexahedra: a Q2 cell's strain varies quadratically within it, too much for one "
+                         "law point)")
     if table == "plasticity":
         if values["dilation_angle"] > values["friction_angle"]:
             raise SceneError(f"{key}.dilation_angle", values["dilation_angle"], "the dilation angle must "
