@@ -35,9 +35,10 @@ RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
 # Keys added after checkpoints were first written, with the value that reproduces the run before
 # they existed: left out of the fingerprint at that value, so an earlier run's checkpoint still
 # continues (a run that sets another value is another model).
-LATER_KEYS = ((("time", "matrix_precision"), "double"), (("time", "local_stepping"), False))
-# The same for keys of every [materials.NAME.TABLE] table (TABLE one of the nonlinear tables).
-LATER_MATERIAL_KEYS = ((("plasticity", "damage"), "integration", "full"),)
+# A key's path through the scene's tables; "*" stands for every table at that depth (materials.NAME).
+LATER_KEYS = ((("time", "matrix_precision"), "double"), (("time", "local_stepping"), False),
+              (("materials", "*", "plasticity", "integration"), "full"),
+              (("materials", "*", "damage", "integration"), "full"))
 
 
 # The scene's file keys (resolved to absolute paths by the scene): a checkpoint holds a hash of
@@ -67,21 +68,24 @@ def _hash_file(path: str, mtime_ns: int, size: int) -> str:
 
 def scene_fingerprint(scene) -> dict:
     """The scene part of the fingerprint: its JSON without the keys a resume may change
-    (RESUMABLE_CHANGES), without later keys at their old behaviour (LATER_KEYS, LATER_MATERIAL_KEYS),
-    files by content."""
+    (RESUMABLE_CHANGES), without later keys at their old behaviour (LATER_KEYS), files by content."""
     data = scene.to_json()
     for table, key in RESUMABLE_CHANGES:
         data.get(table, {}).pop(key, None)
-    for (table, key), old_behaviour in LATER_KEYS:
-        if data.get(table, {}).get(key) == old_behaviour:
-            data[table].pop(key)
-    for tables, key, old_behaviour in LATER_MATERIAL_KEYS:
-        for material in data.get("materials", {}).values():
-            for table in tables:
-                settings = material.get(table)
-                if isinstance(settings, dict) and settings.get(key) == old_behaviour:
-                    settings.pop(key)
+    for path, old_behaviour in LATER_KEYS:
+        for table in _tables_at(data, path[:-1]):
+            if path[-1] in table and table[path[-1]] == old_behaviour:
+                table.pop(path[-1])
     return _files_by_content(data)
+
+
+def _tables_at(data: dict, path: tuple) -> list:
+    """The tables (dicts) of `data` at `path`, "*" matching every key at its depth."""
+    tables = [data]
+    for name in path:
+        tables = [value for table in tables
+                  for value in (table.values() if name == "*" else [table.get(name)]) if isinstance(value, dict)]
+    return tables
 
 
 def _files_by_content(scene_json: dict) -> dict:

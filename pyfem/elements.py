@@ -546,8 +546,7 @@ def scene_laws(scene: typing.Mapping) -> tuple[dict, dict]:
             settings = material.get(table)
             if settings is None:
                 continue
-            parameters = {key: value for key, value in settings.items()
-                          if key not in ("mean_dilatation", "zone", "integration")}
+            parameters = {key: value for key, value in settings.items() if key not in ("mean_dilatation", "zone")}
             if settings.get("zone") is not None:
                 parameters["zone"] = list(settings["zone"])
             law_parameters[name] = {"law": law, "young_modulus": material["E"],
@@ -556,17 +555,10 @@ def scene_laws(scene: typing.Mapping) -> tuple[dict, dict]:
     return law_parameters, mean_dilatation
 
 
-def scene_integration(scene: typing.Mapping) -> dict:
-    """Region -> "full" or "reduced" of a validated scene's [plasticity] / [damage] tables."""
-    return {name: material[table].get("integration") or "full" for name, material in scene["materials"].items()
-            for table in LAW_OF_TABLE if material.get(table) is not None}
-
-
 def nonlinear_component(model, region_names: typing.Sequence[str],
                         law_parameters: typing.Mapping[str, typing.Mapping] | None = None,
                         initial_stress=None, mean_dilatation: bool | typing.Mapping[str, bool] = False,
-                        min_cells_for_threads: int | None = None,
-                        integration: str | typing.Mapping[str, str] = "full") -> NonlinearRegions:
+                        min_cells_for_threads: int | None = None) -> NonlinearRegions:
     """Kernel components for the regions whose material the element loop integrates, and the
     stiffness of all other cells.
 
@@ -577,7 +569,10 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
         model: pyfem.operators.Model.
         region_names: regions (scene material names) to take out of the matrix.
         law_parameters: region -> {"law": name, **parameters (SI)}; a region not listed gets
-            "linear_elastic" with the lambda and G of its material (Pa).
+            "linear_elastic" with the lambda and G of its material (Pa). Besides the law's own
+            parameters: "zone" (a box, `cells_in_zone`) and "integration", "full" (default: the
+            quadrature of the matrix) or "reduced" (Q1 only: one point per cell at its mean strain,
+            the rest of the cells' elastic stiffness, K_hg, in the matrix; pyfem/reduced_integration.py).
         initial_stress: None, or a callable (m, 3) points (m) -> (m, 3, 3) static stress (Pa)
             evaluated at the quadrature points (the laws' total stress starts there; the force
             uses sigma - sigma0).
@@ -585,9 +580,6 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
             region -> bool (absent: False).
         min_cells_for_threads: kernel threshold below which a component runs on one thread
             (None: the kernel's default).
-        integration: "full" (the quadrature of the matrix) or "reduced" (Q1 only: one point per cell
-            at its mean strain, the rest of the cells' elastic stiffness, K_hg, in the matrix;
-            pyfem/reduced_integration.py) in every component, or region -> scheme (absent: "full").
 
     Returns:
         NonlinearRegions: stiffness (the kernel's K without springs), components, arrays, laws.
@@ -604,6 +596,7 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
         given = dict(law_parameters.get(name) or {"law": "linear_elastic", **region_elastic_parameters(model, name)})
         law = given.pop("law", "linear_elastic")
         zone = given.pop("zone", None)
+        schemes[name] = given.pop("integration", "full")
         cells = cells_in_zone(model, region_cells(model, name), zone)
         if zone is not None:
             zones[name] = list(zone)
@@ -616,18 +609,18 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
                           else quadrature_initial_stress(region_arrays.points, initial_stress))
         b_bar = bool(mean_dilatation if isinstance(mean_dilatation, bool) else mean_dilatation.get(name, False))
         options[name] = {"mean_dilatation": b_bar}
-        schemes[name] = integration if isinstance(integration, str) else integration.get(name, "full")
         if schemes[name] == "reduced":  # one point per cell, K_hg in the matrix (pyfem/reduced_integration.py)
             if law == "linear_elastic":
                 lame = (parameters["lame_lambda"], parameters["shear_modulus"])
             else:
                 lame = lame_moduli(parameters["young_modulus"], parameters["poisson_ratio"])
-            hourglass[name] = hourglass_stiffness(region_arrays, *lame, b_bar, model.n_nodes)
+            one_point = one_point_arrays(region_arrays)
+            hourglass[name] = hourglass_stiffness(region_arrays, one_point, *lame, b_bar, model.n_nodes)
             if stresses[name] is not None:  # the cell's mean initial stress, sum_q w_q sigma0_q / V
                 stresses[name] = np.ascontiguousarray(
                     np.einsum("cq,cqk->ck", region_arrays.weights, stresses[name])[:, None, :]
-                    / region_arrays.weights.sum(axis=1)[:, None, None])
-            region_arrays = one_point_arrays(region_arrays)
+                    / one_point.weights[:, :, None])
+            region_arrays = one_point
             options[name]["mean_dilatation"] = False  # one point: its volumetric strain is the mean
         elif schemes[name] != "full":
             raise ValueError(f"integration of region {name!r}: {schemes[name]!r}, not 'full' or 'reduced'")

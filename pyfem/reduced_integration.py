@@ -89,13 +89,14 @@ def element_matrices(gradients: np.ndarray, weights: np.ndarray, lame_lambda: fl
     return K
 
 
-def hourglass_stiffness(full, lame_lambda: float, shear_modulus: float, mean_dilatation: bool,
+def hourglass_stiffness(full, one_point, lame_lambda: float, shear_modulus: float, mean_dilatation: bool,
                         n_nodes: int) -> scipy.sparse.bsr_matrix:
     """K_hg of the cells (module docstring): the full-integration elastic stiffness of the cells
     minus their one-point stiffness, assembled, BSR (3 n_nodes)^2 with (3, 3) blocks (N/m).
 
     Args:
         full: ElementArrays of the Q1 cells with the full quadrature.
+        one_point: `one_point_arrays(full)`.
         lame_lambda, shear_modulus: the law's initial elastic moduli (Pa).
         mean_dilatation: the full-integration element is B-bar's (the region's option).
         n_nodes: nodes of the model.
@@ -107,10 +108,9 @@ def hourglass_stiffness(full, lame_lambda: float, shear_modulus: float, mean_dil
         gradients = np.einsum("qkm,cqml->cqkl", full.reference_gradients, full.inverse_jacobians[rows])
         weights = full.weights[rows]
         whole = element_matrices(gradients, weights, lame_lambda, shear_modulus, mean_dilatation)
-        volume = weights.sum(axis=1, keepdims=True)
-        mean = np.einsum("cq,cqkl->ckl", weights, gradients) / volume[:, :, None]
-        one_point = element_matrices(mean[:, None], volume, lame_lambda, shear_modulus, False)
-        blocks = (whole - one_point).reshape(len(rows), 24, 24)
+        single = element_matrices(one_point.gradients[rows], one_point.weights[rows], lame_lambda, shear_modulus,
+                                  False)
+        blocks = (whole - single).reshape(len(rows), 24, 24)
         dofs = (3 * full.cell_nodes[rows][:, :, None] + np.arange(3)).reshape(len(rows), 24)
         total = total + scipy.sparse.csr_matrix(
             (blocks.ravel(), (np.repeat(dofs, 24, axis=1).ravel(), np.tile(dofs, (1, 24)).ravel())),

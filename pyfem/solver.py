@@ -137,8 +137,7 @@ def nonlinear_regions(scene: Scene, model, time_step: TimeStep):
     matrix into kernel element loops (pyfem.elements), or None when there are none. Their laws start
     from the scene's initial stress at the quadrature points; warnings go to the scene (also a step
     too close to the elastic limit for non-associated flow, `plastic_frequency_factor`)."""
-    from pyfem.elements import (initial_warnings, nonlinear_component, plastic_frequency_factor, scene_integration,
-                                scene_laws)
+    from pyfem.elements import initial_warnings, nonlinear_component, plastic_frequency_factor, scene_laws
     from pyfem.initial_stress import stress_field_from_scene
 
     laws, mean_dilatation = scene_laws(scene)
@@ -146,8 +145,7 @@ def nonlinear_regions(scene: Scene, model, time_step: TimeStep):
         return None
     try:
         nonlinear = nonlinear_component(model, list(laws), laws, mean_dilatation=mean_dilatation,
-                                        initial_stress=stress_field_from_scene(scene),
-                                        integration=scene_integration(scene))
+                                        initial_stress=stress_field_from_scene(scene))
     except ValueError as error:  # the kernel's own range checks, should the scene's have missed one
         raise SceneError("materials", sorted(laws), f"a nonlinear material was refused by the kernel: "
                          f"{error}")
