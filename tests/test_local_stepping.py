@@ -52,6 +52,15 @@ def graded_scene(geo: pathlib.Path, local: bool, **extra):
     return parse_scene(data, source="test")
 
 
+def run_to_the_end(simulation) -> np.ndarray:
+    """u (m) after the simulation's steps from rest, by the stepper `solver.make_stepper` builds."""
+    stepper = solver.make_stepper(simulation)
+    n = simulation.stiffness.shape[0]
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    stepper.run(u, v, a, simulation.n_steps, 0.0)
+    return u
+
+
 def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_stepping(tmp_path):
     geo = tmp_path / "graded.geo"
     geo.write_text(GRADED_GEO)
@@ -83,11 +92,7 @@ def test_one_rate_level_is_global_stepping(tmp_path):
         simulation = solver.prepare(scene)
         if local:
             assert simulation.node_levels.max() == 0  # a uniform mesh: one rate
-        stepper = solver.make_stepper(simulation)
-        n = simulation.stiffness.shape[0]
-        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-        stepper.run(u, v, a, simulation.n_steps, 0.0)
-        runs[local] = u
+        runs[local] = run_to_the_end(simulation)
     assert np.max(np.abs(runs[False])) > 1e-5
     assert np.linalg.norm(runs[True] - runs[False]) <= 1e-12 * np.linalg.norm(runs[False])
 
@@ -331,11 +336,7 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
             scene = two_layer_contact_scene(local, True, cohesion=0.0, friction_angle=5.0)
             scene["time"]["dt"] = dt
             simulation = solver.prepare(scene)
-            stepper = solver.make_stepper(simulation)
-            n = simulation.stiffness.shape[0]
-            u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-            stepper.run(u, v, a, simulation.n_steps, 0.0)
-            finals.append((u, simulation.contact_pairs.state_counts()))
+            finals.append((run_to_the_end(simulation), simulation.contact_pairs.state_counts()))
         (u_global, counts_global), (u_local, counts_local) = finals
         assert counts_local[2] > 0 and counts_global[2] > 0  # pairs sliding at the end in both
         differences.append(np.abs(u_local - u_global).max() / np.abs(u_global).max())
@@ -380,10 +381,7 @@ def lagged_sliding(local: bool, dt: float, normal_lag: dict | None, deterioratio
         simulation.node_levels = np.zeros_like(simulation.node_levels)
     elif local:
         assert simulation.node_levels.max() >= 1  # several rates
-    stepper = solver.make_stepper(simulation)
-    n = simulation.stiffness.shape[0]
-    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    stepper.run(u, v, a, simulation.n_steps, 0.0)
+    u = run_to_the_end(simulation)
     assert simulation.contact_pairs.state_counts()[2] > 0  # pairs sliding at the end
     return u
 
@@ -449,14 +447,6 @@ def pairs_at_a_coarse_level(simulation) -> np.ndarray:
     cell_nodes = simulation.model.V.dofmap.list.array.reshape(simulation.model.n_cells, -1)
     levels = np.where(simulation.model.node_coords[:, 2] >= 22.5, 1, 0).astype(np.int32)
     return local_stepping.equalize_pair_drift(levels, cell_nodes, simulation.contact_arrays["pairs"], None)
-
-
-def run_to_the_end(simulation) -> np.ndarray:
-    stepper = solver.make_stepper(simulation)
-    n = simulation.stiffness.shape[0]
-    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    stepper.run(u, v, a, simulation.n_steps, 0.0)
-    return u
 
 
 @pytest.mark.parametrize("normal_lag", [None, LAG], ids=["instant", "lagged"])
