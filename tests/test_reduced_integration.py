@@ -214,3 +214,19 @@ def test_bad_integration_is_one_line_naming_the_key(table):
     with pytest.raises(SceneError, match=rf"materials\.rock\.{table}\.integration") as error:
         parse_scene(data, source="test")
     assert "mesh.order = 2" in str(error.value)
+
+
+def test_a_one_point_lining_is_warned_about():
+    """[damage] with integration = "reduced" (a concrete box) prepares, with one point per cell, and the scene carries
+    one line saying that bending within a cell does not crack it; "full" carries no such line."""
+    def prepared(integration):
+        return solver.prepare(parse_scene({
+            "title": "one-point concrete", "mesh": {"builder": "box", "size": [10.0, 10.0, 10.0], "h": 5.0, "order": 1},
+            "materials": {"rock": {"preset": "concrete", "damage": {"integration": integration}}},
+            "time": {"duration": 0.01}, "output": {"xdmf_interval": 0.0}}, source="test"))
+
+    one_point = prepared("reduced")
+    assert one_point.nonlinear.arrays["rock"].weights.shape == (8, 1)
+    lines = [line for line in one_point.scene.warnings if "materials.rock.damage.integration" in line]
+    assert len(lines) == 1 and "bending within a cell does not crack it" in lines[0]
+    assert not any("integration" in line for line in prepared("full").scene.warnings)
