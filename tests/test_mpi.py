@@ -1,10 +1,11 @@
 """`mpirun -n N python3 -m pyfem run SCENE` equals the serial run (issue 13, docs/scaling.md).
 
-The same command line on 1, 2 and 3 ranks (3: an odd partition), seven scenes:
+The same command line on 1, 2 and 3 ranks (3: an odd partition), eight scenes:
 - the free-field box under a vertical SV pulse (workflows/scenes/box_vertical_sv.toml);
 - a contact scene whose pairs break their bonds, slide and open (tests/scenes/mpi_hard_contact.toml),
   and the same with the friction's normal-stress lag;
-- a damage scene whose weak layer yields (tests/scenes/mpi_weak_layer.toml);
+- a damage scene whose weak layer yields (tests/scenes/mpi_weak_layer.toml), and the same layer
+  with one point per cell;
 - the same layer in Q2 with Rayleigh damping, float32 matrix blocks and a plasticity zone that one
   of 3 ranks does not reach (tests/scenes/mpi_q2_zone.toml);
 - a circular tunnel in the tetrahedral mesh of a user's gmsh script (meshes/tunnel_in_box_tet.geo),
@@ -167,6 +168,21 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
     assert parallel["energy"]["balance_error"] < 1e-12
     print(f"{name} on {ranks} ranks: largest difference from serial {worst:.2e}; owned {mpi['owned_nodes']}, "
           f"ghosts {mpi['ghost_nodes']}, bytes per step {mpi['bytes_sent_per_step']}")
+
+
+def test_more_ranks_than_cores_yield_the_core_while_they_wait():
+    """Ranks that spin while they wait take the cores from the ranks they wait for (docs/scaling.md
+    "More ranks than cores"): with more local ranks than usable cores pyfem asks Open MPI to yield,
+    unless the user chose; with a core per rank it changes nothing."""
+    from pyfem.distributed import YIELD_VARIABLE, yield_when_oversubscribed
+
+    cores = len(os.sched_getaffinity(0))
+    crowded = {"OMPI_COMM_WORLD_LOCAL_SIZE": str(cores + 1)}
+    assert yield_when_oversubscribed(crowded) and crowded[YIELD_VARIABLE] == "1"
+    for environ in ({"OMPI_COMM_WORLD_LOCAL_SIZE": str(cores)}, {"MPI_LOCALNRANKS": "1"}, {}):
+        assert not yield_when_oversubscribed(environ) and YIELD_VARIABLE not in environ
+    chosen = {"OMPI_COMM_WORLD_LOCAL_SIZE": str(cores + 1), YIELD_VARIABLE: "0"}
+    assert not yield_when_oversubscribed(chosen) and chosen[YIELD_VARIABLE] == "0"
 
 
 def test_check_under_mpirun_prints_the_plan_once_with_the_ranks_share():
