@@ -79,6 +79,19 @@ def yield_when_oversubscribed(environ=os.environ) -> bool:
 # several times more), the stiffness product ~1 ns per block (27 per row), contact 156 ns per pair.
 POINT_WORK = 2.3   # rows per element-loop quadrature point
 PAIR_WORK = 6.0    # rows per contact pair
+# A one-point cell (integration = "reduced") costs more than one of a full cell's points: its 8
+# nodes' gather and scatter are the cell's, not shared among 8 points. On the coarse case 3 (22 960
+# rock cells one point, the 3 360 lining cells full; 2026-11-27) the element loop fell from 33.3 to
+# 15.4 ms at rest (1 thread) and from 40.4 to 13.2 ms yielding (2 threads): with the lining's share
+# at the full run's cost per point, a one-point cell costs 3.1 and 1.8 points. Counted as:
+ONE_POINT_CELL_POINTS = 2.5
+
+
+def cell_points(nonlinear, name: str) -> float:
+    """The work of one element-loop cell of region `name`, in quadrature points (POINT_WORK each)."""
+    if nonlinear.integration.get(name, "full") == "reduced":
+        return ONE_POINT_CELL_POINTS
+    return float(nonlinear.arrays[name].weights.shape[1])
 
 
 def bisection(points: np.ndarray, parts: int, weights: np.ndarray | None = None) -> np.ndarray:
@@ -144,15 +157,16 @@ class Partition:
 
 def node_work(simulation) -> np.ndarray:
     """(n_nodes,) the work of each node in a step, in matrix rows: 1, plus POINT_WORK per element-loop
-    quadrature point of its cells (each cell's points shared among its nodes), plus PAIR_WORK per
+    quadrature point of its cells (each cell's points shared among its nodes; a one-point cell counts
+    ONE_POINT_CELL_POINTS), plus PAIR_WORK per
     contact pair shared between its two nodes. The element loop, where it is on, is most of a step
     (README benchmark), so a partition by node count leaves the rank with the cavern's zone waiting
     for nothing and the other waiting for it."""
     work = np.ones(len(simulation.mass))
     if simulation.nonlinear is not None:
-        for arrays in simulation.nonlinear.arrays.values():
+        for name, arrays in simulation.nonlinear.arrays.items():
             cell_nodes = np.asarray(arrays.cell_nodes)
-            share = POINT_WORK * arrays.weights.shape[1] / cell_nodes.shape[1]
+            share = POINT_WORK * cell_points(simulation.nonlinear, name) / cell_nodes.shape[1]
             np.add.at(work, cell_nodes.ravel(), share)
     if simulation.contact_arrays is not None and len(simulation.contact_arrays["pairs"]):
         np.add.at(work, np.asarray(simulation.contact_arrays["pairs"]).ravel(), 0.5 * PAIR_WORK)
@@ -253,9 +267,9 @@ def rank_work(simulation, parts: Partition) -> np.ndarray:
         mine = share(simulation, parts, rank)
         work[rank] = mine.n_owned
         if simulation.nonlinear is not None:
-            for name, arrays in simulation.nonlinear.arrays.items():
+            for name in simulation.nonlinear.arrays:
                 cells = sum(len(indices) for _, indices in mine.cells.get(name, []))
-                work[rank] += POINT_WORK * cells * arrays.weights.shape[1]
+                work[rank] += POINT_WORK * cells * cell_points(simulation.nonlinear, name)
         if mine.pairs is not None:
             work[rank] += PAIR_WORK * len(mine.pairs)
     return work

@@ -3,6 +3,7 @@ docs/scaling.md "Weighted partitions"): a rank's share of a step follows its nod
 count. Without MPI: the partition is computed from the replicated model, the same on every rank
 (tests/test_mpi.py runs the partitions under mpirun against the serial run)."""
 import numpy as np
+import pytest
 
 from pyfem import distributed, solver
 from pyfem.scene import parse_scene
@@ -20,21 +21,27 @@ def test_weighted_bisection_cuts_at_half_the_weight():
     assert np.array_equal(three, distributed.bisection(line, 3))
 
 
-def test_a_plastic_layer_in_one_half_is_shared_by_work():
+@pytest.mark.parametrize("integration", ["full", "reduced"])
+def test_a_plastic_layer_in_one_half_is_shared_by_work(integration):
     """A column whose lower quarter is a Mohr-Coulomb layer (the element loop: ~2.3 matrix rows per
     point): cut by node count along its height, one rank gets the whole layer; cut by work, the
-    ranks' modelled work is within 5 % of each other."""
+    ranks' modelled work is within 5 % of each other. With one point per cell the layer's cells count
+    ONE_POINT_CELL_POINTS points each (their gather and scatter), not one."""
     scene = parse_scene({
         "mesh": {"builder": "box", "size": [12.0, 6.0, 48.0], "h": 2.0, "order": 1,
                  "layers": [{"material": "soft", "thickness": 12.0}, {"material": "rock", "thickness": 36.0}]},
         "materials": {"soft": {"E": 2.0e9, "nu": 0.3, "rho": 2400.0,
-                               "plasticity": {"cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e5}},
+                               "plasticity": {"cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e5,
+                                              "integration": integration}},
                       "rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}},
         "time": {"duration": 0.01},
     }, source="test")
     simulation = solver.prepare(scene, solve_static=False)
     work = distributed.node_work(simulation)
-    assert work.max() > 10 * work.min()  # the layer's nodes carry the element loop
+    cells = simulation.nonlinear.arrays["soft"].cells.size
+    points = 8 if integration == "full" else distributed.ONE_POINT_CELL_POINTS
+    assert np.sum(work - 1.0) == pytest.approx(distributed.POINT_WORK * points * cells, rel=1e-12)
+    assert work.max() > (10 if integration == "full" else 3) * work.min()  # the layer's nodes carry the element loop
     ratios = {}
     for weighted in (False, True):
         per_rank = distributed.rank_work(simulation, distributed.partition(simulation, 2, weighted=weighted))
