@@ -132,9 +132,8 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     """Validate the scene and print the solver's plan for it."""
     scene = load_scene(scene_path, overrides)
     report_warnings(scene)
-    from pyfem.distributed import launched_rank, yield_when_oversubscribed
+    from pyfem.distributed import launched_rank
 
-    yield_when_oversubscribed()  # before anything starts MPI
     if launched_rank() > 0:  # under mpirun rank 0 alone builds and times the plan
         import dolfinx  # noqa: F401  (MPI and PETSc start collectively: rank 0's import waits for ours)
 

@@ -54,25 +54,6 @@ def launched_rank() -> int:
     return 0
 
 
-# Set by the launchers: the ranks on this machine (Open MPI, MPICH/Hydra, Slurm).
-LOCAL_SIZE_VARIABLES = ("OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS", "SLURM_NTASKS_PER_NODE")
-YIELD_VARIABLE = "OMPI_MCA_mpi_yield_when_idle"
-
-
-def yield_when_oversubscribed(environ=os.environ) -> bool:
-    """Before MPI starts (`main`): with more ranks on this machine than cores it may use, Open MPI's
-    ranks yield the core while they wait for a message instead of spinning (OMPI_MCA_mpi_yield_when_idle
-    = 1, unless the user set it). Spinning ranks take the cores from the ranks they wait for: the
-    contact scene of tests/test_mpi.py on 3 ranks on 2 cores took 44.6 s spinning and 7.4 s yielding
-    (6.1 s on 2 ranks; 7.9 against 0.06 ms per step in the ghost exchange; docs/scaling.md). Returns
-    whether it set it."""
-    local = next((int(environ[name]) for name in LOCAL_SIZE_VARIABLES if environ.get(name, "").isdigit()), 0)
-    if YIELD_VARIABLE in environ or local <= len(os.sched_getaffinity(0)):
-        return False
-    environ[YIELD_VARIABLE] = "1"
-    return True
-
-
 # The work of one node in a step, in units of a matrix row (its ~27 blocks), for weighted
 # partitions (`node_work`). Measured on the coarse case 1 and 3 (2026-11-25, 2 threads, from rest,
 # `pyfem check`): the element loop 61 ns per quadrature point at rest (a yielding point costs

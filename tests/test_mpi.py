@@ -170,21 +170,6 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
           f"ghosts {mpi['ghost_nodes']}, bytes per step {mpi['bytes_sent_per_step']}")
 
 
-def test_more_ranks_than_cores_yield_the_core_while_they_wait():
-    """Ranks that spin while they wait take the cores from the ranks they wait for (docs/scaling.md
-    "More ranks than cores"): with more local ranks than usable cores pyfem asks Open MPI to yield,
-    unless the user chose; with a core per rank it changes nothing."""
-    from pyfem.distributed import YIELD_VARIABLE, yield_when_oversubscribed
-
-    cores = len(os.sched_getaffinity(0))
-    crowded = {"OMPI_COMM_WORLD_LOCAL_SIZE": str(cores + 1)}
-    assert yield_when_oversubscribed(crowded) and crowded[YIELD_VARIABLE] == "1"
-    for environ in ({"OMPI_COMM_WORLD_LOCAL_SIZE": str(cores)}, {"MPI_LOCALNRANKS": "1"}, {}):
-        assert not yield_when_oversubscribed(environ) and YIELD_VARIABLE not in environ
-    chosen = {"OMPI_COMM_WORLD_LOCAL_SIZE": str(cores + 1), YIELD_VARIABLE: "0"}
-    assert not yield_when_oversubscribed(chosen) and chosen[YIELD_VARIABLE] == "0"
-
-
 def test_check_under_mpirun_prints_the_plan_once_with_the_ranks_share():
     result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
                              "check", SCENES["contact"][0]], cwd=REPO, env=ENV, capture_output=True, text=True,
