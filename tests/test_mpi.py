@@ -1,6 +1,9 @@
 """`mpirun -n N python3 -m pyfem run SCENE` equals the serial run (issue 13, docs/scaling.md).
 
-The same command line on 1, 2 and 3 ranks (3: an odd partition), eight scenes:
+The same command line on 1 and 2 ranks, and on 3 (an odd partition) for the free field, contact,
+damage and zone scenes (the issue's three kinds, and the zone that one of 3 ranks does not reach;
+the other scenes take the same paths on 3 ranks as on 2, and their 3-rank runs cost 40-70 s of the
+default tier), eight scenes:
 - the free-field box under a vertical SV pulse (workflows/scenes/box_vertical_sv.toml);
 - a contact scene whose pairs break their bonds, slide and open (tests/scenes/mpi_hard_contact.toml),
   and the same with the friction's normal-stress lag;
@@ -64,6 +67,9 @@ SCENES = {
                                                           "boundary.face.ymax.type=roller", "--set", "wave.type=P")),
 }
 
+# The scenes also run on 3 ranks.
+THREE_RANKS = ("free_field", "contact", "damage", "zone")
+
 
 def pyfem_run(ranks: int, scene: str, out_dir: Path, *extra: str) -> subprocess.CompletedProcess:
     command = [PYTHON, "-m", "pyfem", "run", scene, "--out", str(out_dir), *extra]
@@ -77,11 +83,11 @@ def pyfem_run(ranks: int, scene: str, out_dir: Path, *extra: str) -> subprocess.
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    """{(scene, ranks): run directory} for 1, 2, 3 ranks."""
+    """{(scene, ranks): run directory} for 1 and 2 ranks, and 3 for THREE_RANKS."""
     base = tmp_path_factory.mktemp("mpi")
     out = {}
     for name, (scene, extra) in SCENES.items():
-        for ranks in (1, 2, 3):
+        for ranks in (1, 2, 3) if name in THREE_RANKS else (1, 2):
             out[name, ranks] = base / f"{name}_{ranks}"
             pyfem_run(ranks, scene, out[name, ranks], *extra)
     return out
@@ -117,8 +123,8 @@ def summary(run_dir: Path) -> dict:
     return json.loads((run_dir / "run.json").read_text())
 
 
-@pytest.mark.parametrize("name", list(SCENES))
-@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("name, ranks", [(name, ranks) for ranks in (2, 3) for name in SCENES
+                                         if ranks == 2 or name in THREE_RANKS])
 def test_mpirun_equals_the_serial_run(runs, name, ranks):
     serial, parallel = summary(runs[name, 1]), summary(runs[name, ranks])
     # Something happened, the same in both.
