@@ -1060,6 +1060,11 @@ Args:
           py::arg("nodes"),
           "Steps the nodes' whole stiffness rows at their drift level (add_contact does it for pair nodes); "
           "each node must step at its drift level itself (checked at the first run).")
+      .def("set_row_split", &LocalStepper::set_row_split, py::arg("on"),
+           "The row split (nodal subcycling) instead of the column split: each node at its own level with "
+           "its whole row, a coarser neighbour read along its drift (docs/lts_plan.md \"The row split, "
+           "prototyped\"); not yet with element-loop components or contact pairs. Before the first run.")
+      .def_property_readonly("row_split", &LocalStepper::row_split)
       .def("phase_seconds", [](const LocalStepper& stepper) { return phase_dict(stepper.phase_times()); },
            "Wall time (s) of each part of the steps (Stepper.phase_seconds; update: the drifts, stiffness: "
            "the kicks); steps counts fine steps.")

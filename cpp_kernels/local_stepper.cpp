@@ -65,6 +65,12 @@ void LocalStepper::set_constraints(const std::int32_t* nodes, std::int64_t count
   initialised_ = false;
 }
 
+void LocalStepper::set_row_split(bool on) {
+  row_split_ = on;
+  levels_stale_ = true;
+  initialised_ = false;
+}
+
 void LocalStepper::project(std::int64_t i, double* dv) const {
   const std::int32_t k = constraint_slot_[i];
   if (k < 0) return;
@@ -106,9 +112,29 @@ void LocalStepper::build_levels() {
     level.row_ptr.assign(1, 0);
     level.columns.clear();
     level.blocks.clear();
+    level.coarser_column.clear();
     level.own.clear();
     level.drift.clear();
     level.component_row.clear();
+    if (row_split_) {  // the level's own rows, whole (set_row_split)
+      for (std::int64_t i = 0; i < n; ++i) {
+        if (level_[i] != k) continue;
+        for (std::int64_t b = stiffness.indptr[i]; b < stiffness.indptr[i + 1]; ++b) {
+          const std::int32_t j = stiffness.indices[b];
+          level.columns.push_back(j);
+          level.blocks.insert(level.blocks.end(), stiffness.blocks + 9 * b, stiffness.blocks + 9 * b + 9);
+          level.coarser_column.push_back(static_cast<std::int8_t>(level_[j] > k ? max_level_ - level_[j] : -1));
+        }
+        level.rows.push_back(static_cast<std::int32_t>(i));
+        level.row_ptr.push_back(static_cast<std::int64_t>(level.columns.size()));
+        level.own.push_back(1);
+        level.component_row.push_back(0);
+        active[i] = c;
+      }
+      level.force.assign(3 * level.rows.size(), 0.0);
+      level.external.assign(3 * level.rows.size(), 0.0);
+      continue;
+    }
     std::fill(loaded.begin(), loaded.end(), 0);
     for (const auto& component : level.components)
       for (const std::int32_t node : component->nodes()) loaded[node] = 1;
@@ -198,8 +224,15 @@ void LocalStepper::rebuild() {
   }
   levels_stale_ = false;
   std::fill(row_cap_.begin(), row_cap_.end(), kMaxLevels);
+  if (row_split_) {
+    for (const Level& level : levels_)
+      if (!level.components.empty() || !level.contacts.empty())
+        throw std::invalid_argument("LocalStepper: the row split does not take element-loop components or "
+                                    "contact pairs yet (docs/lts_plan.md \"The row split, prototyped\")");
+    drift_end_.assign(max_level_ + 1, 0.0);
+  }
   build_levels();
-  if (!capped_.empty()) {
+  if (!capped_.empty() && !row_split_) {
     for (const std::int32_t node : capped_) {
       if (level_[node] != drift_level_[node])
         throw std::invalid_argument(
@@ -430,12 +463,28 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
   for (std::int64_t r = 0; r < n_rows; ++r) {
     const std::int64_t i = level.rows[r];
     double f[3] = {0.0, 0.0, 0.0};
-    for (std::int64_t b = level.row_ptr[r]; b < level.row_ptr[r + 1]; ++b) {
-      const double* block = level.blocks.data() + 9 * b;
-      const double* uj = u + 3 * static_cast<std::int64_t>(level.columns[b]);
-      f[0] -= block[0] * uj[0] + block[1] * uj[1] + block[2] * uj[2];
-      f[1] -= block[3] * uj[0] + block[4] * uj[1] + block[5] * uj[2];
-      f[2] -= block[6] * uj[0] + block[7] * uj[1] + block[8] * uj[2];
+    if (row_split_) {  // a coarser column along its drift: u_j - (T_j - t) v_j
+      for (std::int64_t b = level.row_ptr[r]; b < level.row_ptr[r + 1]; ++b) {
+        const double* block = level.blocks.data() + 9 * b;
+        const std::int64_t j = level.columns[b];
+        double uj[3] = {u[3 * j], u[3 * j + 1], u[3 * j + 2]};
+        const int coarser = level.coarser_column[b];
+        if (coarser >= 0) {
+          const double behind = drift_end_[coarser] - t;
+          for (int d = 0; d < 3; ++d) uj[d] -= behind * v[3 * j + d];
+        }
+        f[0] -= block[0] * uj[0] + block[1] * uj[1] + block[2] * uj[2];
+        f[1] -= block[3] * uj[0] + block[4] * uj[1] + block[5] * uj[2];
+        f[2] -= block[6] * uj[0] + block[7] * uj[1] + block[8] * uj[2];
+      }
+    } else {
+      for (std::int64_t b = level.row_ptr[r]; b < level.row_ptr[r + 1]; ++b) {
+        const double* block = level.blocks.data() + 9 * b;
+        const double* uj = u + 3 * static_cast<std::int64_t>(level.columns[b]);
+        f[0] -= block[0] * uj[0] + block[1] * uj[1] + block[2] * uj[2];
+        f[1] -= block[3] * uj[0] + block[4] * uj[1] + block[5] * uj[2];
+        f[2] -= block[6] * uj[0] + block[7] * uj[1] + block[8] * uj[2];
+      }
     }
     if (level.component_row[r])
       for (int d = 0; d < 3; ++d) {
@@ -527,6 +576,7 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
     correct_contacts(c, t, u, v);
     phase_times_.contact += omp_get_wtime() - started;
   }
+  if (row_split_) drift_end_[c] = t + h;  // this level's nodes now drift to t + h
   const double drift_started = omp_get_wtime();
   const std::vector<std::int32_t>& drift = levels_[c].drift;
   const std::int64_t n_drift = static_cast<std::int64_t>(drift.size());
@@ -574,6 +624,7 @@ void LocalStepper::prepare_structure() {
 
 void LocalStepper::initialise(const double* u, const double* v, double t0) {
   prepare_structure();
+  std::fill(drift_end_.begin(), drift_end_.end(), t0);  // row split: every node at its drift's end
   // Every level's force at (u, v, t0): an end kick of zero length that keeps v.
   std::vector<double> v_copy(v, v + 3 * n_nodes());
   for (int c = 0; c <= max_level_; ++c) end_kick(c, 0.0, t0, u, v_copy.data(), true);
@@ -674,9 +725,10 @@ namespace {
 constexpr const char* kLocalParameterNames[] = {"dt_fine", "alpha", "nodes", "max_level", "providers",
                                                 "constraints"};
 
-std::string local_parameter_name(std::size_t j) {
+std::string local_parameter_name(std::size_t j, std::size_t levels) {
   constexpr std::size_t fixed = sizeof(kLocalParameterNames) / sizeof(kLocalParameterNames[0]);
   if (j < fixed) return kLocalParameterNames[j];
+  if (j == fixed + 2 * levels) return "the row split (set_row_split)";
   return std::string((j - fixed) % 2 ? "contact pair sets" : "element-loop components") + " at coarse level " +
          std::to_string((j - fixed) / 2);
 }
@@ -690,6 +742,7 @@ std::vector<double> LocalStepper::checkpoint_parameters() const {
     parameters.push_back(static_cast<double>(level.components.size()));
     parameters.push_back(static_cast<double>(level.contacts.size()));
   }
+  if (row_split_) parameters.push_back(1.0);  // absent for the column split: its checkpoints as before
   return parameters;
 }
 
@@ -726,7 +779,7 @@ void LocalStepper::load_state(const StateArchive& archive) {
   for (std::size_t j = 0; j < std::max(saved.size(), expected.size()); ++j)
     if (j >= saved.size() || j >= expected.size() || saved[j] != expected[j])
       throw std::invalid_argument(
-          "checkpoint: " + local_parameter_name(j) + " was " +
+          "checkpoint: " + local_parameter_name(j, levels_.size()) + " was " +
           (j < saved.size() ? std::to_string(saved[j]) : std::string("absent")) + ", the model's is " +
           (j < expected.size() ? std::to_string(expected[j]) : std::string("absent")) +
           " (a checkpoint of another scene?)");

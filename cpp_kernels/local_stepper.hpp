@@ -113,6 +113,19 @@ class LocalStepper {
   /// blocks break the column split's exact momentum balance at O(dt^2) (docs/lts_plan.md).
   void step_rows_at_drift_level(const std::vector<std::int32_t>& nodes);
 
+  /// The row split (nodal subcycling, docs/lts_plan.md "The row split, prototyped") instead of the
+  /// column split: every node steps at its own level with its whole stiffness row, its force at
+  /// the end of each of its steps read from the positions of that time, a coarser neighbour j along
+  /// its drift, u_j - (T_j - t) v_j (T_j the end of j's drift: exact, no kick changes v_j within it);
+  /// a node drifts at its own level only. No force is split across rates, so a coarse node next to
+  /// finer ones no longer drifts with them while its own force arrives as kicks (the stress defect
+  /// of the column split where levels meet). Momentum and energy are kept to O(dt^2) only. Not yet
+  /// with element-loop components or contact pairs (std::invalid_argument at the first run); the
+  /// row caps of step_rows_at_drift_level do not apply (every row steps at its own level). Set
+  /// before the first run.
+  void set_row_split(bool on);
+  bool row_split() const { return row_split_; }
+
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
   /// return each node's own-level acceleration of its last end kick (the FSAL value the next
   /// start kick uses), a = -M^-1 K u + ... for a one-level model as Stepper's a. The first call
@@ -174,6 +187,9 @@ class LocalStepper {
     std::vector<std::int64_t> row_ptr;
     std::vector<std::int32_t> columns;
     std::vector<double> blocks;
+    // Row split: per block, the coarse index of its column's level if coarser than this level
+    // (the column is read along its drift), else -1.
+    std::vector<std::int8_t> coarser_column;
     std::vector<double> force;           // (rows, 3) level-c force (+ f_ext on own rows) of the last end kick
     std::vector<double> external;        // (rows, 3) f_ext of own rows at the last end kick
     std::vector<std::uint8_t> own;       // (rows) the row's node has this level
@@ -242,6 +258,10 @@ class LocalStepper {
   std::vector<std::int32_t> row_cap_;         // per node: its row's blocks at min(column level, cap)
   std::vector<std::int32_t> capped_;          // nodes whose rows step at their drift level
   bool levels_stale_ = false;                 // components or caps added since the last build
+  bool row_split_ = false;                    // set_row_split
+  // Row split: the end of the current drift of each coarse index's nodes (substep), the time a
+  // coarser column is read back from.
+  std::vector<double> drift_end_;
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
   Energy energy_;

@@ -10,6 +10,9 @@ rows, 1bfd44c).
 
     /usr/bin/python3 workflows/lts_cavity.py [--out DIR]     # about 2 minutes on 2 cores
 
+`--rows` runs local stepping with the kernel's row split (LocalStepper.set_row_split: nodal
+subcycling, docs/lts_plan.md "The row split, prototyped") instead of its column split.
+
 `--buffer B` moves every level boundary B node layers out (each node sharing a cell with a finer node
 takes that level, B times) and runs local stepping at safety 0.8 only: docs/lts_plan.md "A buffer
 does not remove it".
@@ -29,6 +32,20 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 RUNS = [("global", 0.1), ("global", 0.8), ("local", 0.8), ("local", 0.4), ("local", 0.2)]
+
+
+def row_split() -> None:
+    """Every LocalStepper the run builds steps by the row split."""
+    from pyfem import _kernels
+
+    column_split = _kernels.LocalStepper
+
+    def local_stepper(*args, **kwargs):
+        kernel = column_split(*args, **kwargs)
+        kernel.set_row_split(True)
+        return kernel
+
+    _kernels.LocalStepper = local_stepper
 
 
 def buffered(layers: int) -> None:
@@ -58,8 +75,11 @@ def main() -> int:
     parser.add_argument("--out", type=pathlib.Path, default=ROOT / "runs" / "lts_cavity")
     parser.add_argument("--buffer", type=int, default=0, help="node layers added to the finer side of every "
                         "level boundary (local stepping at safety 0.8 only)")
+    parser.add_argument("--rows", action="store_true", help="local stepping by the row split")
     args = parser.parse_args()
     runs = RUNS
+    if args.rows:
+        row_split()
     if args.buffer:
         buffered(args.buffer)
         runs = [("global", 0.1), ("local", 0.8)]
@@ -75,7 +95,8 @@ def main() -> int:
         scene = cavity.tunnel_scene(mesh, 1)
         scene["time"]["safety"] = safety
         scene["time"]["local_stepping"] = scheme == "local"
-        out = args.out / f"{scheme}_{safety:g}{f'_buffer{args.buffer}' if args.buffer and scheme == 'local' else ''}"
+        tag = (f"_buffer{args.buffer}" if args.buffer else "") + ("_rows" if args.rows else "")
+        out = args.out / f"{scheme}_{safety:g}{tag if scheme == 'local' else ''}"
         started = time.perf_counter()
         summary = solver.run(scene, out)
         wall = time.perf_counter() - started

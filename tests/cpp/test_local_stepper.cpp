@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <cstdio>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "local_stepper.hpp"
@@ -664,4 +666,169 @@ TEST(LocalStepper, ConstrainedNodesAsStepperAndHeldAtEveryLevel) {
   }
   EXPECT_EQ(worst_held, 0.0);
   EXPECT_GT(moved, 1e-3);  // the rollers' free components moved
+}
+
+// The row split (LocalStepper::set_row_split, docs/lts_plan.md "The row split, prototyped").
+namespace {
+
+// Link strains (u_{e+1} - u_e, x component) of the chain after every global step of a run from the
+// pulse at rest over n_global steps of dt_fine 2^max_level; rows: steps, columns: links.
+std::vector<std::vector<double>> link_strain_history(const Chain& chain, double dt_fine, std::int64_t n_global,
+                                                     bool row_split) {
+  LocalStepper local(chain.system.view(), chain.system.mass.data(), chain.level.data(), dt_fine, 0.0);
+  local.set_row_split(row_split);
+  const int n = chain.system.n_nodes;
+  std::vector<double> u = pulse(n), v(u.size(), 0.0), a(u.size(), 0.0);
+  std::vector<std::vector<double>> history;
+  for (std::int64_t s = 0; s < n_global; ++s) {
+    local.run(u.data(), v.data(), a.data(), 1, 0.0);
+    std::vector<double> strain(n - 1);
+    for (int e = 0; e + 1 < n; ++e) strain[e] = u[3 * (e + 1)] - u[3 * e];
+    history.push_back(strain);
+  }
+  return history;
+}
+
+}  // namespace
+
+// One level: every row at that level, whole: the column split's (and so Stepper's) arithmetic.
+TEST(LocalStepperRowSplit, OneLevelIsTheColumnSplit) {
+  const BlockSystem system = random_spd_system(40, 3, 21);
+  const std::vector<std::int32_t> levels(system.n_nodes, 0);
+  std::mt19937_64 generator(5);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  std::vector<double> u(system.n_dofs()), v(system.n_dofs()), a(system.n_dofs(), 0.0);
+  for (double& value : u) value = 0.01 * uniform(generator);
+  for (double& value : v) value = 0.1 * uniform(generator);
+  std::vector<double> u2 = u, v2 = v, a2 = a;
+  LocalStepper columns(system.view(), system.mass.data(), levels.data(), 0.02, 0.3);
+  LocalStepper rows(system.view(), system.mass.data(), levels.data(), 0.02, 0.3);
+  rows.set_row_split(true);
+  EXPECT_TRUE(rows.row_split());
+  columns.run(u.data(), v.data(), a.data(), 200, 0.0);
+  rows.run(u2.data(), v2.data(), a2.data(), 200, 0.0);
+  EXPECT_LT(max_relative_difference(u2, u), 1e-14);
+  EXPECT_LT(max_relative_difference(v2, v), 1e-14);
+}
+
+// Several levels (4x jumps): second order against a converged reference, as the column split.
+TEST(LocalStepperRowSplit, SeveralLevelsAreSecondOrder) {
+  const Chain chain = graded_chain(161, 24, 64.0, 5);
+  const int max_level = *std::max_element(chain.level.begin(), chain.level.end());
+  ASSERT_GE(max_level, 2);
+  const double T = 40.0 * chain.dt_min * (1 << max_level);
+  const std::vector<double> u0 = pulse(161);
+  std::vector<double> ur = u0, vr(u0.size(), 0.0), ar(u0.size(), 0.0);
+  {
+    const double fine = chain.dt_min / 32.0;
+    Stepper reference(chain.system.view(), chain.system.mass.data(), StepperParameters{fine, 0.0, 0.0, false});
+    for (std::size_t i = 0; i < u0.size(); ++i) {
+      double Ku = 0.0;
+      for (std::size_t j = 0; j < u0.size(); ++j) Ku += chain.system.dense[i * u0.size() + j] * u0[j];
+      ar[i] = -Ku;
+    }
+    reference.run(ur.data(), vr.data(), ar.data(), static_cast<std::int64_t>(std::llround(T / fine)), 0.0);
+  }
+  std::vector<double> errors;
+  for (double safety : {0.8, 0.4, 0.2}) {
+    const std::int64_t steps = static_cast<std::int64_t>(std::llround(T / (safety * chain.dt_min * (1 << max_level))));
+    const double dt_fine = T / static_cast<double>(steps) / (1 << max_level);
+    LocalStepper local(chain.system.view(), chain.system.mass.data(), chain.level.data(), dt_fine, 0.0);
+    local.set_row_split(true);
+    std::vector<double> u = u0, v(u0.size(), 0.0), a(u0.size(), 0.0);
+    local.run(u.data(), v.data(), a.data(), steps, 0.0);
+    double error = 0.0, norm = 0.0;
+    for (std::size_t k = 0; k < u.size(); ++k) {
+      error += (u[k] - ur[k]) * (u[k] - ur[k]);
+      norm += ur[k] * ur[k];
+    }
+    errors.push_back(std::sqrt(error / norm));
+  }
+  for (std::size_t k = 0; k + 1 < errors.size(); ++k) {
+    const double order = std::log2(errors[k] / errors[k + 1]);
+    EXPECT_GT(order, 1.8) << "errors " << errors[k] << " -> " << errors[k + 1];
+    EXPECT_LT(order, 2.3);
+  }
+  EXPECT_GT(errors[0], 1e-6);  // the pulse moved
+}
+
+// The strain where levels meet: the column split's error peaks at the links between levels (a
+// coarse node drifts with its finer neighbours while its own force arrives as kicks); the row
+// split's does not: its worst link there is 23x closer to global stepping's answer.
+TEST(LocalStepperRowSplit, NoStrainPeakWhereLevelsMeet) {
+  const Chain chain = graded_chain(161, 24, 64.0, 5);
+  const int max_level = *std::max_element(chain.level.begin(), chain.level.end());
+  const double dt_fine = 0.8 * chain.dt_min;
+  const std::int64_t n_global = 40;
+  // Reference: global stepping at dt_fine / 16 sampled at the global steps.
+  std::vector<std::vector<double>> reference;
+  {
+    const double fine = dt_fine / 16.0;
+    Stepper stepper(chain.system.view(), chain.system.mass.data(), StepperParameters{fine, 0.0, 0.0, false});
+    std::vector<double> u = pulse(161), v(u.size(), 0.0), a(u.size(), 0.0);
+    for (std::size_t i = 0; i < u.size(); ++i) {
+      double Ku = 0.0;
+      for (std::size_t j = 0; j < u.size(); ++j) Ku += chain.system.dense[i * u.size() + j] * u[j];
+      a[i] = -Ku;
+    }
+    for (std::int64_t s = 0; s < n_global; ++s) {
+      stepper.run(u.data(), v.data(), a.data(), 16 * (std::int64_t{1} << max_level), 0.0);
+      std::vector<double> strain(160);
+      for (int e = 0; e < 160; ++e) strain[e] = u[3 * (e + 1)] - u[3 * e];
+      reference.push_back(strain);
+    }
+  }
+  double scale = 0.0;
+  for (const auto& row : reference)
+    for (double value : row) scale = std::max(scale, std::abs(value));
+  auto boundary_error = [&](bool row_split) {
+    const auto history = link_strain_history(chain, dt_fine, n_global, row_split);
+    double worst = 0.0;
+    for (int e = 0; e < 160; ++e) {
+      if (chain.level[e] == chain.level[e + 1]) continue;  // links where levels meet only
+      for (std::int64_t s = 0; s < n_global; ++s)
+        worst = std::max(worst, std::abs(history[s][e] - reference[s][e]));
+    }
+    return worst / scale;
+  };
+  const double columns = boundary_error(false), rows = boundary_error(true);
+  std::printf("strain error at the links where levels meet: column split %.3e, row split %.3e\n", columns, rows);
+  EXPECT_GT(columns, 1e-4);  // the comparison sees the stepping error
+  EXPECT_LT(rows, 0.2 * columns);  // measured 5.1e-4 against 1.2e-2
+}
+
+// Stable at the global scheme's safety factor over a long run; the plain energy bounded.
+TEST(LocalStepperRowSplit, LongRunKeepsTheEnergyBounded) {
+  const Chain chain = graded_chain(161, 24, 256.0, 5);
+  const int max_level = *std::max_element(chain.level.begin(), chain.level.end());
+  ASSERT_GE(max_level, 3);
+  LocalStepper local(chain.system.view(), chain.system.mass.data(), chain.level.data(), 0.95 * chain.dt_min, 0.0);
+  local.set_row_split(true);
+  std::vector<double> u = pulse(161), v(u.size(), 0.0), a(u.size(), 0.0);
+  local.run(u.data(), v.data(), a.data(), 1, 0.0);
+  const double initial = local.energy().initial;
+  double low = 1.0, high = 1.0;
+  for (int chunk = 0; chunk < 200; ++chunk) {
+    local.run(u.data(), v.data(), a.data(), 100, 0.0);
+    const LocalStepper::Energy e = local.energy();
+    low = std::min(low, (e.kinetic + e.strain) / initial);
+    high = std::max(high, (e.kinetic + e.strain) / initial);
+  }
+  EXPECT_GT(low, 0.9);
+  EXPECT_LT(high, 1.1);
+}
+
+// Not yet with contact pairs or element-loop components: one clear error at the first run.
+TEST(LocalStepperRowSplit, RefusesContactPairsForNow) {
+  const Chain chain = graded_chain(41, 6, 4.0, 3);
+  LocalStepper local(chain.system.view(), chain.system.mass.data(), chain.level.data(), 0.5 * chain.dt_min, 0.0);
+  local.set_row_split(true);
+  local.add_contact(bonded_pair(3, 4), chain.level[3]);
+  std::vector<double> u(3 * 41, 0.0), v(u.size(), 0.0), a(u.size(), 0.0);
+  try {
+    local.run(u.data(), v.data(), a.data(), 1, 0.0);
+    FAIL() << "the row split took contact pairs";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("row split"), std::string::npos) << error.what();
+  }
 }
