@@ -411,9 +411,21 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
             "contact": contact, "levels": np.bincount(levels, minlength=top + 1).tolist()}
 
 
-def local_time_step(time_step, levels: np.ndarray):
+def row_split(nonlinear, contact: bool) -> bool:
+    """Whether the kernel steps this model by the row split (LocalStepper.set_row_split: every node at
+    its own level with its whole stiffness row, a coarser neighbour read along its drift): where the
+    model has no element-loop regions (`nonlinear`: NonlinearRegions or None) and no contact pairs.
+    The row split's stresses where levels meet are global stepping's (the cavity test at safety 0.8:
+    0.53-1.07 % against 0.54-1.06 %; the column split 1.5-8.7 %, docs/lts_plan.md "The row split,
+    prototyped"); the kernel does not take components or pairs in it yet, so those models keep the
+    column split."""
+    return nonlinear is None and not contact
+
+
+def local_time_step(time_step, levels: np.ndarray, split: str = "column"):
     """The scene's TimeStep with whole global steps per output interval: dt_fine lowered (never
-    raised) so that steps_per_output is a multiple of 2^L. Returns (TimeStep, L)."""
+    raised) so that steps_per_output is a multiple of 2^L; its reason names the levels and the split
+    ("row" or "column", `row_split`). Returns (TimeStep, L)."""
     top = int(levels.max())
     ratio = 2 ** top
     interval = time_step.dt * time_step.steps_per_output
@@ -424,7 +436,7 @@ def local_time_step(time_step, levels: np.ndarray):
     reason = re.sub(r"\d+ steps per output interval", f"{steps_per_output} fine steps per output interval",
                     time_step.reason)
     reason = (reason + f"; local time stepping: {top + 1} rate levels (nodes per level, finest first: "
-              + ", ".join(str(int(c)) for c in counts) + f"), global step {dt * ratio:.6g} s")
+              + ", ".join(str(int(c)) for c in counts) + f"), global step {dt * ratio:.6g} s, the {split} split")
     return dataclasses.replace(time_step, dt=dt, steps_per_output=steps_per_output, reason=reason), top
 
 

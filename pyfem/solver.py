@@ -70,6 +70,7 @@ class Simulation:
     nonlinear: "NonlinearRegions | None" = None  # element-loop regions (pyfem.elements), None: matrix only
     node_levels: np.ndarray | None = None  # [time] local_stepping: rate level per node (pyfem.local_stepping)
     lts_stability: dict | None = None      # [time] local_stepping: check_stability's report, once per model
+    lts_split: str | None = None           # [time] local_stepping: "row" or "column" (local_stepping.row_split)
     lts_preview: np.ndarray | None = None  # local stepping off: the levels it would use (prepare(preview_levels=True))
     static: object = None                # pyfem.static.StaticState when a [static] stage ran
 
@@ -458,7 +459,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
     elastic_stiffness = stiffness  # of every cell: the rate levels of local stepping
     if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
         stiffness = add_block_diagonal(nonlinear.stiffness, spring_nodes, springs)
-    node_levels = preview = None
+    node_levels = preview = lts_split = None
     local = scene["time"].get("local_stepping")
     if local or preview_levels:
         from pyfem import local_stepping
@@ -486,7 +487,8 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
                                                 loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells))
             if local:
                 node_levels = levels
-                time_step, _ = local_stepping.local_time_step(time_step, node_levels)
+                lts_split = "row" if local_stepping.row_split(nonlinear, "contact" in scene.effects) else "column"
+                time_step, _ = local_stepping.local_time_step(time_step, node_levels, lts_split)
             else:
                 preview = levels
     n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
@@ -495,7 +497,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
     simulation = Simulation(scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
                             time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
                             constraints=constraints, n_steps=n_steps, nonlinear=nonlinear,
-                            node_levels=node_levels, lts_preview=preview)
+                            node_levels=node_levels, lts_preview=preview, lts_split=lts_split)
     if "seismic_input" in scene.effects:
         from pyfem.seismic.setup import seismic_input_from_scene
 
@@ -568,9 +570,13 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
                 for component, level in parts:
                     kernel.add_internal_force(component, level)
             built["regions"] = [region for region, _ in regions]
-        # Rows stepped at their drift level: the pair nodes (add_contact), and the fine side of every
-        # level boundary, so that a coarser neighbour's force reaches them at each of their substeps
-        # instead of as kicks at the ends of the coarse step (docs/lts_plan.md "Interface rows").
+        if simulation.lts_split == "row":
+            kernel.set_row_split(True)  # every row at its own level: no caps
+            return kernel
+        # Column split: rows stepped at their drift level: the pair nodes (add_contact), and the fine
+        # side of every level boundary, so that a coarser neighbour's force reaches them at each of
+        # their substeps instead of as kicks at the ends of the coarse step (docs/lts_plan.md
+        # "Interface rows").
         rows = [local_stepping.interface_rows(levels, cell_nodes, cell_cap, loop_cells)]
         if simulation.contact_arrays is not None:
             rows.append(np.unique(simulation.contact_arrays["pairs"]))
@@ -840,9 +846,16 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
     pairs = simulation.contact_arrays["pairs"] if simulation.contact_arrays is not None else None
     p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
                                           simulation.stiffness, pairs, simulation.time_step, phases_ms)
-    verdict = ("it would pay (time.local_stepping = true), but stresses where a finer level meets a coarser "
-               "one are less accurate (a cavity test: 8.7 % off the exact history at safety 0.8, global stepping 0.5 %; "
-               "docs/lts_plan.md \"Interface rows\")" if p["speed_up"] >= 1.2 else "not worth it on this model")
+    if p["speed_up"] < 1.2:
+        verdict = "not worth it on this model"
+    elif local_stepping.row_split(simulation.nonlinear, pairs is not None):
+        verdict = ("it would pay (time.local_stepping = true; the row split: stresses where levels meet as global "
+                   "stepping's, docs/lts_plan.md \"The row split, prototyped\")")
+    else:
+        verdict = ("it would pay (time.local_stepping = true), but with element-loop cells or contact pairs it steps "
+                   "by the column split, whose stresses where a finer level meets a coarser one are less accurate (a "
+                   "cavity test: 8.7 % off the exact history at safety 0.8, global stepping 0.5 %; docs/lts_plan.md "
+                   "\"Interface rows\")")
     return {"local stepping (off)": (
         f"predicted {p['speed_up']:.2f}x the speed of global stepping per simulated second ({len(p['levels'])} "
         f"rate level{'s' if len(p['levels']) != 1 else ''}, nodes per level {p['levels']}; work against global "

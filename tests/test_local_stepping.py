@@ -67,6 +67,7 @@ def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_steppin
     summaries = {local: solver.run(graded_scene(geo, local), tmp_path / f"run_{local}") for local in (False, True)}
     local = summaries[True]
     assert "local time stepping: 3 rate levels" in local["dt_reason"]
+    assert local["dt_reason"].endswith("the row split")  # a linear model (pyfem/local_stepping.py row_split)
     levels = solver.prepare(graded_scene(geo, True)).node_levels
     counts = np.bincount(levels)
     assert len(counts) == 3 and np.all(counts > 100)  # three rates, each with cells in it
@@ -309,6 +310,7 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
     mapped = np.zeros(len(whole.mass), dtype=np.int32)
     mapped[unsplit_node] = levels  # both copies of a pair node have one level
     whole.node_levels = mapped
+    whole.lts_split = "column"  # the split mesh's (its pairs need it): the same arithmetic
     assert split.time_step.dt == whole.time_step.dt
     histories = []
     for simulation in (split, whole):
@@ -481,6 +483,7 @@ def test_pairs_at_a_coarser_level_than_the_finest_are_global_stepping_at_their_o
     mapped = np.zeros(len(whole.mass), dtype=np.int32)
     mapped[unsplit_node] = split.node_levels
     whole.node_levels = mapped
+    whole.lts_split = "column"  # the split mesh's (its pairs need it): the same arithmetic
     stepper = solver.make_stepper(whole)
     stepper.kernel.step_rows_at_drift_level(np.unique(unsplit_node[split.contact_arrays["pairs"]]).astype(np.int32))
     n = whole.stiffness.shape[0]
