@@ -117,6 +117,24 @@ void LocalStepper::build_levels() {
     level.drift.clear();
     level.component_row.clear();
     if (row_split_) {  // the level's own rows, whole (set_row_split)
+      std::fill(loaded.begin(), loaded.end(), 0);
+      for (const auto& component : level.components)
+        for (const std::int32_t node : component->nodes()) loaded[node] = 1;
+      level.coarser_nodes.clear();
+      level.coarser_nodes_level.clear();
+      for (std::int64_t i = 0; i < n; ++i) {
+        if (loaded[i] && level_[i] < k)
+          throw std::invalid_argument("row split: node " + std::to_string(i) + " at level " +
+                                      std::to_string(level_[i]) + " is in an element-loop component at the "
+                                      "coarser level " + std::to_string(k) + ": give each cell the finest "
+                                      "level of its nodes (pyfem/local_stepping.py)");
+        if (loaded[i] && level_[i] > k) {
+          level.coarser_nodes.push_back(static_cast<std::int32_t>(i));
+          level.coarser_nodes_level.push_back(static_cast<std::int8_t>(max_level_ - level_[i]));
+        }
+      }
+      level.coarser_saved.assign(3 * level.coarser_nodes.size(), 0.0);
+      level.coarser_force.assign(3 * level.coarser_nodes.size(), 0.0);
       for (std::int64_t i = 0; i < n; ++i) {
         if (level_[i] != k) continue;
         for (std::int64_t b = stiffness.indptr[i]; b < stiffness.indptr[i + 1]; ++b) {
@@ -128,7 +146,7 @@ void LocalStepper::build_levels() {
         level.rows.push_back(static_cast<std::int32_t>(i));
         level.row_ptr.push_back(static_cast<std::int64_t>(level.columns.size()));
         level.own.push_back(1);
-        level.component_row.push_back(0);
+        level.component_row.push_back(loaded[i]);
         active[i] = c;
       }
       level.force.assign(3 * level.rows.size(), 0.0);
@@ -175,6 +193,27 @@ void LocalStepper::build_levels() {
   for (std::int64_t i = 0; i < n; ++i) {
     levels_[active[i]].drift.push_back(static_cast<std::int32_t>(i));
     drift_level_[i] = max_level_ - active[i];
+  }
+  if (row_split_) {  // each own row's finer component forces (set_row_split)
+    std::vector<std::int64_t> row_of(n, -1);
+    for (const Level& level : levels_)
+      for (std::size_t r = 0; r < level.rows.size(); ++r) row_of[level.rows[r]] = static_cast<std::int64_t>(r);
+    std::vector<std::vector<std::pair<std::int32_t, std::int32_t>>> entries(n);
+    for (int c = 0; c <= max_level_; ++c)
+      for (std::size_t q = 0; q < levels_[c].coarser_nodes.size(); ++q)
+        entries[levels_[c].coarser_nodes[q]].emplace_back(c, static_cast<std::int32_t>(q));
+    for (Level& level : levels_) {
+      level.finer_ptr.assign(1, 0);
+      level.finer_level.clear();
+      level.finer_index.clear();
+      for (const std::int32_t i : level.rows) {
+        for (const auto& [c, q] : entries[i]) {
+          level.finer_level.push_back(c);
+          level.finer_index.push_back(q);
+        }
+        level.finer_ptr.push_back(static_cast<std::int64_t>(level.finer_level.size()));
+      }
+    }
   }
 }
 
@@ -224,13 +263,7 @@ void LocalStepper::rebuild() {
   }
   levels_stale_ = false;
   std::fill(row_cap_.begin(), row_cap_.end(), kMaxLevels);
-  if (row_split_) {
-    for (const Level& level : levels_)
-      if (!level.components.empty() || !level.contacts.empty())
-        throw std::invalid_argument("LocalStepper: the row split does not take element-loop components or "
-                                    "contact pairs yet (docs/lts_plan.md \"The row split, prototyped\")");
-    drift_end_.assign(max_level_ + 1, 0.0);
-  }
+  if (row_split_) drift_end_.assign(max_level_ + 1, 0.0);
   build_levels();
   if (!capped_.empty() && !row_split_) {
     for (const std::int32_t node : capped_) {
@@ -453,8 +486,28 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
     for (auto& provider : providers_) provider->add_forces(t, u, v, external_.data());
   }
   lap(phase_times_.input_forces);
-  // The level's element-loop cells at the new u (their trial state; committed below).
+  // The level's element-loop cells at the new u (their trial state; committed below). Row split:
+  // their coarser nodes read along their drift (u restored exactly after), and their force on them
+  // kept for those nodes' own end kicks.
+  const std::int64_t n_coarser = static_cast<std::int64_t>(level.coarser_nodes.size());
+  double* moving = const_cast<double*>(u);  // the caller's state (substep), put back below
+  for (std::int64_t q = 0; q < n_coarser; ++q) {
+    const std::int64_t j = level.coarser_nodes[q];
+    const double behind = drift_end_[level.coarser_nodes_level[q]] - t;
+    for (int d = 0; d < 3; ++d) {
+      level.coarser_saved[3 * q + d] = u[3 * j + d];
+      moving[3 * j + d] -= behind * v[3 * j + d];
+    }
+  }
   for (const auto& component : level.components) component->compute(u, internal_.data());
+  for (std::int64_t q = 0; q < n_coarser; ++q) {
+    const std::int64_t j = level.coarser_nodes[q];
+    for (int d = 0; d < 3; ++d) {
+      moving[3 * j + d] = level.coarser_saved[3 * q + d];
+      level.coarser_force[3 * q + d] = internal_[3 * j + d];
+      internal_[3 * j + d] = 0.0;
+    }
+  }
   lap(phase_times_.element_loop);
   const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
   double external_work = 0.0, damping_work = 0.0;
@@ -490,6 +543,11 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
       for (int d = 0; d < 3; ++d) {
         f[d] -= internal_[3 * i + d];
         internal_[3 * i + d] = 0.0;  // ready for the next level's components
+      }
+    if (row_split_)  // finer levels' cells on this node, evaluated at t by their end kicks
+      for (std::int64_t e = level.finer_ptr[r]; e < level.finer_ptr[r + 1]; ++e) {
+        const double* from = levels_[level.finer_level[e]].coarser_force.data() + 3 * level.finer_index[e];
+        for (int d = 0; d < 3; ++d) f[d] -= from[d];
       }
     const double m = mass_[i];
     double* vi = v + 3 * i;
@@ -627,7 +685,11 @@ void LocalStepper::initialise(const double* u, const double* v, double t0) {
   std::fill(drift_end_.begin(), drift_end_.end(), t0);  // row split: every node at its drift's end
   // Every level's force at (u, v, t0): an end kick of zero length that keeps v.
   std::vector<double> v_copy(v, v + 3 * n_nodes());
-  for (int c = 0; c <= max_level_; ++c) end_kick(c, 0.0, t0, u, v_copy.data(), true);
+  // Row split: finest first, so that a coarser row reads its finer cells' forces at t0.
+  for (int k = 0; k <= max_level_; ++k) {
+    const int c = row_split_ ? max_level_ - k : k;
+    end_kick(c, 0.0, t0, u, v_copy.data(), true);
+  }
   // The pairs' slip rate for D is that of the state (Stepper::reset_energy).
   for (Level& level : levels_)
     for (const auto& pairs : level.contacts) pairs->observe_velocity(v);

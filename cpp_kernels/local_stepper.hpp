@@ -119,10 +119,12 @@ class LocalStepper {
   /// its drift, u_j - (T_j - t) v_j (T_j the end of j's drift: exact, no kick changes v_j within it);
   /// a node drifts at its own level only. No force is split across rates, so a coarse node next to
   /// finer ones no longer drifts with them while its own force arrives as kicks (the stress defect
-  /// of the column split where levels meet). Momentum and energy are kept to O(dt^2) only. Not yet
-  /// with element-loop components or contact pairs (std::invalid_argument at the first run); the
-  /// row caps of step_rows_at_drift_level do not apply (every row steps at its own level). Set
-  /// before the first run.
+  /// of the column split where levels meet). Momentum and energy are kept to O(dt^2) only.
+  /// Element-loop components step at their level and read their coarser nodes along their drift;
+  /// their force on such a node is what the node's own end kick reads (the finer level's end kick
+  /// at the same time comes first): give each cell the finest level of its nodes. Contact pairs as in
+  /// the column split (both nodes at the pairs' level). The row caps of step_rows_at_drift_level do
+  /// not apply (every row steps at its own level). Set before the first run.
   void set_row_split(bool on);
   bool row_split() const { return row_split_; }
 
@@ -190,6 +192,18 @@ class LocalStepper {
     // Row split: per block, the coarse index of its column's level if coarser than this level
     // (the column is read along its drift), else -1.
     std::vector<std::int8_t> coarser_column;
+    // Row split: the nodes of this level's components at coarser levels, their coarse index, their u
+    // while the components read them along their drift, and the components' force on them at the
+    // last end kick (which their own rows read at their own end kicks: the same time).
+    std::vector<std::int32_t> coarser_nodes;
+    std::vector<std::int8_t> coarser_nodes_level;
+    std::vector<double> coarser_saved;
+    std::vector<double> coarser_force;
+    // Row split: per own row, the finer levels' component forces on it: (level, index into that
+    // level's coarser_nodes), rows by finer_ptr.
+    std::vector<std::int64_t> finer_ptr;
+    std::vector<std::int32_t> finer_level;
+    std::vector<std::int32_t> finer_index;
     std::vector<double> force;           // (rows, 3) level-c force (+ f_ext on own rows) of the last end kick
     std::vector<double> external;        // (rows, 3) f_ext of own rows at the last end kick
     std::vector<std::uint8_t> own;       // (rows) the row's node has this level

@@ -482,12 +482,14 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         else:
             cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
             pairs = model.pairs.nodes if "contact" in scene.effects else None
+            rows = local_stepping.row_split(nonlinear, "contact" in scene.effects)
             levels = local_stepping.node_levels(elastic_stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
                                                 pinned=np.unique(dashpot_nodes), pairs=pairs,
-                                                loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells))
+                                                loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells),
+                                                rows=rows)
             if local:
                 node_levels = levels
-                lts_split = "row" if local_stepping.row_split(nonlinear, "contact" in scene.effects) else "column"
+                lts_split = "row" if rows else "column"
                 time_step, _ = local_stepping.local_time_step(time_step, node_levels, lts_split)
             else:
                 preview = levels
@@ -545,8 +547,11 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
     model = simulation.model
     cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
     loop_cells = local_stepping.loop_cell_mask(simulation.nonlinear, model.n_cells)
+    row_split = simulation.lts_split == "row"
     cell_cap = None
-    if loop_cells is not None and simulation.contact_arrays is not None:
+    if row_split:  # a cell at the finest level of its nodes (LocalStepper.set_row_split)
+        cell_cap = levels[cell_nodes].min(axis=1)
+    elif loop_cells is not None and simulation.contact_arrays is not None:
         cell_cap = local_stepping.pair_cell_cap(levels, cell_nodes, simulation.contact_arrays["pairs"], loop_cells)
 
     built = {}  # the regions' LevelComponents of the last kernel built
@@ -570,7 +575,7 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
                 for component, level in parts:
                     kernel.add_internal_force(component, level)
             built["regions"] = [region for region, _ in regions]
-        if simulation.lts_split == "row":
+        if row_split:
             kernel.set_row_split(True)  # every row at its own level: no caps
             return kernel
         # Column split: rows stepped at their drift level: the pair nodes (add_contact), and the fine
@@ -601,7 +606,8 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         simulation.nonlinear.components = built["regions"]
     if simulation.contact_arrays is not None:  # the pairs at their levels, read back as one set
         simulation.contact_pairs, parts = local_stepping.level_pairs(simulation.contact_arrays, levels, cell_nodes,
-                                                                     cell_cap, loop_cells, make_contact_pairs)
+                                                                     cell_cap, loop_cells, make_contact_pairs,
+                                                                     row_split)
         stage_contact = getattr(stage, "contact", None)
         if stage_contact is not None:
             local_stepping.load_pair_parts(stage_contact, simulation.contact_pairs.parts,

@@ -328,7 +328,7 @@ struct SplitChainRun {
 };
 
 SplitChainRun bonded_split_chain(const Chain& chain, std::int64_t p, const std::vector<std::int32_t>& level,
-                                 int pair_level, double dt_fine, std::int64_t steps) {
+                                 int pair_level, double dt_fine, std::int64_t steps, bool row_split = false) {
   const std::int64_t n = chain.system.n_nodes;
   std::vector<char> to_copy(n, 0);
   for (std::int64_t k = p + 1; k < n; ++k) to_copy[k] = 1;
@@ -338,6 +338,8 @@ SplitChainRun bonded_split_chain(const Chain& chain, std::int64_t p, const std::
   LocalStepper merged(chain.system.view(), chain.system.mass.data(), level.data(), dt_fine, 0.0);
   merged.step_rows_at_drift_level({static_cast<std::int32_t>(p)});  // as add_contact does the halves'
   LocalStepper local(split.view(), split.mass.data(), split_level.data(), dt_fine, 0.0);
+  merged.set_row_split(row_split);
+  local.set_row_split(row_split);
   auto pair = bonded_pair(static_cast<std::int32_t>(p), static_cast<std::int32_t>(n));
   local.add_contact(pair, pair_level);
   std::vector<double> v = pulse(static_cast<int>(n)), u(v.size(), 0.0), a(v.size(), 0.0);
@@ -818,17 +820,30 @@ TEST(LocalStepperRowSplit, LongRunKeepsTheEnergyBounded) {
   EXPECT_LT(high, 1.1);
 }
 
-// Not yet with contact pairs or element-loop components: one clear error at the first run.
-TEST(LocalStepperRowSplit, RefusesContactPairsForNow) {
-  const Chain chain = graded_chain(41, 6, 4.0, 3);
-  LocalStepper local(chain.system.view(), chain.system.mass.data(), chain.level.data(), 0.5 * chain.dt_min, 0.0);
-  local.set_row_split(true);
-  local.add_contact(bonded_pair(3, 4), chain.level[3]);
-  std::vector<double> u(3 * 41, 0.0), v(u.size(), 0.0), a(u.size(), 0.0);
-  try {
-    local.run(u.data(), v.data(), a.data(), 1, 0.0);
-    FAIL() << "the row split took contact pairs";
-  } catch (const std::invalid_argument& error) {
-    EXPECT_NE(std::string(error.what()).find("row split"), std::string::npos) << error.what();
-  }
+// A bonded pair in the row split: both halves at one level (the finer of the two, and nothing
+// else lowered), the split chain reproduces the merged chain under the same levels, inside the
+// coarse part and at a level boundary.
+TEST(LocalStepperRowSplit, BondedPairReproducesTheMergedChain) {
+  const Chain chain = graded_chain(161, 24, 64.0, 5);
+  const int max_level = *std::max_element(chain.level.begin(), chain.level.end());
+  const double dt_fine = 0.8 * chain.dt_min;
+  const SplitChainRun coarse = bonded_split_chain(chain, 20, chain.level, max_level, dt_fine, 60, true);
+  EXPECT_LT(coarse.difference, 1e-11);
+  EXPECT_LT(coarse.copy_difference, 1e-11);
+  EXPECT_GT(coarse.moved, 1e-3);
+  EXPECT_EQ(coarse.state, kBonded);
+  std::int64_t edge = 0;
+  for (std::int64_t k = 1; k + 1 < 161; ++k)
+    if (chain.level[k] > chain.level[k + 1] && chain.level[k - 1] == chain.level[k]) {
+      edge = k;
+      break;
+    }
+  ASSERT_GT(edge, 0);
+  std::vector<std::int32_t> equalized = chain.level;
+  equalized[edge] = chain.level[edge + 1];
+  const SplitChainRun boundary = bonded_split_chain(chain, edge, equalized, equalized[edge], dt_fine, 60, true);
+  EXPECT_LT(boundary.difference, 1e-11);
+  EXPECT_LT(boundary.copy_difference, 1e-11);
+  EXPECT_GT(boundary.moved, 1e-3);
+  EXPECT_EQ(boundary.state, kBonded);
 }
