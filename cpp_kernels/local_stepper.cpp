@@ -195,9 +195,6 @@ void LocalStepper::build_levels() {
     drift_level_[i] = max_level_ - active[i];
   }
   if (row_split_) {  // each own row's finer component forces (set_row_split)
-    std::vector<std::int64_t> row_of(n, -1);
-    for (const Level& level : levels_)
-      for (std::size_t r = 0; r < level.rows.size(); ++r) row_of[level.rows[r]] = static_cast<std::int64_t>(r);
     std::vector<std::vector<std::pair<std::int32_t, std::int32_t>>> entries(n);
     for (int c = 0; c <= max_level_; ++c)
       for (std::size_t q = 0; q < levels_[c].coarser_nodes.size(); ++q)
