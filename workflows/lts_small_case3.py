@@ -27,11 +27,13 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "workflows"))
 
 RUNS = [("global", 0.2, None), ("global", 0.8, None), ("local", 0.8, "column"), ("local", 0.8, "row")]
 
 
 def main() -> int:
+    import case_study
     import test_case_study_stage as small
 
     from pyfem import local_stepping, solver
@@ -54,20 +56,16 @@ def main() -> int:
         out = args.out / f"{scheme}_{safety:g}{'_' + split if split else ''}"
         started = time.perf_counter()
         done = out / "run.json"
-        if done.exists() and json.loads(done.read_text()).get("status") == "finished":  # read, not run again
-            summary = json.loads(done.read_text())
+        summary = json.loads(done.read_text()) if done.exists() else {}
+        if summary.get("status") == "finished":  # read, not run again
             wall = float("nan")
         else:
             summary = solver.run(scene, out)
             wall = time.perf_counter() - started
         if scheme == "local":
             assert summary["dt_reason"].endswith(f"the {split} split"), summary["dt_reason"]
-        u = {}
-        for name in ("A", "B", "C", "D"):
-            data = np.loadtxt(out / "monitors" / f"{name}.csv", delimiter=",", skiprows=1)
-            with open(out / "monitors" / f"{name}.csv") as handle:
-                header = handle.readline().strip().split(",")
-            u[name] = data[:, [header.index(k) for k in ("ux", "uy", "uz")]]
+        u = {name: case_study.displacement(case_study.read_csv(out / "monitors" / f"{name}.csv"))
+             for name in ("A", "B", "C", "D")}
         if reference is None:
             reference, difference = u, "-"
         else:
@@ -75,8 +73,7 @@ def main() -> int:
                                    for k in u)
         regions = summary["nonlinear_regions"]
         yielded = sum(r["yielded_volume"] for name, r in regions.items() if name != "lining")
-        pairs = json.loads((out / "run.json").read_text()).get("pairs", {})
-        slip = max((p.get("max_slip", 0.0) for p in pairs.values()), default=float("nan"))
+        slip = max((p.get("max_slip", 0.0) for p in summary.get("pairs", {}).values()), default=float("nan"))
         print(f"| {scheme} {safety:g}{' ' + split + ' split' if split else ''} | {difference} | {100 * slip:.3f} | "
               f"{yielded:,.0f} | {regions['lining'].get('damaged_volume', float('nan')):,.0f} | "
               f"{summary['energy']['balance_error']:.1e} | {wall:.0f} |", flush=True)
