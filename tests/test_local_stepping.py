@@ -18,7 +18,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from pyfem import solver
+from pyfem import local_stepping, solver
 from pyfem.scene import SceneError, parse_scene
 
 GRADED_GEO = """SetFactory("OpenCASCADE");
@@ -287,6 +287,38 @@ def two_layer_contact_scene(local: bool, contact: bool, cohesion: float = 1.0e15
         if normal_lag is not None:
             data["contact"]["normal_lag"] = normal_lag
     return parse_scene(data, source="test")
+
+
+def test_bonded_pairs_in_the_row_split_reproduce_the_unsplit_mesh(monkeypatch):
+    """The row split with contact pairs (not the default for such models yet: pyfem/local_stepping.py
+    row_split, forced here): the two nodes of a pair at the finer of their levels and nothing else
+    lowered (equalize_pair_levels), each pair at its nodes' own level (level_pairs); with every pair
+    bonded the split mesh is the unsplit mesh under the same levels, both by the row split."""
+    from scipy.spatial import cKDTree
+
+    monkeypatch.setattr(local_stepping, "row_split", lambda *_: True)
+    split = solver.prepare(two_layer_contact_scene(True, True))
+    whole = solver.prepare(two_layer_contact_scene(True, False))
+    assert split.lts_split == whole.lts_split == "row"
+    levels, pairs = split.node_levels, split.contact_arrays["pairs"]
+    assert levels.max() >= 1 and np.all(levels[pairs[:, 0]] == levels[pairs[:, 1]])
+    distance, unsplit_node = cKDTree(whole.model.node_coords).query(split.model.node_coords)
+    assert np.max(distance) < 1e-9
+    whole.node_levels = np.zeros(len(whole.mass), dtype=np.int32)
+    whole.node_levels[unsplit_node] = levels
+    histories = []
+    for simulation in (split, whole):
+        stepper = solver.make_stepper(simulation)
+        assert stepper.kernel.row_split
+        n = simulation.stiffness.shape[0]
+        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+        stepper.run(u, v, a, simulation.n_steps, 0.0)
+        histories.append(u.reshape(-1, 3))
+    split_u, whole_u = histories
+    assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
+    assert split.contact_pairs.state_counts()[0] == len(pairs)  # all bonded
+    assert np.abs(np.asarray(split.contact_pairs.contact_force())).max() > 0.0  # the correction acted
+    assert np.abs(split_u - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
 
 
 def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
