@@ -331,25 +331,30 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
   // impulse, not the drift's velocity half a step later (a first-order difference in dt).
   // contact_observed_v_ holds v(t) (substep); minus the drift's velocity, plus the corrected one.
   double* observed = contact_observed_v_.data();
+  // The impulses' work is that over the drift they start, m dv . v_drift (dv the velocity they add):
+  // not the kinetic energy they add, which is larger by m dv^2 / 2. A pair that holds a force f
+  // between halves of mass m each takes back, in every substep, the h f / m by which the two kicks
+  // around it drove the halves apart: the kinetic energy falls by h^2 f^2 / m each time and the
+  // kicks give it back, but a kinetic measure would book it as work every substep (a drift of the
+  // balance, docs/lts_plan.md "The contact work under local stepping").
   for (const auto& pairs : level.contacts) {
     const std::vector<std::int32_t>& nodes = pairs->unique_nodes();
-    double kinetic_before = 0.0;
     for (const std::int64_t i : nodes)
       for (int d = 0; d < 3; ++d) {
         contact_a_[3 * i + d] = 0.0;  // v is the drift's velocity: u(t + h) = u + h v
-        kinetic_before += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
+        contact_before_v_[3 * i + d] = v[3 * i + d];
         observed[3 * i + d] -= v[3 * i + d];
       }
     const ContactStepResult result = pairs->correct(t, operators, u, v, contact_a_.data(), false);
-    double kinetic_after = 0.0;
+    double work = 0.0;
     for (const std::int64_t i : nodes)
       for (int d = 0; d < 3; ++d) {
         observed[3 * i + d] += v[3 * i + d];  // v(t) + dv
         v[3 * i + d] += 0.5 * h * contact_a_[3 * i + d];
-        kinetic_after += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
+        work += mass_[i] * (v[3 * i + d] - contact_before_v_[3 * i + d]) * v[3 * i + d];
       }
     pairs->observe_velocity(observed);
-    energy_.contact_work += kinetic_after - kinetic_before;
+    energy_.contact_work += work;
     energy_.friction_dissipation += result.friction_dissipation;
   }
 }
@@ -674,6 +679,7 @@ void LocalStepper::prepare_structure() {
       if (!level.contacts.empty()) {
         contact_a_.assign(3 * n_nodes(), 0.0);
         contact_observed_v_.assign(3 * n_nodes(), 0.0);
+        contact_before_v_.assign(3 * n_nodes(), 0.0);
       }
 }
 

@@ -96,8 +96,9 @@ class LocalStepper {
   /// It is what Stepper's correction and its next start kick add to the drift's
   /// velocity: a one-level run gives Stepper's displacements; the velocities at a sample time lack
   /// R's first half (h/2 A^-1 R, given with the next impulse) and the returned a has no R. The
-  /// contact work is the
-  /// kinetic energy the impulses add; friction dissipation as ContactPairs reports it. Checked at
+  /// contact work is the impulses' work over the drift they start, m dv . v (not the kinetic
+  /// energy they add: docs/lts_plan.md "The contact work under local stepping"); friction
+  /// dissipation as ContactPairs reports it. Checked at
   /// the first run: std::invalid_argument naming a pair node of another drift level.
   void add_contact(std::shared_ptr<ContactPairs> pairs, int level);
 
@@ -148,7 +149,7 @@ class LocalStepper {
     double kinetic = 0.0, strain = 0.0, external_work = 0.0, damping_work = 0.0, initial = 0.0;
     double internal_stored = 0.0;       // the components' committed stored energy (J)
     double internal_dissipation = 0.0;  // their dissipation since the run started (J)
-    double contact_work = 0.0;          // kinetic energy added by the contact impulses (J)
+    double contact_work = 0.0;          // work of the contact impulses over their drifts (J)
     double friction_dissipation = 0.0;  // of the slipping pairs (J; part of -contact_work)
     // kinetic + strain + internal_stored - initial - external_work + damping_work
     //   + internal_dissipation - contact_work
@@ -268,6 +269,7 @@ class LocalStepper {
   // (3 n) scratch: pair nodes' v(t) before their level's start kick, then the velocity whose slip
   // rate the pairs observe (correct_contacts).
   std::vector<double> contact_observed_v_;
+  std::vector<double> contact_before_v_;      // (3 n) scratch: pair nodes' v before the impulse
   std::vector<std::int32_t> drift_level_;     // per node, fine index of the finest level moving it
   std::vector<std::int32_t> row_cap_;         // per node: its row's blocks at min(column level, cap)
   std::vector<std::int32_t> capped_;          // nodes whose rows step at their drift level

@@ -397,7 +397,10 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path):
     work = max(np.abs(energy["external_work"]).max(), (energy["kinetic"] + energy["strain"]).max())
     print("balance / work:", np.abs(energy["balance"]).max() / work, "global:",
           np.abs(energy_global["balance"]).max() / work)
-    assert np.abs(energy["balance"]).max() < 0.05 * work  # the plain account of local stepping: O(dt^2)
+    # The plain account of local stepping, O(dt^2): 1.2e-4 of the work with the impulses' work
+    # over their drifts (as kinetic energy added, the pairs' holding force drifted it by h^2 f^2 / m
+    # per substep: docs/lts_plan.md "The contact work under local stepping").
+    assert np.abs(energy["balance"]).max() < 1e-3 * work
     assert pair_rows[-1, 4] == pytest.approx(pair_rows_global[-1, 4], rel=0.01)
     assert energy["friction_dissipation"][-1] == pytest.approx(energy_global["friction_dissipation"][-1], rel=0.02)
 
