@@ -388,11 +388,12 @@ def load_pair_parts(whole, parts: list, pair_nodes: np.ndarray) -> None:
 
 
 def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, stiffness, pairs: np.ndarray | None,
-                       time_step, phases_ms: dict) -> dict:
+                       time_step, phases_ms: dict, rows: bool = True) -> dict:
     """What local stepping would save on a model, from its rate levels and the measured phases of one
     global step (`phases_ms`: ms per step of element_loop, stiffness, contact, update, input_forces). Each phase's work per simulated second relative to global stepping at time_step.dt:
-    - element loop: its points weighted by 2^-k of their cell's level (`cell_levels`, made finer
-      around contact pairs by `pair_cell_cap`), times dt / dt_fine;
+    - element loop: its points weighted by 2^-k of their cell's level (the row split, `rows`: the
+      finest of its nodes'; the column split: `cell_levels`, made finer around contact pairs by
+      `pair_cell_cap`), times dt / dt_fine;
     - contact: the pairs weighted by their level;
     - the rest (stiffness kicks, drifts, input): the matrix's blocks weighted by their column's level.
     Returns {"speed_up" (global time / predicted local time per simulated second), "element_loop",
@@ -401,7 +402,7 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
     measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured) (docs/lts_plan.md
     "Where it pays")."""
     levels = np.asarray(levels)
-    fine_step, top = local_time_step(time_step, levels)
+    fine_step, top = local_time_step(time_step, levels, "row" if rows else "column")
     scale = time_step.dt / fine_step.dt
     weight = 2.0 ** -levels.astype(float)
     blocks_per_column = np.diff(stiffness.indptr).astype(float)
@@ -409,10 +410,13 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
     loop = 0.0
     loop_cells = loop_cell_mask(nonlinear, len(cell_nodes))
     if loop_cells is not None:
-        cap = pair_cell_cap(levels, cell_nodes, pairs, loop_cells) if pairs is not None and len(pairs) else None
-        cell_level = cell_levels(levels, cell_nodes).astype(np.int64)
-        if cap is not None:
-            cell_level = np.minimum(cell_level, cap)
+        if rows:
+            cell_level = levels[cell_nodes].min(axis=1).astype(np.int64)
+        else:
+            cap = pair_cell_cap(levels, cell_nodes, pairs, loop_cells) if pairs is not None and len(pairs) else None
+            cell_level = cell_levels(levels, cell_nodes).astype(np.int64)
+            if cap is not None:
+                cell_level = np.minimum(cell_level, cap)
         points = np.zeros(len(cell_nodes))
         for arrays in nonlinear.arrays.values():
             points[arrays.cells] = arrays.weights.shape[1]
@@ -430,15 +434,16 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
 
 def row_split(nonlinear, contact: bool) -> bool:
     """Whether the kernel steps this model by the row split (LocalStepper.set_row_split: every node at
-    its own level with its whole stiffness row, a coarser neighbour read along its drift): where the
-    model has no element-loop regions (`nonlinear`: NonlinearRegions or None) and no contact pairs.
-    The row split's stresses where levels meet are global stepping's (the cavity test at safety 0.8:
-    0.53-1.07 % against 0.54-1.06 %; the column split 1.5-8.7 %, docs/lts_plan.md "The row split,
-    prototyped"). The kernel takes element-loop cells and contact pairs in the row split too, and on
-    the small case 3 its displacements were as close to global stepping's as global stepping at the
-    same safety, but its plain energy account was 6.8 % off (the column split's 2.1 %), which is not
-    understood yet; so those models keep the column split."""
-    return nonlinear is None and not contact
+    its own level with its whole stiffness row, a coarser neighbour read along its drift) rather than
+    the column split: every model, element-loop regions (`nonlinear`) and contact pairs (`contact`)
+    included. The row split's stresses where levels meet are global stepping's (the cavity test at
+    safety 0.8: 0.53-1.07 % against 0.54-1.06 %; the column split 1.5-8.7 %, docs/lts_plan.md "The row
+    split, prototyped"); on the small case 3 with all physics its displacements are as close to global
+    stepping's as global stepping at the same safety, and its energy balance 4.0e-5 of the work (the
+    column split's 4.6e-5; docs/lts_plan.md "The contact work under local stepping"), and its pairs
+    step at their own nodes' rates instead of pinning the finest rate along every interface. The
+    column split stays in the kernel for comparisons (workflows/lts_small_case3.py patches this)."""
+    return True
 
 
 def local_time_step(time_step, levels: np.ndarray, split: str = "column"):

@@ -850,18 +850,18 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
     model = simulation.model
     cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
     pairs = simulation.contact_arrays["pairs"] if simulation.contact_arrays is not None else None
+    rows = local_stepping.row_split(simulation.nonlinear, pairs is not None)
     p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
-                                          simulation.stiffness, pairs, simulation.time_step, phases_ms)
+                                          simulation.stiffness, pairs, simulation.time_step, phases_ms, rows)
     if p["speed_up"] < 1.2:
         verdict = "not worth it on this model"
-    elif local_stepping.row_split(simulation.nonlinear, pairs is not None):
+    elif rows:
         verdict = ("it would pay (time.local_stepping = true; the row split: stresses where levels meet as global "
                    "stepping's, docs/lts_plan.md \"The row split, prototyped\")")
     else:
-        verdict = ("it would pay (time.local_stepping = true), but with element-loop cells or contact pairs it steps "
-                   "by the column split, whose stresses where a finer level meets a coarser one are less accurate (a "
-                   "cavity test: 8.7 % off the exact history at safety 0.8, global stepping 0.5 %; docs/lts_plan.md "
-                   "\"Interface rows\")")
+        verdict = ("it would pay (time.local_stepping = true), but it would step by the column split, whose stresses "
+                   "where a finer level meets a coarser one are less accurate (a cavity test: 8.7 % off the exact "
+                   "history at safety 0.8, global stepping 0.5 %; docs/lts_plan.md \"Interface rows\")")
     return {"local stepping (off)": (
         f"predicted {p['speed_up']:.2f}x the speed of global stepping per simulated second ({len(p['levels'])} "
         f"rate level{'s' if len(p['levels']) != 1 else ''}, nodes per level {p['levels']}; work against global "
