@@ -487,6 +487,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
                                                 pinned=np.unique(dashpot_nodes), pairs=pairs,
                                                 loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells),
                                                 rows=rows)
+            levels = local_stepping.fit_levels_to_output(levels, time_step.steps_per_output)
             if local:
                 node_levels = levels
                 lts_split = "row" if rows else "column"

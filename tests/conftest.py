@@ -3,6 +3,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 ROUNDOFF = 1e-10  # relative agreement expected between two evaluations of the same arithmetic
 EXACT = 1e-12  # relative agreement of two arrangements of the same sums over a few hundred steps
@@ -47,3 +48,14 @@ def write_msh_with_quadratic_tetrahedra(path):
     lines += ["$EndNodes", "$Elements", "1", "1 11 2 1 1 " + " ".join(str(k + 1) for k in range(10)),
               "$EndElements"]
     Path(path).write_text("\n".join(lines) + "\n")
+
+
+@pytest.fixture
+def unfitted_levels(monkeypatch):
+    """Local stepping's rate levels as the mesh gives them, not capped to fit the output interval
+    (pyfem.local_stepping.fit_levels_to_output): the small test scenes have few steps per output
+    interval, where the cap would leave one or two levels, and these tests are about the kernel's
+    accuracy and stability with several levels. The cap has its own test."""
+    from pyfem import local_stepping
+
+    monkeypatch.setattr(local_stepping, "fit_levels_to_output", lambda levels, steps_per_output: levels)

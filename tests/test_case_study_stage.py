@@ -54,7 +54,7 @@ def stage_checks(summary) -> None:
 
 
 @pytest.mark.parametrize("local_stepping, integration", [(False, "full"), (True, "mixed")])
-def test_small_case3_without_wave_stays_at_rest(tmp_path, local_stepping, integration):
+def test_small_case3_without_wave_stays_at_rest(tmp_path, local_stepping, integration, unfitted_levels):
     """Also with local time stepping: the stage's element-loop and pair state, cut by rate level
     (pyfem/local_stepping.py load_component_parts, load_pair_parts), hands over in equilibrium, with
     the sandstone's cells at one point each (integration = "reduced", their hourglass stiffness in the

@@ -13,6 +13,7 @@ docs/lts_plan.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
 - What the local stepper does not do yet is refused with one line naming time.local_stepping.
 """
 import json
+import math
 import pathlib
 
 import numpy as np
@@ -61,7 +62,7 @@ def run_to_the_end(simulation) -> np.ndarray:
     return u
 
 
-def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_stepping(tmp_path):
+def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_stepping(tmp_path, unfitted_levels):
     geo = tmp_path / "graded.geo"
     geo.write_text(GRADED_GEO)
     summaries = {local: solver.run(graded_scene(geo, local), tmp_path / f"run_{local}") for local in (False, True)}
@@ -98,7 +99,7 @@ def test_one_rate_level_is_global_stepping(tmp_path):
     assert np.linalg.norm(runs[True] - runs[False]) <= 1e-12 * np.linalg.norm(runs[False])
 
 
-def test_check_predicts_what_local_stepping_would_save_where_the_scene_allows_it(tmp_path):
+def test_check_predicts_what_local_stepping_would_save_where_the_scene_allows_it(tmp_path, unfitted_levels):
     """`check` with local stepping off (pyfem.local_stepping.predicted_speed_up): one rate level
     predicts exactly global stepping's speed; the preview's levels are those a run with it on uses;
     the graded mesh, whose finest level holds most nodes, is not worth it; the coarse case 1 (its rock
@@ -237,7 +238,7 @@ def two_layer_plastic_scene(local: bool):
     }, source="test")
 
 
-def test_yielding_layer_at_its_own_rate_follows_global_stepping(tmp_path):
+def test_yielding_layer_at_its_own_rate_follows_global_stepping(tmp_path, unfitted_levels):
     """The scene path of nonlinear local stepping (pyfem/local_stepping.py level_components): the
     yielding soft layer's cells at their coarser level, read back as one region for the monitors and
     run.json, against global stepping of the same scene."""
@@ -687,3 +688,23 @@ def test_the_kernel_refuses_a_coarser_element_loop_cell_on_a_pair_node(monkeypat
     with pytest.raises(ValueError, match=r"contact pair node \d+ \(pairs at level 0\) is loaded by an element-loop "
                                          r"component at the coarser level [1-9]"):
         stepper.run(np.zeros(n), np.zeros(n), np.zeros(n), 2 ** int(simulation.node_levels.max()), 0.0)
+
+
+def test_levels_fit_the_output_interval_where_a_deep_hierarchy_costs_more_than_it_saves():
+    """local_stepping.fit_levels_to_output: the run takes whole global steps per output interval, so
+    with 85 steps per interval six levels (global step 32 dt_fine) need 96 fine steps where four
+    (8 dt_fine) need 88. The coarse case 3's levels are capped at 3, 7.7 % less work by the node
+    count; an interval of 96 steps keeps all six, and capping never makes a node coarser."""
+    from pyfem.local_stepping import fit_levels_to_output
+
+    levels = np.repeat(np.arange(6), [19756, 8710, 8880, 17869, 3039, 98]).astype(np.int32)
+    capped = fit_levels_to_output(levels, 85)
+    assert capped.max() == 3 and np.array_equal(capped, np.minimum(levels, 3))
+
+    def cost(lv, steps):
+        top = int(lv.max())
+        return math.ceil(steps / 2 ** top) * 2 ** top * np.sum(2.0 ** -lv)
+
+    assert cost(capped, 85) == pytest.approx(0.923 * cost(levels, 85), abs=0.002 * cost(levels, 85))
+    assert np.array_equal(fit_levels_to_output(levels, 96), levels)
+    assert np.all(fit_levels_to_output(levels, 85) <= levels)
