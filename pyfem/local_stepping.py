@@ -14,13 +14,17 @@ but with the model's boundary dashpots, is iterated from a random state for STAB
 steps, and its energy must not grow (a growth of 0.2 % per global step or more is caught; the 1D
 prototype and the kernel's tests are stable up to the global safety factor, docs/lts_plan.md).
 
-Element-loop materials (`plasticity`, `damage` tables) step at their cells' own rates: each cell at
-the coarsest level of its nodes, its region split into one kernel component per level (the cell
-split of docs/lts_plan.md "Nonlinear cells at their own rates"), read back as one region by
-`LevelComponents`. Contact pairs step at their own rates too (LocalStepper.add_contact: an impulse
-before each drift of the level their nodes drift at): the two nodes of a pair are put at one level
-and one drift level (`equalize_pair_drift`), the pairs split into one kernel ContactPairs per drift
-level and read back as one set by `LevelPairs`. After a relaxation stage both continue the stage's state, cut by level
+Every model steps by the row split (`row_split`, LocalStepper.set_row_split; docs/lts_plan.md "The
+row split, prototyped", "The contact work under local stepping"): every node at its own level with its
+whole stiffness row. The levels are then capped where a deep hierarchy costs more fine steps per
+output interval than it saves (`fit_levels_to_output`). Element-loop materials (`plasticity`,
+`damage` tables) step at their cells' own rates: each cell at the finest level of its nodes (the
+column split, kept in the kernel for comparisons: the coarsest), its region split into one kernel
+component per level, read back as one region by `LevelComponents`. Contact pairs step at their own
+rates too (LocalStepper.add_contact: an impulse before each drift of their level): the two nodes of
+a pair at the finer of their levels (`equalize_pair_levels`; the column split: one level and one
+drift level, `equalize_pair_drift`), the pairs split into one kernel ContactPairs per level and read
+back as one set by `LevelPairs`. After a relaxation stage both continue the stage's state, cut by level
 (`load_component_parts`, `load_pair_parts`). Fixed and roller faces project every kick of their
 nodes (LocalStepper.set_constraints; contact pairs on them are refused by key, `pyfem.solver.prepare`). What is not supported yet, refused by
 key: stiffness-proportional damping. Checkpoints hold the LocalStepper's own state
