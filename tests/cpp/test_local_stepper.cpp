@@ -355,7 +355,7 @@ struct SplitChainRun {
 };
 
 // strain: the chains start from u = strain x i (x and y) as well, so that the pair carries a force
-// from the start and all along (its halves' forces differ by twice the links' tension).
+// from the start and all along (its halves are pulled apart by the tensions of their links).
 SplitChainRun bonded_split_chain(const Chain& chain, std::int64_t p, const std::vector<std::int32_t>& level,
                                  int pair_level, double dt_fine, std::int64_t steps, bool row_split = false,
                                  double strain = 0.0) {
