@@ -425,8 +425,9 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
     Returns {"speed_up" (global time / predicted local time per simulated second), "element_loop",
     "matrix", "contact" (the relative work of each), "levels" (nodes per level)}. A model: it leaves out
     the pair and interface rows stepped at their drift level and the kicks' own overhead: it over-predicts the
-    measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured) (docs/lts_plan.md
-    "Where it pays")."""
+    measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured, the column
+    split; docs/lts_plan.md "Where it pays"), and by 27 % on the coarse case 3 in the row split (1.69x predicted from
+    `check`'s steps at rest, 1.33x measured with the rock yielding; "The case study under the row split")."""
     levels = np.asarray(levels)
     fine_step, top = local_time_step(time_step, levels, "row" if rows else "column")
     scale = time_step.dt / fine_step.dt
