@@ -290,31 +290,46 @@ def two_layer_contact_scene(local: bool, contact: bool, cohesion: float = 1.0e15
     return parse_scene(data, source="test")
 
 
+def split_and_unsplit_under_the_same_levels(split, whole):
+    """Runs the prepared split mesh (contact pairs) and the prepared unsplit mesh to the end under
+    the split mesh's levels and split (a pair's two copies share one level; in the column split the
+    unsplit node's row steps at its drift level, as LocalStepper.add_contact makes the pair nodes'):
+    the same arithmetic while every pair stays bonded. Returns (split u, unsplit u, each split node's
+    unsplit node), u as (nodes, 3)."""
+    from scipy.spatial import cKDTree
+
+    distance, unsplit_node = cKDTree(whole.model.node_coords).query(split.model.node_coords)
+    assert np.max(distance) < 1e-9
+    mapped = np.zeros(len(whole.mass), dtype=np.int32)
+    mapped[unsplit_node] = split.node_levels  # both copies of a pair node have one level
+    whole.node_levels = mapped
+    whole.lts_split = split.lts_split
+    assert split.time_step.dt == whole.time_step.dt
+    histories = []
+    for simulation in (split, whole):
+        stepper = solver.make_stepper(simulation)
+        assert stepper.kernel.row_split == (split.lts_split == "row")
+        if simulation is whole and split.lts_split == "column":
+            pair_nodes = np.unique(unsplit_node[split.contact_arrays["pairs"]]).astype(np.int32)
+            stepper.kernel.step_rows_at_drift_level(pair_nodes)
+        n = simulation.stiffness.shape[0]
+        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+        stepper.run(u, v, a, simulation.n_steps, 0.0)
+        histories.append(u.reshape(-1, 3))
+    return histories[0], histories[1], unsplit_node
+
+
 def test_bonded_pairs_in_the_row_split_reproduce_the_unsplit_mesh():
     """The row split with contact pairs (the default, pyfem/local_stepping.py row_split): the two
     nodes of a pair at the finer of their levels and nothing else lowered (equalize_pair_levels), each
     pair at its nodes' own level (level_pairs); with every pair bonded the split mesh is the unsplit
     mesh under the same levels, both by the row split."""
-    from scipy.spatial import cKDTree
-
     split = solver.prepare(two_layer_contact_scene(True, True))
     whole = solver.prepare(two_layer_contact_scene(True, False))
     assert split.lts_split == whole.lts_split == "row"
     levels, pairs = split.node_levels, split.contact_arrays["pairs"]
     assert levels.max() >= 1 and np.all(levels[pairs[:, 0]] == levels[pairs[:, 1]])
-    distance, unsplit_node = cKDTree(whole.model.node_coords).query(split.model.node_coords)
-    assert np.max(distance) < 1e-9
-    whole.node_levels = np.zeros(len(whole.mass), dtype=np.int32)
-    whole.node_levels[unsplit_node] = levels
-    histories = []
-    for simulation in (split, whole):
-        stepper = solver.make_stepper(simulation)
-        assert stepper.kernel.row_split
-        n = simulation.stiffness.shape[0]
-        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-        stepper.run(u, v, a, simulation.n_steps, 0.0)
-        histories.append(u.reshape(-1, 3))
-    split_u, whole_u = histories
+    split_u, whole_u, unsplit_node = split_and_unsplit_under_the_same_levels(split, whole)
     assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
     assert split.contact_pairs.state_counts()[0] == len(pairs)  # all bonded
     assert np.abs(np.asarray(split.contact_pairs.contact_force())).max() > 0.0  # the correction acted
@@ -330,8 +345,6 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path, 
     interface that slides follows global stepping at second order in dt; the scene path end to end,
     its energy account included (docs/lts_plan.md "Contact pairs at their own rates", "The contact
     work under local stepping")."""
-    from scipy.spatial import cKDTree
-
     monkeypatch.setattr(local_stepping, "row_split", lambda *_: False)
     split = solver.prepare(two_layer_contact_scene(True, True))
     whole = solver.prepare(two_layer_contact_scene(True, False))
@@ -340,23 +353,8 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path, 
     print("nodes per level:", np.bincount(levels), "pair levels:", np.unique(levels[pairs]))
     assert levels.max() >= 1 and np.count_nonzero(levels > 0) > 100  # several rates
     assert np.all(levels[pairs[:, 0]] == levels[pairs[:, 1]])
-    distance, unsplit_node = cKDTree(whole.model.node_coords).query(split.model.node_coords)
-    assert np.max(distance) < 1e-9
-    mapped = np.zeros(len(whole.mass), dtype=np.int32)
-    mapped[unsplit_node] = levels  # both copies of a pair node have one level
-    whole.node_levels = mapped
-    whole.lts_split = "column"  # the split mesh's (its pairs need it): the same arithmetic
-    assert split.time_step.dt == whole.time_step.dt
-    histories = []
-    for simulation in (split, whole):
-        stepper = solver.make_stepper(simulation)
-        if simulation is whole:  # the interface rows as the pair nodes' (LocalStepper.add_contact)
-            stepper.kernel.step_rows_at_drift_level(np.unique(unsplit_node[pairs]).astype(np.int32))
-        n = simulation.stiffness.shape[0]
-        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-        stepper.run(u, v, a, simulation.n_steps, 0.0)
-        histories.append(u.reshape(-1, 3))
-    split_u, whole_u = histories
+    split_u, whole_u, unsplit_node = split_and_unsplit_under_the_same_levels(split, whole)
+    assert split.lts_split == "column"
     assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
     assert np.abs(split_u - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
     counts = split.contact_pairs.state_counts()
@@ -505,49 +503,39 @@ def test_pairs_at_a_coarser_level_than_the_finest_are_global_stepping_at_their_o
     stepping's at 2 dt within 2 %, and halves with dt as that does (stick-slip makes a sliding pair
     first order in dt under global stepping too). So local stepping against global stepping at the
     same dt falls at first order here, not second: the pairs' own step, not the level split."""
-    from scipy.spatial import cKDTree
-
-    def final(local, dt, cohesion=0.0):
+    def prepared(local, dt, cohesion=0.0):
         simulation = solver.prepare(three_layer_pairs_scene(local, dt, cohesion, normal_lag))
         if local:
             levels = pairs_at_a_coarse_level(simulation)
             pair_levels = np.unique(levels[simulation.contact_arrays["pairs"]])
             assert list(pair_levels) == [1] and np.count_nonzero(levels == 0) > 100  # coarser than the finest
             simulation.node_levels = levels
-        u = run_to_the_end(simulation)
-        return u, simulation
+        return simulation
+
+    def final(local, dt):
+        return run_to_the_end(prepared(local, dt))
 
     # Bonded: the split mesh against the unsplit mesh under the same levels.
-    bonded, split = final(True, 2.0e-4, cohesion=1.0e15)
-    assert split.contact_pairs.state_counts()[0] == len(split.contact_arrays["pairs"])  # all bonded
+    split = prepared(True, 2.0e-4, cohesion=1.0e15)
     whole_scene = three_layer_pairs_scene(True, 2.0e-4, 1.0e15, normal_lag).to_json()
     del whole_scene["contact"], whole_scene["pair_monitor"]
     whole = solver.prepare(parse_scene(whole_scene, source="test"))
-    distance, unsplit_node = cKDTree(whole.model.node_coords).query(split.model.node_coords)
-    assert np.max(distance) < 1e-9
-    mapped = np.zeros(len(whole.mass), dtype=np.int32)
-    mapped[unsplit_node] = split.node_levels
-    whole.node_levels = mapped
-    whole.lts_split = split.lts_split  # the same arithmetic
-    stepper = solver.make_stepper(whole)
-    stepper.kernel.step_rows_at_drift_level(np.unique(unsplit_node[split.contact_arrays["pairs"]]).astype(np.int32))
-    n = whole.stiffness.shape[0]
-    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    stepper.run(u, v, a, whole.n_steps, 0.0)
-    whole_u = u.reshape(-1, 3)
+    split_u, whole_u, unsplit_node = split_and_unsplit_under_the_same_levels(split, whole)
+    assert split.contact_pairs.state_counts()[0] == len(split.contact_arrays["pairs"])  # all bonded
     assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
-    assert np.abs(bonded.reshape(-1, 3) - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
+    assert np.abs(split_u - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
+    bonded = split_u.reshape(-1)
 
     # Sliding: errors against the converged reference.
-    reference, _ = final(False, 2.5e-5)
+    reference = final(False, 2.5e-5)
     scale = np.abs(reference).max()
     print("the weak interface against the bonded one:", np.abs(reference - bonded).max() / scale)
     assert np.abs(reference - bonded).max() > 0.3 * scale  # the weak interface slipped (60-65 % of the motion)
     error = {}
     for dt in (4.0e-4, 2.0e-4, 1.0e-4):
-        error["global", dt] = np.abs(final(False, dt)[0] - reference).max() / scale
+        error["global", dt] = np.abs(final(False, dt) - reference).max() / scale
         if dt < 4.0e-4:
-            error["local", dt] = np.abs(final(True, dt)[0] - reference).max() / scale
+            error["local", dt] = np.abs(final(True, dt) - reference).max() / scale
     print("errors against global stepping at dt / 8:", error)
     for dt in (2.0e-4, 1.0e-4):
         assert error["local", dt] == pytest.approx(error["global", 2 * dt], rel=0.02)
