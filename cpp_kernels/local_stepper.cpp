@@ -116,10 +116,10 @@ void LocalStepper::build_levels() {
     level.own.clear();
     level.drift.clear();
     level.component_row.clear();
+    std::fill(loaded.begin(), loaded.end(), 0);  // the nodes this level's components load
+    for (const auto& component : level.components)
+      for (const std::int32_t node : component->nodes()) loaded[node] = 1;
     if (row_split_) {  // the level's own rows, whole (set_row_split)
-      std::fill(loaded.begin(), loaded.end(), 0);
-      for (const auto& component : level.components)
-        for (const std::int32_t node : component->nodes()) loaded[node] = 1;
       level.coarser_nodes.clear();
       level.coarser_nodes_level.clear();
       for (std::int64_t i = 0; i < n; ++i) {
@@ -153,9 +153,6 @@ void LocalStepper::build_levels() {
       level.external.assign(3 * level.rows.size(), 0.0);
       continue;
     }
-    std::fill(loaded.begin(), loaded.end(), 0);
-    for (const auto& component : level.components)
-      for (const std::int32_t node : component->nodes()) loaded[node] = 1;
     for (std::int64_t i = 0; i < n; ++i) {
       const std::int64_t before = static_cast<std::int64_t>(level.columns.size());
       std::int64_t diagonal = -1;

@@ -5,9 +5,9 @@ The small model of tests/test_case_study_stage.py (workflows/scenes/case3_contac
 to a 90 x 74 x 110 m block around a 24 m cavern, two interfaces with contact pairs): its static
 stage, then `--duration` s of oblique El Centro with the rock yielding, the lining cracking and the
 pairs sticking and slipping. Runs global stepping at safety 0.2 (the reference) and 0.8, and local
-stepping at 0.8 by the column split and by the row split (forced: `pyfem.local_stepping.row_split`
-chooses the row split only for models without element-loop cells and pairs until this comparison
-says otherwise). Prints per run: the largest difference of u at the lining monitors A-D from the
+stepping at 0.8 by the column split and by the row split (each forced through
+`pyfem.local_stepping.row_split`; the row split is the default since this comparison, docs/lts_plan.md
+"The contact work under local stepping"). Prints per run: the largest difference of u at the lining monitors A-D from the
 reference relative to its peak, the largest slip at the pair monitors, the yielded rock, the lining's damaged
 volume, the energy balance error and the wall time of the run (nan: a finished run directory read
 again, not run).
@@ -45,13 +45,13 @@ def main() -> int:
     import test_case_study_stage as small
 
     from pyfem import local_stepping, solver
+    from pyfem.scene import load_scene
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=pathlib.Path, default=ROOT / "runs" / "lts_small_case3")
     parser.add_argument("--duration", type=float, default=1.5)
     parser.add_argument("--model", choices=sorted(RUNS), default="small")
     args = parser.parse_args()
-    from pyfem.scene import load_scene
 
     def scene_of(overrides):
         if args.model == "small":
@@ -67,9 +67,8 @@ def main() -> int:
     global_rate = None
     for scheme, safety, split in RUNS[args.model]:
         local_stepping.row_split = (lambda *_: split == "row") if split else chosen
-        scene = scene_of([f"time.duration={args.duration}", "output.xdmf_interval=0.0",
-                                   f"time.safety={safety}",
-                                   f"time.local_stepping={'true' if scheme == 'local' else 'false'}"])
+        scene = scene_of([f"time.duration={args.duration}", "output.xdmf_interval=0.0", f"time.safety={safety}",
+                          f"time.local_stepping={'true' if scheme == 'local' else 'false'}"])
         out = args.out / f"{scheme}_{safety:g}{'_' + split if split else ''}"
         started = time.perf_counter()
         done = out / "run.json"
