@@ -40,6 +40,10 @@ LATER_KEYS = ((("time", "matrix_precision"), "double"), (("time", "local_steppin
               (("materials", "*", "plasticity", "integration"), "full"),
               (("materials", "*", "damage", "integration"), "full"))
 
+# Keys whose value is a decision taken on the model ("auto"): left out of the scene's fingerprint,
+# since the model's part holds its outcome (local stepping: dt, steps and the levels' hash).
+DECIDED_KEYS = ((("time", "local_stepping"), "auto"),)
+
 
 # The scene's file keys (resolved to absolute paths by the scene): a checkpoint holds a hash of
 # each file's content, not its path, so a run continues from another clone or a moved project.
@@ -72,9 +76,9 @@ def scene_fingerprint(scene) -> dict:
     data = scene.to_json()
     for table, key in RESUMABLE_CHANGES:
         data.get(table, {}).pop(key, None)
-    for path, old_behaviour in LATER_KEYS:
+    for path, dropped in LATER_KEYS + DECIDED_KEYS:
         for table in _tables_at(data, path[:-1]):
-            if path[-1] in table and table[path[-1]] == old_behaviour:
+            if path[-1] in table and table[path[-1]] == dropped:
                 table.pop(path[-1])
     return _files_by_content(data)
 
@@ -202,13 +206,18 @@ class Checkpoint:
 
     def check_model(self, simulation) -> None:
         """Raises SceneError (key --resume) when this checkpoint is not of the simulation's model."""
-        self._refuse_difference(_first_difference(self.saved_fingerprint(), model_fingerprint(simulation)))
+        auto = simulation.scene["time"].get("local_stepping") == "auto"
+        self._refuse_difference(_first_difference(self.saved_fingerprint(), model_fingerprint(simulation)), auto)
 
-    def _refuse_difference(self, where: str | None) -> None:
+    def _refuse_difference(self, where: str | None, auto_stepping: bool = False) -> None:
         if where is None:
             return
         if where.startswith("scene."):
             self._refuse(f"the scene's {where[len('scene.'):]} differs from the checkpoint's")
+        elif auto_stepping and where in ("dt", "steps", "levels_sha256"):
+            self._refuse(f"the model's {where} differs from the checkpoint's: time.local_stepping = \"auto\" "
+                         "decided otherwise than the interrupted run's setting (set time.local_stepping to "
+                         "true or false as it ran)")
         else:
             self._refuse(f"the model's {where} differs from the checkpoint's (another mesh or build?)")
 

@@ -1,4 +1,5 @@
-"""Local time stepping from a scene (`[time] local_stepping = true`; docs/lts_plan.md): the rate
+"""Local time stepping from a scene (`[time] local_stepping`: true, false or "auto", the default, which
+turns it on where it pays, `auto_decision`; docs/lts_plan.md): the rate
 level of every node, the time step made a whole number of global steps per output interval, and
 an adapter that gives the kernel's LocalStepper the interface the run loop uses.
 
@@ -48,6 +49,17 @@ STABILITY_STEPS = 240      # global steps of the set-up check
 STABILITY_CHUNK = 10       # global steps between energy readings
 STABILITY_AMPLITUDE = 1.0e-9  # m, the random state's scale
 STABILITY_RATIO = 2.0      # largest energy of the last third / of the first third, above: unstable
+AUTO_PAYS = 1.25
+"""`time.local_stepping = "auto"` (the default) turns local stepping on where `auto_decision` predicts
+at least this speed-up over the whole run, its set-up check included: the prediction runs 7-27 %
+above the measured speed-up (`predicted_speed_up`), so a model it turns on is faster."""
+COST_NS = {"block": 5.0, "point": 172.0, "pair": 350.0, "node": 11.2}
+"""The kernel's cost per step (ns, 2 threads) of a 3x3 block of the stiffness product, a point of an
+element-loop law, a contact pair and a node's update and input forces: the coarse case 3's global steps
+with the rock yielding (2.73 ms for 548 268 blocks, 36.2 ms for 210 560 points, 4.03 ms for 11 520
+pairs, 0.66 ms for 58 352 nodes; docs/lts_plan.md "On where it pays"). `auto_decision` predicts by
+these fixed figures, not by timing this machine, so that a scene makes the same decision on every
+machine and when a run resumes."""
 
 
 def check_supported(scene, beta: float) -> None:
@@ -457,6 +469,42 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
                 + sum(phases_ms.get(name, 0.0) for name in ("stiffness", "update", "input_forces")) * matrix)
     return {"speed_up": global_ms / local_ms if local_ms > 0 else math.inf, "element_loop": loop, "matrix": matrix,
             "contact": contact, "levels": np.bincount(levels, minlength=top + 1).tolist()}
+
+
+def estimated_phases_ms(stiffness, nonlinear, pairs: np.ndarray | None, n_nodes: int) -> dict:
+    """A global step's phases (ms) by the work model COST_NS: the stiffness product by its blocks, the
+    element loop by its points, the contact by its pairs, the update and input forces by the nodes;
+    `predicted_speed_up`'s phases where nothing was timed."""
+    points = sum(arrays.weights.size for arrays in nonlinear.arrays.values()) if nonlinear is not None else 0
+    return {"stiffness": 1e-6 * COST_NS["block"] * float(stiffness.indptr[-1]),
+            "element_loop": 1e-6 * COST_NS["point"] * points,
+            "contact": 1e-6 * COST_NS["pair"] * (len(pairs) if pairs is not None else 0),
+            "update": 1e-6 * COST_NS["node"] * n_nodes}
+
+
+def auto_decision(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, stiffness, pairs: np.ndarray | None,
+                  time_step, duration: float, rows: bool = True) -> tuple[bool, str]:
+    """`time.local_stepping = "auto"`: whether local stepping pays on this model over this run, and
+    why. The speed-up per step is `predicted_speed_up` with the phases of the work model
+    (`estimated_phases_ms`); the set-up check (`check_stability`, STABILITY_STEPS global steps of the
+    local stepper) is charged to the run, so a short run of a model that would pay in the long one
+    stays with global stepping. On when the run's predicted speed-up is at least AUTO_PAYS.
+    Returns (on, the reason for run.json and `check`)."""
+    if not np.any(levels):
+        return False, ("\"auto\": off: one rate level on this model (every node's stable step within 2x of the "
+                       "finest), nothing to gain")
+    phases = estimated_phases_ms(stiffness, nonlinear, pairs, len(levels))
+    p = predicted_speed_up(levels, cell_nodes, nonlinear, stiffness, pairs, time_step, phases, rows)
+    fine_step, top = local_time_step(time_step, levels, "row" if rows else "column")
+    run_steps = max(1.0, duration / time_step.dt)  # global stepping's steps
+    check_steps = STABILITY_STEPS * 2 ** top * fine_step.dt / time_step.dt  # the check, in those steps
+    over_run = p["speed_up"] * run_steps / (run_steps + check_steps)
+    on = over_run >= AUTO_PAYS
+    reason = (f"\"auto\": {'on' if on else 'off'}: predicted {over_run:.2f}x the speed of global stepping over "
+              f"the run ({p['speed_up']:.2f}x per step by the work model, {top + 1} rate level"
+              f"{'s' if top else ''}; the set-up check {100 * check_steps / run_steps:.2g} % of the run's steps); "
+              f"on from {AUTO_PAYS}x")
+    return on, reason
 
 
 def row_split(nonlinear, contact: bool) -> bool:

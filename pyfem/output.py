@@ -762,6 +762,7 @@ class RunWriter:
             "boundary_faces": _face_report(sim.model),
             "traction_free_surfaces": dict(sim.model.free_surfaces),
             **({"static": sim.static.summary()} if getattr(sim, "static", None) is not None else {}),
+            **({"local_stepping": sim.lts_decision} if getattr(sim, "lts_decision", None) else {}),
             **({"local_stepping_stability": sim.lts_stability} if getattr(sim, "lts_stability", None) else {}),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
             "warnings": list(getattr(self.scene, "warnings", [])),

@@ -543,9 +543,10 @@ SCHEMA = Table({
         "power_iteration": Flag("sharpen the critical step by power iteration", default=True),
         "matrix_precision": Choice("storage of the stiffness matrix's blocks in the kernel", ("double", "single"),
                                    default="double"),
-        "local_stepping": Flag("multi-rate stepping: each cell and contact pair at its own stable rate (not with "
-                               "stiffness-proportional damping; docs/lts_plan.md)",
-                               default=False),
+        "local_stepping": Choice("multi-rate stepping: each cell and contact pair at its own stable rate; \"auto\": "
+                                 "on where the scene allows it and it is predicted to pay over the whole run "
+                                 "(docs/lts_plan.md \"On where it pays\")", (True, False, "auto"),
+                                 default="auto"),
     }, "[time]"),
     "wave": Table({
         "type": Choice("wave type", ("P", "SV", "SH"), default=None),  # or [[wave.component]]

@@ -415,6 +415,8 @@ def _type(spec: Any) -> str:
     if isinstance(spec, Vector):
         return f"{spec.length} numbers"
     if isinstance(spec, Choice):
+        if any(isinstance(o, bool) for o in spec.options):
+            return "boolean or " + " or ".join(scene_module._show(o) for o in spec.options if not isinstance(o, bool))
         return "integer" if all(isinstance(o, int) for o in spec.options) else "string"
     if isinstance(spec, FilePath):
         return "file path"

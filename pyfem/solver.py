@@ -72,6 +72,8 @@ class Simulation:
     lts_stability: dict | None = None      # [time] local_stepping: check_stability's report, once per model
     lts_split: str | None = None           # [time] local_stepping: "row" or "column" (local_stepping.row_split)
     lts_preview: np.ndarray | None = None  # local stepping off: the levels it would use (prepare(preview_levels=True))
+    lts_decision: str | None = None        # [time] local_stepping = "auto": on or off, and why (auto_decision)
+    lts_global_step: TimeStep | None = None  # local stepping on: the scene's global step (fall_back_to_global_stepping)
     static: object = None                # pyfem.static.StaticState when a [static] stage ran
 
 
@@ -437,6 +439,27 @@ def face_report(model) -> list[dict]:
             for face in model.faces]
 
 
+def whole_steps(duration: float, time_step) -> int:
+    """The steps of a run: whole output intervals, the last sample on or just after the duration."""
+    n_steps = math.ceil(duration / time_step.dt - 1e-9)
+    return time_step.steps_per_output * math.ceil(n_steps / time_step.steps_per_output)
+
+
+def fall_back_to_global_stepping(simulation: Simulation, report: dict) -> None:
+    """`time.local_stepping = "auto"` turned local stepping on but its set-up check found the map
+    unstable on this model (`report`, local_stepping.check_stability): the run steps globally at the
+    scene's step instead, and run.json and a warning say why."""
+    simulation.node_levels = simulation.lts_split = None
+    simulation.time_step = simulation.lts_global_step
+    simulation.n_steps = whole_steps(simulation.scene["time"]["duration"], simulation.time_step)
+    simulation.lts_stability = report
+    simulation.lts_decision = (f"\"auto\": off: its set-up check found the local time stepping map unstable on this "
+                               f"model (a random state's energy grew {report['growth']:.3g}x in "
+                               f"{report['global_steps']} global steps); global stepping instead")
+    simulation.scene.warn("time.local_stepping = \"auto\": local stepping was predicted to pay, but its map is "
+                          "unstable on this model; the run steps globally (run.json \"local_stepping\")")
+
+
 def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = False) -> Simulation:
     """Builds the model and every operator the kernel needs (no time stepping); with [static], runs
     the static stage and hands its state over (solve_static=False: only checks it, for `plan`).
@@ -459,9 +482,11 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
     elastic_stiffness = stiffness  # of every cell: the rate levels of local stepping
     if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
         stiffness = add_block_diagonal(nonlinear.stiffness, spring_nodes, springs)
-    node_levels = preview = lts_split = None
-    local = scene["time"].get("local_stepping")
-    if local or preview_levels:
+    node_levels = preview = lts_split = global_step = None
+    setting = scene["time"].get("local_stepping")
+    local = setting is True  # "auto" decides below, where the scene allows local stepping
+    lts_decision = None
+    if setting or preview_levels:
         from pyfem import local_stepping
 
         try:
@@ -476,9 +501,11 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
             if MPI.COMM_WORLD.size > 1:  # before anything is distributed: every rank says the same
                 raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs "
                                  "on one rank for now)")
-        except SceneError:
+        except SceneError as error:
             if local:
                 raise
+            if setting == "auto":
+                lts_decision = "\"auto\": off: not available " + str(error).split(": ", 1)[-1].removeprefix("false ")
         else:
             cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
             pairs = model.pairs.nodes if "contact" in scene.effects else None
@@ -488,19 +515,22 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
                                                 loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells),
                                                 rows=rows)
             levels = local_stepping.fit_levels_to_output(levels, time_step.steps_per_output)
+            if setting == "auto":
+                local, lts_decision = local_stepping.auto_decision(
+                    levels, cell_nodes, nonlinear, stiffness, pairs, time_step, scene["time"]["duration"], rows)
             if local:
                 node_levels = levels
                 lts_split = "row" if rows else "column"
+                global_step = time_step
                 time_step, _ = local_stepping.local_time_step(time_step, node_levels, lts_split)
             else:
                 preview = levels
-    n_steps = math.ceil(scene["time"]["duration"] / time_step.dt - 1e-9)
-    # Whole output intervals: the last sample lands on or just after the duration.
-    n_steps = time_step.steps_per_output * math.ceil(n_steps / time_step.steps_per_output)
+    n_steps = whole_steps(scene["time"]["duration"], time_step)
     simulation = Simulation(scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
                             time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
                             constraints=constraints, n_steps=n_steps, nonlinear=nonlinear,
-                            node_levels=node_levels, lts_preview=preview, lts_split=lts_split)
+                            node_levels=node_levels, lts_preview=preview, lts_split=lts_split,
+                            lts_decision=lts_decision, lts_global_step=global_step)
     if "seismic_input" in scene.effects:
         from pyfem.seismic.setup import seismic_input_from_scene
 
@@ -590,12 +620,16 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         return kernel
 
     if simulation.lts_stability is None:  # the LTS map on this model, once (pyfem/local_stepping.py)
-        report = local_stepping.check_stability(lambda: bare_kernel(0.0, None), simulation.stiffness.shape[0])
-        simulation.lts_stability = report
-        if not report["stable"]:
-            raise SceneError(local_stepping.KEY, True, "false for this model: its local time stepping map amplified "
-                             f"a random state's energy {report['growth']:.3g}x in {report['global_steps']} global "
-                             "steps (unstable); lower time.safety or turn local stepping off")
+        simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
+                                                                  simulation.stiffness.shape[0])
+    report = simulation.lts_stability
+    if not report["stable"]:
+        if simulation.scene["time"].get("local_stepping") == "auto":
+            fall_back_to_global_stepping(simulation, report)
+            return None
+        raise SceneError(local_stepping.KEY, True, "false for this model: its local time stepping map amplified "
+                         f"a random state's energy {report['growth']:.3g}x in {report['global_steps']} global "
+                         "steps (unstable); lower time.safety or turn local stepping off")
     kernel = bare_kernel(simulation.alpha)
     stage = simulation.static
     if simulation.nonlinear is not None:
@@ -685,7 +719,9 @@ def make_stepper(simulation: Simulation, distribute: bool = True):
     kernel_threads()
     indptr, indices, blocks = bsr_arrays(simulation.stiffness)
     if simulation.node_levels is not None:  # [time] local_stepping (pyfem/local_stepping.py)
-        return _make_local_stepper(simulation, indptr, indices, blocks)
+        stepper = _make_local_stepper(simulation, indptr, indices, blocks)
+        if stepper is not None:
+            return stepper  # (None: "auto" fell back to global stepping)
     single = simulation.scene["time"].get("matrix_precision", "double") == "single"
     stepper = _kernels.Stepper(indptr, indices, blocks, simulation.mass, simulation.time_step.dt,
                                simulation.alpha, simulation.beta, True, single)
@@ -781,6 +817,8 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     trial = dataclasses.replace(simulation, static=None, contact_pairs=None)
     stepper = make_stepper(trial, distribute=False)  # rank 0 alone (the plan is printed there)
     simulation.lts_stability = trial.lts_stability  # checked once per model (local time stepping)
+    if trial.node_levels is None and simulation.node_levels is not None:  # "auto" fell back
+        fall_back_to_global_stepping(simulation, trial.lts_stability)
     if simulation.node_levels is not None:  # whole global steps of local time stepping
         ratio = 2 ** int(simulation.node_levels.max())
         trial_steps = ratio * max(1, -(-trial_steps // ratio))
@@ -809,6 +847,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         "traction-free surfaces": ", ".join(f"{name} ({count} facets)" for name, count in
                                             model.free_surfaces.items()) or "none",
         "dt": f"{ts.dt:.6g} s ({ts.reason})",
+        **({"local stepping (auto)": simulation.lts_decision} if simulation.lts_decision else {}),
         **({"local stepping": lts_stability_line(simulation.lts_stability)} if simulation.lts_stability else {}),
         **lts_preview_plan(simulation, {name: entry["ms_per_step"] for name, entry in phases.items()}),
         **element_loop,
@@ -854,7 +893,7 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
     rows = local_stepping.row_split(simulation.nonlinear, pairs is not None)
     p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
                                           simulation.stiffness, pairs, simulation.time_step, phases_ms, rows)
-    if p["speed_up"] < 1.2:
+    if p["speed_up"] < local_stepping.AUTO_PAYS:
         verdict = "not worth it on this model"
     elif rows:
         verdict = ("it would pay (time.local_stepping = true; the row split: stresses where levels meet as global "
@@ -875,7 +914,8 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
 
 def lts_stability_line(report: dict) -> str:
     """check's line on the local time stepping map's stability check (pyfem/local_stepping.py)."""
-    return (f"stable on this model: a random state's energy changed {report['growth']:.3g}x over "
+    return (f"{'stable' if report['stable'] else 'UNSTABLE'} on this model: a random state's energy changed "
+            f"{report['growth']:.3g}x over "
             f"{report['global_steps']} global steps (amplitude factor {report['growth_per_step']:.6f} per "
             f"step; unstable from 2x), {report['seconds']:.2f} s")
 
@@ -994,8 +1034,11 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         if stage is not None and not static_output.restore_hand_over(simulation, stage):
             simulation = prepare(scene)  # the file is of another model: the stage is solved again
         if saved is not None:
+            report = saved.meta.get("lts_stability")
+            if report and not report["stable"] and simulation.node_levels is not None:
+                fall_back_to_global_stepping(simulation, report)  # as "auto" did in the first sitting
             saved.check_model(simulation)
-            if saved.meta.get("lts_stability") and simulation.node_levels is not None:
+            if report and simulation.node_levels is not None:
                 # The same model and levels (the fingerprint): the LTS map's check is not run again
                 # (852 s on the paper-scale case 1); run.json keeps the first sitting's report.
                 simulation.lts_stability = saved.meta["lts_stability"]

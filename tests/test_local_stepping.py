@@ -697,3 +697,107 @@ def test_levels_fit_the_output_interval_where_a_deep_hierarchy_costs_more_than_i
     assert cost(capped, 85) == pytest.approx(0.923 * cost(levels, 85), abs=0.002 * cost(levels, 85))
     assert np.array_equal(fit_levels_to_output(levels, 96), levels)
     assert np.all(fit_levels_to_output(levels, 85) <= levels)
+
+
+def test_auto_turns_local_stepping_on_where_it_pays_over_the_whole_run():
+    """`time.local_stepping = "auto"`, the default (local_stepping.auto_decision): the coarse case 1,
+    whose rock steps at coarser rates than its lining, turns it on for its whole record (the row
+    split, the levels a run with it on uses); the same model for 0.05 s does not, since the set-up
+    check of the map would cost more than the run saves; a uniform mesh has one rate and nothing to
+    gain; a scene local stepping does not support (stiffness-proportional damping) steps globally
+    instead of being refused; `false` decides nothing."""
+    from pyfem.scene import load_scene
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "workflows" / "scenes" / "case1_vertical_coarse.toml"
+    whole = solver.prepare(load_scene(path), solve_static=False)
+    print(whole.lts_decision)
+    assert whole.lts_decision.startswith('"auto": on: predicted ')
+    assert whole.node_levels is not None and whole.node_levels.max() >= 2
+    assert whole.time_step.reason.endswith("the row split")
+    assert np.array_equal(whole.node_levels,
+                          solver.prepare(load_scene(path, ["time.local_stepping=true"]), solve_static=False).node_levels)
+    speed_up = float(whole.lts_decision.split("predicted ")[1].split("x")[0])
+    assert local_stepping.AUTO_PAYS <= speed_up < 2.5
+
+    short = solver.prepare(load_scene(path, ["time.duration=0.05"]), solve_static=False)
+    print(short.lts_decision)
+    assert short.node_levels is None and short.lts_decision.startswith('"auto": off: predicted ')
+    per_step = float(short.lts_decision.split("(")[1].split("x per step")[0])
+    assert per_step == pytest.approx(float(whole.lts_decision.split("(")[1].split("x per step")[0]))
+    assert float(short.lts_decision.split("predicted ")[1].split("x")[0]) < local_stepping.AUTO_PAYS <= per_step
+    assert short.time_step.dt > whole.time_step.dt  # the scene's own step, not the fitted fine step
+
+    box = {"builder": "box", "size": [60.0, 10.0, 60.0], "h": 5.0}
+    uniform = solver.prepare(graded_scene(pathlib.Path("unused.geo"), "auto", mesh=box,
+                                          monitor=[{"name": "centre", "point": [30.0, 5.0, 30.0]}]))
+    assert uniform.node_levels is None and "one rate level" in uniform.lts_decision
+
+    damped = solver.prepare(load_scene(path, ["damping.alpha=0.0", "damping.beta=1.0e-4"]), solve_static=False)
+    print(damped.lts_decision)
+    assert damped.node_levels is None
+    assert damped.lts_decision.startswith('"auto": off: not available for scenes with stiffness-proportional')
+    off = solver.prepare(load_scene(path, ["time.local_stepping=false"]), solve_static=False)
+    assert off.node_levels is None and off.lts_decision is None
+
+
+def test_auto_steps_globally_when_the_check_finds_the_map_unstable_also_after_a_resume(tmp_path, monkeypatch):
+    """A model "auto" turns local stepping on for, whose set-up check reports an unstable map (forced
+    here: the map has been stable on every model so far), runs as with local stepping off, bit for
+    bit, with run.json and a warning saying why; a crash and --resume does the same without
+    checking again, and continues the run."""
+    from pyfem.scene import parse_scene
+    from test_checkpoint import assert_same_run, crash_after_a_periodic_checkpoint, history_files
+
+    def scene_with(local):
+        data = two_layer_contact_scene(local, False).to_json()
+        data["output"]["checkpoint_interval"] = 1.0e-9
+        return parse_scene(data, source="test")
+
+    reference = solver.run(scene_with(False), tmp_path / "global")
+    monkeypatch.setattr(local_stepping, "auto_decision", lambda *args: (True, '"auto": on: forced by the test'))
+    assert solver.prepare(scene_with("auto")).node_levels is not None  # it would step locally
+    unstable = {"global_steps": 240, "growth": 3.5, "growth_per_step": 1.0026, "stable": False, "seconds": 0.1}
+    checks = []
+    monkeypatch.setattr(local_stepping, "check_stability", lambda *args, **kwargs: checks.append(1) or unstable)
+    fell_back = solver.run(scene_with("auto"), tmp_path / "auto")
+    assert len(checks) == 1
+    print(fell_back["local_stepping"])
+    assert fell_back["local_stepping"].startswith('"auto": off: its set-up check found the local time stepping '
+                                                  "map unstable")
+    assert fell_back["dt"] == reference["dt"] and fell_back["steps"] == reference["steps"]
+    assert any("unstable on this model" in warning for warning in fell_back["warnings"])
+    assert history_files(tmp_path / "auto") == history_files(tmp_path / "global")  # byte for byte
+
+    out = tmp_path / "crashed"
+    saved = crash_after_a_periodic_checkpoint(monkeypatch, scene_with("auto"), out, 10, 0.15)
+    assert 0.0 < saved.t < 0.15 and not saved.meta["lts_stability"]["stable"]
+    resumed = solver.run(scene_with("auto"), out, resume=True)
+    assert len(checks) == 2  # the first sitting's; not again on resume
+    assert resumed["resumed"][0]["t"] == pytest.approx(saved.t)
+    assert_same_run(out, tmp_path / "global")
+
+
+def test_a_run_auto_would_step_otherwise_is_not_resumed_under_auto(tmp_path, monkeypatch):
+    """The scene's fingerprint leaves "auto" out (pyfem/checkpoint.py DECIDED_KEYS): its outcome is
+    in the model's (dt, steps, levels). A run interrupted with local stepping off resumes under
+    "auto" where auto decides off too, and is refused with one line naming time.local_stepping where
+    auto decides on."""
+    from pyfem import checkpoint
+    from pyfem.scene import parse_scene
+    from test_checkpoint import crash_after_a_periodic_checkpoint
+
+    def scene_with(local):
+        data = two_layer_contact_scene(local, False).to_json()
+        data["output"]["checkpoint_interval"] = 1.0e-9
+        return parse_scene(data, source="test")
+
+    assert checkpoint.scene_fingerprint(scene_with("auto")) == checkpoint.scene_fingerprint(scene_with(False))
+    out = tmp_path / "crashed"
+    crash_after_a_periodic_checkpoint(monkeypatch, scene_with(False), out, 10, 0.15)
+    monkeypatch.setattr(local_stepping, "auto_decision", lambda *args: (True, '"auto": on: forced by the test'))
+    with pytest.raises(SceneError, match=r'time\.local_stepping = "auto" decided otherwise') as error:
+        solver.run(scene_with("auto"), out, resume=True)
+    print(error.value)
+    monkeypatch.setattr(local_stepping, "auto_decision", lambda *args: (False, '"auto": off: forced by the test'))
+    resumed = solver.run(scene_with("auto"), out, resume=True)
+    assert resumed["status"] == "finished" and resumed["resumed"] and resumed["time_reached"] >= 0.3

@@ -137,7 +137,7 @@ def test_defaults_are_filled():
     assert scene["mesh"]["origin"] == [0.0, 0.0, 0.0]
     assert scene["mesh"]["order"] == 1
     assert scene["time"] == {"duration": 0.6, "safety": 0.8, "dt": None, "power_iteration": True,
-                             "matrix_precision": "double", "local_stepping": False}
+                             "matrix_precision": "double", "local_stepping": "auto"}
     assert scene["wave"]["angle"] == 0.0 and scene["wave"]["azimuth"] == 0.0
     assert scene["wave"]["scale"] == 1.0
     assert scene["wave"]["medium"] == "rock"  # the only material
