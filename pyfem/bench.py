@@ -221,7 +221,9 @@ def case_study_rows(presets, steps: int, threads: int = 2, one_point: bool = Tru
         if not path.is_file():  # an installed package carries no workflows
             continue
         for overrides in ((), ONE_POINT_ROCK) if one_point else ((),):
-            rows.append(_case_row(load_scene(path, list(overrides)), preset, bool(overrides), steps, threads))
+            # Global steps (the phases local stepping's work model, local_stepping.COST_NS, is taken from).
+            scene = load_scene(path, ["time.local_stepping=false", *overrides])
+            rows.append(_case_row(scene, preset, bool(overrides), steps, threads))
     return rows
 
 

@@ -36,13 +36,14 @@ RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
 # they existed: left out of the fingerprint at that value, so an earlier run's checkpoint still
 # continues (a run that sets another value is another model).
 # A key's path through the scene's tables; "*" stands for every table at that depth (materials.NAME).
-LATER_KEYS = ((("time", "matrix_precision"), "double"), (("time", "local_stepping"), False),
+LATER_KEYS = ((("time", "matrix_precision"), "double"),
               (("materials", "*", "plasticity", "integration"), "full"),
               (("materials", "*", "damage", "integration"), "full"))
 
-# Keys whose value is a decision taken on the model ("auto"): left out of the scene's fingerprint,
-# since the model's part holds its outcome (local stepping: dt, steps and the levels' hash).
-DECIDED_KEYS = ((("time", "local_stepping"), "auto"),)
+# Keys left out of the scene's fingerprint whatever their value, because the model's part holds what
+# they decide: time.local_stepping (true, false or "auto", which decides on the model) by dt, steps
+# and the levels' hash, so that a run resumes under any setting that steps it the same way.
+DECIDED_KEYS = (("time", "local_stepping"),)
 
 
 # The scene's file keys (resolved to absolute paths by the scene): a checkpoint holds a hash of
@@ -76,11 +77,19 @@ def scene_fingerprint(scene) -> dict:
     data = scene.to_json()
     for table, key in RESUMABLE_CHANGES:
         data.get(table, {}).pop(key, None)
-    for path, dropped in LATER_KEYS + DECIDED_KEYS:
+    for path, old_behaviour in LATER_KEYS:
         for table in _tables_at(data, path[:-1]):
-            if path[-1] in table and table[path[-1]] == dropped:
+            if path[-1] in table and table[path[-1]] == old_behaviour:
                 table.pop(path[-1])
+    _drop_decided(data)
     return _files_by_content(data)
+
+
+def _drop_decided(scene_json: dict) -> None:
+    """`scene_json` without the DECIDED_KEYS (in place)."""
+    for path in DECIDED_KEYS:
+        for table in _tables_at(scene_json, path[:-1]):
+            table.pop(path[-1], None)
 
 
 def _tables_at(data: dict, path: tuple) -> list:
@@ -197,6 +206,7 @@ class Checkpoint:
         FILE_KEYS held their paths: hashed now, from the path it names, if that file still exists)."""
         saved = json.loads(json.dumps(self.meta["fingerprint"]))  # a copy
         _files_by_content(saved.get("scene", {}))
+        _drop_decided(saved.get("scene", {}))  # written before they were left out
         return saved
 
     def check_scene(self, scene) -> None:
@@ -206,18 +216,25 @@ class Checkpoint:
 
     def check_model(self, simulation) -> None:
         """Raises SceneError (key --resume) when this checkpoint is not of the simulation's model."""
-        auto = simulation.scene["time"].get("local_stepping") == "auto"
-        self._refuse_difference(_first_difference(self.saved_fingerprint(), model_fingerprint(simulation)), auto)
+        saved = self.saved_fingerprint()
+        where = _first_difference(saved, model_fingerprint(simulation))
+        if where in ("dt", "steps", "levels_sha256") and ("levels_sha256" in saved) != (
+                getattr(simulation, "node_levels", None) is not None):
+            stepped = "locally" if "levels_sha256" in saved else "globally"
+            from pyfem.distributed import world
 
-    def _refuse_difference(self, where: str | None, auto_stepping: bool = False) -> None:
+            how = ("local stepping runs on one rank: resume it without mpirun" if stepped == "locally"
+                   and world().size > 1 else
+                   f"set time.local_stepping = {'true' if stepped == 'locally' else 'false'} to resume it")
+            self._refuse(f"the interrupted run stepped {stepped} (time.local_stepping) and this one would not; "
+                         + how)
+        self._refuse_difference(where)
+
+    def _refuse_difference(self, where: str | None) -> None:
         if where is None:
             return
         if where.startswith("scene."):
             self._refuse(f"the scene's {where[len('scene.'):]} differs from the checkpoint's")
-        elif auto_stepping and where in ("dt", "steps", "levels_sha256"):
-            self._refuse(f"the model's {where} differs from the checkpoint's: time.local_stepping = \"auto\" "
-                         "decided otherwise than the interrupted run's setting (set time.local_stepping to "
-                         "true or false as it ran)")
         else:
             self._refuse(f"the model's {where} differs from the checkpoint's (another mesh or build?)")
 

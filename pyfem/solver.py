@@ -74,6 +74,7 @@ class Simulation:
     lts_preview: np.ndarray | None = None  # local stepping off: the levels it would use (prepare(preview_levels=True))
     lts_decision: str | None = None        # [time] local_stepping = "auto": on or off, and why (auto_decision)
     lts_global_step: TimeStep | None = None  # local stepping on: the scene's global step (fall_back_to_global_stepping)
+    lts_check_deferred: bool = False       # `plan`: the LTS map's set-up check is left to the run
     static: object = None                # pyfem.static.StaticState when a [static] stage ran
 
 
@@ -449,7 +450,7 @@ def fall_back_to_global_stepping(simulation: Simulation, report: dict) -> None:
     """`time.local_stepping = "auto"` turned local stepping on but its set-up check found the map
     unstable on this model (`report`, local_stepping.check_stability): the run steps globally at the
     scene's step instead, and run.json and a warning say why."""
-    simulation.node_levels = simulation.lts_split = None
+    simulation.lts_preview, simulation.node_levels, simulation.lts_split = simulation.node_levels, None, None
     simulation.time_step = simulation.lts_global_step
     simulation.n_steps = whole_steps(simulation.scene["time"]["duration"], simulation.time_step)
     simulation.lts_stability = report
@@ -619,11 +620,11 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         kernel.step_rows_at_drift_level(np.unique(np.concatenate(rows)).astype(np.int32))
         return kernel
 
-    if simulation.lts_stability is None:  # the LTS map on this model, once (pyfem/local_stepping.py)
+    if simulation.lts_stability is None and not simulation.lts_check_deferred:  # once per model
         simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
                                                                   simulation.stiffness.shape[0])
     report = simulation.lts_stability
-    if not report["stable"]:
+    if report is not None and not report["stable"]:
         if simulation.scene["time"].get("local_stepping") == "auto":
             fall_back_to_global_stepping(simulation, report)
             return None
@@ -782,9 +783,12 @@ def plan(scene: Scene) -> dict:
     """What a run of the scene would do, without running it: effects, sizes, dt, memory and time.
 
     The time estimate comes from timing a few kernel steps on the real matrices. A static stage is
-    described, not solved.
+    described, not solved; with local stepping on, the set-up check of its map is estimated, not run
+    (it runs when the run starts: 35 s on the coarse case 3, 400-1 060 s on the paper-scale cases).
     """
-    return simulation_plan(prepare(scene, solve_static=False, preview_levels=True))
+    simulation = prepare(scene, solve_static=False, preview_levels=True)
+    simulation.lts_check_deferred = True
+    return simulation_plan(simulation)
 
 
 def interface_slip_plan(scene: Scene, model) -> dict:
@@ -849,6 +853,8 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         "dt": f"{ts.dt:.6g} s ({ts.reason})",
         **({"local stepping (auto)": simulation.lts_decision} if simulation.lts_decision else {}),
         **({"local stepping": lts_stability_line(simulation.lts_stability)} if simulation.lts_stability else {}),
+        **({"local stepping": deferred_check_line(simulation, per_step)}
+           if simulation.lts_stability is None and simulation.node_levels is not None else {}),
         **lts_preview_plan(simulation, {name: entry["ms_per_step"] for name, entry in phases.items()}),
         **element_loop,
         **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
@@ -910,6 +916,15 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
         + f"matrix {p['matrix']:.2f}"
         + (f", contact {p['contact']:.2f}" if pairs is not None else "")
         + f"); {verdict}")}
+
+
+def deferred_check_line(simulation: Simulation, per_step: float) -> str:
+    """`check`'s line on the LTS map's set-up check, which it leaves to the run."""
+    from pyfem.local_stepping import STABILITY_STEPS
+
+    fine_steps = STABILITY_STEPS * 2 ** int(simulation.node_levels.max())
+    return (f"the set-up check of its map runs when the run starts ({STABILITY_STEPS} global steps, "
+            f"{fine_steps} fine steps: at most about {fine_steps * per_step:.3g} s at this plan's step time)")
 
 
 def lts_stability_line(report: dict) -> str:
@@ -1030,13 +1045,20 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
 
         # A resumed run takes the stage from static/hand_over.npz instead of solving it again.
         stage = static_output.read_hand_over(out_dir) if saved is not None and "static" in scene else None
-        simulation = prepare(scene, solve_static=stage is None)  # every scene/mesh error surfaces here
+        report = saved.meta.get("lts_stability") if saved is not None else None
+
+        def as_first_sitting(simulation):
+            # "auto" fell back to global stepping in the first sitting: the same now, before the
+            # stage's hand-over (which holds the first sitting's dt) is compared with the model
+            if (report and not report["stable"] and simulation.node_levels is not None
+                    and scene["time"].get("local_stepping") == "auto"):
+                fall_back_to_global_stepping(simulation, report)
+            return simulation
+
+        simulation = as_first_sitting(prepare(scene, solve_static=stage is None))  # scene/mesh errors surface here
         if stage is not None and not static_output.restore_hand_over(simulation, stage):
-            simulation = prepare(scene)  # the file is of another model: the stage is solved again
+            simulation = as_first_sitting(prepare(scene))  # the file is of another model: the stage is solved again
         if saved is not None:
-            report = saved.meta.get("lts_stability")
-            if report and not report["stable"] and simulation.node_levels is not None:
-                fall_back_to_global_stepping(simulation, report)  # as "auto" did in the first sitting
             saved.check_model(simulation)
             if report and simulation.node_levels is not None:
                 # The same model and levels (the fingerprint): the LTS map's check is not run again

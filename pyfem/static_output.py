@@ -216,10 +216,12 @@ def restore_hand_over(simulation, saved: tuple[dict, dict]) -> bool:
     """Makes a saved hand-over the stage of `simulation`, prepared with solve_static=False: the
     monitors' static stress and the pairs' static forces as `pyfem.static.hand_over` leaves them.
     Returns False (nothing changed) when the file is of another model than this one."""
-    from pyfem.checkpoint import _first_difference, model_fingerprint
+    from pyfem.checkpoint import _drop_decided, _first_difference, model_fingerprint
 
     arrays, meta = saved
-    if _first_difference(meta["fingerprint"], model_fingerprint(simulation)) is not None:
+    fingerprint = json.loads(json.dumps(meta["fingerprint"]))  # a copy, without the keys written
+    _drop_decided(fingerprint.get("scene", {}))                # before the fingerprint left them out
+    if _first_difference(fingerprint, model_fingerprint(simulation)) is not None:
         return False
     stage = SavedStage(arrays, meta["summary"])
     if simulation.monitor_stress is not None and stage.monitor_stress is not None:

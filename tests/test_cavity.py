@@ -102,8 +102,9 @@ def kirsch(r_over_a, theta):
 
 def run_tunnel(tmp_path, mesh_file, order=1, local=False, safety=None):
     scene = tunnel_scene(mesh_file, order)
-    if local:  # [time] local_stepping: the wall's 0.6 m cells at the finest rate, the far field coarser
-        scene["time"]["local_stepping"] = True
+    # [time] local_stepping: the wall's 0.6 m cells at the finest rate, the far field coarser; or
+    # global stepping (not "auto", which decides by the mesh and the duration)
+    scene["time"]["local_stepping"] = bool(local)
     if safety is not None:
         scene["time"]["safety"] = safety
     out = tmp_path / f"run_q{order}{'_local' if local else ''}{'' if safety is None else f'_s{safety:g}'}"

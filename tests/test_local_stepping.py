@@ -743,24 +743,31 @@ def test_auto_turns_local_stepping_on_where_it_pays_over_the_whole_run():
 def test_auto_steps_globally_when_the_check_finds_the_map_unstable_also_after_a_resume(tmp_path, monkeypatch):
     """A model "auto" turns local stepping on for, whose set-up check reports an unstable map (forced
     here: the map has been stable on every model so far), runs as with local stepping off, bit for
-    bit, with run.json and a warning saying why; a crash and --resume does the same without
-    checking again, and continues the run."""
-    from pyfem.scene import parse_scene
-    from test_checkpoint import assert_same_run, crash_after_a_periodic_checkpoint, history_files
+    bit, with run.json and a warning saying why: when the check runs in the plan `run` prints
+    first (simulation_plan) too. `check` leaves the check to the run. A crash and --resume steps
+    globally again without checking again and without solving the static stage again."""
+    from pyfem import static
+    from test_checkpoint import assert_same_run, crash_after_a_periodic_checkpoint, history_files, stateful_scene
 
     def scene_with(local):
-        data = two_layer_contact_scene(local, False).to_json()
-        data["output"]["checkpoint_interval"] = 1.0e-9
-        return parse_scene(data, source="test")
+        scene = stateful_scene(duration=0.3)
+        scene["time"]["local_stepping"] = local
+        return scene
 
     reference = solver.run(scene_with(False), tmp_path / "global")
     monkeypatch.setattr(local_stepping, "auto_decision", lambda *args: (True, '"auto": on: forced by the test'))
-    assert solver.prepare(scene_with("auto")).node_levels is not None  # it would step locally
     unstable = {"global_steps": 240, "growth": 3.5, "growth_per_step": 1.0026, "stable": False, "seconds": 0.1}
     checks = []
     monkeypatch.setattr(local_stepping, "check_stability", lambda *args, **kwargs: checks.append(1) or unstable)
-    fell_back = solver.run(scene_with("auto"), tmp_path / "auto")
-    assert len(checks) == 1
+    plan = solver.plan(scene_with("auto"))
+    print(plan["local stepping"])
+    assert "fine steps per output interval" in plan["dt"] and "runs when the run starts" in plan["local stepping"]
+    assert not checks  # `check` leaves it to the run
+
+    plans = []
+    fell_back = solver.run(scene_with("auto"), tmp_path / "auto", on_plan=plans.append)
+    assert len(checks) == 1  # in the printed plan's trial stepper; the run's stepper did not check again
+    assert plans[0]["local stepping (auto)"].startswith('"auto": off: its set-up check found')
     print(fell_back["local_stepping"])
     assert fell_back["local_stepping"].startswith('"auto": off: its set-up check found the local time stepping '
                                                   "map unstable")
@@ -771,17 +778,24 @@ def test_auto_steps_globally_when_the_check_finds_the_map_unstable_also_after_a_
     out = tmp_path / "crashed"
     saved = crash_after_a_periodic_checkpoint(monkeypatch, scene_with("auto"), out, 10, 0.15)
     assert 0.0 < saved.t < 0.15 and not saved.meta["lts_stability"]["stable"]
+    checks.clear()
+
+    def solve_again(*args, **kwargs):
+        raise AssertionError("a resumed run solved the static stage again")
+
+    monkeypatch.setattr(static, "solve_relaxation_stage", solve_again)
     resumed = solver.run(scene_with("auto"), out, resume=True)
-    assert len(checks) == 2  # the first sitting's; not again on resume
+    assert not checks  # the first sitting's report
     assert resumed["resumed"][0]["t"] == pytest.approx(saved.t)
     assert_same_run(out, tmp_path / "global")
 
 
-def test_a_run_auto_would_step_otherwise_is_not_resumed_under_auto(tmp_path, monkeypatch):
-    """The scene's fingerprint leaves "auto" out (pyfem/checkpoint.py DECIDED_KEYS): its outcome is
-    in the model's (dt, steps, levels). A run interrupted with local stepping off resumes under
-    "auto" where auto decides off too, and is refused with one line naming time.local_stepping where
-    auto decides on."""
+def test_a_run_resumes_under_any_setting_of_local_stepping_that_steps_it_the_same_way(tmp_path, monkeypatch):
+    """time.local_stepping is left out of a checkpoint's scene fingerprint (pyfem/checkpoint.py
+    DECIDED_KEYS; also from checkpoints written before): the model's part (dt, steps, the levels'
+    hash) holds what it decides. A run interrupted with local stepping off resumes under "auto"
+    where auto decides off too, and is refused with one line saying how it stepped and what to set
+    where auto would step it locally."""
     from pyfem import checkpoint
     from pyfem.scene import parse_scene
     from test_checkpoint import crash_after_a_periodic_checkpoint
@@ -791,11 +805,16 @@ def test_a_run_auto_would_step_otherwise_is_not_resumed_under_auto(tmp_path, mon
         data["output"]["checkpoint_interval"] = 1.0e-9
         return parse_scene(data, source="test")
 
-    assert checkpoint.scene_fingerprint(scene_with("auto")) == checkpoint.scene_fingerprint(scene_with(False))
+    fingerprints = [checkpoint.scene_fingerprint(scene_with(local)) for local in ("auto", False, True)]
+    assert fingerprints[0] == fingerprints[1] == fingerprints[2] and "local_stepping" not in fingerprints[0]["time"]
     out = tmp_path / "crashed"
-    crash_after_a_periodic_checkpoint(monkeypatch, scene_with(False), out, 10, 0.15)
+    saved = crash_after_a_periodic_checkpoint(monkeypatch, scene_with(False), out, 10, 0.15)
+    saved.meta["fingerprint"]["scene"]["time"]["local_stepping"] = False  # as checkpoints before it wrote
+    assert "local_stepping" not in saved.saved_fingerprint()["scene"]["time"]
+
     monkeypatch.setattr(local_stepping, "auto_decision", lambda *args: (True, '"auto": on: forced by the test'))
-    with pytest.raises(SceneError, match=r'time\.local_stepping = "auto" decided otherwise') as error:
+    with pytest.raises(SceneError, match=r"stepped globally \(time\.local_stepping\) and this one would not; "
+                                         r"set time\.local_stepping = false") as error:
         solver.run(scene_with("auto"), out, resume=True)
     print(error.value)
     monkeypatch.setattr(local_stepping, "auto_decision", lambda *args: (False, '"auto": off: forced by the test'))

@@ -86,7 +86,7 @@ def scene(mesh_file: Path, order: int, f0: float):
         "title": f"lined tunnel under SV, Q{order}, f0 {f0:g} Hz",
         "mesh": {"builder": "file", "file": str(mesh_file), "order": order},
         "materials": {"rock": dict(ROCK), "lining": dict(LINING)},
-        "time": {"duration": DURATION[f0]},
+        "time": {"duration": DURATION[f0], "local_stepping": False},  # one scheme on every mesh of the study
         "wave": {"type": "SV", "angle": 0.0, "medium": "rock",
                  "motion": {"ricker": {"f0": f0, "amplitude": 1.0e-3 * (2.0 / f0)}}},
         "boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}},

@@ -95,7 +95,7 @@ def scene_for(mesh_file: Path, order: int, f0: float, centre: np.ndarray = CENTR
         "title": f"tunnel wall stress, Q{order}, f0 {f0:g} Hz",
         "mesh": {"builder": "file", "file": str(mesh_file), "order": order},
         "materials": {"rock": {"E": E, "nu": NU, "rho": RHO}},
-        "time": {"duration": DURATION[f0]},
+        "time": {"duration": DURATION[f0], "local_stepping": False},  # one scheme on every mesh of the study
         "wave": {"type": "SV", "angle": 0.0, "motion": {"ricker": {"f0": f0, "amplitude": 1.0e-3 * (2.0 / f0)}}},
         "boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}},
         "monitor": [{"name": "wall", "point": monitor_point(centre).tolist()},
