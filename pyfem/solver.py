@@ -1056,10 +1056,11 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             return simulation
 
         simulation = as_first_sitting(prepare(scene, solve_static=stage is None))  # scene/mesh errors surface here
+        if saved is not None:
+            saved.check_model(simulation)  # before a stage is solved again for a checkpoint it would refuse
         if stage is not None and not static_output.restore_hand_over(simulation, stage):
             simulation = as_first_sitting(prepare(scene))  # the file is of another model: the stage is solved again
         if saved is not None:
-            saved.check_model(simulation)
             if report and simulation.node_levels is not None:
                 # The same model and levels (the fingerprint): the LTS map's check is not run again
                 # (852 s on the paper-scale case 1); run.json keeps the first sitting's report.
