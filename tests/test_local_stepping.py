@@ -126,7 +126,7 @@ def test_check_predicts_what_local_stepping_would_save_where_the_scene_allows_it
     from pyfem.scene import load_scene
 
     case1 = solver.plan(load_scene(pathlib.Path(__file__).resolve().parents[1] / "workflows" / "scenes"
-                                   / "case1_vertical_coarse.toml"))["local stepping (off)"]
+                                   / "case1_vertical_coarse.toml", ["time.local_stepping=false"]))["local stepping (off)"]
     print(case1)
     speed_up = float(case1.split("predicted ")[1].split("x")[0])
     assert 1.3 < speed_up < 2.5 and "it would pay (time.local_stepping = true; the row split" in case1
@@ -701,11 +701,11 @@ def test_levels_fit_the_output_interval_where_a_deep_hierarchy_costs_more_than_i
 
 def test_auto_turns_local_stepping_on_where_it_pays_over_the_whole_run():
     """`time.local_stepping = "auto"`, the default (local_stepping.auto_decision): the coarse case 1,
-    whose rock steps at coarser rates than its lining, turns it on for its whole record (the row
-    split, the levels a run with it on uses); the same model for 0.05 s does not, since the set-up
-    check of the map would cost more than the run saves; a uniform mesh has one rate and nothing to
-    gain; a scene local stepping does not support (stiffness-proportional damping) steps globally
-    instead of being refused; `false` decides nothing."""
+    whose rock steps at coarser rates than its lining, turns it on for its 4.9 s (the row split, the
+    levels fitted to the output interval); the same model for 0.05 s does not, since the set-up check
+    of the map would cost more than the run saves; a uniform mesh has one rate and nothing to gain; a
+    scene local stepping does not support (stiffness-proportional damping) steps globally instead of
+    being refused; `false` decides nothing."""
     from pyfem.scene import load_scene
 
     path = pathlib.Path(__file__).resolve().parents[1] / "workflows" / "scenes" / "case1_vertical_coarse.toml"
@@ -714,29 +714,33 @@ def test_auto_turns_local_stepping_on_where_it_pays_over_the_whole_run():
     assert whole.lts_decision.startswith('"auto": on: predicted ')
     assert whole.node_levels is not None and whole.node_levels.max() >= 2
     assert whole.time_step.reason.endswith("the row split")
-    assert np.array_equal(whole.node_levels,
-                          solver.prepare(load_scene(path, ["time.local_stepping=true"]), solve_static=False).node_levels)
+    assert whole.time_step.dt < whole.lts_global_step.dt  # the fitted fine step, below the scene's
     speed_up = float(whole.lts_decision.split("predicted ")[1].split("x")[0])
     assert local_stepping.AUTO_PAYS <= speed_up < 2.5
 
-    short = solver.prepare(load_scene(path, ["time.duration=0.05"]), solve_static=False)
-    print(short.lts_decision)
-    assert short.node_levels is None and short.lts_decision.startswith('"auto": off: predicted ')
-    per_step = float(short.lts_decision.split("(")[1].split("x per step")[0])
+    model = whole.model  # the same model and levels for 0.05 s
+    cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
+    on, short = local_stepping.auto_decision(whole.node_levels, cell_nodes, whole.nonlinear, whole.stiffness,
+                                             None, whole.lts_global_step, 0.05)
+    print(short)
+    assert not on and short.startswith('"auto": off: predicted ')
+    per_step = float(short.split("(")[1].split("x per step")[0])
     assert per_step == pytest.approx(float(whole.lts_decision.split("(")[1].split("x per step")[0]))
-    assert float(short.lts_decision.split("predicted ")[1].split("x")[0]) < local_stepping.AUTO_PAYS <= per_step
-    assert short.time_step.dt > whole.time_step.dt  # the scene's own step, not the fitted fine step
+    assert float(short.split("predicted ")[1].split("x")[0]) < local_stepping.AUTO_PAYS <= per_step
 
     box = {"builder": "box", "size": [60.0, 10.0, 60.0], "h": 5.0}
     uniform = solver.prepare(graded_scene(pathlib.Path("unused.geo"), "auto", mesh=box,
                                           monitor=[{"name": "centre", "point": [30.0, 5.0, 30.0]}]))
     assert uniform.node_levels is None and "one rate level" in uniform.lts_decision
 
-    damped = solver.prepare(load_scene(path, ["damping.alpha=0.0", "damping.beta=1.0e-4"]), solve_static=False)
+    data = two_layer_contact_scene("auto", False).to_json()  # two rate levels
+    data["damping"] = {"alpha": 0.0, "beta": 1.0e-4}
+    damped = solver.prepare(parse_scene(data, source="test"), solve_static=False)
     print(damped.lts_decision)
     assert damped.node_levels is None
     assert damped.lts_decision.startswith('"auto": off: not available for scenes with stiffness-proportional')
-    off = solver.prepare(load_scene(path, ["time.local_stepping=false"]), solve_static=False)
+    data["time"]["local_stepping"] = False
+    off = solver.prepare(parse_scene(data, source="test"), solve_static=False)
     assert off.node_levels is None and off.lts_decision is None
 
 
