@@ -506,7 +506,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
             if local:
                 raise
             if setting == "auto":
-                lts_decision = "\"auto\": off: not available " + str(error).split(": ", 1)[-1].removeprefix("false ")
+                lts_decision = "\"auto\": off: not available " + error.allowed.removeprefix("false ")
         else:
             cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
             pairs = model.pairs.nodes if "contact" in scene.effects else None
