@@ -1,8 +1,8 @@
 """The case-3 scene's whole physics end to end on a small layered cavern (default tier).
 
-workflows/scenes/case3_contact_coarse.toml as it is (static excavation with 95 % relaxation and the
-lining installed, Mohr-Coulomb rock in a zone around the cavern, concrete lining damage, the
-interlayer pairs with deterioration, oblique P + SV El Centro), with mesh overrides that shrink the
+workflows/scenes/case3_contact_coarse.toml as it is (static excavation with the whole load released
+before the lining is installed, Mohr-Coulomb rock in a zone around the cavern, concrete lining
+damage, the interlayer pairs with deterioration, oblique P + SV El Centro), with mesh overrides that shrink the
 model to a 90 x 74 x 110 m block around a 24 m long cavern (two layer interfaces cross it), so that
 the static stage and a short dynamic window take about a minute:
 
@@ -61,9 +61,12 @@ def test_small_case3_without_wave_stays_at_rest(tmp_path, local_stepping, integr
     matrix) beside the non-sandstone's and the lining's full cells ("mixed": both kinds in one run)."""
     # Local stepping over 0.2 s (60 global steps): long enough for a mode its map amplified to show.
     one_point = ['materials.sandstone.plasticity.integration="reduced"'] if integration == "mixed" else []
+    # Relaxation 0.95 (the scenes' value until 2026-11-27): the lining then takes 5 % of the load and
+    # the stage leaves pairs sliding at their strength limit, the hardest hand-over; with the
+    # scene's 1.0 this small model's pairs end the stage in stick.
     scene = small_case3([f"time.duration={0.2 if local_stepping else 0.02}", "output.xdmf_interval=0.0",
                          "contact.deterioration.R0=1.0", f"time.local_stepping={'true' if local_stepping else 'false'}",
-                         *one_point], wave=False)
+                         "static.relaxation=0.95", *one_point], wave=False)
     summary = solver.run(scene, tmp_path / "rest")
     if local_stepping:
         assert "local time stepping: 5 rate levels" in summary["dt_reason"]
