@@ -90,13 +90,25 @@ double plane_value(const Plane& plane, const Vector3& s) {
   return dot(plane.normal, s) - plane.bound;
 }
 
-// Largest violation, relative to scale, of "all planes satisfied, all multipliers >= 0".
-double violation_of(const PlaneSet& set, const Return& r, double scale) {
+// Largest violation, relative to scale, of "all planes satisfied, all multipliers >= 0". The
+// multipliers of the planes outside `active` are zero and add nothing; the maximum is taken before
+// the one division (division by scale > 0 keeps the order, so the same value as dividing each term).
+double violation_of(const PlaneSet& set, const Return& r, const int* active, int count,
+                    double scale) {
   double worst = 0.0;
-  for (int a = 0; a < set.count; ++a) {
-    worst = std::max(worst, plane_value(set.planes[a], r.stress) / scale);
-    worst = std::max(worst, -r.multiplier[a] * set.planes[a].elastic_flow_norm / scale);
+  for (int a = 0; a < set.count; ++a) worst = std::max(worst, plane_value(set.planes[a], r.stress));
+  for (int b = 0; b < count; ++b) {
+    const int a = active[b];
+    worst = std::max(worst, -r.multiplier[a] * set.planes[a].elastic_flow_norm);
   }
+  return worst / scale;
+}
+
+// The yield function (mohr_coulomb_yield) of sorted principal stresses s0 >= s1 >= s2: the largest
+// Mohr-Coulomb plane is then (0, 2) and the largest cut-off plane s0's.
+double sorted_yield(const MohrCoulombMaterial& m, const Vector3& s) {
+  double worst = (s[0] - s[2]) + (s[0] + s[2]) * m.sin_phi - m.strength;
+  if (std::isfinite(m.tensile_strength)) worst = std::max(worst, s[0] - m.tensile_strength);
   return worst;
 }
 
@@ -154,7 +166,7 @@ Return return_to_planes(const PlaneSet& set, const Candidate& c, const Vector3& 
     r.multiplier[c.planes[a]] = x[a];
     for (int i = 0; i < 3; ++i) r.stress[i] -= x[a] * pa.elastic_flow[i];
   }
-  r.violation = violation_of(set, r, scale);
+  r.violation = violation_of(set, r, c.planes.data(), c.count, scale);
   return r;
 }
 
@@ -178,7 +190,7 @@ Return return_to_point(const PlaneSet& set, const Candidate& c, const Vector3& t
         Return r;
         r.stress = c.point;
         for (int col = 0; col < 3; ++col) r.multiplier[chosen[col]] = x[col];
-        r.violation = violation_of(set, r, scale);
+        r.violation = violation_of(set, r, chosen, 3, scale);
         if (r.violation < best.violation) best = r;
         if (best.violation <= kTolerance) return best;
       }
@@ -285,7 +297,7 @@ MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& m,
       symmetric_eigenvalues_estimate(tensor_from_stress_voigt(trial_tensor));
   double screen_scale = std::max({std::abs(estimate[0]), std::abs(estimate[2]), m.strength});
   if (std::isfinite(m.tensile_strength)) screen_scale = std::max(screen_scale, m.tensile_strength);
-  if (mohr_coulomb_yield(m, estimate) < -1e-6 * screen_scale) {
+  if (sorted_yield(m, estimate) < -1e-6 * screen_scale) {
     next.effective_stress = trial_tensor;
     return finish_step(m, old, strain_increment, step);
   }
@@ -299,7 +311,7 @@ MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& m,
   if (std::isfinite(m.tensile_strength)) scale = std::max(scale, m.tensile_strength);
   scale = std::max(scale, std::numeric_limits<double>::min());
 
-  if (mohr_coulomb_yield(m, trial) <= kTolerance * scale) {
+  if (sorted_yield(m, trial) <= kTolerance * scale) {
     // Elastic step: the trial tensor itself, no round trip through the principal axes.
     next.effective_stress = trial_tensor;
     step.region = ReturnRegion::elastic;

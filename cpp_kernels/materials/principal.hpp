@@ -115,8 +115,11 @@ inline double cos_third_of_acos(double r) {
                                      0.003761061493294471,
                                      -0.000651873194735815};
   const double t = std::sqrt(0.5 * (1.0 + r));
-  double c = kFit[8];
-  for (int k = 7; k >= 0; --k) c = c * t + kFit[k];
+  // Estrin's scheme: the same polynomial in a dependency chain of depth 4 instead of Horner's 8.
+  const double t2 = t * t, t4 = t2 * t2;
+  const double p01 = kFit[0] + kFit[1] * t, p23 = kFit[2] + kFit[3] * t;
+  const double p45 = kFit[4] + kFit[5] * t, p67 = kFit[6] + kFit[7] * t;
+  double c = (p01 + t2 * p23) + t4 * ((p45 + t2 * p67) + t4 * kFit[8]);
   const double slope = 12.0 * c * c - 3.0;  // 0 at the double root c = 1/2
   if (slope > 1e-4) c -= (4.0 * c * c * c - 3.0 * c - r) / slope;
   return c;
@@ -134,8 +137,9 @@ inline std::array<double, 3> symmetric_eigenvalues_estimate(const Matrix3& a) {
   const double d0 = a[0][0] - mean, d1 = a[1][1] - mean, d2 = a[2][2] - mean;
   const double size = std::sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0);
   if (size == 0.0) return {mean, mean, mean};
-  const double b00 = d0 / size, b11 = d1 / size, b22 = d2 / size;
-  const double b01 = a[0][1] / size, b02 = a[0][2] / size, b12 = a[1][2] / size;
+  const double inverse = 1.0 / size;
+  const double b00 = d0 * inverse, b11 = d1 * inverse, b22 = d2 * inverse;
+  const double b01 = a[0][1] * inverse, b02 = a[0][2] * inverse, b12 = a[1][2] * inverse;
   const double half_det = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) +
                                  b02 * (b01 * b12 - b11 * b02));
   const double c = cos_third_of_acos(std::clamp(half_det, -1.0, 1.0));
