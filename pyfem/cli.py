@@ -167,7 +167,8 @@ def report_warnings(scene: Scene) -> None:
 
 
 def check_out_dir(out_dir: Path) -> None:
-    """Refuses a run directory that cannot be created or written, before anything is built.
+    """Refuses a run directory that cannot be created or written, or that holds files of the user's
+    (anything without a run's run.json, which the run would overwrite), before anything is built.
 
     A probe directory is made in `out_dir` (or in its nearest existing ancestor, which is where
     the run would create it) and in its parent (where an earlier run is moved aside), then
@@ -186,6 +187,14 @@ def check_out_dir(out_dir: Path) -> None:
 
     if out_dir.exists() and not out_dir.is_dir():
         refuse("exists and is not a directory")
+    if out_dir.is_dir() and not (out_dir / "run.json").exists():
+        entries = sorted(entry.name for entry in out_dir.iterdir())
+        if entries:
+            shown = ", ".join(entries[:3]) + (", ..." if len(entries) > 3 else "")
+            allowed = "a new or empty directory, or one holding an earlier run (its run.json; it is moved aside)"
+            raise SceneError("--out", str(out_dir), allowed,
+                             f"--out {out_dir}: holds {len(entries)} {'entry' if len(entries) == 1 else 'entries'} that are not a run of pyfem ({shown}), "
+                             f"which the run could overwrite; nothing there was changed; allowed: {allowed}")
     ancestor = out_dir.absolute()
     while not ancestor.exists():
         ancestor = ancestor.parent

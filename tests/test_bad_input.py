@@ -126,6 +126,14 @@ def regular_file_as_parent(tmp):
     return str(tmp / "plain" / "run")
 
 
+def directory_of_the_users(tmp):
+    """A directory holding a user's own files, named like a run's outputs, without a run.json."""
+    (tmp / "mine" / "monitors").mkdir(parents=True)
+    (tmp / "mine" / "energy.csv").write_text("the user's own numbers\n")
+    (tmp / "mine" / "monitors" / "centre.csv").write_text("the user's own numbers\n")
+    return str(tmp / "mine")
+
+
 LAYERED_BOX_CONTACT = ('[materials.rock2]\npreset = "non_sandstone"\n'
                        '[contact]\ninterfaces = ["interface_1"]\ncohesion = 1.0\nfriction_angle = 30.0\n')
 TWO_LAYERS = ('h = 5.0\nlayers = [{material = "rock", thickness = 10.0}, '
@@ -187,6 +195,8 @@ BAD_INPUTS = [
     ("layered_cavern bad parameter", lambda tmp: (CAVERN_BAD_H_FAR, []), "mesh.parameters.h_far", ["> 0"]),
     ("out under /proc", with_out(lambda tmp: "/proc/pyfem-out"), "--out", ["/proc"]),
     ("out under a regular file", with_out(regular_file_as_parent), "--out", ["is not a directory"]),
+    ("out holds the user's files", with_out(directory_of_the_users), "--out",
+     ["2 entries that are not a run", "energy.csv, monitors", "nothing there was changed"]),
     ("record file malformed", malformed_record, "wave.motion.record.file", ["line 2", "expected numbers"]),
     ("record window outside the record", box(extra=record_wave(RECORD, ", window = [0.0, 99.0]")),
      "wave.motion.record.window", ["inside the record"]),
@@ -217,6 +227,9 @@ def test_bad_input_is_one_error_line_with_exit_2_and_writes_nothing(capsys, tmp_
     after = sorted(p.name for p in tmp_path.iterdir())
     assert after == sorted(before + ["scene.toml"])  # no run directory, nothing else
     assert not Path("/proc/pyfem-out").exists()
+    if (tmp_path / "mine").exists():  # the user's files are as they were
+        assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["energy.csv", "monitors"]
+        assert (tmp_path / "mine" / "energy.csv").read_text() == "the user's own numbers\n"
 
 
 @pytest.mark.parametrize("case", ["msh garbage", "msh with gmsh's quadratic tetrahedra", "record file malformed",
