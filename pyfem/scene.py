@@ -848,6 +848,41 @@ def _check_mesh(settings: dict) -> None:
     if mesh["builder"] == "file" and mesh["parameters"] is not None:
         raise SceneError("mesh.parameters", mesh["parameters"], "not read by builder \"file\": it takes "
                          "no parameters (everything comes from the file)")
+    if mesh["builder"] == "box":
+        _check_box_fits_in_memory(mesh)
+
+
+# Peak memory of building a box model (gmsh's mesh, dolfinx's assembly, the kernel's matrix) per
+# degree of freedom, measured with `pyfem check` on Q1 and Q2 boxes of 0.1-0.7 million dofs
+# (2026-11-27: 3.7 and 7.8 kB per dof at the peak, Python and dolfinx's own 0.2 GB beside).
+PEAK_BYTES_PER_DOF = {1: 3.7e3, 2: 7.8e3}
+
+
+def physical_memory_bytes() -> float:
+    """This machine's physical memory (bytes)."""
+    import os
+
+    return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+
+
+def _check_box_fits_in_memory(mesh: dict) -> None:
+    """Refuses a box whose mesh.h would need more memory than the machine has, before gmsh meshes
+    it for minutes (a typo such as h = 0.2 for 2.0 asked for 12.5 million cells)."""
+    order, h = mesh["order"], mesh["h"]
+    cells = [max(1, math.ceil(length / h - 1e-9)) for length in mesh["size"]]
+    dofs = 3 * math.prod(order * n + 1 for n in cells)
+    need, have = PEAK_BYTES_PER_DOF[order] * dofs, physical_memory_bytes()
+    if need <= have:
+        return
+    smallest = 1.05 * h * (need / have) ** (1.0 / 3.0)  # the dofs go as h^-3; 5 % to spare
+    step = 10.0 ** (math.floor(math.log10(smallest)) - 1)
+    smallest = math.ceil(smallest / step) * step  # two significant digits, rounded up
+    count = format(math.prod(cells), ",").replace(",", " ")
+    raise SceneError("mesh.h", h, f"h >= {smallest:.3g} m for this box and order on this machine",
+                     f"scene key 'mesh.h' = {h:g}: the box would have {count} Q{order} cells "
+                     f"({dofs / 1e6:.1f} million dofs), about {need / 2**30:.0f} GiB at the peak of its "
+                     f"assembly, more than this machine's {have / 2**30:.1f} GiB; allowed: "
+                     f"h >= {smallest:.3g} m for this box and order on this machine")
 
 
 def _check_materials(settings: dict, warnings: list[str]) -> None:

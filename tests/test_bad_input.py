@@ -193,6 +193,9 @@ BAD_INPUTS = [
     ("materials do not match the volumes", two_layer("[materials.mudstone]", "[materials.granite]"),
      "materials.mudstone", ["granite", "sandstone"]),
     ("layered_cavern bad parameter", lambda tmp: (CAVERN_BAD_H_FAR, []), "mesh.parameters.h_far", ["> 0"]),
+    # A typo (h = 0.005 for 5.0): refused at once by its memory, not after minutes of meshing.
+    ("box too fine for the machine", box("h = 5.0", "h = 0.005"), "mesh.h",
+     ["Q1 cells", "GiB at the peak", "h >= "]),
     ("out under /proc", with_out(lambda tmp: "/proc/pyfem-out"), "--out", ["/proc"]),
     ("out under a regular file", with_out(regular_file_as_parent), "--out", ["is not a directory"]),
     ("out holds the user's files", with_out(directory_of_the_users), "--out",
