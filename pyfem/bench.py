@@ -203,7 +203,8 @@ def element_loop_rows(target_dofs: int, steps: int, threads: int = 2) -> list[di
             rows.append({"case": f"whole box in the element loop, mohr_coulomb on its yield surface "
                                  f"({100 * returning:.0f} % of the points return per step)",
                          "dofs": n, "threads": threads, "ms": 1e3 * seconds, "reference_ms": 1e3 * bare,
-                         "ratio": seconds / bare, "ns_per_point": 1e9 * seconds / regions.n_points})
+                         "ratio": seconds / bare, "ns_per_point": 1e9 * seconds / regions.n_points,
+                         "returning_share": returning})
     return rows
 
 

@@ -42,7 +42,7 @@ EXIT_USAGE = 2  # argparse's own status for bad arguments; a bad scene is one to
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         # `pyfem` when run as the installed console command (pip install .).
-        prog="pyfem" if Path(sys.argv[0]).name == "pyfem" else "python3 -m pyfem",
+        prog="pyfem" if Path(sys.argv[0]).name == "pyfem" else "/usr/bin/python3 -m pyfem",
         description="3D explicit seismic analysis of deep caverns in layered rock.")
     parser.add_argument("--version", action="version", version=f"pyfem {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -358,7 +358,7 @@ def _scene_error_text(error: SceneError, scene_path: Path | None = None) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python3 -m pyfem``; returns the exit status. Under ``mpirun -n N`` every
+    """Entry point of ``/usr/bin/python3 -m pyfem``; returns the exit status. Under ``mpirun -n N`` every
     rank runs it and rank 0 speaks (pyfem/distributed.py): the others' lines are the same or
     nothing, except a failure of their own, whose traceback they print."""
     from pyfem.distributed import launched_rank

@@ -581,7 +581,7 @@ def reference() -> str:
         f"`{WRITE_COMMAND}`. -->",
         "",
         "Every key a scene (TOML) accepts, generated from the schema in `pyfem/scene.py`; "
-        "`python3 -m pyfem keys` prints this page. A key is written as its full dotted path, as in "
+        "`/usr/bin/python3 -m pyfem keys` prints this page. A key is written as its full dotted path, as in "
         "`--set` overrides and error messages: `NAME` stands for the name of a named table "
         "(`materials.NAME.E` is `E` in `[materials.rock]`), `0` for the index of an entry of an "
         "array of tables (`monitor.0.point` is `point` in the first `[[monitor]]`). Units are SI "

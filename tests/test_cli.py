@@ -129,12 +129,14 @@ def test_format_plan_prints_every_key_readably():
 
 def test_bench_element_loop_rows_measure_what_they_say():
     """The benchmark's element-loop rows (no timing asserted: timings live in the benchmark): the
-    scene path and three laws on a small box, each with a time, and a time per point for the laws."""
+    scene path and three laws on a small box, each with a time, and a time per point for the laws;
+    Mohr-Coulomb also on its yield surface, where points do return."""
     from pyfem.bench import element_loop_rows, markdown_table
 
-    rows = element_loop_rows(1500, 2, threads=1)
-    assert [row["case"].split(",")[-1].strip() for row in rows][1:] == [
-        "linear_elastic", "mohr_coulomb at rest", "concrete_damage at rest"]
+    rows = element_loop_rows(1500, 3, threads=1)
+    assert [row["case"].split(",")[-1].strip().split(" (")[0] for row in rows][1:] == [
+        "linear_elastic", "mohr_coulomb at rest", "mohr_coulomb on its yield surface", "concrete_damage at rest"]
+    assert 0.2 < rows[3]["returning_share"] <= 1.0, "the points on the surface return"
     assert rows[0]["ns_per_point"] is None and all(row["ns_per_point"] > 0 for row in rows[1:])
     assert all(row["ms"] > 0 and row["reference_ms"] > 0 for row in rows)
     table = markdown_table({"date": "d", "machine": "m", "cpu_count": 1, "rows": [], "element_loop": rows})
