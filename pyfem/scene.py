@@ -812,6 +812,8 @@ def _check_rules(settings: dict, base_dirs: Sequence[Path], warnings: list[str])
     _resolve_files(settings, base_dirs)
     if "record" in settings.get("wave", {}).get("motion", {}):
         _check_record(settings, warnings)
+    if "ricker" in settings.get("wave", {}).get("motion", {}):
+        _check_ricker_duration(settings, warnings)
     if "wave" in settings:
         _check_resolution(settings, warnings)
 
@@ -1092,6 +1094,21 @@ def _check_record(settings: dict, warnings: list[str]) -> None:
             f"time.duration = {duration:g} s is shorter than the record's motion of {motion:.4g} s "
             f"({processed.record_start:.3g} s filter lead-in + window [{start:g}, {end:g}] s = "
             f"{end - start:g} s; see wave.motion.record.lead_in): the run stops before the record ends")
+
+
+def _check_ricker_duration(settings: dict, warnings: list[str]) -> None:
+    """A run that stops before the Ricker wavelet has passed the reference point is warned of (a
+    0.1 s run of a 5 Hz wavelet centred at 0.3 s saw none of it and printed a PGA of 0.001 g)."""
+    ricker = settings["wave"]["motion"]["ricker"]
+    f0 = ricker["f0"]
+    t0 = ricker["t0"] if ricker["t0"] is not None else 1.5 / f0
+    end = t0 + 1.5 / f0  # the envelope exp(-(pi f0 (t - t0))^2) is 3e-10 of the peak there
+    duration = settings["time"]["duration"]
+    if duration < end * (1.0 - 1e-9):
+        stops = "before the wavelet's peak" if duration < t0 else "before the wavelet has passed"
+        warnings.append(f"time.duration = {duration:g} s is shorter than the Ricker wavelet's motion at the "
+                        f"reference point (peak at t0 = {t0:.4g} s, over by t0 + 1.5/f0 = {end:.4g} s): "
+                        f"the run stops {stops}")
 
 
 @contextlib.contextmanager

@@ -195,6 +195,26 @@ def test_input_motion_peaks_spectrum_and_plot(two_layer_run):
     assert (out / "plots" / "input.png").stat().st_size > 10_000
 
 
+def test_a_run_shorter_than_the_ricker_reports_the_wavelets_peaks_and_warns(tmp_path):
+    """A run that stops before the wavelet's peak (0.1 s of a 5 Hz Ricker centred at 0.3 s): the
+    input's peaks are the whole wavelet's (as a record's are the whole record's), "within_run" what
+    the run saw, and the scene says the run stops before the peak."""
+    def scene(duration):
+        return parse_scene({"title": "short", "mesh": {"size": [20.0, 20.0, 40.0], "h": 10.0},
+                            "materials": {"rock": {"preset": "sandstone"}}, "time": {"duration": duration},
+                            "wave": {"type": "SV", "surface": 40.0, "motion": {"ricker": {"f0": 5.0, "amplitude": 1e-3}}},
+                            "output": {"interval": 0.01, "xdmf_interval": 0.0}})
+    short, whole = scene(0.1), scene(0.6)
+    assert any("stops before the wavelet's peak" in warning for warning in short.warnings), short.warnings
+    assert not any("Ricker" in warning for warning in whole.warnings)
+    seen = solver.run(short, tmp_path / "short")["input_motion"]
+    full = solver.run(whole, tmp_path / "whole")["input_motion"]
+    # The Ricker's peak acceleration: amplitude x 6 (pi f0)^2 at t0.
+    assert full["pga"] == pytest.approx(1e-3 * 6.0 * (np.pi * 5.0) ** 2, rel=1e-3)
+    assert seen["pga"] == pytest.approx(full["pga"], rel=1e-12)
+    assert seen["within_run"]["pga"] < 0.05 * seen["pga"]
+
+
 def test_no_input_motion_without_a_wave(tmp_path):
     scene = parse_scene({"title": "free", "mesh": {"size": [10.0, 10.0, 10.0], "h": 5.0},
                          "materials": {"rock": {"preset": "sandstone"}}, "time": {"duration": 0.01},
