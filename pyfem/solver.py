@@ -759,6 +759,14 @@ def upper_triangle_blocks(stiffness: sp.bsr_matrix) -> int:
     return int(np.count_nonzero(stiffness.indices > rows)) + n_block_rows
 
 
+def element_name(model, order: int) -> str:
+    """Q1/Q2 on hexahedra, P1/P2 on tetrahedra (a gmsh file of the user's)."""
+    from dolfinx import mesh as dolfinx_mesh
+
+    tetrahedra = model.mesh.topology.cell_type == dolfinx_mesh.CellType.tetrahedron
+    return f"{'P' if tetrahedra else 'Q'}{order}{' tetrahedra' if tetrahedra else ''}"
+
+
 def memory_estimate(simulation: Simulation) -> int:
     """Bytes held during the run: stiffness (BSR, and the kernel's upper-triangle copy), state and
     scratch vectors, input tables, contact pairs."""
@@ -841,7 +849,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     return {
         "title": scene["title"],
         "effects on": ", ".join(scene.effects) or "none (free vibration)",
-        "mesh": f"{scene['mesh']['builder']}, Q{scene['mesh']['order']}, {model.n_cells} cells",
+        "mesh": f"{scene['mesh']['builder']}, {element_name(model, scene['mesh']['order'])}, {model.n_cells} cells",
         "nodes": len(simulation.mass),
         "dofs": n,
         **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
