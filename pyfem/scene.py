@@ -1188,9 +1188,19 @@ def _check_time(settings: dict) -> None:
         raise SceneError("time.dt", time["dt"],
                          f"fixed time step must be shorter than time.duration = {time['duration']:g} s")
     if time["dt"] is not None and time["safety"] != SCHEMA.fields["time"].fields["safety"].default:
-        raise SceneError("time.safety", time["safety"],
-                         "not read when time.dt is given (the fixed step is used as it is, after a check "
-                         "against the stable step): give time.dt or time.safety, not both")
+        raise SceneError("time.safety", time["safety"], _DT_AND_SAFETY)
+
+
+_DT_AND_SAFETY = ("not read when time.dt is given (the fixed step is used as it is, after a check against the "
+                  "stable step): give time.dt or time.safety, not both")
+
+
+def _check_dt_and_safety_written(raw: dict) -> None:
+    """time.dt and time.safety both written (a scene that writes safety = 0.8, the default, and a
+    --set time.dt=...): the written safety would not be read."""
+    time = raw.get("time")
+    if isinstance(time, dict) and time.get("dt") is not None and time.get("safety") is not None:
+        raise SceneError("time.safety", time["safety"], _DT_AND_SAFETY)
 
 
 def _check_wave(settings: dict) -> None:
@@ -1382,6 +1392,7 @@ def parse_scene(data: dict, source: str = "<dict>", overrides: Iterable[str] = (
     try:
         raw = apply_overrides(data, overrides)
         settings = SCHEMA.check(raw, "")
+        _check_dt_and_safety_written(raw)
         _check_rules(settings, base_dirs, warnings)
     except SceneError as error:
         error.source = str(source)

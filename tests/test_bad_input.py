@@ -178,6 +178,10 @@ BAD_INPUTS = [
      "materials.rock.damage.A_t", ["must be 1 when fracture_energy > 0"]),
     ("time.safety with time.dt", box("duration = 0.02", "duration = 0.02\ndt = 1.0e-4\nsafety = 0.5"),
      "time.safety", ["not both"]),
+    # The default safety written in the scene and a fixed step set on the command line.
+    ("time.dt set beside a written default safety",
+     lambda tmp: (box("duration = 0.02", "duration = 0.02\nsafety = 0.8")(tmp)[0], ["--set", "time.dt=1.0e-4"]),
+     "time.safety", ["not both"]),
     ("mesh.h with a file mesh", two_layer("[mesh]", "[mesh]\nh = 0.1"), "mesh.h",
      ['not read by builder "file"']),
     ("msh without volumes", mesh_file(write_msh_without_volumes), "mesh.file", ["no physical volume"]),
