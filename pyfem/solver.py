@@ -466,7 +466,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
     the static stage and hands its state over (solve_static=False: only checks it, for `plan`).
     preview_levels: with local stepping off, also the rate levels it would use where the scene allows
     it (Simulation.lts_preview, for `plan`'s prediction)."""
-    from pyfem.operators import build_model
+    from pyfem.operators import PointOutsideMesh, build_model
 
     from mpi4py import MPI
 
@@ -541,8 +541,11 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         points = np.array([m["point"] for m in monitors], dtype=np.float64)
         try:
             simulation.monitor_nodes, simulation.monitor_weights = model.point_weights(points)
-        except ValueError as error:
-            raise SceneError("monitor", [m["point"] for m in monitors], f"points inside the mesh ({error})")
+        except PointOutsideMesh as error:
+            key, monitor = f"monitor.{error.index}.point", monitors[error.index]
+            raise SceneError(key, monitor["point"], "a point inside a cell of the model",
+                             f"scene key '{key}' = {monitor['point']} (monitor {monitor['name']!r}): {error}; "
+                             "allowed: a point inside a cell of the model") from None
         simulation.monitor_names = [m["name"] for m in monitors]
         simulation.monitor_stress = monitor_stress_operator(scene, model, points)
         if nonlinear is not None:

@@ -335,3 +335,15 @@ def test_a_fine_enough_scene_has_no_warnings(capsys, tmp_path):
                                command="check")
     assert status == 0, err
     assert "warning" not in err
+
+
+def test_a_monitor_in_the_cavity_names_its_key_and_where_it_is(capsys):
+    """A monitor point in a user's tunnel (inside the mesh's bounding box, in no cell): one line naming
+    monitor.1.point and the monitor, saying it is in no cell rather than outside the bounds."""
+    scene = REPO / "tests" / "scenes" / "mpi_tunnel_tet.toml"
+    status = cli.main(["check", str(scene), "--set", "monitor.1.point=[60.0, 1.0, 60.0]"])
+    lines = capsys.readouterr().err.splitlines()
+    errors = [line for line in lines if line.startswith("error: ")]
+    assert status == 2 and len(errors) == 1, lines
+    assert "'monitor.1.point' = [60.0, 1.0, 60.0] (monitor 'crown')" in errors[0]
+    assert "inside the mesh's bounding box but in no cell" in errors[0] and "rank" not in errors[0]
