@@ -876,8 +876,23 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
                          + ", ".join(f"{name} {entry['ms_per_step']:.3f} ms" for name, entry in phases.items()
                                      if name != "other" or entry["ms_per_step"] > 0.0),
         "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion",
+        **static_stage_estimate(scene, per_step),
         **distributed_plan(simulation),
     }
+
+
+def static_stage_estimate(scene: Scene, per_step: float) -> dict:
+    """check's bound on the static stage's time before the motion: its two relaxation stages of at
+    most static.max_steps steps each, a step costing about a dynamic step at rest (the same kernel
+    on the same cells; the coarse case study's stages stopped after 1 000-2 000 steps each)."""
+    from pyfem.static import uses_relaxation
+
+    if "static" not in scene or not uses_relaxation(scene):
+        return {}
+    max_steps = int(scene["static"]["max_steps"])
+    return {"static stage estimate": f"up to {2 * max_steps * per_step:.0f} s before the motion (2 stages of at "
+                                     f"most {max_steps} relaxation steps at about {per_step * 1e3:.1f} ms each; a "
+                                     f"stage stops once its out-of-balance ratio is reached)"}
 
 
 def distributed_plan(simulation: Simulation) -> dict:

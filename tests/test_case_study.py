@@ -146,8 +146,12 @@ def test_case_scenes_plan_their_static_stage():
         assert scene["static"]["install"] == ["lining"] and scene["static"]["excavate"] == ["excavation"]
         assert scene["materials"]["lining"]["damage"] is not None
         assert scene["materials"]["sandstone"]["plasticity"]["zone"] is not None
-    stages = plan(scene)["static stage"]
+    planned = plan(scene)
+    stages = planned["static stage"]
     assert "dynamic relaxation" in stages["solver"] and "lining installed stress-free" in stages["stage 2 (support)"]
+    # Its time is bounded before the motion's (a new user's run spent minutes in it unannounced).
+    assert planned["static stage estimate"].startswith("up to ") and "2 stages of at most 6000" in \
+        planned["static stage estimate"]
 
 
 @pytest.fixture(scope="module")
