@@ -239,6 +239,10 @@ def yield_surface_seconds(component, node_coords: np.ndarray, steps: int) -> tup
     return best, float(np.mean(np.asarray(component.plastic_strain()).ravel() > before))
 
 
+ONE_POINT_ROCK = tuple(f'materials.{name}.plasticity.integration="reduced"' for name in ("sandstone", "non_sandstone"))
+"""Overrides of the case-3 scenes for one-point rock cells (the lining stays fully integrated)."""
+
+
 def case_study_rows(presets, steps: int, threads: int = 2, one_point: bool = True) -> list[dict]:
     """The case-3 scene's step (workflows/scenes/case3_contact_PRESET.toml) split into the kernel's
     phases: stiffness product, element loop (Mohr-Coulomb rock zone and concrete lining, at rest:

@@ -7,7 +7,7 @@ fields file's index at that sample. It is written atomically (a temporary file, 
 to `checkpoint.npz` in the run directory every `[output] checkpoint_interval` seconds of wall
 time and when the run is interrupted (Ctrl-C, SIGTERM); a finished run removes it.
 
-`python3 -m pyfem run SCENE --out DIR --resume` rebuilds the model from the scene (the static
+`/usr/bin/python3 -m pyfem run SCENE --out DIR --resume` rebuilds the model from the scene (the static
 stage is solved again: it is deterministic), checks that it is the model of the checkpoint
 (scene, dofs, dt, steps, nodal masses), truncates the histories and fields to the checkpoint's
 sample and continues: the histories of a resumed run equal those of an uninterrupted one bit for

@@ -188,7 +188,13 @@ def check_out_dir(out_dir: Path) -> None:
     if out_dir.exists() and not out_dir.is_dir():
         refuse("exists and is not a directory")
     if out_dir.is_dir() and not (out_dir / "run.json").exists():
-        entries = sorted(entry.name for entry in out_dir.iterdir())
+        try:
+            # Empty directories hold nothing to lose (a run stopped before its run.json leaves its
+            # empty monitors/ and plots/).
+            entries = sorted(entry.name for entry in out_dir.iterdir()
+                             if not (entry.is_dir() and not any(entry.iterdir())))
+        except OSError as error:
+            refuse(f"cannot be read ({error.strerror or error})")
         if entries:
             shown = ", ".join(entries[:3]) + (", ..." if len(entries) > 3 else "")
             allowed = "a new or empty directory, or one holding an earlier run (its run.json; it is moved aside)"

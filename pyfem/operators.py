@@ -252,7 +252,7 @@ class Model:
         for j, point in enumerate(points):
             found = colliding.links(j)
             if len(found) == 0:
-                raise PointOutsideMesh(j, point, *self.bounds, self.mesh.comm.size > 1)
+                raise PointOutsideMesh(j, point, *self.bounds)
             cells[j] = found[0]
         return cells
 
@@ -260,14 +260,13 @@ class Model:
 class PointOutsideMesh(ValueError):
     """A point in no cell of the mesh: `index` in the points asked for, and where it lies."""
 
-    def __init__(self, index: int, point, lo, hi, distributed: bool = False):
+    def __init__(self, index: int, point, lo, hi):
         self.index, self.point = index, [float(x) for x in point]
         inside_box = bool(np.all(np.asarray(point) >= lo) and np.all(np.asarray(point) <= hi))
         self.where = ("inside the mesh's bounding box but in no cell (a cavity, an excavated region or a gap)"
                       if inside_box else "outside the mesh's bounding box")
         box = f"[{', '.join(f'{x:.6g}' for x in lo)}] to [{', '.join(f'{x:.6g}' for x in hi)}] m"
-        rank = " of this rank's part" if distributed else ""
-        super().__init__(f"point {self.point} is {self.where}{rank}; bounding box {box}")
+        super().__init__(f"point {self.point} is {self.where}; bounding box {box}")
 
 
 @dataclasses.dataclass

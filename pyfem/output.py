@@ -355,7 +355,8 @@ def input_motion(simulation) -> dict | None:
         "kind": "record" if record is not None else "ricker",
         **({"source": str(record["file"])} if record is not None else {}),
         "what": "incident displacement g(t) x wave.scale at the reference point, its velocity and "
-                "acceleration, as the kernel's waveform table holds them (a record as processed)",
+                "acceleration, as the kernel's waveform table holds them (a record as processed; a Ricker "
+                "wavelet longer than the run on the table's grid beyond the run's end too)",
         "scale": scale,
         "components": [{key: component[key] for key in ("type", "scale", "angle", "azimuth")}
                        for component in scene.wave_components()],

@@ -861,30 +861,57 @@ PEAK_BYTES_PER_DOF = {1: 3.7e3, 2: 7.8e3}
 
 
 def physical_memory_bytes() -> float:
-    """This machine's physical memory (bytes)."""
+    """The memory this process may use (bytes): the machine's physical memory, or a smaller cgroup
+    limit (a container's)."""
     import os
 
-    return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    total = float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if limit.isdigit():
+            total = min(total, float(limit))
+    except OSError:
+        pass
+    return total
+
+
+def _box_dofs(mesh: dict, h: float) -> float:
+    """Degrees of freedom of the box builder's mesh at element size h (pyfem/geometry/box.py: n_i =
+    ceil(L_i / h) elements per side, a layered box ceil(t / h) per layer in z), as a float (no
+    overflow for a tiny h)."""
+    def elements(length: float) -> float:
+        return max(1.0, math.ceil(min(length / h, 1e15) - 1e-9))
+
+    size, order = mesh["size"], mesh["order"]
+    layers = mesh.get("layers")
+    n_z = sum(elements(layer["thickness"]) for layer in layers) if layers else elements(size[2])
+    return 3.0 * (order * elements(size[0]) + 1) * (order * elements(size[1]) + 1) * (order * n_z + 1)
 
 
 def _check_box_fits_in_memory(mesh: dict) -> None:
     """Refuses a box whose mesh.h would need more memory than the machine has, before gmsh meshes
     it for minutes (a typo such as h = 0.2 for 2.0 asked for 12.5 million cells)."""
     order, h = mesh["order"], mesh["h"]
-    cells = [max(1, math.ceil(length / h - 1e-9)) for length in mesh["size"]]
-    dofs = 3 * math.prod(order * n + 1 for n in cells)
-    need, have = PEAK_BYTES_PER_DOF[order] * dofs, physical_memory_bytes()
-    if need <= have:
+    per_dof, have = PEAK_BYTES_PER_DOF[order], physical_memory_bytes()
+    dofs = _box_dofs(mesh, h)
+    if per_dof * dofs <= have:
         return
-    smallest = 1.05 * h * (need / have) ** (1.0 / 3.0)  # the dofs go as h^-3; 5 % to spare
-    step = 10.0 ** (math.floor(math.log10(smallest)) - 1)
-    smallest = math.ceil(smallest / step) * step  # two significant digits, rounded up
-    count = format(math.prod(cells), ",").replace(",", " ")
-    raise SceneError("mesh.h", h, f"h >= {smallest:.3g} m for this box and order on this machine",
-                     f"scene key 'mesh.h' = {h:g}: the box would have {count} Q{order} cells "
-                     f"({dofs / 1e6:.1f} million dofs), about {need / 2**30:.0f} GiB at the peak of its "
-                     f"assembly, more than this machine's {have / 2**30:.1f} GiB; allowed: "
-                     f"h >= {smallest:.3g} m for this box and order on this machine")
+    # The smallest h that fits, by bisection on the same count (a thin side does not shrink with h).
+    low, high = h, max(mesh["size"])
+    if per_dof * _box_dofs(mesh, high) > have:
+        smallest_text = "no h: even one element per side is too large for this machine"
+    else:
+        for _ in range(100):
+            middle = math.sqrt(low * high)
+            low, high = (low, middle) if per_dof * _box_dofs(mesh, middle) <= have else (middle, high)
+        step = 10.0 ** (math.floor(math.log10(high)) - 1)
+        smallest = math.ceil(high / step) * step  # two significant digits, rounded up
+        smallest_text = f"h >= {smallest:.3g} m for this box and order on this machine"
+    cells = dofs / 3.0 / order ** 3
+    raise SceneError("mesh.h", h, smallest_text,
+                     f"scene key 'mesh.h' = {h:g}: the box would have about {cells:.3g} Q{order} cells "
+                     f"({dofs / 1e6:.3g} million dofs), about {per_dof * dofs / 2**30:.3g} GiB at the peak of "
+                     f"its assembly, more than this machine's {have / 2**30:.1f} GiB; allowed: {smallest_text}")
 
 
 def _check_materials(settings: dict, warnings: list[str]) -> None:
@@ -1192,15 +1219,7 @@ def _check_time(settings: dict) -> None:
 
 
 _DT_AND_SAFETY = ("not read when time.dt is given (the fixed step is used as it is, after a check against the "
-                  "stable step): give time.dt or time.safety, not both")
-
-
-def _check_dt_and_safety_written(raw: dict) -> None:
-    """time.dt and time.safety both written (a scene that writes safety = 0.8, the default, and a
-    --set time.dt=...): the written safety would not be read."""
-    time = raw.get("time")
-    if isinstance(time, dict) and time.get("dt") is not None and time.get("safety") is not None:
-        raise SceneError("time.safety", time["safety"], _DT_AND_SAFETY)
+                  "stable step): give time.dt or a time.safety other than the default 0.8, not both")
 
 
 def _check_wave(settings: dict) -> None:
@@ -1392,7 +1411,6 @@ def parse_scene(data: dict, source: str = "<dict>", overrides: Iterable[str] = (
     try:
         raw = apply_overrides(data, overrides)
         settings = SCHEMA.check(raw, "")
-        _check_dt_and_safety_written(raw)
         _check_rules(settings, base_dirs, warnings)
     except SceneError as error:
         error.source = str(source)

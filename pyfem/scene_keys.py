@@ -149,8 +149,9 @@ RULES = {
     ],
     "time": [
         "`time.dt` < `time.duration`",
-        "`time.dt` and `time.safety` exclude each other: a fixed step is used as given, after a check "
-        "against the stable step",
+        "with `time.dt` a fixed step is used as given, after a check against the stable step, and "
+        "`time.safety` is not read: a `time.safety` other than its default 0.8 beside `time.dt` is refused "
+        "(the default may stay written, as the shipped scenes write it)",
     ],
     "wave": [
         "either `wave.type` (with `wave.angle`, `wave.azimuth`) or `wave.component`, not both",

@@ -882,17 +882,20 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
 
 
 def static_stage_estimate(scene: Scene, per_step: float) -> dict:
-    """check's bound on the static stage's time before the motion: its two relaxation stages of at
-    most static.max_steps steps each, a step costing about a dynamic step at rest (the same kernel
-    on the same cells; the coarse case study's stages stopped after 1 000-2 000 steps each)."""
+    """check's line on the static stage's time before the motion: its two relaxation stages of at
+    most static.max_steps steps each at the dynamic step's cost from rest (the same kernel on the
+    same cells), which a yielding rock raises several times (README "The element loop on the yield
+    surface"); not a bound."""
     from pyfem.static import uses_relaxation
 
     if "static" not in scene or not uses_relaxation(scene):
         return {}
     max_steps = int(scene["static"]["max_steps"])
-    return {"static stage estimate": f"up to {2 * max_steps * per_step:.0f} s before the motion (2 stages of at "
-                                     f"most {max_steps} relaxation steps at about {per_step * 1e3:.1f} ms each; a "
-                                     f"stage stops once its out-of-balance ratio is reached)"}
+    return {"static stage estimate": f"2 stages of at most {max_steps} relaxation steps each (and a frequency probe) "
+                                     f"before the motion: {2 * max_steps * per_step:.0f} s at this step's cost from "
+                                     f"rest, several times that where the rock yields in the stage (a point on the "
+                                     f"yield surface costs about 5x one at rest); a stage stops once its "
+                                     f"out-of-balance ratio is reached (the coarse case study's after 1 000-2 000 steps)"}
 
 
 def distributed_plan(simulation: Simulation) -> dict:

@@ -178,10 +178,6 @@ BAD_INPUTS = [
      "materials.rock.damage.A_t", ["must be 1 when fracture_energy > 0"]),
     ("time.safety with time.dt", box("duration = 0.02", "duration = 0.02\ndt = 1.0e-4\nsafety = 0.5"),
      "time.safety", ["not both"]),
-    # The default safety written in the scene and a fixed step set on the command line.
-    ("time.dt set beside a written default safety",
-     lambda tmp: (box("duration = 0.02", "duration = 0.02\nsafety = 0.8")(tmp)[0], ["--set", "time.dt=1.0e-4"]),
-     "time.safety", ["not both"]),
     ("mesh.h with a file mesh", two_layer("[mesh]", "[mesh]\nh = 0.1"), "mesh.h",
      ['not read by builder "file"']),
     ("msh without volumes", mesh_file(write_msh_without_volumes), "mesh.file", ["no physical volume"]),
@@ -347,3 +343,24 @@ def test_a_monitor_in_the_cavity_names_its_key_and_where_it_is(capsys):
     assert status == 2 and len(errors) == 1, lines
     assert "'monitor.1.point' = [60.0, 1.0, 60.0] (monitor 'crown')" in errors[0]
     assert "inside the mesh's bounding box but in no cell" in errors[0] and "rank" not in errors[0]
+
+
+@pytest.mark.parametrize("size, h, order", [([20.0, 10.0, 20.0], 0.005, 1), ([4000.0, 2.0, 4000.0], 0.5, 1),
+                                            ([4000.0, 2.0, 4000.0], 0.5, 2), ([1e5, 1.0, 1.0], 1e-5, 1)])
+def test_a_box_too_fine_for_the_machine_names_an_h_that_fits(size, h, order):
+    """The memory guard's smallest h is itself accepted, also for a box with a thin side (where the
+    dofs do not fall as h^-3)."""
+    import re
+
+    from pyfem.scene import SceneError, parse_scene
+
+    def scene(h_value):
+        return parse_scene({"mesh": {"size": size, "h": h_value, "order": order},
+                            "materials": {"rock": {"preset": "sandstone"}}, "time": {"duration": 0.01}})
+
+    with pytest.raises(SceneError) as refused:
+        scene(h)
+    assert refused.value.key == "mesh.h" and "GiB at the peak" in str(refused.value)
+    suggested = float(re.search(r"h >= ([0-9.e+-]+) m", str(refused.value)).group(1))
+    assert suggested > h
+    scene(suggested)  # accepted

@@ -141,3 +141,15 @@ def test_bench_element_loop_rows_measure_what_they_say():
     assert all(row["ms"] > 0 and row["reference_ms"] > 0 for row in rows)
     table = markdown_table({"date": "d", "machine": "m", "cpu_count": 1, "rows": [], "element_loop": rows})
     assert "Effects that are off cost nothing" in table
+
+
+def test_bench_case_rows_one_point_overrides_make_a_valid_scene():
+    """The benchmark's case rows run the case-3 scene as it is and with ONE_POINT_ROCK (a constant
+    once lost in an edit, which only a minutes-long `pyfem bench` would have found)."""
+    from pyfem.bench import ONE_POINT_ROCK
+    from pyfem.scene import load_scene
+
+    scene = load_scene(Path(__file__).resolve().parents[1] / "workflows" / "scenes" / "case3_contact_coarse.toml",
+                       ONE_POINT_ROCK)
+    assert all(scene["materials"][name]["plasticity"]["integration"] == "reduced"
+               for name in ("sandstone", "non_sandstone"))

@@ -159,7 +159,6 @@ def test_element_loop_beside_sliding_contact_equals_the_matrix_run_and_closes_th
         data = tomllib.load(stream)
     data["mesh"]["order"] = 1
     data["time"].update(dt=1.0e-3, duration=0.6)
-    data["time"].pop("safety", None)  # not read with a fixed dt, so refused beside it
     data["contact"].update(cohesion=2.0e4, tensile_strength=2.0e4)
     data["wave"]["motion"]["ricker"]["amplitude"] = 0.05
     simulation = prepare(parse_scene(data, source="test", base_dir=CONTACT_WORKFLOW.parent))
