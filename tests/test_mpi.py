@@ -199,19 +199,36 @@ def test_a_bad_key_under_mpirun_is_one_line_and_exit_2(setting, key):
 
 
 def test_a_failure_on_one_rank_ends_every_rank(tmp_path):
-    """Rank 0 cannot create the run's monitors/ (a file of that name is in the way) after the ranks
-    have shared the model: it says so and MPI_Abort ends the job, instead of rank 1 waiting forever
-    in its next exchange."""
+    """Rank 0 cannot start its writer after the ranks have shared the model (RunWriter.start raises
+    FileExistsError in the ranks' own processes, as a file named monitors/ in the run directory did
+    before `--out` refused such a directory up front, below): it says so and MPI_Abort ends the job,
+    instead of rank 1 waiting forever in its next exchange."""
     out = tmp_path / "blocked"
-    out.mkdir()
-    (out / "monitors").write_text("in the way\n")
+    code = ("import sys\nfrom pyfem import cli, output\n"
+            "def blocked(self):\n    raise FileExistsError(17, 'File exists', str(self.out_dir / 'monitors'))\n"
+            "output.RunWriter.start = blocked\n"
+            f"sys.exit(cli.main(['run', {SCENES['free_field'][0]!r}, '--out', {str(out)!r}]))\n")
     began = time.monotonic()
-    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
-                             "run", SCENES["free_field"][0], "--out", str(out)], cwd=REPO, env=ENV,
-                            capture_output=True, text=True, timeout=300)
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-c", code],
+                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=300)
     assert result.returncode != 0
     assert "error: rank 0 of 2: FileExistsError" in result.stderr and "ending every rank" in result.stderr
     assert time.monotonic() - began < 120
+
+
+def test_a_directory_of_the_users_files_is_refused_under_mpirun_too(tmp_path):
+    """A file of the user's in the run directory: one line, exit 2, before anything is shared, and the
+    file as it was."""
+    out = tmp_path / "blocked"
+    out.mkdir()
+    (out / "monitors").write_text("in the way\n")
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
+                             "run", SCENES["free_field"][0], "--out", str(out)], cwd=REPO, env=ENV,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2
+    errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "--out" in errors[0] and "not a run of pyfem (monitors)" in errors[0], result.stderr
+    assert "Traceback" not in result.stderr
     assert (out / "monitors").read_text() == "in the way\n"  # nothing of the user's overwritten
 
 
