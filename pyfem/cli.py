@@ -197,10 +197,11 @@ def check_out_dir(out_dir: Path) -> None:
             refuse(f"cannot be read ({error.strerror or error})")
         if entries:
             shown = ", ".join(entries[:3]) + (", ..." if len(entries) > 3 else "")
+            count = f"{len(entries)} {'entry' if len(entries) == 1 else 'entries'}"
             allowed = "a new or empty directory, or one holding an earlier run (its run.json; it is moved aside)"
             raise SceneError("--out", str(out_dir), allowed,
-                             f"--out {out_dir}: holds {len(entries)} {'entry' if len(entries) == 1 else 'entries'} that are not a run of pyfem ({shown}), "
-                             f"which the run could overwrite; nothing there was changed; allowed: {allowed}")
+                             f"--out {out_dir}: holds {count} that are not a run of pyfem ({shown}), which the "
+                             f"run could overwrite; nothing there was changed; allowed: {allowed}")
     ancestor = out_dir.absolute()
     while not ancestor.exists():
         ancestor = ancestor.parent
