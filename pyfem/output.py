@@ -335,21 +335,21 @@ def input_motion(simulation) -> dict | None:
     t = np.round(tables.t0 + tables.dt * np.arange(tables.g.shape[1]), time_decimals(tables.dt) + 3)
     d, v, a = (scale * np.asarray(values[0], dtype=float) for values in (tables.g, tables.dg, tables.ddg))
     run_end = simulation.n_steps * simulation.time_step.dt
-    inside = t <= run_end + 1e-9 * max(run_end, 1.0)
     motion = scene["wave"]["motion"]
     record = motion.get("record")
-    if record is None and t[-1] < motion["ricker"]["t0"] + 1.5 / motion["ricker"]["f0"]:
-        # The Ricker's table holds only the run's time: the wavelet's own peaks and spectrum come
-        # from the whole wavelet on the table's grid (a record's table holds the whole record).
-        from pyfem.seismic.waveforms import ricker
+    if record is None:
+        from pyfem.seismic.waveforms import ricker, ricker_end
 
         ricker_motion = motion["ricker"]
-        end = ricker_motion["t0"] + 1.5 / ricker_motion["f0"]
-        whole = tables.t0 + tables.dt * np.arange(math.ceil((end - tables.t0) / tables.dt) + 1)
-        t = np.round(whole, time_decimals(tables.dt) + 3)
-        d, v, a = (scale * values for values in ricker(whole, ricker_motion["f0"], ricker_motion["amplitude"],
-                                                      ricker_motion["t0"]))
-        inside = t <= run_end + 1e-9 * max(run_end, 1.0)
+        end = ricker_end(ricker_motion["f0"], ricker_motion["t0"])
+        if t[-1] < end:
+            # The Ricker's table holds only the run's time: the wavelet's own peaks and spectrum come
+            # from the whole wavelet on the table's grid (a record's table holds the whole record).
+            whole = tables.t0 + tables.dt * np.arange(math.ceil((end - tables.t0) / tables.dt) + 1)
+            t = np.round(whole, time_decimals(tables.dt) + 3)
+            d, v, a = (scale * values for values in ricker(whole, ricker_motion["f0"], ricker_motion["amplitude"],
+                                                          ricker_motion["t0"]))
+    inside = t <= run_end + 1e-9 * max(run_end, 1.0)
     spectrum = response_spectrum(a, tables.dt, DEFAULT_PERIODS, STANDARD_DAMPING)
     summary = {
         "kind": "record" if record is not None else "ricker",

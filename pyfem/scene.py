@@ -1126,10 +1126,11 @@ def _check_record(settings: dict, warnings: list[str]) -> None:
 def _check_ricker_duration(settings: dict, warnings: list[str]) -> None:
     """A run that stops before the Ricker wavelet has passed the reference point is warned of (a
     0.1 s run of a 5 Hz wavelet centred at 0.3 s saw none of it and printed a PGA of 0.001 g)."""
+    from pyfem.seismic.waveforms import ricker_end
+
     ricker = settings["wave"]["motion"]["ricker"]
-    f0 = ricker["f0"]
-    t0 = ricker["t0"] if ricker["t0"] is not None else 1.5 / f0
-    end = t0 + 1.5 / f0  # the envelope exp(-(pi f0 (t - t0))^2) is 3e-10 of the peak there
+    t0 = ricker["t0"]  # its default 1.5/f0 set by _check_wave
+    end = ricker_end(ricker["f0"], t0)
     duration = settings["time"]["duration"]
     if duration < end * (1.0 - 1e-9):
         stops = "before the wavelet's peak" if duration < t0 else "before the wavelet has passed"
@@ -1215,11 +1216,10 @@ def _check_time(settings: dict) -> None:
         raise SceneError("time.dt", time["dt"],
                          f"fixed time step must be shorter than time.duration = {time['duration']:g} s")
     if time["dt"] is not None and time["safety"] != SCHEMA.fields["time"].fields["safety"].default:
-        raise SceneError("time.safety", time["safety"], _DT_AND_SAFETY)
-
-
-_DT_AND_SAFETY = ("not read when time.dt is given (the fixed step is used as it is, after a check against the "
-                  "stable step): give time.dt or a time.safety other than the default 0.8, not both")
+        raise SceneError("time.safety", time["safety"],
+                         "not read when time.dt is given (the fixed step is used as it is, after a check "
+                         "against the stable step): give time.dt or a time.safety other than the default 0.8, "
+                         "not both")
 
 
 def _check_wave(settings: dict) -> None:

@@ -47,6 +47,12 @@ def ricker(t, f0, amplitude=1.0, t0=None):
     return g, dg, ddg
 
 
+def ricker_end(f0: float, t0: float) -> float:
+    """When the Ricker wavelet centred at t0 is over: t0 + 1.5/f0, where its envelope
+    exp(-(pi f0 (t - t0))^2) is 3e-10 of the peak (the default t0 = 1.5/f0 starts it as far before)."""
+    return t0 + 1.5 / f0
+
+
 def ricker_analytic_signal(z, f0, amplitude=1.0, t0=None):
     """Analytic signal g + i H[g] of the Ricker wavelet, continued to complex time z.
 
