@@ -376,18 +376,20 @@ Args:
       .def(
           "set_deterioration",
           [](ContactPairs& contact, double R0, double lam, double duration, double m_, double n_,
-             double p_) {
-            contact.set_deterioration(DeteriorationParameters{R0, lam, duration, m_, n_, p_});
+             double p_, double start) {
+            contact.set_deterioration(DeteriorationParameters{R0, lam, duration, m_, n_, p_, start});
           },
           py::arg("R0"), py::arg("lam"), py::arg("duration"), py::arg("m"), py::arg("n"),
-          py::arg("p"),
+          py::arg("p"), py::arg("start") = 0.0,
           R"(Switches the deterioration D(t) = eta(t) gamma(dv_t) on (Eqs. 8-11):
-eta = R0 + (1 - R0) exp(-lam t / duration), gamma = m (|dv_t| + n)^(-p), t the stepper time (s)
-clamped at 0, dv_t = |P_t (v_j - v_i)| (m/s) at the previous step (after its contact force).
+eta = R0 + (1 - R0) exp(-lam t_e / duration), gamma = m (|dv_t| + n)^(-p), t_e = t - start the
+stepper time since the earthquake's start clamped at 0, dv_t = |P_t (v_j - v_i)| (m/s) at the
+previous step (after its contact force).
 
 Args:
     R0: limit of eta, in (0, 1].  lam: decay rate, >= 0.  duration: t_s (s), > 0.
-    m: > 0.  n: slip-rate offset (m/s), > 0.  p: exponent, >= 0.)")
+    m: > 0.  n: slip-rate offset (m/s), > 0.  p: exponent, >= 0.
+    start: stepper time (s) of the earthquake's start (the record window's start), finite.)")
       .def("set_normal_lag", &ContactPairs::set_normal_lag, py::arg("length"), py::arg("velocity"),
            R"(Switches the normal-stress lag of the friction on (Prakash & Clifton; Cochard & Rice
 2000): each pair's effective normal force N* follows N as dN*/dt = -(|dv_t| + velocity) / length

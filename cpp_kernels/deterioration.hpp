@@ -17,6 +17,8 @@ struct DeteriorationParameters {
   double m = 1.0;         // gamma scale, > 0
   double n = 1.0;         // slip-rate offset (m/s), > 0 (keeps gamma finite at zero slip rate)
   double p = 0.0;         // slip-rate exponent, >= 0
+  double start = 0.0;     // stepper time (s) at which the earthquake's clock t of Eq. 9 starts
+                          // (the record window's start, after the filter's lead-in), finite
 };
 
 /// Throws std::invalid_argument naming the first parameter outside its allowed range.
@@ -33,12 +35,15 @@ inline void check_deterioration(const DeteriorationParameters& d) {
   require(std::isfinite(d.m) && d.m > 0.0, "m", d.m, "finite and > 0");
   require(std::isfinite(d.n) && d.n > 0.0, "n", d.n, "finite and > 0 (m/s)");
   require(std::isfinite(d.p) && d.p >= 0.0, "p", d.p, "finite and >= 0");
+  require(std::isfinite(d.start), "start", d.start, "finite (s)");
 }
 
-/// Wear factor (Eq. 9): eta(t) = R0 + (1 - R0) exp(-lambda t / t_s), t clamped at 0 so that a
-/// state before the earthquake start is undamaged.
+/// Wear factor (Eq. 9): eta = R0 + (1 - R0) exp(-lambda t_e / t_s), t_e = t - start the time
+/// since the earthquake's start, clamped at 0 so that a state before it (the static state, the
+/// filter's lead-in) is unworn. The wear runs on time, not on shaking: an interface at its limit
+/// slides as eta falls even where nothing moves (docs/method.md section 9).
 inline double wear_factor(const DeteriorationParameters& d, double t) {
-  return d.R0 + (1.0 - d.R0) * std::exp(-d.lambda * std::max(t, 0.0) / d.duration);
+  return d.R0 + (1.0 - d.R0) * std::exp(-d.lambda * std::max(t - d.start, 0.0) / d.duration);
 }
 
 /// Slip-rate factor (Eq. 10): gamma = m (|dv_t| + n)^(-p), dv_t the relative tangential

@@ -117,7 +117,11 @@ def _files_by_content(scene_json: dict) -> dict:
 def model_fingerprint(simulation) -> dict:
     """What must be equal for a checkpoint to continue on this prepared simulation: the scene
     (`scene_fingerprint`), dofs, dt, steps and a hash of the nodal masses (the mesh and the
-    materials); with local time stepping also a hash of the nodes' rate levels."""
+    materials); with local time stepping also a hash of the nodes' rate levels; with the interfaces'
+    deterioration its parameters as the kernel gets them (R0, lambda, t_s, m, n, p and the wear
+    clock's start, which the scene does not hold: it is the record's lead-in)."""
+    contact = getattr(simulation, "contact_arrays", None) or {}
+    deterioration = contact.get("deterioration")
     return {
         "format": FORMAT,
         "scene": scene_fingerprint(simulation.scene),
@@ -127,6 +131,7 @@ def model_fingerprint(simulation) -> dict:
         "mass_sha256": hashlib.sha256(np.ascontiguousarray(simulation.mass).tobytes()).hexdigest(),
         **({"levels_sha256": hashlib.sha256(np.ascontiguousarray(simulation.node_levels, dtype=np.int32).tobytes())
             .hexdigest()} if getattr(simulation, "node_levels", None) is not None else {}),
+        **({"deterioration": [float(x) for x in deterioration]} if deterioration is not None else {}),
     }
 
 
@@ -233,6 +238,10 @@ class Checkpoint:
     def _refuse_difference(self, where: str | None) -> None:
         if where is None:
             return
+        if where is not None and where.startswith("deterioration"):
+            self._refuse("the interfaces' deterioration differs from the checkpoint's (a checkpoint written before "
+                         "2026-11-27 ran the wear's clock from the run's start, lead-in included; now it starts "
+                         "with the record's window)")
         if where.startswith("scene."):
             self._refuse(f"the scene's {where[len('scene.'):]} differs from the checkpoint's")
         else:

@@ -734,6 +734,11 @@ class RunWriter:
                                       **{name: counts[:, k].tolist() for k, name in enumerate(PAIR_STATES)}}
             summary["pair_states_final"] = {name: int(counts[-1, k]) for k, name in enumerate(PAIR_STATES)}
             summary["n_pairs"] = int(len(self.simulation.contact_arrays["area"]))
+            deterioration = self.simulation.contact_arrays.get("deterioration")
+            if deterioration is not None:
+                from pyfem.solver import wear_words
+
+                summary["deterioration"] = wear_words(deterioration, float(times[-1]))
 
     def _plots(self) -> None:
         """plots/*.png from the closed history files."""

@@ -181,13 +181,29 @@ def attach_kernel_points(stress: MonitorStress, points: np.ndarray, nonlinear) -
             stress.static[j] = voigt_tensor(sigma0.reshape(-1, 6)[found[1]])
 
 
-def earthquake_duration(scene: Scene) -> float:
-    """t_s of the deterioration law (s): the record window's length, else time.duration."""
+def earthquake_clock(scene: Scene) -> tuple[float, float]:
+    """(start, t_s) of the deterioration's wear (Eq. 9, docs/method.md section 9): the run time (s)
+    at which the record's window starts, after the zero-phase filter's lead-in that precedes it
+    (0 without a record), and t_s, the window's length (else time.duration). The lead-in is the
+    filter's quiet precursor, not shaking: the paper's t = 0 is the window's start."""
     record = (scene.get("wave") or {}).get("motion", {}).get("record")
-    if record is not None and record.get("window") is not None:
-        start, end = record["window"]
-        return float(end - start)
-    return float(scene["time"]["duration"])
+    if record is None:
+        return 0.0, float(scene["time"]["duration"])
+    from pyfem.seismic.setup import processed_record
+
+    processed = processed_record(record)
+    start, end = processed.window
+    return float(processed.record_start), float(end - start)
+
+
+def wear_words(deterioration, t_end: float) -> dict:
+    """The wear of the interfaces for run.json and `check`: when its clock starts, t_s, and eta at
+    t_end (Eq. 9 as the kernel's wear_factor computes it)."""
+    R0, lam, duration, _, _, _, start = deterioration
+    eta = R0 + (1.0 - R0) * math.exp(-lam * max(t_end - start, 0.0) / duration)
+    return {"wear_start": start, "t_s": duration, "eta_at_end": eta,
+            "note": f"eta falls from 1 at t = {start:.3g} s (the record window's start) towards R0 = {R0:g} over "
+                    f"t_s = {duration:g} s, whether or not the ground shakes: {eta:.3f} at t = {t_end:.3g} s"}
 
 
 def contact_arguments(scene: Scene, model) -> dict:
@@ -197,7 +213,7 @@ def contact_arguments(scene: Scene, model) -> dict:
 
     Returns:
         dict with pairs, area, normal, static_force, cohesion, tensile_strength,
-        friction_static, friction_dynamic, deterioration (R0, lam, duration, m, n, p) or None and
+        friction_static, friction_dynamic, deterioration (R0, lam, duration, m, n, p, start) or None and
         normal_lag (length, velocity) or None.
     """
     from pyfem.initial_stress import pair_static_forces, stress_field_from_scene
@@ -217,8 +233,9 @@ def contact_arguments(scene: Scene, model) -> dict:
     }
     deterioration = contact.get("deterioration")
     if deterioration is not None:
-        arguments["deterioration"] = (deterioration["R0"], deterioration["lambda"], earthquake_duration(scene),
-                                      deterioration["m"], deterioration["n"], deterioration["p"])
+        start, duration = earthquake_clock(scene)
+        arguments["deterioration"] = (deterioration["R0"], deterioration["lambda"], duration,
+                                      deterioration["m"], deterioration["n"], deterioration["p"], start)
     lag = contact.get("normal_lag")
     arguments["normal_lag"] = None if lag is None else (float(lag["length"]), float(lag["velocity"]))
     return arguments
@@ -856,6 +873,8 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         "nodes": len(simulation.mass),
         "dofs": n,
         **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
+        **({"interface wear": wear_words(simulation.contact_arrays["deterioration"], simulation.n_steps * ts.dt)["note"]}
+           if simulation.contact_arrays and simulation.contact_arrays["deterioration"] is not None else {}),
         "truncation faces": {face["name"]: f"{face['type']}, {face['nodes']} nodes, {face['area']:.4g} m^2"
                              + (", input" if face["input"] else "") + f" ({face['source']})"
                              for face in face_report(model)},

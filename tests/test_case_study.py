@@ -151,6 +151,29 @@ def test_case_scenes_plan_their_static_stage():
     assert "dynamic relaxation" in stages["solver"] and "lining installed stress-free" in stages["stage 2 (support)"]
     # Its time is bounded before the motion's (a new user's run spent minutes in it unannounced).
     assert planned["static stage estimate"].startswith("2 stages of at most 6000 relaxation steps")
+    # Case 3's wear is announced with its clock: from the window's start, 1 s into the run.
+    assert planned["interface wear"].startswith("eta falls from 1 at t = 1 s (the record window's start)")
+    assert planned["interface wear"].endswith("0.844 at t = 4.9 s")
+
+
+def test_case3_wear_starts_with_the_record_window_not_the_lead_in():
+    """Case 3's deterioration clock: eta's t = 0 is the record window's start, 1 s into the run
+    after the filter's tapered lead-in (wave.motion.record.lead_in), and t_s the window's 20 s; the
+    kernel gets both (docs/method.md section 9). Before, the lead-in's second wore the interfaces
+    by 5.5 % with nothing shaking them."""
+    from pyfem.solver import contact_arguments, earthquake_clock
+
+    scene = load_scene(REPOSITORY / "workflows" / "scenes" / "case3_contact_coarse.toml")
+    start, duration = earthquake_clock(scene)
+    assert scene["wave"]["motion"]["record"]["lead_in"] == 1.0
+    assert abs(start - 1.0) < 1e-9 and duration == 20.0
+
+    class NoPairs:
+        pairs = type("P", (), {"nodes": np.zeros((0, 2)), "area": np.zeros(0), "normal": np.zeros((0, 3)),
+                               "coords": np.zeros((0, 3))})()
+
+    arguments = contact_arguments(scene, NoPairs())
+    assert arguments["deterioration"] == (0.75, 5.0, 20.0, 0.883, 0.02, 0.032, start)
 
 
 @pytest.fixture(scope="module")

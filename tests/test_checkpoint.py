@@ -316,6 +316,26 @@ def test_checkpoint_of_another_model_is_refused_before_anything_is_touched(refer
 
 
 
+def test_a_checkpoint_of_the_old_wear_clock_is_refused():
+    """The wear clock's start (the record's lead-in) is not a scene key but changes what the pairs do:
+    a checkpoint whose fingerprint lacks it (written before 2026-11-27, the clock from the run's
+    start) or holds another start is refused by name; the same deterioration continues."""
+    from types import SimpleNamespace
+
+    simulation = SimpleNamespace(scene=stateful_scene(), stiffness=np.zeros((6, 6)), time_step=SimpleNamespace(dt=1e-3),
+                                 n_steps=10, mass=np.ones(2), node_levels=None,
+                                 contact_arrays={"deterioration": (0.75, 5.0, 20.0, 0.883, 0.02, 0.032, 1.0)})
+    saved = checkpoint.model_fingerprint(simulation)
+    assert saved["deterioration"][-1] == 1.0
+    checkpoint.Checkpoint(path=Path("run/checkpoint.npz"), meta={"fingerprint": saved}, u=None, v=None,
+                          a=None).check_model(simulation)
+    for old in ({key: value for key, value in saved.items() if key != "deterioration"},
+                dict(saved, deterioration=[0.75, 5.0, 20.0, 0.883, 0.02, 0.032, 0.0])):
+        with pytest.raises(SceneError, match="deterioration differs from the checkpoint's .*lead-in included"):
+            checkpoint.Checkpoint(path=Path("run/checkpoint.npz"), meta={"fingerprint": old}, u=None, v=None,
+                                  a=None).check_model(simulation)
+
+
 def test_a_checkpoint_knows_its_files_by_content_not_by_path(tmp_path):
     """A record file copied elsewhere (another clone, a moved project) is the same model; a file with
     other content at the same path is not. A checkpoint written before files were hashed (the path

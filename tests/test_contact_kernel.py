@@ -351,6 +351,31 @@ def test_deterioration_equals_eqs_9_to_11_for_a_prescribed_slip_velocity():
     assert h["D"].min() < 0.78 and h["D"].max() > 0.9  # eta decayed, gamma varied
 
 
+def test_a_pair_at_its_limit_stays_bonded_until_the_earthquake_starts_then_slides_as_it_wears():
+    """The wear clock starts at the record window's start (`start`), not at the run's t = 0 (the
+    filter's lead-in before it is not shaking): a pair whose static shear is 99 % of its strength at
+    rest (D = gamma(0) = 1.001) stays bonded and still through the lead-in, and slides once eta has
+    fallen by 1 %, 0.0163 s after the start (eta = 0.99 at lam (t - start) / t_s = -ln(0.96))."""
+    dt, N0, mu, start = 1e-4, 100.0, 0.5, 0.1
+    gamma_rest = M_ * N_ ** -P_
+    T0 = 0.99 * mu * N0 * gamma_rest
+    stepper = anchored_pair_system(1.0, 1.0, 1e4, dt)
+    contact = one_pair(EZ, -N0 * EZ + T0 * EX, 1.0, 0.0, 0.0, mu, mu)
+    contact.set_deterioration(R0, LAM, DURATION, M_, N_, P_, start)
+    stepper.add_contact(contact)
+    h = step_history(stepper, contact, 2000, 6)
+    before = h["t"] <= start + 1e-12
+    assert before.sum() >= 999
+    assert np.all(h["state"][before] == 0) and np.all(h["v"][before] == 0.0)  # still: bonded, at rest
+    assert rel_error(h["D"][before], np.full(before.sum(), gamma_rest)) < 1e-14
+    sliding = np.flatnonzero(h["state"] == 2)
+    assert len(sliding) > 0, "the pair slid once the wear set in"
+    first = h["t"][sliding[0]]
+    expected = start - DURATION / LAM * np.log(1.0 - 0.01 / (1.0 - R0))
+    assert abs(first - expected) < 3 * dt, (first, expected)
+    assert np.abs(h["v"][-1]).max() > 0.0
+
+
 def test_sliding_force_is_mu_d_N_D_with_the_measured_slip_rate():
     dt, N0, mu_d = 1e-3, 100.0, 0.4
     K = sp.csr_matrix((6, 6))

@@ -238,6 +238,21 @@ TEST(Deterioration, PaperValuesFollowEqs9To11) {
   DeteriorationParameters bad = paper;
   bad.n = 0.0;
   EXPECT_THROW(check_deterioration(bad), std::invalid_argument);
+  bad = paper;
+  bad.start = std::nan("");
+  EXPECT_THROW(check_deterioration(bad), std::invalid_argument);
+}
+
+TEST(Deterioration, WearClockStartsAtTheEarthquakesStart) {
+  // The record's window starts 1 s into the run (the filter's lead-in before it): unworn until then,
+  // then Eq. 9 in the time since the start.
+  DeteriorationParameters paper{0.75, 5.0, 20.0, 0.883, 0.02, 0.032};
+  paper.start = 1.0;
+  EXPECT_DOUBLE_EQ(wear_factor(paper, 0.0), 1.0);
+  EXPECT_DOUBLE_EQ(wear_factor(paper, 0.999), 1.0);
+  EXPECT_DOUBLE_EQ(wear_factor(paper, 1.0), 1.0);
+  EXPECT_NEAR(wear_factor(paper, 21.0), 0.75 + 0.25 * std::exp(-5.0), 1e-15);
+  EXPECT_NEAR(wear_factor(paper, 4.0), 0.75 + 0.25 * std::exp(-5.0 * 3.0 / 20.0), 1e-15);
 }
 
 TEST(Contact, RejectsBadPairs) {
