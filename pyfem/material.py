@@ -46,7 +46,7 @@ def allowed(key: str) -> str:
     """What constant `key` allows, in the scene's words: "Poisson's ratio must lie in (-1, 0.5)"."""
     description, lo, hi = ELASTIC_RANGES[key]
     if math.isinf(hi):
-        return f"{description} must be a number > {lo:g}"
+        return f"{description} must be a finite number > {lo:g}"
     return f"{description} must lie in {interval(key)}"
 
 

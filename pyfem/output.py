@@ -431,7 +431,9 @@ class RunWriter:
             previous = previous_run_dir(self.out_dir)
             shutil.move(str(self.out_dir), str(previous))
             print(f"note: the earlier run in {self.out_dir} was moved to {previous}", file=sys.stderr)
-        (self.out_dir / "monitors").mkdir(parents=True, exist_ok=True)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        if self.simulation.monitor_names:  # no empty monitors/ for a scene without [[monitor]]
+            (self.out_dir / "monitors").mkdir(exist_ok=True)
         if self.contact_on:
             (self.out_dir / "pairs").mkdir(exist_ok=True)
         (self.out_dir / "plots").mkdir(exist_ok=True)

@@ -170,7 +170,7 @@ class Interval:
             return "be a finite number"
         if condition.startswith("in "):
             return "lie " + condition
-        return "be a number " + condition
+        return "be a finite number " + condition
 
 
 ANY_REAL = "(-inf, inf)"

@@ -1103,7 +1103,12 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                 fall_back_to_global_stepping(simulation, report)
             return simulation
 
-        simulation = as_first_sitting(prepare(scene, solve_static=stage is None))  # scene/mesh errors surface here
+        try:
+            simulation = as_first_sitting(prepare(scene, solve_static=stage is None))  # scene/mesh errors surface here
+        except RunInterrupted as error:  # the set-up keeps nothing: say what was lost
+            error.setup_seconds = time.perf_counter() - wall_start
+            error.setup_words = "mesh, matrices" + (" and the static stage" if "static" in scene and stage is None else "")
+            raise
         if saved is not None:
             saved.check_model(simulation)  # before a stage is solved again for a checkpoint it would refuse
         if stage is not None and not static_output.restore_hand_over(simulation, stage):

@@ -153,3 +153,21 @@ def test_sigterm_mid_run_is_an_interrupt_too(tmp_path):
     out = tmp_path / "run"
     process, stderr = interrupt(out, signal.SIGTERM)
     assert_interrupted(process, stderr, out, signal.SIGTERM, "interrupted by SIGTERM")
+
+
+def test_a_stop_in_the_set_up_says_what_was_lost(tmp_path, monkeypatch, capsys):
+    """A stop while the model is built or its static stage solved (minutes on the case scenes) keeps
+    nothing: one line says so and that the next run does the set-up again; no directory is made."""
+    from pyfem import cli, solver
+    from pyfem.interrupts import RunInterrupted
+
+    def stopped(*args, **kwargs):
+        raise RunInterrupted(signal.SIGINT)
+
+    monkeypatch.setattr(solver, "prepare", stopped)
+    status = cli.main(["run", str(REPO / SCENE), "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 130
+    assert len(err) == 1 and err[0].startswith("error: interrupted in the set-up (mesh, matrices) after ")
+    assert err[0].endswith("nothing written, and the next run does the set-up again")
+    assert not (tmp_path / "run").exists()

@@ -211,6 +211,16 @@ def test_run_directory_contents(tmp_path):
     assert float((out / "energy.csv").read_text().splitlines()[-1].split(",")[0]) == energy_t[-1]
 
 
+def test_a_scene_without_monitors_writes_no_monitors_directory(tmp_path):
+    """A new user's trial found an empty monitors/ beside a run without [[monitor]]: nothing there."""
+    scene = column_scene("SV", h=SHORTEST_WAVELENGTH / 4, duration=0.02)
+    scene = parse_scene({key: value for key, value in scene.items() if key != "monitor"})
+    solver.run(scene, tmp_path / "run")
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["status"] == "finished"
+    assert not (tmp_path / "run" / "monitors").exists()
+    assert (tmp_path / "run" / "energy.csv").exists()
+
+
 def test_user_dt_above_stable_is_an_error_naming_both(tmp_path):
     scene = column_scene("SV", dt=0.5)
     with pytest.raises(SceneError) as error:

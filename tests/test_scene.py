@@ -50,8 +50,9 @@ BAD_SCENES = [
     # (id, raw scene, key the error must name, words the message must contain)
     ("unknown key with suggestion", with_changes(("mesh.hh", 5.0)), "mesh.hh", "did you mean 'mesh.h'"),
     ("unknown top-level table", with_changes(("bench", {"n": 1})), "bench", "unknown scene key"),
-    ("string where number", with_changes(("mesh.h", "five")), "mesh.h", "must be a number > 0"),
-    ("bool is not a number", with_changes(("time.duration", True)), "time.duration", "must be a number"),
+    ("string where number", with_changes(("mesh.h", "five")), "mesh.h", "must be a finite number > 0"),
+    ("bool is not a number", with_changes(("time.duration", True)), "time.duration", "must be a finite number"),
+    ("infinite duration", with_changes(("time.duration", float("inf"))), "time.duration", "must be a finite number > 0"),
     ("vector of wrong length", with_changes(("mesh.size", [100.0, 10.0])), "mesh.size", "3 numbers"),
     ("missing required", with_changes(("time.duration", DELETE)), "time.duration", "is missing"),
     ("missing box size", with_changes(("mesh.size", DELETE)), "mesh.size", "is missing"),
