@@ -238,7 +238,7 @@ class Checkpoint:
     def _refuse_difference(self, where: str | None) -> None:
         if where is None:
             return
-        if where is not None and where.startswith("deterioration"):
+        if where.startswith("deterioration"):
             self._refuse("the interfaces' deterioration differs from the checkpoint's (a checkpoint written before "
                          "2026-11-27 ran the wear's clock from the run's start, lead-in included; now it starts "
                          "with the record's window)")

@@ -484,8 +484,8 @@ def interruption_text(error: KeyboardInterrupt) -> str:
     if out_dir is None:
         seconds = getattr(error, "setup_seconds", None)
         if seconds is not None:
-            return (f"interrupted in the set-up ({error.setup_words}) after {seconds:.0f} s, before the run started; "
-                    "nothing written, and the next run does the set-up again")
+            return (f"interrupted in the set-up ({error.setup_words}) after {seconds:.0f} s, before the run "
+                    "started; nothing written, and the next run does the set-up again")
         return "interrupted before the run started; nothing written"
     if reached is None:
         return f"interrupted before the first sample; run.json in {out_dir} says so"

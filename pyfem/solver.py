@@ -201,9 +201,11 @@ def wear_words(deterioration, t_end: float) -> dict:
     t_end (Eq. 9 as the kernel's wear_factor computes it)."""
     R0, lam, duration, _, _, _, start = deterioration
     eta = R0 + (1.0 - R0) * math.exp(-lam * max(t_end - start, 0.0) / duration)
+    which = " (the record window's start)" if start > 0.0 else ""
     return {"wear_start": start, "t_s": duration, "eta_at_end": eta,
-            "note": f"eta falls from 1 at t = {start:.3g} s (the record window's start) towards R0 = {R0:g} over "
-                    f"t_s = {duration:g} s, whether or not the ground shakes: {eta:.3f} at t = {t_end:.3g} s"}
+            "note": f"eta falls from 1 at t = {start:.3g} s{which} "
+                    f"towards R0 = {R0:g} over t_s = {duration:g} s, whether or not the ground shakes: {eta:.3f} at "
+                    f"t = {t_end:.3g} s"}
 
 
 def contact_arguments(scene: Scene, model) -> dict:
@@ -873,7 +875,8 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         "nodes": len(simulation.mass),
         "dofs": n,
         **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
-        **({"interface wear": wear_words(simulation.contact_arrays["deterioration"], simulation.n_steps * ts.dt)["note"]}
+        **({"interface wear": wear_words(simulation.contact_arrays["deterioration"],
+                                         simulation.n_steps * ts.dt)["note"]}
            if simulation.contact_arrays and simulation.contact_arrays["deterioration"] is not None else {}),
         "truncation faces": {face["name"]: f"{face['type']}, {face['nodes']} nodes, {face['area']:.4g} m^2"
                              + (", input" if face["input"] else "") + f" ({face['source']})"
@@ -1107,7 +1110,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             simulation = as_first_sitting(prepare(scene, solve_static=stage is None))  # scene/mesh errors surface here
         except RunInterrupted as error:  # the set-up keeps nothing: say what was lost
             error.setup_seconds = time.perf_counter() - wall_start
-            error.setup_words = "mesh, matrices" + (" and the static stage" if "static" in scene and stage is None else "")
+            error.setup_words = "mesh, matrices" + (" and the static stage" if "static" in scene and stage is None
+                                                    else "")
             raise
         if saved is not None:
             saved.check_model(simulation)  # before a stage is solved again for a checkpoint it would refuse
