@@ -179,6 +179,12 @@ def case_numbers(run: dict) -> dict:
                                        for name in ("A", "B", "C") if name in lining}
         numbers["relative_peaks"] = {name: numbers["lining_peak"][name] - numbers["lining_peak"]["D"]
                                      for name in ("A", "B", "C") if name in lining}
+        # The permanent part (the section's convergence as the yielded rock ratchets) and the horizontal
+        # racking alone (x: across the cavern), which the relative maximum above mixes.
+        numbers["relative_end"] = {name: float(np.linalg.norm(lining[name][-1] - lining["D"][-1]))
+                                   for name in ("A", "B", "C") if name in lining}
+        numbers["relative_horizontal"] = {name: float(np.abs(lining[name][:, 0] - lining["D"][:, 0]).max())
+                                          for name in ("A", "B", "C") if name in lining}
     for key, name in (("crown", "A"), ("wall", "B")):
         columns = monitors.get(name, {})
         if "s1" in columns:
@@ -507,6 +513,12 @@ def comparison_table(numbers: dict, preset: str) -> str:
             lambda c, n=name: f"{PAPER[c]['relative'][n]:.1f}")
         row(f"{where} relative to floor D: peak abs(u_X) - peak abs(u_D) (cm)",
             lambda c, n=name: _cm(numbers[c]["relative_peaks"][n]), lambda c: "")
+        row(f"{where} relative to floor D: abs(u_X - u_D) at the end, the permanent part (cm)",
+            lambda c, n=name: _cm(numbers[c]["relative_end"][n]) if "relative_end" in numbers[c] else "-",
+            lambda c: "")
+        row(f"{where} relative to floor D, horizontal (x) only: max_t abs(u_x(X) - u_x(D)) (cm)",
+            lambda c, n=name: _cm(numbers[c]["relative_horizontal"][n]) if "relative_horizontal" in numbers[c]
+            else "-", lambda c: "")
     for key, where in (("crown", "crown A"), ("wall", "wall B")):
         row(f"max principal stress at {where}, dynamic increment alone (MPa)",
             lambda c, k=key: f"{MPA * numbers[c][f's1_dynamic_{k}']:.2f}", lambda c, k=key: _paper(c, f"s1_{k}"))
