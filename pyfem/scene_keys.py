@@ -253,7 +253,8 @@ PURPOSE = {
     "static.boundary": "the truncation faces during the static stage",
     "static.boundary.face.NAME": "the type of one truncation face during the static stage",
     "contact": "contact on the named interfaces (docs/method.md section 9)",
-    "contact.deterioration": "the decay of the interfaces' strength",
+    "contact.deterioration": "the decay of the interfaces' strength, with time from the record window's start "
+                             "whether or not they shear (docs/method.md section 9; R0 = 1: no wear)",
     "contact.normal_lag": "the lag of the normal force the friction sees (regularises sliding between "
                           "dissimilar rocks)",
     "pair_monitor.0": "the contact pair nearest a point, its histories in pairs/NAME.csv",
