@@ -514,11 +514,9 @@ def comparison_table(numbers: dict, preset: str) -> str:
         row(f"{where} relative to floor D: peak abs(u_X) - peak abs(u_D) (cm)",
             lambda c, n=name: _cm(numbers[c]["relative_peaks"][n]), lambda c: "")
         row(f"{where} relative to floor D: abs(u_X - u_D) at the end, the permanent part (cm)",
-            lambda c, n=name: _cm(numbers[c]["relative_end"][n]) if "relative_end" in numbers[c] else "-",
-            lambda c: "")
+            lambda c, n=name: _cm(numbers[c]["relative_end"][n]), lambda c: "")
         row(f"{where} relative to floor D, horizontal (x) only: max_t abs(u_x(X) - u_x(D)) (cm)",
-            lambda c, n=name: _cm(numbers[c]["relative_horizontal"][n]) if "relative_horizontal" in numbers[c]
-            else "-", lambda c: "")
+            lambda c, n=name: _cm(numbers[c]["relative_horizontal"][n]), lambda c: "")
     for key, where in (("crown", "crown A"), ("wall", "wall B")):
         row(f"max principal stress at {where}, dynamic increment alone (MPa)",
             lambda c, k=key: f"{MPA * numbers[c][f's1_dynamic_{k}']:.2f}", lambda c, k=key: _paper(c, f"s1_{k}"))
