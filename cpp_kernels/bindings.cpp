@@ -736,6 +736,18 @@ Returns:
                              "Bytes of state and buffers owned (the borrowed geometry excluded).");
 
   m.def("known_laws", &known_laws, "Names of the material laws HexahedronElements accepts.");
+  m.def(
+      "wear_factor",
+      [](double R0, double lam, double duration, double m_, double n_, double p_, double start,
+         double t) {
+        const DeteriorationParameters d{R0, lam, duration, m_, n_, p_, start};
+        check_deterioration(d);
+        return wear_factor(d, t);
+      },
+      py::arg("R0"), py::arg("lam"), py::arg("duration"), py::arg("m"), py::arg("n"), py::arg("p"),
+      py::arg("start"), py::arg("t"),
+      R"(eta(t) of Eq. 9 as the contact pairs use it: R0 + (1 - R0) exp(-lam t_e / duration),
+t_e = t - start clamped at 0. The arguments are set_deterioration's, then the stepper time t (s).)");
 
   py::class_<MpiNodeExchange, std::shared_ptr<MpiNodeExchange>>(
       m, "MpiNodeExchange",

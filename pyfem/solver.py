@@ -185,7 +185,8 @@ def earthquake_clock(scene: Scene) -> tuple[float, float]:
     """(start, t_s) of the deterioration's wear (Eq. 9, docs/method.md section 9): the run time (s)
     at which the record's window starts, after the zero-phase filter's lead-in that precedes it
     (0 without a record), and t_s, the window's length (else time.duration). The lead-in is the
-    filter's quiet precursor, not shaking: the paper's t = 0 is the window's start."""
+    filter's quiet precursor, not shaking: the paper's t = 0 is the window's start. The record
+    is the one the seismic input processed (processed_record shares it within a process)."""
     record = (scene.get("wave") or {}).get("motion", {}).get("record")
     if record is None:
         return 0.0, float(scene["time"]["duration"])
@@ -198,9 +199,11 @@ def earthquake_clock(scene: Scene) -> tuple[float, float]:
 
 def wear_words(deterioration, t_end: float) -> dict:
     """The wear of the interfaces for run.json and `check`: when its clock starts, t_s, and eta at
-    t_end (Eq. 9 as the kernel's wear_factor computes it)."""
-    R0, lam, duration, _, _, _, start = deterioration
-    eta = R0 + (1.0 - R0) * math.exp(-lam * max(t_end - start, 0.0) / duration)
+    t_end (Eq. 9, computed by the kernel's wear_factor)."""
+    from pyfem import _kernels
+
+    R0, _, duration, _, _, _, start = deterioration
+    eta = _kernels.wear_factor(*deterioration, t=t_end)
     which = " (the record window's start)" if start > 0.0 else ""
     return {"wear_start": start, "t_s": duration, "eta_at_end": eta,
             "note": f"eta falls from 1 at t = {start:.3g} s{which} "

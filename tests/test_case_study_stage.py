@@ -123,7 +123,8 @@ def test_static_stage_pictures_and_interface_figures(small_run):
 
 
 def test_case_study_report_draws_the_lining_damage_maps(small_run, tmp_path):
-    """The workflow's report on the small run: Figs. 11-13 from its damage fields and monitors."""
+    """The workflow's report on the small run: Figs. 11-13 from its damage fields and monitors, and the
+    static stage's section (stresses, plastic zone)."""
     import sys
 
     sys.path.insert(0, str(REPOSITORY / "workflows"))
@@ -132,7 +133,7 @@ def test_case_study_report_draws_the_lining_damage_maps(small_run, tmp_path):
     _, out, summary = small_run
     numbers = case_study.report(presets=("coarse",), cases=(3,), runs_dir=out.parent, results=tmp_path, doc=False)
     case3 = numbers["coarse"][3]
-    for name in ("fig11_lining_damage", "fig12_damage_type", "fig13_deformation"):
+    for name in ("fig11_lining_damage", "fig12_damage_type", "fig13_deformation", "static_case3"):
         assert (tmp_path / f"{name}.png").stat().st_size > 20000
     damage = case3["lining_damage_map"]
     # The map reads the same damage the run's summary reports for the lining.

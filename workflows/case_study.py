@@ -23,6 +23,9 @@ directories), then draws figures like the paper's and writes the comparison:
     fig12_damage_type.png        the same, damage type: tension or shear (Fig. 12)
     fig13_deformation.png        the walls' and crown's x offset to the floor, and the offset
                                  across the soft layer's interface (Fig. 13 b, d)
+    static_caseN.png             each case after its static stage, section y = 0: principal
+                                 stresses, plastic strain (the plastic zone) and damage (the
+                                 run's static/section_stress.png)
     comparison.md, summary.json  our numbers next to the paper's; run costs
 
 and replaces the table between the markers of docs/case_study.md.
@@ -55,6 +58,7 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
+import shutil
 import sys
 import time
 
@@ -608,6 +612,10 @@ def report(presets=("coarse", "paper"), cases=tuple(CASES), runs_dir: pathlib.Pa
         lining = figure_lining_damage(runs, results / f"fig11_lining_damage{suffix}.png",
                                       results / f"fig12_damage_type{suffix}.png")
         offsets = figure_deformation(runs, results / f"fig13_deformation{suffix}.png")
+        for case, run in runs.items():  # the static stage's stresses and plastic zone, as the run drew them
+            section = run["dir"] / "static" / "section_stress.png"
+            if section.exists():
+                shutil.copyfile(section, results / f"static_case{case}{suffix}.png")
         for case in numbers:
             if case in lining:
                 numbers[case]["lining_damage_map"] = lining[case]

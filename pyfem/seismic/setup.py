@@ -1,7 +1,9 @@
 """From a scene's [wave] table to the free field and the kernel's input-force arrays."""
 from __future__ import annotations
 
+import json
 import math
+import os
 import warnings
 
 import numpy as np
@@ -19,6 +21,8 @@ _RECORD_TABLE_DT = 0.002
 # a Ricker wavelet starts at ~1e-6 of its peak and a processed record at rest, so anything
 # larger was put there by a negative delay.
 CUT_WARNING_LEVEL = 1.0e-3
+# Records processed for a run, by (table, file mtime, file size): processed_record.
+_PROCESSED: dict = {}
 
 
 def input_waveform(scene):
@@ -51,23 +55,38 @@ def input_waveform(scene):
 def processed_record(spec, record=None):
     """The input motion of a scene's [wave.motion.record] table, processed as the run uses it.
 
+    The run's set-up asks for it twice (the input forces and the interfaces' wear clock); read
+    from the file (`record` None), it is processed once per table and file version and shared.
+    The scene check passes the record it read and gets a fresh processing, with its warnings.
+
     Args:
         spec: the validated wave.motion.record table (file, units, dt, format, window, band,
             pga, lead_in).
         record: the file already read (pyfem.seismic.records.Record), or None to read it.
 
     Returns:
-        pyfem.seismic.records.ProcessedRecord (time from 0, step _RECORD_TABLE_DT s).
+        pyfem.seismic.records.ProcessedRecord (time from 0, step _RECORD_TABLE_DT s); treat it
+        as read-only.
 
     Raises:
         ValueError: a malformed file, or settings the record cannot meet.
     """
     from pyfem.seismic.records import process_record, read_record
 
+    key = None
     if record is None:
+        stat = os.stat(spec["file"])
+        key = (json.dumps(spec, sort_keys=True, default=str), stat.st_mtime_ns, stat.st_size)
+        if key in _PROCESSED:
+            return _PROCESSED[key]
         record = read_record(spec["file"], units=spec["units"], dt=spec.get("dt"), format=spec["format"])
-    return process_record(record, window=spec.get("window"), band=tuple(spec["band"]), pga=spec.get("pga"),
-                          table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"))
+    processed = process_record(record, window=spec.get("window"), band=tuple(spec["band"]), pga=spec.get("pga"),
+                               table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"))
+    if key is not None:
+        if len(_PROCESSED) >= 4:
+            _PROCESSED.clear()
+        _PROCESSED[key] = processed
+    return processed
 
 
 def seismic_input_from_scene(scene, model):
