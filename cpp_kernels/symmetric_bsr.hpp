@@ -7,6 +7,9 @@
 #pragma once
 
 #include <omp.h>
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <cstdint>
@@ -70,13 +73,15 @@ class SymmetricBlockCsrT : public SymmetricProduct {
       blocks_ = std::move(blocks);
     else
       blocks_.assign(blocks.begin(), blocks.end());  // rounded once, after the sums
+    // The vector row loop reads a block's last row as 4 values: one past the last block.
+    blocks_.resize(blocks_.size() + kPadding, Scalar(0));
   }
 
   std::int64_t n_block_rows() const { return n_; }
   std::int64_t n_blocks() const { return indptr_[n_]; }
   /// Bytes streamed per product: blocks, column indices and row pointers.
   std::int64_t bytes() const override {
-    return static_cast<std::int64_t>(blocks_.size() * sizeof(Scalar) +
+    return static_cast<std::int64_t>((blocks_.size() - kPadding) * sizeof(Scalar) +
                                      indices_.size() * sizeof(std::int32_t) +
                                      indptr_.size() * sizeof(std::int64_t));
   }
@@ -94,6 +99,8 @@ class SymmetricBlockCsrT : public SymmetricProduct {
   }
 
  private:
+  static constexpr std::size_t kPadding = 4;
+
   void sort_row(std::int64_t i, std::vector<double>& all_blocks) {
     const std::int64_t begin = indptr_[i] + 1, end = indptr_[i + 1];
     std::vector<std::int64_t> order(end - begin);
@@ -168,6 +175,12 @@ class SymmetricBlockCsrT : public SymmetricProduct {
     std::fill(y1 + 3 * r0, y1 + 3 * r1, 0.0);
     if (kVectors == 2) std::fill(y2 + 3 * r0, y2 + 3 * r1, 0.0);
     std::fill(spill_[t].begin(), spill_[t].end(), 0.0);
+#if defined(__AVX2__)
+    if constexpr (kVectors == 1 && std::is_same_v<Scalar, double>) {
+      rows_avx2(r0, r1, x1, y1, spill1);
+      return;
+    }
+#endif
     for (std::int64_t i = r0; i < r1; ++i) {
       const double* xi = x1 + 3 * i;
       const double* wi = (kVectors == 2) ? x2 + 3 * i : nullptr;
@@ -214,6 +227,51 @@ class SymmetricBlockCsrT : public SymmetricProduct {
       }
     }
   }
+
+#if defined(__AVX2__)
+  // rows() for one vector of double blocks with AVX2: a block's rows B_r are loaded as 4 values
+  // (the 4th is the next row's first, multiplied but never summed or stored). Row i gathers
+  // (B_r0 x_j0, B_r1 x_j1, B_r2 x_j2) per lane over its blocks and sums the lanes at its end;
+  // the transposed block sends B^T x_i = sum_r B_r x_ir to row j as 2 + 1 values (plain loads
+  // and stores, which the next read of the same row receives from the store buffer). The sums
+  // are the same products, added in another order than the scalar loop's (round-off only).
+  void rows_avx2(std::int64_t r0, std::int64_t r1, const double* x, double* y, double* spill) const {
+    const __m256i first3 = _mm256_setr_epi64x(-1, -1, -1, 0);
+    const double* all = blocks_.data();
+    for (std::int64_t i = r0; i < r1; ++i) {
+      const __m256d xi = _mm256_maskload_pd(x + 3 * i, first3);
+      const __m256d xi0 = _mm256_set1_pd(x[3 * i]);
+      const __m256d xi1 = _mm256_set1_pd(x[3 * i + 1]);
+      const __m256d xi2 = _mm256_set1_pd(x[3 * i + 2]);
+      const double* d = all + 9 * indptr_[i];
+      __m256d row0 = _mm256_mul_pd(_mm256_loadu_pd(d), xi);
+      __m256d row1 = _mm256_mul_pd(_mm256_loadu_pd(d + 3), xi);
+      __m256d row2 = _mm256_mul_pd(_mm256_loadu_pd(d + 6), xi);
+      for (std::int64_t k = indptr_[i] + 1; k < indptr_[i + 1]; ++k) {
+        const double* b = all + 9 * k;
+        const std::int64_t j = indices_[k];
+        const __m256d b0 = _mm256_loadu_pd(b), b1 = _mm256_loadu_pd(b + 3), b2 = _mm256_loadu_pd(b + 6);
+        // x_j as 4 values, the 4th from the next node (masked at the last node: no read past x).
+        const __m256d xj = (j + 1 < n_) ? _mm256_loadu_pd(x + 3 * j) : _mm256_maskload_pd(x + 3 * j, first3);
+        row0 = _mm256_add_pd(row0, _mm256_mul_pd(b0, xj));
+        row1 = _mm256_add_pd(row1, _mm256_mul_pd(b1, xj));
+        row2 = _mm256_add_pd(row2, _mm256_mul_pd(b2, xj));
+        const __m256d sent = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(b0, xi0), _mm256_mul_pd(b1, xi1)),
+                                           _mm256_mul_pd(b2, xi2));
+        double* target = (j < r1) ? y + 3 * j : spill + 3 * (j - r1);
+        _mm_storeu_pd(target, _mm_add_pd(_mm_loadu_pd(target), _mm256_castpd256_pd128(sent)));
+        _mm_store_sd(target + 2, _mm_add_sd(_mm_load_sd(target + 2), _mm256_extractf128_pd(sent, 1)));
+      }
+      alignas(32) double s0[4], s1[4], s2[4];
+      _mm256_store_pd(s0, row0);
+      _mm256_store_pd(s1, row1);
+      _mm256_store_pd(s2, row2);
+      y[3 * i] += s0[0] + s0[1] + s0[2];
+      y[3 * i + 1] += s1[0] + s1[1] + s1[2];
+      y[3 * i + 2] += s2[0] + s2[1] + s2[2];
+    }
+  }
+#endif
 
   // Thread t adds what the row ranges before it wrote beyond themselves into its rows.
   template <int kVectors>

@@ -96,8 +96,10 @@ def runs(tmp_path_factory):
 # Net forces of a long wave on a fine mesh: a = (f - K u) / m, where K u is (omega_max / omega)^2
 # ~ 1e6 times m a for the cavity scene's 2 Hz wavelet and its 0.4 m tetrahedra at the wall, so
 # round-off of the sums in another order (1e-16 of K u) is ~1e-10 of the accelerations and of the
-# rollers' reactions there (measured 6e-10 and 3e-10; u 3e-15, v 3e-12, stress 5e-12).
-NET_FORCE_TOLERANCE = {"cavity": {"acceleration": 1.0e-9, "reaction": 1.0e-9}}
+# rollers' reactions there (measured 6e-10 and 3e-10 with the serial product's scalar order; 1.25e-9
+# for the accelerations since it sums a row's blocks lane by lane (AVX2, cpp_kernels/symmetric_bsr.hpp);
+# u 3e-15, v 3e-12, stress 5e-12).
+NET_FORCE_TOLERANCE = {"cavity": {"acceleration": 3.0e-9, "reaction": 1.0e-9}}
 
 
 def assert_equal_to_serial(run_dir: Path, serial: Path, tolerances: dict | None = None) -> float:
