@@ -176,7 +176,7 @@ class SymmetricBlockCsrT : public SymmetricProduct {
     if (kVectors == 2) std::fill(y2 + 3 * r0, y2 + 3 * r1, 0.0);
     std::fill(spill_[t].begin(), spill_[t].end(), 0.0);
 #if defined(__AVX2__)
-    if constexpr (kVectors == 1 && std::is_same_v<Scalar, double>) {
+    if constexpr (kVectors == 1) {
       rows_avx2(r0, r1, x1, y1, spill1);
       return;
     }
@@ -229,7 +229,11 @@ class SymmetricBlockCsrT : public SymmetricProduct {
   }
 
 #if defined(__AVX2__)
-  // rows() for one vector of double blocks with AVX2: a block's rows B_r are loaded as 4 values
+  // Four stored values as doubles (float blocks widened: the sums stay in double).
+  static __m256d load4(const double* p) { return _mm256_loadu_pd(p); }
+  static __m256d load4(const float* p) { return _mm256_cvtps_pd(_mm_loadu_ps(p)); }
+
+  // rows() for one vector with AVX2: a block's rows B_r are loaded as 4 values
   // (the 4th is the next row's first, multiplied but never summed or stored). Row i gathers
   // (B_r0 x_j0, B_r1 x_j1, B_r2 x_j2) per lane over its blocks and sums the lanes at its end;
   // the transposed block sends B^T x_i = sum_r B_r x_ir to row j as 2 + 1 values (plain loads
@@ -237,20 +241,20 @@ class SymmetricBlockCsrT : public SymmetricProduct {
   // are the same products, added in another order than the scalar loop's (round-off only).
   void rows_avx2(std::int64_t r0, std::int64_t r1, const double* x, double* y, double* spill) const {
     const __m256i first3 = _mm256_setr_epi64x(-1, -1, -1, 0);
-    const double* all = blocks_.data();
+    const Scalar* all = blocks_.data();
     for (std::int64_t i = r0; i < r1; ++i) {
       const __m256d xi = _mm256_maskload_pd(x + 3 * i, first3);
       const __m256d xi0 = _mm256_set1_pd(x[3 * i]);
       const __m256d xi1 = _mm256_set1_pd(x[3 * i + 1]);
       const __m256d xi2 = _mm256_set1_pd(x[3 * i + 2]);
-      const double* d = all + 9 * indptr_[i];
-      __m256d row0 = _mm256_mul_pd(_mm256_loadu_pd(d), xi);
-      __m256d row1 = _mm256_mul_pd(_mm256_loadu_pd(d + 3), xi);
-      __m256d row2 = _mm256_mul_pd(_mm256_loadu_pd(d + 6), xi);
+      const Scalar* d = all + 9 * indptr_[i];
+      __m256d row0 = _mm256_mul_pd(load4(d), xi);
+      __m256d row1 = _mm256_mul_pd(load4(d + 3), xi);
+      __m256d row2 = _mm256_mul_pd(load4(d + 6), xi);
       for (std::int64_t k = indptr_[i] + 1; k < indptr_[i + 1]; ++k) {
-        const double* b = all + 9 * k;
+        const Scalar* b = all + 9 * k;
         const std::int64_t j = indices_[k];
-        const __m256d b0 = _mm256_loadu_pd(b), b1 = _mm256_loadu_pd(b + 3), b2 = _mm256_loadu_pd(b + 6);
+        const __m256d b0 = load4(b), b1 = load4(b + 3), b2 = load4(b + 6);
         // x_j as 4 values, the 4th from the next node (masked at the last node: no read past x).
         const __m256d xj = (j + 1 < n_) ? _mm256_loadu_pd(x + 3 * j) : _mm256_maskload_pd(x + 3 * j, first3);
         row0 = _mm256_add_pd(row0, _mm256_mul_pd(b0, xj));
