@@ -54,7 +54,8 @@ class SymmetricBlockCsrT : public SymmetricProduct {
     }
     for (std::int64_t i = 0; i < n_; ++i) indptr_[i + 1] += indptr_[i];
     indices_.resize(indptr_[n_]);
-    std::vector<double> blocks(9 * indptr_[n_], 0.0);
+    // The vector row loop reads a block's last row as 4 values: kPadding zeros after the last block.
+    std::vector<double> blocks(9 * indptr_[n_] + kPadding, 0.0);
     for (std::int64_t i = 0; i < n_; ++i) {
       indices_[indptr_[i]] = static_cast<std::int32_t>(i);
       std::int64_t next = indptr_[i] + 1;  // slot indptr_[i] is the diagonal
@@ -73,8 +74,6 @@ class SymmetricBlockCsrT : public SymmetricProduct {
       blocks_ = std::move(blocks);
     else
       blocks_.assign(blocks.begin(), blocks.end());  // rounded once, after the sums
-    // The vector row loop reads a block's last row as 4 values: one past the last block.
-    blocks_.resize(blocks_.size() + kPadding, Scalar(0));
   }
 
   std::int64_t n_block_rows() const { return n_; }

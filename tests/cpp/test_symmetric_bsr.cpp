@@ -2,6 +2,8 @@
 #include <omp.h>
 
 #include <cmath>
+#include <limits>
+#include <utility>
 #include <vector>
 
 #include "bsr.hpp"
@@ -21,7 +23,84 @@ std::vector<double> random_vector(std::int64_t n, unsigned seed) {
   return x;
 }
 
+// K with integer entries (every summation order exact, in double and float): symmetric diagonal
+// blocks and, per coupling (i, j), i < j, a nonsymmetric block A with K_ij = A, K_ji = A^T.
+BlockSystem integer_system(std::int64_t n, const std::vector<std::pair<int, int>>& couplings) {
+  BlockSystem system;
+  system.n_nodes = n;
+  const std::int64_t n_dofs = 3 * n;
+  system.dense.assign(n_dofs * n_dofs, 0.0);
+  std::vector<char> pattern(n * n, 0);
+  for (std::int64_t i = 0; i < n; ++i) {
+    pattern[i * n + i] = 1;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) system.dense[(3 * i + r) * n_dofs + 3 * i + c] = 1 + r + c + i;
+  }
+  for (std::size_t p = 0; p < couplings.size(); ++p) {
+    const auto [i, j] = couplings[p];
+    pattern[i * n + j] = pattern[j * n + i] = 1;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) {
+        const double value = 1 + 3 * r + c + 9 * static_cast<int>(p);  // A_rc != A_cr
+        system.dense[(3 * i + r) * n_dofs + 3 * j + c] = value;
+        system.dense[(3 * j + c) * n_dofs + 3 * i + r] = value;
+      }
+  }
+  compress(system, pattern);
+  return system;
+}
+
 }  // namespace
+
+// Nonsymmetric off-diagonal blocks, so y_j += B^T x_i is told apart from B x_i; node 4 (the last)
+// coupled to 0, 2 and 3 (x_j read masked, the last stored block reading the padding); with 2
+// threads rows [0, 2) and with 3 threads rows [0, 1) and [1, 3) write through the spill buffers.
+// Integer entries: exact for double and float blocks, single and dual products, any thread count.
+TEST(SymmetricBlockCsr, NonsymmetricBlocksLastNodeAndSpillsAreExact) {
+  const BlockSystem system = integer_system(5, {{0, 1}, {0, 4}, {1, 2}, {2, 4}, {3, 4}});
+  std::vector<double> x(system.n_dofs()), w(system.n_dofs());
+  for (std::int64_t d = 0; d < system.n_dofs(); ++d) {
+    x[d] = static_cast<double>(d % 5) - 2.0;
+    w[d] = static_cast<double>(d % 3) + 1.0;
+  }
+  const auto expected = dense_product(system, x);
+  const auto expected_w = dense_product(system, w);
+  const SymmetricBlockCsr upper(system.view());
+  const SymmetricBlockCsrSingle single(system.view());
+  for (int threads : {1, 2, 3}) {
+    std::vector<double> y(system.n_dofs(), 99.0), y_single(system.n_dofs(), 99.0);
+    std::vector<double> y1(system.n_dofs(), 99.0), y2(system.n_dofs(), 99.0);
+    upper.multiply(x.data(), y.data(), threads);
+    single.multiply(x.data(), y_single.data(), threads);
+    upper.multiply_dual(x.data(), w.data(), y1.data(), y2.data(), threads);
+    EXPECT_EQ(y, expected) << threads << " threads";
+    EXPECT_EQ(y_single, expected) << threads << " threads";
+    EXPECT_EQ(y1, expected) << threads << " threads";
+    EXPECT_EQ(y2, expected_w) << threads << " threads";
+  }
+}
+
+// The 4th lane of the vector loads (the next node's x, the next row's block value, the padding)
+// never reaches y: NaN at node 2, coupled to nothing, leaves rows 0 and 1 exact.
+TEST(SymmetricBlockCsr, FourthLaneNeverReachesTheResult) {
+  const BlockSystem system = integer_system(3, {{0, 1}});
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<double> x = {1, -2, 3, 2, 1, -1, nan, nan, nan};
+  const std::vector<double> clean = {1, -2, 3, 2, 1, -1, 0, 0, 0};
+  const auto expected = dense_product(system, clean);
+  const SymmetricBlockCsr upper(system.view());
+  const SymmetricBlockCsrSingle single(system.view());
+  for (int threads : {1, 2}) {
+    std::vector<double> y(9, 99.0), y_single(9, 99.0);
+    upper.multiply(x.data(), y.data(), threads);
+    single.multiply(x.data(), y_single.data(), threads);
+    for (int d = 0; d < 6; ++d) {
+      EXPECT_EQ(y[d], expected[d]) << d << ", " << threads << " threads";
+      EXPECT_EQ(y_single[d], expected[d]) << d << ", " << threads << " threads";
+    }
+    EXPECT_TRUE(std::isnan(y[6]));
+  }
+}
 
 // The symmetric product equals the full block product for 1, 2 and 3 threads (the spill
 // buffers of lower row ranges must reach the rows of higher ones).
