@@ -181,18 +181,19 @@ def attach_kernel_points(stress: MonitorStress, points: np.ndarray, nonlinear) -
             stress.static[j] = voigt_tensor(sigma0.reshape(-1, 6)[found[1]])
 
 
-def earthquake_clock(scene: Scene) -> tuple[float, float]:
+def earthquake_clock(scene: Scene, processed=None) -> tuple[float, float]:
     """(start, t_s) of the deterioration's wear (Eq. 9, docs/method.md section 9): the run time (s)
     at which the record's window starts, after the zero-phase filter's lead-in that precedes it
     (0 without a record), and t_s, the window's length (else time.duration). The lead-in is the
     filter's quiet precursor, not shaking: the paper's t = 0 is the window's start. The record
-    is the one the seismic input processed (processed_record shares it within a process)."""
-    record = (scene.get("wave") or {}).get("motion", {}).get("record")
-    if record is None:
+    is the one the seismic input is driven with: `processed` (pyfem.seismic.setup.scene_record),
+    processed here when None."""
+    if (scene.get("wave") or {}).get("motion", {}).get("record") is None:
         return 0.0, float(scene["time"]["duration"])
-    from pyfem.seismic.setup import processed_record
+    if processed is None:
+        from pyfem.seismic.setup import scene_record
 
-    processed = processed_record(record)
+        processed = scene_record(scene)
     start, end = processed.window
     return float(processed.record_start), float(end - start)
 
@@ -211,10 +212,11 @@ def wear_words(deterioration, t_end: float) -> dict:
                     f"t = {t_end:.3g} s"}
 
 
-def contact_arguments(scene: Scene, model) -> dict:
+def contact_arguments(scene: Scene, model, processed=None) -> dict:
     """The arrays and strengths of the kernel's ContactPairs for the scene's [contact] table.
 
-    Static forces come from [initial_stress] (zero without it): F = A sigma0(x) n.
+    Static forces come from [initial_stress] (zero without it): F = A sigma0(x) n. processed: the
+    scene's processed record for the wear clock (earthquake_clock).
 
     Returns:
         dict with pairs, area, normal, static_force, cohesion, tensile_strength,
@@ -238,7 +240,7 @@ def contact_arguments(scene: Scene, model) -> dict:
     }
     deterioration = contact.get("deterioration")
     if deterioration is not None:
-        start, duration = earthquake_clock(scene)
+        start, duration = earthquake_clock(scene, processed)
         arguments["deterioration"] = (deterioration["R0"], deterioration["lambda"], duration,
                                       deterioration["m"], deterioration["n"], deterioration["p"], start)
     lag = contact.get("normal_lag")
@@ -554,10 +556,12 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
                             constraints=constraints, n_steps=n_steps, nonlinear=nonlinear,
                             node_levels=node_levels, lts_preview=preview, lts_split=lts_split,
                             lts_decision=lts_decision, lts_global_step=global_step)
-    if "seismic_input" in scene.effects:
-        from pyfem.seismic.setup import seismic_input_from_scene
+    from pyfem.seismic.setup import scene_record, seismic_input_from_scene
 
-        simulation.freefield, simulation.input_arrays = seismic_input_from_scene(scene, model)
+    # The record is processed once: the input forces and the interfaces' wear clock share it.
+    record = scene_record(scene) if {"seismic_input", "contact"} & set(scene.effects) else None
+    if "seismic_input" in scene.effects:
+        simulation.freefield, simulation.input_arrays = seismic_input_from_scene(scene, model, record)
     monitors = scene.get("monitor", [])
     if monitors:
         points = np.array([m["point"] for m in monitors], dtype=np.float64)
@@ -573,7 +577,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         if nonlinear is not None:
             attach_kernel_points(simulation.monitor_stress, points, nonlinear)
     if "contact" in scene.effects:
-        simulation.contact_arrays = contact_arguments(scene, model)
+        simulation.contact_arrays = contact_arguments(scene, model, record)
         pair_monitors = scene.get("pair_monitor", [])
         simulation.pair_monitor_names = [m["name"] for m in pair_monitors]
         simulation.pair_monitor_pairs = np.array([model.pairs.nearest(m["point"]) for m in pair_monitors],

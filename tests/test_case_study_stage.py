@@ -162,3 +162,21 @@ def test_coarse_case3_after_its_stage_stays_at_rest_until_the_record_starts(tmp_
     assert summary["nonlinear_regions"]["lining"]["peak_damage"] == 0.0
     for name, pair in summary["pairs"].items():
         assert pair["max_slip"] < 1e-10, name
+
+
+
+def test_the_set_up_processes_the_record_once_for_the_input_and_the_wear_clock(monkeypatch):
+    """prepare() processes case 3's record once: the input forces are driven with it and the
+    interfaces' wear clock starts at its window (before, each read and filtered it anew)."""
+    from pyfem.seismic import records
+    from pyfem.seismic.setup import scene_record
+
+    scene = small_case3(["time.duration=0.01"])  # (the scene's check processes it for its warnings)
+    calls = []
+    process = records.process_record
+    monkeypatch.setattr(records, "process_record", lambda *args, **kwargs: calls.append(1) or process(*args, **kwargs))
+    simulation = solver.prepare(scene, solve_static=False)
+    assert len(calls) == 1
+    processed = scene_record(scene)  # the same processing again, for comparison
+    assert np.array_equal(simulation.freefield.tables.ddg[0], processed.acceleration)
+    assert simulation.contact_arrays["deterioration"][6] == processed.record_start == pytest.approx(1.0)

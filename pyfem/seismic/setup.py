@@ -1,9 +1,7 @@
 """From a scene's [wave] table to the free field and the kernel's input-force arrays."""
 from __future__ import annotations
 
-import json
 import math
-import os
 import warnings
 
 import numpy as np
@@ -21,12 +19,15 @@ _RECORD_TABLE_DT = 0.002
 # a Ricker wavelet starts at ~1e-6 of its peak and a processed record at rest, so anything
 # larger was put there by a negative delay.
 CUT_WARNING_LEVEL = 1.0e-3
-# Records processed for a run, by (table, file mtime, file size): processed_record.
-_PROCESSED: dict = {}
 
 
-def input_waveform(scene):
+def input_waveform(scene, processed=None):
     """The input motion g(t) of a scene and the grid of its table.
+
+    Args:
+        scene: validated Scene with a [wave] table.
+        processed: the scene's record as processed_record gave it, to use instead of processing
+            it again (the run's set-up processes it once for the input and the wear clock).
 
     Returns:
         (waveform, table_grid, processed_record): waveform is a function t -> (g, g', g'')
@@ -47,7 +48,8 @@ def input_waveform(scene):
         return waveform, (0.0, table_dt, n_samples), None
     from pyfem.seismic.records import as_waveform
 
-    processed = processed_record(motion["record"])
+    if processed is None:
+        processed = processed_record(motion["record"])
     t0, dt, g, dg, ddg = as_waveform(processed)
     return WaveformTables(t0=t0, dt=dt, g=g[None, :], dg=dg[None, :], ddg=ddg[None, :]), None, processed
 
@@ -55,53 +57,45 @@ def input_waveform(scene):
 def processed_record(spec, record=None):
     """The input motion of a scene's [wave.motion.record] table, processed as the run uses it.
 
-    The run's set-up asks for it twice (the input forces and the interfaces' wear clock); read
-    from the file (`record` None), it is processed once per table and file version and shared.
-    The scene check passes the record it read and gets a fresh processing, with its warnings.
-
     Args:
         spec: the validated wave.motion.record table (file, units, dt, format, window, band,
             pga, lead_in).
         record: the file already read (pyfem.seismic.records.Record), or None to read it.
 
     Returns:
-        pyfem.seismic.records.ProcessedRecord (time from 0, step _RECORD_TABLE_DT s); treat it
-        as read-only.
+        pyfem.seismic.records.ProcessedRecord (time from 0, step _RECORD_TABLE_DT s).
 
     Raises:
         ValueError: a malformed file, or settings the record cannot meet.
     """
     from pyfem.seismic.records import process_record, read_record
 
-    key = None
     if record is None:
-        stat = os.stat(spec["file"])
-        key = (json.dumps(spec, sort_keys=True, default=str), stat.st_mtime_ns, stat.st_size)
-        if key in _PROCESSED:
-            return _PROCESSED[key]
         record = read_record(spec["file"], units=spec["units"], dt=spec.get("dt"), format=spec["format"])
-    processed = process_record(record, window=spec.get("window"), band=tuple(spec["band"]), pga=spec.get("pga"),
-                               table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"))
-    if key is not None:
-        if len(_PROCESSED) >= 4:
-            _PROCESSED.clear()
-        _PROCESSED[key] = processed
-    return processed
+    return process_record(record, window=spec.get("window"), band=tuple(spec["band"]), pga=spec.get("pga"),
+                          table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"))
 
 
-def seismic_input_from_scene(scene, model):
+def scene_record(scene):
+    """The scene's processed record (processed_record), or None without a [wave.motion.record]."""
+    spec = (scene.get("wave") or {}).get("motion", {}).get("record")
+    return None if spec is None else processed_record(spec)
+
+
+def seismic_input_from_scene(scene, model, processed=None):
     """The exact free field of the scene's waves and the kernel's SeismicInput arrays.
 
     Args:
         scene: validated Scene with a [wave] table.
         model: pyfem.operators.Model (faces, node coordinates, bounds).
+        processed: the scene's processed record (scene_record), None to process it here.
 
     Returns:
         (FreeField, dict of SeismicInput arrays)
     """
     wave = scene["wave"]
     medium = scene["materials"][wave["medium"]]
-    waveform, table_grid, _ = input_waveform(scene)
+    waveform, table_grid, _ = input_waveform(scene, processed)
     components = scene.wave_components()
     for component in components:
         # wave.scale multiplies the motion g(t) that all components share.
