@@ -205,8 +205,9 @@ StateArchive dict_archive(const py::dict& blocks) {
 /// load_state(archive) without a prefix).
 template <class T>
 auto stepper_save_state() {
-  return [](const T& stepper) {
+  return [](const T& stepper, bool points) {
     StateArchive archive;
+    archive.set_per_point(points);
     stepper.save_state(archive);
     return archive_dict(archive);
   };
@@ -214,7 +215,11 @@ auto stepper_save_state() {
 
 template <class T>
 auto stepper_load_state() {
-  return [](T& stepper, const py::dict& blocks) { stepper.load_state(dict_archive(blocks)); };
+  return [](T& stepper, const py::dict& blocks, bool points) {
+    StateArchive archive = dict_archive(blocks);
+    archive.set_per_point(points);
+    stepper.load_state(archive);
+  };
 }
 
 /// A new float64 array (n,) holding a copy of `values` (the per-pair outputs of ContactPairs).
@@ -831,13 +836,19 @@ Args:
           "save_state", stepper_save_state<Stepper>(),
           R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
 byte blocks (the energy account, the last internal force and reactions, the contact pairs'
-and every internal-force component's state), a copy.)")
+and every internal-force component's state), a copy.
+
+points false: a sample's state, not a checkpoint's: without the per-point and per-node blocks
+(the element loop's points and initial stress, the nodal forces); the energy account, reactions
+and contact pairs as with true. Under mpirun the ranks' samples are merged so (pyfem/distributed.py).)",
+          py::arg("points") = true)
       .def(
           "load_state", stepper_load_state<Stepper>(),
-          py::arg("state"),
+          py::arg("state"), py::arg("points") = true,
           R"(Restores save_state's dict into a stepper built from the same scene (same dt, damping,
 dofs, providers, pairs and components, in the same order). ValueError names the first block that
-does not fit; then nothing may be assumed about the stepper's state.)")
+does not fit; then nothing may be assumed about the stepper's state. points false: a dict of
+save_state(points=False), the per-point and per-node state left as it was.)")
       .def("set_mass_damping", &Stepper::set_mass_damping, py::arg("alpha"),
            "Changes the mass-proportional damping alpha (1/s, >= 0) for the following steps "
            "(dynamic relaxation of the static stage adapts it). ValueError for a bad alpha.")
@@ -1096,10 +1107,15 @@ Args:
           "save_state", stepper_save_state<LocalStepper>(),
           R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
 byte blocks (each level's last force, the energy account, every level's components and contact
-pairs), a copy.)")
+pairs), a copy.
+
+points false: a sample's state, not a checkpoint's: without the per-point and per-node blocks
+(the element loop's points and initial stress, the nodal forces); the energy account, reactions
+and contact pairs as with true. Under mpirun the ranks' samples are merged so (pyfem/distributed.py).)",
+          py::arg("points") = true)
       .def(
           "load_state", stepper_load_state<LocalStepper>(),
-          py::arg("state"),
+          py::arg("state"), py::arg("points") = true,
           R"(Restores save_state's dict into a stepper built from the same scene (same levels, dt_fine,
 damping, providers, components and pairs at the same levels in the same order); the next run
 continues without initialising. ValueError names the first block that does not fit.)")

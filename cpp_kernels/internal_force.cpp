@@ -134,27 +134,31 @@ void HexahedronElementsBase::rebase() {
 }
 
 void HexahedronElementsBase::save_state(StateArchive& archive, const std::string& prefix) const {
-  archive.put(prefix + "points", std::vector<std::int64_t>{geometry_.n_cells * geometry_.n_points});
-  save_points(archive, prefix + "state");
-  archive.put(prefix + "initial_stress", initial_stress_);
+  if (archive.per_point()) {
+    archive.put(prefix + "points", std::vector<std::int64_t>{geometry_.n_cells * geometry_.n_points});
+    save_points(archive, prefix + "state");
+    archive.put(prefix + "initial_stress", initial_stress_);
+  }
   archive.put_value(prefix + "stored_energy", stored_energy_);
   archive.put_value(prefix + "dissipation", dissipation_);
 }
 
 void HexahedronElementsBase::load_state(const StateArchive& archive, const std::string& prefix) {
-  std::vector<std::int64_t> points{geometry_.n_cells * geometry_.n_points};
-  archive.get(prefix + "points", points);
-  if (points[0] != geometry_.n_cells * geometry_.n_points)
-    throw std::invalid_argument("checkpoint block '" + prefix + "points': " +
-                                std::to_string(points[0]) + " points, the model has " +
-                                std::to_string(geometry_.n_cells * geometry_.n_points));
-  load_points(archive, prefix + "state");
-  // sigma0 at every point, or none (a component built without initial stress, never rebased).
-  archive.get_resized(prefix + "initial_stress", initial_stress_);
-  if (!initial_stress_.empty() && initial_stress_.size() != static_cast<std::size_t>(6 * points[0]))
-    throw std::invalid_argument("checkpoint block '" + prefix + "initial_stress': " +
-                                std::to_string(initial_stress_.size()) + " values, the model needs 0 or " +
-                                std::to_string(6 * points[0]));
+  if (archive.per_point()) {
+    std::vector<std::int64_t> points{geometry_.n_cells * geometry_.n_points};
+    archive.get(prefix + "points", points);
+    if (points[0] != geometry_.n_cells * geometry_.n_points)
+      throw std::invalid_argument("checkpoint block '" + prefix + "points': " +
+                                  std::to_string(points[0]) + " points, the model has " +
+                                  std::to_string(geometry_.n_cells * geometry_.n_points));
+    load_points(archive, prefix + "state");
+    // sigma0 at every point, or none (a component built without initial stress, never rebased).
+    archive.get_resized(prefix + "initial_stress", initial_stress_);
+    if (!initial_stress_.empty() && initial_stress_.size() != static_cast<std::size_t>(6 * points[0]))
+      throw std::invalid_argument("checkpoint block '" + prefix + "initial_stress': " +
+                                  std::to_string(initial_stress_.size()) + " values, the model needs 0 or " +
+                                  std::to_string(6 * points[0]));
+  }
   archive.get_value(prefix + "stored_energy", stored_energy_);
   archive.get_value(prefix + "dissipation", dissipation_);
   trial_ready_ = false;

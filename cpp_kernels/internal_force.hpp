@@ -57,8 +57,9 @@ class InternalForceComponent {
 
   /// Writes the committed state (per point, the initial stress, the energies) under `prefix`
   /// (checkpoint, docs/checkpoint.md); load_state reads it back into a component built from the
-  /// same cells and law, the trial state reset to the committed one. Throws
-  /// std::invalid_argument for a missing block or one of another size.
+  /// same cells and law, the trial state reset to the committed one. An archive that is not
+  /// per_point() holds the energies only. Throws std::invalid_argument for a missing block or
+  /// one of another size.
   virtual void save_state(StateArchive& archive, const std::string& prefix) const = 0;
   virtual void load_state(const StateArchive& archive, const std::string& prefix) = 0;
 

@@ -81,6 +81,14 @@ class StateArchive {
   bool contains(const std::string& name) const { return blocks_.count(name) != 0; }
   const Blocks& blocks() const { return blocks_; }
 
+  /// false: a sample's state, not a checkpoint's: the objects leave out (and do not read) their
+  /// per-point and per-node blocks (the element loop's points and initial stress, the stepper's
+  /// nodal internal force) and keep the rest (energy account, reactions, contact pairs). Under
+  /// mpirun the ranks merge this at every output sample and the whole state only where fields
+  /// or a checkpoint are written (pyfem/distributed.py).
+  bool per_point() const { return per_point_; }
+  void set_per_point(bool per_point) { per_point_ = per_point; }
+
  private:
   const std::vector<std::uint8_t>& find(const std::string& name) const {
     const auto found = blocks_.find(name);
@@ -91,6 +99,7 @@ class StateArchive {
   }
 
   Blocks blocks_;
+  bool per_point_ = true;
 };
 
 }  // namespace cavern

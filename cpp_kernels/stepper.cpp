@@ -695,7 +695,7 @@ void Stepper::save_state(StateArchive& archive) const {
   archive.put(kEnergyBlock, energy);
   archive.put("stepper/provider_work", provider_work_);
   archive.put("stepper/provider_power", provider_power_);
-  archive.put("stepper/internal_force", internal_force_);
+  if (archive.per_point()) archive.put("stepper/internal_force", internal_force_);
   archive.put("stepper/reactions", reactions_);
   if (contact_) contact_->save_state(archive, "contact/");
   for (std::size_t k = 0; k < components_.size(); ++k) {
@@ -729,7 +729,7 @@ void Stepper::load_state(const StateArchive& archive) {
   archive.get(kEnergyBlock, energy);
   archive.get("stepper/provider_work", provider_work_);
   archive.get("stepper/provider_power", provider_power_);
-  archive.get("stepper/internal_force", internal_force_);
+  if (archive.per_point()) archive.get("stepper/internal_force", internal_force_);
   archive.get("stepper/reactions", reactions_);
   if (contact_) contact_->load_state(archive, "contact/");
   for (std::size_t k = 0; k < components_.size(); ++k)

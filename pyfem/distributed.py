@@ -312,7 +312,12 @@ def _local_contact(arrays: dict, mine: Share):
 
 def local_stepper(simulation, mine: Share, exchange):
     """The kernel's Stepper of one rank's share: `pyfem.solver.make_stepper`'s objects restricted to
-    the share (an effect added there must be added here too; tests/test_mpi.py runs each)."""
+    the share (an effect added there must be added here too; tests/test_mpi.py runs each).
+
+    Returns:
+        (stepper, components, objects): components (region, "counted" or "halo", indices into the
+        region's cells) and the element-loop component object of each, in the stepper's order.
+    """
     from pyfem import _kernels
     from pyfem.solver import seismic_input_kernel
 
@@ -335,7 +340,7 @@ def local_stepper(simulation, mine: Share, exchange):
     if simulation.contact_arrays is not None:
         contact = _local_contact(simulation.contact_arrays, mine)
         stepper.add_contact(contact)
-    components = []
+    components, objects = [], []
     if simulation.nonlinear is not None:
         for name in simulation.nonlinear.arrays:
             for kind, cells in mine.cells[name]:
@@ -344,16 +349,22 @@ def local_stepper(simulation, mine: Share, exchange):
                                                                node_numbers=mine.local_of)
                 stepper.add_internal_force(component, count_energy=kind == "counted")
                 components.append((name, kind, cells))
+                objects.append(component)
     if simulation.static is not None:  # the stage's out-of-balance on the owned nodes (pyfem/static.py)
         from pyfem.static import add_hand_over_force
 
         add_hand_over_force(stepper, simulation, nodes=mine.nodes[:mine.n_owned], local_of=mine.local_of,
                             n_local=len(mine.nodes))
     stepper.set_partition(mine.n_owned, exchange)
-    return stepper, components
+    return stepper, components, objects
 
 
 # --- The serial stepper's state (save_state blocks) cut into shares and put together again ---
+
+def _dof_rows(nodes: np.ndarray) -> np.ndarray:
+    """The dofs 3 i, 3 i + 1, 3 i + 2 of the given nodes, in order."""
+    return (3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)).reshape(-1)
+
 
 def state_rows(block: bytes, count: int) -> np.ndarray:
     """A block of `count` equal rows as a (count, row bytes) uint8 array."""
@@ -425,15 +436,17 @@ def slice_state(serial: dict, template: dict, simulation, parts: Partition, mine
 
 
 def merge_states(serial_template: dict, states: list, simulation, parts: Partition, shares: list,
-                 components: list) -> dict:
+                 components: list, points: bool = True) -> dict:
     """The serial stepper's state blocks from every rank's (`states`, `shares`, `components`
-    per rank): owned rows from their owner, counted cells from theirs, sums of the scalars."""
+    per rank): owned rows from their owner, counted cells from theirs, sums of the scalars.
+    points False: `states` are save_state(points=False) (no per-point or per-node blocks), and so
+    is what this returns for the serial stepper's load_state(..., points=False)."""
     out = dict(serial_template)
     out["stepper/energy_started"] = states[0]["stepper/energy_started"]
     for key in ("stepper/energy", "stepper/provider_work", "stepper/provider_power"):
         out[key] = np.sum([np.frombuffer(s[key], dtype=np.float64) for s in states], axis=0).tobytes()
     force = np.frombuffer(serial_template["stepper/internal_force"], dtype=np.float64).reshape(-1, 3).copy()
-    if force.size:
+    if force.size and points:
         for s, mine in zip(states, shares):
             rows = mine.nodes[:mine.n_owned]
             if len(s["stepper/internal_force"]):
@@ -466,21 +479,25 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
     for k, name in enumerate(regions):
         src = f"component/{k}/"
         n_cells = len(simulation.nonlinear.arrays[name].cells)
-        state = state_rows(serial_template[src + "state"], n_cells).copy()
-        sigma0 = serial_template[src + "initial_stress"]
-        sigma0_rows = state_rows(sigma0, n_cells).copy() if len(sigma0) else None
+        state = sigma0_rows = None
+        if points:
+            state = state_rows(serial_template[src + "state"], n_cells).copy()
+            sigma0 = serial_template[src + "initial_stress"]
+            sigma0_rows = state_rows(sigma0, n_cells).copy() if len(sigma0) else None
         totals = {"stored_energy": 0.0, "dissipation": 0.0}
         for s, rank_components in zip(states, components):
             for j, (region, kind, cells) in enumerate(rank_components):
                 if region != name or kind != "counted":
                     continue
-                state[cells] = state_rows(s[f"component/{j}/state"], len(cells))
-                if sigma0_rows is not None:
-                    sigma0_rows[cells] = state_rows(s[f"component/{j}/initial_stress"], len(cells))
+                if points:
+                    state[cells] = state_rows(s[f"component/{j}/state"], len(cells))
+                    if sigma0_rows is not None:
+                        sigma0_rows[cells] = state_rows(s[f"component/{j}/initial_stress"], len(cells))
                 for scalar in totals:
                     totals[scalar] += float(np.frombuffer(s[f"component/{j}/{scalar}"], dtype=np.float64)[0])
-        out[src + "state"] = state.tobytes()
-        out[src + "initial_stress"] = sigma0_rows.tobytes() if sigma0_rows is not None else b""
+        if points:
+            out[src + "state"] = state.tobytes()
+            out[src + "initial_stress"] = sigma0_rows.tobytes() if sigma0_rows is not None else b""
         for scalar, value in totals.items():
             out[src + scalar] = np.array([value]).tobytes()
     return out
@@ -488,10 +505,14 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
 
 class DistributedStepper:
     """The ranks' steppers behind the Stepper calls of `pyfem.solver.run` (which runs on every
-    rank). The u, v, a the run loop holds are the whole model's; they are exact on rank 0 after
-    every run() (gathered), and read by every rank only where the run starts (zeros, or a
-    checkpoint's). energy(), reactions() and save_state() are the serial stepper's after the
-    merge: meaningful on rank 0, which writes."""
+    rank). The u, v, a the run loop holds are the whole model's, read by every rank only where the
+    run starts (zeros, or a checkpoint's). After every run() rank 0 holds what a sample reads:
+    u, v, a at the sampled nodes (`set_samples`), the energy account, reactions and contact pairs
+    in the serial stepper, the monitors' law values (`monitor_point_values`). The whole state (u,
+    v, a everywhere, every point's material state) is gathered by `gather_whole`, a collective,
+    where fields, the summary or a checkpoint read it; `whole` says whether it is. energy(),
+    reactions() and save_state() are the serial stepper's after the merge: meaningful on rank 0,
+    which writes."""
 
     def __init__(self, simulation, serial, comm: MPI.Comm):
         self.simulation, self.serial, self.comm = simulation, serial, comm
@@ -500,13 +521,47 @@ class DistributedStepper:
         self.shares = [share(simulation, self.parts, q) for q in range(comm.size)] if comm.rank == 0 else None
         self.mine = self.shares[0] if comm.rank == 0 else share(simulation, self.parts, comm.rank)
         self.exchange = _exchange(comm, self.parts, self.mine)
-        self.kernel, self.components = local_stepper(simulation, self.mine, self.exchange)
+        self.kernel, self.components, self.objects = local_stepper(simulation, self.mine, self.exchange)
         self.all_components = comm.gather(self.components, root=0)
         self.template = self.kernel.save_state()
         self.serial_template = serial.save_state()
         self.setup_seconds = time.perf_counter() - began
         self.merge_seconds = 0.0
+        self.whole = True
+        self._sent = {False: (0, 0), True: (0, 0)}  # gathers, bytes sent to rank 0 by the last, light / whole
+        self.set_samples(np.arange(len(simulation.mass)), None)  # until told what the writer reads
         self._load(self.serial_template)  # the stage's state (components, pairs), cut into shares
+
+    def set_samples(self, nodes: np.ndarray, kernel_points: list | None) -> None:
+        """What every sample reads: `nodes` (rank 0's RunWriter.sampled_nodes, the same on every
+        rank) and the monitors' kernel points (MonitorStress.kernel_points: per monitor None or
+        (region index, flat point index))."""
+        nodes = np.unique(np.asarray(nodes, dtype=np.int64))
+        owner = self.parts.node_owner[nodes]
+        self._sample_rows = _dof_rows(self.mine.local_of[nodes[owner == self.comm.rank]])
+        if self.comm.rank == 0:
+            self._sample_global = [_dof_rows(nodes[owner == q]) for q in range(self.comm.size)]
+        self._kernel_points = [] if kernel_points is None else list(kernel_points)
+        self._points = []  # (monitor, local component object, point index in it) of this rank's points
+        regions = list(self.simulation.nonlinear.arrays) if self.simulation.nonlinear is not None else []
+        for j, found in enumerate(self._kernel_points):
+            if found is None:
+                continue
+            name = regions[found[0]]
+            n_points = _region_points(self.simulation.nonlinear, name)
+            cell, q = divmod(int(found[1]), n_points)
+            for component, (region, kind, cells) in zip(self.objects, self.components):
+                k = int(np.searchsorted(cells, cell))
+                if region == name and kind == "counted" and k < len(cells) and cells[k] == cell:
+                    self._points.append((j, component, k * n_points + q))
+        self._values = None
+
+    def monitor_point_values(self, locations: list) -> dict:
+        """The monitors' law values at the last sample (as NonlinearRegions.point_values gives them),
+        read on the ranks that count their cells; rank 0 only."""
+        if len(locations) != len(self._kernel_points) or self._values is None:
+            raise RuntimeError("monitor_point_values: not the kernel points given to set_samples")
+        return self._values
 
     # The run loop's calls -----------------------------------------------------------------------
     def _load(self, serial_state: dict) -> None:
@@ -517,43 +572,82 @@ class DistributedStepper:
 
     def _local_state(self, u, v, a):
         if self._pull:
-            rows = (3 * self.mine.nodes[:, None] + np.arange(3)).reshape(-1)
+            rows = _dof_rows(self.mine.nodes)
             self.u, self.v, self.a = (np.ascontiguousarray(x[rows]) for x in (u, v, a))
             self._pull = False
         return self.u, self.v, self.a
 
-    def _gather(self, u, v, a) -> None:
-        """Owned u, v, a into the whole-model arrays on rank 0; the ranks' state into the serial
-        stepper there. A non-finite value on any rank makes every rank's u non-finite (the run
-        loop's check then stops every rank alike)."""
-        began = time.perf_counter()
-        n = 3 * self.mine.n_owned
-        owned = np.stack([self.u[:n], self.v[:n], self.a[:n]])
+    def _finite(self) -> bool:
         from mpi4py import MPI
 
-        finite = self.comm.allreduce(bool(np.isfinite(owned).all()), op=MPI.LAND)
+        n = 3 * self.mine.n_owned
+        local = all(bool(np.isfinite(x[:n]).all()) for x in (self.u, self.v, self.a))
+        return self.comm.allreduce(local, op=MPI.LAND)
+
+    def _gather_point_values(self) -> None:
+        rows = []
+        for j, component, point in self._points:
+            at = np.array([point], dtype=np.int64)
+            rows.append((j, np.asarray(component.stress(at))[0], float(component.damage(at)[0]),
+                         int(component.damage_type(at)[0]), float(component.plastic_strain(at)[0])))
+        pieces = self.comm.gather(rows, root=0)
+        if self.comm.rank != 0 or not self._kernel_points:
+            return
+        m = len(self._kernel_points)
+        values = {"found": np.array([found is not None for found in self._kernel_points], dtype=bool),
+                  "stress": np.full((m, 6), np.nan), "damage": np.zeros(m),
+                  "damage_type": np.zeros(m, dtype=np.int32), "plastic_strain": np.zeros(m)}
+        for j, stress, damage, damage_type, plastic in (row for piece in pieces for row in piece):
+            values["stress"][j], values["damage"][j] = stress, damage
+            values["damage_type"][j], values["plastic_strain"][j] = damage_type, plastic
+        self._values = values
+
+    def _gather(self, u, v, a, whole: bool) -> None:
+        """Into rank 0: owned u, v, a (of the sampled nodes, or all with `whole`) into the
+        whole-model arrays, the ranks' kernel state into the serial stepper (its per-point blocks
+        only with `whole`), the monitors' law values. A non-finite value on any rank makes every
+        rank's u non-finite (the run loop's check then stops every rank alike)."""
+        began = time.perf_counter()
+        finite = self._finite()
+        if whole:
+            n = 3 * self.mine.n_owned
+            owned = np.stack([self.u[:n], self.v[:n], self.a[:n]])
+            rows_of = [_dof_rows(mine.nodes[:mine.n_owned]) for mine in self.shares] if self.comm.rank == 0 else None
+        else:
+            rows = self._sample_rows
+            owned = np.stack([self.u[rows], self.v[rows], self.a[rows]])
+            rows_of = self._sample_global if self.comm.rank == 0 else None
+        state = self.kernel.save_state(points=whole)
+        self._sent[whole] = (self._sent[whole][0] + 1, owned.nbytes + sum(len(block) for block in state.values()))
         pieces = self.comm.gather(owned, root=0)
-        states = self.comm.gather(self.kernel.save_state(), root=0)
+        states = self.comm.gather(state, root=0)
         if self.comm.rank == 0:
-            for piece, mine in zip(pieces, self.shares):
-                rows = (3 * mine.nodes[:mine.n_owned, None] + np.arange(3)).reshape(-1)
+            for piece, rows in zip(pieces, rows_of):
                 u[rows], v[rows], a[rows] = piece
             self.serial.load_state(merge_states(self.serial_template, states, self.simulation, self.parts,
-                                                self.shares, self.all_components))
+                                                self.shares, self.all_components, points=whole), points=whole)
+        self._gather_point_values()
         if not finite:
             u[:] = np.nan
+        self.whole = whole
         self.merge_seconds += time.perf_counter() - began
+
+    def gather_whole(self, u, v, a) -> None:
+        """The whole state on rank 0 (fields, the summary, a checkpoint read it); a collective,
+        nothing to do when it is already whole."""
+        if not self.whole:
+            self._gather(u, v, a, whole=True)
 
     def reset_energy(self, u, v, a, t0: float) -> None:
         self._pull = True
         lu, lv, la = self._local_state(u, v, a)
         self.kernel.reset_energy(lu, lv, la, t0)
-        self._gather(u, v, a)
+        self._gather(u, v, a, whole=True)
 
     def run(self, u, v, a, n_steps: int, t0: float) -> float:
         lu, lv, la = self._local_state(u, v, a)
         end = self.kernel.run(lu, lv, la, n_steps, t0)
-        self._gather(u, v, a)
+        self._gather(u, v, a, whole=False)
         return end
 
     def energy(self):
@@ -563,11 +657,16 @@ class DistributedStepper:
         return self.serial.reactions() if self.comm.rank == 0 else None
 
     def save_state(self) -> dict:
+        if not self.whole:
+            raise RuntimeError("save_state: the state is not whole on rank 0 (gather_whole first)")
         return self.serial.save_state() if self.comm.rank == 0 else {}
 
     def load_state(self, state: dict) -> None:
         self.serial.load_state(state)
         self._load(state)
+        self.whole = True
+        if self._kernel_points:  # the monitors' values of the loaded state
+            self._gather_point_values()
 
     def phase_seconds(self) -> dict:
         phases = dict(self.kernel.phase_seconds())
@@ -580,15 +679,19 @@ class DistributedStepper:
 
     def describe(self) -> dict:
         """For run.json, per rank: owned and ghost nodes, bytes sent per step, element-loop cells it
-        counts and halo cells it also computes, contact pairs; and the set-up time."""
+        counts and halo cells it also computes, contact pairs, the merges on rank 0 (light: what a
+        sample reads; whole: every node and point) of this sitting and the bytes it sent to the
+        last of each; and the set-up time."""
         cells = sum(len(rows) for region in self.mine.cells.values() for kind, rows in region if kind == "counted")
         halo = sum(len(rows) for region in self.mine.cells.values() for kind, rows in region if kind == "halo")
         pairs = 0 if self.mine.pairs is None else len(self.mine.pairs)
         counts = self.comm.gather((self.mine.n_owned, len(self.mine.nodes) - self.mine.n_owned,
-                                   int(self.exchange.bytes_sent_per_step), cells, halo, pairs), root=0)
+                                   int(self.exchange.bytes_sent_per_step), cells, halo, pairs,
+                                   *self._sent[False], *self._sent[True]), root=0)
         if self.comm.rank != 0:
             return {}
-        columns = ("owned_nodes", "ghost_nodes", "bytes_sent_per_step", "element_loop_cells", "halo_cells", "pairs")
+        columns = ("owned_nodes", "ghost_nodes", "bytes_sent_per_step", "element_loop_cells", "halo_cells", "pairs",
+                   "light_merges", "bytes_per_light_merge", "whole_merges", "bytes_per_whole_merge")
         return {"ranks": self.comm.size, **{name: [c[k] for c in counts] for k, name in enumerate(columns)},
                 "setup_seconds": round(self.setup_seconds, 3)}
 

@@ -71,6 +71,11 @@ class StopSignals:
             return
         raise RunInterrupted(signal_number)
 
+    @property
+    def pending(self) -> bool:
+        """Whether a stop signal waits for the end of the deferred block."""
+        return self._pending is not None
+
     def stop_together(self, comm) -> None:
         """Under mpirun (always_defer): if any rank has a stop signal pending, every rank gets it,
         so all of them leave their deferred block at the same sample. A collective: every rank

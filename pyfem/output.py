@@ -397,6 +397,9 @@ class RunWriter:
         self.energy_samples: list[list[float]] = []
         self.contact_on = simulation.contact_arrays is not None
         self.nonlinear = simulation.nonlinear  # pyfem.elements.NonlinearRegions or None
+        # The monitors' law values (kernel points -> dict as NonlinearRegions.point_values); None:
+        # read from self.nonlinear. Under mpirun the ranks' own components (pyfem.distributed).
+        self.point_values = None
         self.energy_columns = (ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if self.contact_on else [])
                                + (INTERNAL_ENERGY_COLUMNS if self.nonlinear is not None else []))
         self.pair_rows: list[np.ndarray] = []       # each (n_pair_monitors, len(PAIR_COLUMNS))
@@ -571,7 +574,7 @@ class RunWriter:
             resultants = (sim.constraints.face_resultants(reactions) if reactions is not None
                           else np.zeros((len(sim.constraints.face_names), 3)))
             reaction_row = [t] + list(resultants.ravel())
-        write_fields = bool(self.xdmf_every) and self._sample_count % self.xdmf_every == 0
+        write_fields = self.next_sample_writes_fields()
         contact = sim.contact_pairs
         pair_values = pair_rows = state_counts = None  # every pair's values, computed once when needed
         if contact is not None:
@@ -602,6 +605,25 @@ class RunWriter:
         self._sample_count += 1
         if time.monotonic() - self._last_flush > FLUSH_SECONDS:
             self.flush()
+
+    def next_sample_writes_fields(self) -> bool:
+        """Whether the next sample() writes fields (every xdmf interval)."""
+        return bool(self.xdmf_every) and self._sample_count % self.xdmf_every == 0
+
+    def sampled_nodes(self) -> np.ndarray:
+        """The nodes whose u, v, a every sample() reads (the monitors' cells, the contact pairs, the
+        deformed section); fields, the run's summary and checkpoints read every node and point.
+        Under mpirun the ranks gather these at every sample and the whole state only where it is
+        read (pyfem.distributed.DistributedStepper)."""
+        sim = self.simulation
+        nodes = [np.asarray(self.deformation.nodes, dtype=np.int64).ravel()]
+        if sim.monitor_nodes is not None:
+            nodes.append(np.asarray(sim.monitor_nodes, dtype=np.int64).ravel())
+        if sim.monitor_stress is not None:
+            nodes.append(np.asarray(sim.monitor_stress.nodes, dtype=np.int64).ravel())
+        if sim.contact_arrays is not None:
+            nodes.append(np.asarray(sim.contact_arrays["pairs"], dtype=np.int64).ravel())
+        return np.unique(np.concatenate(nodes))
 
     def flush(self) -> None:
         """Writes the queued history rows to disk and the time reached to run.json."""
@@ -643,7 +665,7 @@ class RunWriter:
             total = dynamic + static
             kernel = None
             if stress.kernel_points is not None:  # the law's stress where the cell is nonlinear
-                kernel = self.nonlinear.point_values(stress.kernel_points)
+                kernel = (self.point_values or self.nonlinear.point_values)(stress.kernel_points)
                 found = kernel["found"]
                 total[found] = kernel["stress"][found]
                 dynamic[found] = total[found] - static[found]

@@ -1136,6 +1136,12 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         write_checkpoint = None  # set once the state (u, v, a, t, kernel, writer) is whole
         try:
             stepper = make_stepper(simulation)
+            if comm.size > 1:  # the ranks gather at each sample what the writer reads then
+                stress = simulation.monitor_stress
+                stepper.set_samples(comm.bcast(writer.sampled_nodes() if root else None, root=0),
+                                    None if stress is None else stress.kernel_points)
+                if root:
+                    writer.point_values = stepper.monitor_point_values
             n = simulation.stiffness.shape[0]
             ts = simulation.time_step
             n_outputs = simulation.n_steps // ts.steps_per_output
@@ -1202,6 +1208,9 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                         stepper.run(u, v, a, ts.steps_per_output, done * ts.steps_per_output * ts.dt)
                         done += 1
                         t = done * ts.steps_per_output * ts.dt
+                        if comm.size > 1 and comm.bcast(root and (done == n_outputs or writer.next_sample_writes_fields()),
+                                                        root=0):
+                            stepper.gather_whole(u, v, a)  # fields and the final summary read every point
                         reactions = stepper.reactions() if simulation.constraints is not None else None
                         if not np.isfinite(u).all():
                             raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
@@ -1210,9 +1219,13 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                         output_seconds += time.perf_counter() - output_start
                         due = clock.due() if comm.size == 1 else comm.bcast(clock.due(), root=0)
                         if due and done < n_outputs:
+                            if comm.size > 1:
+                                stepper.gather_whole(u, v, a)
                             write_checkpoint()
                         if comm.size > 1:
                             signals.stop_together(comm)
+                            if signals.pending:  # the interrupted run's checkpoint and summary
+                                stepper.gather_whole(u, v, a)
                     bar.update()
                     if progress is not None:
                         progress(t)

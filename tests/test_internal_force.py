@@ -315,3 +315,30 @@ def test_bad_arguments_are_value_errors_naming_the_parameter():
         stepper.add_internal_force(component)
     with pytest.raises(ValueError, match="not among region_names"):
         nonlinear_component(simulation_of(1).model, ["upper"], {"lower": {"law": "linear_elastic"}})
+
+
+def test_a_samples_state_leaves_the_points_out_and_as_they_were():
+    """Stepper.save_state(points=False), what the MPI ranks merge at every sample: the energy
+    account and the components' energies, not their points or the nodal internal force; loading
+    it restores the account and leaves every point's state as it was."""
+    simulation = simulation_of(1)
+    n = simulation.model.n_dofs
+    stepper, nonlinear = split_stepper(simulation)
+    component = nonlinear.components[0]
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    stepper.reset_energy(u, v, a, 0.0)
+    t = stepper.run(u, v, a, 100, 0.0)
+    whole, light = stepper.save_state(), stepper.save_state(points=False)
+    assert component.stored_energy() > 0.0 and np.abs(component.stress()).max() > 0.0  # the pulse arrived
+    assert set(light) == set(whole) - {"stepper/internal_force", "component/0/points", "component/0/state",
+                                       "component/0/initial_stress"}
+    assert all(light[key] == whole[key] for key in light)
+    energy, stress = stepper.energy(), component.stress()
+    stepper.run(u, v, a, 50, t)
+    assert not np.array_equal(component.stress(), stress)
+    moved = component.stress()
+    stepper.load_state(light, points=False)
+    assert stepper.energy() == energy  # the account of the sample
+    assert np.array_equal(component.stress(), moved)  # the points as they were
+    with pytest.raises(ValueError, match="no block 'stepper/internal_force'"):
+        stepper.load_state(light)  # a checkpoint needs every node and point
