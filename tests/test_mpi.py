@@ -297,3 +297,54 @@ def test_a_serial_checkpoint_resumes_on_three_ranks(tmp_path):
     worst = largest_difference(out, reference)
     print(f"largest difference from the uninterrupted serial run {worst:.2e}")
     assert worst < TOLERANCE
+
+
+def rank_pids(mpirun_pid: int) -> dict:
+    """{rank: pid} of the ranks mpirun started (its children, by OMPI_COMM_WORLD_RANK)."""
+    ranks = {}
+    for task in Path(f"/proc/{mpirun_pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            try:
+                environ = Path(f"/proc/{child}/environ").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            for entry in environ:
+                if entry.startswith(b"OMPI_COMM_WORLD_RANK="):
+                    ranks[int(entry.split(b"=")[1])] = int(child)
+    return ranks
+
+
+def test_sigterm_to_one_rank_stops_every_rank_with_a_whole_checkpoint_that_resumes(tmp_path):
+    """SIGTERM to rank 1 only, mid-run, of the damage scene (a yielding layer: per-point state):
+    every rank stops at the same sample, rank 0 gathers the whole state (the samples in between
+    gather only what they read) and writes the checkpoint and an "interrupted" run.json; resumed on
+    2 ranks, the histories equal the uninterrupted 2-rank run's byte for byte."""
+    scene, _ = SCENES["damage"]
+    settings = ("--set", "time.duration=1.5", "--set", "output.checkpoint_interval=0")
+    reference, out = tmp_path / "reference", tmp_path / "stopped"
+    pyfem_run(2, scene, reference, *settings)
+    command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem", "run", scene,
+               "--out", str(out), *settings]
+    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    deadline = time.monotonic() + 300
+    while not ((out / "monitors" / "layer.csv").exists() and
+               len((out / "monitors" / "layer.csv").read_text().splitlines()) > 20):
+        assert process.poll() is None, "the run ended before the signal"
+        assert time.monotonic() < deadline, "no samples after 300 s"
+        time.sleep(0.05)
+    os.kill(rank_pids(process.pid)[1], signal.SIGTERM)
+    _, stderr = process.communicate(timeout=300)
+    stopped = summary(out)
+    assert process.returncode != 0 and stopped["status"] == "interrupted", stderr[-2000:]
+    assert (out / checkpoint.CHECKPOINT_NAME).exists() and "Traceback" not in stderr
+    assert 0.1 < stopped["time_reached"] < 1.5
+    pyfem_run(2, scene, out, *settings, "--resume")
+    resumed = summary(out)
+    assert resumed["status"] == "finished" and resumed["nonlinear_regions"]["weak"]["yielded_volume"] > 0.0
+    assert histories(out) == histories(reference)
+    for name in histories(reference):
+        if name.name == "energy.csv":  # the account's partial sums are regrouped on resume
+            assert relative_difference(out / name, reference / name, scales(reference)) < 1e-13
+        else:
+            assert (out / name).read_bytes() == (reference / name).read_bytes(), name
