@@ -161,6 +161,8 @@ void HexahedronElementsBase::load_state(const StateArchive& archive, const std::
   }
   archive.get_value(prefix + "stored_energy", stored_energy_);
   archive.get_value(prefix + "dissipation", dissipation_);
+  // A pending trial state is dropped (commit() now throws); the next compute() starts from the
+  // committed points, loaded or, for a sample's archive, as they were.
   trial_ready_ = false;
 }
 

@@ -14,13 +14,15 @@ docs/scaling.md "The distributed step" is the design; this is its first implemen
   lowest node); dashpots, constraints, input forces and pairs are those of owned nodes.
 - After every step one message per neighbour rank carries v and a of the shared nodes
   (cpp_kernels/mpi_exchange.hpp); the next pass A then gives every ghost its owner's u.
-- At every output sample the ranks' states are gathered on rank 0 into the serial stepper
-  (`merge`), which the writer and checkpoints read as in a serial run; a checkpoint is the serial
-  one, and `--resume` slices it again (any rank count).
+- At every output sample the ranks gather on rank 0 what the sample reads (`merge`): u, v, a of
+  the sampled nodes, the kernel state without its per-point blocks into the serial stepper, the
+  monitors' law values; the whole state (every node and point) where fields, a checkpoint or the
+  run's summary read it (`gather_whole`). The writer and checkpoints read the serial stepper as
+  in a serial run; a checkpoint is the serial one, and `--resume` slices it again (any rank count).
 
 Not done yet (docs/scaling.md): dolfinx's distributed mesh and assembly (the model is replicated,
 so memory does not fall with the ranks), the static stage in parallel (each rank solves it),
-merging only what the sample writes, overlapping the exchange with the interior rows.
+fields written in parallel, overlapping the exchange with the interior rows.
 """
 
 from __future__ import annotations
@@ -445,8 +447,9 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
     out["stepper/energy_started"] = states[0]["stepper/energy_started"]
     for key in ("stepper/energy", "stepper/provider_work", "stepper/provider_power"):
         out[key] = np.sum([np.frombuffer(s[key], dtype=np.float64) for s in states], axis=0).tobytes()
-    force = np.frombuffer(serial_template["stepper/internal_force"], dtype=np.float64).reshape(-1, 3).copy()
+    force = np.frombuffer(serial_template["stepper/internal_force"], dtype=np.float64).reshape(-1, 3)
     if force.size and points:
+        force = force.copy()
         for s, mine in zip(states, shares):
             rows = mine.nodes[:mine.n_owned]
             if len(s["stepper/internal_force"]):
@@ -597,7 +600,11 @@ class DistributedStepper:
         values = {"found": np.array([found is not None for found in self._kernel_points], dtype=bool),
                   "stress": np.full((m, 6), np.nan), "damage": np.zeros(m),
                   "damage_type": np.zeros(m, dtype=np.int32), "plastic_strain": np.zeros(m)}
-        for j, stress, damage, damage_type, plastic in (row for piece in pieces for row in piece):
+        received = [row for piece in pieces for row in piece]
+        if len(received) != int(values["found"].sum()):  # each found point is counted by one rank
+            raise RuntimeError(f"monitor law values: {len(received)} points read by the ranks, "
+                               f"{int(values['found'].sum())} monitors in nonlinear cells")
+        for j, stress, damage, damage_type, plastic in received:
             values["stress"][j], values["damage"][j] = stress, damage
             values["damage_type"][j], values["plastic_strain"][j] = damage_type, plastic
         self._values = values

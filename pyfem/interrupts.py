@@ -52,7 +52,8 @@ class StopSignals:
         self._previous: dict[int, object] = {}
         self._deferring = False
         self._always_defer = always_defer
-        self._pending: int | None = None
+        self._pending: int | None = None  # a signal received here
+        self._agreed: int | None = None  # always_defer: the signal all ranks agreed on (stop_together)
 
     def __enter__(self) -> "StopSignals":
         if threading.current_thread() is threading.main_thread():
@@ -71,20 +72,16 @@ class StopSignals:
             return
         raise RunInterrupted(signal_number)
 
-    @property
-    def pending(self) -> bool:
-        """Whether a stop signal waits for the end of the deferred block."""
-        return self._pending is not None
-
-    def stop_together(self, comm) -> None:
-        """Under mpirun (always_defer): if any rank has a stop signal pending, every rank gets it,
-        so all of them leave their deferred block at the same sample. A collective: every rank
-        calls it at the same point."""
+    def stop_together(self, comm) -> bool:
+        """Under mpirun (always_defer): whether any rank has a stop signal pending; if so every rank
+        leaves its deferred block at this sample. A collective: every rank calls it at the same
+        point. Only this agreement stops a rank: a signal that reaches a rank after it (while the
+        others are already stepping on) waits for the next sample's."""
         from mpi4py import MPI
 
-        pending = comm.allreduce(self._pending or 0, op=MPI.MAX)
-        if pending:
-            self._pending = pending
+        agreed = comm.allreduce(self._pending or 0, op=MPI.MAX)
+        self._agreed = agreed or None
+        return bool(agreed)
 
     @contextlib.contextmanager
     def deferred(self, reraise: bool = True):
@@ -96,7 +93,8 @@ class StopSignals:
             yield
         finally:
             self._deferring = outer
-        if not outer and self._pending is not None:
-            pending, self._pending = self._pending, None
+        stop = self._agreed if self._always_defer else self._pending
+        if not outer and stop is not None:
+            self._pending = self._agreed = None
             if reraise:
-                raise RunInterrupted(pending)
+                raise RunInterrupted(stop)

@@ -400,6 +400,9 @@ class RunWriter:
         # The monitors' law values (kernel points -> dict as NonlinearRegions.point_values); None:
         # read from self.nonlinear. Under mpirun the ranks' own components (pyfem.distributed).
         self.point_values = None
+        # Under mpirun, a run that failed between two whole merges: the points' state on rank 0 is
+        # that of the last field sample, so the summary leaves the material regions out.
+        self.points_stale = False
         self.energy_columns = (ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if self.contact_on else [])
                                + (INTERNAL_ENERGY_COLUMNS if self.nonlinear is not None else []))
         self.pair_rows: list[np.ndarray] = []       # each (n_pair_monitors, len(PAIR_COLUMNS))
@@ -748,7 +751,11 @@ class RunWriter:
         times = np.array(self.times)
         summary["energy"] = self._energy_summary(np.array(self.energy_samples), self.energy_columns)
         summary["monitors"] = self._monitor_peaks(times)
-        if self.nonlinear is not None:
+        if self.nonlinear is not None and self.points_stale:
+            summary.pop("nonlinear_regions", None)
+            summary["nonlinear_regions_note"] = ("not gathered: under mpirun the run failed between two merges of the "
+                                                 "whole state; fields.xdmf's last sample holds the material state")
+        elif self.nonlinear is not None:
             # Damage and plastic strain never decrease: the final state holds the peaks.
             summary["nonlinear_regions"] = self.nonlinear.region_summary()
         if self.contact_on:

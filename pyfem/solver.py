@@ -1134,6 +1134,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         writer = RunWriter(out_dir, simulation) if root else SilentWriter(out_dir)
         clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"])
         write_checkpoint = None  # set once the state (u, v, a, t, kernel, writer) is whole
+        stepper = None
         try:
             stepper = make_stepper(simulation)
             if comm.size > 1:  # the ranks gather at each sample what the writer reads then
@@ -1222,10 +1223,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                             if comm.size > 1:
                                 stepper.gather_whole(u, v, a)
                             write_checkpoint()
-                        if comm.size > 1:
-                            signals.stop_together(comm)
-                            if signals.pending:  # the interrupted run's checkpoint and summary
-                                stepper.gather_whole(u, v, a)
+                        if comm.size > 1 and signals.stop_together(comm):
+                            stepper.gather_whole(u, v, a)  # the interrupted run's checkpoint and summary
                     bar.update()
                     if progress is not None:
                         progress(t)
@@ -1256,6 +1255,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         except BaseException as error:
             if writer.started:
                 with signals.deferred(reraise=False):
+                    if comm.size > 1 and stepper is not None and not stepper.whole:
+                        writer.points_stale = True  # no collective now: the ranks are being aborted
                     writer.fail(f"{type(error).__name__}: {error}")
                 reached = f"t = {writer.times[-1]:.6g} s" if writer.times else "no sample"
                 error.add_note(f"run failed; the results up to {reached} are kept in {writer.out_dir}")

@@ -225,6 +225,26 @@ def test_a_failure_on_one_rank_ends_every_rank(tmp_path):
     assert time.monotonic() - began < 120
 
 
+def test_a_run_failing_between_whole_merges_leaves_no_stale_material_summary(tmp_path):
+    """A write that fails on rank 0 at a sample that gathered only what it reads (the damage scene:
+    fields every 20th sample, the failure at the 31st): run.json says "failed" and leaves the
+    material regions out, saying why, rather than reporting the points as of the last field sample."""
+    out = tmp_path / "failed"
+    code = ("import sys\nfrom pyfem import cli, output\n"
+            "sample = output.RunWriter.sample\n"
+            "def failing(self, *args, **kwargs):\n"
+            "    if self._sample_count == 30:\n        raise OSError(28, 'No space left on device')\n"
+            "    return sample(self, *args, **kwargs)\n"
+            "output.RunWriter.sample = failing\n"
+            f"sys.exit(cli.main(['run', {SCENES['damage'][0]!r}, '--out', {str(out)!r}]))\n")
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-c", code],
+                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=300)
+    assert result.returncode != 0 and "No space left on device" in result.stderr
+    failed = summary(out)
+    assert failed["status"] == "failed" and failed["time_reached"] == pytest.approx(29 * 0.005)
+    assert "nonlinear_regions" not in failed and "whole state" in failed["nonlinear_regions_note"]
+
+
 def test_a_directory_of_the_users_files_is_refused_under_mpirun_too(tmp_path):
     """A file of the user's in the run directory: one line, exit 2, before anything is shared, and the
     file as it was."""
