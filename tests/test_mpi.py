@@ -334,11 +334,13 @@ def rank_pids(mpirun_pid: int) -> dict:
     return ranks
 
 
-def test_sigterm_to_one_rank_stops_every_rank_with_a_whole_checkpoint_that_resumes(tmp_path):
-    """SIGTERM to rank 1 only, mid-run, of the damage scene (a yielding layer: per-point state):
-    every rank stops at the same sample, rank 0 gathers the whole state (the samples in between
-    gather only what they read) and writes the checkpoint and an "interrupted" run.json; resumed on
-    2 ranks, the histories equal the uninterrupted 2-rank run's byte for byte."""
+@pytest.mark.parametrize("target", ["rank 1", "mpirun"])
+def test_a_stop_signal_stops_every_rank_with_a_whole_checkpoint_that_resumes(tmp_path, target):
+    """SIGTERM to rank 1 only, or Ctrl-C (SIGINT) to mpirun, which passes it to every rank, mid-run,
+    of the damage scene (a yielding layer: per-point state): every rank stops at the same sample,
+    rank 0 gathers the whole state (the samples in between gather only what they read) and writes
+    the checkpoint and an "interrupted" run.json; resumed on 2 ranks, the histories equal the
+    uninterrupted 2-rank run's byte for byte."""
     scene, _ = SCENES["damage"]
     settings = ("--set", "time.duration=1.5", "--set", "output.checkpoint_interval=0")
     reference, out = tmp_path / "reference", tmp_path / "stopped"
@@ -353,7 +355,10 @@ def test_sigterm_to_one_rank_stops_every_rank_with_a_whole_checkpoint_that_resum
         assert process.poll() is None, "the run ended before the signal"
         assert time.monotonic() < deadline, "no samples after 300 s"
         time.sleep(0.05)
-    os.kill(rank_pids(process.pid)[1], signal.SIGTERM)
+    if target == "mpirun":
+        process.send_signal(signal.SIGINT)
+    else:
+        os.kill(rank_pids(process.pid)[1], signal.SIGTERM)
     _, stderr = process.communicate(timeout=300)
     stopped = summary(out)
     assert process.returncode != 0 and stopped["status"] == "interrupted", stderr[-2000:]
