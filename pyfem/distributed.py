@@ -503,6 +503,10 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
             out[src + "initial_stress"] = sigma0_rows.tobytes() if sigma0_rows is not None else b""
         for scalar, value in totals.items():
             out[src + scalar] = np.array([value]).tobytes()
+    if not points:  # the template's per-point blocks: not read, so not copied into the kernel
+        per_point = {"stepper/internal_force"} | {f"component/{k}/{block}" for k in range(len(regions))
+                                                  for block in ("points", "state", "initial_stress")}
+        out = {key: value for key, value in out.items() if key not in per_point}
     return out
 
 
