@@ -696,13 +696,16 @@ class DistributedStepper:
         cells = sum(len(rows) for region in self.mine.cells.values() for kind, rows in region if kind == "counted")
         halo = sum(len(rows) for region in self.mine.cells.values() for kind, rows in region if kind == "halo")
         pairs = 0 if self.mine.pairs is None else len(self.mine.pairs)
+        from pyfem.output import peak_memory_mib
+
         counts = self.comm.gather((self.mine.n_owned, len(self.mine.nodes) - self.mine.n_owned,
                                    int(self.exchange.bytes_sent_per_step), cells, halo, pairs,
-                                   *self._sent[False], *self._sent[True]), root=0)
+                                   *self._sent[False], *self._sent[True], round(peak_memory_mib(), 1)), root=0)
         if self.comm.rank != 0:
             return {}
         columns = ("owned_nodes", "ghost_nodes", "bytes_sent_per_step", "element_loop_cells", "halo_cells", "pairs",
-                   "light_merges", "bytes_per_light_merge", "whole_merges", "bytes_per_whole_merge")
+                   "light_merges", "bytes_per_light_merge", "whole_merges", "bytes_per_whole_merge",
+                   "peak_memory_mib")
         return {"ranks": self.comm.size, **{name: [c[k] for c in counts] for k, name in enumerate(columns)},
                 "setup_seconds": round(self.setup_seconds, 3)}
 

@@ -738,6 +738,9 @@ class RunWriter:
             summary["checkpoints"] = checkpoints
         if mpi:
             summary["mpi"] = mpi
+        # This process's peak resident memory over the sitting (model build, static stage, run);
+        # under mpirun rank 0's, every rank's in "mpi".
+        summary["peak_memory_mib"] = round(peak_memory_mib(), 1)
         self._partial_summary()
         self._plots()
         _write_json(self.out_dir / "run.json", summary)
@@ -989,6 +992,13 @@ class RunWriter:
         if self.xdmf is not None:
             self.xdmf.__exit__(None, None, None)
             self.xdmf = None
+
+
+def peak_memory_mib() -> float:
+    """The process's peak resident set size so far (MiB; getrusage's ru_maxrss, KiB on Linux)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _face_report(model) -> list:
