@@ -738,8 +738,9 @@ class RunWriter:
             summary["checkpoints"] = checkpoints
         if mpi:
             summary["mpi"] = mpi
-        # This process's peak resident memory over the sitting (model build, static stage, run);
-        # under mpirun rank 0's, every rank's in "mpi".
+        # The process's peak resident memory so far: for `pyfem run`, the model build, static stage
+        # and run of this sitting; a run called in-process after other work includes that work.
+        # Under mpirun rank 0's; every rank's in "mpi".
         summary["peak_memory_mib"] = round(peak_memory_mib(), 1)
         self._partial_summary()
         self._plots()

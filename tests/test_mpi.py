@@ -175,8 +175,11 @@ def test_mpirun_equals_the_serial_run(runs, name, ranks):
     assert all(n > 0 for n in mpi["owned_nodes"]) and all(n > 0 for n in mpi["ghost_nodes"])
     assert all(b > 0 for b in mpi["bytes_sent_per_step"])
     assert "mpi" not in serial
-    # Every rank builds the whole model, so it holds at least what the serial run's arrays take.
-    assert all(peak >= 0.5 * serial["peak_memory_mib"] for peak in mpi["peak_memory_mib"])
+    # Every rank builds the whole model: the other ranks' peak memory is of rank 0's size (rank 0
+    # also holds the writer). (The serial run here is in the test's process: its peak is that
+    # process's, whatever it ran before.)
+    assert all(0.5 * mpi["peak_memory_mib"][0] <= peak <= 1.5 * mpi["peak_memory_mib"][0]
+               for peak in mpi["peak_memory_mib"])
     worst = assert_equal_to_serial(runs[name, ranks], runs[name, 1], NET_FORCE_TOLERANCE.get(name))
     for monitor, peaks in serial["monitors"].items():
         for key, value in peaks.items():
