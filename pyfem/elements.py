@@ -110,6 +110,23 @@ class ElementArrays:
                        if isinstance(getattr(self, f.name), np.ndarray)))
 
 
+def blank_point_values(found: np.ndarray) -> dict:
+    """The law values of m points before any is read: {"found" (m,) bool, "stress" (m, 6) Voigt (Pa;
+    NaN where not found), "damage" (m,), "damage_type" (m,) int32, "plastic_strain" (m,)} (0 where
+    not found). `read_point_values` gives the same keys but "found"."""
+    m = len(found)
+    return {"found": np.asarray(found, dtype=bool), "stress": np.full((m, 6), np.nan), "damage": np.zeros(m),
+            "damage_type": np.zeros(m, dtype=np.int32), "plastic_strain": np.zeros(m)}
+
+
+def read_point_values(component, points: np.ndarray) -> dict:
+    """The committed law values at one component's points (kernel point indices, int64), one batch
+    read per accessor: the keys of `blank_point_values` but "found"."""
+    return {"stress": np.asarray(component.stress(points)), "damage": np.asarray(component.damage(points)),
+            "damage_type": np.asarray(component.damage_type(points)),
+            "plastic_strain": np.asarray(component.plastic_strain(points))}
+
+
 @dataclasses.dataclass
 class NonlinearRegions:
     """The element-loop regions of a model and the stiffness of all other cells.
@@ -191,21 +208,14 @@ class NonlinearRegions:
 
     def point_values(self, locations: typing.Sequence) -> dict:
         """The committed state at points given as `nearest_point` gives them (None: not in a
-        component): {"found" (m,) bool, "stress" (m, 6) Voigt (Pa; NaN where not found),
-        "damage" (m,), "damage_type" (m,) int32, "plastic_strain" (m,)} (0 where not found)."""
-        m = len(locations)
-        values = {"found": np.array([found is not None for found in locations], dtype=bool),
-                  "stress": np.full((m, 6), np.nan), "damage": np.zeros(m),
-                  "damage_type": np.zeros(m, dtype=np.int32), "plastic_strain": np.zeros(m)}
+        component): `blank_point_values` filled by `read_point_values` of each component."""
+        values = blank_point_values(np.array([found is not None for found in locations], dtype=bool))
         for index, component in enumerate(self.components):
             rows = [j for j, found in enumerate(locations) if found is not None and found[0] == index]
-            if not rows:
-                continue
-            points = np.array([locations[j][1] for j in rows], dtype=np.int64)
-            values["stress"][rows] = component.stress(points)
-            values["damage"][rows] = component.damage(points)
-            values["damage_type"][rows] = component.damage_type(points)
-            values["plastic_strain"][rows] = component.plastic_strain(points)
+            if rows:
+                points = np.array([locations[j][1] for j in rows], dtype=np.int64)
+                for key, read in read_point_values(component, points).items():
+                    values[key][rows] = read
         return values
 
     def _active(self, components) -> list:

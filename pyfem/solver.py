@@ -188,12 +188,11 @@ def earthquake_clock(scene: Scene, processed=None) -> tuple[float, float]:
     filter's quiet precursor, not shaking: the paper's t = 0 is the window's start. The record
     is the one the seismic input is driven with: `processed` (pyfem.seismic.setup.scene_record),
     processed here when None."""
-    if (scene.get("wave") or {}).get("motion", {}).get("record") is None:
-        return 0.0, float(scene["time"]["duration"])
-    if processed is None:
-        from pyfem.seismic.setup import scene_record
+    from pyfem.seismic.setup import scene_record
 
-        processed = scene_record(scene)
+    processed = scene_record(scene) if processed is None else processed
+    if processed is None:
+        return 0.0, float(scene["time"]["duration"])
     start, end = processed.window
     return float(processed.record_start), float(end - start)
 
@@ -938,10 +937,15 @@ def distributed_plan(simulation: Simulation) -> dict:
     shares = [distributed.share(simulation, parts, rank) for rank in range(comm.size)]
     owned = [mine.n_owned for mine in shares]
     ghosts = [len(mine.nodes) - mine.n_owned for mine in shares]
+    stage_words = ""
+    if "static" in simulation.scene:
+        from pyfem.static import uses_relaxation
+
+        stage_words = (", the static stage's relaxation steps shared like the motion's" if uses_relaxation(simulation.scene)
+                       else " and solves the (linear) static stage")
     return {"MPI ranks": f"{comm.size}: owned nodes {owned}, ghost nodes {ghosts} ({48 * max(ghosts):,} bytes "
                          f"received per step by the busiest rank); every rank builds the whole model"
-                         + (" and solves the static stage" if "static" in simulation.scene else "")
-                         + "; the time estimate above is one rank's for the whole model"}
+                         + stage_words + "; the time estimate above is one rank's for the whole model"}
 
 
 def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:

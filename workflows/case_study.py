@@ -137,13 +137,14 @@ def displacement(columns: dict) -> np.ndarray:
     return np.column_stack([columns["ux"], columns["uy"], columns["uz"]])
 
 
-def load_run(directory: pathlib.Path) -> dict | None:
-    """run.json, monitors and pairs of a finished run, or None if it has not finished."""
+def load_run(directory: pathlib.Path, finished_only: bool = True) -> dict | None:
+    """run.json, monitors and pairs of a run, or None if it has no run.json or, with
+    `finished_only`, has not finished (without it a run still going is read up to where it is)."""
     summary_path = directory / "run.json"
     if not summary_path.exists():
         return None
     summary = json.loads(summary_path.read_text())
-    if summary.get("status") != "finished":
+    if finished_only and summary.get("status") != "finished":
         return None
     monitors = {path.stem: read_csv(path) for path in sorted((directory / "monitors").glob("*.csv"))}
     pairs = {path.stem: read_csv(path) for path in sorted((directory / "pairs").glob("*.csv"))} \

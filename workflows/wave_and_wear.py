@@ -24,17 +24,20 @@ import numpy as np
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "workflows"))
-from case_study import CROWN_PAIR, WALL_PAIRS, _pyplot, displacement, read_csv  # noqa: E402
+from case_study import CROWN_PAIR, WALL_PAIRS, _pyplot, displacement, load_run  # noqa: E402
 
 CM = 100.0
 STATES = ("bonded", "stick", "sliding", "separated")
 
 
 def read(directory: pathlib.Path) -> dict:
-    summary = json.loads((directory / "run.json").read_text())
-    monitors = {p.stem: read_csv(p) for p in sorted((directory / "monitors").glob("*.csv"))}
-    pairs = {p.stem: read_csv(p) for p in sorted((directory / "pairs").glob("*.csv"))}
-    return {"summary": summary, "monitors": monitors, "pairs": pairs, "dir": directory}
+    """`case_study.load_run` of a run finished or not; exit 2 naming a directory without a run."""
+    run = load_run(directory, finished_only=False)
+    if run is None:
+        print(f"wave_and_wear: {directory} holds no run.json (expected a run directory of pyfem run)",
+              file=sys.stderr)
+        sys.exit(2)
+    return run
 
 
 def numbers(run: dict) -> dict:
