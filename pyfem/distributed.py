@@ -312,6 +312,30 @@ def _local_contact(arrays: dict, mine: Share):
     return make_contact_pairs(local)
 
 
+def _add_constraints(stepper, constraints, mine: Share) -> None:
+    """The share's constraints (`mine.constraints`, indices into `constraints`) in local numbering."""
+    if constraints is not None:
+        stepper.set_constraints(np.ascontiguousarray(mine.local_of[constraints.nodes[mine.constraints]], dtype=np.int32),
+                                np.ascontiguousarray(constraints.projection[mine.constraints]))
+
+
+def _add_components(stepper, nonlinear, regions: list, mine: Share) -> tuple[list, list]:
+    """Element-loop components of the share's cells of `regions` (counted and halo), added to the
+    stepper in region order. Fresh (no initial stress): the state comes with slice_state.
+
+    Returns:
+        (components, objects) as `local_stepper` returns them.
+    """
+    components, objects = [], []
+    for name in regions:
+        for kind, cells in mine.cells[name]:
+            component = nonlinear.new_component(name, initial_stress=None, rows=cells, node_numbers=mine.local_of)
+            stepper.add_internal_force(component, count_energy=kind == "counted")
+            components.append((name, kind, cells))
+            objects.append(component)
+    return components, objects
+
+
 def local_stepper(simulation, mine: Share, exchange):
     """The kernel's Stepper of one rank's share: `pyfem.solver.make_stepper`'s objects restricted to
     the share (an effect added there must be added here too; tests/test_mpi.py runs each).
@@ -332,10 +356,7 @@ def local_stepper(simulation, mine: Share, exchange):
         stepper.set_dashpots(np.ascontiguousarray(mine.local_of[simulation.dashpot_nodes[mine.dashpots]],
                                                   dtype=np.int32),
                              np.ascontiguousarray(simulation.dashpot_matrices[mine.dashpots]))
-    if simulation.constraints is not None:
-        c = simulation.constraints
-        stepper.set_constraints(np.ascontiguousarray(mine.local_of[c.nodes[mine.constraints]], dtype=np.int32),
-                                np.ascontiguousarray(c.projection[mine.constraints]))
+    _add_constraints(stepper, simulation.constraints, mine)
     if simulation.input_arrays is not None:
         stepper.add_seismic_input(seismic_input_kernel(_owned_input_arrays(simulation.input_arrays, mine)))
     contact = None
@@ -344,14 +365,7 @@ def local_stepper(simulation, mine: Share, exchange):
         stepper.add_contact(contact)
     components, objects = [], []
     if simulation.nonlinear is not None:
-        for name in simulation.nonlinear.arrays:
-            for kind, cells in mine.cells[name]:
-                # Fresh (no initial stress): the state comes with slice_state.
-                component = simulation.nonlinear.new_component(name, initial_stress=None, rows=cells,
-                                                               node_numbers=mine.local_of)
-                stepper.add_internal_force(component, count_energy=kind == "counted")
-                components.append((name, kind, cells))
-                objects.append(component)
+        components, objects = _add_components(stepper, simulation.nonlinear, list(simulation.nonlinear.arrays), mine)
     if simulation.static is not None:  # the stage's out-of-balance on the owned nodes (pyfem/static.py)
         from pyfem.static import add_hand_over_force
 
@@ -592,25 +606,27 @@ class DistributedStepper:
         return self.comm.allreduce(local, op=MPI.LAND)
 
     def _gather_point_values(self) -> None:
-        rows = []
-        for j, component, point in self._points:
-            at = np.array([point], dtype=np.int64)
-            rows.append((j, np.asarray(component.stress(at))[0], float(component.damage(at)[0]),
-                         int(component.damage_type(at)[0]), float(component.plastic_strain(at)[0])))
-        pieces = self.comm.gather(rows, root=0)
+        """The monitors' law values into rank 0: each rank reads the points of the cells it counts,
+        one batch per component (`read_point_values`), rank 0 fills `blank_point_values` with them."""
+        from pyfem.elements import blank_point_values, read_point_values
+
+        pieces_here = []
+        for component in {id(component): component for _, component, _ in self._points}.values():
+            mine = [(j, point) for j, owner, point in self._points if owner is component]
+            read = read_point_values(component, np.array([point for _, point in mine], dtype=np.int64))
+            pieces_here.append((np.array([j for j, _ in mine], dtype=np.int64), read))
+        pieces = self.comm.gather(pieces_here, root=0)
         if self.comm.rank != 0 or not self._kernel_points:
             return
-        m = len(self._kernel_points)
-        values = {"found": np.array([found is not None for found in self._kernel_points], dtype=bool),
-                  "stress": np.full((m, 6), np.nan), "damage": np.zeros(m),
-                  "damage_type": np.zeros(m, dtype=np.int32), "plastic_strain": np.zeros(m)}
-        received = [row for piece in pieces for row in piece]
-        if len(received) != int(values["found"].sum()):  # each found point is counted by one rank
-            raise RuntimeError(f"monitor law values: {len(received)} points read by the ranks, "
+        values = blank_point_values(np.array([found is not None for found in self._kernel_points], dtype=bool))
+        received = [piece for rank_pieces in pieces for piece in rank_pieces]
+        count = sum(len(rows) for rows, _ in received)
+        if count != int(values["found"].sum()):  # each found point is counted by one rank
+            raise RuntimeError(f"monitor law values: {count} points read by the ranks, "
                                f"{int(values['found'].sum())} monitors in nonlinear cells")
-        for j, stress, damage, damage_type, plastic in received:
-            values["stress"][j], values["damage"][j] = stress, damage
-            values["damage_type"][j], values["plastic_strain"][j] = damage_type, plastic
+        for rows, read in received:
+            for key, column in read.items():
+                values[key][rows] = column
         self._values = values
 
     def _gather(self, u, v, a, whole: bool) -> None:
@@ -708,6 +724,120 @@ class DistributedStepper:
                    "peak_memory_mib")
         return {"ranks": self.comm.size, **{name: [c[k] for c in counts] for k, name in enumerate(columns)},
                 "setup_seconds": round(self.setup_seconds, 3)}
+
+
+# --- The static stage's relaxation on the ranks (pyfem/static.py, pyfem/relaxation.py) ---
+
+@dataclasses.dataclass
+class StageModel:
+    """What slice_state and merge_states read of a relaxation stage's stepper: its pairs and its
+    active element-loop regions, in the serial stage stepper's order (stage 1 leaves the regions
+    installed later out)."""
+
+    contact_arrays: dict | None
+    nonlinear: "ActiveRegions | None"
+
+
+class ActiveRegions:
+    """A NonlinearRegions restricted to the regions a stage steps (`arrays` in the given order)."""
+
+    def __init__(self, nonlinear, regions: list) -> None:
+        self.arrays = {name: nonlinear.arrays[name] for name in regions}
+
+
+class DistributedStage:
+    """One relaxation stage's stepper shared among the ranks behind the Stepper calls of
+    `pyfem.relaxation.relax`: the serial stage stepper (matrix, scaled mass, held faces, ramped load,
+    element-loop components, pairs) cut into the dynamic run's shares (`partition` of the
+    simulation: the same owners, ghosts and cells). run() steps each rank's share and puts the whole
+    u, v, a on every rank (one allgather per relax chunk), so that relax's norms, damping and
+    convergence are the same on every rank; `gathered` puts every rank's kernel state into the
+    serial stage stepper on every rank at the stage's end (its components, pairs and reactions are
+    then the whole model's, as after a serial stage).
+
+    Args:
+        simulation: pyfem.solver.Simulation being prepared (model, nonlinear, contact arrays).
+        parts: `partition(simulation, comm.size)`.
+        serial: the serial stage stepper (pyfem.static._stage_stepper), its state the stage's start.
+        stiffness: (3n, 3n) the stage's matrix cells (N/m), a sparsity inside the simulation's.
+        mass: (n,) the stage's scaled nodal masses (kg in pseudo time).
+        constraints: the stage's held faces (pyfem.solver constraints) or None.
+        load: (3n,) the stage's load (N); ramp: pseudo time over which it rises.
+        regions: the element-loop regions the serial stepper has, in its order.
+        contact_arrays: the stage's pair arrays (no deterioration) or None.
+        comm: the MPI communicator.
+    """
+
+    def __init__(self, simulation, parts: Partition, serial, stiffness, mass: np.ndarray, constraints,
+                 load: np.ndarray, ramp: float, regions: list, contact_arrays: dict | None, comm) -> None:
+        from pyfem import _kernels
+        from pyfem.relaxation import PSEUDO_STEP
+        from pyfem.static import hand_over_force_provider
+
+        self.serial, self.comm, self.parts = serial, comm, parts
+        self.model = StageModel(contact_arrays, None if simulation.nonlinear is None
+                                else ActiveRegions(simulation.nonlinear, regions))
+        self.shares = []
+        for rank in range(comm.size):
+            whole = share(simulation, parts, rank)
+            held = None if constraints is None else np.flatnonzero(parts.node_owner[constraints.nodes] == rank)
+            self.shares.append(dataclasses.replace(whole, constraints=held))
+        mine = self.mine = self.shares[comm.rank]
+        self._owned_rows = [_dof_rows(s.nodes[:s.n_owned]) for s in self.shares]
+        self.exchange = _exchange(comm, parts, mine)
+        stiffness = stiffness.tobsr(blocksize=(3, 3))
+        if np.any(mine.local_of[_block_neighbours(stiffness, mine.nodes[:mine.n_owned])] < 0):
+            raise RuntimeError("the static stage's matrix couples an owned node to one the share lacks")
+        indptr, indices, blocks = local_matrix(stiffness, mine)
+        kernel = _kernels.Stepper(indptr, indices, blocks, np.ascontiguousarray(mass[mine.nodes]), PSEUDO_STEP,
+                                  0.0, 0.0)
+        _add_constraints(kernel, constraints, mine)
+        local_load = np.zeros((len(mine.nodes), 3))
+        owned = mine.nodes[:mine.n_owned]
+        local_load[:mine.n_owned] = np.asarray(load, dtype=np.float64).reshape(-1, 3)[owned]
+        if np.any(local_load):
+            kernel.add_seismic_input(hand_over_force_provider(local_load.reshape(-1), ramp))
+        self.components = []
+        if self.model.nonlinear is not None:
+            self.components, _ = _add_components(kernel, simulation.nonlinear, regions, mine)
+        if contact_arrays is not None:
+            kernel.add_contact(_local_contact(contact_arrays, mine))
+        kernel.set_partition(mine.n_owned, self.exchange)
+        self.kernel = kernel
+        self.all_components = comm.allgather(self.components)
+        self.serial_template = serial.save_state()
+        kernel.load_state(slice_state(self.serial_template, kernel.save_state(), self.model, parts, mine,
+                                      comm.rank, self.components))
+        self._local = None
+
+    @property
+    def n_dofs(self) -> int:
+        return self.serial.n_dofs
+
+    def set_mass_damping(self, alpha: float) -> None:
+        self.kernel.set_mass_damping(alpha)
+
+    def run(self, u, v, a, n_steps: int, t0: float) -> float:
+        """Steps the share from the whole u, v, a given at the first call (relax does not change
+        them between calls), then writes every rank's owned rows into u, v, a on every rank."""
+        if self._local is None:
+            rows = _dof_rows(self.mine.nodes)
+            self._local = tuple(np.ascontiguousarray(x[rows]) for x in (u, v, a))
+        lu, lv, la = self._local
+        end = self.kernel.run(lu, lv, la, n_steps, t0)
+        n = 3 * self.mine.n_owned
+        pieces = self.comm.allgather(np.stack([lu[:n], lv[:n], la[:n]]))
+        for piece, rows in zip(pieces, self._owned_rows):
+            u[rows], v[rows], a[rows] = piece
+        return end
+
+    def gathered(self):
+        """The serial stage stepper with every rank's kernel state merged in (a collective; on every
+        rank): its components, pairs and reactions are the stage's end, as after a serial stage."""
+        states = self.comm.allgather(self.kernel.save_state())
+        self.serial.load_state(merge_states(self.serial_template, states, self.model, self.parts, self.shares,
+                                            self.all_components))
+        return self.serial
 
 
 def abort_all(error: BaseException) -> None:

@@ -644,6 +644,19 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
     basis_full = (basis_rock if not len(installed_cells)
                   else free_basis(n_nodes, held_nodes, held_projection, pairs, np.zeros(0, dtype=np.int64)))
     check_held(basis_rock, model.node_coords, inactive, boundary)
+    # Under mpirun each stage is stepped by the ranks, cut as the dynamic run will be (its partition).
+    comm = world()
+    parts = partition(simulation, comm.size) if comm.size > 1 else None
+    stage_pairs = None if contact is None else dict(simulation.contact_arrays, deterioration=None)
+
+    def stage_stepper(stiffness, load, active, regions, stage_contact, ramp=0.0):
+        """The stage's kernel stepper: serial, or shared among the ranks (`DistributedStage`)."""
+        serial = _stage_stepper(stiffness, mass, constraints, load, active, stage_contact, ramp)
+        if parts is None:
+            return serial
+        return DistributedStage(simulation, parts, serial, stiffness, mass, constraints, load, ramp, regions,
+                                stage_pairs, comm)
+
     relaxation = settings["relaxation"]
     f_exc = loads.excavation.ravel()
     support_load = (1.0 - relaxation) * f_exc + loads.installed_weight.ravel()
@@ -778,6 +791,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     Returns:
         StaticState, with `components` and `contact` for the dynamic run.
     """
+    from pyfem.distributed import DistributedStage, partition, world
     from pyfem.elements import add_matrices, linear_stiffness, plastic_frequency_factor, scene_laws
     from pyfem.relaxation import probe_frequency, ramp_length, relax, scaled_mass
     from pyfem.solver import make_contact_pairs
@@ -825,6 +839,19 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     if simulation.contact_arrays is not None:
         contact = make_contact_pairs(dict(simulation.contact_arrays, deterioration=None))
 
+    # Under mpirun each stage is stepped by the ranks, cut as the dynamic run will be (its partition).
+    comm = world()
+    parts = partition(simulation, comm.size) if comm.size > 1 else None
+    stage_pairs = None if contact is None else dict(simulation.contact_arrays, deterioration=None)
+
+    def stage_stepper(stiffness, load, active, regions, stage_contact, ramp=0.0):
+        """The stage's kernel stepper: serial, or shared among the ranks (`DistributedStage`)."""
+        serial = _stage_stepper(stiffness, mass, constraints, load, active, stage_contact, ramp)
+        if parts is None:
+            return serial
+        return DistributedStage(simulation, parts, serial, stiffness, mass, constraints, load, ramp, regions,
+                                stage_pairs, comm)
+
     relaxation = settings["relaxation"]
     f_exc = loads.excavation.ravel()
     if contact is not None:
@@ -845,7 +872,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         elastic = linear_stiffness(model, installed_cells) if len(installed_cells) else model.stiffness
         probe_contact = None if contact is None else make_contact_pairs(dict(simulation.contact_arrays,
                                                                              deterioration=None))
-        omega, probe_steps = probe_frequency(_stage_stepper(elastic, mass, constraints, probe_load, [], probe_contact),
+        omega, probe_steps = probe_frequency(stage_stepper(elastic, probe_load, [], [], probe_contact),
                                              mass, probe_load, max_steps, floor=floor)
         ramp = ramp_length(omega)
     stages, increments, reactions = [], [], []
@@ -864,11 +891,14 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
                     components[k] = nonlinear.new_component(region, initial_stress=None)
         load = fraction * f_exc + carried + (loads.installed_weight.ravel() if index == 1 else 0.0)
         active = [component for component in components if component is not None]
-        stepper = _stage_stepper(stiffness, mass, constraints, load, active, contact, ramp)
+        active_regions = [region for region, component in zip(element_regions, components) if component is not None]
+        stepper = stage_stepper(stiffness, load, active, active_regions, contact, ramp)
         u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor,
                           report=lambda steps, ratio, seconds, name=name: print(
                               f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), "
                               f"out-of-balance {ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True))
+        if parts is not None:  # the ranks' state into the serial stage stepper and its components, on every rank
+            stepper = stepper.gathered()
         for component in active:
             component.rebase()
         if contact is not None:
@@ -919,7 +949,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
                                                 for face in model.faces},
                         boundary=boundary, seconds=time.perf_counter() - start,
                         settings=dict(settings, tolerance=tolerance, load_ramp_steps=ramp,
-                                      probe_steps=probe_steps),
+                                      probe_steps=probe_steps, ranks=comm.size),
                         components=components, contact=contact)
     state.cell_state_first = cell_state_first
     state.cell_state = _cell_state(model, nonlinear, components)
