@@ -644,19 +644,6 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
     basis_full = (basis_rock if not len(installed_cells)
                   else free_basis(n_nodes, held_nodes, held_projection, pairs, np.zeros(0, dtype=np.int64)))
     check_held(basis_rock, model.node_coords, inactive, boundary)
-    # Under mpirun each stage is stepped by the ranks, cut as the dynamic run will be (its partition).
-    comm = world()
-    parts = partition(simulation, comm.size) if comm.size > 1 else None
-    stage_pairs = None if contact is None else dict(simulation.contact_arrays, deterioration=None)
-
-    def stage_stepper(stiffness, load, active, regions, stage_contact, ramp=0.0):
-        """The stage's kernel stepper: serial, or shared among the ranks (`DistributedStage`)."""
-        serial = _stage_stepper(stiffness, mass, constraints, load, active, stage_contact, ramp)
-        if parts is None:
-            return serial
-        return DistributedStage(simulation, parts, serial, stiffness, mass, constraints, load, ramp, regions,
-                                stage_pairs, comm)
-
     relaxation = settings["relaxation"]
     f_exc = loads.excavation.ravel()
     support_load = (1.0 - relaxation) * f_exc + loads.installed_weight.ravel()
