@@ -2,8 +2,11 @@
 
 docs/scaling.md "The distributed step" is the design; this is its first implementation:
 
-- Every rank builds the whole serial model (mesh, matrices, static stage: the same bits on every
-  rank) and the serial stepper, whose state is the run's state in one place. The nodes are then
+- Every rank builds the whole serial model (mesh, matrices: the same bits on every rank) and the
+  serial stepper, whose state is the run's state in one place. The static stage's relaxation
+  (pyfem/static.py) is stepped by the ranks too, in the same shares (`DistributedStage`); its end
+  state is merged into the serial stage stepper on every rank, so every rank hands the same stage
+  over (a linear stage, one PETSc solve, is still solved whole by every rank). The nodes are then
   split among the ranks (recursive coordinate bisection weighted by each node's work, `node_work`:
   the element loop's points and the pairs count; the nodes of pairs that share nodes go to one
   rank together, so every contact pair is whole on one rank).
@@ -21,8 +24,8 @@ docs/scaling.md "The distributed step" is the design; this is its first implemen
   in a serial run; a checkpoint is the serial one, and `--resume` slices it again (any rank count).
 
 Not done yet (docs/scaling.md): dolfinx's distributed mesh and assembly (the model is replicated,
-so memory does not fall with the ranks), the static stage in parallel (each rank solves it),
-fields written in parallel, overlapping the exchange with the interior rows.
+so memory does not fall with the ranks), the linear static stage's solve in parallel (each rank
+solves it), fields written in parallel, overlapping the exchange with the interior rows.
 """
 
 from __future__ import annotations

@@ -942,7 +942,7 @@ def distributed_plan(simulation: Simulation) -> dict:
         from pyfem.static import uses_relaxation
 
         stage_words = (", the static stage's relaxation steps shared like the motion's" if uses_relaxation(simulation.scene)
-                       else " and solves the (linear) static stage")
+                       else ", the static stage's PETSc solves shared (a block of rows each)")
     return {"MPI ranks": f"{comm.size}: owned nodes {owned}, ghost nodes {ghosts} ({48 * max(ghosts):,} bytes "
                          f"received per step by the busiest rank); every rank builds the whole model"
                          + stage_words + "; the time estimate above is one rank's for the whole model"}

@@ -445,28 +445,45 @@ class LinearSolver:
     Direct (MUMPS Cholesky when PETSc has MUMPS, else PETSc's LU) up to DIRECT_SOLVER_LIMIT
     unknowns or when asked; above, CG with smoothed-aggregation AMG (GAMG) given the rigid-body
     modes as near null space, to the relative residual `tolerance`.
+
+    Under `mpirun -n N` (`comm` of more than one rank) the ranks solve it together: each holds a
+    contiguous block of the matrix's rows (PETSc's MPIAIJ; the matrix, replicated, is cut here),
+    MUMPS factorises in parallel (PETSc's own LU is serial only: without MUMPS the ranks use CG +
+    GAMG), and every rank receives the whole solution.
     """
 
     def __init__(self, matrix: sp.csr_matrix, tolerance: float, choice: str = "auto",
-                 near_null_space: np.ndarray | None = None):
+                 near_null_space: np.ndarray | None = None, comm=None):
         from petsc4py import PETSc
 
         n = matrix.shape[0]
         self.method = choice if choice != "auto" else ("direct" if n <= DIRECT_SOLVER_LIMIT else "iterative")
+        parallel = comm is not None and comm.size > 1
+        has_mumps = PETSc.Sys.hasExternalPackage("mumps")
+        if parallel and self.method == "direct" and not has_mumps:
+            self.method = "iterative"
         self.tolerance = tolerance
         self.matrix = matrix
+        self.comm = comm if parallel else None
+        # This rank's rows [first, last): all of them on one rank.
+        rank, size = (comm.rank, comm.size) if parallel else (0, 1)
+        self.first, self.last = n * rank // size, n * (rank + 1) // size
+        petsc_comm = PETSc.COMM_WORLD if parallel else PETSc.COMM_SELF
+        self._petsc_comm = petsc_comm
         matrix = matrix.tocsr()
         matrix.sort_indices()
-        csr = (matrix.indptr.astype(PETSc.IntType), matrix.indices.astype(PETSc.IntType),
-               np.ascontiguousarray(matrix.data, dtype=np.float64))
-        self._A = PETSc.Mat().createAIJ(size=(n, n), csr=csr, comm=PETSc.COMM_SELF)
+        rows = matrix[self.first:self.last]
+        local = self.last - self.first
+        csr = (rows.indptr.astype(PETSc.IntType), rows.indices.astype(PETSc.IntType),
+               np.ascontiguousarray(rows.data, dtype=np.float64))
+        self._A = PETSc.Mat().createAIJ(size=((local, n), (local, n)), csr=csr, comm=petsc_comm)
         self._A.assemble()
-        ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        ksp = PETSc.KSP().create(petsc_comm)
         ksp.setOperators(self._A)
         pc = ksp.getPC()
         if self.method == "direct":
             ksp.setType("preonly")
-            if PETSc.Sys.hasExternalPackage("mumps"):
+            if has_mumps:
                 pc.setType("cholesky")
                 pc.setFactorSolverType("mumps")
                 self.name = "direct (MUMPS Cholesky)"
@@ -479,16 +496,24 @@ class LinearSolver:
             pc.setType("gamg")
             if near_null_space is not None and near_null_space.shape[1]:
                 basis, _ = np.linalg.qr(near_null_space)
-                vectors = [PETSc.Vec().createWithArray(np.ascontiguousarray(column), comm=PETSc.COMM_SELF)
-                           for column in basis.T]
-                self._null_space = PETSc.NullSpace().create(vectors=vectors, comm=PETSc.COMM_SELF)
+                vectors = [self._vector(column) for column in basis.T]
+                self._null_space = PETSc.NullSpace().create(vectors=vectors, comm=petsc_comm)
                 self._A.setNearNullSpace(self._null_space)
             ksp.setTolerances(rtol=tolerance, atol=0.0, max_it=max(1000, 10 * int(math.sqrt(n))))
             self.name = "iterative (CG + GAMG)"
+        if parallel:
+            self.name += f" on {size} MPI ranks"
         self._ksp = ksp
 
+    def _vector(self, whole: np.ndarray):
+        """A PETSc vector of this rank's rows of `whole` (n,) (copied)."""
+        from petsc4py import PETSc
+
+        part = np.array(whole[self.first:self.last], dtype=np.float64)
+        return PETSc.Vec().createWithArray(part, size=(len(part), len(whole)), comm=self._petsc_comm)
+
     def solve(self, rhs: np.ndarray) -> tuple[np.ndarray, int, float]:
-        """(w, iterations, ||f - K w|| / ||f||).
+        """(w, iterations, ||f - K w|| / ||f||); w whole on every rank.
 
         Raises:
             RuntimeError: the factorisation failed (a singular stiffness: the model is not held)
@@ -499,7 +524,7 @@ class LinearSolver:
         norm = float(np.linalg.norm(rhs))
         if norm == 0.0:
             return np.zeros_like(rhs), 0, 0.0
-        b = PETSc.Vec().createWithArray(np.ascontiguousarray(rhs, dtype=np.float64), comm=PETSc.COMM_SELF)
+        b = self._vector(rhs)
         x = b.duplicate()
         try:
             self._ksp.solve(b, x)
@@ -508,6 +533,8 @@ class LinearSolver:
                                "singular when the held faces leave the model free to move as a rigid body; "
                                "hold more faces ([static.boundary])") from None
         w = x.getArray().copy()
+        if self.comm is not None:  # every rank's rows, in rank order: the whole solution everywhere
+            w = np.concatenate(self.comm.allgather(w))
         residual = float(np.linalg.norm(rhs - self.matrix @ w)) / norm
         iterations = max(1, self._ksp.getIterationNumber()) if self.method == "iterative" else 1
         # A direct solve is not iterated to the tolerance: a residual far above round-off there means
@@ -622,10 +649,12 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
     Returns:
         StaticState (stresses are added by `hand_over`).
     """
+    from pyfem.distributed import world
     from pyfem.elements import linear_stiffness
 
     start = time.perf_counter()
     check_linear(scene)
+    comm = world()  # under mpirun the ranks share each solve (LinearSolver)
     settings = scene["static"]
     setup = _stage_setup(scene, model)
     boundary, installed_regions, installed_cells, loads = (setup.boundary, setup.installed_regions,
@@ -664,7 +693,7 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
         if key not in solver_cache:
             reduced = (T.T @ (K @ T)).tocsr()
             solver_cache[key] = LinearSolver(reduced, stage_tolerance(scene), settings["solver"],
-                                             near_null_space=T.T @ rigid_body_modes(coordinates))
+                                             near_null_space=T.T @ rigid_body_modes(coordinates), comm=comm)
         solver = solver_cache[key]
         w, iterations, residual = solver.solve(T.T @ load)
         u = T @ w
@@ -707,7 +736,7 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
                        out_of_balance=out_of_balance,
                        pair_forces=pair_forces, face_support_forces=face_support,
                        face_in_situ_tractions=face_traction, boundary=boundary,
-                       seconds=time.perf_counter() - start, settings=dict(settings))
+                       seconds=time.perf_counter() - start, settings=dict(settings, ranks=comm.size))
 
 
 # ---------------------------------------------------------------------------------------------

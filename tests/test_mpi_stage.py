@@ -1,5 +1,6 @@
-"""The static stage's relaxation under `mpirun -n N` equals the serial stage (issue 13, docs/scaling.md
-"The static stage on the ranks").
+"""The static stage under `mpirun -n N` equals the serial stage (issue 13, docs/scaling.md section 6,
+"The static stage on the ranks"): its dynamic relaxation stepped by the ranks, and, at the end of
+this file, a linear stage's PETSc solves on the ranks' row blocks.
 
 The user's model: workflows/scenes/case3_contact_coarse.toml as it is (excavation with the whole load
 released, the lining cast stress-free, Mohr-Coulomb rock around the cavern, concrete lining damage,
@@ -30,6 +31,7 @@ import pytest
 
 from conftest import EXACT, ROUNDOFF
 from pyfem.compare import largest_differences
+from pyfem.static import LINEAR_TOLERANCE
 from test_case_study_stage import SMALL_MODEL
 from test_mpi import MPIRUN, pyfem_run
 
@@ -98,3 +100,84 @@ def test_the_static_stage_on_the_ranks_equals_the_serial_stage(stage_runs, ranks
         assert difference < STAGE_ROUNDOFF.get(kind, ROUNDOFF), (kind, difference)
     run = json.loads((stage_runs[ranks] / "run.json").read_text())
     assert run["status"] == "finished" and run["time_reached"] == pytest.approx(0.05)
+
+
+# --- The linear stage: PETSc's solves shared by the ranks (pyfem/static.py LinearSolver) ---
+
+LINED_TUNNEL = """title = "lined tunnel, linear static stage (MPI test)"
+[mesh]
+builder = "file"
+file = "{mesh}"
+order = 1
+[materials.rock]
+E = 8.0e9
+nu = 0.24
+rho = 2600.0
+[materials.lining]
+E = 28.0e9
+nu = 0.167
+rho = 2500.0
+[time]
+duration = 0.01
+local_stepping = false
+[boundary.face.ymin]
+type = "roller"
+[boundary.face.ymax]
+type = "roller"
+[initial_stress]
+stress = [-5.0e6, -5.0e6, -10.0e6, 0.0, 0.0, 0.0]
+[static]
+excavate = ["excavation"]
+install = ["lining"]
+relaxation = 0.5
+[[monitor]]
+name = "crown"
+point = [60.0, 1.0, 64.8]
+[output]
+xdmf_interval = 0.0
+"""
+
+
+@pytest.fixture(scope="module")
+def linear_runs(tmp_path_factory):
+    """{(solver, ranks): run directory} of a lined tunnel (tests/test_static.py's, meshed coarser)
+    whose linear stage excavates with half the load released, then casts the lining: two different
+    matrices, so two factorisations, on 1 and 2 ranks, by the direct and the iterative solver."""
+    import subprocess
+    import sys
+
+    base = tmp_path_factory.mktemp("mpi_linear_stage")
+    mesh = base / "lined.msh"
+    subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(mesh), "--radius", "5", "--size", "120",
+                    "--lining", "0.5", "--h-far", "12"], check=True, timeout=300, cwd=Path(__file__).parents[1])
+    scene = base / "lined.toml"
+    scene.write_text(LINED_TUNNEL.format(mesh=mesh))
+    out = {}
+    for solver in ("direct", "iterative"):
+        for ranks in (1, 2):
+            out[solver, ranks] = base / f"{solver}_{ranks}"
+            pyfem_run(ranks, str(scene), out[solver, ranks], "--set", f'static.solver="{solver}"')
+    return out
+
+
+@pytest.mark.parametrize("solver", ["direct", "iterative"])
+def test_the_linear_stage_solved_by_two_ranks_equals_the_serial_solve(linear_runs, solver):
+    """Direct (MUMPS Cholesky on the ranks' row blocks): the hand-over to EXACT (measured 1e-14 and
+    5e-14 of the largest cell and monitor stress); iterative (CG + GAMG, whose aggregates differ on 2
+    ranks): each solve stops below the stage's tolerance (static.tolerance's default for a linear
+    stage, LINEAR_TOLERANCE = 1e-8 of ||f||), so the two solutions differ by about that: the test
+    allows it (measured 6e-10 and 7e-10, 20 iterations each)."""
+    serial, shared = stage_report(linear_runs[solver, 1]), stage_report(linear_runs[solver, 2])
+    assert serial["settings"]["ranks"] == 1 and shared["settings"]["ranks"] == 2
+    assert [stage["solver"] for stage in shared["stages"]] == [stage["solver"] + " on 2 MPI ranks"
+                                                               for stage in serial["stages"]]
+    assert all(stage["max_displacement"] > 1e-4 for stage in serial["stages"]), "both stages moved the wall"
+    tolerance = EXACT if solver == "direct" else LINEAR_TOLERANCE
+    for expected, got in zip(serial["stages"], shared["stages"]):
+        assert got["residual"] < (LINEAR_TOLERANCE if solver == "iterative" else EXACT)
+        assert got["max_displacement"] == pytest.approx(expected["max_displacement"], rel=tolerance)
+    with np.load(linear_runs[solver, 1] / "static" / "hand_over.npz") as a, \
+            np.load(linear_runs[solver, 2] / "static" / "hand_over.npz") as b:
+        for name in ("cell_stress", "monitor_stress"):
+            assert np.abs(a[name]).max() > 1e6, name  # MPa: the geostatic stress and the opening's
+            assert largest_relative(b[name], a[name]) < tolerance, name
