@@ -71,7 +71,8 @@ def main() -> None:
                 row = {"case": title, "ranks": ranks, "threads": threads, "dofs": summary["dofs"],
                        "steps": summary["steps"], "ms_per_step": 1e3 * summary["loop_seconds"] / summary["steps"],
                        "phases_ms": {key: round(value["ms_per_step"], 4) for key, value in phases.items()},
-                       "mpi": summary.get("mpi"), "command_seconds": round(summary["command_seconds"], 1)}
+                       "mpi": summary.get("mpi"), "command_seconds": round(summary["command_seconds"], 1),
+                       "peak_memory_mib": summary.get("peak_memory_mib")}
                 stages = (summary.get("static") or {}).get("stages", [])
                 if any(stage["solver"] == "dynamic relaxation" for stage in stages):
                     row["stage_seconds"] = round(sum(stage["seconds"] for stage in stages), 1)
