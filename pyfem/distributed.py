@@ -6,7 +6,7 @@ docs/scaling.md "The distributed step" is the design; this is its first implemen
   serial stepper, whose state is the run's state in one place. The static stage's relaxation
   (pyfem/static.py) is stepped by the ranks too, in the same shares (`DistributedStage`); its end
   state is merged into the serial stage stepper on every rank, so every rank hands the same stage
-  over (a linear stage, one PETSc solve, is still solved whole by every rank). The nodes are then
+  over (a linear stage's PETSc solves are shared too: pyfem/static.py LinearSolver). The nodes are then
   split among the ranks (recursive coordinate bisection weighted by each node's work, `node_work`:
   the element loop's points and the pairs count; the nodes of pairs that share nodes go to one
   rank together, so every contact pair is whole on one rank).
@@ -24,12 +24,13 @@ docs/scaling.md "The distributed step" is the design; this is its first implemen
   in a serial run; a checkpoint is the serial one, and `--resume` slices it again (any rank count).
 
 Not done yet (docs/scaling.md): dolfinx's distributed mesh and assembly (the model is replicated,
-so memory does not fall with the ranks), the linear static stage's solve in parallel (each rank
-solves it), fields written in parallel, overlapping the exchange with the interior rows.
+so memory does not fall with the ranks), fields written in parallel, overlapping the exchange with
+the interior rows.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import time
@@ -731,6 +732,17 @@ class DistributedStepper:
 
 # --- The static stage's relaxation on the ranks (pyfem/static.py, pyfem/relaxation.py) ---
 
+@contextlib.contextmanager
+def _alone():
+    """A failure inside this block is this rank's alone (a kernel error on its share): every rank
+    is ended (abort_all) rather than the others left waiting in the next collective."""
+    try:
+        yield
+    except Exception as error:
+        abort_all(error)
+        raise
+
+
 @dataclasses.dataclass
 class StageModel:
     """What slice_state and merge_states read of a relaxation stage's stepper: its pairs and its
@@ -762,7 +774,9 @@ class DistributedStage:
         simulation: pyfem.solver.Simulation being prepared (model, nonlinear, contact arrays).
         parts: `partition(simulation, comm.size)`.
         serial: the serial stage stepper (pyfem.static._stage_stepper), its state the stage's start.
-        stiffness: (3n, 3n) the stage's matrix cells (N/m), a sparsity inside the simulation's.
+        stiffness: (3n, 3n) the stage's matrix cells (N/m); every block of an owned row must couple
+            nodes of the share (the simulation's matrix rows and the element-loop cells touching
+            the owned nodes: so are the stages' and the probe's matrices, checked here).
         mass: (n,) the stage's scaled nodal masses (kg in pseudo time).
         constraints: the stage's held faces (pyfem.solver constraints) or None.
         load: (3n,) the stage's load (N); ramp: pseudo time over which it rises.
@@ -773,24 +787,38 @@ class DistributedStage:
 
     def __init__(self, simulation, parts: Partition, serial, stiffness, mass: np.ndarray, constraints,
                  load: np.ndarray, ramp: float, regions: list, contact_arrays: dict | None, comm) -> None:
-        from pyfem import _kernels
-        from pyfem.relaxation import PSEUDO_STEP
-        from pyfem.static import hand_over_force_provider
-
         self.serial, self.comm, self.parts = serial, comm, parts
         self.model = StageModel(contact_arrays, None if simulation.nonlinear is None
                                 else ActiveRegions(simulation.nonlinear, regions))
         self.shares = []
+        stiffness = stiffness.tobsr(blocksize=(3, 3))
         for rank in range(comm.size):
             whole = share(simulation, parts, rank)
             held = None if constraints is None else np.flatnonzero(parts.node_owner[constraints.nodes] == rank)
             self.shares.append(dataclasses.replace(whole, constraints=held))
+            # Checked for every share on every rank, so that all raise together (no rank left waiting).
+            if np.any(whole.local_of[_block_neighbours(stiffness, whole.nodes[:whole.n_owned])] < 0):
+                raise RuntimeError(f"the static stage's matrix couples a node of rank {rank} to one its share lacks")
         mine = self.mine = self.shares[comm.rank]
         self._owned_rows = [_dof_rows(s.nodes[:s.n_owned]) for s in self.shares]
         self.exchange = _exchange(comm, parts, mine)
-        stiffness = stiffness.tobsr(blocksize=(3, 3))
-        if np.any(mine.local_of[_block_neighbours(stiffness, mine.nodes[:mine.n_owned])] < 0):
-            raise RuntimeError("the static stage's matrix couples an owned node to one the share lacks")
+        with _alone():
+            self.kernel, self.components = self._kernel(simulation, stiffness, mass, constraints, load, ramp,
+                                                        regions, contact_arrays)
+        self.all_components = comm.allgather(self.components)
+        self.serial_template = serial.save_state()
+        with _alone():
+            self.kernel.load_state(slice_state(self.serial_template, self.kernel.save_state(), self.model, parts,
+                                               mine, comm.rank, self.components))
+        self._local = None
+
+    def _kernel(self, simulation, stiffness, mass, constraints, load, ramp, regions, contact_arrays):
+        """This rank's Stepper of the stage and its components (region, kind, cells)."""
+        from pyfem import _kernels
+        from pyfem.relaxation import PSEUDO_STEP
+        from pyfem.static import hand_over_force_provider
+
+        mine = self.mine
         indptr, indices, blocks = local_matrix(stiffness, mine)
         kernel = _kernels.Stepper(indptr, indices, blocks, np.ascontiguousarray(mass[mine.nodes]), PSEUDO_STEP,
                                   0.0, 0.0)
@@ -800,18 +828,13 @@ class DistributedStage:
         local_load[:mine.n_owned] = np.asarray(load, dtype=np.float64).reshape(-1, 3)[owned]
         if np.any(local_load):
             kernel.add_seismic_input(hand_over_force_provider(local_load.reshape(-1), ramp))
-        self.components = []
+        components = []
         if self.model.nonlinear is not None:
-            self.components, _ = _add_components(kernel, simulation.nonlinear, regions, mine)
+            components, _ = _add_components(kernel, simulation.nonlinear, regions, mine)
         if contact_arrays is not None:
             kernel.add_contact(_local_contact(contact_arrays, mine))
         kernel.set_partition(mine.n_owned, self.exchange)
-        self.kernel = kernel
-        self.all_components = comm.allgather(self.components)
-        self.serial_template = serial.save_state()
-        kernel.load_state(slice_state(self.serial_template, kernel.save_state(), self.model, parts, mine,
-                                      comm.rank, self.components))
-        self._local = None
+        return kernel, components
 
     @property
     def n_dofs(self) -> int:
@@ -820,14 +843,26 @@ class DistributedStage:
     def set_mass_damping(self, alpha: float) -> None:
         self.kernel.set_mass_damping(alpha)
 
+    def agreed(self, value):
+        """Rank 0's `value` on every rank (a collective): relax's decisions (out-of-balance ratio,
+        damping) are taken from rank 0's arithmetic, so that no rank can decide otherwise by the
+        last bit of a norm on another processor."""
+        return self.comm.bcast(value, root=0)
+
     def run(self, u, v, a, n_steps: int, t0: float) -> float:
-        """Steps the share from the whole u, v, a given at the first call (relax does not change
-        them between calls), then writes every rank's owned rows into u, v, a on every rank."""
+        """Steps the share n_steps relaxation steps from pseudo time t0 and returns the time reached.
+
+        Args:
+            u, v, a: (3n,) the whole model's displacement (m), velocity and acceleration in pseudo
+                time, read at the first call (relax does not change them between calls) and
+                overwritten in place on every rank with every rank's owned rows after the steps.
+        """
         if self._local is None:
             rows = _dof_rows(self.mine.nodes)
             self._local = tuple(np.ascontiguousarray(x[rows]) for x in (u, v, a))
         lu, lv, la = self._local
-        end = self.kernel.run(lu, lv, la, n_steps, t0)
+        with _alone():
+            end = self.kernel.run(lu, lv, la, n_steps, t0)
         n = 3 * self.mine.n_owned
         pieces = self.comm.allgather(np.stack([lu[:n], lv[:n], la[:n]]))
         for piece, rows in zip(pieces, self._owned_rows):

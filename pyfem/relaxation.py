@@ -112,7 +112,7 @@ def load_factor(t: float, ramp: float) -> float:
 
 
 def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
-                    tolerance: float = PROBE_TOLERANCE, floor: float = 0.0) -> tuple[float, int]:
+                    tolerance: float = PROBE_TOLERANCE, floor: float = 0.0, agree=None) -> tuple[float, int]:
     """The lowest frequency (1/pseudo time) that relaxing `load` excites: an elastic relaxation
     (a stepper with the stage's elastic cells and no laws) run to a loose tolerance; omega from
     the Rayleigh quotient of its displacement. Sets how slowly a nonlinear stage must load.
@@ -120,8 +120,10 @@ def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
     Returns:
         (omega, steps taken).
     """
-    u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor)
+    u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor, agree=agree)
     omega = _rayleigh(u, load - result.out_of_balance, np.repeat(mass, 3))
+    if agree is not None:
+        omega = agree(omega)
     return (omega if omega > 0.0 else 2.0 * SAFETY / PSEUDO_STEP), result.steps
 
 
@@ -133,7 +135,8 @@ def ramp_length(omega: float) -> float:
 
 
 def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_steps: int,
-          chunk: int = CHUNK, ramp: float = 0.0, floor: float = 0.0, report=None) -> tuple[np.ndarray, RelaxationResult]:
+          chunk: int = CHUNK, ramp: float = 0.0, floor: float = 0.0, report=None,
+          agree=None) -> tuple[np.ndarray, RelaxationResult]:
     """Runs the damped pseudo-dynamics of a stepper built for the stage from rest to equilibrium.
 
     Args:
@@ -148,6 +151,8 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         floor: smallest force norm the ratio is taken against (N): a stage whose load nearly
             cancels (nothing excavated) is measured against the stress state's force scale.
         report: None, or called as report(steps, ratio, seconds) every REPORT_SECONDS of wall time.
+        agree: None, or (under mpirun, pyfem.distributed.DistributedStage.agreed) a collective that
+            returns rank 0's value: the ratio and the damping every rank decides by.
 
     Returns:
         (u, RelaxationResult): the displacement at the end (n_dofs,) and how it went.
@@ -173,6 +178,8 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
             raise FloatingPointError(f"the static stage's relaxation became non-finite after {steps} steps")
         residual = m * (a + alpha * v)
         ratio = float(np.linalg.norm(residual)) / load_norm
+        if agree is not None:
+            ratio = agree(ratio)
         history.append((steps, ratio, alpha))
         below = below + 1 if ratio <= tolerance and t >= ramp else 0
         if report is not None and time.perf_counter() - last_report > REPORT_SECONDS:
@@ -194,6 +201,8 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         # Not below half the total displacement's: a softening mechanism (cracking, slip) gives the
         # increment a tiny quotient, and so little damping would leave the stiffer modes ringing.
         omega = max(omega_increment, 0.5 * omega_total)
+        if agree is not None:
+            omega = agree(omega)
         if omega > 0.0:
             alpha = min(2.0 * omega, 2.0 / PSEUDO_STEP)
             stepper.set_mass_damping(alpha)

@@ -888,8 +888,9 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         elastic = linear_stiffness(model, installed_cells) if len(installed_cells) else model.stiffness
         probe_contact = None if contact is None else make_contact_pairs(dict(simulation.contact_arrays,
                                                                              deterioration=None))
-        omega, probe_steps = probe_frequency(stage_stepper(elastic, probe_load, [], [], probe_contact),
-                                             mass, probe_load, max_steps, floor=floor)
+        probe = stage_stepper(elastic, probe_load, [], [], probe_contact)
+        omega, probe_steps = probe_frequency(probe, mass, probe_load, max_steps, floor=floor,
+                                             agree=None if parts is None else probe.agreed)
         ramp = ramp_length(omega)
     stages, increments, reactions = [], [], []
     carried = np.zeros(3 * n_nodes)
@@ -910,10 +911,10 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         active_regions = [region for region, component in zip(element_regions, components) if component is not None]
         stepper = stage_stepper(stiffness, load, active, active_regions, contact, ramp)
         u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor,
-                          report=lambda steps, ratio, seconds, name=name: print(
+                          agree=None if parts is None else stepper.agreed, report=lambda steps, ratio, seconds, name=name: print(
                               f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), "
                               f"out-of-balance {ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True))
-        if parts is not None:  # the ranks' state into the serial stage stepper and its components, on every rank
+        if parts is not None:  # the next stage, the summary and the hand-over read the serial stepper's state
             stepper = stepper.gathered()
         for component in active:
             component.rebase()
@@ -929,7 +930,8 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         stage_regions = {} if nonlinear is None else nonlinear.region_summary(components)
         stages.append(Stage(name=name, active_regions=regions, load=words, load_fraction=fraction,
                             free_dofs=int(3 * n_nodes - 3 * len(inactive) if index == 0 else 3 * n_nodes),
-                            solver="dynamic relaxation" if np.any(load) else "none: no load",
+                            solver=("dynamic relaxation" + ("" if parts is None else f" on {comm.size} MPI ranks")
+                                    if np.any(load) else "none: no load"),
                             iterations=result.steps, residual=result.residual,
                             seconds=time.perf_counter() - stage_start, max_displacement=float(magnitude[worst]),
                             max_displacement_point=coordinates[worst].tolist(), converged=result.converged,

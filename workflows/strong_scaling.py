@@ -74,7 +74,7 @@ def main() -> None:
                        "mpi": summary.get("mpi"), "command_seconds": round(summary["command_seconds"], 1),
                        "peak_memory_mib": summary.get("peak_memory_mib")}
                 stages = (summary.get("static") or {}).get("stages", [])
-                if any(stage["solver"] == "dynamic relaxation" for stage in stages):
+                if any(stage["solver"].startswith("dynamic relaxation") for stage in stages):
                     row["stage_seconds"] = round(sum(stage["seconds"] for stage in stages), 1)
                     row["stage_steps"] = sum(stage["iterations"] for stage in stages)
                 if reference is None:
