@@ -98,7 +98,10 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     from pyfem import solver  # heavy (dolfinx, kernels): only when running
     from pyfem.progress import ProgressLines
 
-    progress = None if sys.stdout.isatty() else ProgressLines(scene["time"]["duration"])
+    # Progress lines on stdout unless the bar (stderr) shows on the same terminal: under mpirun
+    # stdout is a terminal and stderr a pipe, and a log would otherwise show no progress at all.
+    on_terminal = sys.stdout.isatty() and sys.stderr.isatty()
+    progress = None if on_terminal else ProgressLines(scene["time"]["duration"])
     summary = solver.run(scene, out_dir, on_plan=lambda plan: show_plan(scene, plan), progress=progress,
                          resume=resume)
     if not summary:  # an MPI rank other than 0: rank 0 reports

@@ -809,7 +809,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     """
     from pyfem.distributed import DistributedStage, partition, world
     from pyfem.elements import add_matrices, linear_stiffness, plastic_frequency_factor, scene_laws
-    from pyfem.relaxation import probe_frequency, ramp_length, relax, scaled_mass
+    from pyfem.relaxation import PSEUDO_STEP, load_factor, probe_frequency, ramp_length, relax, scaled_mass
     from pyfem.solver import make_contact_pairs
 
     start = time.perf_counter()
@@ -928,12 +928,16 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         magnitude = np.linalg.norm(u.reshape(-1, 3), axis=1)
         worst = int(np.argmax(magnitude))
         stage_regions = {} if nonlinear is None else nonlinear.region_summary(components)
+        solver_words = "dynamic relaxation" + ("" if parts is None else f" on {comm.size} MPI ranks")
+        stage_seconds = time.perf_counter() - stage_start
+        print(f"static stage '{name}': {'converged' if result.converged else 'NOT converged'} after {result.steps} "
+              f"relaxation steps, out-of-balance {result.residual:.2e} (tolerance {tolerance:g}), "
+              f"{stage_seconds:.0f} s ({solver_words})", flush=True)
         stages.append(Stage(name=name, active_regions=regions, load=words, load_fraction=fraction,
                             free_dofs=int(3 * n_nodes - 3 * len(inactive) if index == 0 else 3 * n_nodes),
-                            solver=("dynamic relaxation" + ("" if parts is None else f" on {comm.size} MPI ranks")
-                                    if np.any(load) else "none: no load"),
+                            solver=solver_words if np.any(load) else "none: no load",
                             iterations=result.steps, residual=result.residual,
-                            seconds=time.perf_counter() - stage_start, max_displacement=float(magnitude[worst]),
+                            seconds=stage_seconds, max_displacement=float(magnitude[worst]),
                             max_displacement_point=coordinates[worst].tolist(), converged=result.converged,
                             residual_history=[[step, ratio] for step, ratio, _ in result.history],
                             regions=stage_regions))
@@ -941,11 +945,16 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         if index == 0:
             cell_state_first = _cell_state(model, nonlinear, components)
         if not result.converged:
+            applied_share = load_factor(result.steps * PSEUDO_STEP, ramp)
+            ramp_words = ("" if applied_share >= 1.0 else
+                          f"; the load was still rising: {100.0 * applied_share:.0f} % of it applied (its ramp is "
+                          f"{ramp:.0f} steps)")
             simulation.scene.warn(
                 f"static: the {name} stage did not reach static.tolerance = {tolerance:g} in static.max_steps = "
-                f"{max_steps} relaxation steps (out-of-balance ratio {result.residual:.3g}): the model may be "
-                "collapsing (plastic flow without end) or need more steps; its state is handed over as it is, "
-                "with the out-of-balance applied as a constant force")
+                f"{max_steps} relaxation steps (out-of-balance ratio {result.residual:.3g} of the whole load"
+                f"{ramp_words}): the model may be collapsing (plastic flow without end) or need more steps; its "
+                "state is handed over as it is, so the dynamic run starts out of balance by that much and moves "
+                "from it")
     u1, u2 = increments
     applied = f_exc + loads.installed_weight.ravel()
     load_norm = max(float(np.linalg.norm(applied)), floor)

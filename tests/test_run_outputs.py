@@ -68,6 +68,36 @@ def test_run_prints_the_plan_then_a_progress_line_every_5_percent_off_a_terminal
     assert progress[-1] < next(k for k, line in enumerate(lines) if line.startswith("run finished"))
 
 
+def test_progress_lines_when_stdout_is_a_terminal_and_stderr_is_not(tmp_path):
+    """As under mpirun (Open MPI gives a rank's stdout a terminal, its stderr a pipe): the bar, on
+    stderr, does not show there, so the lines do, on stdout."""
+    import pty
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(PROGRESS_SCENE)
+    env = dict(os.environ, PYTHONPATH=str(REPOSITORY))
+    leader, follower = pty.openpty()
+    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", str(scene), "--out", str(tmp_path / "run")],
+                               cwd=tmp_path, env=env, stdout=follower, stderr=subprocess.PIPE)
+    os.close(follower)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(leader, 65536)
+        except OSError:  # the terminal closed with the process
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    stderr = process.communicate(timeout=300)[1].decode()
+    os.close(leader)
+    assert process.returncode == 0, stderr
+    lines = b"".join(chunks).decode().splitlines()
+    assert sum(line.startswith("progress:") for line in lines) == 20
+    assert any(line.startswith("run finished") for line in lines)
+    assert "it/s" not in stderr and "out/s" not in stderr
+
+
 def test_progress_lines_with_coarse_samples_and_a_fake_clock():
     """Samples 10 % apart: a line at each; the estimate extrapolates wall time per simulated second."""
     lines = []
