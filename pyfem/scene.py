@@ -206,7 +206,7 @@ class Choice:
 
     @property
     def allowed(self) -> str:
-        return f"{self.description} must be one of " + ", ".join(_show(o) for o in self.options)
+        return "must be one of " + ", ".join(_show(o) for o in self.options) + f" ({self.description})"
 
     def check(self, value: Any, key: str) -> Any:
         for option in self.options:

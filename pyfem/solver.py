@@ -1126,7 +1126,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             raise
         if saved is not None:
             saved.check_model(simulation)  # before a stage is solved again for a checkpoint it would refuse
-        if stage is not None and not static_output.restore_hand_over(simulation, stage):
+        restored = stage is not None and static_output.restore_hand_over(simulation, stage)
+        if stage is not None and not restored:
             simulation = as_first_sitting(prepare(scene))  # the file is of another model: the stage is solved again
         if saved is not None:
             if report and simulation.node_levels is not None:
@@ -1134,7 +1135,14 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                 # (852 s on the paper-scale case 1); run.json keeps the first sitting's report.
                 simulation.lts_stability = saved.meta["lts_stability"]
         if on_plan is not None and root:
-            on_plan(simulation_plan(simulation))
+            plan = simulation_plan(simulation)
+            if saved is not None:  # the plan's estimates are a whole run's: say what this sitting does
+                stage_words = ("" if "static" not in scene else
+                               "; the static stage read from static/hand_over.npz, not solved again" if restored
+                               else "; the static stage solved again (no hand-over file of this model)")
+                plan = {"resuming": f"from the checkpoint at t = {saved.t:.6g} s of {scene['time']['duration']:g} s"
+                                    f"{stage_words}", **plan}
+            on_plan(plan)
         writer = RunWriter(out_dir, simulation) if root else SilentWriter(out_dir)
         clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"])
         write_checkpoint = None  # set once the state (u, v, a, t, kernel, writer) is whole

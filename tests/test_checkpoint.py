@@ -258,10 +258,14 @@ def test_crash_after_a_periodic_checkpoint_then_resume_gives_the_uninterrupted_r
     def solve_again(*args, **kwargs):
         raise AssertionError("a resumed run solved the static stage again")
 
+    plans = []
     with monkeypatch.context() as patched:
         patched.setattr(static, "solve_relaxation_stage", solve_again)
-        summary = solver.run(stateful_scene(), out, resume=True)
+        summary = solver.run(stateful_scene(), out, resume=True, on_plan=plans.append)
     assert summary["resumed"][0]["t"] == pytest.approx(CHECKPOINT_T)
+    # The plan printed says what this sitting does, not only the whole run's estimates.
+    assert plans[0]["resuming"] == (f"from the checkpoint at t = {CHECKPOINT_T:.6g} s of 0.45 s; the static stage "
+                                    "read from static/hand_over.npz, not solved again")
     assert_same_run(out, reference_run[0])
 
 
@@ -272,7 +276,9 @@ def test_a_run_without_its_saved_stage_solves_it_again_and_saves_it(reference_ru
     crash_after_a_periodic_checkpoint(monkeypatch, stateful_scene(), out, 5, CHECKPOINT_T + 0.03)
     saved_stage = out / "static" / static_output.HAND_OVER_NAME
     saved_stage.unlink()
-    solver.run(stateful_scene(), out, resume=True)
+    plans = []
+    solver.run(stateful_scene(), out, resume=True, on_plan=plans.append)
+    assert plans[0]["resuming"].endswith("; the static stage solved again (no hand-over file of this model)")
     assert saved_stage.exists()
     assert_same_run(out, reference_run[0])
 
