@@ -961,8 +961,13 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
     rows = local_stepping.row_split(simulation.nonlinear, pairs is not None)
     p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
                                           simulation.stiffness, pairs, simulation.time_step, phases_ms, rows)
+    auto_declined = (simulation.scene["time"].get("local_stepping") == "auto"
+                     and str(simulation.lts_decision or "").startswith('"auto": off: predicted'))
     if p["speed_up"] < local_stepping.AUTO_PAYS:
         verdict = "not worth it on this model"
+    elif auto_declined:  # per step it pays, over this run not (line above): say which
+        verdict = ("it would pay per simulated second on a longer run; over this run's duration the set-up check "
+                   "costs more than it saves (\"auto\" above)")
     elif rows:
         verdict = ("it would pay (time.local_stepping = true; the row split: stresses where levels meet as global "
                    "stepping's, docs/lts_plan.md \"The row split, prototyped\")")
