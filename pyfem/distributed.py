@@ -764,11 +764,12 @@ class DistributedStage:
     """One relaxation stage's stepper shared among the ranks behind the Stepper calls of
     `pyfem.relaxation.relax`: the serial stage stepper (matrix, scaled mass, held faces, ramped load,
     element-loop components, pairs) cut into the dynamic run's shares (`partition` of the
-    simulation: the same owners, ghosts and cells). run() steps each rank's share and puts the whole
-    u, v, a on every rank (one allgather per relax chunk), so that relax's norms, damping and
-    convergence are the same on every rank; `gathered` puts every rank's kernel state into the
-    serial stage stepper on every rank at the stage's end (its components, pairs and reactions are
-    then the whole model's, as after a serial stage).
+    simulation: the same owners, ghosts and cells). run() steps each rank's share; relax works on
+    each rank's owned dofs with this object as its `space` (pyfem.relaxation.WholeModel's calls:
+    norms and Rayleigh quotients summed over the ranks, rank 0's ratio and damping decide for all,
+    the whole u and out-of-balance gathered once at the end); `gathered` puts every rank's kernel
+    state into the serial stage stepper on every rank at the stage's end (its components, pairs and
+    reactions are then the whole model's, as after a serial stage).
 
     Args:
         simulation: pyfem.solver.Simulation being prepared (model, nonlinear, contact arrays).
@@ -843,30 +844,57 @@ class DistributedStage:
     def set_mass_damping(self, alpha: float) -> None:
         self.kernel.set_mass_damping(alpha)
 
+    # relax's arithmetic on the owned dofs (pyfem.relaxation.WholeModel is the serial one) ----------
+    def owned_rows(self, n_dofs: int) -> np.ndarray:
+        """The rows of the model's dof vectors this rank's relax arrays hold: its owned dofs."""
+        return self._owned_rows[self.comm.rank]
+
+    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
+        """x . y over the whole model: each rank's owned part, summed over the ranks."""
+        from mpi4py import MPI
+
+        return float(self.comm.allreduce(float(x @ y), op=MPI.SUM))
+
+    def norm(self, x: np.ndarray) -> float:
+        return float(np.sqrt(self.dot(x, x)))
+
+    def all_finite(self, *arrays: np.ndarray) -> bool:
+        from mpi4py import MPI
+
+        return bool(self.comm.allreduce(all(bool(np.isfinite(x).all()) for x in arrays), op=MPI.LAND))
+
     def agreed(self, value):
         """Rank 0's `value` on every rank (a collective): relax's decisions (out-of-balance ratio,
         damping) are taken from rank 0's arithmetic, so that no rank can decide otherwise by the
-        last bit of a norm on another processor."""
+        last bit of a sum on another processor."""
         return self.comm.bcast(value, root=0)
+
+    def whole(self, x: np.ndarray) -> np.ndarray:
+        """The model's (3n,) vector on every rank from each rank's owned rows of it (an allgather:
+        relax calls it once, at the end)."""
+        out = np.empty(self.n_dofs)
+        for piece, rows in zip(self.comm.allgather(np.asarray(x)), self._owned_rows):
+            out[rows] = piece
+        return out
 
     def run(self, u, v, a, n_steps: int, t0: float) -> float:
         """Steps the share n_steps relaxation steps from pseudo time t0 and returns the time reached.
 
         Args:
-            u, v, a: (3n,) the whole model's displacement (m), velocity and acceleration in pseudo
-                time, read at the first call (relax does not change them between calls) and
-                overwritten in place on every rank with every rank's owned rows after the steps.
+            u, v, a: (3 n_owned,) this rank's owned dofs of the displacement (m), velocity and
+                acceleration in pseudo time (relax's arrays, `owned_rows`), written in place after
+                the steps. relax starts from rest, so the share's ghosts start at zero with their
+                owners and then follow them through the ghost exchange of every step.
         """
         if self._local is None:
-            rows = _dof_rows(self.mine.nodes)
-            self._local = tuple(np.ascontiguousarray(x[rows]) for x in (u, v, a))
+            if any(np.any(given) for given in (u, v, a)):
+                raise ValueError("DistributedStage.run: relax starts from rest")
+            self._local = tuple(np.zeros(3 * len(self.mine.nodes)) for _ in range(3))
         lu, lv, la = self._local
         with _alone():
             end = self.kernel.run(lu, lv, la, n_steps, t0)
         n = 3 * self.mine.n_owned
-        pieces = self.comm.allgather(np.stack([lu[:n], lv[:n], la[:n]]))
-        for piece, rows in zip(pieces, self._owned_rows):
-            u[rows], v[rows], a[rows] = piece
+        u[:], v[:], a[:] = lu[:n], lv[:n], la[:n]
         return end
 
     def gathered(self):

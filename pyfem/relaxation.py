@@ -96,9 +96,36 @@ def scaled_mass(stiffness, frequency_factor: float = 1.0, safety: float = SAFETY
     return mass
 
 
-def _rayleigh(x: np.ndarray, force: np.ndarray, m: np.ndarray) -> float:
-    """sqrt(x.force / x.M x), or 0 when either is not positive."""
-    stiffness_term, mass_term = float(x @ force), float(x @ (m * x))
+class WholeModel:
+    """relax's arithmetic on one process: its arrays hold every dof (the serial stage). Under mpirun
+    pyfem.distributed.DistributedStage offers the same calls on each rank's owned dofs, with sums
+    over the ranks (allreduce) and rank 0's decisions (broadcast)."""
+
+    def owned_rows(self, n_dofs: int):
+        """The rows of the model's dof vectors that relax's arrays hold: all of them."""
+        return slice(0, n_dofs)
+
+    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
+        return float(x @ y)
+
+    def norm(self, x: np.ndarray) -> float:
+        return float(np.linalg.norm(x))
+
+    def all_finite(self, *arrays: np.ndarray) -> bool:
+        return all(bool(np.isfinite(x).all()) for x in arrays)
+
+    def agreed(self, value):
+        return value
+
+    def whole(self, x: np.ndarray) -> np.ndarray:
+        """The model's vector from relax's array of it: itself."""
+        return x
+
+
+def _rayleigh(x: np.ndarray, force: np.ndarray, m: np.ndarray, space=None) -> float:
+    """sqrt(x.force / x.M x), or 0 when either is not positive (sums over `space`'s ranks)."""
+    space = space or WholeModel()
+    stiffness_term, mass_term = space.dot(x, force), space.dot(x, m * x)
     return math.sqrt(stiffness_term / mass_term) if stiffness_term > 0.0 and mass_term > 0.0 else 0.0
 
 
@@ -112,18 +139,18 @@ def load_factor(t: float, ramp: float) -> float:
 
 
 def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
-                    tolerance: float = PROBE_TOLERANCE, floor: float = 0.0, agree=None) -> tuple[float, int]:
+                    tolerance: float = PROBE_TOLERANCE, floor: float = 0.0, space=None) -> tuple[float, int]:
     """The lowest frequency (1/pseudo time) that relaxing `load` excites: an elastic relaxation
     (a stepper with the stage's elastic cells and no laws) run to a loose tolerance; omega from
     the Rayleigh quotient of its displacement. Sets how slowly a nonlinear stage must load.
+    `space`: as for `relax`.
 
     Returns:
         (omega, steps taken).
     """
-    u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor, agree=agree)
-    omega = _rayleigh(u, load - result.out_of_balance, np.repeat(mass, 3))
-    if agree is not None:
-        omega = agree(omega)
+    space = space or WholeModel()
+    u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor, space=space)
+    omega = space.agreed(_rayleigh(u, load - result.out_of_balance, np.repeat(mass, 3)))
     return (omega if omega > 0.0 else 2.0 * SAFETY / PSEUDO_STEP), result.steps
 
 
@@ -136,12 +163,13 @@ def ramp_length(omega: float) -> float:
 
 def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_steps: int,
           chunk: int = CHUNK, ramp: float = 0.0, floor: float = 0.0, report=None,
-          agree=None) -> tuple[np.ndarray, RelaxationResult]:
+          space=None) -> tuple[np.ndarray, RelaxationResult]:
     """Runs the damped pseudo-dynamics of a stepper built for the stage from rest to equilibrium.
 
     Args:
         stepper: pyfem._kernels.Stepper with dt = PSEUDO_STEP and mass `mass`, its constraints,
-            the constant load as a force provider, components and contact pairs attached.
+            the constant load as a force provider, components and contact pairs attached (or, under
+            mpirun, a pyfem.distributed.DistributedStage: the ranks' shares of one).
         mass: (n_nodes,) the stepper's masses.
         load: (n_dofs,) the load the provider applies (N), for the ratio ||r|| / ||f||.
         tolerance: out-of-balance ratio to reach.
@@ -151,17 +179,21 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         floor: smallest force norm the ratio is taken against (N): a stage whose load nearly
             cancels (nothing excavated) is measured against the stress state's force scale.
         report: None, or called as report(steps, ratio, seconds) every REPORT_SECONDS of wall time.
-        agree: None, or (under mpirun, pyfem.distributed.DistributedStage.agreed) a collective that
-            returns rank 0's value: the ratio and the damping every rank decides by.
+        space: where relax's arrays live: None, the whole model in this process (`WholeModel`); or
+            the DistributedStage itself: each rank steps and checks its owned dofs, the norms and
+            Rayleigh quotients are sums over the ranks, the ratio and the damping rank 0's.
 
     Returns:
-        (u, RelaxationResult): the displacement at the end (n_dofs,) and how it went.
+        (u, RelaxationResult): the displacement at the end (n_dofs,) and how it went, whole on every rank.
     """
     start = time.perf_counter()
-    n = stepper.n_dofs
+    space = space or WholeModel()
+    rows = space.owned_rows(len(load))
+    load = np.asarray(load)[rows]
+    m = np.repeat(mass, 3)[rows]
+    n = len(m)
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    m = np.repeat(mass, 3)
-    load_norm = max(float(np.linalg.norm(load)), floor)
+    load_norm = max(space.norm(load), floor)
     history = []
     t, steps, alpha, below = 0.0, 0, 0.0, 0
     last_report = start
@@ -169,23 +201,21 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
     ratio = 0.0 if load_norm == 0.0 else 1.0
     residual = np.zeros(n)
     if load_norm == 0.0:
-        return u, RelaxationResult(True, 0, 0.0, [], residual, time.perf_counter() - start)
+        return space.whole(u), RelaxationResult(True, 0, 0.0, [], space.whole(residual), time.perf_counter() - start)
     while steps < max_steps:
         count = min(chunk, max_steps - steps)
         t = stepper.run(u, v, a, count, t)
         steps += count
-        if not np.isfinite(u).all():
+        if not space.all_finite(u):
             raise FloatingPointError(f"the static stage's relaxation became non-finite after {steps} steps")
         residual = m * (a + alpha * v)
-        ratio = float(np.linalg.norm(residual)) / load_norm
-        if agree is not None:
-            ratio = agree(ratio)
+        ratio = space.agreed(space.norm(residual) / load_norm)
         history.append((steps, ratio, alpha))
         below = below + 1 if ratio <= tolerance and t >= ramp else 0
         if report is not None and time.perf_counter() - last_report > REPORT_SECONDS:
             last_report = time.perf_counter()
             report(steps, ratio, last_report - start)
-            if DIAGNOSE:
+            if DIAGNOSE and isinstance(space, WholeModel):
                 worst = int(np.argmax(np.abs(residual))) // 3
                 print(f"   alpha {alpha:.3g}, |v|max {np.abs(v).max():.3g}, worst node {worst} "
                       f"|r| {np.abs(residual[3 * worst:3 * worst + 3]).max():.3g}", flush=True)
@@ -196,16 +226,15 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         # increment's is not positive (softening) or on the first chunk.
         internal = load_factor(t, ramp) * load - residual
         increment, force_increment = u - previous_u, internal - previous_internal
-        omega_increment = _rayleigh(increment, force_increment, m)
-        omega_total = _rayleigh(u, internal, m)
+        omega_increment = _rayleigh(increment, force_increment, m, space)
+        omega_total = _rayleigh(u, internal, m, space)
         # Not below half the total displacement's: a softening mechanism (cracking, slip) gives the
         # increment a tiny quotient, and so little damping would leave the stiffer modes ringing.
-        omega = max(omega_increment, 0.5 * omega_total)
-        if agree is not None:
-            omega = agree(omega)
+        omega = space.agreed(max(omega_increment, 0.5 * omega_total))
         if omega > 0.0:
             alpha = min(2.0 * omega, 2.0 / PSEUDO_STEP)
             stepper.set_mass_damping(alpha)
         previous_u, previous_internal = u.copy(), internal
-    return u, RelaxationResult(converged=below >= 2, steps=steps, residual=ratio, history=history,
-                               out_of_balance=residual, seconds=time.perf_counter() - start)
+    return space.whole(u), RelaxationResult(converged=below >= 2, steps=steps, residual=ratio, history=history,
+                                            out_of_balance=space.whole(residual),
+                                            seconds=time.perf_counter() - start)

@@ -890,7 +890,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
                                                                              deterioration=None))
         probe = stage_stepper(elastic, probe_load, [], [], probe_contact)
         omega, probe_steps = probe_frequency(probe, mass, probe_load, max_steps, floor=floor,
-                                             agree=None if parts is None else probe.agreed)
+                                             space=None if parts is None else probe)
         ramp = ramp_length(omega)
     stages, increments, reactions = [], [], []
     carried = np.zeros(3 * n_nodes)
@@ -911,7 +911,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         active_regions = [region for region, component in zip(element_regions, components) if component is not None]
         stepper = stage_stepper(stiffness, load, active, active_regions, contact, ramp)
         u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor,
-                          agree=None if parts is None else stepper.agreed, report=lambda steps, ratio, seconds, name=name: print(
+                          space=None if parts is None else stepper, report=lambda steps, ratio, seconds, name=name: print(
                               f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), "
                               f"out-of-balance {ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True))
         if parts is not None:  # the next stage, the summary and the hand-over read the serial stepper's state

@@ -17,8 +17,8 @@ converged, the rock yielded, pairs left their bond, and the ranks did share the 
 - the dynamic histories agree to STAGE_ROUNDOFF per dimension (below): the 0.05 s window is the
   lead-in's quiet precursor (displacements of 7e-7 m against the stage's 0.14 m), so round-off of
   the static state (1e-14 of its forces) is a larger share of these small histories than of a
-  wave's. Measured on 2 / 3 ranks: acceleration 1.6e-8 / 1.6e-8, velocity 1.4e-10 / 1.5e-10,
-  length 7.5e-11 / 2.7e-11, energy 2.8e-9 / 1.2e-9 of their largest values; the same 2-rank run
+  wave's. Measured on 2 / 3 ranks: acceleration 1.6e-8 / 8.6e-9, velocity 1.8e-10 / 2.2e-10,
+  length 4.4e-11 / 2.2e-11, energy 2.8e-9 / 1.3e-9 of their largest values; the same 2-rank run
   with the stage solved whole on every rank (before the stage was shared; only the dynamic step on
   the ranks) differs by 1.2e-9, 2.6e-11, 1.4e-11 and 3.0e-9.
 """
