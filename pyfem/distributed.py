@@ -791,22 +791,26 @@ class DistributedStage:
         self.serial, self.comm, self.parts = serial, comm, parts
         self.model = StageModel(contact_arrays, None if simulation.nonlinear is None
                                 else ActiveRegions(simulation.nonlinear, regions))
-        self.shares = []
-        stiffness = stiffness.tobsr(blocksize=(3, 3))
-        for rank in range(comm.size):
-            whole = share(simulation, parts, rank)
+        from mpi4py import MPI
+
+        def stage_share(rank: int) -> Share:  # the dynamic run's share with the stage's held faces
             held = None if constraints is None else np.flatnonzero(parts.node_owner[constraints.nodes] == rank)
-            self.shares.append(dataclasses.replace(whole, constraints=held))
-            # Checked for every share on every rank, so that all raise together (no rank left waiting).
-            if np.any(whole.local_of[_block_neighbours(stiffness, whole.nodes[:whole.n_owned])] < 0):
-                raise RuntimeError(f"the static stage's matrix couples a node of rank {rank} to one its share lacks")
-        mine = self.mine = self.shares[comm.rank]
-        self._owned_rows = [_dof_rows(s.nodes[:s.n_owned]) for s in self.shares]
+            return dataclasses.replace(share(simulation, parts, rank), constraints=held)
+
+        # Rank 0 merges the ranks' states at the stage's end (`gathered`): it alone needs every share.
+        mine = self.mine = stage_share(comm.rank)
+        self.shares = ([mine] + [stage_share(q) for q in range(1, comm.size)]) if comm.rank == 0 else None
+        stiffness = stiffness.tobsr(blocksize=(3, 3))
+        lacking = bool(np.any(mine.local_of[_block_neighbours(stiffness, mine.nodes[:mine.n_owned])] < 0))
+        if comm.allreduce(lacking, op=MPI.LOR):  # every rank raises, none is left waiting
+            raise RuntimeError("the static stage's matrix couples an owned node to a node outside its rank's share")
+        # Owned nodes ascending, as each share numbers them first: where each rank's owned dofs go.
+        self._owned_rows = [_dof_rows(parts.owned(q)) for q in range(comm.size)]
         self.exchange = _exchange(comm, parts, mine)
         with _alone():
             self.kernel, self.components = self._kernel(simulation, stiffness, mass, constraints, load, ramp,
                                                         regions, contact_arrays)
-        self.all_components = comm.allgather(self.components)
+        self.all_components = comm.gather(self.components, root=0)
         self.serial_template = serial.save_state()
         with _alone():
             self.kernel.load_state(slice_state(self.serial_template, self.kernel.save_state(), self.model, parts,
@@ -899,10 +903,12 @@ class DistributedStage:
 
     def gathered(self):
         """The serial stage stepper with every rank's kernel state merged in (a collective; on every
-        rank): its components, pairs and reactions are the stage's end, as after a serial stage."""
-        states = self.comm.allgather(self.kernel.save_state())
-        self.serial.load_state(merge_states(self.serial_template, states, self.model, self.parts, self.shares,
-                                            self.all_components))
+        rank): its components, pairs and reactions are the stage's end, as after a serial stage.
+        Rank 0 merges the ranks' states and sends the merged state to every rank."""
+        states = self.comm.gather(self.kernel.save_state(), root=0)
+        merged = (merge_states(self.serial_template, states, self.model, self.parts, self.shares, self.all_components)
+                  if self.comm.rank == 0 else None)
+        self.serial.load_state(self.comm.bcast(merged, root=0))
         return self.serial
 
 
