@@ -799,7 +799,8 @@ class DistributedStage:
 
         # Rank 0 merges the ranks' states at the stage's end (`gathered`): it alone needs every share.
         mine = self.mine = stage_share(comm.rank)
-        self.shares = ([mine] + [stage_share(q) for q in range(1, comm.size)]) if comm.rank == 0 else None
+        with _alone():  # rank 0's work alone: a failure must not leave the others in the allreduce below
+            self.shares = ([mine] + [stage_share(q) for q in range(1, comm.size)]) if comm.rank == 0 else None
         stiffness = stiffness.tobsr(blocksize=(3, 3))
         lacking = bool(np.any(mine.local_of[_block_neighbours(stiffness, mine.nodes[:mine.n_owned])] < 0))
         if comm.allreduce(lacking, op=MPI.LOR):  # every rank raises, none is left waiting
@@ -906,8 +907,9 @@ class DistributedStage:
         rank): its components, pairs and reactions are the stage's end, as after a serial stage.
         Rank 0 merges the ranks' states and sends the merged state to every rank."""
         states = self.comm.gather(self.kernel.save_state(), root=0)
-        merged = (merge_states(self.serial_template, states, self.model, self.parts, self.shares, self.all_components)
-                  if self.comm.rank == 0 else None)
+        with _alone():  # rank 0's work alone: a failure must not leave the others in the broadcast
+            merged = (merge_states(self.serial_template, states, self.model, self.parts, self.shares,
+                                   self.all_components) if self.comm.rank == 0 else None)
         self.serial.load_state(self.comm.bcast(merged, root=0))
         return self.serial
 

@@ -148,7 +148,7 @@ def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
     Returns:
         (omega, steps taken).
     """
-    space = space or WholeModel()
+    space = space or (stepper if hasattr(stepper, "owned_rows") else WholeModel())
     u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor, space=space)
     omega = space.agreed(_rayleigh(u, load - result.out_of_balance, np.repeat(mass, 3)))
     return (omega if omega > 0.0 else 2.0 * SAFETY / PSEUDO_STEP), result.steps
@@ -179,15 +179,16 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         floor: smallest force norm the ratio is taken against (N): a stage whose load nearly
             cancels (nothing excavated) is measured against the stress state's force scale.
         report: None, or called as report(steps, ratio, seconds) every REPORT_SECONDS of wall time.
-        space: where relax's arrays live: None, the whole model in this process (`WholeModel`); or
-            the DistributedStage itself: each rank steps and checks its owned dofs, the norms and
-            Rayleigh quotients are sums over the ranks, the ratio and the damping rank 0's.
+        space: where relax's arrays live: the whole model in this process (`WholeModel`, the
+            default for a Stepper); or the DistributedStage (the default when it is the stepper):
+            each rank steps and checks its owned dofs, the norms and Rayleigh quotients are sums
+            over the ranks, the ratio and the damping rank 0's.
 
     Returns:
         (u, RelaxationResult): the displacement at the end (n_dofs,) and how it went, whole on every rank.
     """
     start = time.perf_counter()
-    space = space or WholeModel()
+    space = space or (stepper if hasattr(stepper, "owned_rows") else WholeModel())
     rows = space.owned_rows(len(load))
     load = np.asarray(load)[rows]
     m = np.repeat(mass, 3)[rows]
