@@ -788,10 +788,11 @@ class DistributedStage:
 
     def __init__(self, simulation, parts: Partition, serial, stiffness, mass: np.ndarray, constraints,
                  load: np.ndarray, ramp: float, regions: list, contact_arrays: dict | None, comm) -> None:
+        from mpi4py import MPI
+
         self.serial, self.comm, self.parts = serial, comm, parts
         self.model = StageModel(contact_arrays, None if simulation.nonlinear is None
                                 else ActiveRegions(simulation.nonlinear, regions))
-        from mpi4py import MPI
 
         def stage_share(rank: int) -> Share:  # the dynamic run's share with the stage's held faces
             held = None if constraints is None else np.flatnonzero(parts.node_owner[constraints.nodes] == rank)
@@ -822,18 +823,16 @@ class DistributedStage:
         """This rank's Stepper of the stage and its components (region, kind, cells)."""
         from pyfem import _kernels
         from pyfem.relaxation import PSEUDO_STEP
-        from pyfem.static import hand_over_force_provider
+        from pyfem.static import hand_over_force_provider, local_force
 
         mine = self.mine
         indptr, indices, blocks = local_matrix(stiffness, mine)
         kernel = _kernels.Stepper(indptr, indices, blocks, np.ascontiguousarray(mass[mine.nodes]), PSEUDO_STEP,
                                   0.0, 0.0)
         _add_constraints(kernel, constraints, mine)
-        local_load = np.zeros((len(mine.nodes), 3))
-        owned = mine.nodes[:mine.n_owned]
-        local_load[:mine.n_owned] = np.asarray(load, dtype=np.float64).reshape(-1, 3)[owned]
+        local_load = local_force(load, mine.nodes[:mine.n_owned], mine.local_of, len(mine.nodes))
         if np.any(local_load):
-            kernel.add_seismic_input(hand_over_force_provider(local_load.reshape(-1), ramp))
+            kernel.add_seismic_input(hand_over_force_provider(local_load, ramp))
         components = []
         if self.model.nonlinear is not None:
             components, _ = _add_components(kernel, simulation.nonlinear, regions, mine)

@@ -122,6 +122,11 @@ class WholeModel:
         return x
 
 
+def _default_space(stepper):
+    """relax's `space` when none is given: a DistributedStage is its own, a Stepper the whole model."""
+    return stepper if hasattr(stepper, "owned_rows") else WholeModel()
+
+
 def _rayleigh(x: np.ndarray, force: np.ndarray, m: np.ndarray, space=None) -> float:
     """sqrt(x.force / x.M x), or 0 when either is not positive (sums over `space`'s ranks)."""
     space = space or WholeModel()
@@ -148,7 +153,7 @@ def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
     Returns:
         (omega, steps taken).
     """
-    space = space or (stepper if hasattr(stepper, "owned_rows") else WholeModel())
+    space = space or _default_space(stepper)
     u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor, space=space)
     omega = space.agreed(_rayleigh(u, load - result.out_of_balance, np.repeat(mass, 3)))
     return (omega if omega > 0.0 else 2.0 * SAFETY / PSEUDO_STEP), result.steps
@@ -188,7 +193,7 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
         (u, RelaxationResult): the displacement at the end (n_dofs,) and how it went, whole on every rank.
     """
     start = time.perf_counter()
-    space = space or (stepper if hasattr(stepper, "owned_rows") else WholeModel())
+    space = space or _default_space(stepper)
     rows = space.owned_rows(len(load))
     load = np.asarray(load)[rows]
     m = np.repeat(mass, 3)[rows]

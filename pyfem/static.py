@@ -851,14 +851,13 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     for k, name in enumerate(element_regions):
         if name not in installed_regions:
             components[k] = nonlinear.new_component(name)
-    contact = None
-    if simulation.contact_arrays is not None:
-        contact = make_contact_pairs(dict(simulation.contact_arrays, deterioration=None))
+    # The pairs act in the stage without deterioration (the wear's clock starts with the record).
+    stage_pairs = None if simulation.contact_arrays is None else dict(simulation.contact_arrays, deterioration=None)
+    contact = None if stage_pairs is None else make_contact_pairs(stage_pairs)
 
     # Under mpirun each stage is stepped by the ranks, cut as the dynamic run will be (its partition).
     comm = world()
     parts = partition(simulation, comm.size) if comm.size > 1 else None
-    stage_pairs = None if contact is None else dict(simulation.contact_arrays, deterioration=None)
 
     def stage_stepper(stiffness, load, active, regions, stage_contact, ramp=0.0):
         """The stage's kernel stepper: serial, or shared among the ranks (`DistributedStage`)."""
@@ -886,8 +885,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     probe_load = f_exc + loads.installed_weight.ravel()
     if path_dependent and np.any(probe_load):
         elastic = linear_stiffness(model, installed_cells) if len(installed_cells) else model.stiffness
-        probe_contact = None if contact is None else make_contact_pairs(dict(simulation.contact_arrays,
-                                                                             deterioration=None))
+        probe_contact = None if stage_pairs is None else make_contact_pairs(stage_pairs)
         probe = stage_stepper(elastic, probe_load, [], [], probe_contact)
         omega, probe_steps = probe_frequency(probe, mass, probe_load, max_steps, floor=floor,
                                              space=None if parts is None else probe)
@@ -1128,10 +1126,16 @@ def add_hand_over_force(stepper, simulation, nodes=None, local_of=None, n_local:
         return
     force = state.hand_over_force
     if nodes is not None:
-        local = np.zeros((n_local, 3))
-        local[local_of[nodes]] = np.asarray(force, dtype=np.float64).reshape(-1, 3)[nodes]
-        force = local.reshape(-1)
+        force = local_force(force, nodes, local_of, n_local)
     stepper.add_seismic_input(hand_over_force_provider(force))
+
+
+def local_force(force: np.ndarray, nodes: np.ndarray, local_of: np.ndarray, n_local: int) -> np.ndarray:
+    """(3 n_local,) the force (3n,) (N) at `nodes` only (an MPI rank's owned nodes), renumbered by
+    `local_of` into a vector of the rank's n_local nodes (zero elsewhere)."""
+    local = np.zeros((n_local, 3))
+    local[local_of[nodes]] = np.asarray(force, dtype=np.float64).reshape(-1, 3)[nodes]
+    return local.reshape(-1)
 
 
 def plan_report(scene: typing.Mapping, model) -> dict:

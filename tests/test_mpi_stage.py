@@ -23,6 +23,8 @@ converged, the rock yielded, pairs left their bond, and the ranks did share the 
   the ranks) differs by 1.2e-9, 2.6e-11, 1.4e-11 and 3.0e-9.
 """
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import h5py
@@ -152,9 +154,6 @@ def linear_runs(tmp_path_factory):
     """{(solver, ranks): run directory} of a lined tunnel (tests/test_static.py's, meshed coarser)
     whose linear stage excavates with half the load released, then casts the lining: two different
     matrices, so two factorisations, on 1 and 2 ranks, by the direct and the iterative solver."""
-    import subprocess
-    import sys
-
     base = tmp_path_factory.mktemp("mpi_linear_stage")
     mesh = base / "lined.msh"
     subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(mesh), "--radius", "5", "--size", "120",
