@@ -115,17 +115,19 @@ def static_report(simulation) -> dict:
 
 
 def write_static_fields(folder: Path, simulation) -> None:
-    """static/fields.xdmf: one time per stage, at the cell vertices as the run's fields.xdmf."""
+    """static/fields.xdmf: one time per stage, on the mesh of the run's fields.xdmf
+    (pyfem.output.field_mesh: hexahedra or tetrahedra, every node; cell data of each written cell
+    from its parent cell)."""
     import h5py
     import meshio
 
+    from pyfem.output import field_mesh
+
     state = simulation.static
     model = simulation.model
-    dofs_per_cell = model.V.dofmap.dof_layout.num_dofs
-    cell_nodes = model.V.dofmap.list.array.reshape(-1, dofs_per_cell)[:, :8]  # vertices come first
-    field_nodes, compact = np.unique(cell_nodes, return_inverse=True)
-    hexahedra = compact.reshape(-1, 8)[:, [0, 1, 3, 2, 4, 5, 7, 6]]  # dolfinx -> VTK order
-    active_first = np.ones(len(cell_nodes))
+    field_nodes, cell_type, cells, parent = field_mesh(model)
+    n_cells = len(model.V.dofmap.list.array) // model.V.dofmap.dof_layout.num_dofs
+    active_first = np.ones(n_cells)
     active_first[state.installed_cells] = 0.0
     u1 = state.displacement_first.reshape(-1, 3)
     u = state.displacement.reshape(-1, 3)
@@ -133,15 +135,15 @@ def write_static_fields(folder: Path, simulation) -> None:
     writer.h5_filename = "fields.h5"
     writer.h5_file = h5py.File(folder / "fields.h5", "w")
     try:
-        writer.write_points_cells(model.node_coords[field_nodes], [("hexahedron", hexahedra)])
+        writer.write_points_cells(model.node_coords[field_nodes], [(cell_type, cells)])
         stages = ((1.0, u1, u1, state.cell_stress_first, active_first),
-                  (2.0, u, u - u1, state.cell_stress, np.ones(len(cell_nodes))))
+                  (2.0, u, u - u1, state.cell_stress, np.ones(n_cells)))
         states = (state.cell_state_first, state.cell_state)
         for (t, total, increment, stress, active), cell_state in zip(stages, states):
-            cell_data = {"stress": [tensor6(stress)], "active": [active]}
+            cell_data = {"stress": [tensor6(stress)[parent]], "active": [active[parent]]}
             if cell_state is not None:  # relaxation stage: the laws' history, cell means
                 for key in ("plastic_strain", "damage", "damage_type"):
-                    cell_data[key] = [np.asarray(cell_state[key], dtype=float)]
+                    cell_data[key] = [np.asarray(cell_state[key], dtype=float)[parent]]
             writer.write_data(t, point_data={"displacement": total[field_nodes],
                                              "stage_displacement": increment[field_nodes]},
                               cell_data=cell_data)

@@ -220,6 +220,34 @@ def test_kirsch_excavation_on_tetrahedra(tmp_path, order, wall_size):
     assert checks == 4
 
 
+@pytest.mark.parametrize("order", [1, 2])
+def test_a_run_with_a_static_stage_on_tetrahedra_writes_the_stages_fields(tmp_path, order):
+    """`run` with the excavation stage on a user's tetrahedral .geo writes static/fields.xdmf on the run's
+    field mesh (until 2026-11-28 it assumed hexahedra and the run failed with a traceback): tetrahedra,
+    every node, each written cell's stress its cell's stage stress."""
+    import h5py
+    import test_static as kirsch_static
+
+    from pyfem.output import field_mesh, tensor6
+
+    geo = tmp_path / "filled_tunnel.geo"
+    geo.write_text(FILLED_TUNNEL_GEO.replace("WALL", "1.6"))
+    summary = solver.run(kirsch_static.tunnel_scene(geo, order), tmp_path / "run")
+    assert summary["status"] == "finished"
+    simulation = solver.prepare(kirsch_static.tunnel_scene(geo, order))
+    nodes, cell_type, cells, parent = field_mesh(simulation.model)
+    assert cell_type == "tetra" and len(cells) == (8 if order == 2 else 1) * simulation.model.n_cells
+    with h5py.File(tmp_path / "run" / "static" / "fields.h5") as fields:
+        datasets = {name: np.asarray(fields[name]) for name in fields}
+    topology = [value for value in datasets.values() if value.ndim == 2 and value.shape == cells.shape]
+    assert len(topology) == 1 and np.array_equal(topology[0], cells)
+    stress = [value for value in datasets.values() if value.shape == (len(cells), 6)]
+    assert stress, "the stages' stress is written per cell (Tensor6)"
+    final = tensor6(simulation.static.cell_stress)[parent]
+    assert np.abs(final).max() > 1e6  # MPa: the excavation's stress concentration
+    assert any(np.allclose(value, final, rtol=1e-12, atol=0.0) for value in stress)
+
+
 def test_p2_truncation_face_nodes_follow_the_free_field_at_second_order(tmp_path):
     """The input's traction term A sigma_ff n takes the row-sum (consistent) weights of the quadratic
     triangles, 0 at their vertices, while the springs and dashpots keep the HRZ weights: monitors on
