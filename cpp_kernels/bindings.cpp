@@ -782,7 +782,10 @@ t_e = t - start clamped at 0. The arguments are set_deterioration's, then the st
            py::arg("recv_nodes"), py::arg("n_nodes"),
            "comm_f2c: mpi4py's comm.py2f(); per neighbour rank the local owned nodes it ghosts "
            "and the local ghosts it owns, in ascending global order.")
-      .def_property_readonly("bytes_sent_per_step", &MpiNodeExchange::bytes_sent_per_step);
+      .def_property_readonly("bytes_sent_per_step", &MpiNodeExchange::bytes_sent_per_step,
+                             "Bytes of one exchange of v and a (the Stepper's, once per step).")
+      .def_property_readonly("bytes_sent", &MpiNodeExchange::bytes_sent,
+                             "Bytes this rank has sent through this exchange so far.");
 
   py::class_<Stepper>(m, "Stepper", R"(Velocity-Verlet central difference with lumped mass.
 
@@ -1030,18 +1033,22 @@ Args:
     mass: float64 (n_nodes,) lumped masses (borrowed).
     node_level: int32 (n_nodes,) rate level of each node, 0 the finest (copied).
     dt_fine: step of level 0 (s).
-    alpha: mass-proportional Rayleigh coefficient (1/s).)")
+    alpha: mass-proportional Rayleigh coefficient (1/s).
+    max_level: the largest level (-1: the nodes' largest; an MPI rank's share passes the whole
+        model's, set_partition).)")
       .def(py::init([](const py::object& indptr, const py::object& indices, const py::object& blocks,
                        const py::object& mass, const py::object& level_object, double dt_fine,
-                       double alpha) {
+                       double alpha, int max_level) {
              const std::int64_t n_nodes = node_count(mass);
              const BlockCsrView K = checked_block_csr(indptr, indices, blocks, n_nodes);
              auto mass_array = checked_array<double>(mass, "mass", {n_nodes});
              auto levels = checked_array<std::int32_t>(level_object, "node_level", {n_nodes});
-             return std::make_unique<LocalStepper>(K, mass_array.data(), levels.data(), dt_fine, alpha);
+             return std::make_unique<LocalStepper>(K, mass_array.data(), levels.data(), dt_fine, alpha,
+                                                   max_level);
            }),
            py::arg("indptr"), py::arg("indices"), py::arg("blocks"), py::arg("mass"),
-           py::arg("node_level"), py::arg("dt_fine"), py::arg("alpha") = 0.0, py::keep_alive<1, 2>(),
+           py::arg("node_level"), py::arg("dt_fine"), py::arg("alpha") = 0.0, py::arg("max_level") = -1,
+           py::keep_alive<1, 2>(),
            py::keep_alive<1, 3>(), py::keep_alive<1, 4>(), py::keep_alive<1, 5>())
       .def(
           "set_dashpots",
@@ -1074,12 +1081,25 @@ Args:
           py::arg("input"), py::keep_alive<1, 2>(), "Adds a SeismicInput force provider.")
       .def(
           "add_internal_force",
-          [](LocalStepper& stepper, std::shared_ptr<HexahedronElementsBase> component, int level) {
-            stepper.add_internal_force(std::move(component), level);
-          },
-          py::arg("component"), py::arg("level"), py::keep_alive<1, 2>(),
+          [](LocalStepper& stepper, std::shared_ptr<HexahedronElementsBase> component, int level,
+             bool count_energy) { stepper.add_internal_force(std::move(component), level, count_energy); },
+          py::arg("component"), py::arg("level"), py::arg("count_energy") = true, py::keep_alive<1, 2>(),
           "Adds a HexahedronElements whose cells step at dt_fine 2^level (their nodes then drift at that "
-          "level or a finer one): its force is computed and committed in the level's end kicks.")
+          "level or a finer one): its force is computed and committed in the level's end kicks. "
+          "count_energy=False: its energy stays out of this account (an MPI rank's halo cells).")
+      .def(
+          "set_partition",
+          [](LocalStepper& stepper, std::int64_t n_owned,
+             std::vector<std::shared_ptr<MpiNodeExchange>> exchanges) {
+            stepper.set_partition(n_owned, std::vector<std::shared_ptr<NodeExchange>>(exchanges.begin(),
+                                                                                      exchanges.end()));
+          },
+          py::arg("n_owned"), py::arg("exchanges"), py::keep_alive<1, 3>(),
+          R"(One MPI rank's share of a distributed model under the row split (pyfem/distributed.py): the
+first n_owned nodes are this rank's, the others ghosts; exchanges[k] (an MpiNodeExchange of the
+level-k ghosts, or None) gives them their owners' velocity before every level-k drift; the energy
+account sums the owned nodes and counted components only.)")
+      .def_property_readonly("n_owned_nodes", &LocalStepper::n_owned_nodes)
       .def(
           "add_contact",
           [](LocalStepper& stepper, std::shared_ptr<ContactPairs> pairs, int level) {

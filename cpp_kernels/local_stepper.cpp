@@ -16,10 +16,15 @@ namespace cavern {
 
 namespace {
 constexpr std::int64_t kMinRowsForThreadsLocal = 4096;
+
+const std::shared_ptr<NodeExchange>& nullptr_exchange() {
+  static const std::shared_ptr<NodeExchange> none;
+  return none;
+}
 }
 
 LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
-                           const std::int32_t* node_level, double dt_fine, double alpha)
+                           const std::int32_t* node_level, double dt_fine, double alpha, int max_level)
     : stiffness_(stiffness), mass_(mass), dt_fine_(dt_fine), alpha_(alpha) {
   if (!(std::isfinite(dt_fine) && dt_fine > 0.0))
     throw std::invalid_argument("dt_fine must be finite and > 0, got " + std::to_string(dt_fine));
@@ -35,6 +40,13 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
                                   std::to_string(level_[i]) + " must be in [0, " +
                                   std::to_string(kMaxLevels) + ")");
     max_level_ = std::max(max_level_, level_[i]);
+  }
+  if (max_level >= 0) {  // a share of a model whose coarsest level may have no node here
+    if (max_level < max_level_ || max_level >= kMaxLevels)
+      throw std::invalid_argument("max_level = " + std::to_string(max_level) + " must be in [" +
+                                  std::to_string(max_level_) + " (the nodes' largest level), " +
+                                  std::to_string(kMaxLevels) + ")");
+    max_level_ = max_level;
   }
   levels_.resize(max_level_ + 1);
   row_cap_.assign(n, kMaxLevels);
@@ -63,6 +75,41 @@ void LocalStepper::set_constraints(const std::int32_t* nodes, std::int64_t count
   constraint_P_.assign(projection, projection + 9 * count);
   reactions_.assign(3 * count, 0.0);
   initialised_ = false;
+}
+
+void LocalStepper::set_partition(std::int64_t n_owned,
+                                 std::vector<std::shared_ptr<NodeExchange>> exchanges) {
+  if (n_owned < 0 || n_owned > n_nodes())
+    throw std::invalid_argument("n_owned = " + std::to_string(n_owned) + " must be in [0, " +
+                                std::to_string(n_nodes()) + "]");
+  n_owned_ = n_owned;
+  exchanges_ = std::move(exchanges);
+  initialised_ = false;
+}
+
+void LocalStepper::check_partition() const {
+  if (n_owned_ < 0) return;
+  if (!row_split_)
+    throw std::invalid_argument("a share of a distributed model steps by the row split only (set_row_split): "
+                                "in the column split coarser levels kick finer nodes between their drifts");
+  if (exchanges_.size() != static_cast<std::size_t>(max_level_ + 1))
+    throw std::invalid_argument("set_partition: " + std::to_string(exchanges_.size()) + " exchanges for " +
+                                std::to_string(max_level_ + 1) + " levels (one per level, null: none)");
+  auto require_owned = [this](std::int64_t node, const std::string& what) {
+    if (node >= n_owned_)
+      throw std::invalid_argument(what + " at node " + std::to_string(node) +
+                                  ", a ghost of this share (owned nodes: [0, " + std::to_string(n_owned_) +
+                                  ")): a share's effects must be on its own nodes");
+  };
+  for (std::int64_t i = n_owned_; i < n_nodes(); ++i) {
+    if (dashpot_slot_[i] >= 0) require_owned(i, "a dashpot");
+    if (constraint_slot_[i] >= 0) require_owned(i, "a constraint");
+  }
+  for (const auto& provider : providers_)
+    for (const std::int32_t node : provider->nodes()) require_owned(node, provider->name());
+  for (const Level& level : levels_)
+    for (const auto& pairs : level.contacts)
+      for (const std::int32_t node : pairs->unique_nodes()) require_owned(node, "a contact pair");
 }
 
 void LocalStepper::set_row_split(bool on) {
@@ -218,10 +265,11 @@ void LocalStepper::check_level(const char* what, int level) const {
 }
 
 void LocalStepper::add_internal_force(std::shared_ptr<HexahedronElementsBase> component,
-                                      int level) {
+                                      int level, bool count_energy) {
   check_level("component", level);
   component->check_nodes(n_nodes());
   levels_[max_level_ - level].components.push_back(std::move(component));
+  levels_[max_level_ - level].component_counted.push_back(count_energy ? 1 : 0);
   levels_stale_ = true;  // its rows join the level's at the next run (rebuild)
   initialised_ = false;
 }
@@ -509,6 +557,7 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
   }
   lap(phase_times_.element_loop);
   const std::int64_t n_rows = static_cast<std::int64_t>(level.rows.size());
+  const std::int64_t owned = n_owned_nodes();
   double external_work = 0.0, damping_work = 0.0;
 #pragma omp parallel for schedule(static) if (n_rows >= kMinRowsForThreadsLocal) \
     reduction(+ : external_work, damping_work)
@@ -604,9 +653,12 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
       external_power += external[d] * v_new[d];
       damping_power += damping[d] * v_new[d];
     }
-    // Trapezoid rule over the node's own substep (its start kick to this end kick).
-    external_work += half * (own_power_[2 * i] + external_power);
-    damping_work += half * (own_power_[2 * i + 1] + damping_power);
+    // Trapezoid rule over the node's own substep (its start kick to this end kick); a ghost's is
+    // its owner's to count (set_partition).
+    if (i < owned) {
+      external_work += half * (own_power_[2 * i] + external_power);
+      damping_work += half * (own_power_[2 * i + 1] + damping_power);
+    }
   }
   energy_.external_work += external_work;
   energy_.damping_work += damping_work;
@@ -634,6 +686,14 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
     phase_times_.contact += omp_get_wtime() - started;
   }
   if (row_split_) drift_end_[c] = t + h;  // this level's nodes now drift to t + h
+  // A share (set_partition): the ghosts of this level take their owners' drift velocity.
+  const std::shared_ptr<NodeExchange>& exchange =
+      exchanges_.empty() ? nullptr_exchange() : exchanges_[max_level_ - c];
+  if (exchange) {
+    const double started = omp_get_wtime();
+    exchange->exchange(v, nullptr);
+    phase_times_.exchange += omp_get_wtime() - started;
+  }
   const double drift_started = omp_get_wtime();
   const std::vector<std::int32_t>& drift = levels_[c].drift;
   const std::int64_t n_drift = static_cast<std::int64_t>(drift.size());
@@ -653,6 +713,7 @@ void LocalStepper::substep(int c, double h, double t, double* u, double* v) {
 void LocalStepper::prepare_structure() {
   rebuild();
   check_contacts();
+  check_partition();
   // Each constrained node's implicit update at every level's step (its own end kicks use its own
   // level's; checked at all, before any OpenMP loop can meet a singular one).
   for (std::int64_t i = 0; i < n_nodes(); ++i) {
@@ -706,23 +767,24 @@ void LocalStepper::initialise(const double* u, const double* v, double t0) {
 
 double LocalStepper::measure_state(const double* u, const double* v) {
   double kinetic = 0.0;
-  for (std::int64_t i = 0; i < n_nodes(); ++i)
+  for (std::int64_t i = 0; i < n_owned_nodes(); ++i)  // a ghost's energy is its owner's
     for (int d = 0; d < 3; ++d) kinetic += 0.5 * mass_[i] * v[3 * i + d] * v[3 * i + d];
   energy_.kinetic = kinetic;
   energy_.strain = strain_energy(u);
   energy_.internal_stored = 0.0;
   double dissipation = 0.0;
   for (const Level& level : levels_)
-    for (const auto& component : level.components) {
-      energy_.internal_stored += component->stored_energy();
-      dissipation += component->dissipation();
-    }
+    for (std::size_t k = 0; k < level.components.size(); ++k)
+      if (level.component_counted[k]) {
+        energy_.internal_stored += level.components[k]->stored_energy();
+        dissipation += level.components[k]->dissipation();
+      }
   return dissipation;
 }
 
 double LocalStepper::strain_energy(const double* u) const {
   double twice = 0.0;
-  const std::int64_t n = n_nodes();
+  const std::int64_t n = n_owned_nodes();  // owned rows: the ranks' sums add up to u.K u
 #pragma omp parallel for schedule(static) if (n >= kMinRowsForThreadsLocal) reduction(+ : twice)
   for (std::int64_t i = 0; i < n; ++i) {
     double Ku[3];

@@ -48,11 +48,13 @@ namespace cavern {
 /// plain one: the reported balance oscillates at O(dt^2) (bounded), it is not round-off.
 class LocalStepper {
  public:
-  /// K borrowed (full block CSR, symmetric), mass borrowed; node_level (n_nodes) copied. Throws
-  /// std::invalid_argument for a non-positive mass or dt_fine, a negative alpha or level, or more
-  /// than kMaxLevels levels.
+  /// K borrowed (full block CSR, symmetric), mass borrowed; node_level (n_nodes) copied. The
+  /// largest level L is the nodes' largest, or max_level if given (>= 0: an MPI rank's share steps
+  /// the whole model's levels, set_partition). Throws std::invalid_argument for a non-positive mass
+  /// or dt_fine, a negative alpha or level, more than kMaxLevels levels, or a max_level below the
+  /// nodes' largest level.
   LocalStepper(const BlockCsrView& stiffness, const double* mass, const std::int32_t* node_level,
-               double dt_fine, double alpha);
+               double dt_fine, double alpha, int max_level = -1);
 
   static constexpr int kMaxLevels = 10;
 
@@ -80,7 +82,10 @@ class LocalStepper {
   /// one (a node drifts at the finest level that kicks it), so none drifts slower than a cell that
   /// loads it; a cell may step finer than its nodes (pyfem/local_stepping.py does so for the cells
   /// around contact pairs). Throws std::invalid_argument for a level outside [0, max_level()].
-  void add_internal_force(std::shared_ptr<HexahedronElementsBase> component, int level);
+  /// count_energy = false: its forces act, its stored energy and dissipation are left out of the
+  /// account (an MPI rank's copy of cells another rank counts, set_partition).
+  void add_internal_force(std::shared_ptr<HexahedronElementsBase> component, int level,
+                          bool count_energy = true);
 
   /// Adds contact pairs whose nodes step and drift at rate level `level` (the drift level: the
   /// finest level whose kicks move a node, from its stiffness row's columns and the element-loop
@@ -128,6 +133,22 @@ class LocalStepper {
   /// not apply (every row steps at its own level). Set before the first run.
   void set_row_split(bool on);
   bool row_split() const { return row_split_; }
+
+  /// One MPI rank's share of a distributed model (Stepper::set_partition, docs/scaling.md "Local
+  /// time stepping on the ranks"): its first n_owned nodes are its own, the rest ghosts whose rows it
+  /// computes but does not keep. Row split only (a node's u and v change only in its own level's
+  /// kicks, its contact impulses and its drift): before every drift of level k, after the level's
+  /// start kick and contact impulses, exchanges[k] (null: none) overwrites the velocity of this
+  /// share's ghosts at level k with their owners' (NodeExchange::exchange(v, nullptr)), so every
+  /// ghost drifts exactly as its owner and each owned row reads, at its end kicks, the positions
+  /// the whole model's stepper would. The energy account then sums the owned nodes and the
+  /// counted components (the ranks' accounts add up to the model's). Dashpots, constraints,
+  /// providers and pairs must be on owned nodes. Checked at the first run (std::invalid_argument):
+  /// the row split, one entry per level, effects on owned nodes. Throws std::invalid_argument for
+  /// n_owned outside [0, n_nodes].
+  void set_partition(std::int64_t n_owned, std::vector<std::shared_ptr<NodeExchange>> exchanges);
+  /// Nodes whose u, v and a this stepper keeps: n_owned of set_partition, else every node.
+  std::int64_t n_owned_nodes() const { return n_owned_ < 0 ? n_nodes() : n_owned_; }
 
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
   /// return each node's own-level acceleration of its last end kick (the FSAL value the next
@@ -213,6 +234,7 @@ class LocalStepper {
     double step = 0.0;                   // h of this level
     std::vector<double> implicit_inverse;  // (own rows with a dashpot, 9), keyed by dashpot_slot
     std::vector<std::shared_ptr<HexahedronElementsBase>> components;  // cells at this level
+    std::vector<char> component_counted;  // per component: its energy is in this account
     std::vector<std::uint8_t> component_row;  // (rows) a component of this level loads the row
     std::vector<std::shared_ptr<ContactPairs>> contacts;  // pairs drifting at this level
   };
@@ -234,6 +256,8 @@ class LocalStepper {
   void build_provider_rows();
   // Throws unless every contact's nodes step and drift at its level.
   void check_contacts() const;
+  // Throws unless a partition's effects are on owned nodes and its stepping is the row split.
+  void check_partition() const;
   // Levels, row caps and provider rows from everything added so far (initialise: once, however
   // many components, pairs and providers were added).
   void rebuild();
@@ -280,6 +304,8 @@ class LocalStepper {
   std::vector<double> drift_end_;
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
+  std::int64_t n_owned_ = -1;  // set_partition (-1: not a share, every node owned)
+  std::vector<std::shared_ptr<NodeExchange>> exchanges_;  // per fine level k (set_partition)
   Energy energy_;
   PhaseTimes phase_times_;
 };

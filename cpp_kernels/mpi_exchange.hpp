@@ -52,19 +52,21 @@ class MpiNodeExchange : public NodeExchange {
   MpiNodeExchange(const MpiNodeExchange&) = delete;
   MpiNodeExchange& operator=(const MpiNodeExchange&) = delete;
 
+  /// a null: v only (3 values per node instead of 6; local time stepping's per-level exchange).
   void exchange(double* v, double* a) override {
     const int n = static_cast<int>(neighbours_.size());
+    const int per_node = a ? 6 : 3;
     for (int q = 0; q < n; ++q)
-      MPI_Irecv(recv_buffers_[q].data(), static_cast<int>(recv_buffers_[q].size()), MPI_DOUBLE,
+      MPI_Irecv(recv_buffers_[q].data(), per_node * static_cast<int>(recv_nodes_[q].size()), MPI_DOUBLE,
                 neighbours_[q], kTag, comm_, &requests_[q]);
     for (int q = 0; q < n; ++q) {
       double* out = send_buffers_[q].data();
       for (const std::int32_t node : send_nodes_[q])
         for (int c = 0; c < 3; ++c) {
           *out++ = v[3 * node + c];
-          *out++ = a[3 * node + c];
+          if (a) *out++ = a[3 * node + c];
         }
-      MPI_Isend(send_buffers_[q].data(), static_cast<int>(send_buffers_[q].size()), MPI_DOUBLE,
+      MPI_Isend(send_buffers_[q].data(), per_node * static_cast<int>(send_nodes_[q].size()), MPI_DOUBLE,
                 neighbours_[q], kTag, comm_, &requests_[n + q]);
     }
     MPI_Waitall(2 * n, requests_.data(), MPI_STATUSES_IGNORE);
@@ -73,17 +75,16 @@ class MpiNodeExchange : public NodeExchange {
       for (const std::int32_t node : recv_nodes_[q])
         for (int c = 0; c < 3; ++c) {
           v[3 * node + c] = *in++;
-          a[3 * node + c] = *in++;
+          if (a) a[3 * node + c] = *in++;
         }
     }
+    bytes_sent_ += 8 * per_node * sent_nodes();
   }
 
-  /// Bytes this rank sends per step.
-  std::int64_t bytes_sent_per_step() const {
-    std::int64_t bytes = 0;
-    for (const auto& buffer : send_buffers_) bytes += 8 * static_cast<std::int64_t>(buffer.size());
-    return bytes;
-  }
+  /// Bytes this rank sends per exchange of v and a (the Stepper's one per step).
+  std::int64_t bytes_sent_per_step() const { return 48 * sent_nodes(); }
+  /// Bytes this rank has sent through this exchange so far.
+  std::int64_t bytes_sent() const { return bytes_sent_; }
 
  private:
   static constexpr int kTag = 7301;
@@ -92,6 +93,13 @@ class MpiNodeExchange : public NodeExchange {
   std::vector<std::vector<std::int32_t>> send_nodes_, recv_nodes_;
   std::vector<std::vector<double>> send_buffers_, recv_buffers_;
   std::vector<MPI_Request> requests_;
+  std::int64_t bytes_sent_ = 0;
+
+  std::int64_t sent_nodes() const {
+    std::int64_t count = 0;
+    for (const auto& nodes : send_nodes_) count += static_cast<std::int64_t>(nodes.size());
+    return count;
+  }
 };
 
 }  // namespace cavern

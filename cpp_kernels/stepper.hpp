@@ -77,7 +77,7 @@ struct PhaseTimes {
 class NodeExchange {
  public:
   virtual ~NodeExchange() = default;
-  /// v, a: (3 n_nodes) of this rank, owned first.
+  /// v, a: (3 n_nodes) of this rank, owned first. a null: v only (LocalStepper::set_partition).
   virtual void exchange(double* v, double* a) = 0;
 };
 

@@ -7,7 +7,9 @@
 #include <memory>
 #include <cstdio>
 #include <random>
+#include <stdexcept>
 #include <string>
+#include <thread>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -15,6 +17,7 @@
 #include "local_stepper.hpp"
 #include "random_system.hpp"
 #include "seismic_input.hpp"
+#include "shares.hpp"
 #include "small_matrix.hpp"
 #include "stable_step.hpp"
 #include "stepper.hpp"
@@ -853,4 +856,229 @@ TEST(LocalStepperRowSplit, BondedPairReproducesTheMergedChain) {
   std::vector<std::int32_t> equalized = chain.level;
   equalized[edge] = chain.level[edge + 1];
   expect_merged(bonded_split_chain(chain, edge, equalized, equalized[edge], dt_fine, 60, true));
+}
+
+// Local time stepping on MPI ranks' shares (LocalStepper::set_partition, docs/scaling.md "Local
+// time stepping on the ranks"), the ranks run as two threads that exchange one level's ghosts'
+// velocity through memory before each of that level's drifts, as MpiNodeExchange does by messages.
+namespace {
+
+/// The level-k ghosts' velocity from their owners (a is not exchanged: LocalStepper passes null).
+class LevelMemoryExchange : public NodeExchange {
+ public:
+  LevelMemoryExchange(const Share& mine, const std::vector<std::int32_t>& level, int k,
+                      std::vector<double>& mailbox_out, const std::vector<double>& mailbox_in, Barrier& barrier,
+                      std::int64_t* calls)
+      : mine_(mine), level_(level), k_(k), out_(mailbox_out), in_(mailbox_in), barrier_(barrier), calls_(calls) {}
+
+  void exchange(double* v, double* a) override {
+    if (a != nullptr) throw std::logic_error("LocalStepper exchanges v only");
+    for (std::int64_t l = 0; l < mine_.n_owned; ++l)
+      if (level_[mine_.nodes[l]] == k_)
+        for (int c = 0; c < 3; ++c) out_[3 * mine_.nodes[l] + c] = v[3 * l + c];
+    barrier_.arrive_and_wait();  // both posted
+    for (std::size_t l = mine_.n_owned; l < mine_.nodes.size(); ++l)
+      if (level_[mine_.nodes[l]] == k_)  // only this level's ghosts: the others are mid-drift
+        for (int c = 0; c < 3; ++c) v[3 * l + c] = in_[3 * mine_.nodes[l] + c];
+    barrier_.arrive_and_wait();  // both read
+    ++*calls_;
+  }
+
+ private:
+  const Share& mine_;
+  const std::vector<std::int32_t>& level_;
+  const int k_;
+  std::vector<double>& out_;
+  const std::vector<double>& in_;
+  Barrier& barrier_;
+  std::int64_t* calls_;
+};
+
+struct ShareRun {
+  std::vector<double> u, v, a;
+  LocalStepper::Energy energy;
+  std::int64_t exchanges = 0;
+  std::int8_t pair_state = -1;  // of the pair, on the rank that owns it
+};
+
+}  // namespace
+
+// The graded chain cut at p by a weak deteriorating pair (it breaks, opens, closes and slides), a
+// dashpot and mass-proportional damping, under the row split, on two shares: nodes owned
+// alternately (every owned node has ghost neighbours, at every level; the pair's two nodes on one
+// rank), and owned by blocks where one rank's share holds no node of the coarsest level (its
+// stepper is given the model's). Every owned node follows the whole model's stepper to round-off
+// (the shares sum a row's blocks in another order), and the two energy accounts add up to the
+// whole's.
+TEST(LocalStepperPartition, SharesFollowTheWholeModel) {
+  Chain chain = graded_chain(81, 12, 100.0, 3);
+  // Levels 0 (the stiff middle) to 3 in steps of one: a node may always step finer than it must.
+  for (int i = 0; i < 81; ++i) chain.level[i] = std::min(chain.level[i], std::abs(i - 40) / 4);
+  const int max_level = *std::max_element(chain.level.begin(), chain.level.end());
+  ASSERT_EQ(max_level, 3);
+  const std::int32_t p = 20;
+  const double dt_fine = 0.8 * chain.dt_min;
+  WeakPairChain whole = weak_pair_chain(chain, p, dt_fine);
+  whole.stepper->set_row_split(true);
+  const std::int64_t n = whole.split.n_nodes;  // 82: the pair's copy node is the last
+  std::vector<double> v0 = pulse(81);
+  v0.insert(v0.end(), {v0[3 * p], v0[3 * p + 1], v0[3 * p + 2]});
+  for (double& x : v0) x *= 2.0;
+  const std::vector<double> u0(v0.size(), 0.0), a0(v0.size(), 0.0);
+  std::vector<double> u = u0, v = v0, a = a0;
+  constexpr int kRuns = 4, kStepsPerRun = 30;
+  double t = 0.0;
+  for (int r = 0; r < kRuns; ++r) t = whole.stepper->run(u.data(), v.data(), a.data(), kStepsPerRun, t);
+  ASSERT_NE(whole.pair->state()[0], kBonded);  // the pair broke, opened and slid: contact is exercised
+  const LocalStepper::Energy reference = whole.stepper->energy();
+  ASSERT_GT(reference.friction_dissipation, 0.0);
+  ASSERT_GT(reference.damping_work, 0.0);
+
+  const std::vector<std::int32_t>& level = whole.level;
+  const std::int32_t dashpot_node = static_cast<std::int32_t>(n - 2);  // weak_pair_chain's
+  auto run_shares = [&](const std::vector<int>& owner) {
+    Share shares[2];
+    for (int r = 0; r < 2; ++r) {
+      std::vector<std::int64_t> owned;
+      for (std::int64_t i = 0; i < n; ++i)
+        if (owner[i] == r) owned.push_back(i);
+      shares[r] = make_share(whole.split, owned);
+    }
+    std::vector<double> mailbox[2] = {std::vector<double>(3 * n), std::vector<double>(3 * n)};
+    Barrier barrier;
+    ShareRun runs[2];
+    auto rank = [&](int r) {
+      const Share& share = shares[r];
+      const std::int64_t m = static_cast<std::int64_t>(share.nodes.size());
+      std::vector<std::int64_t> local(n, -1);
+      std::vector<std::int32_t> local_level(m);
+      for (std::int64_t l = 0; l < m; ++l) {
+        local[share.nodes[l]] = l;
+        local_level[l] = level[share.nodes[l]];
+      }
+      LocalStepper stepper(share.system.view(), share.system.mass.data(), local_level.data(), dt_fine, 0.05,
+                           max_level);
+      stepper.set_row_split(true);
+      std::shared_ptr<ContactPairs> pair;
+      if (owner[p] == r) {
+        const std::int32_t pairs[2] = {static_cast<std::int32_t>(local[p]), static_cast<std::int32_t>(local[n - 1])};
+        const double area = 1.0, normal[3] = {0.0, 0.6, 0.8}, F0[3] = {0.0, 0.0, 0.0};
+        pair = std::make_shared<ContactPairs>(ContactGeometry{1, pairs, &area, normal, F0},
+                                              ContactStrength{0.05, 0.02, 0.5, 0.4});
+        pair->set_deterioration(DeteriorationParameters{0.75, 5.0, 100.0, 0.883, 0.02, 0.3});
+        stepper.add_contact(pair, level[p]);
+      }
+      if (owner[dashpot_node] == r) {
+        const std::int32_t node = static_cast<std::int32_t>(local[dashpot_node]);
+        const double C[9] = {0.5, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 1.0};
+        stepper.set_dashpots(&node, 1, C);
+      }
+      std::vector<std::shared_ptr<NodeExchange>> exchanges;
+      for (int k = 0; k <= max_level; ++k)
+        exchanges.push_back(std::make_shared<LevelMemoryExchange>(share, level, k, mailbox[r], mailbox[1 - r],
+                                                                  barrier, &runs[r].exchanges));
+      stepper.set_partition(share.n_owned, exchanges);
+      for (const std::int64_t node : share.nodes)
+        for (int c = 0; c < 3; ++c) {
+          runs[r].u.push_back(u0[3 * node + c]);
+          runs[r].v.push_back(v0[3 * node + c]);
+          runs[r].a.push_back(a0[3 * node + c]);
+        }
+      double time = 0.0;
+      for (int s = 0; s < kRuns; ++s)
+        time = stepper.run(runs[r].u.data(), runs[r].v.data(), runs[r].a.data(), kStepsPerRun, time);
+      runs[r].energy = stepper.energy();
+      if (pair) runs[r].pair_state = pair->state()[0];
+    };
+    std::thread first(rank, 0), second(rank, 1);
+    first.join();
+    second.join();
+
+    double largest[3] = {0.0, 0.0, 0.0}, difference[3] = {0.0, 0.0, 0.0};
+    for (int r = 0; r < 2; ++r)
+      for (std::int64_t l = 0; l < shares[r].n_owned; ++l)
+        for (int c = 0; c < 3; ++c) {
+          const std::int64_t d = 3 * shares[r].nodes[l] + c;
+          const double* mine[3] = {runs[r].u.data(), runs[r].v.data(), runs[r].a.data()};
+          const double* theirs[3] = {u.data(), v.data(), a.data()};
+          for (int q = 0; q < 3; ++q) {
+            largest[q] = std::max(largest[q], std::abs(theirs[q][d]));
+            difference[q] = std::max(difference[q], std::abs(mine[q][3 * l + c] - theirs[q][d]));
+          }
+        }
+    EXPECT_GT(largest[0], 1e-2);  // the chain moved
+    // a is the net of stiffness forces up to 100 times larger (the stiff middle's), summed in
+    // another order by the shares: measured 0 (alternating) and 1.3e-11 (blocks) of its largest.
+    EXPECT_LT(difference[0], 1e-12 * largest[0]);
+    EXPECT_LT(difference[1], 1e-12 * largest[1]);
+    EXPECT_LT(difference[2], 1e-10 * largest[2]);
+    EXPECT_EQ(runs[owner[p]].pair_state, whole.pair->state()[0]);
+    // Every level exchanged at each of its drifts: 2^(L - k) per global step.
+    EXPECT_EQ(runs[0].exchanges, kRuns * kStepsPerRun * ((std::int64_t{1} << (max_level + 1)) - 1));
+    EXPECT_EQ(runs[0].exchanges, runs[1].exchanges);
+    const LocalStepper::Energy& e0 = runs[0].energy;
+    const LocalStepper::Energy& e1 = runs[1].energy;
+    const double scale = reference.initial + reference.external_work + reference.damping_work;
+    EXPECT_NEAR(e0.kinetic + e1.kinetic, reference.kinetic, 1e-12 * scale);
+    EXPECT_NEAR(e0.strain + e1.strain, reference.strain, 1e-12 * scale);
+    EXPECT_NEAR(e0.initial + e1.initial, reference.initial, 1e-12 * scale);
+    EXPECT_NEAR(e0.damping_work + e1.damping_work, reference.damping_work, 1e-12 * scale);
+    EXPECT_NEAR(e0.contact_work + e1.contact_work, reference.contact_work, 1e-12 * scale);
+    EXPECT_NEAR(e0.friction_dissipation + e1.friction_dissipation, reference.friction_dissipation, 1e-12 * scale);
+    EXPECT_NEAR(e0.balance + e1.balance, reference.balance, 1e-12 * scale);
+  };
+  std::vector<int> alternating(n), blocks(n);
+  for (std::int64_t i = 0; i < n; ++i) {
+    alternating[i] = static_cast<int>(i % 2);
+    blocks[i] = (i >= 30 && i < 51) ? 1 : 0;  // rank 1: the middle only, no coarsest node
+  }
+  alternating[n - 1] = alternating[p];  // a pair whole on one rank
+  {
+    SCOPED_TRACE("alternating owners");
+    run_shares(alternating);
+  }
+  {
+    SCOPED_TRACE("blocks");
+    std::int32_t coarsest_in_share = 0;
+    for (std::int64_t i = 29; i <= 51; ++i) coarsest_in_share = std::max(coarsest_in_share, level[i]);
+    ASSERT_LT(coarsest_in_share, max_level);  // rank 1's share needs the model's max_level
+    run_shares(blocks);
+  }
+}
+
+// What a share cannot do: the column split (coarser levels kick finer nodes between their drifts),
+// an effect on a ghost, a max_level below the nodes' largest.
+TEST(LocalStepperPartition, RefusesWhatASharesExchangeCannotKeepExact) {
+  const Chain chain = graded_chain(41, 8, 16.0, 2);
+  const double dt_fine = 0.8 * chain.dt_min;
+  const Share share = make_share(chain.system, 0, 20);
+  ASSERT_GT(share.nodes.size(), 20u);
+  std::vector<std::int32_t> local_level;
+  for (const std::int64_t node : share.nodes) local_level.push_back(chain.level[node]);
+  const int max_level = *std::max_element(chain.level.begin(), chain.level.end());
+  const std::int64_t n_dofs = 3 * static_cast<std::int64_t>(share.nodes.size());
+  std::vector<double> u(n_dofs, 0.0), v(n_dofs, 0.0), a(n_dofs, 0.0);
+  const std::vector<std::shared_ptr<NodeExchange>> none(max_level + 1);
+  auto refused = [&](LocalStepper& stepper, const std::string& expected) {
+    try {
+      stepper.run(u.data(), v.data(), a.data(), 1, 0.0);
+      ADD_FAILURE() << "stepped: " << expected;
+    } catch (const std::invalid_argument& error) {
+      EXPECT_NE(std::string(error.what()).find(expected), std::string::npos) << error.what();
+    }
+  };
+  LocalStepper columns(share.system.view(), share.system.mass.data(), local_level.data(), dt_fine, 0.0, max_level);
+  columns.set_partition(share.n_owned, none);
+  refused(columns, "row split only");
+  LocalStepper ghost_dashpot(share.system.view(), share.system.mass.data(), local_level.data(), dt_fine, 0.0,
+                             max_level);
+  ghost_dashpot.set_row_split(true);
+  const std::int32_t ghost = static_cast<std::int32_t>(share.n_owned);
+  const double C[9] = {0.5, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.5};
+  ghost_dashpot.set_dashpots(&ghost, 1, C);
+  ghost_dashpot.set_partition(share.n_owned, none);
+  refused(ghost_dashpot, "a dashpot at node 20, a ghost");
+  EXPECT_THROW(LocalStepper(chain.system.view(), chain.system.mass.data(), chain.level.data(), dt_fine, 0.0,
+                            max_level - 1),
+               std::invalid_argument);
 }

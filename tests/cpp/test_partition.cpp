@@ -6,82 +6,22 @@
 
 #include <algorithm>
 #include <cmath>
-#include <condition_variable>
 #include <memory>
-#include <mutex>
 #include <random>
 #include <thread>
 #include <vector>
 
 #include "random_system.hpp"
+#include "shares.hpp"
 #include "stable_step.hpp"
 #include "stepper.hpp"
 
 namespace cavern {
 namespace {
 
-/// Both threads wait here until both have arrived (reusable).
-class Barrier {
- public:
-  void arrive_and_wait() {
-    std::unique_lock<std::mutex> lock(mutex_);
-    const int generation = generation_;
-    if (++arrived_ == 2) {
-      arrived_ = 0;
-      ++generation_;
-      condition_.notify_all();
-    } else {
-      condition_.wait(lock, [&] { return generation_ != generation; });
-    }
-  }
-
- private:
-  std::mutex mutex_;
-  std::condition_variable condition_;
-  int arrived_ = 0, generation_ = 0;
-};
-
-/// One share of a whole model: owned nodes first, then ghosts, both ascending.
-struct Share {
-  std::vector<std::int64_t> nodes;  // global node of each local node
-  std::int64_t n_owned = 0;
-  testing::BlockSystem system;      // blocks with an owned index (and the ghosts' diagonal)
-};
-
-Share make_share(const testing::BlockSystem& whole, std::int64_t first, std::int64_t end) {
-  const std::int64_t n = whole.n_nodes;
-  Share share;
-  std::vector<char> is_local(n, 0);
-  for (std::int64_t i = first; i < end; ++i) {
-    share.nodes.push_back(i);
-    is_local[i] = 1;
-  }
-  share.n_owned = end - first;
-  for (std::int64_t i = first; i < end; ++i)  // ghosts: the owned rows' columns
-    for (std::int64_t k = whole.indptr[i]; k < whole.indptr[i + 1]; ++k)
-      if (!is_local[whole.indices[k]]) is_local[whole.indices[k]] = 2;
-  for (std::int64_t j = 0; j < n; ++j)
-    if (is_local[j] == 2) share.nodes.push_back(j);
-  const std::int64_t m = static_cast<std::int64_t>(share.nodes.size());
-  share.system.n_nodes = m;
-  share.system.dense.assign(9 * m * m, 0.0);
-  std::vector<char> pattern(m * m, 0);
-  std::vector<std::int64_t> local(n, -1);
-  for (std::int64_t l = 0; l < m; ++l) local[share.nodes[l]] = l;
-  for (std::int64_t i = 0; i < n; ++i)
-    for (std::int64_t k = whole.indptr[i]; k < whole.indptr[i + 1]; ++k) {
-      const std::int64_t li = local[i], lj = local[whole.indices[k]];
-      if (li < 0 || lj < 0 || (li >= share.n_owned && lj >= share.n_owned && li != lj)) continue;
-      pattern[li * m + lj] = 1;
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c)
-          share.system.dense[(3 * li + r) * 3 * m + 3 * lj + c] =
-              whole.dense[(3 * i + r) * 3 * n + 3 * whole.indices[k] + c];
-    }
-  testing::compress(share.system, pattern);
-  for (const std::int64_t node : share.nodes) share.system.mass.push_back(whole.mass[node]);
-  return share;
-}
+using testing::Barrier;
+using testing::make_share;
+using testing::Share;
 
 /// The two shares' ghost exchange through memory: each posts v, a of every node, the other reads
 /// its ghosts' values by global number.
