@@ -201,26 +201,11 @@ StateArchive dict_archive(const py::dict& blocks) {
   return StateArchive(std::move(copy));
 }
 
-/// The save_state() / load_state(dict) of a stepper (Stepper, LocalStepper: save_state(archive) and
-/// load_state(archive) without a prefix).
+/// A stepper's save_state(points) / load_state(dict, points) (Stepper, LocalStepper): points false
+/// is a sample's state (StateArchive::per_point; the MPI ranks' light merge, pyfem/distributed.py).
 template <class T>
-auto stepper_save_state() {
-  return [](const T& stepper) {
-    StateArchive archive;
-    stepper.save_state(archive);
-    return archive_dict(archive);
-  };
-}
-
-template <class T>
-auto stepper_load_state() {
-  return [](T& stepper, const py::dict& blocks) { stepper.load_state(dict_archive(blocks)); };
-}
-
-/// Stepper's save_state(points) / load_state(dict, points): points false is a sample's state
-/// (StateArchive::per_point; the MPI ranks' light merge, pyfem/distributed.py).
 auto sample_save_state() {
-  return [](const Stepper& stepper, bool points) {
+  return [](const T& stepper, bool points) {
     StateArchive archive;
     archive.set_per_point(points);
     stepper.save_state(archive);
@@ -228,8 +213,9 @@ auto sample_save_state() {
   };
 }
 
+template <class T>
 auto sample_load_state() {
-  return [](Stepper& stepper, const py::dict& blocks, bool points) {
+  return [](T& stepper, const py::dict& blocks, bool points) {
     StateArchive archive = dict_archive(blocks);
     archive.set_per_point(points);
     stepper.load_state(archive);
@@ -850,7 +836,7 @@ Args:
     nodes: int32 (k,) distinct nodes. Copied.
     projection: float64 (k, 3, 3) symmetric idempotent matrices P. Copied.)")
       .def(
-          "save_state", sample_save_state(),
+          "save_state", sample_save_state<Stepper>(),
           R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
 byte blocks (the energy account, the last internal force and reactions, the contact pairs'
 and every internal-force component's state), a copy.
@@ -860,7 +846,7 @@ points false: a sample's state, not a checkpoint's: without the per-point and pe
 and contact pairs as with true. Under mpirun the ranks' samples are merged so (pyfem/distributed.py).)",
           py::arg("points") = true)
       .def(
-          "load_state", sample_load_state(),
+          "load_state", sample_load_state<Stepper>(),
           py::arg("state"), py::arg("points") = true,
           R"(Restores save_state's dict into a stepper built from the same scene (same dt, damping,
 dofs, providers, pairs and components, in the same order). ValueError names the first block that
@@ -1138,13 +1124,15 @@ account sums the owned nodes and counted components only.)")
           py::arg("n_steps"), py::arg("t0"),
           "Advances n_steps global steps of dt() from t0 (u, v, a in place); returns the end time.")
       .def(
-          "save_state", stepper_save_state<LocalStepper>(),
+          "save_state", sample_save_state<LocalStepper>(),
           R"(The run's state beyond u, v, a, t (checkpoint, docs/checkpoint.md): a dict of named
 byte blocks (each level's last force, the energy account, every level's components and contact
-pairs), a copy.)")
+pairs), a copy. points false: a sample's state (no per-row and per-point blocks: the levels'
+forces, the element loop's points), as Stepper.save_state.)",
+          py::arg("points") = true)
       .def(
-          "load_state", stepper_load_state<LocalStepper>(),
-          py::arg("state"),
+          "load_state", sample_load_state<LocalStepper>(),
+          py::arg("state"), py::arg("points") = true,
           R"(Restores save_state's dict into a stepper built from the same scene (same levels, dt_fine,
 damping, providers, components and pairs at the same levels in the same order); the next run
 continues without initialising. ValueError names the first block that does not fit.)")

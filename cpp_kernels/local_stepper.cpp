@@ -884,8 +884,10 @@ void LocalStepper::save_state(StateArchive& archive) const {
   for (int c = 0; c <= max_level_; ++c) {
     const Level& level = levels_[c];
     const std::string prefix = level_prefix(c);
-    archive.put(prefix + "force", level.force);
-    archive.put(prefix + "external", level.external);
+    if (archive.per_point()) {  // per row: not in a sample's state (StateArchive::per_point)
+      archive.put(prefix + "force", level.force);
+      archive.put(prefix + "external", level.external);
+    }
     for (std::size_t k = 0; k < level.components.size(); ++k) {
       const std::string component = prefix + "component/" + std::to_string(k) + "/";
       archive.put_text(component + "name", level.components[k]->name());
@@ -938,8 +940,10 @@ void LocalStepper::load_state(const StateArchive& archive) {
   for (int c = 0; c <= max_level_; ++c) {
     Level& level = levels_[c];
     const std::string prefix = level_prefix(c);
-    archive.get(prefix + "force", level.force);
-    archive.get(prefix + "external", level.external);
+    if (archive.per_point()) {
+      archive.get(prefix + "force", level.force);
+      archive.get(prefix + "external", level.external);
+    }
     for (std::size_t k = 0; k < level.components.size(); ++k)
       level.components[k]->load_state(archive, prefix + "component/" + std::to_string(k) + "/");
     for (std::size_t k = 0; k < level.contacts.size(); ++k)

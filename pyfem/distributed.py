@@ -157,6 +157,9 @@ def node_work(simulation) -> np.ndarray:
             np.add.at(work, cell_nodes.ravel(), share)
     if simulation.contact_arrays is not None and len(simulation.contact_arrays["pairs"]):
         np.add.at(work, np.asarray(simulation.contact_arrays["pairs"]).ravel(), 0.5 * PAIR_WORK)
+    levels = getattr(simulation, "node_levels", None)
+    if levels is not None:  # local time stepping: a node at level k steps 2^(L - k) times per global step
+        work = work * 2.0 ** (int(levels.max()) - np.asarray(levels, dtype=float))
     return work
 
 
@@ -306,14 +309,24 @@ def _owned_input_arrays(arrays: dict, mine: Share) -> dict:
                 **{key: np.ascontiguousarray(arrays[key][entries]) for key in ("table", "tau", "P", "Q")})
 
 
-def _local_contact(arrays: dict, mine: Share):
+def _local_contact(arrays: dict, mine: Share, pairs: np.ndarray | None = None):
+    """The kernel's ContactPairs of the share's pairs (or of `pairs`, model pair indices it owns), in
+    local numbering."""
     from pyfem.solver import make_contact_pairs
 
+    pairs = mine.pairs if pairs is None else pairs
     local = dict(arrays)
-    local["pairs"] = np.ascontiguousarray(mine.local_of[arrays["pairs"][mine.pairs]], dtype=np.int32)
+    local["pairs"] = np.ascontiguousarray(mine.local_of[arrays["pairs"][pairs]], dtype=np.int32)
     for key in ("area", "normal", "static_force"):
-        local[key] = np.ascontiguousarray(np.asarray(arrays[key])[mine.pairs])
+        local[key] = np.ascontiguousarray(np.asarray(arrays[key])[pairs])
     return make_contact_pairs(local)
+
+
+def _add_dashpots(stepper, simulation, mine: Share) -> None:
+    if len(mine.dashpots):
+        stepper.set_dashpots(np.ascontiguousarray(mine.local_of[simulation.dashpot_nodes[mine.dashpots]],
+                                                  dtype=np.int32),
+                             np.ascontiguousarray(simulation.dashpot_matrices[mine.dashpots]))
 
 
 def _add_constraints(stepper, constraints, mine: Share) -> None:
@@ -356,10 +369,7 @@ def local_stepper(simulation, mine: Share, exchange):
     single = simulation.scene["time"].get("matrix_precision", "double") == "single"
     stepper = _kernels.Stepper(indptr, indices, blocks, mass, simulation.time_step.dt, simulation.alpha,
                                simulation.beta, True, single)
-    if len(mine.dashpots):
-        stepper.set_dashpots(np.ascontiguousarray(mine.local_of[simulation.dashpot_nodes[mine.dashpots]],
-                                                  dtype=np.int32),
-                             np.ascontiguousarray(simulation.dashpot_matrices[mine.dashpots]))
+    _add_dashpots(stepper, simulation, mine)
     _add_constraints(stepper, simulation.constraints, mine)
     if simulation.input_arrays is not None:
         stepper.add_seismic_input(seismic_input_kernel(_owned_input_arrays(simulation.input_arrays, mine)))
@@ -528,6 +538,273 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
     return out
 
 
+# --- Local time stepping on the ranks (the row split, LocalStepper.set_partition) ---
+
+def level_exchanges(comm: MPI.Comm, parts: Partition, mine: Share, levels: np.ndarray) -> list:
+    """One kernel MpiNodeExchange per rate level k: the velocity of the share's level-k ghosts from
+    their owners, before each of the level's drifts (LocalStepper.set_partition)."""
+    from pyfem import _kernels
+
+    ghosts = mine.nodes[mine.n_owned:]
+    owners, ghost_levels = parts.node_owner[ghosts], np.asarray(levels)[ghosts]
+    max_level = int(np.max(levels))
+    requests = [[ghosts[(owners == q) & (ghost_levels == k)] for k in range(max_level + 1)] for q in range(comm.size)]
+    asked = comm.alltoall(requests)
+    exchanges = []
+    for k in range(max_level + 1):  # every rank makes each level's (a collective: the communicator's copy)
+        neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q][k]) or len(asked[q][k]))]
+        send = [mine.local_of[asked[q][k]].astype(np.int32) for q in neighbours]
+        recv = [mine.local_of[requests[q][k]].astype(np.int32) for q in neighbours]
+        exchanges.append(_kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(mine.nodes)))
+    return exchanges
+
+
+@dataclasses.dataclass
+class LevelLayout:
+    """Where the parts of a LocalStepper's state sit in its save_state archive, for the serial
+    stepper (`serial_layout`) or one rank's share (`local_lts_stepper`).
+
+    Attributes:
+        max_level: L, the model's largest level.
+        level_nodes: per level k, the model nodes of the stepper's level-k rows, in row order.
+        components: [(region, kind, region cell rows, level, archive prefix)] of its element-loop
+            components (kind "counted" or "halo" on a rank, "whole" in the serial stepper).
+        pairs: [(model pair indices, level, archive prefix)] of its ContactPairs.
+    """
+
+    max_level: int
+    level_nodes: list
+    components: list
+    pairs: list
+
+
+def _level_prefix(max_level: int, level: int, what: str, k: int) -> str:
+    return f"lts/level/{max_level - int(level)}/{what}/{k}/"
+
+
+def _region_levels(simulation) -> dict:
+    """Region -> the rate level of each of its cells, as the serial stepper splits it (row split)."""
+    from pyfem import local_stepping
+
+    model = simulation.model
+    cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
+    cap = local_stepping.row_cell_cap(simulation.node_levels, cell_nodes)
+    return {name: local_stepping.region_cell_levels(arrays, simulation.node_levels, cap)
+            for name, arrays in simulation.nonlinear.arrays.items()}
+
+
+def _pair_levels(simulation) -> np.ndarray | None:
+    arrays = simulation.contact_arrays
+    if arrays is None or not len(arrays["pairs"]):
+        return None
+    return np.asarray(simulation.node_levels)[np.asarray(arrays["pairs"])[:, 0]]
+
+
+def serial_layout(simulation) -> LevelLayout:
+    """The serial LocalStepper's layout (pyfem.solver._make_local_stepper: per region its cells split
+    by level, in region order at each level; one ContactPairs per level)."""
+    levels = np.asarray(simulation.node_levels)
+    max_level = int(levels.max())
+    components, count = [], {}
+    if simulation.nonlinear is not None:
+        for name, cell_level in _region_levels(simulation).items():
+            for level in np.unique(cell_level):
+                k = count.get(int(level), 0)
+                count[int(level)] = k + 1
+                components.append((name, "whole", np.flatnonzero(cell_level == level), int(level),
+                                   _level_prefix(max_level, level, "component", k)))
+    pairs = []
+    pair_level = _pair_levels(simulation)
+    if pair_level is not None:
+        for level in np.unique(pair_level):
+            pairs.append((np.flatnonzero(pair_level == level), int(level), _level_prefix(max_level, level, "contact", 0)))
+    return LevelLayout(max_level, [np.flatnonzero(levels == k) for k in range(max_level + 1)], components, pairs)
+
+
+def local_lts_stepper(simulation, mine: Share, exchanges: list):
+    """The kernel's LocalStepper of one rank's share (row split, `LocalStepper.set_partition`):
+    `pyfem.solver._make_local_stepper`'s objects restricted to the share, each region's counted and
+    halo cells split by level as the serial stepper splits the region, the owned pairs by level.
+
+    Returns:
+        (LocalSteppingAdapter, LevelLayout, component objects, pair objects), the objects in the
+        layout's order.
+    """
+    from pyfem import _kernels
+    from pyfem.local_stepping import LocalSteppingAdapter
+    from pyfem.solver import seismic_input_kernel
+
+    levels = np.asarray(simulation.node_levels, dtype=np.int32)
+    max_level = int(levels.max())
+    local_levels = np.ascontiguousarray(levels[mine.nodes])
+    indptr, indices, blocks = local_matrix(simulation.stiffness, mine)
+    kernel = _kernels.LocalStepper(indptr, indices, blocks, np.ascontiguousarray(simulation.mass[mine.nodes]),
+                                   local_levels, simulation.time_step.dt, simulation.alpha, max_level)
+    kernel.set_row_split(True)
+    _add_dashpots(kernel, simulation, mine)
+    _add_constraints(kernel, simulation.constraints, mine)
+    components, objects, count = [], [], {}
+    if simulation.nonlinear is not None:
+        for name, cell_level in _region_levels(simulation).items():
+            for kind, cells in mine.cells.get(name, []):
+                for level in np.unique(cell_level[cells]):
+                    rows = cells[cell_level[cells] == level]
+                    component = simulation.nonlinear.new_component(name, initial_stress=None, rows=rows,
+                                                                   node_numbers=mine.local_of)
+                    kernel.add_internal_force(component, int(level), kind == "counted")
+                    k = count.get(int(level), 0)
+                    count[int(level)] = k + 1
+                    components.append((name, kind, rows, int(level), _level_prefix(max_level, level, "component", k)))
+                    objects.append(component)
+    pairs, pair_objects = [], []
+    pair_level = _pair_levels(simulation)
+    if pair_level is not None and len(mine.pairs):
+        for level in np.unique(pair_level[mine.pairs]):
+            selected = mine.pairs[pair_level[mine.pairs] == level]
+            contact = _local_contact(simulation.contact_arrays, mine, selected)
+            kernel.add_contact(contact, int(level))
+            pairs.append((selected, int(level), _level_prefix(max_level, level, "contact", 0)))
+            pair_objects.append(contact)
+    stepper = LocalSteppingAdapter(kernel, 2 ** max_level)
+    if simulation.input_arrays is not None:
+        owned_input = _owned_input_arrays(simulation.input_arrays, mine)
+        if len(owned_input["nodes"]):  # (the kernel takes no provider without nodes)
+            kernel.add_seismic_input(seismic_input_kernel(owned_input))
+    if simulation.static is not None:  # the stage's out-of-balance on the owned nodes (pyfem/static.py)
+        from pyfem.static import add_hand_over_force
+
+        add_hand_over_force(stepper, simulation, nodes=mine.nodes[:mine.n_owned], local_of=mine.local_of,
+                            n_local=len(mine.nodes))
+    kernel.set_partition(mine.n_owned, exchanges)
+    layout = LevelLayout(max_level, [mine.nodes[np.flatnonzero(local_levels == k)] for k in range(max_level + 1)],
+                         components, pairs)
+    return stepper, layout, objects, pair_objects
+
+
+def _started(state: dict) -> bool:
+    return bool(np.frombuffer(state["lts/started"], dtype=np.uint8)[0])
+
+
+def _float_rows(block: bytes) -> np.ndarray:
+    return np.frombuffer(block, dtype=np.float64).reshape(-1, 3)
+
+
+def _component_scalar_rank(parts: Partition, name: str, serial_rows: np.ndarray) -> int:
+    """The rank whose counted component of a serial part (region cells `serial_rows`) carries the
+    part's stored energy and dissipation when a state is cut into shares: the lowest counting one."""
+    return int(parts.cell_owner[name][serial_rows].min())
+
+
+def slice_lts_state(source: dict, template: dict, serial: LevelLayout, mine_layout: LevelLayout, simulation,
+                    parts: Partition, mine: Share, rank: int) -> dict:
+    """The serial LocalStepper's state blocks (`source`: its save_state, with its components' and
+    pairs' blocks under their prefixes even when it has not started) as rank `rank`'s stepper needs
+    them; `template`: that stepper's own save_state (a started one: every name and size). The energy
+    account's scalars go to rank 0, a component part's to the lowest rank counting its cells."""
+    out = dict(template)
+    out["lts/started"] = source["lts/started"]
+    if _started(source):
+        for key in ("lts/energy", "lts/dissipation_at_start"):
+            out[key] = source[key] if rank == 0 else np.zeros_like(np.frombuffer(source[key], dtype=np.float64)).tobytes()
+        if mine.constraints is not None:
+            out["lts/reactions"] = np.ascontiguousarray(_float_rows(source["lts/reactions"])[mine.constraints]).tobytes()
+        for k in range(serial.max_level + 1):
+            prefix = f"lts/level/{serial.max_level - k}/"
+            rows = np.searchsorted(serial.level_nodes[k], mine_layout.level_nodes[k])
+            for block in ("force", "external"):
+                out[prefix + block] = np.ascontiguousarray(_float_rows(source[prefix + block])[rows]).tobytes()
+    by_part = {(name, level): (rows, prefix) for name, _, rows, level, prefix in serial.components}
+    for name, kind, rows, level, prefix in mine_layout.components:
+        serial_rows, src = by_part[(name, level)]
+        at = np.searchsorted(serial_rows, rows)
+        n_cells = len(serial_rows)
+        out[prefix + "state"] = np.ascontiguousarray(state_rows(source[src + "state"], n_cells)[at]).tobytes()
+        sigma0 = source[src + "initial_stress"]
+        out[prefix + "initial_stress"] = (np.ascontiguousarray(state_rows(sigma0, n_cells)[at]).tobytes()
+                                          if len(sigma0) else b"")
+        first = kind == "counted" and rank == _component_scalar_rank(parts, name, serial_rows)
+        for scalar in ("stored_energy", "dissipation"):
+            out[prefix + scalar] = source[src + scalar] if first else np.zeros(1).tobytes()
+    pair_nodes = None if simulation.contact_arrays is None else np.asarray(simulation.contact_arrays["pairs"])
+    by_level = {level: (rows, prefix) for rows, level, prefix in serial.pairs}
+    for selected, level, prefix in mine_layout.pairs:
+        serial_rows, src = by_level[level]
+        at = np.searchsorted(serial_rows, selected)
+        for name in pair_blocks(source, src):
+            out[prefix + name] = np.ascontiguousarray(state_rows(source[src + name], len(serial_rows))[at]).tobytes()
+        slots = unique_slots(pair_nodes[serial_rows], at)
+        out[prefix + "node_force"] = np.ascontiguousarray(_float_rows(source[src + "node_force"])[slots]).tobytes()
+    return out
+
+
+def merge_lts_states(template: dict, states: list, serial: LevelLayout, layouts: list, simulation,
+                     parts: Partition, shares: list, points: bool = True) -> dict:
+    """The serial LocalStepper's state blocks from every rank's (`states`, `layouts`, `shares` per
+    rank): owned rows from their owner, counted cells from theirs, sums of the scalars. `template`:
+    the serial stepper's started save_state(points). points False: the ranks' save_state(points=False)
+    into a state for the serial stepper's load_state(..., points=False)."""
+    out = dict(template)
+    out["lts/started"] = states[0]["lts/started"]
+    if not _started(states[0]):
+        return out
+    for key in ("lts/energy", "lts/dissipation_at_start"):
+        out[key] = np.sum([np.frombuffer(s[key], dtype=np.float64) for s in states], axis=0).tobytes()
+    if shares[0].constraints is not None:
+        reactions = _float_rows(template["lts/reactions"]).copy()
+        for s, mine in zip(states, shares):
+            reactions[mine.constraints] = _float_rows(s["lts/reactions"])
+        out["lts/reactions"] = reactions.tobytes()
+    if points:
+        for k in range(serial.max_level + 1):
+            prefix = f"lts/level/{serial.max_level - k}/"
+            for block in ("force", "external"):
+                rows = _float_rows(template[prefix + block]).copy()
+                for rank, (s, layout) in enumerate(zip(states, layouts)):
+                    nodes = layout.level_nodes[k]
+                    owned = parts.node_owner[nodes] == rank
+                    rows[np.searchsorted(serial.level_nodes[k], nodes[owned])] = _float_rows(s[prefix + block])[owned]
+                out[prefix + block] = rows.tobytes()
+    for name, _, serial_rows, level, src in serial.components:
+        n_cells = len(serial_rows)
+        if points:
+            state = state_rows(template[src + "state"], n_cells).copy()
+            sigma0 = template[src + "initial_stress"]
+            sigma0_rows = state_rows(sigma0, n_cells).copy() if len(sigma0) else None
+        totals = {"stored_energy": 0.0, "dissipation": 0.0}
+        for s, layout in zip(states, layouts):
+            for region, kind, rows, part_level, prefix in layout.components:
+                if region != name or part_level != level or kind != "counted":
+                    continue
+                if points:
+                    at = np.searchsorted(serial_rows, rows)
+                    state[at] = state_rows(s[prefix + "state"], len(rows))
+                    if sigma0_rows is not None:
+                        sigma0_rows[at] = state_rows(s[prefix + "initial_stress"], len(rows))
+                for scalar in totals:
+                    totals[scalar] += float(np.frombuffer(s[prefix + scalar], dtype=np.float64)[0])
+        if points:
+            out[src + "state"] = state.tobytes()
+            out[src + "initial_stress"] = sigma0_rows.tobytes() if sigma0_rows is not None else b""
+        for scalar, value in totals.items():
+            out[src + scalar] = np.array([value]).tobytes()
+    pair_nodes = None if simulation.contact_arrays is None else np.asarray(simulation.contact_arrays["pairs"])
+    for serial_rows, level, src in serial.pairs:
+        blocks = {name: state_rows(template[src + name], len(serial_rows)).copy() for name in pair_blocks(template, src)}
+        node_force = _float_rows(template[src + "node_force"]).copy()
+        for s, layout in zip(states, layouts):
+            for selected, part_level, prefix in layout.pairs:
+                if part_level != level:
+                    continue
+                at = np.searchsorted(serial_rows, selected)
+                for name, rows in blocks.items():
+                    rows[at] = state_rows(s[prefix + name], len(selected))
+                node_force[unique_slots(pair_nodes[serial_rows], at)] = _float_rows(s[prefix + "node_force"])
+        for name, rows in blocks.items():
+            out[src + name] = rows.tobytes()
+        out[src + "node_force"] = node_force.tobytes()
+    return out
+
+
 class DistributedStepper:
     """The ranks' steppers behind the Stepper calls of `pyfem.solver.run` (which runs on every
     rank). The u, v, a the run loop holds are the whole model's, read by every rank only where the
@@ -540,16 +817,30 @@ class DistributedStepper:
     which writes."""
 
     def __init__(self, simulation, serial, comm: MPI.Comm):
+        from pyfem.local_stepping import LocalSteppingAdapter
+
         self.simulation, self.serial, self.comm = simulation, serial, comm
         began = time.perf_counter()
         self.parts = partition(simulation, comm.size)
         self.shares = [share(simulation, self.parts, q) for q in range(comm.size)] if comm.rank == 0 else None
         self.mine = self.shares[0] if comm.rank == 0 else share(simulation, self.parts, comm.rank)
-        self.exchange = _exchange(comm, self.parts, self.mine)
-        self.kernel, self.components, self.objects = local_stepper(simulation, self.mine, self.exchange)
+        # Local time stepping (the serial stepper is a LocalStepper): each rank's share steps the row
+        # split with one exchange per level and drift (LocalStepper.set_partition).
+        self.lts = isinstance(serial, LocalSteppingAdapter)
+        if self.lts:
+            self.exchange = level_exchanges(comm, self.parts, self.mine, simulation.node_levels)
+            self.kernel, self.layout, self.objects, self.pair_objects = local_lts_stepper(simulation, self.mine,
+                                                                                          self.exchange)
+            self.components = [(name, kind, rows) for name, kind, rows, _, _ in self.layout.components]
+            self.layouts = comm.gather(self.layout, root=0)
+            self.serial_layout = serial_layout(simulation)
+            self._lts_templates()
+        else:
+            self.exchange = _exchange(comm, self.parts, self.mine)
+            self.kernel, self.components, self.objects = local_stepper(simulation, self.mine, self.exchange)
+            self.template = self.kernel.save_state()
+            self.serial_template = serial.save_state()
         self.all_components = comm.gather(self.components, root=0)
-        self.template = self.kernel.save_state()
-        self.serial_template = serial.save_state()
         self.setup_seconds = time.perf_counter() - began
         self.merge_seconds = 0.0
         self.whole = True
@@ -588,11 +879,61 @@ class DistributedStepper:
             raise RuntimeError("monitor_point_values: not the kernel points given to set_samples")
         return self._values
 
+    def _lts_templates(self) -> None:
+        """Started states of the share's and the serial LocalStepper (every block a merge or a slice
+        fills: a stepper saves its levels' blocks only once it has run), from one initialisation of
+        each at rest; the serial stepper's parts (the stage's state) are put back after it."""
+        zeros = np.zeros(3 * len(self.mine.nodes))
+        self.kernel.run(zeros, zeros.copy(), zeros.copy(), 0, 0.0)  # initialises, steps nothing
+        self.template = self.kernel.save_state()
+        self.kernel.load_state(dict(self.template, **{"lts/started": np.zeros(1, dtype=np.uint8).tobytes()}))
+        kept = [(part, part.save_state()) for part in self._serial_parts()]
+        whole = np.zeros(3 * len(self.simulation.mass))
+        self.serial.run(whole, whole.copy(), whole.copy(), 0, 0.0)
+        self.serial_template = self.serial.save_state()
+        self.serial_light_template = self.serial.save_state(points=False)
+        self.serial.load_state(dict(self.serial_template, **{"lts/started": np.zeros(1, dtype=np.uint8).tobytes()}))
+        for part, state in kept:
+            part.load_state(state)
+
+    def _serial_parts(self) -> list:
+        """The serial LocalStepper's component and pair objects in the order of its layout."""
+        parts = []
+        if self.simulation.nonlinear is not None:
+            for region in self.simulation.nonlinear.components:  # LevelComponents, region order
+                parts.extend(component for _, component in region.parts)
+        if self.simulation.contact_arrays is not None and self.serial_layout.pairs:
+            parts.extend(contact for _, contact in self.simulation.contact_pairs.parts)
+        return parts
+
+    def _serial_part_blocks(self) -> dict:
+        """The serial parts' own states under their archive prefixes (what a started serial
+        stepper's save_state holds for them; an unstarted one holds none)."""
+        entries = [prefix for *_, prefix in self.serial_layout.components] + \
+                  [prefix for *_, prefix in self.serial_layout.pairs]
+        blocks = {}
+        for prefix, part in zip(entries, self._serial_parts()):
+            blocks.update({prefix + name: block for name, block in part.save_state().items()})
+        return blocks
+
     # The run loop's calls -----------------------------------------------------------------------
     def _load(self, serial_state: dict) -> None:
-        local = slice_state(serial_state, self.template, self.simulation, self.parts, self.mine,
-                            self.comm.rank, self.components)
-        self.kernel.load_state(local)
+        if self.lts:
+            source = dict(serial_state)
+            if not _started(serial_state):  # the stage's state is in the serial parts only
+                source.update(self._serial_part_blocks())
+            local = slice_lts_state(source, self.template, self.serial_layout, self.layout, self.simulation,
+                                    self.parts, self.mine, self.comm.rank)
+            if _started(serial_state):
+                self.kernel.load_state(local)
+            prefixes = [prefix for *_, prefix in self.layout.components] + [prefix for *_, prefix in self.layout.pairs]
+            for prefix, part in zip(prefixes, self.objects + self.pair_objects):
+                own = part.save_state()
+                part.load_state({name: local.get(prefix + name, block) for name, block in own.items()})
+        else:
+            local = slice_state(serial_state, self.template, self.simulation, self.parts, self.mine,
+                                self.comm.rank, self.components)
+            self.kernel.load_state(local)
         self._pull = True
 
     def _local_state(self, u, v, a):
@@ -655,8 +996,14 @@ class DistributedStepper:
         if self.comm.rank == 0:
             for piece, rows in zip(pieces, rows_of):
                 u[rows], v[rows], a[rows] = piece
-            self.serial.load_state(merge_states(self.serial_template, states, self.simulation, self.parts,
-                                                self.shares, self.all_components, points=whole), points=whole)
+            if self.lts:
+                merged = merge_lts_states(self.serial_template if whole else self.serial_light_template, states,
+                                          self.serial_layout, self.layouts, self.simulation, self.parts,
+                                          self.shares, points=whole)
+            else:
+                merged = merge_states(self.serial_template, states, self.simulation, self.parts, self.shares,
+                                      self.all_components, points=whole)
+            self.serial.load_state(merged, points=whole)
         self._gather_point_values()
         if not finite:
             u[:] = np.nan
@@ -708,8 +1055,18 @@ class DistributedStepper:
         self.kernel.reset_phase_seconds()
         self.merge_seconds = 0.0
 
+    def bytes_sent_per_step(self) -> int:
+        """Bytes this rank sends per step: v and a of its shared nodes; under local time stepping
+        per fine step, the average of each level's v once per drift (2^(L - k) per global step)."""
+        if not self.lts:
+            return int(self.exchange.bytes_sent_per_step)
+        top = len(self.exchange) - 1
+        per_global = sum(exchange.bytes_sent_per_step // 2 * 2 ** (top - k) for k, exchange in enumerate(self.exchange))
+        return int(round(per_global / 2 ** top))
+
     def describe(self) -> dict:
-        """For run.json, per rank: owned and ghost nodes, bytes sent per step, element-loop cells it
+        """For run.json, per rank: owned and ghost nodes, bytes sent per step (per fine step under
+        local time stepping), element-loop cells it
         counts and halo cells it also computes, contact pairs, the merges on rank 0 (light: what a
         sample reads; whole: every node and point) of this sitting and the bytes it sent to the
         last of each; and the set-up time."""
@@ -719,7 +1076,7 @@ class DistributedStepper:
         from pyfem.output import peak_memory_mib
 
         counts = self.comm.gather((self.mine.n_owned, len(self.mine.nodes) - self.mine.n_owned,
-                                   int(self.exchange.bytes_sent_per_step), cells, halo, pairs,
+                                   self.bytes_sent_per_step(), cells, halo, pairs,
                                    *self._sent[False], *self._sent[True], round(peak_memory_mib(), 1)), root=0)
         if self.comm.rank != 0:
             return {}

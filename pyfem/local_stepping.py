@@ -249,6 +249,22 @@ def cell_levels(node_levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
     return node_levels[cell_nodes].max(axis=1).astype(np.int32)
 
 
+def region_cell_levels(arrays, node_levels: np.ndarray, cell_cap: np.ndarray | None = None) -> np.ndarray:
+    """int32 level of each cell of a region (`ElementArrays`): `cell_levels`, made finer where
+    `cell_cap` (per model cell) says. The serial stepper's parts (`level_components`) and an MPI rank's
+    (pyfem/distributed.py) split a region so."""
+    levels = cell_levels(node_levels, arrays.cell_nodes)
+    if cell_cap is not None:
+        levels = np.minimum(levels, cell_cap[arrays.cells]).astype(np.int32)
+    return levels
+
+
+def row_cell_cap(node_levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
+    """The row split's cap of every model cell (rows of cell_nodes): the finest level of its nodes
+    (LocalStepper.set_row_split)."""
+    return node_levels[cell_nodes].min(axis=1)
+
+
 class LevelComponents:
     """One region's element-loop cells split into kernel components by level, read as the region's one
     component (the interface `pyfem.elements.NonlinearRegions` uses for monitors, fields and run.json):
@@ -378,9 +394,7 @@ def level_components(nonlinear, node_levels: np.ndarray, cell_cap: np.ndarray | 
     region order."""
     result = []
     for name, arrays in nonlinear.arrays.items():
-        levels = cell_levels(node_levels, arrays.cell_nodes)
-        if cell_cap is not None:
-            levels = np.minimum(levels, cell_cap[arrays.cells]).astype(np.int32)
+        levels = region_cell_levels(arrays, node_levels, cell_cap)
         parts, kernel_parts = [], []
         for level in np.unique(levels):
             rows = np.flatnonzero(levels == level)
@@ -573,12 +587,12 @@ class LocalSteppingAdapter:
     def reset_phase_seconds(self) -> None:
         self.kernel.reset_phase_seconds()
 
-    def save_state(self) -> dict:
+    def save_state(self, points: bool = True) -> dict:
         """The kernel's state beyond u, v, a, t (LocalStepper.save_state): name -> bytes."""
-        return self.kernel.save_state()
+        return self.kernel.save_state(points)
 
-    def load_state(self, state: dict) -> None:
-        self.kernel.load_state(state)
+    def load_state(self, state: dict, points: bool = True) -> None:
+        self.kernel.load_state(state, points)
 
 
 def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chunk: int = STABILITY_CHUNK,

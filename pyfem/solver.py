@@ -515,6 +515,10 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
 
         try:
             local_stepping.check_supported(scene, beta)
+            rows = local_stepping.row_split(nonlinear, "contact" in scene.effects)
+            if MPI.COMM_WORLD.size > 1 and not rows:  # before anything is distributed: every rank says the same
+                raise SceneError("time.local_stepping", True, "false under mpirun with the column split (the ranks "
+                                 "step local time stepping by the row split only, docs/scaling.md)")
             if constraints is not None and "contact" in scene.effects:
                 held = np.intersect1d(constraints.nodes, model.pairs.nodes)
                 if len(held):
@@ -522,9 +526,6 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
                                      "false for scenes with contact pairs on fixed or roller faces (node "
                                      f"{int(held[0])} at {np.round(model.node_coords[held[0]], 3).tolist()} is both): "
                                      "local time stepping does not correct a held pair node (docs/lts_plan.md)")
-            if MPI.COMM_WORLD.size > 1:  # before anything is distributed: every rank says the same
-                raise SceneError("time.local_stepping", True, "false under mpirun (local time stepping runs "
-                                 "on one rank for now)")
         except SceneError as error:
             if local:
                 raise
@@ -533,7 +534,6 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         else:
             cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
             pairs = model.pairs.nodes if "contact" in scene.effects else None
-            rows = local_stepping.row_split(nonlinear, "contact" in scene.effects)
             levels = local_stepping.node_levels(elastic_stiffness, mass, cell_nodes, local_stepping.MAX_LEVEL,
                                                 pinned=np.unique(dashpot_nodes), pairs=pairs,
                                                 loop_cells=local_stepping.loop_cell_mask(nonlinear, model.n_cells),
@@ -610,7 +610,7 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
     row_split = simulation.lts_split == "row"
     cell_cap = None
     if row_split:  # a cell at the finest level of its nodes (LocalStepper.set_row_split)
-        cell_cap = levels[cell_nodes].min(axis=1)
+        cell_cap = local_stepping.row_cell_cap(levels, cell_nodes)
     elif loop_cells is not None and simulation.contact_arrays is not None:
         cell_cap = local_stepping.pair_cell_cap(levels, cell_nodes, simulation.contact_arrays["pairs"], loop_cells)
 

@@ -269,10 +269,10 @@ def test_a_directory_of_the_users_files_is_refused_under_mpirun_too(tmp_path):
 CHECKPOINTED_RUN = ("--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
 
 
-def kill_after_first_checkpoint(ranks: int, scene: str, out: Path, window: float) -> None:
+def kill_after_first_checkpoint(ranks: int, scene: str, out: Path, window: float, extra: tuple = ()) -> None:
     """Starts `pyfem run` on `ranks` ranks and kills it (kill -9: mpirun and every rank) at a random
     time within `window` s after its first checkpoint."""
-    command = [PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), *CHECKPOINTED_RUN]
+    command = [PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), *CHECKPOINTED_RUN, *extra]
     if ranks > 1:
         command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)] + command
     process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -288,14 +288,17 @@ def kill_after_first_checkpoint(ranks: int, scene: str, out: Path, window: float
     assert json.loads((out / "run.json").read_text())["status"] == "running"  # as a killed run leaves it
 
 
-def killed_and_resumed(tmp_path: Path, ranks: int, resumed_on: int, window: float) -> tuple[Path, Path, dict]:
+def killed_and_resumed(tmp_path: Path, ranks: int, resumed_on: int, window: float, name: str = "contact",
+                       extra: tuple = ()) -> tuple[Path, Path, dict]:
     """(the killed and resumed run, the uninterrupted run on `ranks`, the resumed run's run.json) of
-    the contact scene, killed on `ranks` ranks after its first checkpoint, resumed on `resumed_on`."""
-    scene, _ = SCENES["contact"]
+    the scene SCENES[name] (and `extra` settings), killed on `ranks` ranks after its first
+    checkpoint, resumed on `resumed_on`."""
+    scene, settings = SCENES[name]
+    extra = (*settings, *extra)
     reference, out = tmp_path / "reference", tmp_path / "killed"
-    pyfem_run(ranks, scene, reference, *CHECKPOINTED_RUN)
-    kill_after_first_checkpoint(ranks, scene, out, window)
-    pyfem_run(resumed_on, scene, out, *CHECKPOINTED_RUN, "--resume")
+    pyfem_run(ranks, scene, reference, *CHECKPOINTED_RUN, *extra)
+    kill_after_first_checkpoint(ranks, scene, out, window, extra)
+    pyfem_run(resumed_on, scene, out, *CHECKPOINTED_RUN, *extra, "--resume")
     resumed = summary(out)
     assert resumed["status"] == "finished" and resumed.get("mpi", {}).get("ranks", 1) == resumed_on
     print(f"killed on {ranks} rank(s) at t > {resumed['resumed'][0]['t']:.3f} s; resumed on {resumed_on}")
