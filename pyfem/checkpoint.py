@@ -226,13 +226,8 @@ class Checkpoint:
         if where in ("dt", "steps", "levels_sha256") and ("levels_sha256" in saved) != (
                 getattr(simulation, "node_levels", None) is not None):
             stepped = "locally" if "levels_sha256" in saved else "globally"
-            from pyfem.distributed import world
-
-            how = ("local stepping runs on one rank: resume it without mpirun" if stepped == "locally"
-                   and world().size > 1 else
-                   f"set time.local_stepping = {'true' if stepped == 'locally' else 'false'} to resume it")
             self._refuse(f"the interrupted run stepped {stepped} (time.local_stepping) and this one would not; "
-                         + how)
+                         f"set time.local_stepping = {'true' if stepped == 'locally' else 'false'} to resume it")
         self._refuse_difference(where)
 
     def _refuse_difference(self, where: str | None) -> None:

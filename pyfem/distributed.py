@@ -559,6 +559,13 @@ def level_exchanges(comm: MPI.Comm, parts: Partition, mine: Share, levels: np.nd
     return exchanges
 
 
+def level_bytes_per_fine_step(nodes_per_level: list) -> float:
+    """Bytes of the velocity exchanges per fine step, averaged over a global step, for the given
+    count of shared nodes at each level k (24 bytes each, at each of the level's 2^(L - k) drifts)."""
+    top = len(nodes_per_level) - 1
+    return 24.0 * sum(count * 2 ** (top - k) for k, count in enumerate(nodes_per_level)) / 2 ** top
+
+
 @dataclasses.dataclass
 class LevelLayout:
     """Where the parts of a LocalStepper's state sit in its save_state archive, for the serial
@@ -1060,9 +1067,7 @@ class DistributedStepper:
         per fine step, the average of each level's v once per drift (2^(L - k) per global step)."""
         if not self.lts:
             return int(self.exchange.bytes_sent_per_step)
-        top = len(self.exchange) - 1
-        per_global = sum(exchange.bytes_sent_per_step // 2 * 2 ** (top - k) for k, exchange in enumerate(self.exchange))
-        return int(round(per_global / 2 ** top))
+        return int(round(level_bytes_per_fine_step([exchange.bytes_sent_per_step // 48 for exchange in self.exchange])))
 
     def describe(self) -> dict:
         """For run.json, per rank: owned and ghost nodes, bytes sent per step (per fine step under

@@ -943,8 +943,16 @@ def distributed_plan(simulation: Simulation) -> dict:
 
         stage_words = (", the static stage's relaxation steps shared like the motion's" if uses_relaxation(simulation.scene)
                        else ", the static stage's PETSc solves shared (a block of rows each)")
-    return {"MPI ranks": f"{comm.size}: owned nodes {owned}, ghost nodes {ghosts} ({48 * max(ghosts):,} bytes "
-                         f"received per step by the busiest rank); every rank builds the whole model"
+    exchange_words = f"{48 * max(ghosts):,} bytes received per step by the busiest rank"
+    if simulation.node_levels is not None:  # one exchange of v per level and drift (docs/scaling.md section 7)
+        levels = np.asarray(simulation.node_levels)
+        top = int(levels.max())
+        per_fine = [distributed.level_bytes_per_fine_step(
+            [int(np.count_nonzero(levels[mine.nodes[mine.n_owned:]] == k)) for k in range(top + 1)]) for mine in shares]
+        exchange_words = (f"local time stepping on every rank: {int(round(max(per_fine))):,} bytes received per fine "
+                          f"step by the busiest rank, in {2 ** (top + 1) - 1} exchanges per global step")
+    return {"MPI ranks": f"{comm.size}: owned nodes {owned}, ghost nodes {ghosts} ({exchange_words}); "
+                         "every rank builds the whole model"
                          + stage_words + "; the time estimates above are one rank's for the whole model: "
                          f"shared by {comm.size} ranks, expect at best 1/{comm.size} of them (the coarse case 3 on "
                          "2 ranks of one 2-core machine: its time loop 1.86x and its static stage 1.84x one rank's)"}
