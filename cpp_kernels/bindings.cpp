@@ -769,9 +769,7 @@ t_e = t - start clamped at 0. The arguments are set_deterioration's, then the st
            "comm_f2c: mpi4py's comm.py2f(); per neighbour rank the local owned nodes it ghosts "
            "and the local ghosts it owns, in ascending global order.")
       .def_property_readonly("bytes_sent_per_step", &MpiNodeExchange::bytes_sent_per_step,
-                             "Bytes of one exchange of v and a (the Stepper's, once per step).")
-      .def_property_readonly("bytes_sent", &MpiNodeExchange::bytes_sent,
-                             "Bytes this rank has sent through this exchange so far.");
+                             "Bytes of one exchange of v and a (the Stepper's, once per step; half with v only).");
 
   py::class_<Stepper>(m, "Stepper", R"(Velocity-Verlet central difference with lumped mass.
 

@@ -78,13 +78,10 @@ class MpiNodeExchange : public NodeExchange {
           if (a) a[3 * node + c] = *in++;
         }
     }
-    bytes_sent_ += 8 * per_node * sent_nodes();
   }
 
-  /// Bytes this rank sends per exchange of v and a (the Stepper's one per step).
+  /// Bytes this rank sends per exchange of v and a (the Stepper's one per step; half with v only).
   std::int64_t bytes_sent_per_step() const { return 48 * sent_nodes(); }
-  /// Bytes this rank has sent through this exchange so far.
-  std::int64_t bytes_sent() const { return bytes_sent_; }
 
  private:
   static constexpr int kTag = 7301;
@@ -93,7 +90,6 @@ class MpiNodeExchange : public NodeExchange {
   std::vector<std::vector<std::int32_t>> send_nodes_, recv_nodes_;
   std::vector<std::vector<double>> send_buffers_, recv_buffers_;
   std::vector<MPI_Request> requests_;
-  std::int64_t bytes_sent_ = 0;
 
   std::int64_t sent_nodes() const {
     std::int64_t count = 0;

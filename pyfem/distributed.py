@@ -677,11 +677,13 @@ def local_lts_stepper(simulation, mine: Share, exchanges: list):
         owned_input = _owned_input_arrays(simulation.input_arrays, mine)
         if len(owned_input["nodes"]):  # (the kernel takes no provider without nodes)
             kernel.add_seismic_input(seismic_input_kernel(owned_input))
-    if simulation.static is not None:  # the stage's out-of-balance on the owned nodes (pyfem/static.py)
-        from pyfem.static import add_hand_over_force
+    hand_over = getattr(simulation.static, "hand_over_force", None)
+    if hand_over is not None:  # the stage's out-of-balance on the owned nodes (pyfem/static.py)
+        from pyfem.static import hand_over_force_provider, local_force
 
-        add_hand_over_force(stepper, simulation, nodes=mine.nodes[:mine.n_owned], local_of=mine.local_of,
-                            n_local=len(mine.nodes))
+        force = local_force(hand_over, mine.nodes[:mine.n_owned], mine.local_of, len(mine.nodes))
+        if np.any(force):  # (the kernel takes no provider without nodes)
+            kernel.add_seismic_input(hand_over_force_provider(force))
     kernel.set_partition(mine.n_owned, exchanges)
     layout = LevelLayout(max_level, [mine.nodes[np.flatnonzero(local_levels == k)] for k in range(max_level + 1)],
                          components, pairs)
@@ -842,6 +844,7 @@ class DistributedStepper:
             self.layouts = comm.gather(self.layout, root=0)
             self.serial_layout = serial_layout(simulation)
             self._lts_templates()
+            self.serial_template_unstarted = serial.save_state()  # the stage's state is in the serial parts
         else:
             self.exchange = _exchange(comm, self.parts, self.mine)
             self.kernel, self.components, self.objects = local_stepper(simulation, self.mine, self.exchange)
@@ -853,7 +856,9 @@ class DistributedStepper:
         self.whole = True
         self._sent = {False: (0, 0), True: (0, 0)}  # gathers, bytes sent to rank 0 by the last, light / whole
         self.set_samples(np.arange(len(simulation.mass)), None)  # until told what the writer reads
-        self._load(self.serial_template)  # the stage's state (components, pairs), cut into shares
+        # The stage's state (components, pairs), cut into shares; under local stepping from the serial
+        # stepper as it is (not started: the first run initialises every share from the run's u, v).
+        self._load(self.serial_template_unstarted if self.lts else self.serial_template)
 
     def set_samples(self, nodes: np.ndarray, kernel_points: list | None) -> None:
         """What every sample reads: `nodes` (rank 0's RunWriter.sampled_nodes, the same on every
@@ -931,12 +936,13 @@ class DistributedStepper:
                 source.update(self._serial_part_blocks())
             local = slice_lts_state(source, self.template, self.serial_layout, self.layout, self.simulation,
                                     self.parts, self.mine, self.comm.rank)
-            if _started(serial_state):
-                self.kernel.load_state(local)
-            prefixes = [prefix for *_, prefix in self.layout.components] + [prefix for *_, prefix in self.layout.pairs]
-            for prefix, part in zip(prefixes, self.objects + self.pair_objects):
-                own = part.save_state()
-                part.load_state({name: local.get(prefix + name, block) for name, block in own.items()})
+            self.kernel.load_state(local)  # not started: only that (its first run initialises from u, v)
+            if not _started(serial_state):  # the parts' state, which an unstarted kernel does not load
+                prefixes = [prefix for *_, prefix in self.layout.components] + \
+                           [prefix for *_, prefix in self.layout.pairs]
+                for prefix, part in zip(prefixes, self.objects + self.pair_objects):
+                    own = part.save_state()
+                    part.load_state({name: local.get(prefix + name, block) for name, block in own.items()})
         else:
             local = slice_state(serial_state, self.template, self.simulation, self.parts, self.mine,
                                 self.comm.rank, self.components)

@@ -651,6 +651,13 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
     if simulation.lts_stability is None and not simulation.lts_check_deferred:  # once per model
         simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
                                                                   simulation.stiffness.shape[0])
+        from pyfem.distributed import world
+
+        comm = world()
+        if comm.size > 1 and simulation.lts_stability is not None:  # every rank checked the same map: one verdict,
+            from mpi4py import MPI  # or ranks stepping locally and globally would wait for each other
+
+            simulation.lts_stability["stable"] = comm.allreduce(bool(simulation.lts_stability["stable"]), op=MPI.LAND)
     report = simulation.lts_stability
     if report is not None and not report["stable"]:
         if simulation.scene["time"].get("local_stepping") == "auto":
@@ -741,7 +748,7 @@ def make_stepper(simulation: Simulation, distribute: bool = True):
     from pyfem.distributed import world
 
     comm = world()
-    if distribute and comm.size > 1:  # (local time stepping is refused under mpirun by `prepare`)
+    if distribute and comm.size > 1:  # (local time stepping too: each rank's share steps the row split)
         from pyfem.distributed import DistributedStepper
 
         return DistributedStepper(simulation, make_stepper(simulation, distribute=False), comm)

@@ -1127,8 +1127,6 @@ def add_hand_over_force(stepper, simulation, nodes=None, local_of=None, n_local:
     force = state.hand_over_force
     if nodes is not None:
         force = local_force(force, nodes, local_of, n_local)
-        if not np.any(force):  # none on this rank's nodes (a local stepper takes no provider without nodes)
-            return
     stepper.add_seismic_input(hand_over_force_provider(force))
 
 
