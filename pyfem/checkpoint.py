@@ -340,13 +340,20 @@ def read_checkpoint(out_dir, state: bool = True) -> Checkpoint:
 class CheckpointClock:
     """When the next periodic checkpoint is due: every `interval` seconds of wall time (0: never).
 
+    The clock may start with time already on it: a run's set-up (the mesh, the static stage, the
+    local-stepping map's check: half an hour for the paper-scale case study) counts towards the
+    first interval, so a run whose set-up took longer than the interval writes its first
+    checkpoint at its first sample, and a run stopped soon after its set-up resumes from there
+    instead of solving its stage again.
+
     Args:
         interval: seconds of wall time between checkpoints (`[output] checkpoint_interval`).
+        elapsed: seconds of wall time already spent before the clock starts (the set-up).
     """
 
-    def __init__(self, interval: float):
+    def __init__(self, interval: float, elapsed: float = 0.0):
         self.interval = float(interval)
-        self._last = time.monotonic()
+        self._last = time.monotonic() - max(float(elapsed), 0.0)
         self.count = 0
         self.seconds = 0.0  # wall time spent writing checkpoints
 

@@ -1166,7 +1166,9 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                                     f"{stage_words}", **plan}
             on_plan(plan)
         writer = RunWriter(out_dir, simulation) if root else SilentWriter(out_dir)
-        clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"])
+        # the set-up counts towards the first checkpoint (a long stage is not solved twice)
+        clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"],
+                                            elapsed=time.perf_counter() - wall_start)
         write_checkpoint = None  # set once the state (u, v, a, t, kernel, writer) is whole
         stepper = None
         try:

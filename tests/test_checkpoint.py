@@ -283,6 +283,43 @@ def test_a_run_without_its_saved_stage_solves_it_again_and_saves_it(reference_ru
     assert_same_run(out, reference_run[0])
 
 
+def test_a_set_up_longer_than_the_interval_checkpoints_at_the_first_sample(reference_run, tmp_path, monkeypatch):
+    """The paper-scale case study's stage and LTS check take half an hour; a run killed minutes
+    into its stepping must not solve them again. The set-up counts towards the first interval: a
+    stage that takes longer than `checkpoint_interval` gives a checkpoint at the first sample."""
+    interval, stage_seconds = 2.0, 2.5
+    solve = static.solve_relaxation_stage
+
+    def slow_stage(*args, **kwargs):
+        time.sleep(stage_seconds)  # the stage of a big model
+        return solve(*args, **kwargs)
+
+    scene = stateful_scene()
+    scene["output"]["checkpoint_interval"] = interval
+    out = tmp_path / "crashed"
+    with monkeypatch.context() as patched:
+        patched.setattr(static, "solve_relaxation_stage", slow_stage)
+        with pytest.raises(RuntimeError, match="simulated crash"):  # 2 samples in, well within an interval
+            solver.run(scene, out, progress=StopAt(0.02, RuntimeError("simulated crash")))
+    saved = checkpoint.read_checkpoint(out)
+    assert saved.t == pytest.approx(0.01) and saved.outputs_done == 1  # the first sample after t = 0
+
+    def solve_again(*args, **kwargs):
+        raise AssertionError("a resumed run solved the static stage again")
+
+    with monkeypatch.context() as patched:
+        patched.setattr(static, "solve_relaxation_stage", solve_again)
+        solver.run(scene, out, resume=True)
+    assert_same_run(out, reference_run[0])
+
+
+def test_the_clock_counts_the_set_up():
+    assert checkpoint.CheckpointClock(60.0, elapsed=61.0).due()
+    assert not checkpoint.CheckpointClock(60.0, elapsed=10.0).due()
+    assert not checkpoint.CheckpointClock(60.0).due()
+    assert not checkpoint.CheckpointClock(0.0, elapsed=1e9).due(), "interval 0: never"
+
+
 def test_ctrl_c_writes_a_checkpoint_and_resume_continues_from_it(reference_run, tmp_path):
     scene = stateful_scene()
     scene["output"]["checkpoint_interval"] = 0.0  # no periodic checkpoint: the interruption's own
