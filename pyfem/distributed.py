@@ -284,16 +284,26 @@ def local_matrix(stiffness: sp.bsr_matrix, mine: Share) -> tuple[np.ndarray, np.
 
 def _exchange(comm: MPI.Comm, parts: Partition, mine: Share):
     """The kernel's MpiNodeExchange: each rank tells the owners which of their nodes it ghosts."""
+    return _ghost_exchanges(comm, parts, mine, [np.ones(len(mine.nodes) - mine.n_owned, dtype=bool)])[0]
+
+
+def _ghost_exchanges(comm: MPI.Comm, parts: Partition, mine: Share, groups: list) -> list:
+    """One kernel MpiNodeExchange per group of the share's ghosts (a boolean mask over
+    mine.nodes[n_owned:]): each rank tells the owners which of their nodes it ghosts in each group.
+    Every rank makes every group's exchange (a collective: the communicator's copy)."""
     from pyfem import _kernels
 
     ghosts = mine.nodes[mine.n_owned:]
     owners = parts.node_owner[ghosts]
-    requests = [ghosts[owners == q] for q in range(comm.size)]  # ascending: ghosts are sorted
+    requests = [[ghosts[(owners == q) & group] for group in groups] for q in range(comm.size)]  # sorted
     asked = comm.alltoall(requests)
-    neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q]) or len(asked[q]))]
-    send = [mine.local_of[asked[q]].astype(np.int32) for q in neighbours]
-    recv = [mine.local_of[requests[q]].astype(np.int32) for q in neighbours]
-    return _kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(mine.nodes))
+    exchanges = []
+    for k in range(len(groups)):
+        neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q][k]) or len(asked[q][k]))]
+        send = [mine.local_of[asked[q][k]].astype(np.int32) for q in neighbours]
+        recv = [mine.local_of[requests[q][k]].astype(np.int32) for q in neighbours]
+        exchanges.append(_kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(mine.nodes)))
+    return exchanges
 
 
 def _owned_input_arrays(arrays: dict, mine: Share) -> dict:
@@ -508,33 +518,51 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
         out["contact/node_force"] = node_force.tobytes()
     regions = list(simulation.nonlinear.arrays) if simulation.nonlinear is not None else []
     for k, name in enumerate(regions):
-        src = f"component/{k}/"
-        n_cells = len(simulation.nonlinear.arrays[name].cells)
-        state = sigma0_rows = None
-        if points:
-            state = state_rows(serial_template[src + "state"], n_cells).copy()
-            sigma0 = serial_template[src + "initial_stress"]
-            sigma0_rows = state_rows(sigma0, n_cells).copy() if len(sigma0) else None
-        totals = {"stored_energy": 0.0, "dissipation": 0.0}
-        for s, rank_components in zip(states, components):
-            for j, (region, kind, cells) in enumerate(rank_components):
-                if region != name or kind != "counted":
-                    continue
-                if points:
-                    state[cells] = state_rows(s[f"component/{j}/state"], len(cells))
-                    if sigma0_rows is not None:
-                        sigma0_rows[cells] = state_rows(s[f"component/{j}/initial_stress"], len(cells))
-                for scalar in totals:
-                    totals[scalar] += float(np.frombuffer(s[f"component/{j}/{scalar}"], dtype=np.float64)[0])
-        if points:
-            out[src + "state"] = state.tobytes()
-            out[src + "initial_stress"] = sigma0_rows.tobytes() if sigma0_rows is not None else b""
-        for scalar, value in totals.items():
-            out[src + scalar] = np.array([value]).tobytes()
+        counted = [(s, f"component/{j}/", cells) for s, rank_components in zip(states, components)
+                   for j, (region, kind, cells) in enumerate(rank_components)
+                   if region == name and kind == "counted"]
+        out.update(merge_component_rows(serial_template, f"component/{k}/",
+                                        len(simulation.nonlinear.arrays[name].cells), counted, points))
     if not points:  # the template's per-point blocks: not read, so not copied into the kernel
         per_point = {"stepper/internal_force"} | {f"component/{k}/{block}" for k in range(len(regions))
                                                   for block in ("points", "state", "initial_stress")}
         out = {key: value for key, value in out.items() if key not in per_point}
+    return out
+
+
+def merge_component_rows(template: dict, src: str, n_cells: int, counted: list, points: bool) -> dict:
+    """One nonlinear component of the serial state from the ranks' counted parts of it.
+
+    Args:
+        template: the serial state the merge fills (its rows of cells no rank counts stay).
+        src: the component's prefix in the serial state ("component/k/" or a level's).
+        n_cells: the serial component's cells.
+        counted: (a rank's state, its part's prefix, the part's rows in the serial component) for
+            every part that counts its cells (halo parts hold copies, not the state).
+        points: whether the per-point state (and initial stress) is merged, or the scalars only.
+
+    Returns:
+        The component's blocks: per-point state and initial stress rows (with `points`) and the
+        stored energy and dissipation summed over the parts.
+    """
+    out = {}
+    if points:
+        state = state_rows(template[src + "state"], n_cells).copy()
+        sigma0 = template[src + "initial_stress"]
+        sigma0_rows = state_rows(sigma0, n_cells).copy() if len(sigma0) else None
+    totals = {"stored_energy": 0.0, "dissipation": 0.0}
+    for s, prefix, at in counted:
+        if points:
+            state[at] = state_rows(s[prefix + "state"], len(at))
+            if sigma0_rows is not None:
+                sigma0_rows[at] = state_rows(s[prefix + "initial_stress"], len(at))
+        for scalar in totals:
+            totals[scalar] += float(np.frombuffer(s[prefix + scalar], dtype=np.float64)[0])
+    if points:
+        out[src + "state"] = state.tobytes()
+        out[src + "initial_stress"] = sigma0_rows.tobytes() if sigma0_rows is not None else b""
+    for scalar, value in totals.items():
+        out[src + scalar] = np.array([value]).tobytes()
     return out
 
 
@@ -543,20 +571,8 @@ def merge_states(serial_template: dict, states: list, simulation, parts: Partiti
 def level_exchanges(comm: MPI.Comm, parts: Partition, mine: Share, levels: np.ndarray) -> list:
     """One kernel MpiNodeExchange per rate level k: the velocity of the share's level-k ghosts from
     their owners, before each of the level's drifts (LocalStepper.set_partition)."""
-    from pyfem import _kernels
-
-    ghosts = mine.nodes[mine.n_owned:]
-    owners, ghost_levels = parts.node_owner[ghosts], np.asarray(levels)[ghosts]
-    max_level = int(np.max(levels))
-    requests = [[ghosts[(owners == q) & (ghost_levels == k)] for k in range(max_level + 1)] for q in range(comm.size)]
-    asked = comm.alltoall(requests)
-    exchanges = []
-    for k in range(max_level + 1):  # every rank makes each level's (a collective: the communicator's copy)
-        neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q][k]) or len(asked[q][k]))]
-        send = [mine.local_of[asked[q][k]].astype(np.int32) for q in neighbours]
-        recv = [mine.local_of[requests[q][k]].astype(np.int32) for q in neighbours]
-        exchanges.append(_kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(mine.nodes)))
-    return exchanges
+    ghost_levels = np.asarray(levels)[mine.nodes[mine.n_owned:]]
+    return _ghost_exchanges(comm, parts, mine, [ghost_levels == k for k in range(int(np.max(levels)) + 1)])
 
 
 def level_bytes_per_fine_step(nodes_per_level: list) -> float:
@@ -774,28 +790,10 @@ def merge_lts_states(template: dict, states: list, serial: LevelLayout, layouts:
                     rows[np.searchsorted(serial.level_nodes[k], nodes[owned])] = _float_rows(s[prefix + block])[owned]
                 out[prefix + block] = rows.tobytes()
     for name, _, serial_rows, level, src in serial.components:
-        n_cells = len(serial_rows)
-        if points:
-            state = state_rows(template[src + "state"], n_cells).copy()
-            sigma0 = template[src + "initial_stress"]
-            sigma0_rows = state_rows(sigma0, n_cells).copy() if len(sigma0) else None
-        totals = {"stored_energy": 0.0, "dissipation": 0.0}
-        for s, layout in zip(states, layouts):
-            for region, kind, rows, part_level, prefix in layout.components:
-                if region != name or part_level != level or kind != "counted":
-                    continue
-                if points:
-                    at = np.searchsorted(serial_rows, rows)
-                    state[at] = state_rows(s[prefix + "state"], len(rows))
-                    if sigma0_rows is not None:
-                        sigma0_rows[at] = state_rows(s[prefix + "initial_stress"], len(rows))
-                for scalar in totals:
-                    totals[scalar] += float(np.frombuffer(s[prefix + scalar], dtype=np.float64)[0])
-        if points:
-            out[src + "state"] = state.tobytes()
-            out[src + "initial_stress"] = sigma0_rows.tobytes() if sigma0_rows is not None else b""
-        for scalar, value in totals.items():
-            out[src + scalar] = np.array([value]).tobytes()
+        counted = [(s, prefix, np.searchsorted(serial_rows, rows)) for s, layout in zip(states, layouts)
+                   for region, kind, rows, part_level, prefix in layout.components
+                   if region == name and part_level == level and kind == "counted"]
+        out.update(merge_component_rows(template, src, len(serial_rows), counted, points))
     pair_nodes = None if simulation.contact_arrays is None else np.asarray(simulation.contact_arrays["pairs"])
     for serial_rows, level, src in serial.pairs:
         blocks = {name: state_rows(template[src + name], len(serial_rows)).copy() for name in pair_blocks(template, src)}
