@@ -130,8 +130,8 @@ py::array_t<std::int64_t> checked_points(const HexahedronElementsBase& elements,
   return points;
 }
 
-/// One of the law's reports (0 damage, 1 damage_type, 2 plastic_strain) of all points (c, q) or
-/// of the given flat indices (n,).
+/// One of the law's reports (0 damage, 1 damage_type, 2 plastic_strain, 3 crack_strain) of all
+/// points (c, q) or of the given flat indices (n,).
 template <typename T>
 py::array_t<T> point_output(const HexahedronElementsBase& elements,
                             const py::object& points_object, int which) {
@@ -150,7 +150,7 @@ py::array_t<T> point_output(const HexahedronElementsBase& elements,
     elements.point_output(indices, n, nullptr, data, nullptr);
   } else {
     elements.point_output(indices, n, which == 0 ? data : nullptr, nullptr,
-                          which == 2 ? data : nullptr);
+                          which == 2 ? data : nullptr, which == 3 ? data : nullptr);
   }
   return out;
 }
@@ -703,6 +703,15 @@ Returns:
           "Equivalent plastic strain sqrt(2/3) sum |d eps_p| (-) of the committed state (0 for "
           "laws without plastic strain): new float64 array (c, q), or (n,) for int64 flat "
           "indices `points`.")
+      .def(
+          "crack_strain",
+          [](const HexahedronElementsBase& elements, const py::object& points_object) {
+            return point_output<double>(elements, points_object, 3);
+          },
+          py::arg("points") = py::none(),
+          "Tensile crack strain d_t kappa_t (-) at its largest so far (the concrete law; 0 for "
+          "laws without cracks); times characteristic_length(), the crack band's opening (m): "
+          "new float64 array (c, q), or (n,) for int64 flat indices `points`.")
       .def(
           "weights",
           [](const HexahedronElementsBase& elements) {

@@ -144,10 +144,11 @@ class HexahedronElementsBase : public InternalForceComponent {
   /// [0, c q), checked by the caller) into out (n, 6).
   virtual void stress_at(const std::int64_t* points, std::int64_t n, double* out) const = 0;
   /// The law's report (material_law.hpp PointOutput) of the committed state of the n points
-  /// `points` (null: all c q points, n ignored) into damage, damage_type and plastic_strain
-  /// (each (n,) or (c, q)); a null output is skipped.
+  /// `points` (null: all c q points, n ignored) into damage, damage_type, plastic_strain and
+  /// crack_strain (each (n,) or (c, q)); a null output is skipped.
   virtual void point_output(const std::int64_t* points, std::int64_t n, double* damage,
-                            std::int32_t* damage_type, double* plastic_strain) const = 0;
+                            std::int32_t* damage_type, double* plastic_strain,
+                            double* crack_strain = nullptr) const = 0;
   /// Quadrature weight x det J of every point (c, q) (m^3), borrowed.
   const double* weights() const { return geometry_.weights; }
   /// Bytes of the state, buffers and adjacency this component owns (geometry is borrowed).
@@ -246,13 +247,15 @@ class HexahedronElements final : public HexahedronElementsBase {
   }
 
   void point_output(const std::int64_t* points, std::int64_t n, double* damage,
-                    std::int32_t* damage_type, double* plastic_strain) const override {
+                    std::int32_t* damage_type, double* plastic_strain,
+                    double* crack_strain = nullptr) const override {
     if (!points) n = geometry_.n_cells * geometry_.n_points;
     for (std::int64_t j = 0; j < n; ++j) {
       const PointOutput report = Law::output(committed_[points ? points[j] : j]);
       if (damage) damage[j] = report.damage;
       if (damage_type) damage_type[j] = report.damage_type;
       if (plastic_strain) plastic_strain[j] = report.plastic_strain;
+      if (crack_strain) crack_strain[j] = report.crack_strain;
     }
   }
 

@@ -46,6 +46,11 @@ ZONE_EDGE = 2.5
 DAMAGED = 0.01
 """A point counts as damaged in run.json's damaged_volume when d > DAMAGED."""
 
+CRACK_OPENINGS = (1.0e-4, 2.0e-4, 3.0e-4, 1.0e-3)
+"""Crack openings (m) by which run.json grades a cracked lining (cracked_volume_by_opening):
+0.1-0.3 mm are the crack-width limits of concrete design codes (EN 1992-1-1 Table 7.1N: 0.3 mm;
+water-retaining structures 0.1-0.2 mm), 1 mm a crack well open."""
+
 
 @dataclasses.dataclass
 class ElementArrays:
@@ -229,7 +234,9 @@ class NonlinearRegions:
         """Per region, the committed state averaged over each cell's points (weights w |det J|):
         {"cells" (c,), "stress" (c, 6) Voigt xx yy zz xy yz xz (Pa), "damage" (c,),
         "plastic_strain" (c,), "damage_type" (c,) int32: the type of the cell's most damaged
-        point (of its largest plastic strain when no point is damaged; 0 for neither)}.
+        point (of its largest plastic strain when no point is damaged; 0 for neither),
+        "crack_opening" (c,) (m): the cell's mean crack strain times its characteristic length,
+        the crack band's opening at its largest so far (0 for laws without cracks)}.
         `components`: those to read (region order; None entries skipped), default `self.components`."""
         result = {}
         for component, name, arrays in self._active(components):
@@ -243,13 +250,17 @@ class NonlinearRegions:
                 "damage": np.einsum("cq,cq->c", weights, damage),
                 "plastic_strain": np.einsum("cq,cq->c", weights, plastic),
                 "damage_type": kind[np.arange(len(kind)), most].astype(np.int32),
+                "crack_opening": crack_opening(component, arrays),
             }
         return result
 
     def region_summary(self, components=None) -> dict:
         """Per region, for run.json: law, integration, cells, points, volume (m^3), damaged_volume (d > DAMAGED,
         m^3, by points), peak_damage, yielded_volume (plastic strain > 0, m^3), peak_plastic_strain,
-        tension_points / shear_points (damage_type 1 / 2), dissipated_energy (J since the start).
+        tension_points / shear_points (damage_type 1 / 2), dissipated_energy (J since the start);
+        for laws that crack, peak_crack_opening (m: the largest cell mean of the crack band's
+        opening, the field crack_opening) and cracked_volume_by_opening ({opening in mm: m^3 of
+        cells whose opening exceeds it}: a cracked-through lining graded by how wide it opened).
         `components` as in `cell_averages`."""
         summary = {}
         for component, name, arrays in self._active(components):
@@ -268,6 +279,11 @@ class NonlinearRegions:
                 "shear_points": int(np.count_nonzero(kind == 2)),
                 "dissipated_energy": float(component.dissipation()),
             }
+            if self.laws[name][0] == "concrete_damage":
+                opening, cell_volume = crack_opening(component, arrays), arrays.weights.sum(axis=1)
+                summary[name]["peak_crack_opening"] = float(opening.max(initial=0.0))
+                summary[name]["cracked_volume_by_opening"] = {
+                    f"{1e3 * w:g}": float(cell_volume[opening > w].sum()) for w in CRACK_OPENINGS}
             zone = self.zones.get(name)
             if zone is not None:  # yielding at the zone's edge: the zone may be too small
                 low, high = np.asarray(zone[:3]), np.asarray(zone[3:])
@@ -276,6 +292,14 @@ class NonlinearRegions:
                 summary[name]["yielded_points_near_zone_edge"] = int(np.count_nonzero(
                     (plastic > 0.0) & (margin < ZONE_EDGE)))
         return summary
+
+
+def crack_opening(component, arrays) -> np.ndarray:
+    """Each cell's crack band opening (c,) (m): its points' crack strain (the law's d_t kappa_t,
+    0 for laws without cracks) averaged with weights w |det J|, times the cell's characteristic
+    length, the h the law regularises with (docs/materials.md "Crack opening")."""
+    weights = arrays.weights / arrays.weights.sum(axis=1, keepdims=True)
+    return np.einsum("cq,cq->c", weights, component.crack_strain()) * component.characteristic_length()
 
 
 def voigt_tensor(voigt: np.ndarray) -> np.ndarray:

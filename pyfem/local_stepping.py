@@ -308,6 +308,15 @@ class LevelComponents:
     def plastic_strain(self, points=None):
         return self._gather("plastic_strain", points, ())
 
+    def crack_strain(self, points=None):
+        return self._gather("crack_strain", points, ())
+
+    def characteristic_length(self) -> np.ndarray:
+        out = np.zeros(len(self.part_of))
+        for rows, component in self.parts:
+            out[rows] = component.characteristic_length()
+        return out
+
     def dissipation(self) -> float:
         return float(sum(component.dissipation() for _, component in self.parts))
 

@@ -945,7 +945,8 @@ class RunWriter:
         and total stress (Pa, tension positive, initial + dynamic) at the cell centroids, as
         6 components xx, xy, xz, yy, yz, zz (XDMF Tensor6); in a nonlinear region the stress is
         the law's, averaged over the cell's quadrature points. "damage": cell fields damage,
-        damage_type and plastic_strain (`NonlinearRegions.cell_averages`; 0 in the matrix cells).
+        damage_type, plastic_strain and crack_opening (m; `NonlinearRegions.cell_averages`; 0 in
+        the matrix cells).
         Always the cell field "region" (int32 region ids, run.json "regions"). Cell data is per cell
         of `field_mesh` (a Q2 cell's values on its 8 parts); t is rounded to `time_decimals`.
         """
@@ -979,7 +980,8 @@ class RunWriter:
                 cell_data["stress"] = [stress]
         if "damage" in fields:
             n_cells = self.simulation.model.n_cells
-            for name, dtype in (("damage", float), ("damage_type", np.int32), ("plastic_strain", float)):
+            for name, dtype in (("damage", float), ("damage_type", np.int32), ("plastic_strain", float),
+                                ("crack_opening", float)):
                 values = np.zeros(n_cells, dtype=dtype)
                 for region in averages.values():
                     values[region["cells"]] = region[name]

@@ -274,6 +274,32 @@ def test_concrete_tension_damage_starts_at_f_t_and_never_decreases(tmp_path):
         damage = np.array([reader.read_data(k)[2]["damage"][0] for k in range(reader.num_steps)])
     assert damage.shape[0] > 20 and damage[-1].max() > 0.0
     assert np.all(np.diff(damage, axis=0) >= 0.0) and np.all((damage >= 0.0) & (damage < 1.0))
+    # The crack band's opening (docs/materials.md "Crack opening"): where and only where the cells
+    # cracked, never closing in the record (its largest so far), and run.json's peak is the field's.
+    with meshio.xdmf.TimeSeriesReader(str(tmp_path / "damage_True" / "fields.xdmf")) as reader:
+        points, cells = reader.read_points_cells()
+        samples = [reader.read_data(k) for k in range(reader.num_steps)]
+    opening = np.array([cell_data["crack_opening"][0] for _, _, cell_data in samples])
+    assert np.all(np.diff(opening, axis=0) >= 0.0)
+    assert np.all((opening[-1] > 0.0) == (damage[-1] > 0.0))
+    assert summary["peak_crack_opening"] == pytest.approx(opening[-1].max(), rel=1e-12)
+    # Independently, from the displacements: a row cracked through (the P wave's tension pulls the
+    # lining's top off) opens by the jump of u_z across it less its elastic part h sigma_zz / E, at
+    # its largest over the record (fields every 0.01 s, so the sampled largest is a little low).
+    cracked_through = np.flatnonzero(damage[-1] > 0.99)
+    assert len(cracked_through) >= 4
+    for cell in cracked_through:
+        nodes = cells[0].data[cell]
+        above = nodes[points[nodes, 2] > points[nodes, 2].mean()]
+        below = nodes[points[nodes, 2] < points[nodes, 2].mean()]
+        h = points[above, 2].mean() - points[below, 2].mean()
+        jump = max(u["displacement"][above, 2].mean() - u["displacement"][below, 2].mean()
+                   - h * c["stress"][0][cell, 5] / CONCRETE["E"] for _, u, c in samples)
+        print(f"cell {cell}: opening {1e3 * opening[-1, cell]:.3f} mm, displacement jump {1e3 * jump:.3f} mm")
+        assert 0.9 * opening[-1, cell] < jump <= opening[-1, cell] * (1.0 + 1e-3)
+    by_opening = list(summary["cracked_volume_by_opening"].values())
+    assert list(summary["cracked_volume_by_opening"]) == ["0.1", "0.2", "0.3", "1"]
+    assert all(a >= b for a, b in zip(by_opening, by_opening[1:])) and by_opening[0] <= summary["volume"]
 
 
 # ------------------------------------------------------------------------- (d) zero cost when off

@@ -20,6 +20,8 @@ directories), then draws figures like the paper's and writes the comparison:
     fig9_relative.png            peak displacement of A, B, C relative to D (Fig. 9)
     fig10_principal_stress.png   max principal stress at A and B (Fig. 10)
     fig11_lining_damage.png      the lining unrolled, damage at the end of each run (Fig. 11)
+    fig11b_crack_opening.png     the same, the crack band's largest opening (mm): graded where the
+                                 damage has saturated (runs since 2026-11-28)
     fig12_damage_type.png        the same, damage type: tension or shear (Fig. 12)
     fig13_deformation.png        the walls' and crown's x offset to the floor, and the offset
                                  across the soft layer's interface (Fig. 13 b, d)
@@ -204,7 +206,8 @@ def case_numbers(run: dict) -> dict:
     if regions:
         numbers["regions"] = {region: {key: values.get(key) for key in
                                        ("peak_damage", "damaged_volume", "yielded_volume", "volume",
-                                        "yielded_points_near_zone_edge")}
+                                        "yielded_points_near_zone_edge", "peak_crack_opening",
+                                        "cracked_volume_by_opening")}
                               for region, values in regions.items()}
     static = summary.get("static")
     if static:
@@ -384,11 +387,15 @@ def section_angle(centroids: np.ndarray, centre_z: float) -> np.ndarray:
     return np.degrees(np.arctan2(centroids[:, 2] - centre_z, centroids[:, 0]))
 
 
-def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathlib.Path) -> dict:
+def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathlib.Path,
+                         path_opening: pathlib.Path | None = None) -> dict:
     """Figs. 11-12: the lining unrolled (position around the section against y along the cavern),
-    coloured by damage and by damage type (tension, shear) at the end of each run; returns per case
-    the damaged share of the lining and the peak damage in the soft-layer bay (|y| < 10 m)."""
-    from matplotlib.colors import ListedColormap
+    coloured by damage and by damage type (tension, shear) at the end of each run, and, where the
+    fields have it, by the crack band's opening (mm, log scale: graded where the damage is not);
+    returns per case the damaged share of the lining and the peak damage in the soft-layer bay
+    (|y| < 10 m), with the opening its largest value and the share opened beyond 0.3 mm, in the bay
+    and by part of the section (crown, walls, floor)."""
+    from matplotlib.colors import ListedColormap, LogNorm
 
     plt = _pyplot()
     fields = {case: read_last_fields(run["dir"]) for case, run in runs.items()}
@@ -397,7 +404,10 @@ def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathl
         return {}
     figures = {}
     summary = {}
-    for key, path in (("damage", path_damage), ("damage_type", path_type)):
+    maps = [("damage", path_damage), ("damage_type", path_type)]
+    if path_opening is not None and all("crack_opening" in f["cell_data"] for f in fields.values()):
+        maps.append(("crack_opening", path_opening))
+    for key, path in maps:
         fig, axes = plt.subplots(1, len(fields), figsize=(4.6 * len(fields) + 1.6, 5.2), squeeze=False, sharey=True)
         for ax, (case, f) in zip(axes[0], sorted(fields.items())):
             cells, centroids = lining_cells(f, runs[case]["summary"])
@@ -411,6 +421,20 @@ def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathl
                 summary[case] = {"t": float(f["t"]), "damaged_share": float(np.mean(values > 0.01)),
                                  "peak_damage_bay": float(values[bay].max(initial=0.0)),
                                  "mean_damage_bay": float(values[bay].mean()) if bay.any() else 0.0}
+            elif key == "crack_opening":
+                mm = np.maximum(1e3 * values, 1e-3)  # below a micrometre: shown as 1 um
+                image = ax.scatter(angle[order], centroids[order, 1], c=mm[order], s=5, marker="s",
+                                   cmap="inferno_r", norm=LogNorm(vmin=1e-3, vmax=10.0))
+                bay = np.abs(centroids[:, 1]) < 10.0
+                parts = {"crown": (angle > 45.0) & (angle < 135.0),  # as seen from mid-height
+                         "walls": (np.abs(angle) <= 45.0) | (np.abs(angle) >= 135.0),
+                         "floor": (angle < -45.0) & (angle > -135.0)}
+                summary[case].update({
+                    "peak_opening_mm": float(mm.max(initial=0.0)),
+                    "opened_0.3mm_share": float(np.mean(mm > 0.3)),
+                    "opened_0.3mm_share_bay": float(np.mean(mm[bay] > 0.3)) if bay.any() else 0.0,
+                    "median_opening_mm": {name: float(np.median(mm[where])) if where.any() else 0.0
+                                          for name, where in parts.items()}})
             else:
                 image = ax.scatter(angle[order], centroids[order, 1], c=values[order], s=5, marker="s",
                                    cmap=ListedColormap(["0.85", "C3", "C0"]), vmin=-0.5, vmax=2.5)
@@ -423,6 +447,10 @@ def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathl
         if key == "damage_type":
             colorbar.set_ticks([0, 1, 2], labels=["none", "tension", "shear"])
             title = "lining damage type at the end of the run (cf. paper Fig. 12); shaded: the soft-layer bay"
+        elif key == "crack_opening":
+            colorbar.set_label("largest crack opening (mm)")
+            title = ("lining crack opening at its largest (the crack band's h d_t kappa_t), unrolled; "
+                     "shaded: the soft-layer bay")
         else:
             colorbar.set_label("damage (-)")
             title = "lining damage at the end of the run, unrolled (cf. paper Fig. 11); shaded: the soft-layer bay"
@@ -538,6 +566,12 @@ def comparison_table(numbers: dict, preset: str) -> str:
         lambda c: (f"{numbers[c]['regions']['lining']['damaged_volume']:.0f} / "
                    f"{numbers[c]['regions']['lining']['volume']:.0f}" if "lining" in numbers[c].get("regions", {})
                    else "-"), lambda c: "")
+    row("lining: largest crack opening (mm) / volume opened beyond 0.3 mm (m^3), end of run",
+        lambda c: (f"{1e3 * numbers[c]['regions']['lining']['peak_crack_opening']:.2f} / "
+                   f"{numbers[c]['regions']['lining']['cracked_volume_by_opening']['0.3']:.0f}"
+                   if (numbers[c].get("regions", {}).get("lining") or {}).get("peak_crack_opening") is not None
+                   else "-"),
+        lambda c: "")
     row("rock yielded volume in the Mohr-Coulomb zone (m^3; yielded points at the zone's edge)",
         lambda c: (" + ".join(f"{v['yielded_volume']:.0f}" for r, v in numbers[c]["regions"].items() if r != "lining")
                    + " (" + " + ".join(str(v["yielded_points_near_zone_edge"]) for r, v in
@@ -611,7 +645,8 @@ def report(presets=("coarse", "paper"), cases=tuple(CASES), runs_dir: pathlib.Pa
         figure_relative(numbers, results / f"fig9_relative{suffix}.png")
         figure_principal_stress(runs, results / f"fig10_principal_stress{suffix}.png")
         lining = figure_lining_damage(runs, results / f"fig11_lining_damage{suffix}.png",
-                                      results / f"fig12_damage_type{suffix}.png")
+                                      results / f"fig12_damage_type{suffix}.png",
+                                      results / f"fig11b_crack_opening{suffix}.png")
         offsets = figure_deformation(runs, results / f"fig13_deformation{suffix}.png")
         for case, run in runs.items():  # the static stage's stresses and plastic zone, as the run drew them
             section = run["dir"] / "static" / "section_stress.png"

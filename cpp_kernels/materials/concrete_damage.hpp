@@ -422,9 +422,14 @@ struct ConcreteDamageLaw {
                                 committed.energy_offset, point, trial.stored);
   }
 
-  /// Damage 1 - (1 - d_t)(1 - d_c), its mechanism; no plastic strain (0).
+  /// Damage 1 - (1 - d_t)(1 - d_c), its mechanism; no plastic strain (0); the crack strain
+  /// d_t kappa_t: under the secant law sigma = (1 - d_t) E eps the inelastic strain is d_t eps, at
+  /// its largest at eps = kappa_t. The crack band puts a crack's whole opening into one row of
+  /// elements, so h d_t kappa_t is the largest opening the crack reached (it grows on after d_t
+  /// saturates, which is what makes it a graded measure of a cracked-through lining).
   static PointOutput output(const State& state) {
-    return {state.damage, static_cast<std::int32_t>(state.damage_type), 0.0};
+    return {state.damage, static_cast<std::int32_t>(state.damage_type), 0.0,
+            state.damage_tension * state.kappa_tension};
   }
 
  private:

@@ -11,7 +11,7 @@
 //   static ElasticModuli elastic_moduli(const Parameters&);   // initial (undamaged) moduli
 //   static PointEnergy evaluate(const Parameters&, const State& committed,
 //                               const PointStrain& point, State& trial);
-//   static PointOutput output(const State&);        // damage, its type, plastic strain
+//   static PointOutput output(const State&);        // damage, its type, plastic, crack strain
 //   static void rebase(const Parameters&, State&);   // the state as the zero strain of a new run
 // initial_state is the state at zero dynamic strain. Its stress is sigma0 when sigma0 is
 // admissible; a law with a strength returns a sigma0 that violates it to the yield surface (or
@@ -81,6 +81,9 @@ struct PointOutput {
   double damage = 0.0;            // scalar damage d in [0, 1)
   std::int32_t damage_type = 0;   // 0 none, 1 tension, 2 shear (principal.hpp DamageType)
   double plastic_strain = 0.0;    // equivalent plastic strain sqrt(2/3) sum |d eps_p| (-)
+  double crack_strain = 0.0;      // tensile crack strain at its largest (-): the inelastic part
+                                  // d_t kappa_t of the tensile equivalent strain; times the
+                                  // crack band's width h, the crack's opening (0 without cracks)
 };
 
 /// Energy densities of a trial state (J/m^3).

@@ -41,6 +41,12 @@ double tension_closed_form(const ConcreteDamageParameters& p, double e, double h
   return std::max(softening, (1.0 - p.damage_max) * E * e);  // the damage cap's stiffness floor
 }
 
+// The law's report of a point state (what monitors, fields and run.json read).
+double crack_strain(const ConcreteDamageState& point) {
+  ConcreteDamageLaw::State state;
+  static_cast<ConcreteDamageState&>(state) = point;
+  return ConcreteDamageLaw::output(state).crack_strain;
+}
 
 }  // namespace
 
@@ -133,6 +139,48 @@ TEST(ConcreteDamage, CrackBandEnergyIndependentOfElementSize) {
   }
   EXPECT_EQ(checks, 3);
   EXPECT_GT(plain_energy[2] / plain_energy[0], 10.0);  // unregularised: proportional to h
+}
+
+TEST(ConcreteDamage, CrackOpeningIsTheBandsInelasticStrainAndEnclosesTheFractureEnergy) {
+  // The reported crack strain is the inelastic part eps - sigma / E of the uniaxial strain (0 up
+  // to the peak), keeps its largest value when the crack unloads, and grows on after the damage
+  // is capped. w = h x crack strain is the crack band's opening: the stress-opening curve
+  // encloses G_f (N/m) for every element size, so w is a property of the crack, not of the mesh.
+  const ConcreteDamageParameters p;
+  const ConcreteDamageMaterial m = concrete_damage_material(p);
+  const double E = p.young_modulus, et = m.threshold_tension;
+  int checks = 0;
+  for (double h : {0.1, 0.5, 2.0}) {
+    ConcreteDamageState state;
+    double enclosed = 0.0, w_previous = 0.0, sigma_previous = 0.0;
+    int k = 1;
+    for (; state.damage_tension < m.damage_max && k < 10000000; ++k) {
+      const double e = k * et / 200.0;
+      const ConcreteDamageStep step = concrete_damage_update(m, state, uniaxial(m, e), h);
+      const double sigma = step.state.stress[0];
+      const double crack = crack_strain(step.state);
+      if (e <= et) EXPECT_EQ(crack, 0.0);
+      EXPECT_NEAR(crack, e - sigma / E, 1e-12 * e);
+      const double w = h * crack;
+      enclosed += 0.5 * (sigma + sigma_previous) * (w - w_previous);
+      w_previous = w, sigma_previous = sigma;
+      state = step.state;
+    }
+    ASSERT_GT(w_previous, 0.0);
+    std::printf("[ info ] h = %.2f m: opening at the damage cap %.3f mm, stress-opening area %.1f N/m "
+                "(G_f %.1f)\n", h, 1e3 * w_previous, enclosed, p.fracture_energy);
+    // As the energy test: the deficit is the energy left in the stiffness floor at the cap.
+    EXPECT_LT(std::abs(enclosed / p.fracture_energy - 1.0), 0.05);
+    // Unloading keeps the largest opening; loading past the cap opens it further.
+    const double largest = crack_strain(state);
+    const ConcreteDamageStep closed = concrete_damage_update(m, state, uniaxial(m, 0.0), h);
+    EXPECT_EQ(crack_strain(closed.state), largest);
+    const ConcreteDamageStep wider =
+        concrete_damage_update(m, closed.state, uniaxial(m, 2.0 * k * et / 200.0), h);
+    EXPECT_GT(crack_strain(wider.state), 1.9 * largest);
+    ++checks;
+  }
+  EXPECT_EQ(checks, 3);
 }
 
 TEST(ConcreteDamage, UnloadingIsSecantAndCompressionRecoversStiffness) {
