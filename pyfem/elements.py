@@ -46,10 +46,11 @@ ZONE_EDGE = 2.5
 DAMAGED = 0.01
 """A point counts as damaged in run.json's damaged_volume when d > DAMAGED."""
 
-CRACK_OPENINGS = (1.0e-4, 2.0e-4, 3.0e-4, 1.0e-3)
+CRACK_OPENINGS = (1.0e-4, 2.0e-4, 3.0e-4, 1.0e-3, 1.0e-2)
 """Crack openings (m) by which run.json grades a cracked lining (cracked_volume_by_opening):
 0.1-0.3 mm are the crack-width limits of concrete design codes (EN 1992-1-1 Table 7.1N: 0.3 mm;
-water-retaining structures 0.1-0.2 mm), 1 mm a crack well open."""
+water-retaining structures 0.1-0.2 mm), 1 mm a crack well open, 10 mm a lining broken through
+(the case study's, docs/case_study.md)."""
 
 
 @dataclasses.dataclass

@@ -424,7 +424,7 @@ def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathl
             elif key == "crack_opening":
                 mm = np.maximum(1e3 * values, 1e-3)  # below a micrometre: shown as 1 um
                 image = ax.scatter(angle[order], centroids[order, 1], c=mm[order], s=5, marker="s",
-                                   cmap="inferno_r", norm=LogNorm(vmin=1e-3, vmax=10.0))
+                                   cmap="inferno_r", norm=LogNorm(vmin=1e-3, vmax=300.0))
                 bay = np.abs(centroids[:, 1]) < 10.0
                 parts = {"crown": (angle > 45.0) & (angle < 135.0),  # as seen from mid-height
                          "walls": (np.abs(angle) <= 45.0) | (np.abs(angle) >= 135.0),
