@@ -33,9 +33,11 @@ def lining_samples(directory: pathlib.Path) -> dict:
     with meshio.xdmf.TimeSeriesReader(str(directory / "fields.xdmf")) as reader:
         points, cells = reader.read_points_cells()
         samples = [reader.read_data(k) for k in range(reader.num_steps)]
-    first = samples[0][2]
-    if "crack_opening" not in first:
+    # A run resumed across 2026-11-28 has the field from its resumed sitting on: read those samples.
+    samples = [sample for sample in samples if "crack_opening" in sample[2]]
+    if not samples:
         raise SystemExit(f"{directory}: its fields have no crack_opening (a run from before 2026-11-28)")
+    first = samples[0][2]
     lining = np.flatnonzero(first["region"][0] == summary["regions"]["lining"])
     centroids = points[cells[0].data[lining]].mean(axis=1)
     return {"title": summary["scene"]["title"], "t": np.array([t for t, _, _ in samples]),
