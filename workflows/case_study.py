@@ -387,6 +387,25 @@ def section_angle(centroids: np.ndarray, centre_z: float) -> np.ndarray:
     return np.degrees(np.arctan2(centroids[:, 2] - centre_z, centroids[:, 0]))
 
 
+def section_parts(angle: np.ndarray) -> dict:
+    """The lining's cells by part of the section, from their `section_angle` (as seen from the
+    section's mid-height): crown, walls (both), floor."""
+    return {"crown": (angle > 45.0) & (angle < 135.0), "walls": (np.abs(angle) <= 45.0) | (np.abs(angle) >= 135.0),
+            "floor": (angle < -45.0) & (angle > -135.0)}
+
+
+def draw_unrolled(ax, angle: np.ndarray, y: np.ndarray, values: np.ndarray, title: str, **colours):
+    """One lining unrolled on `ax` (position around the section against y along the cavern),
+    coloured by `values` (the largest drawn last, on top; `colours`: cmap, vmin/vmax or norm), the
+    soft-layer bay shaded; returns the scatter for the colour bar."""
+    order = np.argsort(values, kind="stable")
+    image = ax.scatter(angle[order], y[order], c=values[order], s=5, marker="s", **colours)
+    ax.axhspan(-10.0, 10.0, color="k", alpha=0.06)
+    ax.set_xticks([-180, -90, 0, 90, 180], ["up. wall", "floor", "down. wall", "crown", "up. wall"], fontsize=7)
+    ax.set_title(title, fontsize=8)
+    return image
+
+
 def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathlib.Path,
                          path_opening: pathlib.Path | None = None) -> dict:
     """Figs. 11-12: the lining unrolled (position around the section against y along the cavern),
@@ -413,35 +432,26 @@ def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathl
             cells, centroids = lining_cells(f, runs[case]["summary"])
             angle = section_angle(centroids, centre_z=0.5 * centroids[:, 2].max())
             values = f["cell_data"][key][cells]
-            order = np.argsort(values, kind="stable")  # the most damaged (or tension) drawn last, on top
+            bay = np.abs(centroids[:, 1]) < 10.0
+            title = f"{CASE_LABELS[case]}, t = {f['t']:.2f} s"
             if key == "damage":
-                image = ax.scatter(angle[order], centroids[order, 1], c=values[order], s=5, marker="s",
-                                   cmap="inferno_r", vmin=0.0, vmax=1.0)
-                bay = np.abs(centroids[:, 1]) < 10.0
+                image = draw_unrolled(ax, angle, centroids[:, 1], values, title, cmap="inferno_r", vmin=0.0, vmax=1.0)
                 summary[case] = {"t": float(f["t"]), "damaged_share": float(np.mean(values > 0.01)),
                                  "peak_damage_bay": float(values[bay].max(initial=0.0)),
                                  "mean_damage_bay": float(values[bay].mean()) if bay.any() else 0.0}
             elif key == "crack_opening":
                 mm = np.maximum(1e3 * values, 1e-3)  # below a micrometre: shown as 1 um
-                image = ax.scatter(angle[order], centroids[order, 1], c=mm[order], s=5, marker="s",
-                                   cmap="inferno_r", norm=LogNorm(vmin=1e-3, vmax=300.0))
-                bay = np.abs(centroids[:, 1]) < 10.0
-                parts = {"crown": (angle > 45.0) & (angle < 135.0),  # as seen from mid-height
-                         "walls": (np.abs(angle) <= 45.0) | (np.abs(angle) >= 135.0),
-                         "floor": (angle < -45.0) & (angle > -135.0)}
+                image = draw_unrolled(ax, angle, centroids[:, 1], mm, title, cmap="inferno_r",
+                                      norm=LogNorm(vmin=1e-3, vmax=300.0))
                 summary[case].update({
                     "peak_opening_mm": float(mm.max(initial=0.0)),
                     "opened_0.3mm_share": float(np.mean(mm > 0.3)),
                     "opened_0.3mm_share_bay": float(np.mean(mm[bay] > 0.3)) if bay.any() else 0.0,
                     "median_opening_mm": {name: float(np.median(mm[where])) if where.any() else 0.0
-                                          for name, where in parts.items()}})
+                                          for name, where in section_parts(angle).items()}})
             else:
-                image = ax.scatter(angle[order], centroids[order, 1], c=values[order], s=5, marker="s",
-                                   cmap=ListedColormap(["0.85", "C3", "C0"]), vmin=-0.5, vmax=2.5)
-            ax.axhspan(-10.0, 10.0, color="k", alpha=0.06)
-            ax.set_xticks([-180, -90, 0, 90, 180], ["up. wall", "floor", "down. wall", "crown", "up. wall"],
-                          fontsize=7)
-            ax.set_title(f"{CASE_LABELS[case]}, t = {f['t']:.2f} s", fontsize=8)
+                image = draw_unrolled(ax, angle, centroids[:, 1], values, title,
+                                      cmap=ListedColormap(["0.85", "C3", "C0"]), vmin=-0.5, vmax=2.5)
         axes[0][0].set_ylabel("y along the cavern (m)")
         colorbar = fig.colorbar(image, ax=axes[0].tolist(), shrink=0.8)
         if key == "damage_type":

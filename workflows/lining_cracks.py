@@ -19,7 +19,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from case_study import _pyplot, section_angle  # noqa: E402
+from case_study import _pyplot, draw_unrolled, lining_cells, section_angle, section_parts  # noqa: E402
 
 THRESHOLDS_MM = (0.1, 0.3, 1.0)
 
@@ -37,9 +37,8 @@ def lining_samples(directory: pathlib.Path) -> dict:
     samples = [sample for sample in samples if "crack_opening" in sample[2]]
     if not samples:
         raise SystemExit(f"{directory}: its fields have no crack_opening (a run from before 2026-11-28)")
-    first = samples[0][2]
-    lining = np.flatnonzero(first["region"][0] == summary["regions"]["lining"])
-    centroids = points[cells[0].data[lining]].mean(axis=1)
+    lining, centroids = lining_cells({"points": points, "cells": cells[0].data,
+                                      "cell_data": {"region": samples[0][2]["region"][0]}}, summary)
     return {"title": summary["scene"]["title"], "t": np.array([t for t, _, _ in samples]),
             "opening_mm": np.array([1e3 * c["crack_opening"][0][lining] for _, _, c in samples]),
             "damage": np.array([c["damage"][0][lining] for _, _, c in samples]),
@@ -47,9 +46,7 @@ def lining_samples(directory: pathlib.Path) -> dict:
 
 
 def parts(run: dict) -> dict:
-    angle, y = run["angle"], run["y"]
-    return {"crown": (angle > 45.0) & (angle < 135.0), "walls": (np.abs(angle) <= 45.0) | (np.abs(angle) >= 135.0),
-            "floor": (angle < -45.0) & (angle > -135.0), "bay": np.abs(y) < 10.0}
+    return {**section_parts(run["angle"]), "bay": np.abs(run["y"]) < 10.0}
 
 
 def table(run: dict) -> list:
@@ -70,13 +67,8 @@ def figure(runs: dict, path: pathlib.Path) -> None:
     plt = _pyplot()
     fig, axes = plt.subplots(1, len(runs), figsize=(4.6 * len(runs) + 1.6, 5.2), squeeze=False, sharey=True)
     for ax, (name, run) in zip(axes[0], runs.items()):
-        w = np.maximum(run["opening_mm"][-1], 1e-3)
-        order = np.argsort(w, kind="stable")
-        image = ax.scatter(run["angle"][order], run["y"][order], c=w[order], s=5, marker="s", cmap="inferno_r",
-                           norm=LogNorm(vmin=1e-3, vmax=300.0))
-        ax.axhspan(-10.0, 10.0, color="k", alpha=0.06)
-        ax.set_xticks([-180, -90, 0, 90, 180], ["up. wall", "floor", "down. wall", "crown", "up. wall"], fontsize=7)
-        ax.set_title(f"{name}, t = {run['t'][-1]:.2f} s", fontsize=8)
+        image = draw_unrolled(ax, run["angle"], run["y"], np.maximum(run["opening_mm"][-1], 1e-3),
+                              f"{name}, t = {run['t'][-1]:.2f} s", cmap="inferno_r", norm=LogNorm(vmin=1e-3, vmax=300.0))
     axes[0][0].set_ylabel("y along the cavern (m)")
     fig.colorbar(image, ax=axes[0].tolist(), shrink=0.8).set_label("largest crack opening (mm)")
     fig.suptitle("lining crack opening at its largest, unrolled (where the damage saturates at 0.9999); "
