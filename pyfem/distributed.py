@@ -644,10 +644,12 @@ def serial_layout(simulation) -> LevelLayout:
     return LevelLayout(max_level, [np.flatnonzero(levels == k) for k in range(max_level + 1)], components, pairs)
 
 
-def local_lts_stepper(simulation, mine: Share, exchanges: list):
+def local_lts_stepper(simulation, mine: Share, exchanges: list, bare: bool = False):
     """The kernel's LocalStepper of one rank's share (row split, `LocalStepper.set_partition`):
     `pyfem.solver._make_local_stepper`'s objects restricted to the share, each region's counted and
     halo cells split by level as the serial stepper splits the region, the owned pairs by level.
+    With `bare`, the map the stability check iterates (`check_stability_on_ranks`): no mass-
+    proportional damping, no pairs, no input or hand-over forces (the serial check's bare kernel).
 
     Returns:
         (LocalSteppingAdapter, LevelLayout, component objects, pair objects), the objects in the
@@ -662,7 +664,8 @@ def local_lts_stepper(simulation, mine: Share, exchanges: list):
     local_levels = np.ascontiguousarray(levels[mine.nodes])
     indptr, indices, blocks = local_matrix(simulation.stiffness, mine)
     kernel = _kernels.LocalStepper(indptr, indices, blocks, np.ascontiguousarray(simulation.mass[mine.nodes]),
-                                   local_levels, simulation.time_step.dt, simulation.alpha, max_level)
+                                   local_levels, simulation.time_step.dt, 0.0 if bare else simulation.alpha,
+                                   max_level)
     kernel.set_row_split(True)
     _add_dashpots(kernel, simulation, mine)
     _add_constraints(kernel, simulation.constraints, mine)
@@ -681,7 +684,7 @@ def local_lts_stepper(simulation, mine: Share, exchanges: list):
                     objects.append(component)
     pairs, pair_objects = [], []
     pair_level = _pair_levels(simulation)
-    if pair_level is not None and len(mine.pairs):
+    if pair_level is not None and len(mine.pairs) and not bare:
         for level in np.unique(pair_level[mine.pairs]):
             selected = mine.pairs[pair_level[mine.pairs] == level]
             contact = _local_contact(simulation.contact_arrays, mine, selected)
@@ -689,12 +692,12 @@ def local_lts_stepper(simulation, mine: Share, exchanges: list):
             pairs.append((selected, int(level), _level_prefix(max_level, level, "contact", 0)))
             pair_objects.append(contact)
     stepper = LocalSteppingAdapter(kernel, 2 ** max_level)
-    if simulation.input_arrays is not None:
+    if simulation.input_arrays is not None and not bare:
         owned_input = _owned_input_arrays(simulation.input_arrays, mine)
         if len(owned_input["nodes"]):  # (the kernel takes no provider without nodes)
             kernel.add_seismic_input(seismic_input_kernel(owned_input))
     hand_over = getattr(simulation.static, "hand_over_force", None)
-    if hand_over is not None:  # the stage's out-of-balance on the owned nodes (pyfem/static.py)
+    if hand_over is not None and not bare:  # the stage's out-of-balance on the owned nodes (pyfem/static.py)
         from pyfem.static import hand_over_force_provider, local_force
 
         force = local_force(hand_over, mine.nodes[:mine.n_owned], mine.local_of, len(mine.nodes))
@@ -704,6 +707,46 @@ def local_lts_stepper(simulation, mine: Share, exchanges: list):
     layout = LevelLayout(max_level, [mine.nodes[np.flatnonzero(local_levels == k)] for k in range(max_level + 1)],
                          components, pairs)
     return stepper, layout, objects, pair_objects
+
+
+class _RankSum:
+    """A share's kernel LocalStepper (run() in global steps, a collective) whose energy() is the whole
+    model's: summed over the ranks, each counting its owned rows and counted cells."""
+
+    def __init__(self, kernel, comm: MPI.Comm) -> None:
+        self.kernel, self.comm = kernel, comm
+
+    def run(self, u, v, a, n_steps: int, t0: float) -> float:
+        return self.kernel.run(u, v, a, n_steps, t0)
+
+    def energy(self) -> dict:
+        energy = self.kernel.energy()
+        keys = ("kinetic", "strain", "internal_stored")
+        total = self.comm.allreduce(np.array([energy[key] for key in keys]))
+        return dict(zip(keys, total))
+
+
+def check_stability_on_ranks(simulation, comm: MPI.Comm, **check) -> dict:
+    """local_stepping.check_stability of the model's LTS map stepped by the ranks' shares (row
+    split, the partition the run steps in): the same random state on every rank, each stepping its
+    owned rows, the energy summed over the ranks; every rank gets the same report, with "ranks".
+    Each rank holds and steps its share only, where the serial check stepped the whole model on
+    every rank (docs/scaling.md "Local time stepping on the ranks")."""
+    from mpi4py import MPI
+
+    from pyfem.local_stepping import check_stability
+
+    parts = partition(simulation, comm.size)
+    mine = share(simulation, parts, comm.rank)
+    exchanges = level_exchanges(comm, parts, mine, simulation.node_levels)
+
+    def make_kernel():
+        stepper, *_ = local_lts_stepper(simulation, mine, exchanges, bare=True)
+        return _RankSum(stepper.kernel, comm)
+
+    report = check_stability(make_kernel, 3 * len(simulation.mass), rows=_dof_rows(mine.nodes), **check)
+    seconds = comm.allreduce(report["seconds"], op=MPI.MAX)
+    return dict(comm.bcast(report, root=0), seconds=seconds, ranks=comm.size)  # rank 0's verdict for all
 
 
 def _started(state: dict) -> bool:

@@ -605,7 +605,7 @@ class LocalSteppingAdapter:
 
 
 def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chunk: int = STABILITY_CHUNK,
-                    seed: int = 0) -> dict:
+                    seed: int = 0, rows: np.ndarray | None = None) -> dict:
     """Iterates the LTS map on the user's model: `make_kernel()` gives a LocalStepper of the model
     (same matrix, mass, levels, step and boundary dashpots; element-loop cells without initial stress,
     so that a tiny state keeps their laws elastic: the linear map) without forces and without mass-
@@ -617,14 +617,18 @@ def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chun
     Returns {"global_steps", "growth" (largest energy of the last third / of the first third),
     "growth_per_step" (its (1 / (2 n)) power, n the steps between the thirds' centres: the amplitude
     factor per global step), "stable", "seconds"}; stable when growth < STABILITY_RATIO, which
-    catches amplitude growth of ~0.2 % per global step and more with the defaults."""
+    catches amplitude growth of ~0.2 % per global step and more with the defaults. `rows`: the
+    kernel steps these dofs of the model's n_dofs only (an MPI rank's share, owned then ghosts,
+    pyfem.distributed.check_stability_on_ranks), from the same random state."""
     start = time.perf_counter()
     kernel = make_kernel()
     rng = np.random.default_rng(seed)
     # A tiny state (1e-9 m): the map is linear in it wherever the element-loop laws stay elastic, and
     # their return mappings (every point yielding at a unit displacement) cost nothing extra.
     u = STABILITY_AMPLITUDE * rng.standard_normal(n_dofs)
-    v, a = np.zeros(n_dofs), np.zeros(n_dofs)
+    if rows is not None:
+        u = np.ascontiguousarray(u[rows])
+    v, a = np.zeros(len(u)), np.zeros(len(u))
     energies = []
     t = 0.0
     for _ in range(max(1, steps // chunk)):

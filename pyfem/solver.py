@@ -649,15 +649,17 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         return kernel
 
     if simulation.lts_stability is None and not simulation.lts_check_deferred:  # once per model
-        simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
-                                                                  simulation.stiffness.shape[0])
-        from pyfem.distributed import world
+        from pyfem.distributed import check_stability_on_ranks, world
 
         comm = world()
-        if comm.size > 1 and simulation.lts_stability is not None:  # every rank checked the same map: one verdict,
-            from mpi4py import MPI  # or ranks stepping locally and globally would wait for each other
-
-            simulation.lts_stability["stable"] = comm.allreduce(bool(simulation.lts_stability["stable"]), op=MPI.LAND)
+        # Under mpirun the map the ranks step, each stepping its share, one verdict for every rank: a
+        # collective, which rank 0 reaches in the plan's trial stepper (simulation_plan) and the other
+        # ranks in their make_stepper (the trial's arrays are the simulation's: the same partition).
+        if comm.size > 1:
+            simulation.lts_stability = check_stability_on_ranks(simulation, comm)
+        else:
+            simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
+                                                                      simulation.stiffness.shape[0])
     report = simulation.lts_stability
     if report is not None and not report["stable"]:
         if simulation.scene["time"].get("local_stepping") == "auto":

@@ -55,6 +55,12 @@ def assert_shared(run: dict, serial: dict, ranks: int) -> None:
     mpi = run["mpi"]
     assert mpi["ranks"] == ranks and sum(mpi["owned_nodes"]) == serial["nodes"]
     assert all(n > 0 for n in mpi["ghost_nodes"]) and all(b > 0 for b in mpi["bytes_sent_per_step"])
+    # The set-up check of the LTS map ran on the ranks' shares and found the serial check's growth
+    # (the same map and random state; the energy summed in another order).
+    checked, alone = run["local_stepping_stability"], serial["local_stepping_stability"]
+    assert checked["ranks"] == ranks and "ranks" not in alone and checked["stable"]
+    assert checked["global_steps"] == alone["global_steps"]
+    assert checked["growth"] == pytest.approx(alone["growth"], rel=1e-9)
 
 
 @pytest.fixture(scope="module")
@@ -109,6 +115,75 @@ def test_the_case_study_scene_under_local_stepping_on_the_ranks_equals_the_seria
         assert difference < STAGE_ROUNDOFF.get(kind, TOLERANCE), (kind, difference)
     print(f"case 3 (small), local stepping on {ranks} ranks: " +
           ", ".join(f"{kind} {value:.1e}" for kind, value in sorted(differences.items()) if value))
+
+
+STABILITY_ON_RANKS = """
+import json, sys
+from pathlib import Path
+sys.path.insert(0, "tests")
+import numpy as np
+from mpi4py import MPI
+from pyfem import _kernels, distributed, local_stepping, solver
+from pyfem.local_stepping import check_stability
+from test_local_stepping import GRADED_GEO, graded_scene
+
+local_stepping.fit_levels_to_output = lambda levels, steps_per_output: levels  # (conftest's unfitted_levels)
+
+comm = MPI.COMM_WORLD
+geo = Path(sys.argv[1])
+if comm.rank == 0:
+    geo.write_text(GRADED_GEO)
+comm.barrier()
+simulation = solver.prepare(graded_scene(geo, True))
+indptr, indices, blocks = solver.bsr_arrays(simulation.stiffness)
+as_set = simulation.node_levels.copy()
+found = {}
+# (one level coarser the energy overflows within the default 240 global steps: 60 keep it finite)
+for name, levels, steps in (("as set", as_set, 240), ("one coarser", as_set + 1, 60)):
+    simulation.node_levels = levels
+
+    def alone():
+        stepper = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass,
+                                        np.ascontiguousarray(levels, dtype=np.int32), simulation.time_step.dt, 0.0)
+        stepper.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
+                             np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
+        stepper.set_row_split(True)
+        return stepper
+
+    ranks = distributed.check_stability_on_ranks(simulation, comm, steps=steps)
+    found[name] = {"ranks": ranks, "serial": check_stability(alone, 3 * len(simulation.mass), steps=steps),
+                   "levels": int(levels.max()) + 1}
+if comm.rank == 0:
+    print("REPORT " + json.dumps(found))
+"""
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_the_stability_check_on_the_ranks_is_the_serial_check_of_the_map_they_step(tmp_path, ranks):
+    """check_stability_on_ranks (each rank steps its share of the LTS map from the same random
+    state, the energy summed over the ranks) against the serial check of the same row-split map,
+    on the graded mesh of tests/test_local_stepping.py: with its levels the map is stable and the
+    growth is the serial one to round-off; with every node one rate coarser both find the same
+    growth, above 1e3 (unstable), and every rank takes the verdict."""
+    import json
+    import subprocess
+
+    from test_mpi import ENV, PYTHON, REPO
+
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), PYTHON, "-c",
+                             STABILITY_ON_RANKS, str(tmp_path / "graded.geo")],
+                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    found = json.loads(result.stdout.split("REPORT ", 1)[1])
+    good, coarse = found["as set"], found["one coarser"]
+    assert good["levels"] >= 3, "the graded mesh stepped at three rates or more"
+    assert good["ranks"]["ranks"] == ranks and good["ranks"]["stable"] and good["serial"]["stable"]
+    assert good["ranks"]["growth"] == pytest.approx(good["serial"]["growth"], rel=1e-9)
+    assert not coarse["ranks"]["stable"] and not coarse["serial"]["stable"] and coarse["ranks"]["growth"] > 1e3
+    assert coarse["ranks"]["growth"] == pytest.approx(coarse["serial"]["growth"], rel=1e-6)
+    print(f"{ranks} ranks: growth {good['ranks']['growth']:.6g} (serial {good['serial']['growth']:.6g}), one "
+          f"level coarser {coarse['ranks']['growth']:.4g} (serial {coarse['serial']['growth']:.4g}); "
+          f"{good['ranks']['seconds']:.2f} s on the ranks, {good['serial']['seconds']:.2f} s whole")
 
 
 def test_kill_9_of_two_ranks_under_local_stepping_then_resume_gives_the_uninterrupted_run(tmp_path):
