@@ -9,7 +9,12 @@ across facets) and `none` (no ghost cells):
 - with the extra ghosts' values from their owners, each rank's owned rows times its local u equal
   PETSc's distributed product to round-off;
 - the strain energy summed over the ranks equals the same box assembled on one rank (another
-  numbering), the lumped mass's total is the box's.
+  numbering), the lumped mass's total is the box's;
+- the kernel's Stepper of each rank's share (its owned rows, the ghosts' rows from the owned rows'
+  transposes and their owners' diagonal blocks, the lumped mass, one ghost exchange per step over
+  the index map's and the extra ghosts) steps a Gaussian bump 100 steps as the box assembled and
+  stepped whole on one rank does, to round-off (nodes matched by coordinates), after the bump has
+  moved by as much as it started with.
 """
 import json
 import subprocess
@@ -35,5 +40,8 @@ def test_owned_rows_in_local_numbering_reproduce_the_distributed_product_and_ene
     assert found["energy"] > 0.0
     assert found["owned_rows_product_error"] < 1e-13
     assert found["energy_difference"] < 1e-13 and found["mass_error"] < 1e-14
+    assert found["steps"] == 100 and found["moved"] > 0.5, "the bump moved"
+    assert found["stepping_difference"] < 1e-12
     print(f"{ghost_mode}: owned/ghost/extra per rank {shares}, product {found['owned_rows_product_error']:.1e}, "
-          f"energy against one rank {found['energy_difference']:.1e}")
+          f"energy against one rank {found['energy_difference']:.1e}, stepped "
+          f"{found['stepping_difference']:.1e}")

@@ -15,7 +15,12 @@ On a hexahedral box of n^3 Q1 cells distributed by dolfinx (`GhostMode` as given
    product A x;
 4. the strain energy 1/2 u.K u summed over the ranks against the same box assembled on one rank
    (another numbering: the energy does not depend on it), and the lumped mass's total;
-5. reports its peak memory and the share of the model it holds.
+5. builds the kernel's Stepper of its share as pyfem.distributed.local_stepper would from the
+   whole matrix (`local_stiffness`: owned rows, the ghosts' rows to owned nodes as the owned rows'
+   transposes, the ghosts' diagonal blocks from their owners; the lumped mass; `ghost_exchange`
+   over the index map's and the extra ghosts) and steps a Gaussian bump STEPS steps from rest,
+   against the box assembled and stepped whole on one rank (nodes matched by coordinates);
+6. reports its peak memory and the share of the model it holds.
 
     /usr/bin/python3 workflows/distributed_assembly.py [n] [ghost_mode]
     mpirun --allow-run-as-root -n 2 /usr/bin/python3 workflows/distributed_assembly.py [n] [ghost_mode]
@@ -28,6 +33,7 @@ import sys
 import time
 
 import numpy as np
+import scipy.sparse as sp
 import ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
@@ -68,7 +74,7 @@ def owned_rows_local(V, matrix):
     ghosts, then the extra ghosts (global nodes of the owned rows' columns that the index map does
     not hold: with GhostMode.shared_facet, neighbours through an edge or a vertex only).
 
-    Returns (indptr, local columns, values, extra ghosts' global nodes)."""
+    Returns (indptr, local columns, values, extra ghosts' global nodes, every local node's global node)."""
     index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
     first, last = index_map.local_range
     mapped = np.concatenate([np.arange(first, last), index_map.ghosts]).astype(np.int64)  # global node
@@ -78,23 +84,77 @@ def owned_rows_local(V, matrix):
     local_nodes = np.concatenate([mapped, extra])
     order = np.argsort(local_nodes)
     local_columns = bs * order[np.searchsorted(local_nodes[order], node)] + component
-    return indptr, local_columns, values, extra
+    return indptr, local_columns, values, extra, local_nodes
 
 
-def fetch_owned(comm: MPI.Comm, V, values: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """(len(wanted), bs) the owners' values of the global nodes `wanted` (the extra ghosts), the
-    owner of a node found from the ranks' owned ranges (what a kernel exchange would be built from)."""
-    index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
-    first, last = index_map.local_range
-    starts = np.array([r[0] for r in comm.allgather((first, last))] + [index_map.size_global])
-    owner = np.searchsorted(starts, wanted, side="right") - 1
+def owners(comm: MPI.Comm, V, nodes: np.ndarray) -> np.ndarray:
+    """The rank owning each global node, from the ranks' owned ranges."""
+    index_map = V.dofmap.index_map
+    starts = np.array([r[0] for r in comm.allgather(index_map.local_range)] + [index_map.size_global])
+    return np.searchsorted(starts, nodes, side="right") - 1
+
+
+def fetch_owned(comm: MPI.Comm, V, owned: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """(len(wanted), k) the owners' rows of `owned` ((owned nodes, k) on every rank) for the global
+    nodes `wanted` (the extra ghosts' values, the ghosts' diagonal blocks)."""
+    first = V.dofmap.index_map.local_range[0]
+    owner = owners(comm, V, wanted)
     asked = comm.alltoall([wanted[owner == q] for q in range(comm.size)])
-    owned = values[:bs * index_map.size_local].reshape(-1, bs)
     replies = comm.alltoall([owned[np.asarray(nodes, dtype=np.int64) - first] for nodes in asked])
-    out = np.zeros((len(wanted), bs))
+    out = np.zeros((len(wanted), owned.shape[1]))
     for q in range(comm.size):
         out[owner == q] = replies[q]
     return out
+
+
+def local_stiffness(comm: MPI.Comm, V, indptr, columns, values, local_nodes: np.ndarray):
+    """(indptr, indices, blocks) of the rank's matrix as pyfem.distributed.local_matrix gives it
+    from the whole one: the owned rows' blocks, each ghost row's blocks to owned nodes (the owned
+    rows' transposed: K is symmetric) and the ghosts' diagonal blocks (from their owners)."""
+    n_owned, n_local = V.dofmap.index_map.size_local, len(local_nodes)
+    rows = sp.csr_matrix((values, columns, indptr), shape=(3 * n_owned, 3 * n_local))
+    owned = sp.vstack([rows, sp.csr_matrix((3 * (n_local - n_owned), 3 * n_local))]).tocsr().tobsr(blocksize=(3, 3))
+    row = np.repeat(np.arange(n_local), np.diff(owned.indptr))
+    col, blocks = owned.indices.astype(np.int64), owned.data
+    ghost = col >= n_owned
+    diagonal = blocks[row == col]  # the owned nodes' diagonal blocks, in node order
+    ghost_diagonal = fetch_owned(comm, V, diagonal.reshape(n_owned, 9), local_nodes[n_owned:]).reshape(-1, 3, 3)
+    ghosts = np.arange(n_owned, n_local)
+    row, col = np.concatenate([row, col[ghost], ghosts]), np.concatenate([col, row[ghost], ghosts])
+    blocks = np.concatenate([blocks, blocks[ghost].transpose(0, 2, 1), ghost_diagonal])
+    order = np.lexsort((col, row))
+    block_indptr = np.zeros(n_local + 1, dtype=np.int64)
+    np.cumsum(np.bincount(row, minlength=n_local), out=block_indptr[1:])
+    return (block_indptr, np.ascontiguousarray(col[order], dtype=np.int32),
+            np.ascontiguousarray(blocks[order], dtype=np.float64))
+
+
+def ghost_exchange(comm: MPI.Comm, V, local_nodes: np.ndarray):
+    """The kernel's MpiNodeExchange of the rank's ghosts (the index map's and the extra ones): each
+    rank asks the owners for its ghosts in ascending global order (pyfem.distributed._ghost_exchanges)."""
+    from pyfem import _kernels
+
+    n_owned = V.dofmap.index_map.size_local
+    first = V.dofmap.index_map.local_range[0]
+    ghosts = local_nodes[n_owned:]
+    owner = owners(comm, V, ghosts)
+    order = np.argsort(ghosts)
+    requests = [ghosts[order][owner[order] == q] for q in range(comm.size)]
+    asked = comm.alltoall(requests)
+    local_of_ghost = dict(zip(ghosts.tolist(), range(n_owned, len(local_nodes))))
+    neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q]) or len(asked[q]))]
+    send = [(np.asarray(asked[q], dtype=np.int64) - first).astype(np.int32) for q in neighbours]
+    recv = [np.array([local_of_ghost[g] for g in requests[q]], dtype=np.int32) for q in neighbours]
+    return _kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(local_nodes))
+
+
+def bump(x: np.ndarray, n: int) -> np.ndarray:
+    """A smooth initial displacement (m) at points x (k, 3): a Gaussian bump at the box's centre."""
+    r2 = ((x - 0.5 * n) ** 2).sum(axis=1) / (0.15 * n) ** 2
+    return 1e-3 * np.stack([np.exp(-r2), 0.5 * np.exp(-r2), -np.exp(-r2)], axis=1).reshape(-1)
+
+
+STEPS, DT = 100, 1.0e-4  # s (the box's 1 m cells: critical step ~1.7e-4 s)
 
 
 def smooth_field(V) -> np.ndarray:
@@ -105,6 +165,67 @@ def smooth_field(V) -> np.ndarray:
     return 1e-3 * field.reshape(-1)
 
 
+def step_the_share(comm: MPI.Comm, V, indptr, columns, values, missing, local_nodes, mass, n: int) -> dict:
+    """The kernel's Stepper of the rank's share (local matrix, lumped mass, ghost exchange), STEPS
+    steps from the bump at rest: its owned nodes' coordinates and displacements, its seconds."""
+    from pyfem import _kernels
+
+    index_map = V.dofmap.index_map
+    n_owned = index_map.size_local
+    coordinates = V.tabulate_dof_coordinates()[:n_owned + index_map.num_ghosts]
+    node_mass = mass.reshape(-1, 3)[:, 0]
+    coordinates = np.concatenate([coordinates, fetch_owned(comm, V, coordinates[:n_owned], missing)])
+    node_mass = np.concatenate([node_mass, fetch_owned(comm, V, node_mass[:n_owned, None], missing)[:, 0]])
+    matrix = local_stiffness(comm, V, indptr, columns, values, local_nodes)
+    stepper = _kernels.Stepper(*matrix, np.ascontiguousarray(node_mass), DT)
+    stepper.set_partition(n_owned, ghost_exchange(comm, V, local_nodes))
+    u = bump(coordinates, n)
+    v, a = np.zeros_like(u), np.zeros_like(u)
+    began = time.perf_counter()
+    stepper.run(u, v, a, STEPS, 0.0)
+    return {"coordinates": coordinates[:n_owned], "u": u[:3 * n_owned].reshape(-1, 3),
+            "seconds": time.perf_counter() - began}
+
+
+def compare_with_one_rank(comm: MPI.Comm, stepped: dict, n: int, ghost_mode: str) -> dict:
+    """The ranks' displacements after STEPS steps against the same box stepped whole on one rank
+    (its own numbering; nodes matched by their coordinates, whole metres)."""
+    from pyfem import _kernels
+
+    pieces = comm.gather((stepped["coordinates"], stepped["u"]), root=0)
+    seconds = comm.allreduce(stepped["seconds"], op=MPI.MAX)
+    if comm.rank != 0:
+        return {}
+    V1, matrix1, mass1 = box_operators(MPI.COMM_SELF, n, ghost_mode)
+    indptr, columns, values = matrix1.getValuesCSR()
+    size = matrix1.getSize()[0]
+    whole = sp.csr_matrix((values, columns, indptr), shape=(size, size)).tobsr(blocksize=(3, 3))
+    whole.sort_indices()
+    stepper = _kernels.Stepper(np.ascontiguousarray(whole.indptr, dtype=np.int64),
+                               np.ascontiguousarray(whole.indices, dtype=np.int32),
+                               np.ascontiguousarray(whole.data), np.ascontiguousarray(mass1.reshape(-1, 3)[:, 0]), DT)
+    coordinates = V1.tabulate_dof_coordinates()
+    u = bump(coordinates, n)
+    start = u.copy()
+    v, a = np.zeros_like(u), np.zeros_like(u)
+    began = time.perf_counter()
+    stepper.run(u, v, a, STEPS, 0.0)
+    alone = time.perf_counter() - began
+
+    def keys(x):
+        i = np.rint(x).astype(np.int64)
+        return (i[:, 0] * (n + 1) + i[:, 1]) * (n + 1) + i[:, 2]
+
+    order = np.argsort(keys(coordinates))
+    ranks_u = np.zeros((len(coordinates), 3))
+    for points, displacement in pieces:
+        ranks_u[order[np.searchsorted(keys(coordinates)[order], keys(points))]] = displacement
+    u, start = u.reshape(-1, 3), start.reshape(-1, 3)
+    return {"steps": STEPS, "moved": float(np.abs(u - start).max() / np.abs(start).max()),
+            "stepping_difference": float(np.abs(ranks_u - u).max() / np.abs(u).max()),
+            "step_seconds_ranks": seconds, "step_seconds_one_rank": alone}
+
+
 def main(argv: list) -> int:
     n = int(argv[0]) if argv else 30
     ghost_mode = argv[1] if len(argv) > 1 else "shared_facet"
@@ -112,10 +233,11 @@ def main(argv: list) -> int:
     began = time.perf_counter()
     V, matrix, mass = box_operators(comm, n, ghost_mode)
     seconds = time.perf_counter() - began
-    indptr, columns, values, missing = owned_rows_local(V, matrix)
+    indptr, columns, values, missing, local_nodes = owned_rows_local(V, matrix)
     index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
     n_owned = bs * index_map.size_local
-    u = np.concatenate([smooth_field(V), fetch_owned(comm, V, smooth_field(V), missing).reshape(-1)])
+    field = smooth_field(V)
+    u = np.concatenate([field, fetch_owned(comm, V, field[:n_owned].reshape(-1, bs), missing).reshape(-1)])
     ours = np.add.reduceat(values * u[columns], indptr[:-1]) if len(values) else np.zeros(0)
     ours[np.diff(indptr) == 0] = 0.0
     x, y = matrix.createVecs()
@@ -125,6 +247,7 @@ def main(argv: list) -> int:
         comm.allreduce(float(np.abs(y.array).max()), op=MPI.MAX)
     energy = comm.allreduce(0.5 * float(u[:n_owned] @ ours), op=MPI.SUM)
     total_mass = comm.allreduce(float(mass[:n_owned].sum()) / 3.0, op=MPI.SUM)
+    stepped = step_the_share(comm, V, indptr, columns, values, missing, local_nodes, mass, n)
     peak = comm.gather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, root=0)
     shares = comm.gather([index_map.size_local, index_map.num_ghosts, len(missing)], root=0)
     reference = None
@@ -135,6 +258,7 @@ def main(argv: list) -> int:
         x1.array[:] = u1
         matrix1.mult(x1, y1)
         reference = 0.5 * float(x1.dot(y1))
+    stepping = compare_with_one_rank(comm, stepped, n, ghost_mode)
     if comm.rank == 0:
         print(json.dumps({
             "n": n, "ghost_mode": ghost_mode, "ranks": comm.size, "nodes": (n + 1) ** 3,
@@ -143,7 +267,7 @@ def main(argv: list) -> int:
             "energy_one_rank": reference,
             "energy_difference": None if reference is None else abs(energy - reference) / reference,
             "mass_error": abs(total_mass - DENSITY * n ** 3) / (DENSITY * n ** 3),
-            "peak_mib_per_rank": [round(p) for p in peak]}))
+            "peak_mib_per_rank": [round(p) for p in peak], **stepping}))
     return 0
 
 
