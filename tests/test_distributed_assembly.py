@@ -42,6 +42,14 @@ def test_owned_rows_in_local_numbering_reproduce_the_distributed_product_and_ene
     assert found["energy_difference"] < 1e-13 and found["mass_error"] < 1e-14
     assert found["steps"] == 100 and found["moved"] > 0.5, "the bump moved"
     assert found["stepping_difference"] < 1e-12
+    # The element loop's halo: the other ranks' cells touching a rank's owned nodes. Ghost cells
+    # across facets hold all but a few (the edge and vertex neighbours); without ghost cells, none.
+    halo = found["halo_cells_and_not_on_rank_per_rank"]
+    assert all(touching > 0 for touching, _ in halo)
+    if ghost_mode == "shared_facet":
+        assert 0 < sum(left for _, left in halo) < 0.2 * sum(touching for touching, _ in halo)
+    else:
+        assert all(left == touching for touching, left in halo)
     print(f"{ghost_mode}: owned/ghost/extra per rank {shares}, product {found['owned_rows_product_error']:.1e}, "
           f"energy against one rank {found['energy_difference']:.1e}, stepped "
-          f"{found['stepping_difference']:.1e}")
+          f"{found['stepping_difference']:.1e}; halo cells and not on the rank {halo}")

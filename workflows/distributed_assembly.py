@@ -20,7 +20,9 @@ On a hexahedral box of n^3 Q1 cells distributed by dolfinx (`GhostMode` as given
    transposes, the ghosts' diagonal blocks from their owners; the lumped mass; `ghost_exchange`
    over the index map's and the extra ghosts) and steps a Gaussian bump STEPS steps from rest,
    against the box assembled and stepped whole on one rank (nodes matched by coordinates);
-6. reports its peak memory and the share of the model it holds.
+6. counts the halo the element loop would need (the other ranks' cells touching its owned nodes,
+   pyfem.distributed.Share.cells "halo") and how much of it dolfinx's ghost cells leave out;
+7. reports its peak memory and the share of the model it holds.
 
     /usr/bin/python3 workflows/distributed_assembly.py [n] [ghost_mode]
     mpirun --allow-run-as-root -n 2 /usr/bin/python3 workflows/distributed_assembly.py [n] [ghost_mode]
@@ -148,6 +150,26 @@ def ghost_exchange(comm: MPI.Comm, V, local_nodes: np.ndarray):
     return _kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(local_nodes))
 
 
+def halo_cells(comm: MPI.Comm, V) -> tuple[int, int]:
+    """(cells of other ranks touching this rank's owned nodes, how many of them are not on this rank
+    as dolfinx's ghost cells): the halo the element loop needs (pyfem.distributed.Share.cells
+    "halo") and what of it the mesh's ghost mode leaves out."""
+    domain = V.mesh
+    node_map, cell_map = V.dofmap.index_map, domain.topology.index_map(3)
+    n_cells = cell_map.size_local + cell_map.num_ghosts
+    cell_nodes = V.dofmap.list.array.reshape(n_cells, -1)
+    node_owner = np.concatenate([np.full(node_map.size_local, comm.rank), node_map.owners])
+    cell_global = cell_map.local_to_global(np.arange(n_cells, dtype=np.int32))
+    needs = [np.zeros(0, dtype=np.int64) for _ in range(comm.size)]  # per rank: my owned cells touching its nodes
+    owned_cells = np.arange(cell_map.size_local)
+    owner_of = node_owner[cell_nodes[owned_cells]]
+    for q in range(comm.size):
+        if q != comm.rank:
+            needs[q] = cell_global[owned_cells[(owner_of == q).any(axis=1)]]
+    received = np.concatenate(comm.alltoall(needs)).astype(np.int64)
+    return len(received), int(np.setdiff1d(received, cell_global).size)
+
+
 def bump(x: np.ndarray, n: int) -> np.ndarray:
     """A smooth initial displacement (m) at points x (k, 3): a Gaussian bump at the box's centre."""
     r2 = ((x - 0.5 * n) ** 2).sum(axis=1) / (0.15 * n) ** 2
@@ -250,6 +272,7 @@ def main(argv: list) -> int:
     stepped = step_the_share(comm, V, indptr, columns, values, missing, local_nodes, mass, n)
     peak = comm.gather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, root=0)
     shares = comm.gather([index_map.size_local, index_map.num_ghosts, len(missing)], root=0)
+    halo = comm.gather(halo_cells(comm, V), root=0)
     reference = None
     if comm.rank == 0 and comm.size > 1:  # the same box on one rank, another numbering
         V1, matrix1, _ = box_operators(MPI.COMM_SELF, n, ghost_mode)
@@ -262,7 +285,8 @@ def main(argv: list) -> int:
     if comm.rank == 0:
         print(json.dumps({
             "n": n, "ghost_mode": ghost_mode, "ranks": comm.size, "nodes": (n + 1) ** 3,
-            "owned_ghost_extra_per_rank": shares, "assembly_seconds": round(seconds, 2),
+            "owned_ghost_extra_per_rank": shares, "halo_cells_and_not_on_rank_per_rank": halo,
+            "assembly_seconds": round(seconds, 2),
             "owned_rows_product_error": product_error, "energy": energy,
             "energy_one_rank": reference,
             "energy_difference": None if reference is None else abs(energy - reference) / reference,
