@@ -731,11 +731,13 @@ def check_stability_on_ranks(simulation, comm: MPI.Comm, **check) -> dict:
     split, the partition the run steps in): the same random state on every rank, each stepping its
     owned rows, the energy summed over the ranks; every rank gets the same report, with "ranks".
     Each rank holds and steps its share only, where the serial check stepped the whole model on
-    every rank (docs/scaling.md "Local time stepping on the ranks")."""
+    every rank (docs/scaling.md "Local time stepping on the ranks"). Its "seconds" include the
+    partition, the share and its exchanges (the slowest rank's)."""
     from mpi4py import MPI
 
     from pyfem.local_stepping import check_stability
 
+    began = time.perf_counter()
     parts = partition(simulation, comm.size)
     mine = share(simulation, parts, comm.rank)
     exchanges = level_exchanges(comm, parts, mine, simulation.node_levels)
@@ -744,8 +746,9 @@ def check_stability_on_ranks(simulation, comm: MPI.Comm, **check) -> dict:
         stepper, *_ = local_lts_stepper(simulation, mine, exchanges, bare=True)
         return _RankSum(stepper.kernel, comm)
 
-    report = check_stability(make_kernel, 3 * len(simulation.mass), rows=_dof_rows(mine.nodes), **check)
-    seconds = comm.allreduce(report["seconds"], op=MPI.MAX)
+    with _alone():  # a kernel error on one rank's share ends every rank (rank 0 may be in its plan)
+        report = check_stability(make_kernel, 3 * len(simulation.mass), rows=_dof_rows(mine.nodes), **check)
+    seconds = comm.allreduce(time.perf_counter() - began, op=MPI.MAX)
     return dict(comm.bcast(report, root=0), seconds=seconds, ranks=comm.size)  # rank 0's verdict for all
 
 
