@@ -433,9 +433,14 @@ def truncation_faces(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[s
         free_surfaces maps the named exterior surfaces that are not truncation faces, and
         "(unnamed)" for the remaining exterior facets, to their facet counts.
 
+    On a mesh distributed over ranks (mesh.comm) every rank gets the same face names (a face
+    may have no facets on a rank), the bounding box is the whole mesh's and the counts are summed,
+    so that the faces' collective assembly meets on every rank.
+
     Raises:
         SceneError: boundary.faces names an unknown surface, or one that is not on the exterior.
     """
+    comm = mesh.comm
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim - 1, tdim)
     exterior = dolfinx_mesh.exterior_facet_indices(mesh.topology)
@@ -450,7 +455,8 @@ def truncation_faces(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[s
                 raise SceneError(f"boundary.faces.{index}", name,
                                  "names of physical surfaces of the mesh: " + ", ".join(sorted(surfaces)))
             facets = surfaces[name]
-            if len(facets) == 0 or not np.all(np.isin(facets, exterior)):
+            outside = comm.allreduce(bool(np.all(np.isin(facets, exterior))), op=MPI.LAND)
+            if comm.allreduce(len(facets)) == 0 or not outside:
                 raise SceneError(f"boundary.faces.{index}", name,
                                  "surfaces on the exterior of the mesh (this one has facets inside it)")
             faces[name] = (facets.astype(np.int32), "boundary.faces")
@@ -461,7 +467,8 @@ def truncation_faces(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[s
                 faces[name] = (facets[np.isin(facets, exterior)].astype(np.int32), "named surface")
     else:
         x = mesh.geometry.x
-        lo, hi = x.min(axis=0), x.max(axis=0)
+        lo = np.min(comm.allgather(x.min(axis=0) if len(x) else np.full(3, np.inf)), axis=0)
+        hi = np.max(comm.allgather(x.max(axis=0) if len(x) else np.full(3, -np.inf)), axis=0)
         tolerance = _PLANE_TOLERANCE * float(np.max(hi - lo))
         for name in BOX_FACES:
             axis = "xyz".index(name[0])
@@ -469,7 +476,7 @@ def truncation_faces(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[s
             facets = dolfinx_mesh.locate_entities_boundary(
                 mesh, tdim - 1, lambda points, a=axis, v=value: np.abs(points[a] - v) <= tolerance)
             facets = facets[np.isin(facets, exterior)]
-            if len(facets):
+            if comm.allreduce(len(facets)):
                 faces[name] = (facets.astype(np.int32), "bounding-box plane")
     on_faces = np.concatenate([f for f, _ in faces.values()]) if faces else np.zeros(0, dtype=np.int32)
     free_surfaces = {}
@@ -477,13 +484,14 @@ def truncation_faces(scene: typing.Mapping, mesh, facet_tags, boundaries: dict[s
     for name, facets in surfaces.items():
         outside = facets[np.isin(facets, exterior)]
         named = np.concatenate([named, outside])
-        if name not in faces and len(outside) and not np.all(np.isin(outside, on_faces)):
-            free_surfaces[name] = int(len(outside))
+        count = comm.allreduce(len(outside))
+        if name not in faces and count and not comm.allreduce(bool(np.all(np.isin(outside, on_faces))), op=MPI.LAND):
+            free_surfaces[name] = int(count)
     interface_facets = np.concatenate([facet_tags.indices[facet_tags.values == tag] for tag in split]) \
         if split else np.zeros(0, dtype=np.int32)
-    unnamed = np.setdiff1d(exterior, np.concatenate([named, on_faces, interface_facets]))
-    if len(unnamed):
-        free_surfaces["(unnamed)"] = int(len(unnamed))
+    unnamed = comm.allreduce(len(np.setdiff1d(exterior, np.concatenate([named, on_faces, interface_facets]))))
+    if unnamed:
+        free_surfaces["(unnamed)"] = int(unnamed)
     return faces, free_surfaces
 
 

@@ -53,3 +53,31 @@ def test_owned_rows_in_local_numbering_reproduce_the_distributed_product_and_ene
     print(f"{ghost_mode}: owned/ghost/extra per rank {shares}, product {found['owned_rows_product_error']:.1e}, "
           f"energy against one rank {found['energy_difference']:.1e}, stepped "
           f"{found['stepping_difference']:.1e}; halo cells and not on the rank {halo}")
+
+
+# The user's models: the free-field box (named faces), a gmsh script's tunnel (unnamed faces found on
+# the bounding-box planes, the cavity's wall traction-free), two interfaces split for contact.
+OPERATOR_SCENES = ["workflows/scenes/box_vertical_sv.toml", "tests/scenes/mpi_tunnel_tet.toml",
+                   "tests/scenes/mpi_hard_contact.toml"]
+
+
+@pytest.mark.parametrize("scene", OPERATOR_SCENES)
+def test_the_model_builders_on_the_distributed_mesh_give_the_one_rank_operators(scene):
+    """workflows/distributed_operators.py on 3 ranks: pyfem's mesh builder, materials, lumped mass
+    and truncation faces on dolfinx's distributed mesh. Every rank names the same faces and free
+    surfaces as one rank does (before 2026-11-28 a rank found the bounding-box planes of its own part
+    and the faces' collective assembly waited forever on the tunnel); every node is owned by one
+    rank; each owned node's mass and face values (area, normal, rho c_p, rho c_s, G) are the one-rank
+    ones to round-off."""
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", PYTHON,
+                             "workflows/distributed_operators.py", scene],
+                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    found = json.loads([line for line in result.stdout.splitlines() if line.startswith("{")][-1])["operators"]
+    assert found["faces"] == ["xmax", "xmin", "ymax", "ymin", "zmax", "zmin"]
+    assert found["faces_equal"] and found["free_surfaces_equal"]
+    for name in found["faces"] + ["mass"]:
+        assert found[name]["nodes"] > 0 and found[name]["owned"] == found[name]["nodes"], name
+        assert found[name]["miscounted_points"] == 0, name
+        assert found[name]["difference"] < 1e-14, name
+    print(scene, {name: found[name]["nodes"] for name in found["faces"] + ["mass"]})
