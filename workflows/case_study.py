@@ -387,6 +387,9 @@ def section_angle(centroids: np.ndarray, centre_z: float) -> np.ndarray:
     return np.degrees(np.arctan2(centroids[:, 2] - centre_z, centroids[:, 0]))
 
 
+BAY_HALF_LENGTH = 10.0  # m: the soft-layer bay, |y| < this along the cavern (shaded in the lining maps)
+
+
 def section_parts(angle: np.ndarray) -> dict:
     """The lining's cells by part of the section, from their `section_angle` (as seen from the
     section's mid-height): crown, walls (both), floor."""
@@ -400,7 +403,7 @@ def draw_unrolled(ax, angle: np.ndarray, y: np.ndarray, values: np.ndarray, titl
     soft-layer bay shaded; returns the scatter for the colour bar."""
     order = np.argsort(values, kind="stable")
     image = ax.scatter(angle[order], y[order], c=values[order], s=5, marker="s", **colours)
-    ax.axhspan(-10.0, 10.0, color="k", alpha=0.06)
+    ax.axhspan(-BAY_HALF_LENGTH, BAY_HALF_LENGTH, color="k", alpha=0.06)
     ax.set_xticks([-180, -90, 0, 90, 180], ["up. wall", "floor", "down. wall", "crown", "up. wall"], fontsize=7)
     ax.set_title(title, fontsize=8)
     return image
@@ -432,7 +435,7 @@ def figure_lining_damage(runs: dict, path_damage: pathlib.Path, path_type: pathl
             cells, centroids = lining_cells(f, runs[case]["summary"])
             angle = section_angle(centroids, centre_z=0.5 * centroids[:, 2].max())
             values = f["cell_data"][key][cells]
-            bay = np.abs(centroids[:, 1]) < 10.0
+            bay = np.abs(centroids[:, 1]) < BAY_HALF_LENGTH
             title = f"{CASE_LABELS[case]}, t = {f['t']:.2f} s"
             if key == "damage":
                 image = draw_unrolled(ax, angle, centroids[:, 1], values, title, cmap="inferno_r", vmin=0.0, vmax=1.0)

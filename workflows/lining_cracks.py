@@ -19,7 +19,8 @@ import sys
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from case_study import _pyplot, draw_unrolled, lining_cells, section_angle, section_parts  # noqa: E402
+from case_study import (BAY_HALF_LENGTH, _pyplot, draw_unrolled, lining_cells, section_angle,  # noqa: E402
+                        section_parts)
 
 THRESHOLDS_MM = (0.1, 0.3, 1.0)
 
@@ -46,7 +47,7 @@ def lining_samples(directory: pathlib.Path) -> dict:
 
 
 def parts(run: dict) -> dict:
-    return {**section_parts(run["angle"]), "bay": np.abs(run["y"]) < 10.0}
+    return {**section_parts(run["angle"]), "bay": np.abs(run["y"]) < BAY_HALF_LENGTH}
 
 
 def table(run: dict) -> list:
