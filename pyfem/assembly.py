@@ -107,19 +107,12 @@ def _checked_positive(mass: np.ndarray) -> np.ndarray:
 
 def elastic_stiffness(V: fem.FunctionSpace, lame_lambda: fem.Function, shear_modulus: fem.Function,
                       quadrature: dict) -> scipy.sparse.bsr_matrix:
-    """Stiffness of linear isotropic elasticity, no boundary conditions, as BSR (3, 3) blocks (N/m).
+    """Stiffness of linear isotropic elasticity, no boundary conditions, as BSR (3, 3) blocks (N/m),
+    on one rank (`elastic_stiffness_matrix` for a mesh distributed over ranks).
 
     K_ij = int (2 G eps(phi_j) + lambda tr(eps(phi_j)) I) : eps(phi_i) dx.
     """
-    trial, test = ufl.TrialFunction(V), ufl.TestFunction(V)
-
-    def strain(u):
-        return ufl.sym(ufl.grad(u))
-
-    stress = 2.0 * shear_modulus * strain(trial) + lame_lambda * ufl.tr(strain(trial)) * ufl.Identity(SPACE_DIMENSION)
-    form = fem.form(ufl.inner(stress, strain(test)) * ufl.dx(metadata=quadrature))
-    matrix = fem_petsc.assemble_matrix(form)
-    matrix.assemble()
+    matrix = elastic_stiffness_matrix(V, lame_lambda, shear_modulus, quadrature)
     indptr, indices, data = matrix.getValuesCSR()
     n_dofs = matrix.getSize()[0]
     matrix.destroy()
@@ -130,3 +123,19 @@ def elastic_stiffness(V: fem.FunctionSpace, lame_lambda: fem.Function, shear_mod
     if bsr.nnz != csr.nnz:
         raise RuntimeError(f"stiffness pattern is not 3x3 blocked ({csr.nnz} entries, {bsr.nnz} in blocks)")
     return bsr
+
+
+def elastic_stiffness_matrix(V: fem.FunctionSpace, lame_lambda: fem.Function, shear_modulus: fem.Function,
+                             quadrature: dict) -> PETSc.Mat:
+    """The elastic stiffness of `elastic_stiffness` as dolfinx assembles it: a PETSc matrix, on
+    a distributed mesh each rank's owned rows (the caller destroys it)."""
+    trial, test = ufl.TrialFunction(V), ufl.TestFunction(V)
+
+    def strain(u):
+        return ufl.sym(ufl.grad(u))
+
+    stress = 2.0 * shear_modulus * strain(trial) + lame_lambda * ufl.tr(strain(trial)) * ufl.Identity(SPACE_DIMENSION)
+    form = fem.form(ufl.inner(stress, strain(test)) * ufl.dx(metadata=quadrature))
+    matrix = fem_petsc.assemble_matrix(form)
+    matrix.assemble()
+    return matrix

@@ -144,8 +144,9 @@ class Model:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) corners of the axis-aligned bounding box of the whole mesh (m)."""
         comm = self.mesh.comm
-        lo = comm.allreduce(self.node_coords.min(axis=0), op=MPI.MIN)
-        hi = comm.allreduce(self.node_coords.max(axis=0), op=MPI.MAX)
+        # (allreduce's MIN and MAX compare whole objects, not numpy arrays elementwise)
+        lo = np.min(comm.allgather(self.node_coords.min(axis=0)), axis=0)
+        hi = np.max(comm.allgather(self.node_coords.max(axis=0)), axis=0)
         return lo, hi
 
     def volume_of_region(self, name: str) -> float:
@@ -159,7 +160,7 @@ class Model:
         local = fem.assemble_scalar(fem.form(indicator * ufl.dx(domain=self.mesh)))
         return self.mesh.comm.allreduce(local, op=MPI.SUM)
 
-    def point_weights(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def point_weights(self, points: np.ndarray, cells: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Interpolation weights of nodal values at arbitrary points.
 
         value(p_j) = sum_k weights[j, k] * value[nodes[j, k]] for any nodal
@@ -168,11 +169,12 @@ class Model:
 
         Args:
             points: (m, 3) coordinates (m); each inside the mesh on this rank.
+            cells: the local cell containing each point; None: the first found.
 
         Returns:
             nodes (m, k) int32 and weights (m, k) float64, k = 8 (Q1) or 27 (Q2).
         """
-        cells, reference_points = self._located_points(points)
+        cells, reference_points = self._located_points(points, cells)
         basix_element = self.V.element.basix_element
         nodes = np.empty((len(cells), basix_element.dim), dtype=np.int32)
         weights = np.empty((len(cells), basix_element.dim), dtype=np.float64)
@@ -181,7 +183,8 @@ class Model:
             nodes[j] = self.V.dofmap.cell_dofs(cell)
         return nodes, weights
 
-    def point_gradient_weights(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def point_gradient_weights(self, points: np.ndarray,
+                               cells: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Weights of the gradient of a nodal field at arbitrary points.
 
         For a vector field with nodal values U (n_nodes, 3),
@@ -195,12 +198,13 @@ class Model:
 
         Args:
             points: (m, 3) coordinates (m); each inside the mesh on this rank.
+            cells: the local cell containing each point; None: the first found.
 
         Returns:
             nodes (m, k) int32, gradients (m, k, 3) float64 (1/m), and cells (m,) int32
             (the local cell each point was evaluated in), k = 8 (Q1) or 27 (Q2).
         """
-        cells, reference_points = self._located_points(points)
+        cells, reference_points = self._located_points(points, cells)
         basix_element = self.V.element.basix_element
         n_basis = basix_element.dim
         nodes = np.empty((len(cells), n_basis), dtype=np.int32)
@@ -227,14 +231,14 @@ class Model:
             names.append(tag_of_region[int(self.cell_tags.values[order[position]])])
         return names
 
-    def _located_points(self, points) -> tuple[np.ndarray, list]:
-        """Containing cell and reference coordinates (each (1, 3)) of (m, 3) points (m)."""
+    def _located_points(self, points, cells: np.ndarray | None = None) -> tuple[np.ndarray, list]:
+        """Containing cell (`cells` when given) and reference coordinates (each (1, 3)) of (m, 3) points (m)."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim == 1:
             points = points.reshape(1, -1)
         if points.ndim != 2 or points.shape[1] != SPACE_DIMENSION:
             raise ValueError(f"points: shape {points.shape} given; expected (m, 3) coordinates (m)")
-        cells = self._containing_cells(points)
+        cells = self._containing_cells(points) if cells is None else np.asarray(cells, dtype=np.int32)
         geometry_dofmap = self.mesh.geometry.dofmap
         geometry_x = self.mesh.geometry.x
         coordinate_map = self.mesh.geometry.cmap

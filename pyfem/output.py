@@ -841,32 +841,10 @@ class RunWriter:
     def _monitor_peaks(self, times: np.ndarray) -> dict:
         """Peaks per monitor (and the difference from the free field with a wave) from the rows kept."""
         sim = self.simulation
-        peaks = {}
         if sim.monitor_nodes is None:
-            return peaks
-        rows = np.array(self.monitor_rows)  # (nt, m, len(monitor_columns))
-        column = {name: k for k, name in enumerate(self.monitor_columns)}
-        for j, name in enumerate(sim.monitor_names):
-            u, vel, acc = (rows[:, j, column[f"{q}x"]:column[f"{q}z"] + 1] for q in "uva")
-            peak = {"displacement": float(np.max(np.linalg.norm(u, axis=1))),
-                    "velocity": float(np.max(np.linalg.norm(vel, axis=1))),
-                    "acceleration": float(np.max(np.linalg.norm(acc, axis=1)))}
-            if "ux_ff" in column:
-                reference = rows[:, j, column["ux_ff"]:column["uz_ff"] + 1]
-                norm = np.linalg.norm(reference)
-                peak["freefield_error"] = float(np.linalg.norm(u - reference) / norm) if norm > 0 else math.nan
-            if sim.monitor_stress is not None:
-                s1, s1_dynamic = rows[:, j, column["s1"]], rows[:, j, column["s1_dynamic"]]
-                peak["region"] = sim.monitor_stress.regions[j]
-                peak["s1_max"] = float(np.max(s1))
-                peak["s1_max_time"] = float(times[int(np.argmax(s1))])
-                peak["s1_initial"] = float(s1[0])
-                peak["s1_dynamic_max"] = float(np.max(s1_dynamic))
-            if "damage" in column:
-                peak["damage_max"] = float(np.max(rows[:, j, column["damage"]]))
-                peak["plastic_strain_max"] = float(np.max(rows[:, j, column["plastic_strain"]]))
-            peaks[name] = peak
-        return peaks
+            return {}
+        regions = sim.monitor_stress.regions if sim.monitor_stress is not None else None
+        return monitor_peaks(np.array(self.monitor_rows), self.monitor_columns, sim.monitor_names, times, regions)
 
     def _pair_peaks(self) -> dict:
         """Peaks and final values per pair monitor from the rows kept."""
@@ -995,6 +973,35 @@ class RunWriter:
         if self.xdmf is not None:
             self.xdmf.__exit__(None, None, None)
             self.xdmf = None
+
+
+def monitor_peaks(rows: np.ndarray, columns: list, names: list, times: np.ndarray, regions: list | None) -> dict:
+    """Peaks per monitor from its history rows (nt, m, len(columns)): |u|, |v|, |a|; the difference
+    from the free field where its columns are; the largest principal stress where the stress
+    columns are (regions: each monitor's region); damage and plastic strain where they are."""
+    peaks = {}
+    column = {name: k for k, name in enumerate(columns)}
+    for j, name in enumerate(names):
+        u, vel, acc = (rows[:, j, column[f"{q}x"]:column[f"{q}z"] + 1] for q in "uva")
+        peak = {"displacement": float(np.max(np.linalg.norm(u, axis=1))),
+                "velocity": float(np.max(np.linalg.norm(vel, axis=1))),
+                "acceleration": float(np.max(np.linalg.norm(acc, axis=1)))}
+        if "ux_ff" in column:
+            reference = rows[:, j, column["ux_ff"]:column["uz_ff"] + 1]
+            norm = np.linalg.norm(reference)
+            peak["freefield_error"] = float(np.linalg.norm(u - reference) / norm) if norm > 0 else math.nan
+        if "s1" in column:
+            s1, s1_dynamic = rows[:, j, column["s1"]], rows[:, j, column["s1_dynamic"]]
+            peak["region"] = regions[j]
+            peak["s1_max"] = float(np.max(s1))
+            peak["s1_max_time"] = float(times[int(np.argmax(s1))])
+            peak["s1_initial"] = float(s1[0])
+            peak["s1_dynamic_max"] = float(np.max(s1_dynamic))
+        if "damage" in column:
+            peak["damage_max"] = float(np.max(rows[:, j, column["damage"]]))
+            peak["plastic_strain_max"] = float(np.max(rows[:, j, column["plastic_strain"]]))
+        peaks[name] = peak
+    return peaks
 
 
 def peak_memory_mib() -> float:

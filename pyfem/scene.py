@@ -609,6 +609,13 @@ SCHEMA = Table({
         "checkpoint_interval": Number("wall time between checkpoints (s; 0: none)", NON_NEGATIVE,
                                       default=300.0),
     }, "[output]"),
+    "parallel": Table({
+        "model": Choice("how the MPI ranks hold the model: \"whole\" (every rank builds the whole model and "
+                        "steps its share) or \"distributed\" (each rank builds and steps only its part of "
+                        "dolfinx's distributed mesh; elastic scenes without contact, static stage or local "
+                        "stepping: docs/scaling.md \"The distributed model\")", ("whole", "distributed"),
+                        default="whole"),
+    }, "[parallel]"),
     "damping": Table({
         "ratio": Number("damping ratio", "[0, 1)", default=None),
         "frequencies": Vector("frequencies [f1, f2] (Hz)", 2, POSITIVE,

@@ -247,6 +247,7 @@ PURPOSE = {
     "boundary.face.NAME": "the boundary type of one truncation face",
     "monitor.0": "a point whose histories go to monitors/NAME.csv",
     "output": "what is written, and how often",
+    "parallel": "how the ranks of `mpirun -n N python3 -m pyfem run` hold the model (docs/scaling.md)",
     "damping": "Rayleigh damping",
     "initial_stress": "the initial stress: geostatic or uniform",
     "static": "a static stage before the dynamic run (docs/static.md)",

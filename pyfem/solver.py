@@ -115,18 +115,19 @@ class MonitorStress:
                 + 2.0 * self.shear_modulus[:, None, None] * strain)
 
 
-def monitor_stress_operator(scene: Scene, model, points: np.ndarray) -> MonitorStress:
+def monitor_stress_operator(scene: Scene, model, points: np.ndarray, cells: np.ndarray | None = None) -> MonitorStress:
     """Gradient weights, materials and initial stress at the monitor points.
 
     Args:
         scene: validated scene ([materials], optional [initial_stress]).
         model: pyfem.operators.Model.
         points: (m, 3) monitor points (m).
+        cells: the local cell containing each point; None: the first found.
     """
     from pyfem.initial_stress import stress_field_from_scene
     from pyfem.material import Material
 
-    nodes, gradients, cells = model.point_gradient_weights(points)
+    nodes, gradients, cells = model.point_gradient_weights(points, cells)
     regions = model.region_of_cells(cells)
     lame = np.array([Material.from_scene(name, scene["materials"][name]).lame
                      for name in regions], dtype=np.float64).reshape(-1, 2)
@@ -296,10 +297,22 @@ def choose_time_step(scene: Scene, stiffness: sp.bsr_matrix, mass: np.ndarray, b
 
     indptr, indices, blocks = bsr_arrays(stiffness)
     omega2_bound = _kernels.gershgorin_bound(indptr, indices, blocks, mass)
+    omega2_power = None
+    if scene["time"].get("power_iteration", True):
+        omega2_power = _kernels.power_iteration(indptr, indices, blocks, mass, POWER_ITERATIONS, 1)
+    return time_step_from(scene, omega2_bound, omega2_power, beta)
+
+
+# Power iterations of the stable step's estimate (choose_time_step).
+POWER_ITERATIONS = 300
+
+
+def time_step_from(scene: Scene, omega2_bound: float, omega2_power: float | None, beta: float) -> TimeStep:
+    """The step of `choose_time_step` from its two estimates of omega_max^2: the Gershgorin bound
+    and the power iteration's (None: not run); also the distributed model's (pyfem/distributed_model.py)."""
     how = "Gershgorin bound"
     omega2 = omega2_bound
-    if scene["time"].get("power_iteration", True):
-        omega2_power = _kernels.power_iteration(indptr, indices, blocks, mass, 300, 1)
+    if omega2_power is not None:
         if 1.05 * omega2_power < omega2_bound:
             omega2 = 1.05 * omega2_power
             how = f"power iteration (+5 %), {math.sqrt(omega2_bound / omega2):.2f}x sharper than Gershgorin"
@@ -1112,6 +1125,10 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     Returns:
         The run summary (also written to run.json).
     """
+    if (scene.get("parallel") or {}).get("model") == "distributed":  # each rank builds its part only
+        from pyfem import distributed_model
+
+        return distributed_model.run(scene, out_dir, on_plan=on_plan, progress=progress, resume=resume)
     from tqdm import tqdm
 
     from pyfem import checkpoint as checkpoints

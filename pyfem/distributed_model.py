@@ -1,0 +1,659 @@
+"""The model built on the ranks (`[parallel] model = "distributed"`; docs/scaling.md "The
+distributed model"): under `mpirun -n N` each rank builds and steps only its part of dolfinx's
+distributed mesh, so the memory of a rank falls with the ranks, where `model = "whole"` has every
+rank build the whole model (pyfem/distributed.py) and step its share of it.
+
+Each rank:
+1. meshes with `pyfem.mesh.create_mesh_with_interfaces(scene, COMM_WORLD)` (gmsh on rank 0,
+   dolfinx's graph partitioner distributes the cells, GhostMode.shared_facet);
+2. assembles its lumped mass, its owned rows of the elastic stiffness (PETSc) and its truncation
+   faces as `pyfem.operators.build_model` does on one rank;
+3. numbers its nodes as the kernel's share (pyfem/distributed.py `Share`): its owned nodes (the
+   function space's), the index map's ghosts, then the *extra ghosts*, nodes that an owned row
+   reaches but the index map does not hold (from 3 ranks on, neighbours through an edge or a
+   vertex only); their coordinates, masses and diagonal blocks come from their owners;
+4. adds the springs, dashpots, input forces and constraints of its owned face nodes, and steps its
+   share with the kernel's Stepper and one `MpiNodeExchange` per step (`Stepper.set_partition`).
+
+The time step is `pyfem.solver.time_step_from` of the Gershgorin bound (the largest owned row over
+the ranks) and a power iteration on the ranks' owned rows from a start vector that is a function of
+the node coordinates, so the step does not depend on the rank count; it differs from the whole
+model's (a random start in the one-rank numbering) by the iteration's convergence error, so a run
+equal to the whole model's to round-off gives `time.dt`.
+
+Outputs (rank 0 writes, dolfinx writes the fields in parallel): monitors/NAME.csv with the whole
+model's columns (u, v, a; the free field with a wave; the stress), energy.csv (every rank's
+owned energies summed), reactions.csv with fixed or roller faces, fields.xdmf (displacement,
+velocity) and run.json.
+
+Not built yet (each refused with the key and what is allowed): contact, element-loop materials
+([plasticity], [damage]), the static stage, local time stepping, stress and strain fields,
+checkpoints and --resume.
+"""
+from __future__ import annotations
+
+import math
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+
+from pyfem.scene import Scene, SceneError
+
+KEY = "parallel.model"
+# The fields the distributed model writes (dolfinx's XDMFFile on the ranks).
+FIELDS = ("displacement", "velocity")
+
+
+# --- what the distributed model does not do yet ------------------------------------------------
+
+def check_supported(scene: Scene, resume: bool = False) -> None:
+    """Raises SceneError naming the first part of the scene that the distributed model does not
+    build yet (every rank says the same: the scene is the same on every rank)."""
+    allowed = "\"whole\" for scenes with {} (the distributed model does not build it yet, docs/scaling.md)"
+    if "contact" in scene.effects:
+        raise SceneError(KEY, "distributed", allowed.format("[contact]"))
+    if "static" in scene:
+        raise SceneError(KEY, "distributed", allowed.format("a [static] stage"))
+    for name, table in scene["materials"].items():
+        for law in ("plasticity", "damage"):
+            if table.get(law):
+                raise SceneError(KEY, "distributed", allowed.format(f"[materials.{name}.{law}]"))
+    if scene["time"].get("local_stepping") is True:
+        raise SceneError(KEY, "distributed", allowed.format("time.local_stepping = true"))
+    other = [name for name in scene["output"]["fields"] if name not in FIELDS]
+    if other and scene["output"]["xdmf_interval"]:
+        raise SceneError(KEY, "distributed", allowed.format(f"output.fields {other}") + "; it writes "
+                         + " and ".join(FIELDS))
+    if resume:
+        raise SceneError(KEY, "distributed", "\"whole\" to --resume a run (the distributed model writes no "
+                         "checkpoints yet, docs/scaling.md)")
+
+
+# --- numbering: owned nodes, the index map's ghosts, the extra ghosts ---------------------------
+
+def owners(comm: MPI.Comm, index_map, nodes: np.ndarray) -> np.ndarray:
+    """The rank owning each global node, from the ranks' owned ranges of `index_map`."""
+    starts = np.array([r[0] for r in comm.allgather(index_map.local_range)] + [index_map.size_global])
+    return np.searchsorted(starts, nodes, side="right") - 1
+
+
+def fetch_owned(comm: MPI.Comm, index_map, owned: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """(len(wanted), k) the owners' rows of `owned` ((owned nodes, k) on every rank) for the global
+    nodes `wanted` (the extra ghosts' values, the ghosts' diagonal blocks)."""
+    first = index_map.local_range[0]
+    owner = owners(comm, index_map, wanted)
+    asked = comm.alltoall([wanted[owner == q] for q in range(comm.size)])
+    replies = comm.alltoall([owned[np.asarray(nodes, dtype=np.int64) - first] for nodes in asked])
+    out = np.zeros((len(wanted), owned.shape[1]))
+    for q in range(comm.size):
+        out[owner == q] = replies[q]
+    return out
+
+
+def owned_rows_local(V, matrix) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
+    """The owned rows of the PETSc `matrix` (getValuesCSR: owned rows, global columns) with local
+    columns: the local nodes are the index map's owned nodes, its ghosts, then the extra ghosts
+    (global nodes of the owned rows' columns that the index map does not hold).
+
+    Returns (rows: CSR (3 owned, 3 local), extra ghosts' global nodes, every local node's global node)."""
+    index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+    first, last = index_map.local_range
+    mapped = np.concatenate([np.arange(first, last), index_map.ghosts]).astype(np.int64)
+    indptr, columns, values = matrix.getValuesCSR()
+    node, component = np.divmod(columns.astype(np.int64), bs)
+    extra = np.setdiff1d(node, mapped)
+    local_nodes = np.concatenate([mapped, extra])
+    order = np.argsort(local_nodes)
+    local_columns = bs * order[np.searchsorted(local_nodes[order], node)] + component
+    rows = sp.csr_matrix((values, local_columns, indptr), shape=(bs * (last - first), bs * len(local_nodes)))
+    rows.sort_indices()
+    return rows, extra, local_nodes
+
+
+def local_stiffness(comm: MPI.Comm, index_map, rows: sp.csr_matrix, n_local: int, local_nodes: np.ndarray):
+    """(indptr, indices, blocks) of the rank's matrix as pyfem.distributed.local_matrix gives it
+    from the whole one: the owned rows' blocks, each ghost row's blocks to owned nodes (the owned
+    rows' transposed: K is symmetric) and the ghosts' diagonal blocks (from their owners)."""
+    n_owned = rows.shape[0] // 3
+    owned = sp.vstack([rows, sp.csr_matrix((3 * (n_local - n_owned), 3 * n_local))]).tocsr().tobsr(blocksize=(3, 3))
+    owned.sort_indices()
+    row = np.repeat(np.arange(n_local), np.diff(owned.indptr))
+    col, blocks = owned.indices.astype(np.int64), owned.data
+    ghost = col >= n_owned
+    diagonal = blocks[row == col]  # the owned nodes' diagonal blocks, in node order
+    if len(diagonal) != n_owned:
+        raise RuntimeError(f"stiffness: {n_owned - len(diagonal)} owned nodes without a diagonal block")
+    ghost_diagonal = fetch_owned(comm, index_map, diagonal.reshape(n_owned, 9), local_nodes[n_owned:]).reshape(-1, 3, 3)
+    ghosts = np.arange(n_owned, n_local)
+    row, col = np.concatenate([row, col[ghost], ghosts]), np.concatenate([col, row[ghost], ghosts])
+    blocks = np.concatenate([blocks, blocks[ghost].transpose(0, 2, 1), ghost_diagonal])
+    order = np.lexsort((col, row))
+    block_indptr = np.zeros(n_local + 1, dtype=np.int64)
+    np.cumsum(np.bincount(row, minlength=n_local), out=block_indptr[1:])
+    return (block_indptr, np.ascontiguousarray(col[order], dtype=np.int32),
+            np.ascontiguousarray(blocks[order], dtype=np.float64))
+
+
+@dataclass
+class GhostPlan:
+    """Who sends what to whom after a step: per neighbour rank, the local nodes this rank sends
+    (its owned nodes the neighbour ghosts) and the local nodes it receives (its ghosts owned there),
+    both in ascending global order (pyfem.distributed._ghost_exchanges)."""
+
+    neighbours: list
+    send: list
+    recv: list
+
+    def kernel_exchange(self, comm: MPI.Comm, n_local: int):
+        """The kernel's MpiNodeExchange of this plan."""
+        from pyfem import _kernels
+
+        return _kernels.MpiNodeExchange(comm.py2f(), self.neighbours, self.send, self.recv, n_local)
+
+    def update(self, comm: MPI.Comm, x: np.ndarray) -> None:
+        """The ghosts' rows of x (n_local, k) from their owners (the power iteration's exchange)."""
+        requests = [comm.Isend(np.ascontiguousarray(x[nodes]), dest=q, tag=77)
+                    for q, nodes in zip(self.neighbours, self.send)]
+        for q, nodes in zip(self.neighbours, self.recv):
+            buffer = np.empty((len(nodes),) + x.shape[1:])
+            comm.Recv(buffer, source=q, tag=77)
+            x[nodes] = buffer
+        MPI.Request.Waitall(requests)
+
+
+def ghost_plan(comm: MPI.Comm, index_map, local_nodes: np.ndarray, n_owned: int) -> GhostPlan:
+    """The exchange of the rank's ghosts (the index map's and the extra ones): each rank asks the
+    owners for its ghosts in ascending global order."""
+    first = index_map.local_range[0]
+    ghosts = local_nodes[n_owned:]
+    owner = owners(comm, index_map, ghosts)
+    order = np.argsort(ghosts)
+    requests = [ghosts[order][owner[order] == q] for q in range(comm.size)]
+    asked = comm.alltoall(requests)
+    local_of_ghost = dict(zip(ghosts.tolist(), range(n_owned, len(local_nodes))))
+    neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q]) or len(asked[q]))]
+    send = [(np.asarray(asked[q], dtype=np.int64) - first).astype(np.int32) for q in neighbours]
+    recv = [np.array([local_of_ghost[g] for g in requests[q]], dtype=np.int32) for q in neighbours]
+    return GhostPlan(neighbours, send, recv)
+
+
+# --- the rank's part of the model ---------------------------------------------------------------
+
+@dataclass
+class RankModel:
+    """One rank's part of the model, in the kernel's local numbering (owned, ghosts, extra ghosts).
+
+    model: pyfem.operators.Model of the distributed mesh (node_coords and mass: the function
+    space's owned and ghost nodes; faces: their owned nodes only; stiffness: None)."""
+
+    comm: MPI.Comm
+    scene: Scene
+    model: object
+    n_owned: int
+    local_nodes: np.ndarray        # global node of every local node
+    coords: np.ndarray             # (n_local, 3)
+    mass: np.ndarray               # (n_local,)
+    rows: sp.csr_matrix            # owned rows with the springs, local columns
+    matrix: tuple                  # the kernel's (indptr, indices, blocks)
+    plan: GhostPlan
+    dashpot_nodes: np.ndarray
+    dashpot_matrices: np.ndarray
+    constraints: object = None
+    alpha: float = 0.0
+    beta: float = 0.0
+    n_dofs_global: int = 0
+    faces_report: list = field(default_factory=list)
+    setup_seconds: float = 0.0
+
+    @property
+    def n_local(self) -> int:
+        return len(self.local_nodes)
+
+    @property
+    def extra_ghosts(self) -> int:
+        index_map = self.model.V.dofmap.index_map
+        return self.n_local - index_map.size_local - index_map.num_ghosts
+
+
+def _owned_face(face, n_owned: int):
+    """The face's owned nodes (a ghost face node's values are its owner's)."""
+    keep = face.nodes < n_owned
+    traction_area = None if face.traction_area is None else face.traction_area[keep]
+    return replace(face, nodes=face.nodes[keep], area=face.area[keep], normal=face.normal[keep],
+                   rho_cp=face.rho_cp[keep], rho_cs=face.rho_cs[keep], shear_modulus=face.shear_modulus[keep],
+                   plane_distance=face.plane_distance[keep], traction_area=traction_area)
+
+
+def _whole_faces(comm: MPI.Comm, faces: list) -> list[dict]:
+    """solver.face_report of the whole model: node counts and areas summed over the ranks (each
+    counts its owned nodes), facet counts summed (each rank's owned facets)."""
+    report = []
+    for face in faces:
+        report.append({"name": face.name, "type": face.kind, "nodes": comm.allreduce(int(len(face.nodes))),
+                       "facets": comm.allreduce(face.n_facets), "area": comm.allreduce(float(np.sum(face.area))),
+                       "input": face.kind in ("viscoelastic", "viscous"), "source": face.source})
+    return report
+
+
+def build(scene: Scene, comm: MPI.Comm) -> RankModel:
+    """This rank's part of the scene's model (module docstring, steps 1-4)."""
+    from dolfinx import fem
+    from dolfinx.fem import petsc as fem_petsc
+
+    from pyfem.assembly import elastic_stiffness_matrix, lumped_mass
+    from pyfem.mesh import create_mesh_with_interfaces
+    from pyfem.operators import Model, _cell_materials, boundary_face, face_kinds, truncation_faces
+    from pyfem.seismic.forces import boundary_springs_and_dashpots
+    from pyfem.solver import boundary_constraints, check_input_faces, damping_coefficients
+
+    began = time.perf_counter()
+    order = scene["mesh"].get("order", 1)
+    mesh, cell_tags, facet_tags, regions, boundaries, interface_tags = create_mesh_with_interfaces(scene, comm)
+    V = fem.VectorFunctionSpace(mesh, ("Lagrange", order))
+    materials = _cell_materials(mesh, cell_tags, regions, scene["materials"])
+    quadrature = {"quadrature_degree": 2 * order}
+    coords = V.tabulate_dof_coordinates().astype(np.float64, copy=True)
+    mass = lumped_mass(V, materials.rho, quadrature)
+    matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
+    rows, extra, local_nodes = owned_rows_local(V, matrix)
+    n_dofs_global = matrix.getSize()[0]
+    matrix.destroy()
+    index_map = V.dofmap.index_map
+    n_owned = index_map.size_local
+    centre = scene.get("boundary", {}).get("centre")
+    if centre is None:  # the whole mesh's box (as build_model's)
+        centre = 0.5 * (np.min(comm.allgather(coords.min(axis=0)), axis=0)
+                        + np.max(comm.allgather(coords.max(axis=0)), axis=0))
+    centre = np.asarray(centre, dtype=np.float64)
+    truncation, free_surfaces = truncation_faces(scene, mesh, facet_tags, boundaries, interface_tags)
+    kinds = face_kinds(scene, truncation)
+    faces = [_owned_face(boundary_face(name, V, facets, materials, coords, centre, quadrature, kind=kinds[name],
+                                       source=source), n_owned)
+             for name, (facets, source) in truncation.items()]
+    model = Model(mesh=mesh, V=V, cell_tags=cell_tags, facet_tags=facet_tags, regions=regions,
+                  boundaries=boundaries, node_coords=coords, mass=mass, stiffness=None, faces=faces,
+                  free_surfaces=free_surfaces, interface_tags=interface_tags, _materials=materials)
+    check_input_faces(scene, model)
+    boundary = scene["boundary"]
+    spring_nodes, springs, dashpot_nodes, dashpots = boundary_springs_and_dashpots(
+        faces, n_owned, None, boundary["alpha_N"], boundary["alpha_T"])
+    if len(spring_nodes):  # K_b on the owned face nodes' diagonal blocks
+        dofs = 3 * np.repeat(spring_nodes, 9) + np.tile(np.repeat(np.arange(3), 3), len(spring_nodes))
+        columns = 3 * np.repeat(spring_nodes, 9) + np.tile(np.tile(np.arange(3), 3), len(spring_nodes))
+        rows = (rows + sp.csr_matrix((springs.reshape(-1), (dofs, columns)), shape=rows.shape)).tocsr()
+        rows.sort_indices()
+    # The extra ghosts' coordinates and masses from their owners.
+    coords = np.concatenate([coords, fetch_owned(comm, index_map, coords[:n_owned], extra)])
+    mass = np.concatenate([mass, fetch_owned(comm, index_map, mass[:n_owned, None], extra)[:, 0]])
+    kernel_matrix = local_stiffness(comm, index_map, rows, len(local_nodes), local_nodes)
+    alpha, beta = damping_coefficients(scene)
+    return RankModel(comm=comm, scene=scene, model=model, n_owned=n_owned, local_nodes=local_nodes, coords=coords,
+                     mass=np.ascontiguousarray(mass), rows=rows, matrix=kernel_matrix,
+                     plan=ghost_plan(comm, index_map, local_nodes, n_owned),
+                     dashpot_nodes=np.ascontiguousarray(dashpot_nodes, dtype=np.int32),
+                     dashpot_matrices=np.ascontiguousarray(dashpots, dtype=np.float64),
+                     constraints=boundary_constraints(faces), alpha=alpha, beta=beta, n_dofs_global=n_dofs_global,
+                     faces_report=_whole_faces(comm, faces),
+                     setup_seconds=time.perf_counter() - began)
+
+
+# --- the time step ------------------------------------------------------------------------------
+
+def start_vector(coords: np.ndarray) -> np.ndarray:
+    """(n, 3) a pseudo-random vector that is a function of the node coordinates only (the same for
+    any rank count and numbering): the power iteration's start."""
+    phase = coords @ np.array([12.9898, 78.233, 37.719])  # of the node's own coordinates only
+    return np.stack([np.sin(phase * (k + 1.0) + 0.5 * k) * 43758.5453 % 1.0 - 0.5 for k in range(3)], axis=1)
+
+
+def power_iteration(part: RankModel, iterations: int) -> float:
+    """The largest eigenvalue of M^-1/2 K M^-1/2 as the kernel's power_iteration estimates it, on
+    the ranks' owned rows with a ghost exchange per product."""
+    comm, n_owned = part.comm, part.n_owned
+    inverse_sqrt_mass = 1.0 / np.sqrt(part.mass)
+    x = start_vector(part.coords)
+    x /= math.sqrt(comm.allreduce(float(np.sum(x[:n_owned] ** 2))))
+    estimate = 0.0
+    for _ in range(iterations):
+        part.plan.update(comm, x)
+        y = (part.rows @ (inverse_sqrt_mass[:, None] * x).reshape(-1)).reshape(-1, 3)
+        y *= inverse_sqrt_mass[:n_owned, None]
+        rayleigh, y_norm2 = comm.allreduce(np.array([float(np.sum(x[:n_owned] * y)), float(np.sum(y * y))]))
+        estimate = float(rayleigh)
+        if y_norm2 == 0.0:
+            break
+        x[:n_owned] = y / math.sqrt(y_norm2)
+    return estimate
+
+
+def choose_time_step(part: RankModel):
+    """pyfem.solver.choose_time_step on the ranks (module docstring)."""
+    from pyfem import _kernels
+    from pyfem.solver import POWER_ITERATIONS, time_step_from
+
+    indptr, indices, blocks = part.matrix
+    # A ghost row holds only its blocks to owned nodes: its row sums are below its owner's.
+    bound = part.comm.allreduce(float(_kernels.gershgorin_bound(indptr, indices, blocks, part.mass)), op=MPI.MAX)
+    power = power_iteration(part, POWER_ITERATIONS) if part.scene["time"].get("power_iteration", True) else None
+    return time_step_from(part.scene, bound, power, part.beta)
+
+
+# --- monitors -------------------------------------------------------------------------------------
+
+@dataclass
+class RankMonitors:
+    """The monitors whose cell this rank owns (the lowest rank owning a cell that contains the point):
+    their indices in the scene's list, interpolation weights and stress operator in local numbering."""
+
+    index: np.ndarray
+    nodes: np.ndarray
+    weights: np.ndarray
+    stress: object = None
+
+
+def locate_monitors(part: RankModel) -> RankMonitors:
+    """Each scene monitor on exactly one rank; a point in no owned cell of any rank is the whole
+    model's PointOutsideMesh (the scene key named)."""
+    from dolfinx import geometry
+
+    from pyfem.operators import PointOutsideMesh
+    from pyfem.solver import monitor_stress_operator
+
+    monitors = part.scene.get("monitor", [])
+    if not monitors:
+        return RankMonitors(np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.int32), np.zeros((0, 0)))
+    model, comm = part.model, part.comm
+    points = np.array([m["point"] for m in monitors], dtype=np.float64)
+    tree = geometry.BoundingBoxTree(model.mesh, model.mesh.topology.dim)
+    colliding = geometry.compute_colliding_cells(model.mesh, geometry.compute_collisions(tree, points), points)
+    owned_cells = model.n_cells
+    found = np.array([any(cell < owned_cells for cell in colliding.links(j)) for j in range(len(points))])
+    claims = np.array(comm.allgather(found))  # (ranks, monitors)
+    for j in range(len(points)):
+        if not claims[:, j].any():
+            lo, hi = model.bounds
+            error = PointOutsideMesh(j, points[j], lo, hi)
+            key = f"monitor.{j}.point"
+            raise SceneError(key, monitors[j]["point"], "a point inside a cell of the model",
+                             f"scene key '{key}' = {monitors[j]['point']} (monitor {monitors[j]['name']!r}): {error}; "
+                             "allowed: a point inside a cell of the model")
+    mine = np.flatnonzero(claims.argmax(axis=0) == comm.rank)
+    if not len(mine):
+        return RankMonitors(mine, np.zeros((0, 0), dtype=np.int32), np.zeros((0, 0)))
+    cells = np.array([min(c for c in colliding.links(j) if c < owned_cells) for j in mine], dtype=np.int32)
+    nodes, weights = model.point_weights(points[mine], cells)
+    return RankMonitors(mine, nodes, weights, monitor_stress_operator(part.scene, model, points[mine], cells))
+
+
+# --- the run --------------------------------------------------------------------------------------
+
+def _stepper(part: RankModel, dt: float, input_arrays: dict | None):
+    """The kernel's Stepper of the rank's share (pyfem.distributed.local_stepper's objects, built here)."""
+    from pyfem import _kernels
+    from pyfem.solver import seismic_input_kernel
+
+    single = part.scene["time"].get("matrix_precision", "double") == "single"
+    stepper = _kernels.Stepper(*part.matrix, part.mass, dt, part.alpha, part.beta, True, single)
+    if len(part.dashpot_nodes):
+        stepper.set_dashpots(part.dashpot_nodes, part.dashpot_matrices)
+    if part.constraints is not None:
+        stepper.set_constraints(np.ascontiguousarray(part.constraints.nodes, dtype=np.int32),
+                                np.ascontiguousarray(part.constraints.projection, dtype=np.float64))
+    if input_arrays is not None and len(input_arrays["nodes"]):
+        stepper.add_seismic_input(seismic_input_kernel(input_arrays))
+    exchange = part.plan.kernel_exchange(part.comm, part.n_local)
+    stepper.set_partition(part.n_owned, exchange)
+    return stepper, exchange
+
+
+class _Fields:
+    """fields.xdmf written by dolfinx on every rank (displacement and velocity; a Q2 field
+    interpolated into Q1 on the mesh's geometry)."""
+
+    def __init__(self, part: RankModel, path: Path) -> None:
+        from dolfinx import fem, io
+
+        from pyfem.output import time_decimals
+
+        V = part.model.V
+        self.n = 3 * (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts)
+        self.written = [name for name in part.scene["output"]["fields"] if name in FIELDS]
+        self.functions = {name: fem.Function(V, name=name) for name in self.written}
+        self.output = self.functions
+        if part.model.order > 1:
+            V1 = fem.VectorFunctionSpace(part.model.mesh, ("Lagrange", 1))
+            self.output = {name: fem.Function(V1, name=name) for name in self.written}
+        self.file = io.XDMFFile(part.comm, str(path), "w")
+        self.file.write_mesh(part.model.mesh)
+        tags = part.model.cell_tags
+        tags.name = "region"  # the cell tags, as the whole model's fields.xdmf has them (run.json "regions")
+        self.file.write_meshtags(tags)
+        output = part.scene["output"]
+        self.decimals = time_decimals(output["interval"], output["xdmf_interval"])
+
+    def write(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
+        t = round(t, self.decimals)  # 0.3, not 0.30000000000000004 (as RunWriter)
+        for name, values in (("displacement", u), ("velocity", v)):
+            if name not in self.functions:
+                continue
+            self.functions[name].x.array[:] = values[:self.n]
+            if self.output is not self.functions:
+                self.output[name].interpolate(self.functions[name])
+            self.file.write_function(self.output[name], t)
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def plan(part: RankModel, time_step, n_steps: int) -> dict:
+    """What `run` prints before it steps (rank 0)."""
+    counts = part.comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts), root=0)
+    if part.comm.rank != 0:
+        return {}
+    return {"model": "distributed: each rank builds and steps its part (docs/scaling.md \"The distributed model\")",
+            "ranks": part.comm.size, "dofs": part.n_dofs_global,
+            "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e in counts],
+            "time step": f"{time_step.dt:.6g} s ({time_step.reason})", "steps": n_steps,
+            "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
+
+
+def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:
+    """`pyfem.solver.run` with the distributed model (module docstring); returns the summary on
+    rank 0, {} on the others. A scene error is every rank's (raised alike on each); any other error
+    ends every rank (pyfem.distributed.abort_all), where the others would wait for it."""
+    check_supported(scene, resume)
+    comm = MPI.COMM_WORLD
+    from pyfem.scene import scene_error_from
+
+    try:
+        return _run(scene, out_dir, comm, on_plan, progress)
+    except SceneError:
+        raise
+    except BaseException as error:
+        if isinstance(error, ValueError) and scene_error_from(error) is not None:
+            raise  # a bad scene, found alike by every rank's builders (the command line's one line)
+        if comm.size > 1:
+            from pyfem.distributed import abort_all
+
+            abort_all(error)
+        raise
+
+
+def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
+    from pyfem.output import (ENERGY_COLUMNS, ENERGY_FORMAT, FREEFIELD_COLUMNS, MONITOR_COLUMNS, MONITOR_FORMAT,
+                              STRESS_COLUMNS, _VOIGT, CsvHistory, _write_json, max_principal, monitor_peaks,
+                              peak_memory_mib, previous_run_dir)
+    from pyfem.seismic.setup import scene_record, seismic_input_from_scene
+    from pyfem.solver import kernel_threads, whole_steps
+
+    root = comm.rank == 0
+    wall_start = time.perf_counter()
+    part = build(scene, comm)
+    part.setup_seconds = comm.allreduce(part.setup_seconds, op=MPI.MAX)
+    time_step = choose_time_step(part)
+    n_steps = whole_steps(scene["time"]["duration"], time_step)
+    freefield = input_arrays = None
+    if "seismic_input" in scene.effects:
+        model = part.model
+        view = _InputView(model.faces, part.coords[:len(model.node_coords)], model.bounds)
+        freefield, input_arrays = seismic_input_from_scene(scene, view, scene_record(scene))
+    monitors = locate_monitors(part)
+    if on_plan is not None:
+        shown = plan(part, time_step, n_steps)
+        if root:
+            on_plan(shown)
+    out = Path(out_dir)
+    if root:
+        if (out / "run.json").exists():
+            previous = previous_run_dir(out)
+            shutil.move(str(out), str(previous))
+            print(f"note: the earlier run in {out} was moved to {previous}", file=sys.stderr)
+        out.mkdir(parents=True, exist_ok=True)
+    comm.Barrier()
+    kernel_threads()
+    stepper, exchange = _stepper(part, time_step.dt, input_arrays)
+    names = [m["name"] for m in scene.get("monitor", [])]
+    points = np.array([m["point"] for m in scene.get("monitor", [])], dtype=float).reshape(-1, 3)
+    columns = list(MONITOR_COLUMNS) + (FREEFIELD_COLUMNS if freefield is not None else []) + \
+        (STRESS_COLUMNS if names else [])
+    regions = comm.gather(list(zip(monitors.index.tolist(), monitors.stress.regions))
+                          if monitors.stress is not None else [], root=0)
+    model = part.model
+    summary = {"title": scene["title"], "scene": scene.to_json(), "effects": list(scene.effects),
+               "model": "distributed", "ranks": comm.size,
+               "cells": comm.allreduce(model.n_cells), "nodes": part.n_dofs_global // 3, "dofs": part.n_dofs_global,
+               "dt": time_step.dt, "dt_critical": time_step.critical, "dt_reason": time_step.reason,
+               "omega_max": time_step.omega_max, "steps": n_steps, "rayleigh": {"alpha": part.alpha, "beta": part.beta},
+               "regions": dict(sorted(model.regions.items(), key=lambda item: item[1])),
+               "boundary_faces": part.faces_report, "traction_free_surfaces": dict(model.free_surfaces),
+               "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(getattr(scene, "warnings", [])),
+               "status": "running",
+               "checkpoints": "none: the distributed model writes no checkpoints yet (docs/scaling.md)"}
+    histories, fields = {}, None
+    if root:
+        _write_json(out / "run.json", summary)
+        histories["energy"] = CsvHistory(out / "energy.csv", ENERGY_COLUMNS, ENERGY_FORMAT)
+        if names:
+            (out / "monitors").mkdir(exist_ok=True)
+            for name in names:
+                histories[name] = CsvHistory(out / "monitors" / f"{name}.csv", columns, MONITOR_FORMAT)
+        if part.constraints is not None:
+            face_columns = ["t"] + [f"{f}_F{axis}" for f in part.constraints.face_names for axis in "xyz"]
+            histories["reactions"] = CsvHistory(out / "reactions.csv", face_columns, ENERGY_FORMAT)
+        region_of = dict(pair for rank_regions in regions for pair in rank_regions)
+        monitor_regions = [region_of[j] for j in range(len(names))]
+    if scene["output"]["xdmf_interval"]:
+        fields = _Fields(part, out / "fields.xdmf")
+        xdmf_every = max(1, round(scene["output"]["xdmf_interval"] / scene["output"]["interval"]))
+    n = 3 * part.n_local
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    rows_kept, energy_rows, times = [], [], []
+
+    def sample(t: float, k: int) -> None:
+        mine = []
+        if len(monitors.index):  # this rank's monitors, as RunWriter._monitor_rows computes them
+            values = [np.full((len(monitors.index), 1), t)]
+            for x in (u, v, a):
+                values.append(np.einsum("mk,mkc->mc", monitors.weights, x.reshape(-1, 3)[monitors.nodes]))
+            if freefield is not None:
+                at, now = points[monitors.index], np.array([t])
+                values += [freefield.displacement(at, now)[0], freefield.velocity(at, now)[0]]
+            dynamic_tensor = monitors.stress.dynamic_stress(u)
+            dynamic = np.stack([dynamic_tensor[:, i, j] for i, j in _VOIGT], axis=1)
+            static = np.stack([monitors.stress.static[:, i, j] for i, j in _VOIGT], axis=1)
+            total = dynamic + static
+            values += [total, max_principal(total)[:, None], max_principal(dynamic)[:, None]]
+            mine = list(zip(monitors.index.tolist(), np.hstack(values)))
+        energy = stepper.energy()
+        sums = comm.reduce(np.array([energy[name] for name in ENERGY_COLUMNS[1:]]), root=0)
+        reactions = None
+        if part.constraints is not None:
+            reactions = comm.reduce(part.constraints.face_resultants(stepper.reactions()), root=0)
+        gathered = comm.gather(mine, root=0)
+        if fields is not None and k % xdmf_every == 0:
+            fields.write(t, u, v)
+        if not root:
+            return
+        by_monitor = dict(pair for rank_rows in gathered for pair in rank_rows)
+        rows = np.array([by_monitor[j] for j in range(len(names))]) if names else None
+        energy_row = [t] + list(sums)
+        histories["energy"].append(energy_row)
+        energy_rows.append(energy_row)
+        times.append(t)
+        if rows is not None:
+            rows_kept.append(rows)
+            for name, row in zip(names, rows):
+                histories[name].append(row)
+        if reactions is not None:
+            histories["reactions"].append([t] + list(reactions.ravel()))
+
+    status = "failed"
+    try:
+        stepper.reset_energy(u, v, a, 0.0)
+        sample(0.0, 0)
+        ts = time_step
+        n_outputs = n_steps // ts.steps_per_output
+        if progress is not None and root:
+            progress.start(0.0)
+        loop_start = time.perf_counter()
+        for done in range(1, n_outputs + 1):
+            stepper.run(u, v, a, ts.steps_per_output, (done - 1) * ts.steps_per_output * ts.dt)
+            t = done * ts.steps_per_output * ts.dt
+            finite = comm.allreduce(bool(np.isfinite(u[:3 * part.n_owned]).all()), op=MPI.LAND)
+            if not finite:
+                raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+            sample(t, done)
+            if progress is not None and root:
+                progress(t)
+        loop_seconds = comm.allreduce(time.perf_counter() - loop_start, op=MPI.MAX)
+        status = "finished"
+    except KeyboardInterrupt as error:  # Ctrl-C on one process: nothing to resume from (no checkpoints)
+        from pyfem.interrupts import RunInterrupted
+
+        status = "interrupted"
+        if isinstance(error, RunInterrupted):
+            raise
+        raise RunInterrupted(time_reached=times[-1] if times else None, out_dir=out) from error
+    finally:
+        for history in histories.values():
+            history.close()
+        if fields is not None:
+            fields.close()
+        if root and status != "finished":
+            summary["status"] = status
+            summary["time_reached"] = times[-1] if times else None
+            _write_json(out / "run.json", summary)
+    per_rank = comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts,
+                            int(exchange.bytes_sent_per_step), round(peak_memory_mib(), 1)), root=0)
+    if not root:
+        return {}
+    from pyfem.output import RunWriter
+
+    summary.update({
+        "status": status, "time_reached": times[-1], "wall_seconds": time.perf_counter() - wall_start,
+        "loop_seconds": loop_seconds, "setup_seconds": part.setup_seconds,
+        "seconds_per_step": loop_seconds / max(1, n_steps),
+        "energy": RunWriter._energy_summary(np.array(energy_rows)),
+        "monitors": monitor_peaks(np.array(rows_kept), columns, names, np.array(times), monitor_regions) if names else {},
+        "mpi": {"ranks": comm.size, **{name: [row[k] for row in per_rank] for k, name in enumerate(
+            ("owned_nodes", "ghost_nodes", "extra_ghost_nodes", "bytes_sent_per_step", "peak_memory_mib"))}},
+    })
+    _write_json(out / "run.json", summary)
+    return summary
+
+
+@dataclass
+class _InputView:
+    """What pyfem.seismic.setup.seismic_input_from_scene reads of a model: the rank's owned faces,
+    its nodes' coordinates and the whole mesh's bounds."""
+
+    faces: list
+    node_coords: np.ndarray
+    bounds: tuple
+

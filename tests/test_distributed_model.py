@@ -1,0 +1,154 @@
+"""`[parallel] model = "distributed"`: each MPI rank builds and steps only its part of dolfinx's
+distributed mesh (pyfem/distributed_model.py, docs/scaling.md "The distributed model").
+
+The reference is the whole model run on one rank (`model = "whole"`, the default: every other
+test's serial run). The distributed model on 1, 2 and 3 ranks (3: an odd partition with *extra
+ghosts*, nodes an owned row reaches that dolfinx's index map does not hold) on two scenes:
+- a layered box (a soft layer between rock) under an oblique SV wavelet with Rayleigh damping,
+  monitors inside cells (tests/scenes/distributed_box.toml);
+- a circular tunnel in the tetrahedral mesh of a user's gmsh script, its wall traction-free, roller
+  faces with reactions (tests/scenes/mpi_tunnel_tet.toml).
+Every monitor, energy and reaction history equals the whole model's to 1e-10 of its dimension's
+largest value (the tunnel's accelerations and reactions to a few 1e-9: net forces of a long wave on
+a fine mesh, round-off of K u in another order, as tests/test_mpi.py explains), and so does the
+last displacement field (nodes matched by coordinates), after asserting that the wave arrived and
+that no rank held the whole model. The time step comes from the ranks' own power iteration (a start
+vector of the node coordinates): its critical step is within 1e-3 of the whole model's and the same
+on every rank count; the two scenes' steps divide the output interval alike, so the runs step alike.
+"""
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from pyfem.compare import largest_differences
+
+REPO = Path(__file__).resolve().parents[1]
+PYTHON = "/usr/bin/python3"
+ENV = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1")
+MPIRUN = shutil.which("mpirun")
+TOLERANCE = 1.0e-10
+DISTRIBUTED = ("--set", "parallel.model=distributed")
+
+SCENES = {"box": "tests/scenes/distributed_box.toml", "tunnel": "tests/scenes/mpi_tunnel_tet.toml"}
+RANKS = {"box": (1, 2, 3), "tunnel": (1, 3)}
+# The tunnel's net forces (tests/test_mpi.py NET_FORCE_TOLERANCE): measured 1.7e-9 and 9e-10 on 3 ranks.
+TOLERANCES = {"tunnel": {"acceleration": 3.0e-9, "reaction": 2.0e-9}}
+
+
+def pyfem(ranks: int, *arguments: str) -> subprocess.CompletedProcess:
+    command = [PYTHON, "-m", "pyfem", *arguments]
+    if ranks > 1:
+        assert MPIRUN is not None, "mpirun not found: scripts/setup.sh installs openmpi-bin"
+        command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)] + command
+    return subprocess.run(command, cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """{(scene, ranks): run directory}; ranks 0: the whole model on one rank."""
+    base = tmp_path_factory.mktemp("distributed")
+    out = {}
+    for name, scene in SCENES.items():
+        for ranks in (0,) + RANKS[name]:
+            out[name, ranks] = base / f"{name}_{ranks}"
+            extra = () if ranks == 0 else DISTRIBUTED
+            result = pyfem(max(ranks, 1), "run", scene, "--out", str(out[name, ranks]), *extra)
+            assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return out
+
+
+def summary(run_dir: Path) -> dict:
+    return json.loads((run_dir / "run.json").read_text())
+
+
+def last_displacement(run_dir: Path, distributed: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(coordinates, displacement) of every node at the last field time."""
+    with h5py.File(run_dir / "fields.h5") as f:
+        if distributed:  # dolfinx's XDMFFile
+            times = sorted(f["Function/displacement"], key=lambda key: float(key.replace("_", ".")))
+            return np.asarray(f["Mesh/mesh/geometry"]), np.asarray(f["Function/displacement"][times[-1]])
+    text = (run_dir / "fields.xdmf").read_text()  # RunWriter: the last displacement's dataset
+    dataset = text.split('Attribute Name="displacement"')[-1].split("fields.h5:")[1].split("<")[0]
+    with h5py.File(run_dir / "fields.h5") as f:
+        return np.asarray(f["data0"]), np.asarray(f[dataset])
+
+
+def by_coordinates(points: np.ndarray, values: np.ndarray) -> np.ndarray:
+    order = np.lexsort(np.round(points, 6).T)
+    return values[order]
+
+
+@pytest.mark.parametrize("name, ranks", [(name, ranks) for name in SCENES for ranks in RANKS[name]])
+def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
+    whole, ours = summary(runs[name, 0]), summary(runs[name, ranks])
+    # Something happened: the wave arrived (and at the tunnel's crown, the wall was stressed).
+    if name == "box":
+        assert whole["monitors"]["centre"]["displacement"] > 5.0e-4
+    else:
+        assert "(unnamed)" in whole["traction_free_surfaces"], "the tunnel's wall is free, not an input face"
+        assert whole["monitors"]["crown"]["displacement"] > 2e-4 and whole["monitors"]["crown"]["s1_dynamic_max"] > 1e3
+        reactions = np.loadtxt(runs[name, 0] / "reactions.csv", delimiter=",", skiprows=1)
+        assert np.abs(reactions[:, 1:]).max() > 100.0, "the rollers were loaded (round-off: 1e-13 N)"
+    # The ranks each held a part: every node owned once, none holding every node.
+    mpi = ours["mpi"]
+    assert ours["model"] == "distributed" and mpi["ranks"] == ranks
+    assert sum(mpi["owned_nodes"]) == whole["nodes"] and ours["cells"] == whole["cells"]
+    if ranks > 1:
+        assert all(o + g < whole["nodes"] for o, g in zip(mpi["owned_nodes"], mpi["ghost_nodes"]))
+        assert all(b > 0 for b in mpi["bytes_sent_per_step"])
+    if ranks == 3:
+        assert sum(mpi["extra_ghost_nodes"]) > 0, "the partition exercised the extra ghosts"
+    for face, expected in zip(ours["boundary_faces"], whole["boundary_faces"], strict=True):
+        assert face == dict(expected, area=pytest.approx(expected["area"], rel=1e-12))
+    assert ours["traction_free_surfaces"] == whole["traction_free_surfaces"]
+    # The time step: the ranks' own estimate.
+    assert ours["dt_critical"] == pytest.approx(whole["dt_critical"], rel=1e-3)
+    assert ours["dt_critical"] == pytest.approx(summary(runs[name, 1])["dt_critical"], rel=1e-8)
+    assert ours["dt"] == whole["dt"] and ours["steps"] == whole["steps"]
+    # Every history, and the last displacement field.
+    differences = largest_differences(runs[name, ranks], runs[name, 0])
+    for kind, difference in differences.items():
+        assert difference < TOLERANCES.get(name, {}).get(kind, TOLERANCE), (kind, difference)
+    if (runs[name, 0] / "fields.h5").exists():
+        x, u = last_displacement(runs[name, 0], False)
+        y, w = last_displacement(runs[name, ranks], True)
+        assert x.shape == y.shape
+        assert np.abs(by_coordinates(x, u) - by_coordinates(y, w)).max() < TOLERANCE * np.abs(u).max()
+    assert ours["energy"]["balance_error"] == pytest.approx(whole["energy"]["balance_error"], abs=1e-12)
+    for monitor, peaks in whole["monitors"].items():
+        for key, value in peaks.items():
+            if isinstance(value, float):
+                assert ours["monitors"][monitor][key] == pytest.approx(value, rel=1e-8, abs=1e-12), (monitor, key)
+    print(f"{name} on {ranks} ranks: {differences}; owned {mpi['owned_nodes']}, ghosts {mpi['ghost_nodes']} "
+          f"(extra {mpi['extra_ghost_nodes']}), peak MiB {mpi['peak_memory_mib']}")
+
+
+@pytest.mark.parametrize("scene, extra, key", [
+    ("tests/scenes/mpi_hard_contact.toml", (), "[contact]"),
+    ("tests/scenes/mpi_weak_layer.toml", (), "plasticity]"),
+    ("workflows/scenes/box_vertical_sv.toml", ("--set", "time.local_stepping=true"), "local_stepping"),
+    ("workflows/scenes/box_vertical_sv.toml", ("--set", 'output.fields=["displacement", "stress"]'), "stress"),
+    ("workflows/scenes/box_vertical_sv.toml", ("--resume",), "--resume"),
+])
+def test_what_the_distributed_model_does_not_build_is_refused_in_one_line(tmp_path, scene, extra, key):
+    result = pyfem(2, "run", scene, "--out", str(tmp_path / "run"), *DISTRIBUTED, *extra)
+    assert result.returncode == 2, result.stderr[-2000:]
+    lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert lines and all(line == lines[0] for line in lines), result.stderr
+    assert "parallel.model" in lines[0] and key in lines[0] and "whole" in lines[0]
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_monitor_outside_the_mesh_is_named_on_every_rank_count(tmp_path):
+    result = pyfem(3, "run", "tests/scenes/mpi_tunnel_tet.toml", "--out", str(tmp_path / "run"), *DISTRIBUTED,
+                   "--set", "monitor.1.point=[60.0, 1.0, 60.0]")  # the tunnel's centre: in no cell
+    assert result.returncode == 2, result.stderr[-2000:]
+    assert "monitor.1.point" in result.stderr and "in no cell" in result.stderr
+    assert "Traceback" not in result.stderr
