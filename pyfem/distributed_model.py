@@ -96,48 +96,84 @@ def fetch_owned(comm: MPI.Comm, index_map, owned: np.ndarray, wanted: np.ndarray
     return out
 
 
-def owned_rows_local(V, matrix) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
-    """The owned rows of the PETSc `matrix` (getValuesCSR: owned rows, global columns) with local
-    columns: the local nodes are the index map's owned nodes, its ghosts, then the extra ghosts
-    (global nodes of the owned rows' columns that the index map does not hold).
+def owned_rows_local(V, matrix, release: bool = False) -> tuple[sp.bsr_matrix, np.ndarray, np.ndarray]:
+    """The owned rows of the PETSc `matrix` (getValuesCSR: owned rows, global columns) as (3, 3)
+    blocks with local columns: the local nodes are the index map's owned nodes, its ghosts, then the
+    extra ghosts (global nodes of the owned rows' columns that the index map does not hold). Built
+    block by block from PETSc's arrays (no scalar CSR copy: the set-up's memory peak is the matrix's).
 
-    Returns (rows: CSR (3 owned, 3 local), extra ghosts' global nodes, every local node's global node)."""
-    index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+    release: destroy the PETSc matrix once its arrays are read (one copy fewer at the peak).
+
+    Returns (rows: BSR (3 owned, 3 local), columns sorted in each row; the extra ghosts' global
+    nodes; every local node's global node)."""
+    index_map = V.dofmap.index_map
     first, last = index_map.local_range
+    n_owned = last - first
     mapped = np.concatenate([np.arange(first, last), index_map.ghosts]).astype(np.int64)
     indptr, columns, values = matrix.getValuesCSR()
-    node, component = np.divmod(columns.astype(np.int64), bs)
+    if release:
+        matrix.destroy()
+    per_row = np.diff(indptr)
+    k = per_row[0::3] // 3  # blocks in each block row: its three scalar rows have 3 k entries each
+    if not (np.array_equal(per_row[1::3], per_row[0::3]) and np.array_equal(per_row[2::3], per_row[0::3])
+            and np.all(per_row[0::3] % 3 == 0)):
+        raise RuntimeError("stiffness: PETSc's owned rows are not (3, 3) blocked")
+    block_indptr = np.zeros(n_owned + 1, dtype=np.int64)
+    np.cumsum(k, out=block_indptr[1:])
+    within = 3 * (np.arange(block_indptr[-1]) - np.repeat(block_indptr[:-1], k))  # the block's first column
+    blocks = np.empty((len(within), 3, 3))
+    for r in range(3):
+        base = np.repeat(indptr[r:-1:3].astype(np.int64), k) + within
+        if r == 0:
+            node = columns[base].astype(np.int64)
+            if np.any(node % 3):
+                raise RuntimeError("stiffness: PETSc's owned rows are not (3, 3) blocked")
+            node //= 3
+        for c in range(3):
+            blocks[:, r, c] = values[base + c]
+    del indptr, columns, values, within, base
     extra = np.setdiff1d(node, mapped)
     local_nodes = np.concatenate([mapped, extra])
     order = np.argsort(local_nodes)
-    local_columns = bs * order[np.searchsorted(local_nodes[order], node)] + component
-    rows = sp.csr_matrix((values, local_columns, indptr), shape=(bs * (last - first), bs * len(local_nodes)))
-    rows.sort_indices()
+    local_columns = order[np.searchsorted(local_nodes[order], node)].astype(np.int32)
+    rows = sp.bsr_matrix((blocks, local_columns, block_indptr), shape=(3 * n_owned, 3 * len(local_nodes)))
+    rows.sort_indices()  # in place
     return rows, extra, local_nodes
 
 
-def local_stiffness(comm: MPI.Comm, index_map, rows: sp.csr_matrix, n_local: int, local_nodes: np.ndarray):
-    """(indptr, indices, blocks) of the rank's matrix as pyfem.distributed.local_matrix gives it
-    from the whole one: the owned rows' blocks, each ghost row's blocks to owned nodes (the owned
-    rows' transposed: K is symmetric) and the ghosts' diagonal blocks (from their owners)."""
+def add_to_diagonal(rows: sp.bsr_matrix, nodes: np.ndarray, blocks: np.ndarray) -> None:
+    """Adds (k, 3, 3) blocks to the diagonal blocks of the owned `nodes` (in place)."""
     n_owned = rows.shape[0] // 3
-    owned = sp.vstack([rows, sp.csr_matrix((3 * (n_local - n_owned), 3 * n_local))]).tocsr().tobsr(blocksize=(3, 3))
-    owned.sort_indices()
-    row = np.repeat(np.arange(n_local), np.diff(owned.indptr))
-    col, blocks = owned.indices.astype(np.int64), owned.data
-    ghost = col >= n_owned
-    diagonal = blocks[row == col]  # the owned nodes' diagonal blocks, in node order
+    row = np.repeat(np.arange(n_owned), np.diff(rows.indptr))
+    diagonal = np.flatnonzero(rows.indices == row)
     if len(diagonal) != n_owned:
         raise RuntimeError(f"stiffness: {n_owned - len(diagonal)} owned nodes without a diagonal block")
-    ghost_diagonal = fetch_owned(comm, index_map, diagonal.reshape(n_owned, 9), local_nodes[n_owned:]).reshape(-1, 3, 3)
+    np.add.at(rows.data, diagonal[nodes], blocks)
+
+
+def local_stiffness(comm: MPI.Comm, index_map, rows: sp.bsr_matrix, n_local: int, local_nodes: np.ndarray):
+    """(indptr, indices, blocks) of the rank's matrix as pyfem.distributed.local_matrix gives it
+    from the whole one: the owned rows' blocks (`rows`, sorted), each ghost row's blocks to owned
+    nodes (the owned rows' transposed: K is symmetric) and the ghosts' diagonal blocks (from their
+    owners). One copy of the owned blocks."""
+    n_owned = rows.shape[0] // 3
+    row = np.repeat(np.arange(n_owned), np.diff(rows.indptr))
+    col = rows.indices
+    diagonal = rows.data[col == row]  # the owned nodes' diagonal blocks, in node order
+    if len(diagonal) != n_owned:
+        raise RuntimeError(f"stiffness: {n_owned - len(diagonal)} owned nodes without a diagonal block")
+    ghost = np.flatnonzero(col >= n_owned)
     ghosts = np.arange(n_owned, n_local)
-    row, col = np.concatenate([row, col[ghost], ghosts]), np.concatenate([col, row[ghost], ghosts])
-    blocks = np.concatenate([blocks, blocks[ghost].transpose(0, 2, 1), ghost_diagonal])
-    order = np.lexsort((col, row))
+    ghost_diagonal = fetch_owned(comm, index_map, diagonal.reshape(n_owned, 9), local_nodes[n_owned:]).reshape(-1, 3, 3)
+    ghost_row = np.concatenate([col[ghost].astype(np.int64), ghosts])
+    ghost_col = np.concatenate([row[ghost], ghosts])
+    ghost_blocks = np.concatenate([rows.data[ghost].transpose(0, 2, 1), ghost_diagonal])
+    order = np.lexsort((ghost_col, ghost_row))  # the ghost rows (after every owned row), sorted
+    counts = np.concatenate([np.diff(rows.indptr), np.bincount(ghost_row - n_owned, minlength=n_local - n_owned)])
     block_indptr = np.zeros(n_local + 1, dtype=np.int64)
-    np.cumsum(np.bincount(row, minlength=n_local), out=block_indptr[1:])
-    return (block_indptr, np.ascontiguousarray(col[order], dtype=np.int32),
-            np.ascontiguousarray(blocks[order], dtype=np.float64))
+    np.cumsum(counts, out=block_indptr[1:])
+    return (block_indptr, np.concatenate([col, ghost_col[order]]).astype(np.int32),
+            np.concatenate([rows.data, ghost_blocks[order]]))
 
 
 @dataclass
@@ -199,7 +235,6 @@ class RankModel:
     local_nodes: np.ndarray        # global node of every local node
     coords: np.ndarray             # (n_local, 3)
     mass: np.ndarray               # (n_local,)
-    rows: sp.csr_matrix            # owned rows with the springs, local columns
     matrix: tuple                  # the kernel's (indptr, indices, blocks)
     plan: GhostPlan
     dashpot_nodes: np.ndarray
@@ -261,9 +296,8 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     coords = V.tabulate_dof_coordinates().astype(np.float64, copy=True)
     mass = lumped_mass(V, materials.rho, quadrature)
     matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
-    rows, extra, local_nodes = owned_rows_local(V, matrix)
     n_dofs_global = matrix.getSize()[0]
-    matrix.destroy()
+    rows, extra, local_nodes = owned_rows_local(V, matrix, release=True)
     index_map = V.dofmap.index_map
     n_owned = index_map.size_local
     centre = scene.get("boundary", {}).get("centre")
@@ -284,17 +318,15 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     spring_nodes, springs, dashpot_nodes, dashpots = boundary_springs_and_dashpots(
         faces, n_owned, None, boundary["alpha_N"], boundary["alpha_T"])
     if len(spring_nodes):  # K_b on the owned face nodes' diagonal blocks
-        dofs = 3 * np.repeat(spring_nodes, 9) + np.tile(np.repeat(np.arange(3), 3), len(spring_nodes))
-        columns = 3 * np.repeat(spring_nodes, 9) + np.tile(np.tile(np.arange(3), 3), len(spring_nodes))
-        rows = (rows + sp.csr_matrix((springs.reshape(-1), (dofs, columns)), shape=rows.shape)).tocsr()
-        rows.sort_indices()
+        add_to_diagonal(rows, spring_nodes, springs)
     # The extra ghosts' coordinates and masses from their owners.
     coords = np.concatenate([coords, fetch_owned(comm, index_map, coords[:n_owned], extra)])
     mass = np.concatenate([mass, fetch_owned(comm, index_map, mass[:n_owned, None], extra)[:, 0]])
     kernel_matrix = local_stiffness(comm, index_map, rows, len(local_nodes), local_nodes)
+    del rows  # (the kernel's matrix holds the owned rows)
     alpha, beta = damping_coefficients(scene)
     return RankModel(comm=comm, scene=scene, model=model, n_owned=n_owned, local_nodes=local_nodes, coords=coords,
-                     mass=np.ascontiguousarray(mass), rows=rows, matrix=kernel_matrix,
+                     mass=np.ascontiguousarray(mass), matrix=kernel_matrix,
                      plan=ghost_plan(comm, index_map, local_nodes, n_owned),
                      dashpot_nodes=np.ascontiguousarray(dashpot_nodes, dtype=np.int32),
                      dashpot_matrices=np.ascontiguousarray(dashpots, dtype=np.float64),
@@ -316,13 +348,17 @@ def power_iteration(part: RankModel, iterations: int) -> float:
     """The largest eigenvalue of M^-1/2 K M^-1/2 as the kernel's power_iteration estimates it, on
     the ranks' owned rows with a ghost exchange per product."""
     comm, n_owned = part.comm, part.n_owned
+    indptr, indices, blocks = part.matrix
+    # The kernel's matrix, its owned rows only (a ghost's row holds its blocks to owned nodes only).
+    owned = sp.bsr_matrix((blocks[:indptr[n_owned]], indices[:indptr[n_owned]], indptr[:n_owned + 1]),
+                          shape=(3 * n_owned, 3 * part.n_local))
     inverse_sqrt_mass = 1.0 / np.sqrt(part.mass)
     x = start_vector(part.coords)
     x /= math.sqrt(comm.allreduce(float(np.sum(x[:n_owned] ** 2))))
     estimate = 0.0
     for _ in range(iterations):
         part.plan.update(comm, x)
-        y = (part.rows @ (inverse_sqrt_mass[:, None] * x).reshape(-1)).reshape(-1, 3)
+        y = (owned @ (inverse_sqrt_mass[:, None] * x).reshape(-1)).reshape(-1, 3)
         y *= inverse_sqrt_mass[:n_owned, None]
         rayleigh, y_norm2 = comm.allreduce(np.array([float(np.sum(x[:n_owned] * y)), float(np.sum(y * y))]))
         estimate = float(rayleigh)

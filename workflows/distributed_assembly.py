@@ -1,6 +1,8 @@
 """Prototype of the first step of issue 13's distributed model (docs/scaling.md "Next steps"):
 dolfinx's distributed mesh and assembly, each rank keeping its owned rows in the kernel's owned +
-ghost numbering. Not used by `pyfem run` yet (build_model refuses more than one rank).
+ghost numbering. Its numbering, ghost-diagonal fetch and exchange are pyfem/distributed_model.py's
+(`[parallel] model = "distributed"`, which `pyfem run` uses since 2026-11-29); this workflow keeps
+the checks of that first step on a plain dolfinx box.
 
 On a hexahedral box of n^3 Q1 cells distributed by dolfinx (`GhostMode` as given), each rank:
 1. assembles the elastic stiffness into a distributed PETSc matrix and takes its owned rows
@@ -42,6 +44,8 @@ from dolfinx import mesh as dmesh
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 
+from pyfem.distributed_model import fetch_owned, ghost_plan, local_stiffness, owned_rows_local
+
 YOUNG, POISSON, DENSITY = 2.0e10, 0.25, 2600.0
 
 
@@ -69,85 +73,6 @@ def box_operators(comm: MPI.Comm, n: int, ghost_mode: str):
     mass.vector.array[:] = lumped.array  # owned values
     mass.x.scatter_forward()  # and the ghosts'
     return V, matrix, mass.x.array.copy()
-
-
-def owned_rows_local(V, matrix):
-    """The owned rows of `matrix` in local dofs: the local nodes are the index map's owned nodes, its
-    ghosts, then the extra ghosts (global nodes of the owned rows' columns that the index map does
-    not hold: with GhostMode.shared_facet, neighbours through an edge or a vertex only).
-
-    Returns (indptr, local columns, values, extra ghosts' global nodes, every local node's global node)."""
-    index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
-    first, last = index_map.local_range
-    mapped = np.concatenate([np.arange(first, last), index_map.ghosts]).astype(np.int64)  # global node
-    indptr, columns, values = matrix.getValuesCSR()
-    node, component = np.divmod(columns.astype(np.int64), bs)
-    extra = np.setdiff1d(node, mapped)
-    local_nodes = np.concatenate([mapped, extra])
-    order = np.argsort(local_nodes)
-    local_columns = bs * order[np.searchsorted(local_nodes[order], node)] + component
-    return indptr, local_columns, values, extra, local_nodes
-
-
-def owners(comm: MPI.Comm, V, nodes: np.ndarray) -> np.ndarray:
-    """The rank owning each global node, from the ranks' owned ranges."""
-    index_map = V.dofmap.index_map
-    starts = np.array([r[0] for r in comm.allgather(index_map.local_range)] + [index_map.size_global])
-    return np.searchsorted(starts, nodes, side="right") - 1
-
-
-def fetch_owned(comm: MPI.Comm, V, owned: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """(len(wanted), k) the owners' rows of `owned` ((owned nodes, k) on every rank) for the global
-    nodes `wanted` (the extra ghosts' values, the ghosts' diagonal blocks)."""
-    first = V.dofmap.index_map.local_range[0]
-    owner = owners(comm, V, wanted)
-    asked = comm.alltoall([wanted[owner == q] for q in range(comm.size)])
-    replies = comm.alltoall([owned[np.asarray(nodes, dtype=np.int64) - first] for nodes in asked])
-    out = np.zeros((len(wanted), owned.shape[1]))
-    for q in range(comm.size):
-        out[owner == q] = replies[q]
-    return out
-
-
-def local_stiffness(comm: MPI.Comm, V, indptr, columns, values, local_nodes: np.ndarray):
-    """(indptr, indices, blocks) of the rank's matrix as pyfem.distributed.local_matrix gives it
-    from the whole one: the owned rows' blocks, each ghost row's blocks to owned nodes (the owned
-    rows' transposed: K is symmetric) and the ghosts' diagonal blocks (from their owners)."""
-    n_owned, n_local = V.dofmap.index_map.size_local, len(local_nodes)
-    rows = sp.csr_matrix((values, columns, indptr), shape=(3 * n_owned, 3 * n_local))
-    owned = sp.vstack([rows, sp.csr_matrix((3 * (n_local - n_owned), 3 * n_local))]).tocsr().tobsr(blocksize=(3, 3))
-    row = np.repeat(np.arange(n_local), np.diff(owned.indptr))
-    col, blocks = owned.indices.astype(np.int64), owned.data
-    ghost = col >= n_owned
-    diagonal = blocks[row == col]  # the owned nodes' diagonal blocks, in node order
-    ghost_diagonal = fetch_owned(comm, V, diagonal.reshape(n_owned, 9), local_nodes[n_owned:]).reshape(-1, 3, 3)
-    ghosts = np.arange(n_owned, n_local)
-    row, col = np.concatenate([row, col[ghost], ghosts]), np.concatenate([col, row[ghost], ghosts])
-    blocks = np.concatenate([blocks, blocks[ghost].transpose(0, 2, 1), ghost_diagonal])
-    order = np.lexsort((col, row))
-    block_indptr = np.zeros(n_local + 1, dtype=np.int64)
-    np.cumsum(np.bincount(row, minlength=n_local), out=block_indptr[1:])
-    return (block_indptr, np.ascontiguousarray(col[order], dtype=np.int32),
-            np.ascontiguousarray(blocks[order], dtype=np.float64))
-
-
-def ghost_exchange(comm: MPI.Comm, V, local_nodes: np.ndarray):
-    """The kernel's MpiNodeExchange of the rank's ghosts (the index map's and the extra ones): each
-    rank asks the owners for its ghosts in ascending global order (pyfem.distributed._ghost_exchanges)."""
-    from pyfem import _kernels
-
-    n_owned = V.dofmap.index_map.size_local
-    first = V.dofmap.index_map.local_range[0]
-    ghosts = local_nodes[n_owned:]
-    owner = owners(comm, V, ghosts)
-    order = np.argsort(ghosts)
-    requests = [ghosts[order][owner[order] == q] for q in range(comm.size)]
-    asked = comm.alltoall(requests)
-    local_of_ghost = dict(zip(ghosts.tolist(), range(n_owned, len(local_nodes))))
-    neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q]) or len(asked[q]))]
-    send = [(np.asarray(asked[q], dtype=np.int64) - first).astype(np.int32) for q in neighbours]
-    recv = [np.array([local_of_ghost[g] for g in requests[q]], dtype=np.int32) for q in neighbours]
-    return _kernels.MpiNodeExchange(comm.py2f(), neighbours, send, recv, len(local_nodes))
 
 
 def halo_cells(comm: MPI.Comm, V) -> tuple[int, int]:
@@ -187,7 +112,7 @@ def smooth_field(V) -> np.ndarray:
     return 1e-3 * field.reshape(-1)
 
 
-def step_the_share(comm: MPI.Comm, V, indptr, columns, values, missing, local_nodes, mass, n: int) -> dict:
+def step_the_share(comm: MPI.Comm, V, rows, missing, local_nodes, mass, n: int) -> dict:
     """The kernel's Stepper of the rank's share (local matrix, lumped mass, ghost exchange), STEPS
     steps from the bump at rest: its owned nodes' coordinates and displacements, its seconds."""
     from pyfem import _kernels
@@ -196,11 +121,12 @@ def step_the_share(comm: MPI.Comm, V, indptr, columns, values, missing, local_no
     n_owned = index_map.size_local
     coordinates = V.tabulate_dof_coordinates()[:n_owned + index_map.num_ghosts]
     node_mass = mass.reshape(-1, 3)[:, 0]
-    coordinates = np.concatenate([coordinates, fetch_owned(comm, V, coordinates[:n_owned], missing)])
-    node_mass = np.concatenate([node_mass, fetch_owned(comm, V, node_mass[:n_owned, None], missing)[:, 0]])
-    matrix = local_stiffness(comm, V, indptr, columns, values, local_nodes)
+    coordinates = np.concatenate([coordinates, fetch_owned(comm, index_map, coordinates[:n_owned], missing)])
+    node_mass = np.concatenate([node_mass, fetch_owned(comm, index_map, node_mass[:n_owned, None], missing)[:, 0]])
+    matrix = local_stiffness(comm, index_map, rows, len(local_nodes), local_nodes)
     stepper = _kernels.Stepper(*matrix, np.ascontiguousarray(node_mass), DT)
-    stepper.set_partition(n_owned, ghost_exchange(comm, V, local_nodes))
+    stepper.set_partition(n_owned, ghost_plan(comm, index_map, local_nodes, n_owned).kernel_exchange(
+        comm, len(local_nodes)))
     u = bump(coordinates, n)
     v, a = np.zeros_like(u), np.zeros_like(u)
     began = time.perf_counter()
@@ -260,13 +186,12 @@ def main(argv: list) -> int:
     began = time.perf_counter()
     V, matrix, mass = box_operators(comm, n, ghost_mode)
     seconds = time.perf_counter() - began
-    indptr, columns, values, missing, local_nodes = owned_rows_local(V, matrix)
+    rows, missing, local_nodes = owned_rows_local(V, matrix)
     index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
     n_owned = bs * index_map.size_local
     field = smooth_field(V)
-    u = np.concatenate([field, fetch_owned(comm, V, field[:n_owned].reshape(-1, bs), missing).reshape(-1)])
-    ours = np.add.reduceat(values * u[columns], indptr[:-1]) if len(values) else np.zeros(0)
-    ours[np.diff(indptr) == 0] = 0.0
+    u = np.concatenate([field, fetch_owned(comm, index_map, field[:n_owned].reshape(-1, bs), missing).reshape(-1)])
+    ours = rows @ u
     x, y = matrix.createVecs()
     x.array[:] = u[:n_owned]
     matrix.mult(x, y)
@@ -274,7 +199,7 @@ def main(argv: list) -> int:
         comm.allreduce(float(np.abs(y.array).max()), op=MPI.MAX)
     energy = comm.allreduce(0.5 * float(u[:n_owned] @ ours), op=MPI.SUM)
     total_mass = comm.allreduce(float(mass[:n_owned].sum()) / 3.0, op=MPI.SUM)
-    stepped = step_the_share(comm, V, indptr, columns, values, missing, local_nodes, mass, n)
+    stepped = step_the_share(comm, V, rows, missing, local_nodes, mass, n)
     peak = comm.gather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, root=0)
     shares = comm.gather([index_map.size_local, index_map.num_ghosts, len(missing)], root=0)
     halo = comm.gather(halo_cells(comm, V), root=0)

@@ -1,0 +1,92 @@
+"""Memory and time of the distributed model against the whole model (issue 13, docs/scaling.md
+"The distributed model"): one elastic scene, the same command line, `[parallel] model = "whole"`
+(every rank builds the whole model) and `"distributed"` (each rank builds its part of dolfinx's
+distributed mesh), on 1 and 2 ranks x 1 thread, one after the other in this run.
+
+Per configuration: each rank's peak resident memory (run.json's peak_memory_mib; for the whole
+model on one rank the process's), the set-up (wall time before the time loop: mesh, assembly, the
+time step, the input forces), the time loop per step, and the largest history difference from the
+whole model's one-rank run (relative to each quantity's largest value).
+
+    /usr/bin/python3 workflows/distributed_memory.py [--quick]
+
+writes workflows/results/distributed_memory.json and prints the README's markdown table. The
+default scene is the free-field box refined to h = 2.5 m in a 160 x 80 x 160 m block (139 425
+nodes, 418 275 dofs: the paper-scale case 3 has 497 610), 0.05 s; --quick: h = 5 m (20 k dofs).
+Run it on a quiet machine: the ranks share the same 2 cores and memory bus.
+"""
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from pyfem.compare import largest_difference  # noqa: E402
+
+PYTHON = "/usr/bin/python3"
+RESULTS = REPO / "workflows" / "results" / "distributed_memory.json"
+SCENE = "workflows/scenes/box_vertical_sv.toml"
+# A block of rock 160 x 80 x 160 m under the vertical SV pulse, monitors inside cells.
+SETTINGS = ["mesh.size=[160.0, 80.0, 160.0]", "wave.surface=210.0", "time.duration=0.05", "output.xdmf_interval=0.0",
+            "monitor.0.point=[81.25, 41.25, 81.25]", "monitor.1.point=[81.25, 41.25, 158.75]",
+            "monitor.2.point=[81.25, 41.25, 21.25]", "output.interval=0.005"]
+
+
+def run(ranks: int, model: str, h: float, out: Path) -> dict:
+    command = [PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), "--set", f"mesh.h={h}",
+               "--set", f"parallel.model={model}"]
+    for setting in SETTINGS:
+        command += ["--set", setting]
+    if ranks > 1:
+        command = ["mpirun", "--allow-run-as-root", "-q", "--bind-to", "none", "-n", str(ranks)] + command
+    env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1")
+    began = time.perf_counter()
+    result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise SystemExit(f"{' '.join(command)} failed:\n{result.stderr[-3000:]}")
+    wall = time.perf_counter() - began
+    summary = json.loads((out / "run.json").read_text())
+    mpi = summary.get("mpi") or {}
+    peaks = mpi.get("peak_memory_mib") or [summary["peak_memory_mib"]]
+    loop = summary["loop_seconds"]
+    return {"ranks": ranks, "model": model, "dofs": summary["dofs"], "steps": summary["steps"],
+            "peak_memory_mib": [round(p) for p in peaks], "command_seconds": round(wall, 1),
+            "setup_seconds": round(summary["wall_seconds"] - loop, 1),
+            "ms_per_step": round(1e3 * loop / summary["steps"], 2),
+            "owned_nodes": mpi.get("owned_nodes"), "ghost_nodes": mpi.get("ghost_nodes")}
+
+
+def main(argv: list) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="h = 5 m (20 k dofs)")
+    args = parser.parse_args(argv)
+    h = 5.0 if args.quick else 2.5
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        base = Path(scratch)
+        for ranks, model in ((1, "whole"), (1, "distributed"), (2, "whole"), (2, "distributed")):
+            out = base / f"{model}_{ranks}"
+            rows.append(run(ranks, model, h, out))
+            rows[-1]["difference_from_whole_one_rank"] = (0.0 if not rows[:-1] else
+                                                          largest_difference(out, base / "whole_1"))
+            print(json.dumps(rows[-1]), flush=True)
+    result = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.node()}, {os.cpu_count()} cores",
+              "scene": SCENE, "settings": [f"mesh.h={h}"] + SETTINGS, "rows": rows}
+    if not args.quick:
+        RESULTS.write_text(json.dumps(result, indent=1) + "\n")
+    print("| model | ranks | peak memory per rank (MiB) | set-up (s) | time loop (ms/step) | difference |")
+    print("|---|---|---|---|---|---|")
+    for row in rows:
+        print(f"| {row['model']} | {row['ranks']} | {' / '.join(map(str, row['peak_memory_mib']))} | "
+              f"{row['setup_seconds']} | {row['ms_per_step']} | {row['difference_from_whole_one_rank']:.1e} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
