@@ -62,8 +62,9 @@ def check_supported(scene: Scene, resume: bool = False) -> None:
         raise SceneError(KEY, "distributed", allowed.format("a [static] stage"))
     for name, table in scene["materials"].items():
         for law in ("plasticity", "damage"):
-            if table.get(law):
-                raise SceneError(KEY, "distributed", allowed.format(f"[materials.{name}.{law}]"))
+            if (table.get(law) or {}).get("integration") == "reduced":
+                raise SceneError(KEY, "distributed", allowed.format(f"materials.{name}.{law}.integration = "
+                                                                    "\"reduced\""))
     if scene["time"].get("local_stepping") is True:
         raise SceneError(KEY, "distributed", allowed.format("time.local_stepping = true"))
     other = [name for name in scene["output"]["fields"] if name not in FIELDS]
@@ -96,13 +97,15 @@ def fetch_owned(comm: MPI.Comm, index_map, owned: np.ndarray, wanted: np.ndarray
     return out
 
 
-def owned_rows_local(V, matrix, release: bool = False) -> tuple[sp.bsr_matrix, np.ndarray, np.ndarray]:
+def owned_rows_local(V, matrix, release: bool = False,
+                     local_nodes: np.ndarray | None = None) -> tuple[sp.bsr_matrix, np.ndarray, np.ndarray]:
     """The owned rows of the PETSc `matrix` (getValuesCSR: owned rows, global columns) as (3, 3)
     blocks with local columns: the local nodes are the index map's owned nodes, its ghosts, then the
     extra ghosts (global nodes of the owned rows' columns that the index map does not hold). Built
     block by block from PETSc's arrays (no scalar CSR copy: the set-up's memory peak is the matrix's).
 
     release: destroy the PETSc matrix once its arrays are read (one copy fewer at the peak).
+    local_nodes: the numbering to use (another matrix's of the same pattern), None: made here.
 
     Returns (rows: BSR (3 owned, 3 local), columns sorted in each row; the extra ghosts' global
     nodes; every local node's global node)."""
@@ -132,10 +135,16 @@ def owned_rows_local(V, matrix, release: bool = False) -> tuple[sp.bsr_matrix, n
         for c in range(3):
             blocks[:, r, c] = values[base + c]
     del indptr, columns, values, within, base
-    extra = np.setdiff1d(node, mapped)
-    local_nodes = np.concatenate([mapped, extra])
+    if local_nodes is None:
+        extra = np.setdiff1d(node, mapped)
+        local_nodes = np.concatenate([mapped, extra])
+    else:
+        extra = local_nodes[len(mapped):]
     order = np.argsort(local_nodes)
-    local_columns = order[np.searchsorted(local_nodes[order], node)].astype(np.int32)
+    found = np.minimum(np.searchsorted(local_nodes[order], node), len(order) - 1)
+    if np.any(local_nodes[order][found] != node):
+        raise RuntimeError("stiffness: a column outside the given local numbering")
+    local_columns = order[found].astype(np.int32)
     rows = sp.bsr_matrix((blocks, local_columns, block_indptr), shape=(3 * n_owned, 3 * len(local_nodes)))
     rows.sort_indices()  # in place
     return rows, extra, local_nodes
@@ -174,6 +183,19 @@ def local_stiffness(comm: MPI.Comm, index_map, rows: sp.bsr_matrix, n_local: int
     np.cumsum(counts, out=block_indptr[1:])
     return (block_indptr, np.concatenate([col, ghost_col[order]]).astype(np.int32),
             np.concatenate([rows.data, ghost_blocks[order]]))
+
+
+def drop_zero_blocks(matrix: tuple) -> tuple:
+    """The kernel's (indptr, indices, blocks) without its all-zero blocks (the element loop's cells
+    leave zero blocks where only they coupled two nodes; the whole model's matrix drops them too)."""
+    indptr, indices, blocks = matrix
+    keep = np.any(blocks.reshape(-1, 9) != 0.0, axis=1)
+    if keep.all():
+        return matrix
+    row = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))[keep]
+    kept_indptr = np.zeros_like(indptr)
+    np.cumsum(np.bincount(row, minlength=len(indptr) - 1), out=kept_indptr[1:])
+    return kept_indptr, np.ascontiguousarray(indices[keep]), np.ascontiguousarray(blocks[keep])
 
 
 @dataclass
@@ -245,6 +267,8 @@ class RankModel:
     n_dofs_global: int = 0
     faces_report: list = field(default_factory=list)
     setup_seconds: float = 0.0
+    estimates: tuple = (0.0, None)   # omega_max^2: the Gershgorin bound, the power iteration's (or None)
+    loop_cells: dict = field(default_factory=dict)  # element-loop region -> its owned cells (local)
 
     @property
     def n_local(self) -> int:
@@ -297,7 +321,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     mass = lumped_mass(V, materials.rho, quadrature)
     matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
     n_dofs_global = matrix.getSize()[0]
-    rows, extra, local_nodes = owned_rows_local(V, matrix, release=True)
+    rows, extra, local_nodes = owned_rows_local(V, matrix, release=True)  # every cell's: the time step's
     index_map = V.dofmap.index_map
     n_owned = index_map.size_local
     centre = scene.get("boundary", {}).get("centre")
@@ -324,15 +348,173 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     mass = np.concatenate([mass, fetch_owned(comm, index_map, mass[:n_owned, None], extra)[:, 0]])
     kernel_matrix = local_stiffness(comm, index_map, rows, len(local_nodes), local_nodes)
     del rows  # (the kernel's matrix holds the owned rows)
+    plan = ghost_plan(comm, index_map, local_nodes, n_owned)
+    mass = np.ascontiguousarray(mass)
+    estimates = omega2_estimates(scene, comm, plan, kernel_matrix, mass, coords, n_owned)
+    loop_cells = element_loop_cells(scene, model)
+    if loop_cells:  # the matrix of the other cells (the whole model's NonlinearRegions.stiffness)
+        del kernel_matrix
+        removed = np.concatenate([cells for cells, _ in loop_cells.values()])
+        matrix = elastic_stiffness_matrix(V, *_without_cells(materials, removed), quadrature)
+        rows, _, _ = owned_rows_local(V, matrix, release=True, local_nodes=local_nodes)
+        if len(spring_nodes):
+            add_to_diagonal(rows, spring_nodes, springs)
+        kernel_matrix = drop_zero_blocks(local_stiffness(comm, index_map, rows, len(local_nodes), local_nodes))
+        del rows
     alpha, beta = damping_coefficients(scene)
     return RankModel(comm=comm, scene=scene, model=model, n_owned=n_owned, local_nodes=local_nodes, coords=coords,
-                     mass=np.ascontiguousarray(mass), matrix=kernel_matrix,
-                     plan=ghost_plan(comm, index_map, local_nodes, n_owned),
+                     mass=mass, matrix=kernel_matrix, plan=plan, estimates=estimates,
+                     loop_cells={name: owned for name, (_, owned) in loop_cells.items()},
                      dashpot_nodes=np.ascontiguousarray(dashpot_nodes, dtype=np.int32),
                      dashpot_matrices=np.ascontiguousarray(dashpots, dtype=np.float64),
                      constraints=boundary_constraints(faces), alpha=alpha, beta=beta, n_dofs_global=n_dofs_global,
                      faces_report=_whole_faces(comm, faces),
                      setup_seconds=time.perf_counter() - began)
+
+
+# --- the element loop on the ranks -----------------------------------------------------------------
+
+def element_loop_cells(scene: Scene, model) -> dict:
+    """Element-loop region -> (its local cells, owned and ghost, in its zone; its owned ones):
+    `pyfem.elements.nonlinear_component`'s cells on this rank (none: {})."""
+    from pyfem.elements import cells_in_zone, region_cells, scene_laws
+
+    laws, _ = scene_laws(scene)
+    out = {}
+    for name, given in laws.items():
+        cells = cells_in_zone(model, region_cells(model, name), given.get("zone"))
+        owned = cells[cells < model.n_cells]
+        if given.get("zone") is not None and model.mesh.comm.allreduce(len(owned)) == 0:
+            raise SceneError(f"materials.{name}.plasticity.zone", given["zone"],
+                             f"a box holding the centroid of a cell of region {name!r}")
+        out[name] = (cells, owned)
+    return out
+
+
+def _without_cells(materials, removed: np.ndarray) -> tuple:
+    """(lambda, G) fields of `materials` zero on the `removed` local cells (pyfem.elements.linear_stiffness)."""
+    from dolfinx import fem
+
+    fields = []
+    for key in ("lame_lambda", "shear_modulus"):
+        values = fem.Function(getattr(materials, key).function_space, name=key)
+        values.x.array[:] = getattr(materials, key).x.array
+        values.x.array[materials.dof_of_cell[np.asarray(removed, dtype=np.int32)]] = 0.0
+        fields.append(values)
+    return tuple(fields)
+
+
+@dataclass
+class RankRegions:
+    """The element loop of a rank: `counted`, pyfem.elements.NonlinearRegions of its owned cells
+    (their energy is this rank's; regions without an owned cell left out), and `halo`, the same of
+    the other ranks' cells that touch its owned nodes (their forces act here, their energy is
+    their owner's). A halo cell's arrays are computed by its owner and sent once at set-up, so a
+    rank needs no cell beyond dolfinx's ghost cells."""
+
+    counted: object
+    halo: object | None
+
+
+def _region_tables(scene: Scene) -> tuple[dict, dict, dict, dict]:
+    """(laws, options, zones, integration) of pyfem.elements.nonlinear_component for the scene."""
+    from pyfem.elements import scene_laws
+
+    laws, mean_dilatation = scene_laws(scene)
+    tables = ({}, {}, {}, {})
+    for name, given in laws.items():
+        given = dict(given)
+        law = given.pop("law")
+        zone = given.pop("zone", None)
+        tables[3][name] = given.pop("integration", "full")
+        tables[0][name] = (law, {key: float(value) for key, value in given.items()})
+        tables[1][name] = {"mean_dilatation": bool(mean_dilatation.get(name, False))}
+        if zone is not None:
+            tables[2][name] = list(zone)
+    return tables
+
+
+def rank_regions(part: RankModel) -> RankRegions | None:
+    """This rank's element loop (`RankRegions`), None without element-loop materials."""
+    from pyfem.elements import ElementArrays, NonlinearRegions, element_arrays, quadrature_initial_stress
+    from pyfem.initial_stress import stress_field_from_scene
+
+    if not part.loop_cells:
+        return None
+    comm, model = part.comm, part.model
+    laws, options, zones, integration = _region_tables(part.scene)
+    field = stress_field_from_scene(part.scene)
+
+    def regions(arrays: dict):
+        stresses = {name: None if field is None else quadrature_initial_stress(a.points, field)
+                    for name, a in arrays.items()}
+        found = NonlinearRegions(stiffness=None, components=[], arrays=arrays,
+                                 laws={name: laws[name] for name in arrays}, initial_stress=stresses,
+                                 options={name: options[name] for name in arrays}, zones=zones,
+                                 integration=integration)
+        found.new_components()
+        return found
+
+    counted_arrays = {name: element_arrays(model.V, cells) for name, cells in part.loop_cells.items()}
+    # Each owned cell goes to every rank owning one of its nodes (its halo there).
+    index_map = model.V.dofmap.index_map
+    owner = np.concatenate([np.full(index_map.size_local, comm.rank), index_map.owners]).astype(np.int64)
+    outgoing = [[] for _ in range(comm.size)]
+    for name, arrays in counted_arrays.items():
+        node_rank = owner[arrays.cell_nodes]
+        for q in np.unique(node_rank):
+            if q == comm.rank:
+                continue
+            rows = np.flatnonzero((node_rank == q).any(axis=1))
+            outgoing[q].append((name, part.local_nodes[arrays.cell_nodes[rows]], arrays.inverse_jacobians[rows],
+                                arrays.weights[rows], arrays.points[rows]))
+    incoming = comm.alltoall(outgoing)
+    order = np.argsort(part.local_nodes)
+    halo_arrays = {}
+    for name in laws:
+        pieces = [piece for from_rank in incoming for piece in from_rank if piece[0] == name]
+        if not pieces:
+            continue
+        global_nodes = np.concatenate([piece[1] for piece in pieces])
+        position = np.minimum(np.searchsorted(part.local_nodes[order], global_nodes), len(order) - 1)
+        if np.any(part.local_nodes[order][position] != global_nodes):
+            raise RuntimeError(f"element loop {name!r}: a halo cell's node is not on this rank")
+        template = element_arrays(model.V, np.zeros(0, dtype=np.int32))
+        halo_arrays[name] = ElementArrays(
+            cells=np.full(len(global_nodes), -1, dtype=np.int32),
+            cell_nodes=np.ascontiguousarray(order[position], dtype=np.int32),
+            reference_gradients=template.reference_gradients,
+            inverse_jacobians=np.ascontiguousarray(np.concatenate([piece[2] for piece in pieces])),
+            weights=np.ascontiguousarray(np.concatenate([piece[3] for piece in pieces])),
+            points=np.ascontiguousarray(np.concatenate([piece[4] for piece in pieces])), tensor=template.tensor)
+    counted = regions({name: arrays for name, arrays in counted_arrays.items() if len(arrays.cells)})
+    return RankRegions(counted=counted, halo=regions(halo_arrays) if halo_arrays else None)
+
+
+def region_summary(comm: MPI.Comm, counted) -> dict:
+    """NonlinearRegions.region_summary of the whole model from the ranks' counted cells: counts,
+    volumes and energies summed, peaks the largest (rank 0; {} elsewhere)."""
+    pieces = comm.gather(counted.region_summary(), root=0)
+    if comm.rank != 0:
+        return {}
+    summed = ("cells", "points", "volume", "damaged_volume", "yielded_volume", "tension_points", "shear_points",
+              "dissipated_energy", "yielded_points_near_zone_edge")
+    largest = ("peak_damage", "peak_plastic_strain", "peak_crack_opening")
+    out: dict = {}
+    for piece in pieces:
+        for name, values in piece.items():
+            if name not in out:
+                out[name] = dict(values)
+                continue
+            whole = out[name]
+            for key, value in values.items():
+                if key in summed:
+                    whole[key] += value
+                elif key in largest:
+                    whole[key] = max(whole[key], value)
+                elif key == "cracked_volume_by_opening":
+                    whole[key] = {w: whole[key][w] + v for w, v in value.items()}
+    return out
 
 
 # --- the time step ------------------------------------------------------------------------------
@@ -344,20 +526,21 @@ def start_vector(coords: np.ndarray) -> np.ndarray:
     return np.stack([np.sin(phase * (k + 1.0) + 0.5 * k) * 43758.5453 % 1.0 - 0.5 for k in range(3)], axis=1)
 
 
-def power_iteration(part: RankModel, iterations: int) -> float:
+def power_iteration(comm: MPI.Comm, plan: GhostPlan, matrix: tuple, mass: np.ndarray, coords: np.ndarray,
+                    n_owned: int, iterations: int) -> float:
     """The largest eigenvalue of M^-1/2 K M^-1/2 as the kernel's power_iteration estimates it, on
-    the ranks' owned rows with a ghost exchange per product."""
-    comm, n_owned = part.comm, part.n_owned
-    indptr, indices, blocks = part.matrix
-    # The kernel's matrix, its owned rows only (a ghost's row holds its blocks to owned nodes only).
+    the ranks' owned rows of the kernel's `matrix` with a ghost exchange per product."""
+    indptr, indices, blocks = matrix
+    n_local = len(indptr) - 1
+    # The owned rows only (a ghost's row holds its blocks to owned nodes only).
     owned = sp.bsr_matrix((blocks[:indptr[n_owned]], indices[:indptr[n_owned]], indptr[:n_owned + 1]),
-                          shape=(3 * n_owned, 3 * part.n_local))
-    inverse_sqrt_mass = 1.0 / np.sqrt(part.mass)
-    x = start_vector(part.coords)
+                          shape=(3 * n_owned, 3 * n_local))
+    inverse_sqrt_mass = 1.0 / np.sqrt(mass)
+    x = start_vector(coords)
     x /= math.sqrt(comm.allreduce(float(np.sum(x[:n_owned] ** 2))))
     estimate = 0.0
     for _ in range(iterations):
-        part.plan.update(comm, x)
+        plan.update(comm, x)
         y = (owned @ (inverse_sqrt_mass[:, None] * x).reshape(-1)).reshape(-1, 3)
         y *= inverse_sqrt_mass[:n_owned, None]
         rayleigh, y_norm2 = comm.allreduce(np.array([float(np.sum(x[:n_owned] * y)), float(np.sum(y * y))]))
@@ -368,16 +551,27 @@ def power_iteration(part: RankModel, iterations: int) -> float:
     return estimate
 
 
+def omega2_estimates(scene: Scene, comm: MPI.Comm, plan: GhostPlan, matrix: tuple, mass: np.ndarray,
+                     coords: np.ndarray, n_owned: int) -> tuple[float, float | None]:
+    """(Gershgorin bound, power iteration's estimate or None) of omega_max^2 of the elastic
+    stiffness of every cell with the springs, as pyfem.solver.choose_time_step takes them."""
+    from pyfem import _kernels
+    from pyfem.solver import POWER_ITERATIONS
+
+    indptr, indices, blocks = matrix
+    # A ghost row holds only its blocks to owned nodes: its row sums are below its owner's.
+    bound = comm.allreduce(float(_kernels.gershgorin_bound(indptr, indices, blocks, mass)), op=MPI.MAX)
+    power = None
+    if scene["time"].get("power_iteration", True):
+        power = power_iteration(comm, plan, matrix, mass, coords, n_owned, POWER_ITERATIONS)
+    return bound, power
+
+
 def choose_time_step(part: RankModel):
     """pyfem.solver.choose_time_step on the ranks (module docstring)."""
-    from pyfem import _kernels
-    from pyfem.solver import POWER_ITERATIONS, time_step_from
+    from pyfem.solver import time_step_from
 
-    indptr, indices, blocks = part.matrix
-    # A ghost row holds only its blocks to owned nodes: its row sums are below its owner's.
-    bound = part.comm.allreduce(float(_kernels.gershgorin_bound(indptr, indices, blocks, part.mass)), op=MPI.MAX)
-    power = power_iteration(part, POWER_ITERATIONS) if part.scene["time"].get("power_iteration", True) else None
-    return time_step_from(part.scene, bound, power, part.beta)
+    return time_step_from(part.scene, *part.estimates, part.beta)
 
 
 # --- monitors -------------------------------------------------------------------------------------
@@ -393,13 +587,13 @@ class RankMonitors:
     stress: object = None
 
 
-def locate_monitors(part: RankModel) -> RankMonitors:
+def locate_monitors(part: RankModel, loop: RankRegions | None = None) -> RankMonitors:
     """Each scene monitor on exactly one rank; a point in no owned cell of any rank is the whole
     model's PointOutsideMesh (the scene key named)."""
     from dolfinx import geometry
 
     from pyfem.operators import PointOutsideMesh
-    from pyfem.solver import monitor_stress_operator
+    from pyfem.solver import attach_kernel_points, monitor_stress_operator
 
     monitors = part.scene.get("monitor", [])
     if not monitors:
@@ -424,13 +618,17 @@ def locate_monitors(part: RankModel) -> RankMonitors:
         return RankMonitors(mine, np.zeros((0, 0), dtype=np.int32), np.zeros((0, 0)))
     cells = np.array([min(c for c in colliding.links(j) if c < owned_cells) for j in mine], dtype=np.int32)
     nodes, weights = model.point_weights(points[mine], cells)
-    return RankMonitors(mine, nodes, weights, monitor_stress_operator(part.scene, model, points[mine], cells))
+    stress = monitor_stress_operator(part.scene, model, points[mine], cells)
+    if loop is not None:  # a monitor in an element-loop cell reads the law there (its owner counts the cell)
+        attach_kernel_points(stress, points[mine], loop.counted)
+    return RankMonitors(mine, nodes, weights, stress)
 
 
 # --- the run --------------------------------------------------------------------------------------
 
-def _stepper(part: RankModel, dt: float, input_arrays: dict | None):
-    """The kernel's Stepper of the rank's share (pyfem.distributed.local_stepper's objects, built here)."""
+def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRegions | None):
+    """The kernel's Stepper of the rank's share (pyfem.distributed.local_stepper's objects, built here):
+    with the element loop its counted cells (their energy this rank's) and its halo cells (not)."""
     from pyfem import _kernels
     from pyfem.solver import seismic_input_kernel
 
@@ -443,6 +641,11 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None):
                                 np.ascontiguousarray(part.constraints.projection, dtype=np.float64))
     if input_arrays is not None and len(input_arrays["nodes"]):
         stepper.add_seismic_input(seismic_input_kernel(input_arrays))
+    if loop is not None:
+        for component in loop.counted.components:
+            stepper.add_internal_force(component)
+        for component in ([] if loop.halo is None else loop.halo.components):
+            stepper.add_internal_force(component, count_energy=False)
     exchange = part.plan.kernel_exchange(part.comm, part.n_local)
     stepper.set_partition(part.n_owned, exchange)
     return stepper, exchange
@@ -522,11 +725,13 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
 
 
 def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
-    from pyfem.output import (ENERGY_COLUMNS, ENERGY_FORMAT, FREEFIELD_COLUMNS, MONITOR_COLUMNS, MONITOR_FORMAT,
-                              STRESS_COLUMNS, _VOIGT, CsvHistory, _write_json, max_principal, monitor_peaks,
-                              peak_memory_mib, previous_run_dir)
+    from pyfem.elements import blank_point_values, initial_warnings, scene_laws
+    from pyfem.output import (DAMAGE_COLUMNS, ENERGY_COLUMNS, ENERGY_FORMAT, FREEFIELD_COLUMNS,
+                              INTERNAL_ENERGY_COLUMNS, MONITOR_COLUMNS, MONITOR_FORMAT, STRESS_COLUMNS, _VOIGT,
+                              CsvHistory, _write_json, max_principal, monitor_peaks, peak_memory_mib,
+                              previous_run_dir)
     from pyfem.seismic.setup import scene_record, seismic_input_from_scene
-    from pyfem.solver import kernel_threads, whole_steps
+    from pyfem.solver import flow_warnings, kernel_threads, whole_steps
 
     root = comm.rank == 0
     wall_start = time.perf_counter()
@@ -534,12 +739,21 @@ def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
     part.setup_seconds = comm.allreduce(part.setup_seconds, op=MPI.MAX)
     time_step = choose_time_step(part)
     n_steps = whole_steps(scene["time"]["duration"], time_step)
+    loop = rank_regions(part)
+    if loop is not None:  # every rank's warnings on every rank (run.json is rank 0's)
+        seen = list(getattr(scene, "warnings", []))
+        for message in dict.fromkeys(m for found in comm.allgather(initial_warnings(loop.counted, scene))
+                                     for m in found):
+            if message not in seen:
+                scene.warn(message)
+        flow_warnings(scene, scene_laws(scene)[0], time_step)
+    energy_columns = ENERGY_COLUMNS + (INTERNAL_ENERGY_COLUMNS if loop is not None else [])
     freefield = input_arrays = None
     if "seismic_input" in scene.effects:
         model = part.model
         view = _InputView(model.faces, part.coords[:len(model.node_coords)], model.bounds)
         freefield, input_arrays = seismic_input_from_scene(scene, view, scene_record(scene))
-    monitors = locate_monitors(part)
+    monitors = locate_monitors(part, loop)
     if on_plan is not None:
         shown = plan(part, time_step, n_steps)
         if root:
@@ -553,11 +767,11 @@ def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
     kernel_threads()
-    stepper, exchange = _stepper(part, time_step.dt, input_arrays)
+    stepper, exchange = _stepper(part, time_step.dt, input_arrays, loop)
     names = [m["name"] for m in scene.get("monitor", [])]
     points = np.array([m["point"] for m in scene.get("monitor", [])], dtype=float).reshape(-1, 3)
     columns = list(MONITOR_COLUMNS) + (FREEFIELD_COLUMNS if freefield is not None else []) + \
-        (STRESS_COLUMNS if names else [])
+        (STRESS_COLUMNS if names else []) + (DAMAGE_COLUMNS if names and loop is not None else [])
     regions = comm.gather(list(zip(monitors.index.tolist(), monitors.stress.regions))
                           if monitors.stress is not None else [], root=0)
     model = part.model
@@ -574,7 +788,7 @@ def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
     histories, fields = {}, None
     if root:
         _write_json(out / "run.json", summary)
-        histories["energy"] = CsvHistory(out / "energy.csv", ENERGY_COLUMNS, ENERGY_FORMAT)
+        histories["energy"] = CsvHistory(out / "energy.csv", energy_columns, ENERGY_FORMAT)
         if names:
             (out / "monitors").mkdir(exist_ok=True)
             for name in names:
@@ -604,10 +818,21 @@ def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
             dynamic = np.stack([dynamic_tensor[:, i, j] for i, j in _VOIGT], axis=1)
             static = np.stack([monitors.stress.static[:, i, j] for i, j in _VOIGT], axis=1)
             total = dynamic + static
+            kernel = None
+            if loop is not None:  # the law's stress where the cell is in the element loop
+                points_at = monitors.stress.kernel_points
+                kernel = (loop.counted.point_values(points_at) if points_at is not None
+                          else blank_point_values(np.zeros(len(monitors.index), dtype=bool)))
+                found = kernel["found"]
+                total[found] = kernel["stress"][found]
+                dynamic[found] = total[found] - static[found]
             values += [total, max_principal(total)[:, None], max_principal(dynamic)[:, None]]
+            if kernel is not None:
+                values += [kernel["damage"][:, None], kernel["damage_type"][:, None].astype(float),
+                           kernel["plastic_strain"][:, None]]
             mine = list(zip(monitors.index.tolist(), np.hstack(values)))
         energy = stepper.energy()
-        sums = comm.reduce(np.array([energy[name] for name in ENERGY_COLUMNS[1:]]), root=0)
+        sums = comm.reduce(np.array([energy[name] for name in energy_columns[1:]]), root=0)
         reactions = None
         if part.constraints is not None:
             reactions = comm.reduce(part.constraints.face_resultants(stepper.reactions()), root=0)
@@ -665,8 +890,12 @@ def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
             summary["status"] = status
             summary["time_reached"] = times[-1] if times else None
             _write_json(out / "run.json", summary)
+    cells = (0, 0) if loop is None else (
+        sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
+        0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
     per_rank = comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts,
-                            int(exchange.bytes_sent_per_step), round(peak_memory_mib(), 1)), root=0)
+                            int(exchange.bytes_sent_per_step), *cells, round(peak_memory_mib(), 1)), root=0)
+    nonlinear = None if loop is None else region_summary(comm, loop.counted)
     if not root:
         return {}
     from pyfem.output import RunWriter
@@ -675,10 +904,12 @@ def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
         "status": status, "time_reached": times[-1], "wall_seconds": time.perf_counter() - wall_start,
         "loop_seconds": loop_seconds, "setup_seconds": part.setup_seconds,
         "seconds_per_step": loop_seconds / max(1, n_steps),
-        "energy": RunWriter._energy_summary(np.array(energy_rows)),
+        "energy": RunWriter._energy_summary(np.array(energy_rows), energy_columns),
         "monitors": monitor_peaks(np.array(rows_kept), columns, names, np.array(times), monitor_regions) if names else {},
         "mpi": {"ranks": comm.size, **{name: [row[k] for row in per_rank] for k, name in enumerate(
-            ("owned_nodes", "ghost_nodes", "extra_ghost_nodes", "bytes_sent_per_step", "peak_memory_mib"))}},
+            ("owned_nodes", "ghost_nodes", "extra_ghost_nodes", "bytes_sent_per_step", "element_loop_cells",
+             "halo_cells", "peak_memory_mib"))}},
+        **({"nonlinear_regions": nonlinear} if nonlinear is not None else {}),
     })
     _write_json(out / "run.json", summary)
     return summary

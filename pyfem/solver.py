@@ -142,7 +142,7 @@ def nonlinear_regions(scene: Scene, model, time_step: TimeStep):
     matrix into kernel element loops (pyfem.elements), or None when there are none. Their laws start
     from the scene's initial stress at the quadrature points; warnings go to the scene (also a step
     too close to the elastic limit for non-associated flow, `plastic_frequency_factor`)."""
-    from pyfem.elements import initial_warnings, nonlinear_component, plastic_frequency_factor, scene_laws
+    from pyfem.elements import initial_warnings, nonlinear_component, scene_laws
     from pyfem.initial_stress import stress_field_from_scene
 
     laws, mean_dilatation = scene_laws(scene)
@@ -156,6 +156,15 @@ def nonlinear_regions(scene: Scene, model, time_step: TimeStep):
                          f"{error}")
     for message in initial_warnings(nonlinear, scene):
         scene.warn(message)
+    flow_warnings(scene, laws, time_step)
+    return nonlinear
+
+
+def flow_warnings(scene: Scene, laws: dict, time_step: TimeStep) -> None:
+    """Warns where non-associated Mohr-Coulomb flow can raise a frequency past the step's margin to the
+    elastic stable limit (`pyfem.elements.plastic_frequency_factor`); laws as `scene_laws` gives them."""
+    from pyfem.elements import plastic_frequency_factor
+
     for name, parameters in laws.items():
         if parameters["law"] == "mohr_coulomb":
             factor = plastic_frequency_factor(parameters["poisson_ratio"], parameters["friction_angle"],
@@ -166,7 +175,6 @@ def nonlinear_regions(scene: Scene, model, time_step: TimeStep):
                            f"friction_angle) can raise frequencies by up to {100 * (factor - 1):.0f} %, more "
                            f"than the step's margin {100 * margin:.0f} % to the elastic stable limit: lower "
                            "time.safety or time.dt")
-    return nonlinear
 
 
 def attach_kernel_points(stress: MonitorStress, points: np.ndarray, nonlinear) -> None:

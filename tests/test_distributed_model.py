@@ -7,10 +7,16 @@ ghosts*, nodes an owned row reaches that dolfinx's index map does not hold) on t
 - a layered box (a soft layer between rock) under an oblique SV wavelet with Rayleigh damping,
   monitors inside cells (tests/scenes/distributed_box.toml);
 - a circular tunnel in the tetrahedral mesh of a user's gmsh script, its wall traction-free, roller
-  faces with reactions (tests/scenes/mpi_tunnel_tet.toml).
-Every monitor, energy and reaction history equals the whole model's to 1e-10 of its dimension's
+  faces with reactions (tests/scenes/mpi_tunnel_tet.toml);
+- the element loop: a Mohr-Coulomb layer that yields between rock and a concrete layer that cracks
+  (the lining's damage law) under an oblique SV pulse over geostatic stress
+  (tests/scenes/distributed_layers.toml): each cell counted by one rank, the other ranks' cells that
+  touch its nodes computed as its halo (their arrays sent once by their owners).
+Every monitor, energy and reaction history (with the laws' stress, damage and plastic strain at the
+monitors, and their stored and dissipated energy) equals the whole model's to 1e-10 of its dimension's
 largest value (the tunnel's accelerations and reactions to a few 1e-9: net forces of a long wave on
-a fine mesh, round-off of K u in another order, as tests/test_mpi.py explains), and so does the
+a fine mesh, round-off of K u in another order, as tests/test_mpi.py explains), so do the element
+loop's regions in run.json (yielded and damaged volumes, peaks, dissipated energy), and so does the
 last displacement field (nodes matched by coordinates), after asserting that the wave arrived and
 that no rank held the whole model. The time step comes from the ranks' own power iteration (a start
 vector of the node coordinates): its critical step is within 1e-3 of the whole model's and the same
@@ -35,8 +41,9 @@ MPIRUN = shutil.which("mpirun")
 TOLERANCE = 1.0e-10
 DISTRIBUTED = ("--set", "parallel.model=distributed")
 
-SCENES = {"box": "tests/scenes/distributed_box.toml", "tunnel": "tests/scenes/mpi_tunnel_tet.toml"}
-RANKS = {"box": (1, 2, 3), "tunnel": (1, 3)}
+SCENES = {"box": "tests/scenes/distributed_box.toml", "tunnel": "tests/scenes/mpi_tunnel_tet.toml",
+          "layers": "tests/scenes/distributed_layers.toml"}
+RANKS = {"box": (1, 2, 3), "tunnel": (1, 3), "layers": (1, 2, 3)}
 # The tunnel's net forces (tests/test_mpi.py NET_FORCE_TOLERANCE): measured 1.7e-9 and 9e-10 on 3 ranks.
 TOLERANCES = {"tunnel": {"acceleration": 3.0e-9, "reaction": 2.0e-9}}
 
@@ -90,6 +97,12 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
     # Something happened: the wave arrived (and at the tunnel's crown, the wall was stressed).
     if name == "box":
         assert whole["monitors"]["centre"]["displacement"] > 5.0e-4
+    elif name == "layers":  # the weak layer yielded, the concrete cracked in part
+        weak, concrete = whole["nonlinear_regions"]["weak"], whole["nonlinear_regions"]["concrete"]
+        assert weak["yielded_volume"] > 0.0 and weak["peak_damage"] > 0.0
+        assert 0.0 < concrete["damaged_volume"] < 0.9 * concrete["volume"] and concrete["tension_points"] > 0
+        assert whole["monitors"]["layer"]["plastic_strain_max"] > 0.0
+        assert whole["monitors"]["concrete"]["damage_max"] > 0.0
     else:
         assert "(unnamed)" in whole["traction_free_surfaces"], "the tunnel's wall is free, not an input face"
         assert whole["monitors"]["crown"]["displacement"] > 2e-4 and whole["monitors"]["crown"]["s1_dynamic_max"] > 1e3
@@ -102,8 +115,20 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
     if ranks > 1:
         assert all(o + g < whole["nodes"] for o, g in zip(mpi["owned_nodes"], mpi["ghost_nodes"]))
         assert all(b > 0 for b in mpi["bytes_sent_per_step"])
-    if ranks == 3:
+    if ranks == 3 and name != "layers":  # (the layers' 2-cell-thin box has none)
         assert sum(mpi["extra_ghost_nodes"]) > 0, "the partition exercised the extra ghosts"
+    if name == "layers":  # each cell counted once, the halo computed where it acts
+        assert sum(mpi["element_loop_cells"]) == sum(r["cells"] for r in whole["nonlinear_regions"].values())
+        assert (min(mpi["halo_cells"]) > 0) == (ranks > 1)
+        for region, values in whole["nonlinear_regions"].items():
+            for key, value in values.items():
+                got = ours["nonlinear_regions"][region][key]
+                if isinstance(value, dict):
+                    assert got == pytest.approx(value, rel=1e-9), (region, key)
+                elif isinstance(value, float):
+                    assert got == pytest.approx(value, rel=1e-9, abs=1e-9 * values["volume"]), (region, key)
+                else:
+                    assert got == value, (region, key)
     for face, expected in zip(ours["boundary_faces"], whole["boundary_faces"], strict=True):
         assert face == dict(expected, area=pytest.approx(expected["area"], rel=1e-12))
     assert ours["traction_free_surfaces"] == whole["traction_free_surfaces"]
@@ -131,7 +156,8 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
 
 @pytest.mark.parametrize("scene, extra, key", [
     ("tests/scenes/mpi_hard_contact.toml", (), "[contact]"),
-    ("tests/scenes/mpi_weak_layer.toml", (), "plasticity]"),
+    ("tests/scenes/mpi_weak_layer.toml", ("--set", 'materials.weak.plasticity.integration="reduced"'),
+     "integration"),
     ("workflows/scenes/box_vertical_sv.toml", ("--set", "time.local_stepping=true"), "local_stepping"),
     ("workflows/scenes/box_vertical_sv.toml", ("--set", 'output.fields=["displacement", "stress"]'), "stress"),
     ("workflows/scenes/box_vertical_sv.toml", ("--resume",), "--resume"),
