@@ -32,6 +32,7 @@ checkpoints and --resume.
 """
 from __future__ import annotations
 
+import json
 import math
 import shutil
 import sys
@@ -46,13 +47,15 @@ from mpi4py import MPI
 from pyfem.scene import Scene, SceneError
 
 KEY = "parallel.model"
+# The histories go to disk (and run.json's time reached) when this much wall time (s) passed since the last time.
+FLUSH_SECONDS = 2.0
 # The fields the distributed model writes (dolfinx's XDMFFile on the ranks).
 FIELDS = ("displacement", "velocity")
 
 
 # --- what the distributed model does not do yet ------------------------------------------------
 
-def check_supported(scene: Scene, resume: bool = False) -> None:
+def check_supported(scene: Scene) -> None:
     """Raises SceneError naming the first part of the scene that the distributed model does not
     build yet (every rank says the same: the scene is the same on every rank)."""
     allowed = "\"whole\" for scenes with {} (the distributed model does not build it yet, docs/scaling.md)"
@@ -71,9 +74,6 @@ def check_supported(scene: Scene, resume: bool = False) -> None:
     if other and scene["output"]["xdmf_interval"]:
         raise SceneError(KEY, "distributed", allowed.format(f"output.fields {other}") + "; it writes "
                          + " and ".join(FIELDS))
-    if resume:
-        raise SceneError(KEY, "distributed", "\"whole\" to --resume a run (the distributed model writes no "
-                         "checkpoints yet, docs/scaling.md)")
 
 
 # --- numbering: owned nodes, the index map's ghosts, the extra ghosts ---------------------------
@@ -655,7 +655,7 @@ class _Fields:
     """fields.xdmf written by dolfinx on every rank (displacement and velocity; a Q2 field
     interpolated into Q1 on the mesh's geometry)."""
 
-    def __init__(self, part: RankModel, path: Path) -> None:
+    def __init__(self, part: RankModel, path: Path, append: bool = False) -> None:
         from dolfinx import fem, io
 
         from pyfem.output import time_decimals
@@ -668,13 +668,16 @@ class _Fields:
         if part.model.order > 1:
             V1 = fem.VectorFunctionSpace(part.model.mesh, ("Lagrange", 1))
             self.output = {name: fem.Function(V1, name=name) for name in self.written}
-        self.file = io.XDMFFile(part.comm, str(path), "w")
-        self.file.write_mesh(part.model.mesh)
-        tags = part.model.cell_tags
-        tags.name = "region"  # the cell tags, as the whole model's fields.xdmf has them (run.json "regions")
-        self.file.write_meshtags(tags)
+        self.comm, self.path = part.comm, path
+        self.file = io.XDMFFile(part.comm, str(path), "a" if append else "w")
+        if not append:  # (a resumed run's file has them)
+            self.file.write_mesh(part.model.mesh)
+            tags = part.model.cell_tags
+            tags.name = "region"  # the cell tags, as the whole model's fields.xdmf has them (run.json "regions")
+            self.file.write_meshtags(tags)
         output = part.scene["output"]
         self.decimals = time_decimals(output["interval"], output["xdmf_interval"])
+        self.every = max(1, round(output["xdmf_interval"] / output["interval"]))
 
     def write(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
         t = round(t, self.decimals)  # 0.3, not 0.30000000000000004 (as RunWriter)
@@ -685,6 +688,12 @@ class _Fields:
             if self.output is not self.functions:
                 self.output[name].interpolate(self.functions[name])
             self.file.write_function(self.output[name], t)
+
+    def reopen(self) -> None:
+        """Continues the file after a close (a checkpoint closes it so that it is whole on disk)."""
+        from dolfinx import io
+
+        self.file = io.XDMFFile(self.comm, str(self.path), "a")
 
     def close(self) -> None:
         self.file.close()
@@ -704,15 +713,20 @@ def plan(part: RankModel, time_step, n_steps: int) -> dict:
 
 def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:
     """`pyfem.solver.run` with the distributed model (module docstring); returns the summary on
-    rank 0, {} on the others. A scene error is every rank's (raised alike on each); any other error
-    ends every rank (pyfem.distributed.abort_all), where the others would wait for it."""
-    check_supported(scene, resume)
-    comm = MPI.COMM_WORLD
+    rank 0, {} on the others. resume: continue the interrupted run in out_dir from its checkpoint
+    (on any rank count: its state is keyed by position). A scene error is every rank's (raised alike on each); a stop
+    signal stops every rank at the same sample with a checkpoint (`pyfem.interrupts.StopSignals`); any
+    other error ends every rank (pyfem.distributed.abort_all), where the others would wait for it."""
     from pyfem.scene import scene_error_from
 
+    check_supported(scene)
+    comm = MPI.COMM_WORLD
+    saved = read_checkpoint(out_dir) if resume else None  # refused before any work, on every rank alike
+    if saved is not None:
+        saved.check_scene(scene)
     try:
-        return _run(scene, out_dir, comm, on_plan, progress)
-    except SceneError:
+        return DistributedRun(scene, Path(out_dir), comm, saved).go(on_plan, progress)
+    except (SceneError, KeyboardInterrupt):
         raise
     except BaseException as error:
         if isinstance(error, ValueError) and scene_error_from(error) is not None:
@@ -724,96 +738,220 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         raise
 
 
-def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
-    from pyfem.elements import blank_point_values, initial_warnings, scene_laws
-    from pyfem.output import (DAMAGE_COLUMNS, ENERGY_COLUMNS, ENERGY_FORMAT, FREEFIELD_COLUMNS,
-                              INTERNAL_ENERGY_COLUMNS, MONITOR_COLUMNS, MONITOR_FORMAT, STRESS_COLUMNS, _VOIGT,
-                              CsvHistory, _write_json, max_principal, monitor_peaks, peak_memory_mib,
-                              previous_run_dir)
-    from pyfem.seismic.setup import scene_record, seismic_input_from_scene
-    from pyfem.solver import flow_warnings, kernel_threads, whole_steps
+# --- checkpoints: each rank its own state, rank 0 the run's (docs/checkpoint.md "Distributed model") ---
 
-    root = comm.rank == 0
-    wall_start = time.perf_counter()
-    part = build(scene, comm)
-    part.setup_seconds = comm.allreduce(part.setup_seconds, op=MPI.MAX)
-    time_step = choose_time_step(part)
-    n_steps = whole_steps(scene["time"]["duration"], time_step)
-    loop = rank_regions(part)
-    if loop is not None:  # every rank's warnings on every rank (run.json is rank 0's)
-        seen = list(getattr(scene, "warnings", []))
-        for message in dict.fromkeys(m for found in comm.allgather(initial_warnings(loop.counted, scene))
-                                     for m in found):
-            if message not in seen:
-                scene.warn(message)
-        flow_warnings(scene, scene_laws(scene)[0], time_step)
-    energy_columns = ENERGY_COLUMNS + (INTERNAL_ENERGY_COLUMNS if loop is not None else [])
-    freefield = input_arrays = None
-    if "seismic_input" in scene.effects:
-        model = part.model
-        view = _InputView(model.faces, part.coords[:len(model.node_coords)], model.bounds)
-        freefield, input_arrays = seismic_input_from_scene(scene, view, scene_record(scene))
-    monitors = locate_monitors(part, loop)
-    if on_plan is not None:
-        shown = plan(part, time_step, n_steps)
-        if root:
-            on_plan(shown)
-    out = Path(out_dir)
-    if root:
-        if (out / "run.json").exists():
-            previous = previous_run_dir(out)
-            shutil.move(str(out), str(previous))
-            print(f"note: the earlier run in {out} was moved to {previous}", file=sys.stderr)
-        out.mkdir(parents=True, exist_ok=True)
-    comm.Barrier()
-    kernel_threads()
-    stepper, exchange = _stepper(part, time_step.dt, input_arrays, loop)
-    names = [m["name"] for m in scene.get("monitor", [])]
-    points = np.array([m["point"] for m in scene.get("monitor", [])], dtype=float).reshape(-1, 3)
-    columns = list(MONITOR_COLUMNS) + (FREEFIELD_COLUMNS if freefield is not None else []) + \
-        (STRESS_COLUMNS if names else []) + (DAMAGE_COLUMNS if names and loop is not None else [])
-    regions = comm.gather(list(zip(monitors.index.tolist(), monitors.stress.regions))
-                          if monitors.stress is not None else [], root=0)
-    model = part.model
-    summary = {"title": scene["title"], "scene": scene.to_json(), "effects": list(scene.effects),
-               "model": "distributed", "ranks": comm.size,
-               "cells": comm.allreduce(model.n_cells), "nodes": part.n_dofs_global // 3, "dofs": part.n_dofs_global,
-               "dt": time_step.dt, "dt_critical": time_step.critical, "dt_reason": time_step.reason,
-               "omega_max": time_step.omega_max, "steps": n_steps, "rayleigh": {"alpha": part.alpha, "beta": part.beta},
-               "regions": dict(sorted(model.regions.items(), key=lambda item: item[1])),
-               "boundary_faces": part.faces_report, "traction_free_surfaces": dict(model.free_surfaces),
-               "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(getattr(scene, "warnings", [])),
-               "status": "running",
-               "checkpoints": "none: the distributed model writes no checkpoints yet (docs/scaling.md)"}
-    histories, fields = {}, None
-    if root:
-        _write_json(out / "run.json", summary)
-        histories["energy"] = CsvHistory(out / "energy.csv", energy_columns, ENERGY_FORMAT)
-        if names:
-            (out / "monitors").mkdir(exist_ok=True)
-            for name in names:
-                histories[name] = CsvHistory(out / "monitors" / f"{name}.csv", columns, MONITOR_FORMAT)
-        if part.constraints is not None:
-            face_columns = ["t"] + [f"{f}_F{axis}" for f in part.constraints.face_names for axis in "xyz"]
-            histories["reactions"] = CsvHistory(out / "reactions.csv", face_columns, ENERGY_FORMAT)
-        region_of = dict(pair for rank_regions in regions for pair in rank_regions)
-        monitor_regions = [region_of[j] for j in range(len(names))]
-    if scene["output"]["xdmf_interval"]:
-        fields = _Fields(part, out / "fields.xdmf")
-        xdmf_every = max(1, round(scene["output"]["xdmf_interval"] / scene["output"]["interval"]))
-    n = 3 * part.n_local
-    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    rows_kept, energy_rows, times = [], [], []
+def rank_file(out: Path, identifier: int, rank: int) -> Path:
+    return out / f"checkpoint.{identifier}.rank{rank}.npz"
 
-    def sample(t: float, k: int) -> None:
+
+def read_checkpoint(out_dir):
+    """The distributed run's checkpoint (its JSON part, pyfem.checkpoint.Checkpoint without state),
+    or SceneError (key --resume) naming why not: none, finished, or the whole model's."""
+    from pyfem import checkpoint as checkpoints
+
+    saved = checkpoints.read_checkpoint(out_dir, state=False)
+    if saved.meta.get("model") != "distributed":
+        raise SceneError("--resume", str(out_dir), "the checkpoint of a run of the distributed model",
+                         f"--resume {saved.path}: written by a run with parallel.model = \"whole\"; resume it "
+                         "with parallel.model = \"whole\"")
+    return saved
+
+
+# Coordinates (m) are matched at this resolution (1 um): a node by its position, a cell by its
+# quadrature points' mean, so that a checkpoint does not depend on the partition or the rank count.
+KEY_RESOLUTION = 1.0e-6
+
+
+def point_keys(points: np.ndarray) -> np.ndarray:
+    """(n, 3) int64 keys of positions (m)."""
+    return np.round(np.asarray(points, dtype=np.float64).reshape(-1, 3) / KEY_RESOLUTION).astype(np.int64)
+
+
+def rows_of(have: np.ndarray, want: np.ndarray, what: str) -> np.ndarray:
+    """The row of `have` (n, 3 keys) holding each key of `want` (m, 3); RuntimeError naming `what`
+    when one is missing."""
+    _, inverse = np.unique(np.concatenate([have, want]), axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    row_of_group = np.full(int(inverse.max(initial=-1)) + 1, -1, dtype=np.int64)
+    row_of_group[inverse[:len(have)]] = np.arange(len(have))
+    rows = row_of_group[inverse[len(have):]]
+    if np.any(rows < 0):
+        raise RuntimeError(f"checkpoint: {int(np.count_nonzero(rows < 0))} {what} of this model are not in it")
+    return rows
+
+
+def cut_fields(path: Path, after: float) -> None:
+    """Removes from a dolfinx fields.xdmf (and its .h5) every time after `after` (s): what an
+    interrupted run wrote after its checkpoint, written again by the resumed run."""
+    import h5py
+    from xml.etree import ElementTree as ET
+
+    ET.register_namespace("xi", "http://www.w3.org/2001/XInclude")
+    tree = ET.parse(path)
+    removed = []
+    for collection in tree.getroot().iter("Grid"):
+        for grid in list(collection):
+            stamp = grid.find("Time") if grid.tag == "Grid" else None
+            if stamp is not None and float(stamp.get("Value")) > after * (1 + 1e-12):
+                removed += [item.text.split(":", 1)[1] for item in grid.iter("DataItem")]
+                collection.remove(grid)
+    if removed:
+        with h5py.File(path.with_suffix(".h5"), "a") as data:
+            for name in removed:
+                if name in data:
+                    del data[name]
+    tree.write(path)
+
+
+class DistributedRun:
+    """One sitting of a distributed run: the model built on the ranks, its writer on rank 0, the
+    time loop, the checkpoints (`write_checkpoint`) and the resume (`_resume`)."""
+
+    def __init__(self, scene: Scene, out: Path, comm: MPI.Comm, saved=None) -> None:
+        from pyfem.elements import initial_warnings, scene_laws
+        from pyfem.output import DAMAGE_COLUMNS, ENERGY_COLUMNS, FREEFIELD_COLUMNS, INTERNAL_ENERGY_COLUMNS, \
+            MONITOR_COLUMNS, STRESS_COLUMNS
+        from pyfem.seismic.setup import scene_record, seismic_input_from_scene
+        from pyfem.solver import flow_warnings, whole_steps
+
+        self.scene, self.out, self.comm, self.saved = scene, out, comm, saved
+        self.root = comm.rank == 0
+        self.wall_start = time.perf_counter()
+        part = self.part = build(scene, comm)
+        part.setup_seconds = comm.allreduce(part.setup_seconds, op=MPI.MAX)
+        self.time_step = choose_time_step(part)
+        self.n_steps = whole_steps(scene["time"]["duration"], self.time_step)
+        loop = self.loop = rank_regions(part)
+        if loop is not None:  # every rank's warnings on every rank (run.json is rank 0's)
+            seen = list(getattr(scene, "warnings", []))
+            for message in dict.fromkeys(m for found in comm.allgather(initial_warnings(loop.counted, scene))
+                                         for m in found):
+                if message not in seen:
+                    scene.warn(message)
+            flow_warnings(scene, scene_laws(scene)[0], self.time_step)
+        self.energy_columns = ENERGY_COLUMNS + (INTERNAL_ENERGY_COLUMNS if loop is not None else [])
+        self.freefield = input_arrays = None
+        if "seismic_input" in scene.effects:
+            model = part.model
+            view = _InputView(model.faces, part.coords[:len(model.node_coords)], model.bounds)
+            self.freefield, input_arrays = seismic_input_from_scene(scene, view, scene_record(scene))
+        self.monitors = locate_monitors(part, loop)
+        self.input_arrays = input_arrays
+        self.names = [m["name"] for m in scene.get("monitor", [])]
+        self.points = np.array([m["point"] for m in scene.get("monitor", [])], dtype=float).reshape(-1, 3)
+        self.columns = list(MONITOR_COLUMNS) + (FREEFIELD_COLUMNS if self.freefield is not None else []) + \
+            (STRESS_COLUMNS if self.names else []) + (DAMAGE_COLUMNS if self.names and loop is not None else [])
+        stress = self.monitors.stress
+        regions = comm.gather(list(zip(self.monitors.index.tolist(), stress.regions)) if stress is not None else [],
+                              root=0)
+        self.monitor_regions = None
+        if self.root:
+            region_of = dict(pair for rank_regions in regions for pair in rank_regions)
+            self.monitor_regions = [region_of[j] for j in range(len(self.names))]
+        if saved is not None:
+            self._check_model(saved)
+        self.histories, self.fields = {}, None
+        self.rows_kept, self.energy_rows, self.times = [], [], []
+        self.summary: dict = {}
+        self.checkpoint_id = 0
+        self.done = 0
+        self.previous_timing = {"wall_seconds": 0.0, "loop_seconds": 0.0}
+        self.last_flush = time.monotonic()
+
+    # -- set-up -------------------------------------------------------------------------------------
+    def _fingerprint(self) -> dict:
+        from pyfem.checkpoint import scene_fingerprint
+
+        return {"scene": scene_fingerprint(self.scene), "dofs": self.part.n_dofs_global, "dt": self.time_step.dt,
+                "steps": self.n_steps, "ranks": self.comm.size}
+
+    def _check_model(self, saved) -> None:
+        """Refuses (SceneError, key --resume, on every rank alike) a checkpoint of another model,
+        rank count or partition."""
+        theirs, ours = saved.meta["fingerprint"], self._fingerprint()
+        for key in ("dofs", "dt", "steps"):
+            if theirs[key] != ours[key]:
+                saved._refuse(f"the model's {key} differs from the checkpoint's (another mesh or build?)")
+
+    def _summary(self) -> dict:
+        part, model, ts = self.part, self.part.model, self.time_step
+        return {"title": self.scene["title"], "scene": self.scene.to_json(), "effects": list(self.scene.effects),
+                "model": "distributed", "ranks": self.comm.size,
+                "cells": self.comm.allreduce(model.n_cells), "nodes": part.n_dofs_global // 3,
+                "dofs": part.n_dofs_global, "dt": ts.dt, "dt_critical": ts.critical, "dt_reason": ts.reason,
+                "omega_max": ts.omega_max, "steps": self.n_steps, "rayleigh": {"alpha": part.alpha, "beta": part.beta},
+                "regions": dict(sorted(model.regions.items(), key=lambda item: item[1])),
+                "boundary_faces": part.faces_report, "traction_free_surfaces": dict(model.free_surfaces),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(getattr(self.scene, "warnings", [])),
+                "status": "running"}
+
+    def _open(self, stepper) -> tuple:
+        """Starts the run directory, or continues the interrupted one; returns (u, v, a)."""
+        from pyfem.output import ENERGY_FORMAT, MONITOR_FORMAT, CsvHistory, _write_json, previous_run_dir
+
+        out, part, saved = self.out, self.part, self.saved
+        summary = self._summary()  # (collective)
+        sizes = None
+        if saved is None:
+            if self.root:
+                if (out / "run.json").exists():
+                    previous = previous_run_dir(out)
+                    shutil.move(str(out), str(previous))
+                    print(f"note: the earlier run in {out} was moved to {previous}", file=sys.stderr)
+                out.mkdir(parents=True, exist_ok=True)
+            n = 3 * part.n_local
+            u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+            stepper.reset_energy(u, v, a, 0.0)
+        else:
+            meta = saved.meta
+            self.checkpoint_id, self.done = int(meta["id"]), int(meta["outputs_done"])
+            self.previous_timing = meta["timing"]
+            u, v, a = self.load_rank_states(stepper, self.checkpoint_id, int(meta["fingerprint"]["ranks"]))
+            if self.root:
+                with np.load(saved.path, allow_pickle=False) as data:
+                    self.times = data["writer_times"].tolist()
+                    self.energy_rows = data["writer_energy"].tolist()
+                    self.rows_kept = list(data["writer_rows"]) if "writer_rows" in data else []
+                summary = dict(summary, started=meta["started"], warnings=summary["warnings"],
+                               resumed=meta.get("resumed", []) + [{"t": saved.t, "at": time.strftime("%Y-%m-%dT%H:%M:%S")}])
+                sizes = meta["history_sizes"]
+        self.summary = summary
+        if self.root:
+            _write_json(out / "run.json", summary)
+            at = (lambda name: None) if sizes is None else sizes.get
+            self.histories["energy"] = CsvHistory(out / "energy.csv", self.energy_columns, ENERGY_FORMAT,
+                                                  at("energy"))
+            if self.names:
+                (out / "monitors").mkdir(exist_ok=True)
+                for name in self.names:
+                    self.histories[name] = CsvHistory(out / "monitors" / f"{name}.csv", self.columns, MONITOR_FORMAT,
+                                                      at(name))
+            if part.constraints is not None:
+                face_columns = ["t"] + [f"{f}_F{axis}" for f in part.constraints.face_names for axis in "xyz"]
+                self.histories["reactions"] = CsvHistory(out / "reactions.csv", face_columns, ENERGY_FORMAT,
+                                                         at("reactions"))
+        if self.scene["output"]["xdmf_interval"]:
+            if saved is not None and self.root and (out / "fields.xdmf").exists():
+                cut_fields(out / "fields.xdmf", saved.t)
+            self.comm.Barrier()
+            self.fields = _Fields(part, out / "fields.xdmf", append=saved is not None)
+        return u, v, a
+
+    # -- the samples ------------------------------------------------------------------------------------
+    def sample(self, t: float, k: int, stepper, u, v, a) -> None:
+        """Monitors, energy, reactions and fields at time t (sample k); every rank, rank 0 writes."""
+        from pyfem.elements import blank_point_values
+        from pyfem.output import _VOIGT, max_principal
+
+        monitors, loop, comm = self.monitors, self.loop, self.comm
         mine = []
         if len(monitors.index):  # this rank's monitors, as RunWriter._monitor_rows computes them
             values = [np.full((len(monitors.index), 1), t)]
             for x in (u, v, a):
                 values.append(np.einsum("mk,mkc->mc", monitors.weights, x.reshape(-1, 3)[monitors.nodes]))
-            if freefield is not None:
-                at, now = points[monitors.index], np.array([t])
-                values += [freefield.displacement(at, now)[0], freefield.velocity(at, now)[0]]
+            if self.freefield is not None:
+                at, now = self.points[monitors.index], np.array([t])
+                values += [self.freefield.displacement(at, now)[0], self.freefield.velocity(at, now)[0]]
             dynamic_tensor = monitors.stress.dynamic_stress(u)
             dynamic = np.stack([dynamic_tensor[:, i, j] for i, j in _VOIGT], axis=1)
             static = np.stack([monitors.stress.static[:, i, j] for i, j in _VOIGT], axis=1)
@@ -832,87 +970,261 @@ def _run(scene: Scene, out_dir, comm: MPI.Comm, on_plan, progress) -> dict:
                            kernel["plastic_strain"][:, None]]
             mine = list(zip(monitors.index.tolist(), np.hstack(values)))
         energy = stepper.energy()
-        sums = comm.reduce(np.array([energy[name] for name in energy_columns[1:]]), root=0)
+        sums = comm.reduce(np.array([energy[name] for name in self.energy_columns[1:]]), root=0)
         reactions = None
-        if part.constraints is not None:
-            reactions = comm.reduce(part.constraints.face_resultants(stepper.reactions()), root=0)
+        if self.part.constraints is not None:
+            reactions = comm.reduce(self.part.constraints.face_resultants(stepper.reactions()), root=0)
         gathered = comm.gather(mine, root=0)
-        if fields is not None and k % xdmf_every == 0:
-            fields.write(t, u, v)
-        if not root:
+        if self.fields is not None and k % self.fields.every == 0:
+            self.fields.write(t, u, v)
+        if not self.root:
             return
         by_monitor = dict(pair for rank_rows in gathered for pair in rank_rows)
-        rows = np.array([by_monitor[j] for j in range(len(names))]) if names else None
         energy_row = [t] + list(sums)
-        histories["energy"].append(energy_row)
-        energy_rows.append(energy_row)
-        times.append(t)
-        if rows is not None:
-            rows_kept.append(rows)
-            for name, row in zip(names, rows):
-                histories[name].append(row)
+        self.histories["energy"].append(energy_row)
+        self.energy_rows.append(energy_row)
+        self.times.append(t)
+        if self.names:
+            rows = np.array([by_monitor[j] for j in range(len(self.names))])
+            self.rows_kept.append(rows)
+            for name, row in zip(self.names, rows):
+                self.histories[name].append(row)
         if reactions is not None:
-            histories["reactions"].append([t] + list(reactions.ravel()))
+            self.histories["reactions"].append([t] + list(reactions.ravel()))
+        if time.monotonic() - self.last_flush > FLUSH_SECONDS:  # the rows so far on disk, and the time reached
+            self.flush()
 
-    status = "failed"
-    try:
-        stepper.reset_energy(u, v, a, 0.0)
-        sample(0.0, 0)
-        ts = time_step
-        n_outputs = n_steps // ts.steps_per_output
-        if progress is not None and root:
-            progress.start(0.0)
+    def flush(self) -> None:
+        from pyfem.output import _write_json
+
+        for history in self.histories.values():
+            history.flush()
+        if self.times:
+            self.summary["time_reached"] = self.times[-1]
+            _write_json(self.out / "run.json", self.summary)
+        self.last_flush = time.monotonic()
+
+    # -- checkpoints -------------------------------------------------------------------------------
+    def timing(self, loop_start: float) -> dict:
+        now = time.perf_counter()
+        return {"wall_seconds": self.previous_timing["wall_seconds"] + now - self.wall_start,
+                "loop_seconds": self.previous_timing["loop_seconds"] + now - loop_start}
+
+    def write_checkpoint(self, stepper, u, v, a, t: float, loop_start: float) -> None:
+        """Every rank's state to its file, then rank 0's record (`checkpoint.npz`, written last and
+        atomically, names the files): a crash at any moment leaves the last whole checkpoint. A
+        collective."""
+        from pyfem.checkpoint import CHECKPOINT_NAME, FORMAT, write_atomically
+
+        comm, out = self.comm, self.out
+        identifier = self.checkpoint_id + 1
+        write_atomically(rank_file(out, identifier, comm.rank), self.rank_state(stepper, u, v, a))
+        comm.Barrier()
+        if self.root:
+            sizes = {name: history.size() for name, history in self.histories.items()}
+            meta = {"format": FORMAT, "model": "distributed", "id": identifier, "fingerprint": self._fingerprint(),
+                    "t": t, "outputs_done": self.done, "timing": self.timing(loop_start),
+                    "history_sizes": sizes, "started": self.summary["started"],
+                    "resumed": self.summary.get("resumed", []), "written": time.time()}
+            writer = {"meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
+                      "writer_times": np.array(self.times), "writer_energy": np.array(self.energy_rows)}
+            if self.rows_kept:
+                writer["writer_rows"] = np.array(self.rows_kept)
+            if self.fields is not None:
+                self.fields.file.close()  # flushed to disk with the checkpoint (reopened below)
+            write_atomically(out / CHECKPOINT_NAME, writer)
+        elif self.fields is not None:
+            self.fields.file.close()
+        if self.fields is not None:
+            self.fields.reopen()
+        comm.Barrier()
+        if self.root:  # the previous checkpoint's files (of any rank count: a resumed run's first)
+            for path in out.glob("checkpoint.*.rank*.npz"):
+                if not path.name.startswith(f"checkpoint.{identifier}.rank"):
+                    path.unlink(missing_ok=True)
+        self.checkpoint_id = identifier
+
+    def _components(self) -> list:
+        """(region, "counted" or "halo", ElementArrays) of the stepper's components, in its order."""
+        loop = self.loop
+        if loop is None:
+            return []
+        found = [(name, "counted", arrays) for name, arrays in loop.counted.arrays.items()]
+        if loop.halo is not None:
+            found += [(name, "halo", arrays) for name, arrays in loop.halo.arrays.items()]
+        return found
+
+    def rank_state(self, stepper, u, v, a) -> dict:
+        """This rank's part of a checkpoint, keyed by position, not by its numbering: its owned nodes'
+        u, v, a and internal force, its constraints' reactions, its counted cells' per-point state,
+        and its share of the energy account (a sum over the ranks)."""
+        part, n = self.part, self.part.n_owned
+        kernel = stepper.save_state()
+        out = {"node_keys": point_keys(part.coords[:n]), "u": u[:3 * n], "v": v[:3 * n], "a": a[:3 * n]}
+        force = np.frombuffer(kernel["stepper/internal_force"], dtype=np.float64)
+        if len(force):
+            out["internal_force"] = force[:3 * n]
+        if part.constraints is not None:
+            out["reaction_keys"] = point_keys(part.coords[part.constraints.nodes])
+            out["reactions"] = np.frombuffer(kernel["stepper/reactions"], dtype=np.float64)
+        for name in ("stepper/energy", "stepper/provider_work", "stepper/provider_power", "stepper/energy_started"):
+            out[name] = np.frombuffer(kernel[name], dtype=np.uint8)
+        for k, (name, kind, arrays) in enumerate(self._components()):
+            if kind != "counted":
+                continue
+            prefix, cells = f"component/{k}/", len(arrays.weights)
+            out[f"cells/{name}/keys"] = point_keys(arrays.points.mean(axis=1))
+            for block in ("state", "initial_stress"):
+                out[f"cells/{name}/{block}"] = np.frombuffer(kernel[prefix + block], dtype=np.uint8).reshape(cells, -1)
+            for block in ("stored_energy", "dissipation"):
+                out[f"cells/{name}/{block}"] = np.frombuffer(kernel[prefix + block], dtype=np.uint8)
+        return out
+
+    def load_rank_states(self, stepper, identifier: int, ranks: int) -> tuple:
+        """The checkpoint's state for this rank's nodes and cells, from every rank file of checkpoint
+        `identifier` (written by `ranks` ranks, any partition): returns (u, v, a); the kernel's state
+        loaded (energy account on rank 0, summed; a region's scalars on its first counted component)."""
+        part, comm = self.part, self.comm
+        files = [dict(np.load(rank_file(self.out, identifier, q), allow_pickle=False)) for q in range(ranks)]
+        rows = rows_of(np.concatenate([f["node_keys"] for f in files]), point_keys(part.coords), "nodes")
+        u, v, a = (np.ascontiguousarray(np.concatenate([f[x].reshape(-1, 3) for f in files])[rows].reshape(-1))
+                   for x in "uva")
+        state = dict(stepper.save_state())
+        if len(state["stepper/internal_force"]):
+            state["stepper/internal_force"] = np.ascontiguousarray(
+                np.concatenate([f["internal_force"].reshape(-1, 3) for f in files])[rows]).tobytes()
+        if part.constraints is not None:
+            found = rows_of(np.concatenate([f["reaction_keys"] for f in files]),
+                            point_keys(part.coords[part.constraints.nodes]), "constrained nodes")
+            state["stepper/reactions"] = np.ascontiguousarray(
+                np.concatenate([f["reactions"].reshape(-1, 3) for f in files])[found]).tobytes()
+        state["stepper/energy_started"] = files[0]["stepper/energy_started"].tobytes()
+        for name in ("stepper/energy", "stepper/provider_work", "stepper/provider_power"):
+            total = np.sum([f[name].view(np.float64) for f in files], axis=0)
+            state[name] = (total if comm.rank == 0 else np.zeros_like(total)).tobytes()
+        first = {}  # region -> the lowest rank counting its cells takes its scalars
+        counted_here = {name for name, kind, _ in self._components() if kind == "counted"}
+        lowest = comm.allgather(sorted(counted_here))
+        for name in {n for names in lowest for n in names}:
+            first[name] = min(q for q, names in enumerate(lowest) if name in names)
+        for k, (name, kind, arrays) in enumerate(self._components()):
+            prefix = f"component/{k}/"
+            having = [f for f in files if f"cells/{name}/keys" in f]
+            found = rows_of(np.concatenate([f[f"cells/{name}/keys"] for f in having]),
+                            point_keys(arrays.points.mean(axis=1)), f"cells of {name!r}")
+            for block in ("state", "initial_stress"):
+                data = np.concatenate([f[f"cells/{name}/{block}"] for f in having])
+                state[prefix + block] = np.ascontiguousarray(data[found]).tobytes()
+            takes = kind == "counted" and comm.rank == first[name]
+            for block in ("stored_energy", "dissipation"):
+                total = np.sum([f[f"cells/{name}/{block}"].view(np.float64) for f in having], axis=0)
+                state[prefix + block] = (total if takes else np.zeros_like(total)).tobytes()
+        stepper.load_state(state)
+        return u, v, a
+
+    def remove_checkpoint(self) -> None:
+        from pyfem.checkpoint import CHECKPOINT_NAME
+
+        self.comm.Barrier()
+        if self.root:  # (a resumed run's files may be of another rank count)
+            for path in self.out.glob("checkpoint.*.rank*.npz"):
+                path.unlink(missing_ok=True)
+            (self.out / CHECKPOINT_NAME).unlink(missing_ok=True)
+
+    # -- the run --------------------------------------------------------------------------------------
+    def go(self, on_plan, progress) -> dict:
+        from pyfem import checkpoint as checkpoints
+        from pyfem.interrupts import RunInterrupted, StopSignals
+        from pyfem.output import RunWriter, _write_json, monitor_peaks, peak_memory_mib
+        from pyfem.solver import kernel_threads
+
+        comm, root, part, ts = self.comm, self.root, self.part, self.time_step
+        if on_plan is not None:
+            shown = plan(part, ts, self.n_steps)
+            if root:
+                if self.saved is not None:
+                    shown = {"resuming": f"from the checkpoint at t = {self.saved.t:.6g} s of "
+                                         f"{self.scene['time']['duration']:g} s", **shown}
+                on_plan(shown)
+        kernel_threads()
+        stepper, exchange = _stepper(part, ts.dt, self.input_arrays, self.loop)
+        n_outputs = self.n_steps // ts.steps_per_output
+        clock = checkpoints.CheckpointClock(self.scene["output"]["checkpoint_interval"],
+                                            elapsed=time.perf_counter() - self.wall_start)
+        status, started = "failed", False
         loop_start = time.perf_counter()
-        for done in range(1, n_outputs + 1):
-            stepper.run(u, v, a, ts.steps_per_output, (done - 1) * ts.steps_per_output * ts.dt)
-            t = done * ts.steps_per_output * ts.dt
-            finite = comm.allreduce(bool(np.isfinite(u[:3 * part.n_owned]).all()), op=MPI.LAND)
-            if not finite:
-                raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
-            sample(t, done)
-            if progress is not None and root:
-                progress(t)
-        loop_seconds = comm.allreduce(time.perf_counter() - loop_start, op=MPI.MAX)
-        status = "finished"
-    except KeyboardInterrupt as error:  # Ctrl-C on one process: nothing to resume from (no checkpoints)
-        from pyfem.interrupts import RunInterrupted
-
-        status = "interrupted"
-        if isinstance(error, RunInterrupted):
-            raise
-        raise RunInterrupted(time_reached=times[-1] if times else None, out_dir=out) from error
-    finally:
-        for history in histories.values():
-            history.close()
-        if fields is not None:
-            fields.close()
-        if root and status != "finished":
-            summary["status"] = status
-            summary["time_reached"] = times[-1] if times else None
-            _write_json(out / "run.json", summary)
-    cells = (0, 0) if loop is None else (
-        sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
-        0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
-    per_rank = comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts,
-                            int(exchange.bytes_sent_per_step), *cells, round(peak_memory_mib(), 1)), root=0)
-    nonlinear = None if loop is None else region_summary(comm, loop.counted)
-    if not root:
-        return {}
-    from pyfem.output import RunWriter
-
-    summary.update({
-        "status": status, "time_reached": times[-1], "wall_seconds": time.perf_counter() - wall_start,
-        "loop_seconds": loop_seconds, "setup_seconds": part.setup_seconds,
-        "seconds_per_step": loop_seconds / max(1, n_steps),
-        "energy": RunWriter._energy_summary(np.array(energy_rows), energy_columns),
-        "monitors": monitor_peaks(np.array(rows_kept), columns, names, np.array(times), monitor_regions) if names else {},
-        "mpi": {"ranks": comm.size, **{name: [row[k] for row in per_rank] for k, name in enumerate(
-            ("owned_nodes", "ghost_nodes", "extra_ghost_nodes", "bytes_sent_per_step", "element_loop_cells",
-             "halo_cells", "peak_memory_mib"))}},
-        **({"nonlinear_regions": nonlinear} if nonlinear is not None else {}),
-    })
-    _write_json(out / "run.json", summary)
-    return summary
+        with StopSignals(always_defer=comm.size > 1) as signals:
+            u = v = a = None
+            try:
+                with signals.deferred():
+                    u, v, a = self._open(stepper)
+                    started = True
+                    if self.saved is None:
+                        self.sample(0.0, 0, stepper, u, v, a)
+                if progress is not None and root:
+                    progress.start(self.done * ts.steps_per_output * ts.dt)
+                while self.done < n_outputs:
+                    with signals.deferred():  # a stop waits for the sample: the state is whole
+                        stepper.run(u, v, a, ts.steps_per_output, self.done * ts.steps_per_output * ts.dt)
+                        self.done += 1
+                        t = self.done * ts.steps_per_output * ts.dt
+                        if not comm.allreduce(bool(np.isfinite(u[:3 * part.n_owned]).all()), op=MPI.LAND):
+                            raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+                        self.sample(t, self.done, stepper, u, v, a)
+                        if comm.bcast(clock.due(), root=0) and self.done < n_outputs:
+                            began = time.perf_counter()
+                            self.write_checkpoint(stepper, u, v, a, t, loop_start)
+                            clock.written(time.perf_counter() - began)
+                        if comm.size > 1:
+                            signals.stop_together(comm)
+                    if progress is not None and root:
+                        progress(t)
+                status = "finished"
+            except KeyboardInterrupt as error:
+                status = "interrupted"
+                interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
+                if started:  # the state is that of the last sample (deferred blocks)
+                    with signals.deferred(reraise=False):
+                        self.write_checkpoint(stepper, u, v, a, self.times[-1] if root else 0.0, loop_start)
+                interrupted.time_reached = comm.bcast(self.times[-1] if root and self.times else None, root=0)
+                interrupted.out_dir = self.out
+                raise interrupted from error
+            finally:
+                for history in self.histories.values():
+                    history.close()
+                if self.fields is not None:
+                    self.fields.close()
+                if root and status != "finished" and self.summary:
+                    self.summary["status"] = status
+                    self.summary["time_reached"] = self.times[-1] if self.times else None
+                    _write_json(self.out / "run.json", self.summary)
+        timing = self.timing(loop_start)
+        loop_seconds = comm.allreduce(timing["loop_seconds"], op=MPI.MAX)
+        loop = self.loop
+        cells = (0, 0) if loop is None else (
+            sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
+            0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
+        per_rank = comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts,
+                                int(exchange.bytes_sent_per_step), *cells, round(peak_memory_mib(), 1)), root=0)
+        nonlinear = None if loop is None else region_summary(comm, loop.counted)
+        self.remove_checkpoint()
+        if not root:
+            return {}
+        self.summary.update({
+            "status": status, "time_reached": self.times[-1], "wall_seconds": timing["wall_seconds"],
+            "loop_seconds": loop_seconds, "setup_seconds": part.setup_seconds,
+            "seconds_per_step": loop_seconds / max(1, self.n_steps),
+            "checkpoints": {"written": clock.count, "seconds": clock.seconds, "interval": clock.interval},
+            "energy": RunWriter._energy_summary(np.array(self.energy_rows), self.energy_columns),
+            "monitors": (monitor_peaks(np.array(self.rows_kept), self.columns, self.names, np.array(self.times),
+                                       self.monitor_regions) if self.names else {}),
+            "mpi": {"ranks": comm.size, **{name: [row[k] for row in per_rank] for k, name in enumerate(
+                ("owned_nodes", "ghost_nodes", "extra_ghost_nodes", "bytes_sent_per_step", "element_loop_cells",
+                 "halo_cells", "peak_memory_mib"))}},
+            **({"nonlinear_regions": nonlinear} if nonlinear is not None else {}),
+        })
+        _write_json(self.out / "run.json", self.summary)
+        return self.summary
 
 
 @dataclass

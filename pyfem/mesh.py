@@ -89,7 +89,15 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
         _check_regions_match_materials(regions, scene["materials"], optional=excavated)
         interface_names = list((scene.get("contact") or {}).get("interfaces") or [])
         if not interface_names and not excavated:
-            mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, model_rank, gdim=3)
+            if comm.size == 1:
+                mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, model_rank, gdim=3)
+            else:  # gmshio's create_mesh with the partitioner of stable part numbers
+                plain = gmshio.create_mesh
+                gmshio.create_mesh = lambda *args: plain(*args, partitioner=stable_partitioner())
+                try:
+                    mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, model_rank, gdim=3)
+                finally:
+                    gmshio.create_mesh = plain
             return mesh, cell_tags, facet_tags, regions, boundaries, {}
         missing = [name for name in interface_names if name not in boundaries]
         if missing:
@@ -108,6 +116,30 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
         mesh, cell_tags, facet_tags, interface_tags = split_interfaces(
             arrays, {name: boundaries[name] for name in interface_names}, comm, model_rank)
     return mesh, cell_tags, facet_tags, regions, boundaries, interface_tags
+
+
+def stable_partitioner():
+    """dolfinx's cell partitioner (its default graph partitioner, ghost cells across facets) with the
+    parts numbered by their lowest global cell: the graph partitioner's split is reproducible, but
+    which rank gets which part was not (the two halves of a 2-rank run swapped between runs), and a
+    rank's sums, so a run's last digits, follow its part. On one rank nothing changes."""
+    from dolfinx import graph
+
+    base = graph.partitioner()
+
+    def partition(comm, parts: int, cells, ghosting: bool):
+        destinations = base(comm, parts, cells, ghosting)
+        offsets, links = np.asarray(destinations.offsets), np.asarray(destinations.array)
+        n_cells = len(offsets) - 1
+        first = comm.exscan(n_cells) or 0
+        lowest = np.full(parts, np.iinfo(np.int64).max, dtype=np.int64)
+        np.minimum.at(lowest, links[offsets[:-1]], first + np.arange(n_cells, dtype=np.int64))
+        comm.Allreduce(MPI.IN_PLACE, lowest, op=MPI.MIN)
+        number = np.empty(parts, dtype=np.int32)
+        number[np.argsort(lowest, kind="stable")] = np.arange(parts, dtype=np.int32)
+        return _cpp.graph.AdjacencyList_int32(np.ascontiguousarray(number[links]), np.asarray(offsets, dtype=np.int32))
+
+    return dolfinx_mesh.create_cell_partitioner(partition)
 
 
 def split_interfaces(arrays: dict | None, interface_tags: typing.Mapping[str, int], comm: MPI.Comm,
@@ -141,7 +173,7 @@ def split_interfaces(arrays: dict | None, interface_tags: typing.Mapping[str, in
     gmsh_type, cell_type, facet_type = _cell_types_of(cells.shape[1])
     ufl_domain = gmshio.ufl_mesh(gmsh_type, 3)
     cells = cells[:, gmshio.cell_perm_array(cell_type, cells.shape[1])]
-    mesh = dolfinx_mesh.create_mesh(comm, cells, x, ufl_domain)
+    mesh = dolfinx_mesh.create_mesh(comm, cells, x, ufl_domain, partitioner=stable_partitioner())
     local_entities, local_values = _cpp.io.distribute_entity_data(mesh._mesh, 3, cells, cell_values)
     mesh.topology.create_connectivity(3, 0)
     cell_tags = dolfinx_mesh.meshtags_from_entities(mesh, 3, _cpp.graph.AdjacencyList_int32(local_entities),

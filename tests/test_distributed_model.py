@@ -160,7 +160,6 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
      "integration"),
     ("workflows/scenes/box_vertical_sv.toml", ("--set", "time.local_stepping=true"), "local_stepping"),
     ("workflows/scenes/box_vertical_sv.toml", ("--set", 'output.fields=["displacement", "stress"]'), "stress"),
-    ("workflows/scenes/box_vertical_sv.toml", ("--resume",), "--resume"),
 ])
 def test_what_the_distributed_model_does_not_build_is_refused_in_one_line(tmp_path, scene, extra, key):
     result = pyfem(2, "run", scene, "--out", str(tmp_path / "run"), *DISTRIBUTED, *extra)
@@ -178,3 +177,127 @@ def test_a_monitor_outside_the_mesh_is_named_on_every_rank_count(tmp_path):
     assert result.returncode == 2, result.stderr[-2000:]
     assert "monitor.1.point" in result.stderr and "in no cell" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+# --- checkpoint and resume (each rank its own state, rank 0 the run's record) -----------------------
+
+CHECKPOINTED = (*DISTRIBUTED, "--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
+
+
+def same_files(out: Path, reference: Path, tolerance: float | None = None) -> None:
+    """Every history byte for byte (energy.csv to 1e-13: each rank's account is regrouped on rank 0 at
+    a resume), every field at every time equal; tolerance: all within it instead (another rank count)."""
+    from pyfem.compare import relative_difference, scales
+
+    names = sorted(p.relative_to(reference) for p in reference.rglob("*.csv"))
+    assert names and names == sorted(p.relative_to(out) for p in out.rglob("*.csv"))
+    for name in names:
+        if tolerance is not None or name.name == "energy.csv":
+            assert relative_difference(out / name, reference / name, scales(reference)) < (tolerance or 1e-13), name
+        else:
+            assert (out / name).read_bytes() == (reference / name).read_bytes(), name
+    with h5py.File(reference / "fields.h5") as expected, h5py.File(out / "fields.h5") as got:
+        times = list(expected["Function/displacement"])
+        assert times == list(got["Function/displacement"]) and len(times) > 10
+        for t in times:
+            if tolerance is not None:  # (another partition: the nodes in another order)
+                continue
+            for field in ("displacement", "velocity"):
+                assert np.array_equal(expected[f"Function/{field}/{t}"], got[f"Function/{field}/{t}"]), (field, t)
+    assert (out / "fields.xdmf").read_text().count("<Time ") == (reference / "fields.xdmf").read_text().count("<Time ")
+
+
+def killed(out: Path, ranks: int, settings: tuple, window: float) -> None:
+    """Starts the layers scene on `ranks` ranks and kills it (kill -9: mpirun and every rank) at a
+    random time within `window` s after its first checkpoint."""
+    import random
+    import signal
+    import time
+
+    command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), PYTHON, "-m", "pyfem", "run",
+               SCENES["layers"], "--out", str(out), *settings]
+    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
+    deadline = time.monotonic() + 300
+    while not (out / "checkpoint.npz").exists():
+        assert process.poll() is None, "the run ended before its first checkpoint"
+        assert time.monotonic() < deadline, "no checkpoint after 300 s"
+        time.sleep(0.05)
+    time.sleep(random.uniform(0.0, window))
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait(timeout=60)
+    status = json.loads((out / "run.json").read_text())["status"]
+    assert status == "running", f"{status}: the run ended before the kill"  # as a killed run leaves it
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("uninterrupted") / "run"
+    result = pyfem(2, "run", SCENES["layers"], "--out", str(out), *CHECKPOINTED)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return out
+
+
+@pytest.mark.parametrize("resumed_on", [2, 3])
+def test_kill_9_of_two_ranks_then_resume_gives_the_uninterrupted_run(tmp_path, uninterrupted, resumed_on):
+    """kill -9 of mpirun and both ranks at a random time after the first checkpoint of the layers
+    scene (a yielding layer and cracking concrete: per-point state); `--resume` on 2 ranks: every
+    history byte for byte and every field as the uninterrupted run's; on 3 ranks (the checkpoint is
+    keyed by position, not by a partition): within 1e-10, the sums of another partition."""
+    out = tmp_path / "killed"
+    killed(out, 2, CHECKPOINTED, 1.0)
+    result = pyfem(resumed_on, "run", SCENES["layers"], "--out", str(out), *CHECKPOINTED, "--resume")
+    assert result.returncode == 0, result.stderr[-3000:]
+    resumed = summary(out)
+    assert resumed["status"] == "finished" and 0.0 < resumed["resumed"][0]["t"] < 3.0
+    assert resumed["mpi"]["ranks"] == resumed_on and resumed["nonlinear_regions"]["weak"]["yielded_volume"] > 0.0
+    assert not list(out.glob("checkpoint*")), "a finished run keeps no checkpoint"
+    same_files(out, uninterrupted, None if resumed_on == 2 else 1e-10)
+    print(f"killed at t > {resumed['resumed'][0]['t']:.3f} s of 3 s; resumed on {resumed_on} ranks")
+
+
+def test_sigterm_to_one_rank_stops_both_with_a_checkpoint_that_resumes(tmp_path):
+    """SIGTERM to rank 1 only, once the first rows are on disk (2 s of wall time): both ranks stop at
+    the same sample, write the checkpoint and an "interrupted" run.json (no traceback); the resume
+    equals the uninterrupted run (histories byte for byte, energy.csv to 1e-13, fields)."""
+    import signal
+    import time
+
+    from test_mpi import rank_pids
+
+    settings = (*DISTRIBUTED, "--set", "output.checkpoint_interval=0", "--set", "time.duration=8.0")
+    reference, out = tmp_path / "reference", tmp_path / "stopped"
+    result = pyfem(2, "run", SCENES["layers"], "--out", str(reference), *settings)
+    assert result.returncode == 0, result.stderr[-3000:]
+    command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem", "run",
+               SCENES["layers"], "--out", str(out), *settings]
+    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    layer = out / "monitors" / "layer.csv"
+    deadline = time.monotonic() + 300
+    while not (layer.exists() and len(layer.read_text().splitlines()) > 2):
+        assert process.poll() is None, "the run ended before the signal"
+        assert time.monotonic() < deadline, "no samples after 300 s"
+        time.sleep(0.05)
+    os.kill(rank_pids(process.pid)[1], signal.SIGTERM)
+    _, stderr = process.communicate(timeout=300)
+    stopped = summary(out)
+    assert process.returncode != 0 and stopped["status"] == "interrupted", stderr[-2000:]
+    assert (out / "checkpoint.npz").exists() and "Traceback" not in stderr
+    assert 0.1 < stopped["time_reached"] < 7.0
+    result = pyfem(2, "run", SCENES["layers"], "--out", str(out), *settings, "--resume")
+    assert result.returncode == 0, result.stderr[-3000:]
+    same_files(out, reference)
+
+
+def test_the_whole_model_refuses_a_distributed_checkpoint_in_one_line(tmp_path):
+    """The whole model cannot read a distributed checkpoint (each rank's state in its own file): one
+    line naming parallel.model, exit 2, the checkpoint kept for the right command."""
+    out = tmp_path / "killed"
+    killed(out, 2, CHECKPOINTED, 0.5)
+    result = pyfem(1, "run", SCENES["layers"], "--out", str(out), "--set", "output.checkpoint_interval=0.5",
+                   "--set", "time.duration=3.0", "--resume")
+    assert result.returncode == 2, result.stderr[-2000:]
+    lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert lines and "--resume" in lines[0] and 'parallel.model = "distributed"' in lines[0], result.stderr
+    assert "Traceback" not in result.stderr and (out / "checkpoint.npz").exists()
