@@ -13,7 +13,10 @@ Each rank:
    reaches but the index map does not hold (from 3 ranks on, neighbours through an edge or a
    vertex only); their coordinates, masses and diagonal blocks come from their owners;
 4. adds the springs, dashpots, input forces and constraints of its owned face nodes, and steps its
-   share with the kernel's Stepper and one `MpiNodeExchange` per step (`Stepper.set_partition`).
+   share with the kernel's Stepper and one `MpiNodeExchange` per step (`Stepper.set_partition`);
+5. with element-loop materials ([plasticity], [damage]): steps its owned cells (counted: their energy
+   is its own) and, as its halo, the other ranks' cells that touch its owned nodes, whose arrays
+   their owners send at set-up (`rank_regions`); the matrix holds the other cells.
 
 The time step is `pyfem.solver.time_step_from` of the Gershgorin bound (the largest owned row over
 the ranks) and a power iteration on the ranks' owned rows from a start vector that is a function of
@@ -22,13 +25,14 @@ model's (a random start in the one-rank numbering) by the iteration's convergenc
 equal to the whole model's to round-off gives `time.dt`.
 
 Outputs (rank 0 writes, dolfinx writes the fields in parallel): monitors/NAME.csv with the whole
-model's columns (u, v, a; the free field with a wave; the stress), energy.csv (every rank's
-owned energies summed), reactions.csv with fixed or roller faces, fields.xdmf (displacement,
-velocity) and run.json.
+model's columns (u, v, a; the free field with a wave; the stress; the law's damage and plastic
+strain), energy.csv (every rank's owned energies summed), reactions.csv with fixed or roller faces,
+fields.xdmf (displacement, velocity) and run.json. Checkpoints: every rank its own file keyed by
+position, rank 0's record written last (`DistributedRun.write_checkpoint`); a run resumes on any
+rank count (docs/checkpoint.md "The distributed model").
 
-Not built yet (each refused with the key and what is allowed): contact, element-loop materials
-([plasticity], [damage]), the static stage, local time stepping, stress and strain fields,
-checkpoints and --resume.
+Not built yet (each refused with the key and what is allowed): contact, the static stage, local
+time stepping, one point per cell, stress, strain and damage fields.
 """
 from __future__ import annotations
 
@@ -303,7 +307,6 @@ def _whole_faces(comm: MPI.Comm, faces: list) -> list[dict]:
 def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     """This rank's part of the scene's model (module docstring, steps 1-4)."""
     from dolfinx import fem
-    from dolfinx.fem import petsc as fem_petsc
 
     from pyfem.assembly import elastic_stiffness_matrix, lumped_mass
     from pyfem.mesh import create_mesh_with_interfaces
