@@ -27,12 +27,12 @@ equal to the whole model's to round-off gives `time.dt`.
 Outputs (rank 0 writes, dolfinx writes the fields in parallel): monitors/NAME.csv with the whole
 model's columns (u, v, a; the free field with a wave; the stress; the law's damage and plastic
 strain), energy.csv (every rank's owned energies summed), reactions.csv with fixed or roller faces,
-fields.xdmf (displacement, velocity) and run.json. Checkpoints: every rank its own file keyed by
+fields.xdmf (`_Fields`: the whole model's fields, the tensors as 3 x 3 cell data) and run.json. Checkpoints: every rank its own file keyed by
 position, rank 0's record written last (`DistributedRun.write_checkpoint`); a run resumes on any
 rank count (docs/checkpoint.md "The distributed model").
 
 Not built yet (each refused with the key and what is allowed): contact, the static stage, local
-time stepping, one point per cell, stress, strain and damage fields.
+time stepping, one point per cell.
 """
 from __future__ import annotations
 
@@ -53,8 +53,6 @@ from pyfem.scene import Scene, SceneError
 KEY = "parallel.model"
 # The histories go to disk (and run.json's time reached) when this much wall time (s) passed since the last time.
 FLUSH_SECONDS = 2.0
-# The fields the distributed model writes (dolfinx's XDMFFile on the ranks).
-FIELDS = ("displacement", "velocity")
 
 
 # --- what the distributed model does not do yet ------------------------------------------------
@@ -74,10 +72,6 @@ def check_supported(scene: Scene) -> None:
                                                                     "\"reduced\""))
     if scene["time"].get("local_stepping") is True:
         raise SceneError(KEY, "distributed", allowed.format("time.local_stepping = true"))
-    other = [name for name in scene["output"]["fields"] if name not in FIELDS]
-    if other and scene["output"]["xdmf_interval"]:
-        raise SceneError(KEY, "distributed", allowed.format(f"output.fields {other}") + "; it writes "
-                         + " and ".join(FIELDS))
 
 
 # --- numbering: owned nodes, the index map's ghosts, the extra ghosts ---------------------------
@@ -655,42 +649,87 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
 
 
 class _Fields:
-    """fields.xdmf written by dolfinx on every rank (displacement and velocity; a Q2 field
-    interpolated into Q1 on the mesh's geometry)."""
+    """fields.xdmf written by dolfinx on every rank: displacement, velocity and acceleration (point
+    data; a Q2 field interpolated into Q1 on the mesh's geometry); strain and stress (cell data at
+    the cell centroids, 3 x 3 tensors, tension positive, initial + dynamic; in an element-loop cell
+    the law's stress averaged over its points), damage (cell data damage, damage_type,
+    plastic_strain, crack_opening; 0 outside the element loop), as RunWriter writes them for the
+    whole model (which stores the tensors as XDMF Tensor6); the cell tags as "region"."""
 
-    def __init__(self, part: RankModel, path: Path, append: bool = False) -> None:
+    POINT = ("displacement", "velocity", "acceleration")
+    DAMAGE = ("damage", "damage_type", "plastic_strain", "crack_opening")
+
+    def __init__(self, part: RankModel, path: Path, loop: RankRegions | None, append: bool = False) -> None:
         from dolfinx import fem, io
 
-        from pyfem.output import time_decimals
+        from pyfem.output import cell_strain_operator, time_decimals
 
-        V = part.model.V
+        model, wanted = part.model, part.scene["output"]["fields"]
+        V = model.V
         self.n = 3 * (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts)
-        self.written = [name for name in part.scene["output"]["fields"] if name in FIELDS]
-        self.functions = {name: fem.Function(V, name=name) for name in self.written}
+        self.loop = loop
+        self.point = [name for name in self.POINT if name in wanted]
+        self.functions = {name: fem.Function(V, name=name) for name in self.point}
         self.output = self.functions
-        if part.model.order > 1:
-            V1 = fem.VectorFunctionSpace(part.model.mesh, ("Lagrange", 1))
-            self.output = {name: fem.Function(V1, name=name) for name in self.written}
+        if model.order > 1:
+            V1 = fem.VectorFunctionSpace(model.mesh, ("Lagrange", 1))
+            self.output = {name: fem.Function(V1, name=name) for name in self.point}
+        self.tensors = [name for name in ("strain", "stress") if name in wanted]
+        self.scalars = list(self.DAMAGE) if "damage" in wanted else []
+        self.cells = {}
+        if self.tensors or self.scalars:
+            self.n_cells = model.n_cells  # owned: a ghost cell's value comes from its owner
+            self.strain = cell_strain_operator(part.scene, model) if self.tensors else None
+            T = fem.TensorFunctionSpace(model.mesh, ("DG", 0))
+            Q = fem.FunctionSpace(model.mesh, ("DG", 0))
+            self.cells.update({name: fem.Function(T, name=name) for name in self.tensors})
+            self.cells.update({name: fem.Function(Q, name=name) for name in self.scalars})
+            self.tensor_dofs = T.dofmap.list.array.reshape(-1, 1)[:self.n_cells, 0]  # blocks of 9
+            self.scalar_dofs = Q.dofmap.list.array.reshape(-1, 1)[:self.n_cells, 0]
         self.comm, self.path = part.comm, path
         self.file = io.XDMFFile(part.comm, str(path), "a" if append else "w")
         if not append:  # (a resumed run's file has them)
-            self.file.write_mesh(part.model.mesh)
-            tags = part.model.cell_tags
+            self.file.write_mesh(model.mesh)
+            tags = model.cell_tags
             tags.name = "region"  # the cell tags, as the whole model's fields.xdmf has them (run.json "regions")
             self.file.write_meshtags(tags)
         output = part.scene["output"]
         self.decimals = time_decimals(output["interval"], output["xdmf_interval"])
         self.every = max(1, round(output["xdmf_interval"] / output["interval"]))
 
-    def write(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
+    def write(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
         t = round(t, self.decimals)  # 0.3, not 0.30000000000000004 (as RunWriter)
-        for name, values in (("displacement", u), ("velocity", v)):
+        for name, values in zip(self.POINT, (u, v, a)):
             if name not in self.functions:
                 continue
             self.functions[name].x.array[:] = values[:self.n]
             if self.output is not self.functions:
                 self.output[name].interpolate(self.functions[name])
             self.file.write_function(self.output[name], t)
+        if not self.cells:
+            return
+        averages = self.loop.counted.cell_averages() if self.loop is not None else {}
+        values = {}
+        if self.tensors:
+            strain = self.strain.strain(u)
+            values["strain"] = strain[:self.n_cells]
+            stress = self.strain.stress(strain)[:self.n_cells]
+            for region in averages.values():
+                xx, yy, zz, xy, yz, xz = region["stress"].T
+                stress[region["cells"]] = np.stack([np.stack([xx, xy, xz], 1), np.stack([xy, yy, yz], 1),
+                                                    np.stack([xz, yz, zz], 1)], 1)
+            values["stress"] = stress
+        for name in self.scalars:
+            values[name] = np.zeros(self.n_cells)
+            for region in averages.values():
+                values[name][region["cells"]] = region[name]
+        for name, function in self.cells.items():
+            if name in self.tensors:
+                function.x.array.reshape(-1, 9)[self.tensor_dofs] = values[name].reshape(-1, 9)
+            else:
+                function.x.array[self.scalar_dofs] = values[name]
+            function.x.scatter_forward()
+            self.file.write_function(function, t)
 
     def reopen(self) -> None:
         """Continues the file after a close (a checkpoint closes it so that it is whole on disk)."""
@@ -937,7 +976,7 @@ class DistributedRun:
             if saved is not None and self.root and (out / "fields.xdmf").exists():
                 cut_fields(out / "fields.xdmf", saved.t)
             self.comm.Barrier()
-            self.fields = _Fields(part, out / "fields.xdmf", append=saved is not None)
+            self.fields = _Fields(part, out / "fields.xdmf", self.loop, append=saved is not None)
         return u, v, a
 
     # -- the samples ------------------------------------------------------------------------------------
@@ -979,7 +1018,7 @@ class DistributedRun:
             reactions = comm.reduce(self.part.constraints.face_resultants(stepper.reactions()), root=0)
         gathered = comm.gather(mine, root=0)
         if self.fields is not None and k % self.fields.every == 0:
-            self.fields.write(t, u, v)
+            self.fields.write(t, u, v, a)
         if not self.root:
             return
         by_monitor = dict(pair for rank_rows in gathered for pair in rank_rows)
