@@ -766,8 +766,13 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     saved = read_checkpoint(out_dir) if resume else None  # refused before any work, on every rank alike
     if saved is not None:
         saved.check_scene(scene)
+    from pyfem.interrupts import StopSignals
+
     try:
-        return DistributedRun(scene, Path(out_dir), comm, saved).go(on_plan, progress)
+        # Under mpirun a stop signal during the set-up waits for the first sample (every rank stops
+        # there together, with a checkpoint); on one rank it ends the set-up, nothing written.
+        with StopSignals(always_defer=comm.size > 1) as signals:
+            return DistributedRun(scene, Path(out_dir), comm, saved).go(on_plan, progress, signals)
     except (SceneError, KeyboardInterrupt):
         raise
     except BaseException as error:
@@ -1174,9 +1179,11 @@ class DistributedRun:
             (self.out / CHECKPOINT_NAME).unlink(missing_ok=True)
 
     # -- the run --------------------------------------------------------------------------------------
-    def go(self, on_plan, progress) -> dict:
+    def go(self, on_plan, progress, signals) -> dict:
+        """The time loop from the set-up to the summary (rank 0's; {} elsewhere); `signals`: the
+        run's pyfem.interrupts.StopSignals."""
         from pyfem import checkpoint as checkpoints
-        from pyfem.interrupts import RunInterrupted, StopSignals
+        from pyfem.interrupts import RunInterrupted
         from pyfem.output import RunWriter, _write_json, monitor_peaks, peak_memory_mib
         from pyfem.solver import kernel_threads
 
@@ -1195,51 +1202,50 @@ class DistributedRun:
                                             elapsed=time.perf_counter() - self.wall_start)
         status, started = "failed", False
         loop_start = time.perf_counter()
-        with StopSignals(always_defer=comm.size > 1) as signals:
-            u = v = a = None
-            try:
-                with signals.deferred():
-                    u, v, a = self._open(stepper)
-                    started = True
-                    if self.saved is None:
-                        self.sample(0.0, 0, stepper, u, v, a)
+        u = v = a = None
+        try:
+            with signals.deferred():
+                u, v, a = self._open(stepper)
+                started = True
+                if self.saved is None:
+                    self.sample(0.0, 0, stepper, u, v, a)
+            if progress is not None and root:
+                progress.start(self.done * ts.steps_per_output * ts.dt)
+            while self.done < n_outputs:
+                with signals.deferred():  # a stop waits for the sample: the state is whole
+                    stepper.run(u, v, a, ts.steps_per_output, self.done * ts.steps_per_output * ts.dt)
+                    self.done += 1
+                    t = self.done * ts.steps_per_output * ts.dt
+                    if not comm.allreduce(bool(np.isfinite(u[:3 * part.n_owned]).all()), op=MPI.LAND):
+                        raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+                    self.sample(t, self.done, stepper, u, v, a)
+                    if comm.bcast(clock.due(), root=0) and self.done < n_outputs:
+                        began = time.perf_counter()
+                        self.write_checkpoint(stepper, u, v, a, t, loop_start)
+                        clock.written(time.perf_counter() - began)
+                    if comm.size > 1:
+                        signals.stop_together(comm)
                 if progress is not None and root:
-                    progress.start(self.done * ts.steps_per_output * ts.dt)
-                while self.done < n_outputs:
-                    with signals.deferred():  # a stop waits for the sample: the state is whole
-                        stepper.run(u, v, a, ts.steps_per_output, self.done * ts.steps_per_output * ts.dt)
-                        self.done += 1
-                        t = self.done * ts.steps_per_output * ts.dt
-                        if not comm.allreduce(bool(np.isfinite(u[:3 * part.n_owned]).all()), op=MPI.LAND):
-                            raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
-                        self.sample(t, self.done, stepper, u, v, a)
-                        if comm.bcast(clock.due(), root=0) and self.done < n_outputs:
-                            began = time.perf_counter()
-                            self.write_checkpoint(stepper, u, v, a, t, loop_start)
-                            clock.written(time.perf_counter() - began)
-                        if comm.size > 1:
-                            signals.stop_together(comm)
-                    if progress is not None and root:
-                        progress(t)
-                status = "finished"
-            except KeyboardInterrupt as error:
-                status = "interrupted"
-                interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
-                if started:  # the state is that of the last sample (deferred blocks)
-                    with signals.deferred(reraise=False):
-                        self.write_checkpoint(stepper, u, v, a, self.times[-1] if root else 0.0, loop_start)
-                interrupted.time_reached = comm.bcast(self.times[-1] if root and self.times else None, root=0)
-                interrupted.out_dir = self.out
-                raise interrupted from error
-            finally:
-                for history in self.histories.values():
-                    history.close()
-                if self.fields is not None:
-                    self.fields.close()
-                if root and status != "finished" and self.summary:
-                    self.summary["status"] = status
-                    self.summary["time_reached"] = self.times[-1] if self.times else None
-                    _write_json(self.out / "run.json", self.summary)
+                    progress(t)
+            status = "finished"
+        except KeyboardInterrupt as error:
+            status = "interrupted"
+            interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
+            if started:  # the state is that of the last sample (deferred blocks)
+                with signals.deferred(reraise=False):
+                    self.write_checkpoint(stepper, u, v, a, self.times[-1] if root else 0.0, loop_start)
+            interrupted.time_reached = comm.bcast(self.times[-1] if root and self.times else None, root=0)
+            interrupted.out_dir = self.out
+            raise interrupted from error
+        finally:
+            for history in self.histories.values():
+                history.close()
+            if self.fields is not None:
+                self.fields.close()
+            if root and status != "finished" and self.summary:
+                self.summary["status"] = status
+                self.summary["time_reached"] = self.times[-1] if self.times else None
+                _write_json(self.out / "run.json", self.summary)
         timing = self.timing(loop_start)
         loop_seconds = comm.allreduce(timing["loop_seconds"], op=MPI.MAX)
         loop = self.loop

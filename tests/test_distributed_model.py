@@ -176,7 +176,6 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
     ("tests/scenes/mpi_weak_layer.toml", ("--set", 'materials.weak.plasticity.integration="reduced"'),
      "integration"),
     ("workflows/scenes/box_vertical_sv.toml", ("--set", "time.local_stepping=true"), "local_stepping"),
-    ("workflows/scenes/box_vertical_sv.toml", ("--set", 'output.fields=["displacement", "stress"]'), "stress"),
 ])
 def test_what_the_distributed_model_does_not_build_is_refused_in_one_line(tmp_path, scene, extra, key):
     result = pyfem(2, "run", scene, "--out", str(tmp_path / "run"), *DISTRIBUTED, *extra)
