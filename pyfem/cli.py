@@ -137,6 +137,13 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     report_warnings(scene)
     from pyfem.distributed import launched_rank
 
+    if (scene.get("parallel") or {}).get("model") == "distributed":  # every rank builds its part
+        from pyfem import distributed_model
+
+        plan = distributed_model.check(scene)
+        if plan:
+            show_plan(scene, plan)
+        return 0
     if launched_rank() > 0:  # under mpirun rank 0 alone builds and times the plan
         import dolfinx  # noqa: F401  (MPI and PETSc start collectively: rank 0's import waits for ours)
 

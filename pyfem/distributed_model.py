@@ -753,6 +753,50 @@ def plan(part: RankModel, time_step, n_steps: int) -> dict:
             "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
 
 
+# Steps the `check` times on every rank (from rest, the element loop's points elastic).
+TRIAL_STEPS = 20
+
+
+def check(scene: Scene) -> dict:
+    """`pyfem check` with the distributed model, on every rank (a collective): each rank builds its
+    part as a run does and steps it TRIAL_STEPS steps from rest; rank 0 gets the plan (the model's
+    size and shares, the time step, the measured time per step and the time loop it predicts, each
+    rank's memory), the others {}. Nothing is written."""
+    from pyfem.output import peak_memory_mib
+    from pyfem.solver import kernel_threads
+
+    check_supported(scene)
+    comm = MPI.COMM_WORLD
+    run = DistributedRun(scene, Path("."), comm)
+    part, ts, loop = run.part, run.time_step, run.loop
+    kernel_threads()
+    stepper, exchange = _stepper(part, ts.dt, run.input_arrays, loop)
+    n = 3 * part.n_local
+    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    stepper.reset_energy(u, v, a, 0.0)
+    comm.Barrier()
+    began = time.perf_counter()
+    stepper.run(u, v, a, TRIAL_STEPS, 0.0)
+    per_step = comm.allreduce(time.perf_counter() - began, op=MPI.MAX) / TRIAL_STEPS
+    cells = (0, 0) if loop is None else (
+        sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
+        0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
+    shares = comm.gather((*cells, int(exchange.bytes_sent_per_step), round(peak_memory_mib())), root=0)
+    shown = plan(part, ts, run.n_steps)
+    if comm.rank != 0:
+        return {}
+    seconds = per_step * run.n_steps
+    shown.update({
+        "effects": ", ".join(scene.effects) or "none",
+        "element loop cells / halo cells per rank": [f"{c} / {h}" for c, h, _, _ in shares] if loop else "none",
+        "bytes sent per step per rank": [b for _, _, b, _ in shares],
+        "time per step": f"{1e3 * per_step:.3g} ms (the slowest rank, {TRIAL_STEPS} steps from rest timed here)",
+        "time loop estimate": f"{seconds:.0f} s ({seconds / 3600:.2f} h) for {run.n_steps} steps; with the element "
+                              "loop yielding or cracking a step costs up to several times this",
+        "peak memory per rank (MiB, the set-up and the trial)": [m for *_, m in shares]})
+    return shown
+
+
 def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:
     """`pyfem.solver.run` with the distributed model (module docstring); returns the summary on
     rank 0, {} on the others. resume: continue the interrupted run in out_dir from its checkpoint

@@ -187,6 +187,24 @@ def test_what_the_distributed_model_does_not_build_is_refused_in_one_line(tmp_pa
     assert not (tmp_path / "run").exists()
 
 
+def test_check_builds_the_ranks_parts_and_times_them_once(tmp_path):
+    """`mpirun -n 2 pyfem check` of a distributed scene: every rank builds its part (no rank the
+    whole model), rank 0 prints one plan with the ranks' shares, the element loop's counted and halo
+    cells and a measured time per step; nothing is written."""
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
+                             "check", str(REPO / SCENES["layers"]), *DISTRIBUTED], cwd=tmp_path, env=ENV,
+                            capture_output=True,
+                            text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert result.stdout.count("model:") == 1 and "distributed" in result.stdout
+    lines = {line.split(":")[0]: line for line in result.stdout.splitlines() if ":" in line}
+    assert "ranks:" in result.stdout and lines["ranks"].split()[-1] == "2"
+    assert "/ 0" not in lines["element loop cells / halo cells per rank"]  # each rank has halo cells
+    per_step = float(lines["time per step"].split()[3])
+    assert per_step > 0.0
+    assert not any(tmp_path.iterdir()), "check wrote something"
+
+
 def test_a_monitor_outside_the_mesh_is_named_on_every_rank_count(tmp_path):
     result = pyfem(3, "run", "tests/scenes/mpi_tunnel_tet.toml", "--out", str(tmp_path / "run"), *DISTRIBUTED,
                    "--set", "monitor.1.point=[60.0, 1.0, 60.0]")  # the tunnel's centre: in no cell
