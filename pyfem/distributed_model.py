@@ -974,6 +974,9 @@ class DistributedRun:
                 "regions": dict(sorted(model.regions.items(), key=lambda item: item[1])),
                 "boundary_faces": part.faces_report, "traction_free_surfaces": dict(model.free_surfaces),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(getattr(self.scene, "warnings", [])),
+                **({"local_stepping": "\"auto\": off: the distributed model steps globally (local time stepping "
+                                      "on it is not built yet, docs/scaling.md)"}
+                   if self.scene["time"].get("local_stepping") == "auto" else {}),
                 "status": "running"}
 
     def _open(self, stepper) -> tuple:
