@@ -82,13 +82,16 @@ def scene_record(scene):
     return None if spec is None else processed_record(spec)
 
 
-def seismic_input_from_scene(scene, model, processed=None):
+def seismic_input_from_scene(scene, model, processed=None, boundary_points=None):
     """The exact free field of the scene's waves and the kernel's SeismicInput arrays.
 
     Args:
         scene: validated Scene with a [wave] table.
         model: pyfem.operators.Model (faces, node coordinates, bounds).
         processed: the scene's processed record (scene_record), None to process it here.
+        boundary_points: (m, 3) where the input acts, for the warning that wave.reference_point
+            cuts the input's start; None: the model's truncation-face nodes (a distributed model
+            passes every rank's, since its faces hold the rank's own nodes only).
 
     Returns:
         (FreeField, dict of SeismicInput arrays)
@@ -104,9 +107,11 @@ def seismic_input_from_scene(scene, model, processed=None):
                           surface=wave.get("surface"), waveform=waveform, table_grid=table_grid,
                           reference_point=wave.get("reference_point"), model_bounds=model.bounds)
     if wave.get("reference_point") is not None:
-        boundary_nodes = np.unique(np.concatenate([face.nodes for face in model.faces])) if model.faces else \
-            np.arange(len(model.node_coords))
-        warn_if_start_is_cut(freefield, model.node_coords[boundary_nodes], wave["reference_point"])
+        if boundary_points is None:
+            boundary_nodes = np.unique(np.concatenate([face.nodes for face in model.faces])) if model.faces else \
+                np.arange(len(model.node_coords))
+            boundary_points = model.node_coords[boundary_nodes]
+        warn_if_start_is_cut(freefield, boundary_points, wave["reference_point"])
     boundary = scene["boundary"]
     # Each truncation face by its own type: only viscoelastic and viscous faces carry input.
     arrays = equivalent_input_forces(model.faces, model.node_coords, freefield, None,
