@@ -1143,14 +1143,9 @@ class DistributedRun:
             self.flush()
 
     def flush(self) -> None:
-        from pyfem.output import _write_json
+        from pyfem.output import flush_run
 
-        for history in self.histories.values():
-            history.flush()
-        if self.times:
-            self.summary["time_reached"] = self.times[-1]
-            _write_json(self.out / "run.json", self.summary)
-        self.last_flush = time.monotonic()
+        self.last_flush = flush_run(self.histories, self.summary, self.times, self.out)
 
     # -- checkpoints -------------------------------------------------------------------------------
     def timing(self, loop_start: float) -> dict:

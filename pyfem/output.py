@@ -630,12 +630,7 @@ class RunWriter:
 
     def flush(self) -> None:
         """Writes the queued history rows to disk and the time reached to run.json."""
-        for history in self._histories.values():
-            history.flush()
-        if self.times:
-            self._summary["time_reached"] = self.times[-1]
-            _write_json(self.out_dir / "run.json", self._summary)
-        self._last_flush = time.monotonic()
+        self._last_flush = flush_run(self._histories, self._summary, self.times, self.out_dir)
 
     def _monitor_columns(self) -> list[str]:
         """Columns of monitors/NAME.csv: t, u, v, a, then the free field with a wave, then the stress."""
@@ -973,6 +968,17 @@ class RunWriter:
         if self.xdmf is not None:
             self.xdmf.__exit__(None, None, None)
             self.xdmf = None
+
+
+def flush_run(histories: dict, summary: dict, times: list, out_dir: Path) -> float:
+    """Writes the queued rows of `histories` (CsvHistory) to disk and the time reached to run.json;
+    returns the time.monotonic() of the flush (a run writer's, the whole model's or the distributed)."""
+    for history in histories.values():
+        history.flush()
+    if times:
+        summary["time_reached"] = times[-1]
+        _write_json(Path(out_dir) / "run.json", summary)
+    return time.monotonic()
 
 
 def monitor_peaks(rows: np.ndarray, columns: list, names: list, times: np.ndarray, regions: list | None) -> dict:
