@@ -10,7 +10,7 @@ Each rank:
    faces as `pyfem.operators.build_model` does on one rank;
 3. numbers its nodes as the kernel's share (pyfem/distributed.py `Share`): its owned nodes (the
    function space's), the index map's ghosts, then the *extra ghosts*, nodes that an owned row
-   reaches but the index map does not hold (from 3 ranks on, neighbours through an edge or a
+   reaches but the index map does not hold (with GhostMode.shared_facet, neighbours through an edge or a
    vertex only); their coordinates, masses and diagonal blocks come from their owners;
 4. adds the springs, dashpots, input forces and constraints of its owned face nodes, and steps its
    share with the kernel's Stepper and one `MpiNodeExchange` per step (`Stepper.set_partition`);
@@ -61,7 +61,7 @@ FLUSH_SECONDS = 2.0
 def check_supported(scene: Scene) -> None:
     """Raises SceneError naming the first part of the scene that the distributed model does not
     build yet (every rank says the same: the scene is the same on every rank)."""
-    allowed = "\"whole\" for scenes with {} (the distributed model does not build it yet, docs/scaling.md)"
+    allowed = "\"whole\" here: the distributed model does not build {} yet (docs/scaling.md)"
     if "contact" in scene.effects:
         raise SceneError(KEY, "distributed", allowed.format("[contact]"))
     if "static" in scene:
@@ -307,7 +307,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     from pyfem.mesh import create_mesh_with_interfaces
     from pyfem.operators import Model, _cell_materials, boundary_face, face_kinds, truncation_faces
     from pyfem.seismic.forces import boundary_springs_and_dashpots
-    from pyfem.solver import boundary_constraints, check_input_faces, damping_coefficients
+    from pyfem.solver import boundary_constraints, check_input_faces, damping_coefficients, warn_input_medium
 
     began = time.perf_counter()
     order = scene["mesh"].get("order", 1)
@@ -339,6 +339,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
                   boundaries=boundaries, node_coords=coords, mass=mass, stiffness=None, faces=faces,
                   free_surfaces=free_surfaces, interface_tags=interface_tags, _materials=materials)
     check_input_faces(scene, model)
+    warn_input_medium(scene, model, comm)
     boundary = scene["boundary"]
     spring_nodes, springs, dashpot_nodes, dashpots = boundary_springs_and_dashpots(
         faces, n_owned, None, boundary["alpha_N"], boundary["alpha_T"])
@@ -591,8 +592,6 @@ class RankMonitors:
 def locate_monitors(part: RankModel, loop: RankRegions | None = None) -> RankMonitors:
     """Each scene monitor on exactly one rank; a point in no owned cell of any rank is the whole
     model's PointOutsideMesh (the scene key named)."""
-    from dolfinx import geometry
-
     from pyfem.operators import PointOutsideMesh
     from pyfem.solver import attach_kernel_points, monitor_stress_operator
 
@@ -601,23 +600,30 @@ def locate_monitors(part: RankModel, loop: RankRegions | None = None) -> RankMon
         return RankMonitors(np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.int32), np.zeros((0, 0)))
     model, comm = part.model, part.comm
     points = np.array([m["point"] for m in monitors], dtype=np.float64)
-    tree = geometry.BoundingBoxTree(model.mesh, model.mesh.topology.dim)
-    colliding = geometry.compute_colliding_cells(model.mesh, geometry.compute_collisions(tree, points), points)
     owned_cells = model.n_cells
-    found = np.array([any(cell < owned_cells for cell in colliding.links(j)) for j in range(len(points))])
-    claims = np.array(comm.allgather(found))  # (ranks, monitors)
+    # Per monitor this rank's preferred owned cell holding it (Model.preferred_cell) and its centroid;
+    # the monitor goes to the rank whose cell is preferred over the others' (the whole model's choice).
+    best = []
+    for found in model.cells_holding(points):
+        found = found[found < owned_cells]
+        best.append((len(found),) + ((None, None) if not len(found) else model.preferred_cell(found)))
+    offers = comm.allgather([(count, None if centroid is None else tuple(centroid)) for count, _, centroid in best])
+    mine = []
     for j in range(len(points)):
-        if not claims[:, j].any():
+        held = [(offer[j][1], q) for q, offer in enumerate(offers) if offer[j][1] is not None]
+        if not held:
             lo, hi = model.bounds
             error = PointOutsideMesh(j, points[j], lo, hi)
             key = f"monitor.{j}.point"
             raise SceneError(key, monitors[j]["point"], "a point inside a cell of the model",
                              f"scene key '{key}' = {monitors[j]['point']} (monitor {monitors[j]['name']!r}): {error}; "
                              "allowed: a point inside a cell of the model")
-    mine = np.flatnonzero(claims.argmax(axis=0) == comm.rank)
+        if min(held)[1] == comm.rank:
+            mine.append(j)
+    mine = np.array(mine, dtype=np.int64)
     if not len(mine):
         return RankMonitors(mine, np.zeros((0, 0), dtype=np.int32), np.zeros((0, 0)))
-    cells = np.array([min(c for c in colliding.links(j) if c < owned_cells) for j in mine], dtype=np.int32)
+    cells = np.array([best[j][1] for j in mine], dtype=np.int32)
     nodes, weights = model.point_weights(points[mine], cells)
     stress = monitor_stress_operator(part.scene, model, points[mine], cells)
     if loop is not None:  # a monitor in an element-loop cell reads the law there (its owner counts the cell)
@@ -935,11 +941,8 @@ class DistributedRun:
         self.n_steps = whole_steps(scene["time"]["duration"], self.time_step)
         loop = self.loop = rank_regions(part)
         if loop is not None:  # every rank's warnings on every rank (run.json is rank 0's)
-            seen = list(getattr(scene, "warnings", []))
-            for message in dict.fromkeys(m for found in comm.allgather(initial_warnings(loop.counted, scene))
-                                         for m in found):
-                if message not in seen:
-                    scene.warn(message)
+            for message in initial_warnings(loop.counted, scene, comm):  # (counts summed over the ranks)
+                scene.warn(message)
             flow_warnings(scene, scene_laws(scene)[0], self.time_step)
         self.energy_columns = ENERGY_COLUMNS + (INTERNAL_ENERGY_COLUMNS if loop is not None else [])
         self.freefield = input_arrays = None

@@ -508,33 +508,53 @@ def quadrature_initial_stress(points: np.ndarray, field) -> np.ndarray:
     return np.ascontiguousarray(voigt.reshape(points.shape[0], points.shape[1], 6))
 
 
-def initial_warnings(regions: NonlinearRegions, scene: typing.Mapping) -> list[str]:
+def initial_warnings(regions: NonlinearRegions, scene: typing.Mapping, comm=None) -> list[str]:
     """One line per thing a user should know about the regions' initial state: points whose initial
     stress is beyond the law's strength (returned or damaged at t = 0, the excess released as
     motion), concrete cells too large for the crack band (h > 2 E G_f / f_t^2: brittle), and
-    concrete with one point per cell (blind to bending within a cell)."""
-    messages = []
+    concrete with one point per cell (blind to bending within a cell).
+
+    comm: the ranks of a distributed model (pyfem/distributed_model.py), each holding the cells it
+    counts of some regions: the counts are summed over the ranks (a collective, every rank the same
+    lines); None: `regions` are the whole model's."""
+    totals = {}  # region -> [points changed, points, cells too large, cells, largest h]
     for component, (name, arrays) in zip(regions.components, regions.arrays.items()):
         law, parameters = regions.laws[name]
+        sigma0 = regions.initial_stress.get(name)
+        changed = 0
+        if sigma0 is not None:
+            tolerance = 1e-9 * max(1.0, float(np.abs(sigma0).max()))
+            changed = int(np.any(np.abs(component.stress() - sigma0) > tolerance, axis=2).sum())
+        large, largest_h = 0, 0.0
+        if law == "concrete_damage" and parameters.get("fracture_energy", 0.0) > 0.0:
+            limit = 2.0 * parameters["young_modulus"] * parameters["fracture_energy"] / parameters["tensile_strength"] ** 2
+            h = component.characteristic_length()
+            large, largest_h = int(np.count_nonzero(h >= limit)), float(h.max(initial=0.0))
+        totals[name] = [changed, int(arrays.weights.size), large, int(arrays.weights.shape[0]), largest_h]
+    laws = dict(regions.laws)
+    if comm is not None:  # every rank the same regions, in the same order
+        pieces = comm.allgather((totals, laws))
+        totals, laws = {}, {}
+        for rank_totals, rank_laws in pieces:
+            laws.update(rank_laws)
+            for name, values in rank_totals.items():
+                whole = totals.setdefault(name, [0, 0, 0, 0, 0.0])
+                totals[name] = [a + b for a, b in zip(whole[:4], values[:4])] + [max(whole[4], values[4])]
+    messages = []
+    for name, (changed, points, large, _, largest_h) in totals.items():
+        law, parameters = laws[name]
         table = {kernel_law: table for table, kernel_law in LAW_OF_TABLE.items()}.get(law)
         if table is None:
             continue
-        sigma0 = regions.initial_stress.get(name)
-        if sigma0 is not None:
-            tolerance = 1e-9 * max(1.0, float(np.abs(sigma0).max()))
-            changed = np.any(np.abs(component.stress() - sigma0) > tolerance, axis=2)
-            if changed.any():
-                messages.append(f"materials.{name}.{table}: {int(changed.sum())} of {changed.size} points start "
-                                "beyond the strength under [initial_stress]; their stress was returned to it "
-                                "(damaged) at t = 0 and the excess is released as motion")
-        if law == "concrete_damage" and parameters.get("fracture_energy", 0.0) > 0.0:
-            largest = (2.0 * parameters["young_modulus"] * parameters["fracture_energy"]
-                       / parameters["tensile_strength"] ** 2)
-            h = component.characteristic_length()
-            if np.any(h >= largest):
-                messages.append(f"materials.{name}.damage: {int(np.count_nonzero(h >= largest))} cells are larger "
-                                f"than 2 E G_f / f_t^2 = {largest:.3g} m (up to {h.max():.3g} m): the crack band "
-                                "cannot regularise them and they crack brittly; refine the mesh there")
+        if changed:
+            messages.append(f"materials.{name}.{table}: {changed} of {points} points start "
+                            "beyond the strength under [initial_stress]; their stress was returned to it "
+                            "(damaged) at t = 0 and the excess is released as motion")
+        if large:
+            limit = 2.0 * parameters["young_modulus"] * parameters["fracture_energy"] / parameters["tensile_strength"] ** 2
+            messages.append(f"materials.{name}.damage: {large} cells are larger "
+                            f"than 2 E G_f / f_t^2 = {limit:.3g} m (up to {largest_h:.3g} m): the crack band "
+                            "cannot regularise them and they crack brittly; refine the mesh there")
         if law == "concrete_damage" and regions.integration.get(name) == "reduced":
             messages.append(f"materials.{name}.damage.integration = \"reduced\": a one-point cell's law sees its "
                             "mean strain only, so bending within a cell does not crack it: a lining a few cells "

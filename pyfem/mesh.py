@@ -120,9 +120,10 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
 
 def stable_partitioner():
     """dolfinx's cell partitioner (its default graph partitioner, ghost cells across facets) with the
-    parts numbered by their lowest global cell: the graph partitioner's split is reproducible, but
-    which rank gets which part was not (the two halves of a 2-rank run swapped between runs), and a
-    rank's sums, so a run's last digits, follow its part. On one rank nothing changes."""
+    parts numbered by their lowest global cell: which rank got which part varied between runs (the
+    two halves of a 2-rank run swapped) where the split did not, and a rank's sums, so a run's last
+    digits, follow its part. (The split itself is not guaranteed to repeat.) On one rank nothing
+    changes."""
     from dolfinx import graph
 
     base = graph.partitioner()

@@ -246,18 +246,35 @@ class Model:
                             for point, cell in zip(points, cells)]
         return cells, reference_points
 
-    def _containing_cells(self, points: np.ndarray) -> np.ndarray:
-        """One cell containing each point, or ValueError naming the first point outside."""
+    def cells_holding(self, points: np.ndarray) -> list:
+        """Per point, every local cell containing it (several on a face, an edge or a node)."""
         if self._cell_locator is None:
             self._cell_locator = geometry.BoundingBoxTree(self.mesh, self.mesh.topology.dim)
         candidates = geometry.compute_collisions(self._cell_locator, points)
         colliding = geometry.compute_colliding_cells(self.mesh, candidates, points)
+        return [np.asarray(colliding.links(j), dtype=np.int32) for j in range(points.shape[0])]
+
+    def cell_centroids(self, cells: np.ndarray) -> np.ndarray:
+        """(c, 3) mean of each local cell's geometry nodes (m)."""
+        dofmap = self.mesh.geometry.dofmap
+        n_geometry = dofmap.offsets[1] - dofmap.offsets[0]
+        return self.mesh.geometry.x[dofmap.array.reshape(-1, n_geometry)[np.asarray(cells, dtype=np.int32)]].mean(axis=1)
+
+    def preferred_cell(self, cells: np.ndarray) -> tuple[int, np.ndarray]:
+        """Of cells holding one point, the one whose centroid is lowest in x, then y, then z, and that
+        centroid: a point on a face, an edge or a node between cells gets the same cell whatever the
+        numbering or the rank count (its stress and strain are that cell's)."""
+        centroids = self.cell_centroids(cells)
+        k = int(np.lexsort((centroids[:, 2], centroids[:, 1], centroids[:, 0]))[0])
+        return int(cells[k]), centroids[k]
+
+    def _containing_cells(self, points: np.ndarray) -> np.ndarray:
+        """One cell containing each point (`preferred_cell`), or ValueError naming the first point outside."""
         cells = np.empty(points.shape[0], dtype=np.int32)
-        for j, point in enumerate(points):
-            found = colliding.links(j)
+        for j, (point, found) in enumerate(zip(points, self.cells_holding(points))):
             if len(found) == 0:
                 raise PointOutsideMesh(j, point, *self.bounds)
-            cells[j] = found[0]
+            cells[j] = self.preferred_cell(found)[0]
         return cells
 
 

@@ -452,10 +452,11 @@ def check_input_faces(scene: Scene, model) -> None:
                      f"the input (faces found: {found}; fixed, roller and free faces carry none)")
 
 
-def warn_input_medium(scene: Scene, model) -> None:
+def warn_input_medium(scene: Scene, model, comm=None) -> None:
     """Warns when other materials than `[wave] medium` reach the input faces: they receive the free
     field of the medium's homogeneous half-space, not their own (docs/method.md section 5, "Limit").
-    A node's material is read off its face's lumped impedance, rho c_s over its area."""
+    A node's material is read off its face's lumped impedance, rho c_s over its area. comm: the
+    ranks of a distributed model (pyfem/distributed_model.py), whose faces are each rank's part."""
     from pyfem.material import Material
     from pyfem.seismic.forces import INPUT_TYPES
 
@@ -468,6 +469,8 @@ def warn_input_medium(scene: Scene, model) -> None:
     total = sum(float(np.sum(face.area)) for face in faces)
     other = sum(float(np.sum(face.area[np.abs(face.rho_cs / face.area / reference - 1.0) > 0.01]))
                 for face in faces)
+    if comm is not None:  # a distributed model's faces hold each rank's owned nodes: the whole's sums
+        total, other = comm.allreduce(total), comm.allreduce(other)
     if total > 0.0 and other > 0.01 * total:
         scene.warn(f"wave.medium = '{medium}': {100 * other / total:.0f} % of the input faces' area lies in other "
                    f"materials, which receive the free field of a homogeneous '{medium}' half-space, not their "

@@ -296,8 +296,11 @@ def test_kill_9_of_two_ranks_then_resume_gives_the_uninterrupted_run(tmp_path, u
     assert resumed["status"] == "finished" and 0.0 < resumed["resumed"][0]["t"] < 3.0
     assert resumed["mpi"]["ranks"] == resumed_on and resumed["nonlinear_regions"]["weak"]["yielded_volume"] > 0.0
     assert not list(out.glob("checkpoint*")), "a finished run keeps no checkpoint"
-    same_files(out, uninterrupted, None if resumed_on == 2 else 1e-10)
-    if resumed_on == 3:  # another partition writes its nodes in another order: a second fields file
+    # The same split (dolfinx's graph partitioner usually repeats it): byte for byte; another (another
+    # rank count, or a split that did not repeat): round-off, the fields in a second file.
+    split = resumed["mpi"]["owned_nodes"] == summary(uninterrupted)["mpi"]["owned_nodes"]
+    same_files(out, uninterrupted, None if split else 1e-10)
+    if not split:  # another partition writes its nodes in another order: a second fields file
         first, second = resumed["fields_files"]
         assert first == "fields.xdmf" and (out / second).exists()
         with h5py.File(out / "fields.h5") as a, h5py.File((out / second).with_suffix(".h5")) as b, \
@@ -345,7 +348,8 @@ def test_sigterm_to_one_rank_stops_both_with_a_checkpoint_that_resumes(tmp_path)
     assert 0.1 < stopped["time_reached"] < 7.0
     result = pyfem(2, "run", SCENES["layers"], "--out", str(out), *settings, "--resume")
     assert result.returncode == 0, result.stderr[-3000:]
-    same_files(out, reference)
+    split = summary(out)["mpi"]["owned_nodes"] == summary(reference)["mpi"]["owned_nodes"]
+    same_files(out, reference, None if split else 1e-10)
 
 
 def test_the_whole_model_refuses_a_distributed_checkpoint_in_one_line(tmp_path):
