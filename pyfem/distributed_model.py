@@ -420,16 +420,13 @@ class RankRegions:
 
 def _region_tables(scene: Scene) -> tuple[dict, dict, dict, dict]:
     """(laws, options, zones, integration) of pyfem.elements.nonlinear_component for the scene."""
-    from pyfem.elements import scene_laws
+    from pyfem.elements import scene_laws, split_law_parameters
 
     laws, mean_dilatation = scene_laws(scene)
     tables = ({}, {}, {}, {})
     for name, given in laws.items():
-        given = dict(given)
-        law = given.pop("law")
-        zone = given.pop("zone", None)
-        tables[3][name] = given.pop("integration", "full")
-        tables[0][name] = (law, {key: float(value) for key, value in given.items()})
+        law, zone, tables[3][name], parameters = split_law_parameters(given)
+        tables[0][name] = (law, parameters)
         tables[1][name] = {"mean_dilatation": bool(mean_dilatation.get(name, False))}
         if zone is not None:
             tables[2][name] = list(zone)
@@ -472,6 +469,7 @@ def rank_regions(part: RankModel) -> RankRegions | None:
                                 arrays.weights[rows], arrays.points[rows]))
     incoming = comm.alltoall(outgoing)
     order = np.argsort(part.local_nodes)
+    template = element_arrays(model.V, np.zeros(0, dtype=np.int32))  # the reference tables, the same for every cell
     halo_arrays = {}
     for name in laws:
         pieces = [piece for from_rank in incoming for piece in from_rank if piece[0] == name]
@@ -481,7 +479,6 @@ def rank_regions(part: RankModel) -> RankRegions | None:
         position = np.minimum(np.searchsorted(part.local_nodes[order], global_nodes), len(order) - 1)
         if np.any(part.local_nodes[order][position] != global_nodes):
             raise RuntimeError(f"element loop {name!r}: a halo cell's node is not on this rank")
-        template = element_arrays(model.V, np.zeros(0, dtype=np.int32))
         halo_arrays[name] = ElementArrays(
             cells=np.full(len(global_nodes), -1, dtype=np.int32),
             cell_nodes=np.ascontiguousarray(order[position], dtype=np.int32),
@@ -1091,35 +1088,18 @@ class DistributedRun:
     # -- the samples ------------------------------------------------------------------------------------
     def sample(self, t: float, k: int, stepper, u, v, a) -> None:
         """Monitors, energy, reactions and fields at time t (sample k); every rank, rank 0 writes."""
-        from pyfem.elements import blank_point_values
-        from pyfem.output import _VOIGT, max_principal
+        from pyfem.output import monitor_rows
 
         monitors, loop, comm = self.monitors, self.loop, self.comm
         mine = []
-        if len(monitors.index):  # this rank's monitors, as RunWriter._monitor_rows computes them
-            values = [np.full((len(monitors.index), 1), t)]
-            for x in (u, v, a):
-                values.append(np.einsum("mk,mkc->mc", monitors.weights, x.reshape(-1, 3)[monitors.nodes]))
-            if self.freefield is not None:
-                at, now = self.points[monitors.index], np.array([t])
-                values += [self.freefield.displacement(at, now)[0], self.freefield.velocity(at, now)[0]]
-            dynamic_tensor = monitors.stress.dynamic_stress(u)
-            dynamic = np.stack([dynamic_tensor[:, i, j] for i, j in _VOIGT], axis=1)
-            static = np.stack([monitors.stress.static[:, i, j] for i, j in _VOIGT], axis=1)
-            total = dynamic + static
-            kernel = None
-            if loop is not None:  # the law's stress where the cell is in the element loop
-                points_at = monitors.stress.kernel_points
-                kernel = (loop.counted.point_values(points_at) if points_at is not None
-                          else blank_point_values(np.zeros(len(monitors.index), dtype=bool)))
-                found = kernel["found"]
-                total[found] = kernel["stress"][found]
-                dynamic[found] = total[found] - static[found]
-            values += [total, max_principal(total)[:, None], max_principal(dynamic)[:, None]]
-            if kernel is not None:
-                values += [kernel["damage"][:, None], kernel["damage_type"][:, None].astype(float),
-                           kernel["plastic_strain"][:, None]]
-            mine = list(zip(monitors.index.tolist(), np.hstack(values)))
+        if len(monitors.index):  # this rank's monitors, as the whole model's writer computes them
+            stress = monitors.stress
+            kernel = None  # the law's values where the cell is in the element loop (attach_kernel_points)
+            if loop is not None and stress.kernel_points is not None:
+                kernel = loop.counted.point_values(stress.kernel_points)
+            rows = monitor_rows(t, u, v, a, monitors.nodes, monitors.weights, self.freefield,
+                                self.points[monitors.index], stress, kernel)
+            mine = list(zip(monitors.index.tolist(), rows))
         energy = stepper.energy()  # (a rank without element-loop cells has no internal terms: 0)
         sums = comm.reduce(np.array([energy.get(name, 0.0) for name in self.energy_columns[1:]]), root=0)
         reactions = None

@@ -610,6 +610,16 @@ def scene_laws(scene: typing.Mapping) -> tuple[dict, dict]:
     return law_parameters, mean_dilatation
 
 
+def split_law_parameters(given: typing.Mapping) -> tuple[str, list | None, str, dict]:
+    """(law, zone or None, integration, the law's own parameters as floats) of one region's entry of
+    `nonlinear_component`'s law_parameters (as `scene_laws` gives them)."""
+    given = dict(given)
+    law = given.pop("law", "linear_elastic")
+    zone = given.pop("zone", None)
+    integration = given.pop("integration", "full")
+    return law, zone, integration, {key: float(value) for key, value in given.items()}
+
+
 def nonlinear_component(model, region_names: typing.Sequence[str],
                         law_parameters: typing.Mapping[str, typing.Mapping] | None = None,
                         initial_stress=None, mean_dilatation: bool | typing.Mapping[str, bool] = False,
@@ -648,17 +658,14 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
 
     arrays, laws, stresses, options, removed, zones, schemes, hourglass = {}, {}, {}, {}, [], {}, {}, {}
     for name in region_names:
-        given = dict(law_parameters.get(name) or {"law": "linear_elastic", **region_elastic_parameters(model, name)})
-        law = given.pop("law", "linear_elastic")
-        zone = given.pop("zone", None)
-        schemes[name] = given.pop("integration", "full")
+        law, zone, schemes[name], parameters = split_law_parameters(
+            law_parameters.get(name) or {"law": "linear_elastic", **region_elastic_parameters(model, name)})
         cells = cells_in_zone(model, region_cells(model, name), zone)
         if zone is not None:
             zones[name] = list(zone)
         if not len(cells):
             raise ValueError(f"materials.{name}.plasticity.zone = {law_parameters[name].get('zone')}: no cell of "
                              f"region {name!r} has its centroid in the box")
-        parameters = {key: float(value) for key, value in given.items()}
         region_arrays = element_arrays(model.V, cells)
         stresses[name] = (None if initial_stress is None
                           else quadrature_initial_stress(region_arrays.points, initial_stress))

@@ -647,31 +647,12 @@ class RunWriter:
     def _monitor_rows(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """(n_monitors, len(monitor_columns)) rows of the monitor files at time t (s)."""
         sim = self.simulation
-        values = [np.full((len(sim.monitor_names), 1), t)]
-        for field in (u, v, a):
-            nodal = field.reshape(-1, 3)[sim.monitor_nodes]  # (m, k, 3)
-            values.append(np.einsum("mk,mkc->mc", sim.monitor_weights, nodal))
-        if sim.freefield is not None:
-            times = np.array([t])
-            values += [sim.freefield.displacement(self._monitor_points, times)[0],
-                       sim.freefield.velocity(self._monitor_points, times)[0]]
         stress = sim.monitor_stress
-        if stress is not None:
-            dynamic_tensor = stress.dynamic_stress(u)
-            dynamic = np.stack([dynamic_tensor[:, i, j] for i, j in _VOIGT], axis=1)
-            static = np.stack([stress.static[:, i, j] for i, j in _VOIGT], axis=1)
-            total = dynamic + static
-            kernel = None
-            if stress.kernel_points is not None:  # the law's stress where the cell is nonlinear
-                kernel = (self.point_values or self.nonlinear.point_values)(stress.kernel_points)
-                found = kernel["found"]
-                total[found] = kernel["stress"][found]
-                dynamic[found] = total[found] - static[found]
-            values += [total, max_principal(total)[:, None], max_principal(dynamic)[:, None]]
-            if kernel is not None:
-                values += [kernel["damage"][:, None], kernel["damage_type"][:, None].astype(float),
-                           kernel["plastic_strain"][:, None]]
-        return np.hstack(values)
+        kernel = None
+        if stress is not None and stress.kernel_points is not None:  # the law's values where the cell is nonlinear
+            kernel = (self.point_values or self.nonlinear.point_values)(stress.kernel_points)
+        return monitor_rows(t, u, v, a, sim.monitor_nodes, sim.monitor_weights, sim.freefield, self._monitor_points,
+                            stress, kernel)
 
     def _open_histories(self, resume_at: dict | None = None) -> None:
         """energy.csv, monitors/NAME.csv and pairs/NAME.csv with their headers; resume_at: a resumed
@@ -968,6 +949,36 @@ class RunWriter:
         if self.xdmf is not None:
             self.xdmf.__exit__(None, None, None)
             self.xdmf = None
+
+
+def monitor_rows(t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray, nodes: np.ndarray, weights: np.ndarray,
+                 freefield, points: np.ndarray, stress, kernel: dict | None) -> np.ndarray:
+    """(m, columns) rows of monitors/NAME.csv at time t (s) for m monitors: u, v, a interpolated from
+    their cells' `nodes` with `weights`; the free field at their `points` (with a wave); with `stress`
+    (solver.MonitorStress) the total and dynamic stress, s1 of each; `kernel`: the law's values at
+    the monitors' kernel points (NonlinearRegions.point_values: its stress replaces the matrix cells'
+    where found, then damage, damage type and plastic strain), None without the element loop. The
+    whole model's writer and the distributed run (pyfem/distributed_model.py) both write these."""
+    values = [np.full((len(nodes), 1), t)]
+    for field in (u, v, a):
+        values.append(np.einsum("mk,mkc->mc", weights, field.reshape(-1, 3)[nodes]))
+    if freefield is not None:
+        times = np.array([t])
+        values += [freefield.displacement(points, times)[0], freefield.velocity(points, times)[0]]
+    if stress is not None:
+        dynamic_tensor = stress.dynamic_stress(u)
+        dynamic = np.stack([dynamic_tensor[:, i, j] for i, j in _VOIGT], axis=1)
+        static = np.stack([stress.static[:, i, j] for i, j in _VOIGT], axis=1)
+        total = dynamic + static
+        if kernel is not None:
+            found = kernel["found"]
+            total[found] = kernel["stress"][found]
+            dynamic[found] = total[found] - static[found]
+        values += [total, max_principal(total)[:, None], max_principal(dynamic)[:, None]]
+        if kernel is not None:
+            values += [kernel["damage"][:, None], kernel["damage_type"][:, None].astype(float),
+                       kernel["plastic_strain"][:, None]]
+    return np.hstack(values)
 
 
 def flush_run(histories: dict, summary: dict, times: list, out_dir: Path) -> float:

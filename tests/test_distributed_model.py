@@ -33,6 +33,7 @@ import numpy as np
 import pytest
 
 from pyfem.compare import largest_differences
+from test_mpi import CHECKPOINTED_RUN, kill_after_first_checkpoint, sigterm_to_rank_one
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = "/usr/bin/python3"
@@ -224,7 +225,8 @@ def test_a_monitor_outside_the_mesh_is_named_on_every_rank_count(tmp_path):
 
 # --- checkpoint and resume (each rank its own state, rank 0 the run's record) -----------------------
 
-CHECKPOINTED = (*DISTRIBUTED, "--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
+# test_mpi's checkpointed run (a checkpoint every 0.5 s of wall time, 3 s of motion), distributed
+CHECKPOINTED = (*CHECKPOINTED_RUN, *DISTRIBUTED)
 
 
 def same_files(out: Path, reference: Path, tolerance: float | None = None) -> None:
@@ -251,29 +253,6 @@ def same_files(out: Path, reference: Path, tolerance: float | None = None) -> No
     assert (out / "fields.xdmf").read_text().count("<Time ") == (reference / "fields.xdmf").read_text().count("<Time ")
 
 
-def killed(out: Path, ranks: int, settings: tuple, window: float) -> None:
-    """Starts the layers scene on `ranks` ranks and kills it (kill -9: mpirun and every rank) at a
-    random time within `window` s after its first checkpoint."""
-    import random
-    import signal
-    import time
-
-    command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), PYTHON, "-m", "pyfem", "run",
-               SCENES["layers"], "--out", str(out), *settings]
-    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                               start_new_session=True)
-    deadline = time.monotonic() + 300
-    while not (out / "checkpoint.npz").exists():
-        assert process.poll() is None, "the run ended before its first checkpoint"
-        assert time.monotonic() < deadline, "no checkpoint after 300 s"
-        time.sleep(0.05)
-    time.sleep(random.uniform(0.0, window))
-    os.killpg(process.pid, signal.SIGKILL)
-    process.wait(timeout=60)
-    status = json.loads((out / "run.json").read_text())["status"]
-    assert status == "running", f"{status}: the run ended before the kill"  # as a killed run leaves it
-
-
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory):
     out = tmp_path_factory.mktemp("uninterrupted") / "run"
@@ -289,7 +268,7 @@ def test_kill_9_of_two_ranks_then_resume_gives_the_uninterrupted_run(tmp_path, u
     history byte for byte and every field as the uninterrupted run's; on 3 ranks (the checkpoint is
     keyed by position, not by a partition): within 1e-10, the sums of another partition."""
     out = tmp_path / "killed"
-    killed(out, 2, CHECKPOINTED, 1.0)
+    kill_after_first_checkpoint(2, SCENES["layers"], out, 1.0, DISTRIBUTED)
     result = pyfem(resumed_on, "run", SCENES["layers"], "--out", str(out), *CHECKPOINTED, "--resume")
     assert result.returncode == 0, result.stderr[-3000:]
     resumed = summary(out)
@@ -321,27 +300,11 @@ def test_sigterm_to_one_rank_stops_both_with_a_checkpoint_that_resumes(tmp_path)
     """SIGTERM to rank 1 only, once the first rows are on disk (2 s of wall time): both ranks stop at
     the same sample, write the checkpoint and an "interrupted" run.json (no traceback); the resume
     equals the uninterrupted run (histories byte for byte, energy.csv to 1e-13, fields)."""
-    import signal
-    import time
-
-    from test_mpi import rank_pids
-
     settings = (*DISTRIBUTED, "--set", "output.checkpoint_interval=0", "--set", "time.duration=8.0")
     reference, out = tmp_path / "reference", tmp_path / "stopped"
     result = pyfem(2, "run", SCENES["layers"], "--out", str(reference), *settings)
     assert result.returncode == 0, result.stderr[-3000:]
-    command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem", "run",
-               SCENES["layers"], "--out", str(out), *settings]
-    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)
-    layer = out / "monitors" / "layer.csv"
-    deadline = time.monotonic() + 300
-    while not (layer.exists() and len(layer.read_text().splitlines()) > 2):
-        assert process.poll() is None, "the run ended before the signal"
-        assert time.monotonic() < deadline, "no samples after 300 s"
-        time.sleep(0.05)
-    os.kill(rank_pids(process.pid)[1], signal.SIGTERM)
-    _, stderr = process.communicate(timeout=300)
+    process, stderr = sigterm_to_rank_one(SCENES["layers"], out, settings, rows=2)
     stopped = summary(out)
     assert process.returncode != 0 and stopped["status"] == "interrupted", stderr[-2000:]
     assert (out / "checkpoint.npz").exists() and "Traceback" not in stderr
@@ -356,7 +319,7 @@ def test_the_whole_model_refuses_a_distributed_checkpoint_in_one_line(tmp_path):
     """The whole model cannot read a distributed checkpoint (each rank's state in its own file): one
     line naming parallel.model, exit 2, the checkpoint kept for the right command."""
     out = tmp_path / "killed"
-    killed(out, 2, CHECKPOINTED, 0.5)
+    kill_after_first_checkpoint(2, SCENES["layers"], out, 0.5, DISTRIBUTED)
     result = pyfem(1, "run", SCENES["layers"], "--out", str(out), "--set", "output.checkpoint_interval=0.5",
                    "--set", "time.duration=3.0", "--resume")
     assert result.returncode == 2, result.stderr[-2000:]

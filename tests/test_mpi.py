@@ -346,6 +346,24 @@ def rank_pids(mpirun_pid: int) -> dict:
     return ranks
 
 
+def sigterm_to_rank_one(scene: str, out: Path, settings: tuple, rows: int) -> tuple:
+    """Starts `pyfem run` of `scene` on 2 ranks, sends SIGTERM to rank 1 only once monitors/layer.csv
+    holds more than `rows` lines (written every 2 s), waits for the run's end: (process, stderr)."""
+    command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem", "run", scene,
+               "--out", str(out), *settings]
+    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    layer = out / "monitors" / "layer.csv"
+    deadline = time.monotonic() + 300
+    while not (layer.exists() and len(layer.read_text().splitlines()) > rows):
+        assert process.poll() is None, "the run ended before the signal"
+        assert time.monotonic() < deadline, "no samples after 300 s"
+        time.sleep(0.05)
+    os.kill(rank_pids(process.pid)[1], signal.SIGTERM)
+    _, stderr = process.communicate(timeout=300)
+    return process, stderr
+
+
 def test_sigterm_to_one_rank_stops_every_rank_with_a_whole_checkpoint_that_resumes(tmp_path):
     """SIGTERM to rank 1 only, mid-run, of the damage scene (a yielding layer: per-point state):
     every rank stops at the same sample, rank 0 gathers the whole state (the samples in between
@@ -360,18 +378,7 @@ def test_sigterm_to_one_rank_stops_every_rank_with_a_whole_checkpoint_that_resum
     settings = ("--set", "time.duration=6.0", "--set", "output.checkpoint_interval=0")
     reference, out = tmp_path / "reference", tmp_path / "stopped"
     pyfem_run(2, scene, reference, *settings)
-    command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem", "run", scene,
-               "--out", str(out), *settings]
-    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)
-    deadline = time.monotonic() + 300
-    while not ((out / "monitors" / "layer.csv").exists() and
-               len((out / "monitors" / "layer.csv").read_text().splitlines()) > 20):
-        assert process.poll() is None, "the run ended before the signal"
-        assert time.monotonic() < deadline, "no samples after 300 s"
-        time.sleep(0.05)
-    os.kill(rank_pids(process.pid)[1], signal.SIGTERM)
-    _, stderr = process.communicate(timeout=300)
+    process, stderr = sigterm_to_rank_one(scene, out, settings, rows=20)
     stopped = summary(out)
     assert process.returncode != 0 and stopped["status"] == "interrupted", stderr[-2000:]
     assert (out / checkpoint.CHECKPOINT_NAME).exists() and "Traceback" not in stderr
