@@ -62,8 +62,6 @@ def check_supported(scene: Scene) -> None:
     """Raises SceneError naming the first part of the scene that the distributed model does not
     build yet (every rank says the same: the scene is the same on every rank)."""
     allowed = "\"whole\" here: the distributed model does not build {} yet (docs/scaling.md)"
-    if "contact" in scene.effects:
-        raise SceneError(KEY, "distributed", allowed.format("[contact]"))
     if "static" in scene:
         raise SceneError(KEY, "distributed", allowed.format("a [static] stage"))
     for name, table in scene["materials"].items():
@@ -96,22 +94,12 @@ def fetch_owned(comm: MPI.Comm, index_map, owned: np.ndarray, wanted: np.ndarray
     return out
 
 
-def owned_rows_local(V, matrix, release: bool = False,
-                     local_nodes: np.ndarray | None = None) -> tuple[sp.bsr_matrix, np.ndarray, np.ndarray]:
+def owned_rows_global(matrix, n_owned: int, release: bool = False) -> tuple:
     """The owned rows of the PETSc `matrix` (getValuesCSR: owned rows, global columns) as (3, 3)
-    blocks with local columns: the local nodes are the index map's owned nodes, its ghosts, then the
-    extra ghosts (global nodes of the owned rows' columns that the index map does not hold). Built
-    block by block from PETSc's arrays (no scalar CSR copy: the set-up's memory peak is the matrix's).
+    blocks: (block_indptr, the blocks' global columns (nodes), blocks). Built block by block from
+    PETSc's arrays (no scalar CSR copy: the set-up's memory peak is the matrix's).
 
-    release: destroy the PETSc matrix once its arrays are read (one copy fewer at the peak).
-    local_nodes: the numbering to use (another matrix's of the same pattern), None: made here.
-
-    Returns (rows: BSR (3 owned, 3 local), columns sorted in each row; the extra ghosts' global
-    nodes; every local node's global node)."""
-    index_map = V.dofmap.index_map
-    first, last = index_map.local_range
-    n_owned = last - first
-    mapped = np.concatenate([np.arange(first, last), index_map.ghosts]).astype(np.int64)
+    release: destroy the PETSc matrix once its arrays are read (one copy fewer at the peak)."""
     indptr, columns, values = matrix.getValuesCSR()
     if release:
         matrix.destroy()
@@ -133,20 +121,55 @@ def owned_rows_local(V, matrix, release: bool = False,
             node //= 3
         for c in range(3):
             blocks[:, r, c] = values[base + c]
-    del indptr, columns, values, within, base
+    return block_indptr, node, blocks
+
+
+def local_numbering(owned: np.ndarray, mapped: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(every local node's global node, the extra ghosts) of the kernel's numbering: the `owned`
+    nodes this rank steps, then the function space's other local nodes (`mapped`: its owned nodes
+    and ghosts) in their order, then the *extra ghosts*, nodes of the owned rows' `columns` that
+    neither holds, ascending. Without moved pair nodes: the function space's numbering, then the
+    extra ghosts."""
+    rest = mapped[~np.isin(mapped, owned)]
+    known = np.concatenate([owned, rest])
+    extra = np.setdiff1d(columns, known)
+    return np.concatenate([known, extra]).astype(np.int64), extra
+
+
+def localize(rows: tuple, local_nodes: np.ndarray) -> sp.bsr_matrix:
+    """The rows (block_indptr, global columns, blocks) as BSR (3 rows, 3 local) with local columns
+    (`local_nodes`: every local node's global node), sorted in each row."""
+    from pyfem.distributed_pairs import positions
+
+    block_indptr, node, blocks = rows
+    try:
+        local_columns = positions(local_nodes, node, "stiffness").astype(np.int32)
+    except RuntimeError:
+        raise RuntimeError("stiffness: a column outside the given local numbering") from None
+    matrix = sp.bsr_matrix((blocks, local_columns, block_indptr),
+                           shape=(3 * (len(block_indptr) - 1), 3 * len(local_nodes)))
+    matrix.sort_indices()  # in place
+    return matrix
+
+
+def owned_rows_local(V, matrix, release: bool = False,
+                     local_nodes: np.ndarray | None = None) -> tuple[sp.bsr_matrix, np.ndarray, np.ndarray]:
+    """The owned rows of the PETSc `matrix` (`owned_rows_global`) with local columns: the local nodes
+    are the index map's owned nodes, its ghosts, then the extra ghosts (`local_numbering`).
+
+    local_nodes: the numbering to use (another matrix's of the same pattern), None: made here.
+
+    Returns (rows: BSR (3 owned, 3 local), columns sorted in each row; the extra ghosts' global
+    nodes; every local node's global node)."""
+    index_map = V.dofmap.index_map
+    first, last = index_map.local_range
+    mapped = np.concatenate([np.arange(first, last), index_map.ghosts]).astype(np.int64)
+    rows = owned_rows_global(matrix, last - first, release)
     if local_nodes is None:
-        extra = np.setdiff1d(node, mapped)
-        local_nodes = np.concatenate([mapped, extra])
+        local_nodes, extra = local_numbering(mapped[:last - first], mapped, rows[1])
     else:
         extra = local_nodes[len(mapped):]
-    order = np.argsort(local_nodes)
-    found = np.minimum(np.searchsorted(local_nodes[order], node), len(order) - 1)
-    if np.any(local_nodes[order][found] != node):
-        raise RuntimeError("stiffness: a column outside the given local numbering")
-    local_columns = order[found].astype(np.int32)
-    rows = sp.bsr_matrix((blocks, local_columns, block_indptr), shape=(3 * n_owned, 3 * len(local_nodes)))
-    rows.sort_indices()  # in place
-    return rows, extra, local_nodes
+    return localize(rows, local_nodes), extra, local_nodes
 
 
 def add_to_diagonal(rows: sp.bsr_matrix, nodes: np.ndarray, blocks: np.ndarray) -> None:
@@ -159,11 +182,22 @@ def add_to_diagonal(rows: sp.bsr_matrix, nodes: np.ndarray, blocks: np.ndarray) 
     np.add.at(rows.data, diagonal[nodes], blocks)
 
 
-def local_stiffness(comm: MPI.Comm, index_map, rows: sp.bsr_matrix, n_local: int, local_nodes: np.ndarray):
+def stepping(comm: MPI.Comm, ownership):
+    """pyfem.distributed_pairs.Ownership of `ownership` (itself, or dolfinx's index map: its owners)."""
+    from pyfem.distributed_pairs import Ownership
+
+    return ownership if isinstance(ownership, Ownership) else Ownership.of(comm, ownership)
+
+
+def local_stiffness(comm: MPI.Comm, ownership, rows: sp.bsr_matrix, n_local: int, local_nodes: np.ndarray):
     """(indptr, indices, blocks) of the rank's matrix as pyfem.distributed.local_matrix gives it
     from the whole one: the owned rows' blocks (`rows`, sorted), each ghost row's blocks to owned
-    nodes (the owned rows' transposed: K is symmetric) and the ghosts' diagonal blocks (from their
-    owners). One copy of the owned blocks."""
+    nodes (the owned rows' transposed: K is symmetric) and the ghosts' diagonal blocks (from the
+    ranks stepping them, `ownership`: an Ownership or dolfinx's index map). One copy of the owned
+    blocks."""
+    from pyfem.distributed_pairs import fetch
+
+    ownership = stepping(comm, ownership)
     n_owned = rows.shape[0] // 3
     row = np.repeat(np.arange(n_owned), np.diff(rows.indptr))
     col = rows.indices
@@ -172,7 +206,8 @@ def local_stiffness(comm: MPI.Comm, index_map, rows: sp.bsr_matrix, n_local: int
         raise RuntimeError(f"stiffness: {n_owned - len(diagonal)} owned nodes without a diagonal block")
     ghost = np.flatnonzero(col >= n_owned)
     ghosts = np.arange(n_owned, n_local)
-    ghost_diagonal = fetch_owned(comm, index_map, diagonal.reshape(n_owned, 9), local_nodes[n_owned:]).reshape(-1, 3, 3)
+    ghost_diagonal = fetch(comm, ownership.owner(local_nodes[n_owned:]), local_nodes[:n_owned],
+                           diagonal.reshape(n_owned, 9), local_nodes[n_owned:]).reshape(-1, 3, 3)
     ghost_row = np.concatenate([col[ghost].astype(np.int64), ghosts])
     ghost_col = np.concatenate([row[ghost], ghosts])
     ghost_blocks = np.concatenate([rows.data[ghost].transpose(0, 2, 1), ghost_diagonal])
@@ -224,18 +259,20 @@ class GhostPlan:
         MPI.Request.Waitall(requests)
 
 
-def ghost_plan(comm: MPI.Comm, index_map, local_nodes: np.ndarray, n_owned: int) -> GhostPlan:
+def ghost_plan(comm: MPI.Comm, ownership, local_nodes: np.ndarray, n_owned: int) -> GhostPlan:
     """The exchange of the rank's ghosts (the index map's and the extra ones): each rank asks the
-    owners for its ghosts in ascending global order."""
-    first = index_map.local_range[0]
+    ranks stepping them (`ownership`: an Ownership or dolfinx's index map) for its ghosts in
+    ascending global order."""
+    from pyfem.distributed_pairs import positions
+
     ghosts = local_nodes[n_owned:]
-    owner = owners(comm, index_map, ghosts)
+    owner = stepping(comm, ownership).owner(ghosts)
     order = np.argsort(ghosts)
     requests = [ghosts[order][owner[order] == q] for q in range(comm.size)]
     asked = comm.alltoall(requests)
     local_of_ghost = dict(zip(ghosts.tolist(), range(n_owned, len(local_nodes))))
     neighbours = [q for q in range(comm.size) if q != comm.rank and (len(requests[q]) or len(asked[q]))]
-    send = [(np.asarray(asked[q], dtype=np.int64) - first).astype(np.int32) for q in neighbours]
+    send = [positions(local_nodes[:n_owned], asked[q], "ghost exchange").astype(np.int32) for q in neighbours]
     recv = [np.array([local_of_ghost[g] for g in requests[q]], dtype=np.int32) for q in neighbours]
     return GhostPlan(neighbours, send, recv)
 
@@ -247,7 +284,10 @@ class RankModel:
     """One rank's part of the model, in the kernel's local numbering (owned, ghosts, extra ghosts).
 
     model: pyfem.operators.Model of the distributed mesh (node_coords and mass: the function
-    space's owned and ghost nodes; faces: their owned nodes only; stiffness: None)."""
+    space's owned and ghost nodes, in its numbering; faces: the nodes this rank steps, in the
+    kernel's numbering; stiffness: None). Without contact the kernel's numbering starts with the
+    function space's; with contact the pair nodes moved to this rank come after its owned nodes and
+    those it gave away among its ghosts (`kernel_of_dolfinx`, pyfem/distributed_pairs.py)."""
 
     comm: MPI.Comm
     scene: Scene
@@ -268,6 +308,36 @@ class RankModel:
     setup_seconds: float = 0.0
     estimates: tuple = (0.0, None)   # omega_max^2: the Gershgorin bound, the power iteration's (or None)
     loop_cells: dict = field(default_factory=dict)  # element-loop region -> its owned cells (local)
+    ownership: object = None         # pyfem.distributed_pairs.Ownership: the rank stepping each global node
+    kernel_of_dolfinx: np.ndarray | None = None  # the function space's local node -> the kernel's (None: the same)
+    pairs: object = None             # pyfem.interfaces.NodePairs of the pairs this rank steps (kernel numbering)
+    pair_index: np.ndarray | None = None   # each of `pairs`' index among the whole model's (interface, position)
+    pair_global: np.ndarray | None = None  # (n, 2) each of `pairs`' global nodes
+    n_pairs: int = 0                 # the whole model's
+    moved_nodes: int = 0             # pair nodes stepped on another rank than dolfinx's owner (every rank's)
+
+    pair_side: np.ndarray | None = None    # per local node: 0, or 1 + side + 2 interface for a pair's node
+
+    def node_keys(self, nodes: np.ndarray) -> np.ndarray:
+        """Checkpoint keys of local `nodes`: their positions, and with contact which side of which
+        interface (a pair's two nodes share their position)."""
+        keys = point_keys(self.coords[nodes])
+        if self.pair_side is None:
+            return keys
+        return np.column_stack([keys, self.pair_side[nodes]])
+
+    def kernel_nodes(self, nodes: np.ndarray) -> np.ndarray:
+        """The kernel's local numbers of the function space's local `nodes`."""
+        if self.kernel_of_dolfinx is None:
+            return nodes
+        return self.kernel_of_dolfinx[nodes].astype(np.asarray(nodes).dtype)
+
+    def dolfinx_order(self, values: np.ndarray) -> np.ndarray:
+        """(3 n) kernel-numbered nodal values -> the function space's local nodes' (3 n_dolfinx)."""
+        n = len(self.model.node_coords)
+        if self.kernel_of_dolfinx is None:
+            return values[:3 * n]
+        return values.reshape(-1, 3)[self.kernel_of_dolfinx].reshape(-1)
 
     @property
     def n_local(self) -> int:
@@ -304,6 +374,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     from dolfinx import fem
 
     from pyfem.assembly import elastic_stiffness_matrix, lumped_mass, uses_diagonal_scaling
+    from pyfem.distributed_pairs import Ownership, global_pairs, move_rows, pair_moves, positions, route_faces
     from pyfem.mesh import create_mesh_with_interfaces
     from pyfem.operators import Model, _cell_materials, boundary_face, face_kinds, truncation_faces
     from pyfem.seismic.forces import boundary_springs_and_dashpots
@@ -318,25 +389,38 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
                          "mesh: their HRZ-lumped mass is not built on the ranks yet, docs/scaling.md)")
     materials = _cell_materials(mesh, cell_tags, regions, scene["materials"])
     quadrature = {"quadrature_degree": 2 * order}
-    coords = V.tabulate_dof_coordinates().astype(np.float64, copy=True)
-    mass = lumped_mass(V, materials.rho, quadrature)
+    coords_d = V.tabulate_dof_coordinates().astype(np.float64, copy=True)  # the function space's numbering
+    mass_d = lumped_mass(V, materials.rho, quadrature)
+    index_map = V.dofmap.index_map
+    first, last = index_map.local_range
+    mapped = np.concatenate([np.arange(first, last), index_map.ghosts]).astype(np.int64)
+    # Contact: each pair stepped where its side-i node is owned (pyfem/distributed_pairs.py).
+    ownership, pairs = Ownership.of(comm, index_map), None
+    if "contact" in scene.effects:
+        pairs = global_pairs(comm, V, facet_tags, interface_tags, coords_d, mapped, quadrature)
+        ownership = Ownership.of(comm, index_map, *pair_moves(pairs, ownership))
     matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
     n_dofs_global = matrix.getSize()[0]
-    rows, extra, local_nodes = owned_rows_local(V, matrix, release=True)  # every cell's: the time step's
-    index_map = V.dofmap.index_map
-    n_owned = index_map.size_local
+    owned, global_rows = move_rows(comm, ownership, first, owned_rows_global(matrix, last - first, release=True))
+    local_nodes, _ = local_numbering(owned, mapped, global_rows[1])
+    rows = localize(global_rows, local_nodes)  # every cell's: the time step's
+    del global_rows
+    n_owned = len(owned)
+    kernel_of_dolfinx = positions(local_nodes, mapped, "numbering")
+    identity = np.array_equal(kernel_of_dolfinx, np.arange(len(mapped)))
     centre = scene.get("boundary", {}).get("centre")
     if centre is None:  # the whole mesh's box (as build_model's)
-        centre = 0.5 * (np.min(comm.allgather(coords.min(axis=0)), axis=0)
-                        + np.max(comm.allgather(coords.max(axis=0)), axis=0))
+        centre = 0.5 * (np.min(comm.allgather(coords_d.min(axis=0)), axis=0)
+                        + np.max(comm.allgather(coords_d.max(axis=0)), axis=0))
     centre = np.asarray(centre, dtype=np.float64)
     truncation, free_surfaces = truncation_faces(scene, mesh, facet_tags, boundaries, interface_tags)
     kinds = face_kinds(scene, truncation)
-    faces = [_owned_face(boundary_face(name, V, facets, materials, coords, centre, quadrature, kind=kinds[name],
-                                       source=source), n_owned)
+    faces = [_owned_face(boundary_face(name, V, facets, materials, coords_d, centre, quadrature, kind=kinds[name],
+                                       source=source), index_map.size_local)
              for name, (facets, source) in truncation.items()]
+    faces = route_faces(comm, ownership, faces, mapped, local_nodes)  # the nodes this rank steps, its numbering
     model = Model(mesh=mesh, V=V, cell_tags=cell_tags, facet_tags=facet_tags, regions=regions,
-                  boundaries=boundaries, node_coords=coords, mass=mass, stiffness=None, faces=faces,
+                  boundaries=boundaries, node_coords=coords_d, mass=mass_d, stiffness=None, faces=faces,
                   free_surfaces=free_surfaces, interface_tags=interface_tags, _materials=materials)
     check_input_faces(scene, model)
     warn_input_medium(scene, model, comm)
@@ -345,12 +429,17 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
         faces, n_owned, None, boundary["alpha_N"], boundary["alpha_T"])
     if len(spring_nodes):  # K_b on the owned face nodes' diagonal blocks
         add_to_diagonal(rows, spring_nodes, springs)
-    # The extra ghosts' coordinates and masses from their owners.
-    coords = np.concatenate([coords, fetch_owned(comm, index_map, coords[:n_owned], extra)])
-    mass = np.concatenate([mass, fetch_owned(comm, index_map, mass[:n_owned, None], extra)[:, 0]])
-    kernel_matrix = local_stiffness(comm, index_map, rows, len(local_nodes), local_nodes)
+    # Coordinates and masses in the kernel's numbering; the nodes the function space does not hold
+    # (extra ghosts, moved pair nodes) from dolfinx's owners.
+    coords, mass = np.zeros((len(local_nodes), 3)), np.zeros(len(local_nodes))
+    coords[kernel_of_dolfinx], mass[kernel_of_dolfinx] = coords_d, mass_d
+    missing = np.ones(len(local_nodes), dtype=bool)
+    missing[kernel_of_dolfinx] = False
+    coords[missing] = fetch_owned(comm, index_map, coords_d[:index_map.size_local], local_nodes[missing])
+    mass[missing] = fetch_owned(comm, index_map, mass_d[:index_map.size_local, None], local_nodes[missing])[:, 0]
+    kernel_matrix = local_stiffness(comm, ownership, rows, len(local_nodes), local_nodes)
     del rows  # (the kernel's matrix holds the owned rows)
-    plan = ghost_plan(comm, index_map, local_nodes, n_owned)
+    plan = ghost_plan(comm, ownership, local_nodes, n_owned)
     mass = np.ascontiguousarray(mass)
     estimates = omega2_estimates(scene, comm, plan, kernel_matrix, mass, coords, n_owned)
     loop_cells = element_loop_cells(scene, model)
@@ -358,20 +447,48 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
         del kernel_matrix
         removed = np.concatenate([cells for cells, _ in loop_cells.values()])
         matrix = elastic_stiffness_matrix(V, *_without_cells(materials, removed), quadrature)
-        rows, _, _ = owned_rows_local(V, matrix, release=True, local_nodes=local_nodes)
+        _, global_rows = move_rows(comm, ownership, first, owned_rows_global(matrix, last - first, release=True))
+        rows = localize(global_rows, local_nodes)
+        del global_rows
         if len(spring_nodes):
             add_to_diagonal(rows, spring_nodes, springs)
-        kernel_matrix = drop_zero_blocks(local_stiffness(comm, index_map, rows, len(local_nodes), local_nodes))
+        kernel_matrix = drop_zero_blocks(local_stiffness(comm, ownership, rows, len(local_nodes), local_nodes))
         del rows
     alpha, beta = damping_coefficients(scene)
+    rank_pairs = pair_index = pair_global = pair_side = None
+    if pairs is not None:
+        pair_index, pair_global, rank_pairs = _rank_pairs(comm, pairs, ownership, local_nodes, mass)
+        pair_side = np.zeros(len(local_nodes), dtype=np.int64)
+        for side in (0, 1):
+            here = np.isin(pairs.nodes[:, side], local_nodes)
+            pair_side[positions(local_nodes, pairs.nodes[here, side], "pairs")] = 1 + side + 2 * pairs.interface[here]
     return RankModel(comm=comm, scene=scene, model=model, n_owned=n_owned, local_nodes=local_nodes, coords=coords,
                      mass=mass, matrix=kernel_matrix, plan=plan, estimates=estimates,
                      loop_cells={name: owned for name, (_, owned) in loop_cells.items()},
                      dashpot_nodes=np.ascontiguousarray(dashpot_nodes, dtype=np.int32),
                      dashpot_matrices=np.ascontiguousarray(dashpots, dtype=np.float64),
                      constraints=boundary_constraints(faces), alpha=alpha, beta=beta, n_dofs_global=n_dofs_global,
-                     faces_report=_whole_faces(comm, faces),
-                     setup_seconds=time.perf_counter() - began)
+                     faces_report=_whole_faces(comm, faces), ownership=ownership,
+                     kernel_of_dolfinx=None if identity else kernel_of_dolfinx, pairs=rank_pairs,
+                     pair_index=pair_index, pair_global=pair_global, pair_side=pair_side,
+                     n_pairs=0 if pairs is None else len(pairs),
+                     moved_nodes=len(ownership.moved), setup_seconds=time.perf_counter() - began)
+
+
+def _rank_pairs(comm: MPI.Comm, pairs, ownership, local_nodes: np.ndarray, mass: np.ndarray):
+    """(their indices in `pairs`, their global nodes, pyfem.interfaces.NodePairs) of the pairs this
+    rank steps (those whose side-i node dolfinx gave it), in the kernel's numbering, in `pairs`'
+    order (interface, then position)."""
+    from pyfem.distributed_pairs import positions
+    from pyfem.interfaces import NodePairs
+
+    keep = ownership.owner(pairs.nodes[:, 0]) == comm.rank
+    mine = pairs.select(keep)
+    nodes = positions(local_nodes, mine.nodes.ravel(), "contact pairs").reshape(-1, 2).astype(np.int32)
+    return np.flatnonzero(keep), mine.nodes, NodePairs(names=mine.names, interface=np.ascontiguousarray(mine.interface, dtype=np.int32),
+                     nodes=np.ascontiguousarray(nodes), coords=np.ascontiguousarray(mine.coords),
+                     area=np.ascontiguousarray(mine.area), normal=np.ascontiguousarray(mine.normal),
+                     mass=np.ascontiguousarray(mass[nodes]))
 
 
 # --- the element loop on the ranks -----------------------------------------------------------------
@@ -455,18 +572,21 @@ def rank_regions(part: RankModel) -> RankRegions | None:
         return found
 
     counted_arrays = {name: element_arrays(model.V, cells) for name, cells in part.loop_cells.items()}
-    # Each owned cell goes to every rank owning one of its nodes (its halo there).
+    # Each owned cell goes to every rank stepping one of its nodes (its halo there).
     index_map = model.V.dofmap.index_map
-    owner = np.concatenate([np.full(index_map.size_local, comm.rank), index_map.owners]).astype(np.int64)
+    mapped = np.concatenate([np.arange(*index_map.local_range), index_map.ghosts]).astype(np.int64)
     outgoing = [[] for _ in range(comm.size)]
     for name, arrays in counted_arrays.items():
-        node_rank = owner[arrays.cell_nodes]
+        global_nodes = mapped[arrays.cell_nodes]
+        node_rank = part.ownership.owner(global_nodes.ravel()).reshape(global_nodes.shape)
         for q in np.unique(node_rank):
             if q == comm.rank:
                 continue
             rows = np.flatnonzero((node_rank == q).any(axis=1))
-            outgoing[q].append((name, part.local_nodes[arrays.cell_nodes[rows]], arrays.inverse_jacobians[rows],
+            outgoing[q].append((name, global_nodes[rows], arrays.inverse_jacobians[rows],
                                 arrays.weights[rows], arrays.points[rows]))
+        if part.kernel_of_dolfinx is not None:  # the kernel's numbering
+            arrays.cell_nodes = np.ascontiguousarray(part.kernel_nodes(arrays.cell_nodes), dtype=np.int32)
     incoming = comm.alltoall(outgoing)
     order = np.argsort(part.local_nodes)
     template = element_arrays(model.V, np.zeros(0, dtype=np.int32))  # the reference tables, the same for every cell
@@ -622,17 +742,63 @@ def locate_monitors(part: RankModel, loop: RankRegions | None = None) -> RankMon
         return RankMonitors(mine, np.zeros((0, 0), dtype=np.int32), np.zeros((0, 0)))
     cells = np.array([best[j][1] for j in mine], dtype=np.int32)
     nodes, weights = model.point_weights(points[mine], cells)
+    nodes = part.kernel_nodes(nodes)
     stress = monitor_stress_operator(part.scene, model, points[mine], cells)
+    if part.kernel_of_dolfinx is not None:
+        stress = replace(stress, nodes=part.kernel_nodes(stress.nodes))
     if loop is not None:  # a monitor in an element-loop cell reads the law there (its owner counts the cell)
         attach_kernel_points(stress, points[mine], loop.counted)
     return RankMonitors(mine, nodes, weights, stress)
 
 
+@dataclass
+class RankPairMonitors:
+    """The pair monitors this rank reports (the rank stepping the pair `NodePairs.nearest` picks
+    among every rank's): their indices in the scene's list and their pairs' indices among the rank's;
+    on every rank `where` (per monitor: the pair's index among the whole model's, its interface, its
+    position), run.json's."""
+
+    index: np.ndarray
+    pairs: np.ndarray
+    where: list
+
+    @classmethod
+    def none(cls) -> "RankPairMonitors":
+        return cls(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), [])
+
+
+def locate_pair_monitors(part: RankModel) -> RankPairMonitors:
+    """Each scene pair monitor on the rank stepping its nearest pair, chosen as the whole model's
+    `NodePairs.nearest` chooses (`nearest_keys`, over every rank's pairs); the far-pair warning."""
+    from pyfem.interfaces import nearest_keys
+    from pyfem.solver import warn_far_pair_monitor
+
+    monitors, pairs, comm = part.scene.get("pair_monitor", []), part.pairs, part.comm
+    index, chosen, where = [], [], []
+    for j, monitor in enumerate(monitors):
+        offer = None
+        if len(pairs):
+            keys = nearest_keys(pairs.coords, pairs.interface, monitor["point"])
+            k = min(range(len(keys)), key=keys.__getitem__)
+            offer = (keys[k], int(part.pair_index[k]), float(pairs.area[k]), k, pairs.coords[k].tolist())
+        offers = comm.allgather(offer)
+        best, q = min((o, q) for q, o in enumerate(offers) if o is not None)
+        key, whole_index, area, k, _ = best
+        at = offers[q][4]
+        warn_far_pair_monitor(part.scene, monitor, np.array(at), area)
+        where.append((whole_index, pairs.names[key[1]], at))
+        if q == comm.rank:
+            index.append(j)
+            chosen.append(k)
+    return RankPairMonitors(np.array(index, dtype=np.int64), np.array(chosen, dtype=np.int64), where)
+
+
 # --- the run --------------------------------------------------------------------------------------
 
-def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRegions | None):
+def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRegions | None, contact=None):
     """The kernel's Stepper of the rank's share (pyfem.distributed.local_stepper's objects, built here):
-    with the element loop its counted cells (their energy this rank's) and its halo cells (not)."""
+    with the element loop its counted cells (their energy this rank's) and its halo cells (not);
+    `contact`: the kernel's ContactPairs of the pairs it steps (None: none)."""
     from pyfem import _kernels
     from pyfem.solver import seismic_input_kernel
 
@@ -650,6 +816,8 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
             stepper.add_internal_force(component)
         for component in ([] if loop.halo is None else loop.halo.components):
             stepper.add_internal_force(component, count_energy=False)
+    if contact is not None:
+        stepper.add_contact(contact)
     exchange = part.plan.kernel_exchange(part.comm, part.n_local)
     stepper.set_partition(part.n_owned, exchange)
     return stepper, exchange
@@ -664,6 +832,7 @@ class _Fields:
     whole model (which stores the tensors as XDMF Tensor6); the cell tags as "region"."""
 
     POINT = ("displacement", "velocity", "acceleration")
+    PAIR = (("pair_state", 8), ("pair_slip", 3), ("pair_D", 7))  # columns of output.pair_values
     DAMAGE = ("damage", "damage_type", "plastic_strain", "crack_opening")
 
     def __init__(self, part: RankModel, path: Path, loop: RankRegions | None, append: bool = False) -> None:
@@ -693,7 +862,16 @@ class _Fields:
             self.cells.update({name: fem.Function(Q, name=name) for name in self.scalars})
             self.tensor_dofs = T.dofmap.list.array.reshape(-1, 1)[:self.n_cells, 0]  # blocks of 9
             self.scalar_dofs = Q.dofmap.list.array.reshape(-1, 1)[:self.n_cells, 0]
-        self.comm, self.path = part.comm, path
+        self.comm, self.path, self.part = part.comm, path, part
+        self.pair_functions = {}
+        if part.pairs is not None:  # the interface fields on both nodes of every pair, 0 elsewhere (as RunWriter)
+            S, parent = V.sub(0).collapse()
+            self.pair_node = np.asarray(parent, dtype=np.int64)[:S.dofmap.index_map.size_local] // 3
+            self.pair_functions = {name: fem.Function(S, name=name) for name, _ in self.PAIR}
+            self.pair_output = self.pair_functions
+            if model.order > 1:
+                S1 = fem.FunctionSpace(model.mesh, ("Lagrange", 1))
+                self.pair_output = {name: fem.Function(S1, name=name) for name, _ in self.PAIR}
         self.file = io.XDMFFile(part.comm, str(path), "a" if append else "w")
         if not append:  # (a resumed run's file has them)
             self.file.write_mesh(model.mesh)
@@ -704,15 +882,19 @@ class _Fields:
         self.decimals = time_decimals(output["interval"], output["xdmf_interval"])
         self.every = max(1, round(output["xdmf_interval"] / output["interval"]))
 
-    def write(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
+    def write(self, t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray, pairs: np.ndarray | None = None) -> None:
+        """u, v, a: the kernel's (its numbering); pairs: output.pair_values of this rank's pairs."""
         t = round(t, self.decimals)  # 0.3, not 0.30000000000000004 (as RunWriter)
+        u, v, a = (self.part.dolfinx_order(x) for x in (u, v, a))
         for name, values in zip(self.POINT, (u, v, a)):
             if name not in self.functions:
                 continue
-            self.functions[name].x.array[:] = values[:self.n]
+            self.functions[name].x.array[:] = values
             if self.output is not self.functions:
                 self.output[name].interpolate(self.functions[name])
             self.file.write_function(self.output[name], t)
+        if self.pair_functions:
+            self._write_pairs(t, pairs)
         if not self.cells:
             return
         averages = self.loop.counted.cell_averages() if self.loop is not None else {}
@@ -737,6 +919,26 @@ class _Fields:
                 function.x.array[self.scalar_dofs] = values[name]
             function.x.scatter_forward()
             self.file.write_function(function, t)
+
+    def _write_pairs(self, t: float, pairs: np.ndarray) -> None:
+        """The pair fields: each rank's pair values sent to dolfinx's owners of the two nodes."""
+        from pyfem.distributed_pairs import route_to
+
+        part = self.part
+        nodes = part.pair_global.ravel()
+        columns = [column for _, column in self.PAIR]
+        values = np.repeat(pairs[:, columns], 2, axis=0)
+        got_nodes, got_values = route_to(self.comm, part.ownership.dolfinx_owner(nodes), nodes, values)
+        first, last = part.model.V.dofmap.index_map.local_range
+        nodal = np.zeros((last - first, len(columns)))
+        nodal[got_nodes - first] = got_values
+        for k, (name, _) in enumerate(self.PAIR):
+            function = self.pair_functions[name]
+            function.x.array[:len(self.pair_node)] = nodal[self.pair_node, k]
+            function.x.scatter_forward()
+            if self.pair_output is not self.pair_functions:
+                self.pair_output[name].interpolate(function)
+            self.file.write_function(self.pair_output[name], t)
 
     def reopen(self) -> None:
         """Continues the file after a close (a checkpoint closes it so that it is whole on disk)."""
@@ -924,8 +1126,7 @@ class DistributedRun:
 
     def __init__(self, scene: Scene, out: Path, comm: MPI.Comm, saved=None) -> None:
         from pyfem.elements import initial_warnings, scene_laws
-        from pyfem.output import DAMAGE_COLUMNS, ENERGY_COLUMNS, FREEFIELD_COLUMNS, INTERNAL_ENERGY_COLUMNS, \
-            MONITOR_COLUMNS, STRESS_COLUMNS
+        from pyfem.output import DAMAGE_COLUMNS, FREEFIELD_COLUMNS, MONITOR_COLUMNS, STRESS_COLUMNS, energy_columns
         from pyfem.seismic.setup import scene_record, seismic_input_from_scene
         from pyfem.solver import flow_warnings, whole_steps
 
@@ -941,18 +1142,31 @@ class DistributedRun:
             for message in initial_warnings(loop.counted, scene, comm):  # (counts summed over the ranks)
                 scene.warn(message)
             flow_warnings(scene, scene_laws(scene)[0], self.time_step)
-        self.energy_columns = ENERGY_COLUMNS + (INTERNAL_ENERGY_COLUMNS if loop is not None else [])
+        self.energy_columns = energy_columns(part.pairs is not None, loop is not None)
         self.freefield = input_arrays = None
+        record = scene_record(scene) if {"seismic_input", "contact"} & set(scene.effects) else None
         if "seismic_input" in scene.effects:
             model = part.model
-            view = _InputView(model.faces, part.coords[:len(model.node_coords)], model.bounds)
+            view = _InputView(model.faces, part.coords, model.bounds)
             points = None
             if scene["wave"].get("reference_point") is not None:  # the whole model's face nodes, on every rank
                 owned = np.unique(np.concatenate([face.nodes for face in model.faces] or [np.zeros(0, int)]))
                 points = np.concatenate(comm.allgather(part.coords[owned.astype(np.int64)]))
-            self.freefield, input_arrays = seismic_input_from_scene(scene, view, scene_record(scene), points)
+            self.freefield, input_arrays = seismic_input_from_scene(scene, view, record, points)
         self.monitors = locate_monitors(part, loop)
         self.input_arrays = input_arrays
+        self.contact_arrays, self.pair_monitors = None, RankPairMonitors.none()
+        self.pair_names = []
+        if part.pairs is not None:
+            from types import SimpleNamespace
+
+            from pyfem.solver import contact_arguments
+
+            self.contact_arrays = contact_arguments(scene, SimpleNamespace(pairs=part.pairs), record)
+            self.pair_monitors = locate_pair_monitors(part)
+            self.pair_names = [m["name"] for m in scene.get("pair_monitor", [])]
+        self.pair_rows_kept, self.state_counts = [], []
+        self.contact = None  # the kernel's ContactPairs of this rank's pairs (set with the stepper)
         self.names = [m["name"] for m in scene.get("monitor", [])]
         self.points = np.array([m["point"] for m in scene.get("monitor", [])], dtype=float).reshape(-1, 3)
         self.columns = list(MONITOR_COLUMNS) + (FREEFIELD_COLUMNS if self.freefield is not None else []) + \
@@ -1039,6 +1253,8 @@ class DistributedRun:
                     self.times = data["writer_times"].tolist()
                     self.energy_rows = data["writer_energy"].tolist()
                     self.rows_kept = list(data["writer_rows"]) if "writer_rows" in data else []
+                    self.pair_rows_kept = list(data["writer_pair_rows"]) if "writer_pair_rows" in data else []
+                    self.state_counts = list(data["writer_state_counts"]) if "writer_state_counts" in data else []
                 summary = dict(summary, started=meta["started"], warnings=summary["warnings"],
                                resumed=meta.get("resumed", []) + [{"t": saved.t, "at": time.strftime("%Y-%m-%dT%H:%M:%S")}])
                 sizes = meta["history_sizes"]
@@ -1053,6 +1269,13 @@ class DistributedRun:
                 for name in self.names:
                     self.histories[name] = CsvHistory(out / "monitors" / f"{name}.csv", self.columns, MONITOR_FORMAT,
                                                       at(name))
+            if self.pair_names:
+                from pyfem.output import PAIR_COLUMNS, PAIR_FORMAT
+
+                (out / "pairs").mkdir(exist_ok=True)
+                for name in self.pair_names:
+                    self.histories[f"pairs/{name}"] = CsvHistory(out / "pairs" / f"{name}.csv", PAIR_COLUMNS,
+                                                                 PAIR_FORMAT, at(f"pairs/{name}"))
             if part.constraints is not None:
                 face_columns = ["t"] + [f"{f}_F{axis}" for f in part.constraints.face_names for axis in "xyz"]
                 self.histories["reactions"] = CsvHistory(out / "reactions.csv", face_columns, ENERGY_FORMAT,
@@ -1100,14 +1323,28 @@ class DistributedRun:
             rows = monitor_rows(t, u, v, a, monitors.nodes, monitors.weights, self.freefield,
                                 self.points[monitors.index], stress, kernel)
             mine = list(zip(monitors.index.tolist(), rows))
-        energy = stepper.energy()  # (a rank without element-loop cells has no internal terms: 0)
+        pairs = counts = None
+        if self.contact_arrays is not None:  # this rank's pairs (a rank without pairs has no ContactPairs)
+            from pyfem.output import pair_values
+
+            writes = self.fields is not None and k % self.fields.every == 0
+            if self.contact is None:
+                pairs, counts = np.zeros((0, 9)), np.zeros(4, dtype=np.int64)
+            else:
+                counts = np.asarray(self.contact.state_counts(), dtype=np.int64).copy()
+                if len(self.pair_monitors.index) or writes:
+                    pairs = pair_values(self.contact, self.contact_arrays["normal"], u)
+            counts = comm.reduce(counts, root=0)
+            mine_pairs = comm.gather([(j, np.concatenate([[t], pairs[p]]))
+                                      for j, p in zip(self.pair_monitors.index, self.pair_monitors.pairs)], root=0)
+        energy = stepper.energy()  # (a rank without element-loop cells or pairs has no such terms: 0)
         sums = comm.reduce(np.array([energy.get(name, 0.0) for name in self.energy_columns[1:]]), root=0)
         reactions = None
         if self.part.constraints is not None:
             reactions = comm.reduce(self.part.constraints.face_resultants(stepper.reactions()), root=0)
         gathered = comm.gather(mine, root=0)
         if self.fields is not None and k % self.fields.every == 0:
-            self.fields.write(t, u, v, a)
+            self.fields.write(t, u, v, a, pairs)
         if not self.root:
             return
         by_monitor = dict(pair for rank_rows in gathered for pair in rank_rows)
@@ -1122,6 +1359,14 @@ class DistributedRun:
                 self.histories[name].append(row)
         if reactions is not None:
             self.histories["reactions"].append([t] + list(reactions.ravel()))
+        if counts is not None:
+            self.state_counts.append(counts)
+            if self.pair_names:
+                by_pair = dict(pair for rank_rows in mine_pairs for pair in rank_rows)
+                rows = np.array([by_pair[j] for j in range(len(self.pair_names))])
+                self.pair_rows_kept.append(rows)
+                for name, row in zip(self.pair_names, rows):
+                    self.histories[f"pairs/{name}"].append(row)
         if time.monotonic() - self.last_flush > FLUSH_SECONDS:  # the rows so far on disk, and the time reached
             self.flush()
 
@@ -1157,6 +1402,10 @@ class DistributedRun:
                       "writer_times": np.array(self.times), "writer_energy": np.array(self.energy_rows)}
             if self.rows_kept:
                 writer["writer_rows"] = np.array(self.rows_kept)
+            if self.pair_rows_kept:
+                writer["writer_pair_rows"] = np.array(self.pair_rows_kept)
+            if self.state_counts:
+                writer["writer_state_counts"] = np.array(self.state_counts)
             if self.fields is not None:
                 self.fields.file.close()  # flushed to disk with the checkpoint (reopened below)
             write_atomically(out / CHECKPOINT_NAME, writer)
@@ -1187,15 +1436,20 @@ class DistributedRun:
         and its share of the energy account (a sum over the ranks)."""
         part, n = self.part, self.part.n_owned
         kernel = stepper.save_state()
-        out = {"node_keys": point_keys(part.coords[:n]), "u": u[:3 * n], "v": v[:3 * n], "a": a[:3 * n]}
+        out = {"node_keys": part.node_keys(np.arange(n)), "u": u[:3 * n], "v": v[:3 * n], "a": a[:3 * n]}
         force = np.frombuffer(kernel["stepper/internal_force"], dtype=np.float64)
         if len(force):
             out["internal_force"] = force[:3 * n]
         if part.constraints is not None:
-            out["reaction_keys"] = point_keys(part.coords[part.constraints.nodes])
+            out["reaction_keys"] = part.node_keys(part.constraints.nodes)
             out["reactions"] = np.frombuffer(kernel["stepper/reactions"], dtype=np.float64)
         for name in ("stepper/energy", "stepper/provider_work", "stepper/provider_power", "stepper/energy_started"):
             out[name] = np.frombuffer(kernel[name], dtype=np.uint8)
+        if self.contact is not None:  # every pair's state, keyed by its interface and position
+            pairs = part.pairs
+            out["pair_keys"] = self._pair_keys()
+            for name in self._contact_blocks(kernel):
+                out[f"pairs/{name}"] = np.frombuffer(kernel[name], dtype=np.uint8).reshape(len(pairs), -1)
         for k, (name, kind, arrays) in enumerate(self._components()):
             if kind != "counted":
                 continue
@@ -1207,13 +1461,24 @@ class DistributedRun:
                 out[f"cells/{name}/{block}"] = np.frombuffer(kernel[prefix + block], dtype=np.uint8)
         return out
 
+    def _pair_keys(self) -> np.ndarray:
+        """(n, 4) int64 keys of this rank's pairs: interface index, then position."""
+        pairs = self.part.pairs
+        return np.column_stack([pairs.interface.astype(np.int64), point_keys(pairs.coords)])
+
+    @staticmethod
+    def _contact_blocks(kernel: dict) -> list[str]:
+        """The kernel's per-pair contact state blocks (every contact/ entry but the pairs' node numbers,
+        which are the rank's own)."""
+        return sorted(name for name in kernel if name.startswith("contact/") and name != "contact/pairs")
+
     def load_rank_states(self, stepper, identifier: int, ranks: int) -> tuple:
         """The checkpoint's state for this rank's nodes and cells, from every rank file of checkpoint
         `identifier` (written by `ranks` ranks, any partition): returns (u, v, a); the kernel's state
         loaded (energy account on rank 0, summed; a region's scalars on its first counted component)."""
         part, comm = self.part, self.comm
         files = [dict(np.load(rank_file(self.out, identifier, q), allow_pickle=False)) for q in range(ranks)]
-        rows = rows_of(np.concatenate([f["node_keys"] for f in files]), point_keys(part.coords), "nodes")
+        rows = rows_of(np.concatenate([f["node_keys"] for f in files]), part.node_keys(np.arange(part.n_local)), "nodes")
         u, v, a = (np.ascontiguousarray(np.concatenate([f[x].reshape(-1, 3) for f in files])[rows].reshape(-1))
                    for x in "uva")
         state = dict(stepper.save_state())
@@ -1222,7 +1487,7 @@ class DistributedRun:
                 np.concatenate([f["internal_force"].reshape(-1, 3) for f in files])[rows]).tobytes()
         if part.constraints is not None:
             found = rows_of(np.concatenate([f["reaction_keys"] for f in files]),
-                            point_keys(part.coords[part.constraints.nodes]), "constrained nodes")
+                            part.node_keys(part.constraints.nodes), "constrained nodes")
             state["stepper/reactions"] = np.ascontiguousarray(
                 np.concatenate([f["reactions"].reshape(-1, 3) for f in files])[found]).tobytes()
         state["stepper/energy_started"] = files[0]["stepper/energy_started"].tobytes()
@@ -1257,6 +1522,12 @@ class DistributedRun:
             for block in ("stored_energy", "dissipation"):
                 total = np.sum([f[f"cells/{name}/{block}"].view(np.float64) for f in having], axis=0)
                 state[prefix + block] = (total if takes else np.zeros_like(total)).tobytes()
+        if self.contact is not None:
+            having = [f for f in files if "pair_keys" in f]
+            found = rows_of(np.concatenate([f["pair_keys"] for f in having]), self._pair_keys(), "contact pairs")
+            for name in self._contact_blocks(state):
+                data = np.concatenate([f[f"pairs/{name}"] for f in having])
+                state[name] = np.ascontiguousarray(data[found]).tobytes()
         stepper.load_state(state)
         return u, v, a
 
@@ -1287,7 +1558,11 @@ class DistributedRun:
                                          f"{self.scene['time']['duration']:g} s", **shown}
                 on_plan(shown)
         kernel_threads()
-        stepper, exchange = _stepper(part, ts.dt, self.input_arrays, self.loop)
+        if self.contact_arrays is not None and len(part.pairs):
+            from pyfem.solver import make_contact_pairs
+
+            self.contact = make_contact_pairs(self.contact_arrays)
+        stepper, exchange = _stepper(part, ts.dt, self.input_arrays, self.loop, self.contact)
         n_outputs = self.n_steps // ts.steps_per_output
         clock = checkpoints.CheckpointClock(self.scene["output"]["checkpoint_interval"],
                                             elapsed=time.perf_counter() - self.wall_start)
@@ -1364,6 +1639,14 @@ class DistributedRun:
                  "halo_cells", "peak_memory_mib"))}},
             **({"nonlinear_regions": nonlinear} if nonlinear is not None else {}),
         })
+        if self.contact_arrays is not None:
+            from pyfem.output import pair_peaks, pair_state_summary
+
+            self.summary["pairs"] = (pair_peaks(np.array(self.pair_rows_kept), self.pair_names, self.pair_monitors.where)
+                                     if self.pair_names else {})
+            self.summary.update(pair_state_summary(np.array(self.times), np.array(self.state_counts), part.n_pairs,
+                                                   self.contact_arrays.get("deterioration")))
+            self.summary["mpi"]["moved_pair_nodes"] = part.moved_nodes
         _write_json(self.out / "run.json", self.summary)
         return self.summary
 

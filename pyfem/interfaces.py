@@ -55,9 +55,20 @@ class NodePairs:
         return np.flatnonzero(self.interface == self.names.index(name))
 
     def nearest(self, point: typing.Sequence[float]) -> int:
-        """Index of the pair nearest to `point` (m)."""
-        distance = np.linalg.norm(self.coords - np.asarray(point, dtype=float), axis=1)
-        return int(np.argmin(distance))
+        """Index of the pair nearest to `point` (m); among pairs equally near (`nearest_key`), the
+        one of the lowest interface, then the lowest position (x, then y, then z): the choice does
+        not depend on the pairs' order, so the distributed model's ranks make it alike."""
+        keys = nearest_keys(self.coords, self.interface, point)
+        return int(min(range(len(keys)), key=keys.__getitem__))
+
+
+def nearest_keys(coords: np.ndarray, interface: np.ndarray, point: typing.Sequence[float]) -> list[tuple]:
+    """Per pair the key `NodePairs.nearest` minimises: its distance to `point`, its interface, its
+    position, the lengths rounded to 1e-9 m (pairs equally near on a regular grid stay equal after
+    round-off, and one position is one key whatever the round-off of the mesh's coordinates)."""
+    distance = np.round(np.linalg.norm(coords - np.asarray(point, dtype=float), axis=1), 9)
+    where = np.round(coords, 9) + 0.0
+    return [(float(d), int(k), *map(float, x)) for d, k, x in zip(distance, interface, where)]
 
 
 def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int, int]], mass: np.ndarray,
@@ -105,6 +116,11 @@ def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int
         chunks["area"].append(area_i[nodes_i])
         chunks["normal"].append(normal)
     arrays = {key: np.concatenate(value) for key, value in chunks.items()}
+    # By interface, then position: the order does not depend on the mesh's numbering (the
+    # distributed model's pairs, pyfem/distributed_pairs.py, are in this order too).
+    where = np.round(arrays["coords"], 9) + 0.0  # (one position one key, -0.0 as 0.0)
+    order = np.lexsort((where[:, 2], where[:, 1], where[:, 0], arrays["interface"]))
+    arrays = {key: value[order] for key, value in arrays.items()}
     if np.any(arrays["area"] <= 0.0):
         raise ValueError("interface pairs: a lumped pair area is <= 0")
     arrays["mass"] = np.ascontiguousarray(mass[arrays["nodes"]])

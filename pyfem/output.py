@@ -403,8 +403,7 @@ class RunWriter:
         # Under mpirun, a run that failed between two whole merges: the points' state on rank 0 is
         # that of the last field sample, so the summary leaves the material regions out.
         self.points_stale = False
-        self.energy_columns = (ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if self.contact_on else [])
-                               + (INTERNAL_ENERGY_COLUMNS if self.nonlinear is not None else []))
+        self.energy_columns = energy_columns(self.contact_on, self.nonlinear is not None)
         self.pair_rows: list[np.ndarray] = []       # each (n_pair_monitors, len(PAIR_COLUMNS))
         self.state_count_samples: list[np.ndarray] = []  # each (4,)
         self.monitor_columns = self._monitor_columns()
@@ -681,15 +680,8 @@ class RunWriter:
             history.close()
 
     def _pair_values(self, u: np.ndarray) -> np.ndarray:
-        """(n_pairs, 9): dux, duy, duz, slip, gap (m), N, T (N), D (-), state of every pair."""
-        contact = self.simulation.contact_pairs
-        normal = self.simulation.contact_arrays["normal"]
-        delta = np.asarray(contact.relative_displacement(u))
-        gap = np.einsum("pc,pc->p", delta, normal)
-        slip = np.linalg.norm(delta - gap[:, None] * normal, axis=1)
-        tangential = np.linalg.norm(np.asarray(contact.tangential_force()), axis=1)
-        return np.column_stack([delta, slip, gap, np.asarray(contact.normal_force()), tangential,
-                                np.asarray(contact.deterioration()), np.asarray(contact.state(), dtype=float)])
+        """(n_pairs, 9) `pair_values` of every pair."""
+        return pair_values(self.simulation.contact_pairs, self.simulation.contact_arrays["normal"], u)
 
     def finish(self, wall_seconds: float, loop_seconds: float, phases: dict | None = None,
                checkpoints: dict | None = None, mpi: dict | None = None) -> dict:
@@ -740,16 +732,9 @@ class RunWriter:
             summary["nonlinear_regions"] = self.nonlinear.region_summary()
         if self.contact_on:
             summary["pairs"] = self._pair_peaks()
-            counts = np.array(self.state_count_samples).reshape(-1, len(PAIR_STATES))
-            summary["pair_states"] = {"t": times.tolist(),
-                                      **{name: counts[:, k].tolist() for k, name in enumerate(PAIR_STATES)}}
-            summary["pair_states_final"] = {name: int(counts[-1, k]) for k, name in enumerate(PAIR_STATES)}
-            summary["n_pairs"] = int(len(self.simulation.contact_arrays["area"]))
-            deterioration = self.simulation.contact_arrays.get("deterioration")
-            if deterioration is not None:
-                from pyfem.solver import wear_words
-
-                summary["deterioration"] = wear_words(deterioration, float(times[-1]))
+            summary.update(pair_state_summary(times, np.array(self.state_count_samples),
+                                              len(self.simulation.contact_arrays["area"]),
+                                              self.simulation.contact_arrays.get("deterioration")))
 
     def _plots(self) -> None:
         """plots/*.png from the closed history files."""
@@ -823,30 +808,14 @@ class RunWriter:
         return monitor_peaks(np.array(self.monitor_rows), self.monitor_columns, sim.monitor_names, times, regions)
 
     def _pair_peaks(self) -> dict:
-        """Peaks and final values per pair monitor from the rows kept."""
+        """Peaks and final values per pair monitor from the rows kept (`pair_peaks`)."""
         sim = self.simulation
-        peaks = {}
         if not sim.pair_monitor_names:
-            return peaks
-        rows = np.array(self.pair_rows)  # (nt, m, 10): t, then PAIR_COLUMNS[1:]
+            return {}
         pairs = sim.model.pairs
-        for j, name in enumerate(sim.pair_monitor_names):
-            index = int(sim.pair_monitor_pairs[j])
-            values = rows[:, j, 1:]
-            peaks[name] = {
-                "pair": index,
-                "interface": pairs.names[int(pairs.interface[index])],
-                "point": pairs.coords[index].tolist(),
-                "max_relative_displacement": float(np.max(np.linalg.norm(values[:, 0:3], axis=1))),
-                "max_slip": float(np.max(values[:, 3])),
-                "residual_slip": float(values[-1, 3]),
-                "max_gap": float(np.max(values[:, 4])),
-                "max_N": float(np.max(values[:, 5])),
-                "max_T": float(np.max(values[:, 6])),
-                "min_D": float(np.min(values[:, 7])),
-                "final_state": PAIR_STATES[int(values[-1, 8])],
-            }
-        return peaks
+        where = [(int(index), pairs.names[int(pairs.interface[index])], pairs.coords[index].tolist())
+                 for index in sim.pair_monitor_pairs]
+        return pair_peaks(np.array(self.pair_rows), sim.pair_monitor_names, where)
 
     def _open_fields(self, resume: dict | None = None) -> None:
         """One temporal XDMF collection holding every field per time (ParaView, meshio read it).
@@ -949,6 +918,60 @@ class RunWriter:
         if self.xdmf is not None:
             self.xdmf.__exit__(None, None, None)
             self.xdmf = None
+
+
+def energy_columns(contact: bool, element_loop: bool) -> list[str]:
+    """energy.csv's columns: the account's, then contact's work and friction, then the element loop's."""
+    return ENERGY_COLUMNS + (CONTACT_ENERGY_COLUMNS if contact else []) + (INTERNAL_ENERGY_COLUMNS if element_loop else [])
+
+
+def pair_values(contact, normal: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """(n_pairs, 9): dux, duy, duz, slip, gap (m), N, T (N), D (-), state of every pair of the
+    kernel's ContactPairs `contact` (unit normals `normal`) at the displacement u."""
+    delta = np.asarray(contact.relative_displacement(u)).reshape(-1, 3)
+    gap = np.einsum("pc,pc->p", delta, normal)
+    slip = np.linalg.norm(delta - gap[:, None] * normal, axis=1)
+    tangential = np.linalg.norm(np.asarray(contact.tangential_force()).reshape(-1, 3), axis=1)
+    return np.column_stack([delta, slip, gap, np.asarray(contact.normal_force()), tangential,
+                            np.asarray(contact.deterioration()), np.asarray(contact.state(), dtype=float)])
+
+
+def pair_peaks(rows: np.ndarray, names: list, where: list) -> dict:
+    """run.json "pairs": peaks and final values per pair monitor; rows (nt, m, 10): t, then
+    PAIR_COLUMNS[1:]; where: per monitor (pair index, interface name, point)."""
+    peaks = {}
+    for j, name in enumerate(names):
+        index, interface, point = where[j]
+        values = rows[:, j, 1:]
+        peaks[name] = {
+            "pair": index,
+            "interface": interface,
+            "point": point,
+            "max_relative_displacement": float(np.max(np.linalg.norm(values[:, 0:3], axis=1))),
+            "max_slip": float(np.max(values[:, 3])),
+            "residual_slip": float(values[-1, 3]),
+            "max_gap": float(np.max(values[:, 4])),
+            "max_N": float(np.max(values[:, 5])),
+            "max_T": float(np.max(values[:, 6])),
+            "min_D": float(np.min(values[:, 7])),
+            "final_state": PAIR_STATES[int(values[-1, 8])],
+        }
+    return peaks
+
+
+def pair_state_summary(times: np.ndarray, counts: np.ndarray, n_pairs: int, deterioration) -> dict:
+    """run.json's pair_states (counts per state at every sample), pair_states_final, n_pairs and the
+    deterioration's words (`deterioration`: contact_arguments' tuple or None)."""
+    counts = counts.reshape(-1, len(PAIR_STATES))
+    out = {"pair_states": {"t": np.asarray(times).tolist(),
+                           **{name: counts[:, k].tolist() for k, name in enumerate(PAIR_STATES)}},
+           "pair_states_final": {name: int(counts[-1, k]) for k, name in enumerate(PAIR_STATES)},
+           "n_pairs": int(n_pairs)}
+    if deterioration is not None:
+        from pyfem.solver import wear_words
+
+        out["deterioration"] = wear_words(deterioration, float(times[-1]))
+    return out
 
 
 def monitor_rows(t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray, nodes: np.ndarray, weights: np.ndarray,

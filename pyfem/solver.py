@@ -607,17 +607,22 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
                                                  dtype=np.int64)
         area = np.asarray(simulation.contact_arrays["area"], dtype=float)
         for monitor, pair in zip(pair_monitors, simulation.pair_monitor_pairs):
-            at = model.pairs.coords[pair]
-            distance = float(np.linalg.norm(at - np.asarray(monitor["point"], dtype=float)))
-            if distance > 2.0 * np.sqrt(area[pair]):  # farther than about two faces from any pair
-                scene.warn(f"pair_monitor '{monitor['name']}' at {list(monitor['point'])} is {distance:.3g} m from "
-                           f"the nearest contact pair (at {[round(float(x), 3) for x in at]}), which it reports: "
-                           "is the point on an interface of contact.interfaces?")
+            warn_far_pair_monitor(scene, monitor, model.pairs.coords[pair], float(area[pair]))
     if "static" in scene:  # the stage's stress and pair forces become the initial state (pyfem/static.py)
         from pyfem.static import hand_over
 
         hand_over(simulation, solve=solve_static)
     return simulation
+
+
+def warn_far_pair_monitor(scene: Scene, monitor: dict, at: np.ndarray, area: float) -> None:
+    """Warns when the pair a pair monitor reports (at `at`, lumped area `area`) is farther than
+    about two faces from the monitor's point."""
+    distance = float(np.linalg.norm(np.asarray(at, dtype=float) - np.asarray(monitor["point"], dtype=float)))
+    if distance > 2.0 * np.sqrt(area):
+        scene.warn(f"pair_monitor '{monitor['name']}' at {list(monitor['point'])} is {distance:.3g} m from "
+                   f"the nearest contact pair (at {[round(float(x), 3) for x in at]}), which it reports: "
+                   "is the point on an interface of contact.interfaces?")
 
 
 def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):

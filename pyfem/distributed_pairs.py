@@ -1,0 +1,245 @@
+"""Contact pairs on the distributed model (docs/scaling.md "Contact on the distributed model").
+
+The two nodes of a contact pair are separate vertices of the split mesh (pyfem.interface_split),
+each owned by whichever rank dolfinx's topology picks (a shared vertex gets a random owner among
+the ranks sharing it; a partitioner can put the two sides of an interface on different ranks, since
+the split interface joins no facets). The kernel steps a pair on one rank, with both of its nodes
+owned there (`Stepper.check_partition`). So the distributed model *moves* the stepping of a pair's
+side-j node to the rank that owns its side-i node when dolfinx gave them different owners:
+
+- `Ownership`: the rank that steps each global node: dolfinx's owner, except the moved nodes;
+- `global_pairs`: every pair of every interface (global node numbers, position, lumped area and
+  normal, from the owners of the side-i nodes as `pyfem.interfaces.interface_pairs` computes them
+  on one rank), on every rank, in an order that does not depend on the rank count (interface, then
+  position);
+- `pair_moves`: the side-j nodes to move, and where;
+- `move_rows`: the moved nodes' stiffness rows (global columns) to their new rank;
+- `route_faces`: the moved nodes' truncation-face values (springs, dashpots, input) likewise;
+- `route_to`: any per-node values to the rank that owns (dolfinx's sense) or steps each node.
+
+A node in two pairs (interfaces that meet) is refused: the whole model's pair groups are not built
+here yet.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+
+from pyfem.scene import SceneError
+
+
+@dataclass
+class Ownership:
+    """Which rank steps each global node: the owner of dolfinx's index map (its ranks' contiguous
+    ranges `starts`), except the `moved` nodes (sorted), stepped on `moved_to`."""
+
+    starts: np.ndarray
+    moved: np.ndarray
+    moved_to: np.ndarray
+
+    @classmethod
+    def of(cls, comm: MPI.Comm, index_map, moved=None, moved_to=None) -> "Ownership":
+        starts = np.array([r[0] for r in comm.allgather(index_map.local_range)] + [index_map.size_global],
+                          dtype=np.int64)
+        moved = np.zeros(0, dtype=np.int64) if moved is None else np.asarray(moved, dtype=np.int64)
+        moved_to = np.zeros(0, dtype=np.int64) if moved_to is None else np.asarray(moved_to, dtype=np.int64)
+        order = np.argsort(moved)
+        return cls(starts, moved[order], moved_to[order])
+
+    def dolfinx_owner(self, nodes: np.ndarray) -> np.ndarray:
+        return np.searchsorted(self.starts, np.asarray(nodes, dtype=np.int64), side="right") - 1
+
+    def owner(self, nodes: np.ndarray) -> np.ndarray:
+        nodes = np.asarray(nodes, dtype=np.int64)
+        out = self.dolfinx_owner(nodes)
+        if len(self.moved) and len(nodes):
+            at = np.minimum(np.searchsorted(self.moved, nodes), len(self.moved) - 1)
+            hit = self.moved[at] == nodes
+            out[hit] = self.moved_to[at[hit]]
+        return out
+
+
+def positions(have: np.ndarray, wanted: np.ndarray, what: str) -> np.ndarray:
+    """Index in `have` (distinct global nodes) of each of `wanted`; RuntimeError naming `what` if absent."""
+    have = np.asarray(have, dtype=np.int64)
+    wanted = np.asarray(wanted, dtype=np.int64)
+    order = np.argsort(have, kind="stable")
+    if not len(have):
+        if len(wanted):
+            raise RuntimeError(f"{what}: a node not on this rank")
+        return np.zeros(0, dtype=np.int64)
+    found = np.minimum(np.searchsorted(have[order], wanted), len(order) - 1)
+    if np.any(have[order][found] != wanted):
+        raise RuntimeError(f"{what}: a node not on this rank")
+    return order[found]
+
+
+def fetch(comm: MPI.Comm, owner: np.ndarray, owned: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """(len(wanted), k) rows of `values` ((len(owned), k) on every rank: its `owned` global nodes')
+    from the rank `owner` names for each wanted global node."""
+    wanted = np.asarray(wanted, dtype=np.int64)
+    asked = comm.alltoall([wanted[owner == q] for q in range(comm.size)])
+    replies = comm.alltoall([values[positions(owned, nodes, "fetch")] for nodes in asked])
+    out = np.zeros((len(wanted), values.shape[1]), dtype=values.dtype)
+    for q in range(comm.size):
+        out[owner == q] = replies[q]
+    return out
+
+
+def route_to(comm: MPI.Comm, destination: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:
+    """Sends row k of every array to rank destination[k]; returns the arrays' rows received, in
+    rank order (this rank's own rows among them)."""
+    sent = comm.alltoall([[array[destination == q] for array in arrays] for q in range(comm.size)])
+    return [np.concatenate([piece[k] for piece in sent]) for k in range(len(arrays))]
+
+
+# --- the pairs -----------------------------------------------------------------------------------
+
+@dataclass
+class GlobalPairs:
+    """Every contact pair of the model, on every rank: `nodes` (n, 2) the global nodes of side i and
+    side j, as pyfem.interfaces.NodePairs holds them for the whole model."""
+
+    names: list
+    interface: np.ndarray
+    nodes: np.ndarray
+    coords: np.ndarray
+    area: np.ndarray
+    normal: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.area)
+
+    def select(self, keep: np.ndarray) -> "GlobalPairs":
+        return GlobalPairs(self.names, self.interface[keep], self.nodes[keep], self.coords[keep], self.area[keep],
+                           self.normal[keep])
+
+
+def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np.ndarray, global_of_local: np.ndarray,
+                 quadrature: dict) -> GlobalPairs:
+    """Every pair of the split interfaces (`pyfem.interfaces.interface_pairs` on the ranks): each
+    rank lumps the side-i area and normal and the side-j area over its cells (summed into their
+    owners), matches its owned side-i nodes with every rank's owned side-j nodes by position, and
+    every rank gets every pair, sorted by interface and position."""
+    import ufl
+    from scipy.spatial import cKDTree
+
+    from pyfem.assembly import assemble_nodal_vector, facet_measure
+
+    mesh = V.mesh
+    n_owned = V.dofmap.index_map.size_local
+    test = ufl.TestFunction(V)
+    lo = np.min(comm.allgather(coords.min(axis=0)), axis=0)
+    hi = np.max(comm.allgather(coords.max(axis=0)), axis=0)
+    span = float(np.max(hi - lo))
+    names = list(interface_tags)
+    mine = []
+    for index, name in enumerate(names):
+        lumped = []
+        for tag in interface_tags[name]:
+            ds = facet_measure(mesh, facet_tags.indices[facet_tags.values == tag], quadrature)
+            area = assemble_nodal_vector(ufl.inner(ufl.as_vector((1.0, 0.0, 0.0)), test) * ds, V)[:, 0]
+            normal = assemble_nodal_vector(ufl.inner(ufl.FacetNormal(mesh), test) * ds, V)
+            lumped.append((np.flatnonzero(area[:n_owned] != 0.0), area, normal))
+        (nodes_i, area_i, normal_i), (nodes_j, _, _) = lumped
+        side_j = comm.allgather((global_of_local[nodes_j], coords[nodes_j]))
+        global_j = np.concatenate([piece[0] for piece in side_j]).astype(np.int64)
+        coords_j = np.concatenate([piece[1] for piece in side_j]).reshape(-1, 3)
+        total_i = comm.allreduce(len(nodes_i))
+        if total_i != len(global_j):
+            raise ValueError(f"interface {name!r}: {total_i} nodes on side i, {len(global_j)} on side j")
+        match = np.zeros(0, dtype=np.int64)
+        if len(nodes_i):
+            distance, match = cKDTree(coords_j).query(coords[nodes_i])
+            if np.any(distance > 1e-9 * span):
+                raise ValueError(f"interface {name!r}: the nodes of the two sides do not coincide pairwise")
+        normal = normal_i[nodes_i]
+        normal /= np.linalg.norm(normal, axis=1)[:, None]
+        mine.append((np.full(len(nodes_i), index, dtype=np.int32),
+                     np.column_stack([global_of_local[nodes_i], global_j[match]]).astype(np.int64),
+                     coords[nodes_i], area_i[nodes_i], normal))
+    pieces = [piece for rank_pieces in comm.allgather(mine) for piece in rank_pieces]
+    arrays = [np.concatenate([piece[k] for piece in pieces]) for k in range(5)]
+    interface, nodes, where, area, normal = arrays
+    nodes, where, normal = nodes.reshape(-1, 2), where.reshape(-1, 3), normal.reshape(-1, 3)
+    if len(np.unique(nodes[:, 1])) != len(nodes):
+        raise ValueError("interface pairs: two side-i nodes matched one side-j node")
+    if np.any(area <= 0.0):
+        raise ValueError("interface pairs: a lumped pair area is <= 0")
+    key = np.round(where, 9) + 0.0  # by position to 1e-9 m, as pyfem.interfaces.interface_pairs sorts
+    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0], interface))
+    return GlobalPairs(names, interface[order], nodes[order], where[order], area[order], normal[order])
+
+
+def pair_moves(pairs: GlobalPairs, ownership: Ownership) -> tuple[np.ndarray, np.ndarray]:
+    """(moved side-j nodes, their new rank: the owner of their side-i node) of the pairs whose two
+    nodes dolfinx gave to different ranks. A node in two pairs is refused (SceneError)."""
+    nodes = pairs.nodes.ravel()
+    if len(np.unique(nodes)) != len(nodes):
+        raise SceneError("parallel.model", "distributed",
+                         "\"whole\" for interfaces that meet (a node in two contact pairs: the whole model's pair "
+                         "groups are not built on the ranks yet, docs/scaling.md)")
+    owner_i = ownership.dolfinx_owner(pairs.nodes[:, 0])
+    owner_j = ownership.dolfinx_owner(pairs.nodes[:, 1])
+    apart = owner_i != owner_j
+    return pairs.nodes[apart, 1], owner_i[apart]
+
+
+def move_rows(comm: MPI.Comm, ownership: Ownership, first: int, rows: tuple) -> tuple:
+    """The owned rows (block_indptr, global columns, blocks) of dolfinx's owned nodes first, first + 1, ...
+    -> (the global nodes this rank steps, their rows): the rows of the moved nodes sent to their new
+    rank, those this rank receives after its own, ascending."""
+    indptr, columns, blocks = rows
+    n = len(indptr) - 1
+    nodes = first + np.arange(n, dtype=np.int64)
+    if not len(ownership.moved):
+        return nodes, rows
+    owner = ownership.owner(nodes)
+    counts = np.diff(indptr)
+    row_of_block = np.repeat(np.arange(n), counts)
+    outgoing = []
+    for q in range(comm.size):
+        chosen = owner == q
+        take = chosen[row_of_block]
+        outgoing.append((nodes[chosen], counts[chosen], columns[take], blocks[take]))
+    incoming = comm.alltoall(outgoing)
+    kept_nodes, kept_counts, kept_columns, kept_blocks = incoming[comm.rank]
+    got = [piece for q, piece in enumerate(incoming) if q != comm.rank and len(piece[0])]
+    if got:
+        got_nodes = np.concatenate([piece[0] for piece in got])
+        got_counts = np.concatenate([piece[1] for piece in got])
+        got_columns = np.concatenate([piece[2] for piece in got])
+        got_blocks = np.concatenate([piece[3] for piece in got])
+        order = np.argsort(got_nodes)
+        starts = np.concatenate([[0], np.cumsum(got_counts)])
+        take = np.concatenate([np.arange(starts[r], starts[r + 1]) for r in order]).astype(np.int64)
+        kept_nodes = np.concatenate([kept_nodes, got_nodes[order]])
+        kept_counts = np.concatenate([kept_counts, got_counts[order]])
+        kept_columns = np.concatenate([kept_columns, got_columns[take]])
+        kept_blocks = np.concatenate([kept_blocks, got_blocks[take]])
+    new_indptr = np.zeros(len(kept_nodes) + 1, dtype=np.int64)
+    np.cumsum(kept_counts, out=new_indptr[1:])
+    return kept_nodes.astype(np.int64), (new_indptr, kept_columns.astype(np.int64), kept_blocks)
+
+
+def route_faces(comm: MPI.Comm, ownership: Ownership, faces: list, global_of_local: np.ndarray,
+                local_nodes: np.ndarray) -> list:
+    """The truncation faces of the nodes this rank steps: `faces` hold dolfinx's owned nodes
+    (local numbering of the function space); a moved node's entries go to its new rank; returns
+    the faces with `nodes` in the kernel's local numbering (`local_nodes`: its global nodes)."""
+    out = []
+    for face in faces:
+        per_node = [f.name for f in dataclasses.fields(face)
+                    if isinstance(getattr(face, f.name), np.ndarray) and f.name != "nodes"]
+        nodes = global_of_local[face.nodes].astype(np.int64)
+        if len(ownership.moved):
+            received = route_to(comm, ownership.owner(nodes), nodes, *[getattr(face, name) for name in per_node])
+        else:
+            received = [nodes] + [getattr(face, name) for name in per_node]
+        values = dict(zip(per_node, received[1:]))
+        local = positions(local_nodes, received[0], f"face {face.name!r}").astype(np.int32)
+        out.append(dataclasses.replace(face, nodes=local, **values))
+    return out
