@@ -959,6 +959,8 @@ def plan(part: RankModel, time_step, n_steps: int) -> dict:
             "ranks": part.comm.size, "dofs": part.n_dofs_global,
             "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e in counts],
             "time step": f"{time_step.dt:.6g} s ({time_step.reason})", "steps": n_steps,
+            **({"contact pairs": f"{part.n_pairs} ({part.moved_nodes} side-j nodes stepped on their side-i node's rank, "
+                                 "not dolfinx's owner: pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
             "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
 
 
@@ -1003,7 +1005,7 @@ def _check(scene: Scene) -> dict:
     run = DistributedRun(scene, Path("."), comm)
     part, ts, loop = run.part, run.time_step, run.loop
     kernel_threads()
-    stepper, exchange = _stepper(part, ts.dt, run.input_arrays, loop)
+    stepper, exchange = run.stepper()
     n = 3 * part.n_local
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
     stepper.reset_energy(u, v, a, 0.0)
@@ -1197,6 +1199,15 @@ class DistributedRun:
         self.last_flush = time.monotonic()
 
     # -- set-up -------------------------------------------------------------------------------------
+    def stepper(self) -> tuple:
+        """(the kernel's Stepper of this rank's part, its exchange), with the ContactPairs of the
+        rank's pairs (`self.contact`; a rank without pairs has none)."""
+        if self.contact_arrays is not None and len(self.part.pairs):
+            from pyfem.solver import make_contact_pairs
+
+            self.contact = make_contact_pairs(self.contact_arrays)
+        return _stepper(self.part, self.time_step.dt, self.input_arrays, self.loop, self.contact)
+
     def _fingerprint(self) -> dict:
         from pyfem.checkpoint import scene_fingerprint
 
@@ -1558,11 +1569,7 @@ class DistributedRun:
                                          f"{self.scene['time']['duration']:g} s", **shown}
                 on_plan(shown)
         kernel_threads()
-        if self.contact_arrays is not None and len(part.pairs):
-            from pyfem.solver import make_contact_pairs
-
-            self.contact = make_contact_pairs(self.contact_arrays)
-        stepper, exchange = _stepper(part, ts.dt, self.input_arrays, self.loop, self.contact)
+        stepper, exchange = self.stepper()
         n_outputs = self.n_steps // ts.steps_per_output
         clock = checkpoints.CheckpointClock(self.scene["output"]["checkpoint_interval"],
                                             elapsed=time.perf_counter() - self.wall_start)

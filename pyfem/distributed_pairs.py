@@ -191,7 +191,8 @@ def pair_moves(pairs: GlobalPairs, ownership: Ownership) -> tuple[np.ndarray, np
 def move_rows(comm: MPI.Comm, ownership: Ownership, first: int, rows: tuple) -> tuple:
     """The owned rows (block_indptr, global columns, blocks) of dolfinx's owned nodes first, first + 1, ...
     -> (the global nodes this rank steps, their rows): the rows of the moved nodes sent to their new
-    rank, those this rank receives after its own, ascending."""
+    rank, those this rank receives after its own, ascending. Only the moved rows travel; the kept
+    rows are copied once, into the new arrays (the set-up's memory peak stays two copies of the rows)."""
     indptr, columns, blocks = rows
     n = len(indptr) - 1
     nodes = first + np.arange(n, dtype=np.int64)
@@ -202,27 +203,33 @@ def move_rows(comm: MPI.Comm, ownership: Ownership, first: int, rows: tuple) -> 
     row_of_block = np.repeat(np.arange(n), counts)
     outgoing = []
     for q in range(comm.size):
-        chosen = owner == q
+        chosen = (owner == q) if q != comm.rank else np.zeros(n, dtype=bool)
         take = chosen[row_of_block]
         outgoing.append((nodes[chosen], counts[chosen], columns[take], blocks[take]))
-    incoming = comm.alltoall(outgoing)
-    kept_nodes, kept_counts, kept_columns, kept_blocks = incoming[comm.rank]
-    got = [piece for q, piece in enumerate(incoming) if q != comm.rank and len(piece[0])]
+    got = [piece for piece in comm.alltoall(outgoing) if len(piece[0])]
+    keep = owner == comm.rank
+    if keep.all() and not got:
+        return nodes, rows
+    kept_blocks = keep[row_of_block]
+    del row_of_block
+    got_nodes = np.concatenate([piece[0] for piece in got]) if got else np.zeros(0, dtype=np.int64)
+    got_counts = np.concatenate([piece[1] for piece in got]) if got else np.zeros(0, dtype=np.int64)
+    order = np.argsort(got_nodes)
+    starts = np.concatenate([[0], np.cumsum(got_counts)]).astype(np.int64)
+    take = (np.concatenate([np.arange(starts[r], starts[r + 1]) for r in order]).astype(np.int64) if len(order)
+            else np.zeros(0, dtype=np.int64))
+    n_kept = int(np.count_nonzero(kept_blocks))
+    new_columns = np.empty(n_kept + len(take), dtype=np.int64)
+    new_blocks = np.empty((n_kept + len(take), 3, 3))
+    np.compress(kept_blocks, columns, axis=0, out=new_columns[:n_kept])
+    np.compress(kept_blocks, blocks, axis=0, out=new_blocks[:n_kept])
     if got:
-        got_nodes = np.concatenate([piece[0] for piece in got])
-        got_counts = np.concatenate([piece[1] for piece in got])
-        got_columns = np.concatenate([piece[2] for piece in got])
-        got_blocks = np.concatenate([piece[3] for piece in got])
-        order = np.argsort(got_nodes)
-        starts = np.concatenate([[0], np.cumsum(got_counts)])
-        take = np.concatenate([np.arange(starts[r], starts[r + 1]) for r in order]).astype(np.int64)
-        kept_nodes = np.concatenate([kept_nodes, got_nodes[order]])
-        kept_counts = np.concatenate([kept_counts, got_counts[order]])
-        kept_columns = np.concatenate([kept_columns, got_columns[take]])
-        kept_blocks = np.concatenate([kept_blocks, got_blocks[take]])
-    new_indptr = np.zeros(len(kept_nodes) + 1, dtype=np.int64)
-    np.cumsum(kept_counts, out=new_indptr[1:])
-    return kept_nodes.astype(np.int64), (new_indptr, kept_columns.astype(np.int64), kept_blocks)
+        new_columns[n_kept:] = np.concatenate([piece[2] for piece in got])[take]
+        new_blocks[n_kept:] = np.concatenate([piece[3] for piece in got])[take]
+    new_nodes = np.concatenate([nodes[keep], got_nodes[order]]).astype(np.int64)
+    new_indptr = np.zeros(len(new_nodes) + 1, dtype=np.int64)
+    np.cumsum(np.concatenate([counts[keep], got_counts[order]]), out=new_indptr[1:])
+    return new_nodes, (new_indptr, new_columns, new_blocks)
 
 
 def route_faces(comm: MPI.Comm, ownership: Ownership, faces: list, global_of_local: np.ndarray,

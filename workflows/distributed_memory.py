@@ -8,14 +8,17 @@ model on one rank the process's), the set-up (wall time before the time loop: me
 time step, the input forces), the time loop per step, and the largest history difference from the
 whole model's one-rank run (relative to each quantity's largest value).
 
-    /usr/bin/python3 workflows/distributed_memory.py [--quick | --large]
+    /usr/bin/python3 workflows/distributed_memory.py [--quick | --large | --contact]
 
 writes workflows/results/distributed_memory.json and prints the README's markdown table. The
 default scene is the free-field box refined to h = 2.5 m in a 160 x 80 x 160 m block (139 425
 nodes, 418 275 dofs: the paper-scale case 3 has 497 610), 0.05 s; --quick: h = 5 m (20 k dofs);
 --large: the distributed model alone on 2 ranks, a 320 x 160 x 320 m block of h = 2.5 m (1 081 665
 nodes, 3 244 995 dofs, 0.02 s; the whole model would need about 3.3 KB per dof on each rank, more than
-this machine's 24 GiB for 2 ranks), its row added to the results file as "large".
+this machine's 24 GiB for 2 ranks), its row added to the results file as "large"; --contact: the
+four configurations on the contact scene (tests/scenes/mpi_hard_contact.toml: soft rock, a thin stiff
+layer, both interfaces in contact with deterioration, oblique SV) as a 160 x 80 x 160 m block of
+h = 2.5 m (4 290 pairs, 437 580 dofs, 0.2 s), added as "contact".
 Run it on a quiet machine: the ranks share the same 2 cores and memory bus.
 """
 import argparse
@@ -47,8 +50,17 @@ LARGE = ["mesh.size=[320.0, 160.0, 320.0]", "wave.surface=370.0", "time.duration
          "output.interval=0.005"]
 
 
-def run(ranks: int, model: str, h: float, out: Path, settings: list = SETTINGS) -> dict:
-    command = [PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), "--set", f"mesh.h={h}",
+CONTACT_SCENE = "tests/scenes/mpi_hard_contact.toml"
+CONTACT = ["mesh.size=[160.0, 80.0, 160.0]",
+           "mesh.layers=[{material = \"soft\", thickness = 79.5}, {material = \"stiff\", thickness = 1.0}, "
+           "{material = \"soft\", thickness = 79.5}]",
+           "wave.surface=165.0", "initial_stress.surface=165.0", "time.duration=0.2", "output.xdmf_interval=0.0",
+           "monitor.0.point=[80.0, 40.0, 80.0]", "pair_monitor.0.point=[80.0, 40.0, 80.5]",
+           "pair_monitor.1.point=[80.0, 40.0, 79.5]", "output.interval=0.005"]
+
+
+def run(ranks: int, model: str, h: float, out: Path, settings: list = SETTINGS, scene: str = SCENE) -> dict:
+    command = [PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), "--set", f"mesh.h={h}",
                "--set", f"parallel.model={model}"]
     for setting in settings:
         command += ["--set", setting]
@@ -75,7 +87,16 @@ def main(argv: list) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="h = 5 m (20 k dofs)")
     parser.add_argument("--large", action="store_true", help="3.2 M dofs, the distributed model on 2 ranks only")
+    parser.add_argument("--contact", action="store_true", help="the contact scene, 4 290 pairs")
     args = parser.parse_args(argv)
+    if args.contact:
+        rows = compare_models(2.5, CONTACT, CONTACT_SCENE)
+        result = json.loads(RESULTS.read_text())
+        result["contact"] = {"date": time.strftime("%Y-%m-%d"), "scene": CONTACT_SCENE,
+                             "settings": ["mesh.h=2.5"] + CONTACT, "rows": rows}
+        RESULTS.write_text(json.dumps(result, indent=1) + "\n")
+        print_table(rows)
+        return 0
     if args.large:
         with tempfile.TemporaryDirectory() as scratch:
             row = run(2, "distributed", 2.5, Path(scratch) / "large", LARGE)
@@ -86,25 +107,35 @@ def main(argv: list) -> int:
         RESULTS.write_text(json.dumps(result, indent=1) + "\n")
         return 0
     h = 5.0 if args.quick else 2.5
+    rows = compare_models(h, SETTINGS, SCENE)
+    result = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.node()}, {os.cpu_count()} cores",
+              "scene": SCENE, "settings": [f"mesh.h={h}"] + SETTINGS, "rows": rows}
+    if not args.quick:
+        RESULTS.write_text(json.dumps(result, indent=1) + "\n")
+    print_table(rows)
+    return 0
+
+
+def compare_models(h: float, settings: list, scene: str) -> list[dict]:
+    """The whole and the distributed model on 1 and 2 ranks, one after the other."""
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
         base = Path(scratch)
         for ranks, model in ((1, "whole"), (1, "distributed"), (2, "whole"), (2, "distributed")):
             out = base / f"{model}_{ranks}"
-            rows.append(run(ranks, model, h, out))
+            rows.append(run(ranks, model, h, out, settings, scene))
             rows[-1]["difference_from_whole_one_rank"] = (0.0 if not rows[:-1] else
                                                           largest_difference(out, base / "whole_1"))
             print(json.dumps(rows[-1]), flush=True)
-    result = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.node()}, {os.cpu_count()} cores",
-              "scene": SCENE, "settings": [f"mesh.h={h}"] + SETTINGS, "rows": rows}
-    if not args.quick:
-        RESULTS.write_text(json.dumps(result, indent=1) + "\n")
+    return rows
+
+
+def print_table(rows: list[dict]) -> None:
     print("| model | ranks | peak memory per rank (MiB) | set-up (s) | time loop (ms/step) | difference |")
     print("|---|---|---|---|---|---|")
     for row in rows:
         print(f"| {row['model']} | {row['ranks']} | {' / '.join(map(str, row['peak_memory_mib']))} | "
               f"{row['setup_seconds']} | {row['ms_per_step']} | {row['difference_from_whole_one_rank']:.1e} |")
-    return 0
 
 
 if __name__ == "__main__":
