@@ -229,6 +229,13 @@ class Checkpoint:
             self._refuse(f"the interrupted run stepped {stepped} (time.local_stepping) and this one would not; "
                          f"set time.local_stepping = {'true' if stepped == 'locally' else 'false'} to resume it")
         self._refuse_difference(where)
+        contact = getattr(simulation, "contact_arrays", None)
+        saved_pairs = self.kernel.get("contact/pairs")
+        if contact is not None and saved_pairs is not None and \
+                saved_pairs != np.ascontiguousarray(contact["pairs"], dtype=np.int32).tobytes():
+            self._refuse("the checkpoint lists the contact pairs in another order than this version (a checkpoint "
+                         "with contact written before 2026-11-29 lists them in the mesh's numbering; they are now "
+                         "sorted by interface and position)")
 
     def _refuse_difference(self, where: str | None) -> None:
         if where is None:

@@ -315,6 +315,7 @@ class RankModel:
     pair_global: np.ndarray | None = None  # (n, 2) each of `pairs`' global nodes
     n_pairs: int = 0                 # the whole model's
     moved_nodes: int = 0             # pair nodes stepped on another rank than dolfinx's owner (every rank's)
+    n_extra: int = 0                 # extra ghosts: ghosts the function space's index map does not hold
 
     pair_side: np.ndarray | None = None    # per local node: 0, or 1 + side + 2 interface for a pair's node
 
@@ -345,8 +346,9 @@ class RankModel:
 
     @property
     def extra_ghosts(self) -> int:
-        index_map = self.model.V.dofmap.index_map
-        return self.n_local - index_map.size_local - index_map.num_ghosts
+        """Ghosts the function space's index map does not hold (not counting moved pair nodes this
+        rank steps, which are owned here)."""
+        return self.n_extra
 
 
 def _owned_face(face, n_owned: int):
@@ -402,7 +404,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
     n_dofs_global = matrix.getSize()[0]
     owned, global_rows = move_rows(comm, ownership, first, owned_rows_global(matrix, last - first, release=True))
-    local_nodes, _ = local_numbering(owned, mapped, global_rows[1])
+    local_nodes, extra = local_numbering(owned, mapped, global_rows[1])
     rows = localize(global_rows, local_nodes)  # every cell's: the time step's
     del global_rows
     n_owned = len(owned)
@@ -472,7 +474,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
                      kernel_of_dolfinx=None if identity else kernel_of_dolfinx, pairs=rank_pairs,
                      pair_index=pair_index, pair_global=pair_global, pair_side=pair_side,
                      n_pairs=0 if pairs is None else len(pairs),
-                     moved_nodes=len(ownership.moved), setup_seconds=time.perf_counter() - began)
+                     moved_nodes=len(ownership.moved), n_extra=len(extra), setup_seconds=time.perf_counter() - began)
 
 
 def _rank_pairs(comm: MPI.Comm, pairs, ownership, local_nodes: np.ndarray, mass: np.ndarray):
@@ -769,8 +771,8 @@ class RankPairMonitors:
 
 def locate_pair_monitors(part: RankModel) -> RankPairMonitors:
     """Each scene pair monitor on the rank stepping its nearest pair, chosen as the whole model's
-    `NodePairs.nearest` chooses (`nearest_keys`, over every rank's pairs); the far-pair warning."""
-    from pyfem.interfaces import nearest_keys
+    `NodePairs.nearest` chooses (`nearest_pair`'s keys, over every rank's pairs); the far-pair warning."""
+    from pyfem.interfaces import nearest_pair
     from pyfem.solver import warn_far_pair_monitor
 
     monitors, pairs, comm = part.scene.get("pair_monitor", []), part.pairs, part.comm
@@ -778,9 +780,8 @@ def locate_pair_monitors(part: RankModel) -> RankPairMonitors:
     for j, monitor in enumerate(monitors):
         offer = None
         if len(pairs):
-            keys = nearest_keys(pairs.coords, pairs.interface, monitor["point"])
-            k = min(range(len(keys)), key=keys.__getitem__)
-            offer = (keys[k], int(part.pair_index[k]), float(pairs.area[k]), k, pairs.coords[k].tolist())
+            k, key = nearest_pair(pairs.coords, pairs.interface, monitor["point"])
+            offer = (key, int(part.pair_index[k]), float(pairs.area[k]), k, pairs.coords[k].tolist())
         offers = comm.allgather(offer)
         best, q = min((o, q) for q, o in enumerate(offers) if o is not None)
         key, whole_index, area, k, _ = best
@@ -842,7 +843,6 @@ class _Fields:
 
         model, wanted = part.model, part.scene["output"]["fields"]
         V = model.V
-        self.n = 3 * (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts)
         self.loop = loop
         self.point = [name for name in self.POINT if name in wanted]
         self.functions = {name: fem.Function(V, name=name) for name in self.point}
@@ -1085,7 +1085,7 @@ def point_keys(points: np.ndarray) -> np.ndarray:
 
 
 def rows_of(have: np.ndarray, want: np.ndarray, what: str) -> np.ndarray:
-    """The row of `have` (n, 3 keys) holding each key of `want` (m, 3); RuntimeError naming `what`
+    """The row of `have` (n, k keys) holding each key of `want` (m, k); RuntimeError naming `what`
     when one is missing."""
     _, inverse = np.unique(np.concatenate([have, want]), axis=0, return_inverse=True)
     inverse = inverse.ravel()
@@ -1457,10 +1457,9 @@ class DistributedRun:
         for name in ("stepper/energy", "stepper/provider_work", "stepper/provider_power", "stepper/energy_started"):
             out[name] = np.frombuffer(kernel[name], dtype=np.uint8)
         if self.contact is not None:  # every pair's state, keyed by its interface and position
-            pairs = part.pairs
             out["pair_keys"] = self._pair_keys()
             for name in self._contact_blocks(kernel):
-                out[f"pairs/{name}"] = np.frombuffer(kernel[name], dtype=np.uint8).reshape(len(pairs), -1)
+                out[f"pairs/{name}"] = np.frombuffer(kernel[name], dtype=np.uint8).reshape(len(part.pairs), -1)
         for k, (name, kind, arrays) in enumerate(self._components()):
             if kind != "counted":
                 continue
@@ -1479,9 +1478,11 @@ class DistributedRun:
 
     @staticmethod
     def _contact_blocks(kernel: dict) -> list[str]:
-        """The kernel's per-pair contact state blocks (every contact/ entry but the pairs' node numbers,
-        which are the rank's own)."""
-        return sorted(name for name in kernel if name.startswith("contact/") and name != "contact/pairs")
+        """The kernel's per-pair contact state blocks: every contact/ entry but the pairs' node
+        numbers (the rank's own) and node_force (per pair node, the last correction's scratch: zeroed
+        before every correction, read by nothing)."""
+        return sorted(name for name in kernel if name.startswith("contact/")
+                      and name not in ("contact/pairs", "contact/node_force"))
 
     def load_rank_states(self, stepper, identifier: int, ranks: int) -> tuple:
         """The checkpoint's state for this rank's nodes and cells, from every rank file of checkpoint

@@ -71,8 +71,11 @@ def positions(have: np.ndarray, wanted: np.ndarray, what: str) -> np.ndarray:
         if len(wanted):
             raise RuntimeError(f"{what}: a node not on this rank")
         return np.zeros(0, dtype=np.int64)
-    found = np.minimum(np.searchsorted(have[order], wanted), len(order) - 1)
-    if np.any(have[order][found] != wanted):
+    ascending = have[order]
+    if np.any(ascending[1:] == ascending[:-1]):
+        raise RuntimeError(f"{what}: a node listed twice")
+    found = np.minimum(np.searchsorted(ascending, wanted), len(order) - 1)
+    if np.any(ascending[found] != wanted):
         raise RuntimeError(f"{what}: a node not on this rank")
     return order[found]
 
@@ -128,6 +131,7 @@ def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np
     from scipy.spatial import cKDTree
 
     from pyfem.assembly import assemble_nodal_vector, facet_measure
+    from pyfem.interfaces import interfaces_meet
 
     mesh = V.mesh
     n_owned = V.dofmap.index_map.size_local
@@ -149,13 +153,15 @@ def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np
         global_j = np.concatenate([piece[0] for piece in side_j]).astype(np.int64)
         coords_j = np.concatenate([piece[1] for piece in side_j]).reshape(-1, 3)
         total_i = comm.allreduce(len(nodes_i))
-        if total_i != len(global_j):
-            raise ValueError(f"interface {name!r}: {total_i} nodes on side i, {len(global_j)} on side j")
+        if total_i != len(global_j):  # (every rank alike)
+            raise interfaces_meet(name, f"{total_i} nodes on side i, {len(global_j)} on side j")
         match = np.zeros(0, dtype=np.int64)
+        apart = False
         if len(nodes_i):
             distance, match = cKDTree(coords_j).query(coords[nodes_i])
-            if np.any(distance > 1e-9 * span):
-                raise ValueError(f"interface {name!r}: the nodes of the two sides do not coincide pairwise")
+            apart = bool(np.any(distance > 1e-9 * span))
+        if comm.allreduce(apart, op=MPI.LOR):  # every rank raises, none waits in a collective
+            raise interfaces_meet(name, "the nodes of its two sides do not coincide pairwise")
         normal = normal_i[nodes_i]
         normal /= np.linalg.norm(normal, axis=1)[:, None]
         mine.append((np.full(len(nodes_i), index, dtype=np.int32),
@@ -165,8 +171,10 @@ def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np
     arrays = [np.concatenate([piece[k] for piece in pieces]) for k in range(5)]
     interface, nodes, where, area, normal = arrays
     nodes, where, normal = nodes.reshape(-1, 2), where.reshape(-1, 3), normal.reshape(-1, 3)
-    if len(np.unique(nodes[:, 1])) != len(nodes):
-        raise ValueError("interface pairs: two side-i nodes matched one side-j node")
+    values, counts = np.unique(nodes[:, 1], return_counts=True)
+    if np.any(counts > 1):  # (every rank alike)
+        twice = np.flatnonzero(nodes[:, 1] == values[np.argmax(counts)])[0]
+        raise interfaces_meet(names[int(interface[twice])], "two side-i nodes matched one side-j node")
     if np.any(area <= 0.0):
         raise ValueError("interface pairs: a lumped pair area is <= 0")
     key = np.round(where, 9) + 0.0  # by position to 1e-9 m, as pyfem.interfaces.interface_pairs sorts

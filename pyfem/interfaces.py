@@ -55,20 +55,33 @@ class NodePairs:
         return np.flatnonzero(self.interface == self.names.index(name))
 
     def nearest(self, point: typing.Sequence[float]) -> int:
-        """Index of the pair nearest to `point` (m); among pairs equally near (`nearest_key`), the
+        """Index of the pair nearest to `point` (m); among pairs equally near (`nearest_pair`), the
         one of the lowest interface, then the lowest position (x, then y, then z): the choice does
         not depend on the pairs' order, so the distributed model's ranks make it alike."""
-        keys = nearest_keys(self.coords, self.interface, point)
-        return int(min(range(len(keys)), key=keys.__getitem__))
+        return nearest_pair(self.coords, self.interface, point)[0]
 
 
-def nearest_keys(coords: np.ndarray, interface: np.ndarray, point: typing.Sequence[float]) -> list[tuple]:
-    """Per pair the key `NodePairs.nearest` minimises: its distance to `point`, its interface, its
-    position, the lengths rounded to 1e-9 m (pairs equally near on a regular grid stay equal after
-    round-off, and one position is one key whatever the round-off of the mesh's coordinates)."""
-    distance = np.round(np.linalg.norm(coords - np.asarray(point, dtype=float), axis=1), 9)
+def nearest_pair(coords: np.ndarray, interface: np.ndarray, point: typing.Sequence[float]) -> tuple[int, tuple]:
+    """(index, key) of the pair that minimises the key (its distance to `point`, its interface, its
+    position, the lengths rounded to 1e-9 m: pairs equally near on a regular grid stay equal after
+    round-off, and one position is one key whatever the round-off of the mesh's coordinates); keys
+    compare as tuples, so the ranks' best pairs can be compared with each other."""
+    distance = np.round(np.linalg.norm(coords - np.asarray(point, dtype=float), axis=1), 9) + 0.0
     where = np.round(coords, 9) + 0.0
-    return [(float(d), int(k), *map(float, x)) for d, k, x in zip(distance, interface, where)]
+    index = int(np.lexsort((where[:, 2], where[:, 1], where[:, 0], interface, distance))[0])
+    return index, (float(distance[index]), int(interface[index]), *map(float, where[index]))
+
+
+def interfaces_meet(name: str, found: str):
+    """The SceneError of an interface whose two sides do not pair up node by node: what
+    pyfem.interface_split cannot split (an interface that crosses another or ends on it inside the
+    model, a T or a cross: a node on two split interfaces needs more than two copies)."""
+    from pyfem.scene import SceneError
+
+    allowed = ("interfaces that neither cross nor end on another interface inside the model (they may reach "
+               "the outer boundary); a T or a cross of split interfaces is not supported")
+    return SceneError("contact.interfaces", name, allowed,
+                      f"scene key 'contact.interfaces': interface {name!r}: {found}; allowed: {allowed}")
 
 
 def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int, int]], mass: np.ndarray,
@@ -88,7 +101,8 @@ def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int
         quadrature: form metadata (quadrature degree).
 
     Returns:
-        NodePairs over all interfaces, in the order of `interface_tags`.
+        NodePairs over all interfaces, sorted by interface (in the order of `interface_tags`), then
+        by position (x, then y, then z, to 1e-9 m).
     """
     mesh = V.mesh
     test = ufl.TestFunction(V)
@@ -104,10 +118,10 @@ def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int
             lumped.append((np.flatnonzero(area != 0.0), area, normal))
         (nodes_i, area_i, normal_i), (nodes_j, _, _) = lumped
         if len(nodes_i) != len(nodes_j):
-            raise ValueError(f"interface {name!r}: {len(nodes_i)} nodes on side i, {len(nodes_j)} on side j")
+            raise interfaces_meet(name, f"{len(nodes_i)} nodes on side i, {len(nodes_j)} on side j")
         distance, match = cKDTree(node_coords[nodes_j]).query(node_coords[nodes_i])
         if np.any(distance > 1e-9 * span) or len(np.unique(match)) != len(match):
-            raise ValueError(f"interface {name!r}: the nodes of the two sides do not coincide pairwise")
+            raise interfaces_meet(name, "the nodes of its two sides do not coincide pairwise")
         normal = normal_i[nodes_i]  # outward from side i = towards side j
         normal /= np.linalg.norm(normal, axis=1)[:, None]
         chunks["interface"].append(np.full(len(nodes_i), index, dtype=np.int32))

@@ -161,8 +161,9 @@ def split_interfaces(arrays: dict | None, interface_tags: typing.Mapping[str, in
     """
     nodes_per_cell = comm.bcast(arrays["cells"].shape[1] if comm.rank == model_rank else None, root=model_rank)
     if comm.rank == model_rank:
-        x, cells, facets, facet_values, split_tags, _ = split_topology(
-            arrays["x"], arrays["cells"], arrays["facets"], arrays["facet_values"], interface_tags)
+        x, cells, facets, facet_values = _without_unused_nodes(arrays["x"], arrays["cells"], arrays["facets"],
+                                                               arrays["facet_values"])
+        x, cells, facets, facet_values, split_tags, _ = split_topology(x, cells, facets, facet_values, interface_tags)
         cell_values = np.asarray(arrays["cell_values"], dtype=np.int32)
     else:
         x, cells = np.zeros((0, 3)), np.zeros((0, nodes_per_cell), dtype=np.int64)
@@ -187,6 +188,19 @@ def split_interfaces(arrays: dict | None, interface_tags: typing.Mapping[str, in
                                                      local_values.astype(np.int32))
     facet_tags.name = "Facet tags"
     return mesh, cell_tags, facet_tags, split_tags
+
+
+def _without_unused_nodes(x: np.ndarray, cells: np.ndarray, facets: np.ndarray, facet_values: np.ndarray) -> tuple:
+    """(x, cells, facets, facet_values) without the nodes no cell uses (gmsh can leave one in a
+    tetrahedral mesh; dolfinx's create_mesh, given the split arrays, crashed or hung on it), the
+    facets renumbered (a facet on such a node, which no cell has, dropped)."""
+    used = np.zeros(len(x), dtype=bool)
+    used[np.asarray(cells).ravel()] = True
+    if used.all():
+        return x, cells, facets, facet_values
+    number = np.cumsum(used) - 1
+    kept = used[facets].all(axis=1) if len(facets) else np.zeros(0, dtype=bool)
+    return x[used], number[cells], number[facets[kept]], np.asarray(facet_values)[kept]
 
 
 # Nodes per facet of the supported cells (by nodes per cell): quadrilaterals of hexahedra,

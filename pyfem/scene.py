@@ -654,7 +654,9 @@ SCHEMA = Table({
         }, "[static.boundary]"),
     }, "[static]", presence="optional"),
     "contact": Table({
-        "interfaces": TextList("interface names", non_empty=True),
+        "interfaces": TextList("interface names: named surfaces (a box's layers: interface_1, ...) that neither "
+                               "cross nor end on one another inside the model (they may reach the outer "
+                               "boundary)", non_empty=True),
         "cohesion": Number("interface cohesion (Pa)", NON_NEGATIVE),
         "friction_angle": Number("static friction angle (deg)", "[0, 90)"),
         "dynamic_friction_angle": Number("dynamic friction angle (deg)", "[0, 90)",

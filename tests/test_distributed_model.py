@@ -414,3 +414,63 @@ def test_contact_killed_on_two_ranks_resumes_on_three(tmp_path):
     assert states["bonded"][k] == 0 and expected["pairs"]["upper"]["residual_slip"] > 1e-5, "slid before the kill"
     assert resumed["pair_states"] == states
     same_files(out, reference, 1e-10)
+
+
+T_JUNCTION_GEO = """// a horizontal bedding plane and a vertical fault above it that ends on it (a T; a new-user trial)
+Point(1) = {0, 0, 0}; Point(2) = {40, 0, 0}; Point(3) = {80, 0, 0};
+Point(4) = {0, 0, 20}; Point(5) = {40, 0, 20}; Point(6) = {80, 0, 20};
+Point(7) = {0, 0, 50}; Point(8) = {40, 0, 50}; Point(9) = {80, 0, 50};
+Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 6}; Line(4) = {6, 5}; Line(5) = {5, 4}; Line(6) = {4, 1};
+Line(7) = {2, 5}; Line(8) = {5, 8}; Line(9) = {8, 7}; Line(10) = {7, 4}; Line(11) = {6, 9}; Line(12) = {9, 8};
+Curve Loop(1) = {1, 7, 5, 6}; Plane Surface(1) = {1};
+Curve Loop(2) = {2, 3, 4, -7}; Plane Surface(2) = {2};
+Curve Loop(3) = {-5, 8, 9, 10}; Plane Surface(3) = {3};
+Curve Loop(4) = {-4, 11, 12, -8}; Plane Surface(4) = {4};
+Transfinite Curve{1, 2, 4, 5, 9, 12} = 11; Transfinite Curve{3, 6, 7} = 6; Transfinite Curve{8, 10, 11} = 8;
+Transfinite Surface{1, 2, 3, 4}; Recombine Surface{1, 2, 3, 4};
+out[] = Extrude {0, 8, 0} { Surface{1, 2, 3, 4}; Layers{2}; Recombine; };
+Physical Volume("lower") = {out[1], out[7]};
+Physical Volume("upper") = {out[13], out[19]};
+Physical Surface("bedding") = {out[4], out[10]};
+Physical Surface("fault") = {out[15]};
+"""
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_a_fault_that_ends_on_a_bedding_plane_is_refused_in_one_line(tmp_path, ranks):
+    """Split interfaces that meet in a T (or cross) cannot be split into pairs (a node on two
+    interfaces would need more than two copies): one line naming contact.interfaces, exit 2, in the
+    whole model (1 rank) and the distributed model (2 ranks), where both raised a traceback before."""
+    (tmp_path / "t.geo").write_text(T_JUNCTION_GEO)
+    scene = (REPO / "tests" / "scenes" / "mpi_hard_contact.toml").read_text()
+    scene = scene.split("[materials.soft]")[0].split("[mesh]")[0] + f"""
+[mesh]
+builder = "file"
+file = "{tmp_path / 't.geo'}"
+
+[materials.lower]
+E = 15.0e9
+nu = 0.25
+rho = 2600.0
+
+[materials.upper]
+E = 3.0e9
+nu = 0.30
+rho = 2350.0
+
+[time]
+duration = 0.1
+
+[contact]
+interfaces = ["bedding", "fault"]
+cohesion = 2.0e4
+friction_angle = 25.0
+tensile_strength = 1.0e4
+"""
+    (tmp_path / "t.toml").write_text(scene)
+    result = pyfem(ranks, "check", str(tmp_path / "t.toml"), *(DISTRIBUTED if ranks > 1 else ()))
+    assert result.returncode == 2, result.stderr[-3000:]
+    lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and "contact.interfaces" in lines[0] and "cross nor end on another" in lines[0], \
+        result.stderr[-2000:]
+    assert "Traceback" not in result.stderr

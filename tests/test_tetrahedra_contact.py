@@ -139,3 +139,47 @@ def test_block_of_tetrahedra_slides_as_newmark_rigid_block(tmp_path):
     scale = max(max(abs(e["external_work"]) for e in energies), max(e["kinetic"] + e["strain"] for e in energies))
     assert max(abs(e["balance"]) for e in energies) < 0.01 * scale
     assert final["friction_dissipation"] > 0.1 * scale
+
+
+def test_a_gmsh_mesh_with_a_node_no_cell_uses_runs_with_contact(tmp_path):
+    """gmsh 4.8 leaves one node that no tetrahedron uses in meshes/dipping_fault_tet.geo (a new-user
+    trial's dipping fault); with the fault split for contact dolfinx crashed on it (exit 59, or a
+    hang under mpirun). pyfem.mesh drops such nodes before dolfinx sees the split mesh: the scene
+    runs, its fault's pairs slide, and the mesh's node count is that of the cells' nodes."""
+    import json
+    import subprocess
+    import sys
+
+    from pyfem._gmsh import gmsh
+    from pyfem.geometry import gmsh_session, load_msh
+    from pyfem.mesh import _model_arrays, _without_unused_nodes
+
+    repository = Path(__file__).resolve().parents[1]
+    with gmsh_session("unused"):
+        load_msh(str(repository / "meshes" / "dipping_fault_tet.geo"))
+        arrays = _model_arrays()
+    used = np.unique(arrays["cells"])
+    x, cells, facets, values = _without_unused_nodes(arrays["x"], arrays["cells"], arrays["facets"],
+                                                     arrays["facet_values"])
+    assert len(x) == len(used) and np.array_equal(np.unique(cells), np.arange(len(x)))
+    assert np.allclose(x[cells], arrays["x"][arrays["cells"]]) and len(facets) == len(arrays["facets"])
+    out = tmp_path / "run"
+    result = subprocess.run([sys.executable, "-m", "pyfem", "run", "tests/scenes/dipping_fault_tet.toml", "--out",
+                             str(out)], cwd=repository, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    summary = json.loads((out / "run.json").read_text())
+    assert summary["nodes"] == len(used) + summary["n_pairs"], "every node a cell's, the fault's copies added"
+    assert max(summary["pair_states"]["sliding"]) > 0 and summary["pairs"]["fault_mid"]["max_slip"] > 1e-4
+    print(f"{len(arrays['x']) - len(used)} unused node(s) dropped; {summary['n_pairs']} pairs")
+
+
+def test_unused_nodes_are_dropped_and_the_rest_renumbered():
+    """`_without_unused_nodes` on a two-tetrahedron mesh with two nodes no cell uses."""
+    from pyfem.mesh import _without_unused_nodes
+
+    x = np.arange(21.0).reshape(7, 3)
+    cells = np.array([[0, 2, 3, 4], [2, 3, 4, 6]])
+    facets = np.array([[2, 3, 4], [0, 1, 2]])  # the second on node 1, which no cell uses
+    got_x, got_cells, got_facets, got_values = _without_unused_nodes(x, cells, facets, np.array([7, 8]))
+    assert np.array_equal(got_x, x[[0, 2, 3, 4, 6]]) and np.array_equal(got_x[got_cells], x[cells])
+    assert np.array_equal(got_x[got_facets], x[[[2, 3, 4]]]) and got_values.tolist() == [7]
