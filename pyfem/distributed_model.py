@@ -317,7 +317,7 @@ class RankModel:
     moved_nodes: int = 0             # pair nodes stepped on another rank than dolfinx's owner (every rank's)
     n_extra: int = 0                 # extra ghosts: ghosts the function space's index map does not hold
 
-    pair_side: np.ndarray | None = None    # per local node: 0, or 1 + side + 2 interface for a pair's node
+    pair_side: np.ndarray | None = None    # per local node: its roles, bit side + 2 interface of each pair it is in
 
     def node_keys(self, nodes: np.ndarray) -> np.ndarray:
         """Checkpoint keys of local `nodes`: their positions, and with contact which side of which
@@ -460,10 +460,14 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     rank_pairs = pair_index = pair_global = pair_side = None
     if pairs is not None:
         pair_index, pair_global, rank_pairs = _rank_pairs(comm, pairs, ownership, local_nodes, mass)
-        pair_side = np.zeros(len(local_nodes), dtype=np.int64)
+        if len(pairs.names) > 31:
+            raise SceneError(KEY, "distributed", f"\"whole\" for more than 31 contact interfaces (here "
+                             f"{len(pairs.names)}: a checkpoint keys a pair node by its roles, a bit each)")
+        pair_side = np.zeros(len(local_nodes), dtype=np.int64)  # a bit per role: side of an interface
         for side in (0, 1):
             here = np.isin(pairs.nodes[:, side], local_nodes)
-            pair_side[positions(local_nodes, pairs.nodes[here, side], "pairs")] = 1 + side + 2 * pairs.interface[here]
+            np.bitwise_or.at(pair_side, positions(local_nodes, pairs.nodes[here, side], "pairs"),
+                             np.left_shift(1, side + 2 * pairs.interface[here].astype(np.int64)))
     return RankModel(comm=comm, scene=scene, model=model, n_owned=n_owned, local_nodes=local_nodes, coords=coords,
                      mass=mass, matrix=kernel_matrix, plan=plan, estimates=estimates,
                      loop_cells={name: owned for name, (_, owned) in loop_cells.items()},

@@ -12,13 +12,13 @@ side-j node to the rank that owns its side-i node when dolfinx gave them differe
   normal, from the owners of the side-i nodes as `pyfem.interfaces.interface_pairs` computes them
   on one rank), on every rank, in an order that does not depend on the rank count (interface, then
   position);
-- `pair_moves`: the side-j nodes to move, and where;
+- `pair_moves`: the nodes to move (side j, or a pair group's), and where;
 - `move_rows`: the moved nodes' stiffness rows (global columns) to their new rank;
 - `route_faces`: the moved nodes' truncation-face values (springs, dashpots, input) likewise;
 - `route_to`: any per-node values to the rank that owns (dolfinx's sense) or steps each node.
 
-A node in two pairs (interfaces that meet) is refused: the whole model's pair groups are not built
-here yet.
+Pairs that share a node (interfaces that meet in an L along the model's boundary) are stepped
+together on one rank, as the whole model's pair groups are.
 """
 from __future__ import annotations
 
@@ -28,7 +28,6 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from pyfem.scene import SceneError
 
 
 @dataclass
@@ -183,17 +182,23 @@ def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np
 
 
 def pair_moves(pairs: GlobalPairs, ownership: Ownership) -> tuple[np.ndarray, np.ndarray]:
-    """(moved side-j nodes, their new rank: the owner of their side-i node) of the pairs whose two
-    nodes dolfinx gave to different ranks. A node in two pairs is refused (SceneError)."""
-    nodes = pairs.nodes.ravel()
-    if len(np.unique(nodes)) != len(nodes):
-        raise SceneError("parallel.model", "distributed",
-                         "\"whole\" for interfaces that meet (a node in two contact pairs: the whole model's pair "
-                         "groups are not built on the ranks yet, docs/scaling.md)")
-    owner_i = ownership.dolfinx_owner(pairs.nodes[:, 0])
-    owner_j = ownership.dolfinx_owner(pairs.nodes[:, 1])
-    apart = owner_i != owner_j
-    return pairs.nodes[apart, 1], owner_i[apart]
+    """(moved nodes, their new rank) of the pairs whose nodes dolfinx gave to different ranks. A
+    pair is stepped on the rank dolfinx gave its side-i node. Pairs that share a node (interfaces
+    that meet in an L along the model's boundary) form a group, stepped whole on one rank as the
+    whole model's partition keeps it (pyfem.distributed.pair_groups): the rank of the side-i node of
+    the group's first pair (in `pairs`' order)."""
+    import scipy.sparse as sp
+
+    nodes, inverse = np.unique(pairs.nodes.ravel(), return_inverse=True)
+    edges = inverse.reshape(-1, 2)
+    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(len(nodes), len(nodes)))
+    n_groups, group = sp.csgraph.connected_components(graph, directed=False)
+    pair_group = group[edges[:, 0]]
+    first = np.full(n_groups, len(pairs), dtype=np.int64)
+    np.minimum.at(first, pair_group, np.arange(len(pairs)))
+    rank = ownership.dolfinx_owner(pairs.nodes[first, 0])[group]
+    apart = ownership.dolfinx_owner(nodes) != rank
+    return nodes[apart], rank[apart]
 
 
 def move_rows(comm: MPI.Comm, ownership: Ownership, first: int, rows: tuple) -> tuple:

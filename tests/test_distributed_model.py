@@ -48,7 +48,8 @@ DISTRIBUTED = ("--set", "parallel.model=distributed")
 
 SCENES = {"box": "tests/scenes/distributed_box.toml", "tunnel": "tests/scenes/mpi_tunnel_tet.toml",
           "layers": "tests/scenes/distributed_layers.toml", "zone": "tests/scenes/mpi_weak_layer.toml",
-          "contact": "tests/scenes/mpi_hard_contact.toml", "contact_yield": "tests/scenes/mpi_hard_contact.toml"}
+          "contact": "tests/scenes/mpi_hard_contact.toml", "contact_yield": "tests/scenes/mpi_hard_contact.toml",
+          "contact_l": "tests/scenes/inclusion_l_contact.toml"}
 # The zone: a plasticity zone at x < 40 m of a 150 m box, which one of 2 ranks does not reach (no
 # element-loop cell, counted or halo); monitors inside cells.
 SETTINGS = {"zone": ("--set", "materials.weak.plasticity.zone=[0.0, 0.0, 0.0, 40.0, 10.0, 60.0]",
@@ -59,9 +60,11 @@ SETTINGS = {"zone": ("--set", "materials.weak.plasticity.zone=[0.0, 0.0, 0.0, 40
                               "tensile_strength=1.0e5}", "--set", "output.xdmf_interval=0.1",
                               "--set", 'output.fields=["displacement", "stress", "damage"]')}
 RANKS = {"box": (1, 2, 3), "tunnel": (1, 3), "layers": (1, 2, 3), "zone": (1, 2), "contact": (1, 2, 3),
-         "contact_yield": (1, 3)}
+         "contact_yield": (1, 3), "contact_l": (1, 3)}
 # The tunnel's net forces (tests/test_mpi.py NET_FORCE_TOLERANCE): measured 1.7e-9 and 9e-10 on 3 ranks.
 TOLERANCES = {"tunnel": {"acceleration": 3.0e-9, "reaction": 2.0e-9}}
+# The power iterations' convergence (two start vectors): the inclusion's estimates differ by 1.1e-3.
+DT_TOLERANCE = {"contact_l": 2.0e-3}
 
 
 def pyfem(ranks: int, *arguments: str) -> subprocess.CompletedProcess:
@@ -88,6 +91,16 @@ def runs(tmp_path_factory):
 
 def summary(run_dir: Path) -> dict:
     return json.loads((run_dir / "run.json").read_text())
+
+
+def pair_groups_in(scene: str) -> int:
+    """The nodes in more than one contact pair of the whole model of `scene` (built on one rank here)."""
+    from pyfem.operators import build_model
+    from pyfem.scene import load_scene
+
+    pairs = build_model(load_scene(REPO / scene)).pairs.nodes.ravel()
+    _, counts = np.unique(pairs, return_counts=True)
+    return int(np.count_nonzero(counts > 1))
 
 
 # The whole model's Tensor6 (xx xy xz yy yz zz) in dolfinx's 3 x 3 tensor (row by row).
@@ -145,8 +158,12 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
     elif name.startswith("contact"):  # the pairs broke their bonds and slid; with 2 and 3 ranks some pairs had
         # their two nodes owned by two ranks (the partitioner cuts along the split interfaces)
         states = whole["pair_states"]
-        assert whole["pair_states_final"]["bonded"] == 0 and max(states["sliding"]) > 0.5 * whole["n_pairs"]
-        assert whole["pairs"]["upper"]["max_slip"] > 1e-3 and whole["pairs"]["upper"]["residual_slip"] > 1e-5
+        if name == "contact_l":  # an L: the edge's nodes in two pairs, stepped as one group on one rank
+            assert pair_groups_in(SCENES[name]) > 0 and max(states["sliding"]) > 0.2 * whole["n_pairs"]
+            assert whole["pairs"]["top"]["max_slip"] > 1e-4 and whole["pairs"]["side"]["max_slip"] > 1e-4
+        else:
+            assert whole["pair_states_final"]["bonded"] == 0 and max(states["sliding"]) > 0.5 * whole["n_pairs"]
+            assert whole["pairs"]["upper"]["max_slip"] > 1e-3 and whole["pairs"]["upper"]["residual_slip"] > 1e-5
         assert (ours["mpi"]["moved_pair_nodes"] > 0) == (ranks > 1)
         if name == "contact_yield":
             assert whole["nonlinear_regions"]["soft"]["yielded_volume"] > 0.0
@@ -193,7 +210,7 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
         assert face == dict(expected, area=pytest.approx(expected["area"], rel=1e-12))
     assert ours["traction_free_surfaces"] == whole["traction_free_surfaces"]
     # The time step: the ranks' own estimate.
-    assert ours["dt_critical"] == pytest.approx(whole["dt_critical"], rel=1e-3)
+    assert ours["dt_critical"] == pytest.approx(whole["dt_critical"], rel=DT_TOLERANCE.get(name, 1e-3))
     assert ours["dt_critical"] == pytest.approx(summary(runs[name, 1])["dt_critical"], rel=1e-8)
     assert ours["dt"] == whole["dt"] and ours["steps"] == whole["steps"]
     # Every history, and the last displacement field.
