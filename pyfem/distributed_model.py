@@ -31,8 +31,13 @@ fields.xdmf (`_Fields`: the whole model's fields, the tensors as 3 x 3 cell data
 position, rank 0's record written last (`DistributedRun.write_checkpoint`); a run resumes on any
 rank count (docs/checkpoint.md "The distributed model").
 
-Not built yet (each refused with the key and what is allowed): contact, the static stage, local
-time stepping, one point per cell.
+Contact (pyfem/distributed_pairs.py): a pair is stepped on the rank dolfinx gave its side-i node;
+its side-j node, when owned elsewhere, is moved there with its stiffness rows and face values, so
+the kernel's numbering (owned nodes first) differs from the function space's, and what dolfinx
+numbers (fields, monitors, element arrays) is mapped through `RankModel.kernel_of_dolfinx`.
+
+Not built yet (each refused with the key and what is allowed): the static stage, local time
+stepping, one point per cell, quadratic tetrahedra.
 """
 from __future__ import annotations
 
@@ -316,12 +321,11 @@ class RankModel:
     n_pairs: int = 0                 # the whole model's
     moved_nodes: int = 0             # pair nodes stepped on another rank than dolfinx's owner (every rank's)
     n_extra: int = 0                 # extra ghosts: ghosts the function space's index map does not hold
-
     pair_side: np.ndarray | None = None    # per local node: its roles, bit side + 2 interface of each pair it is in
 
     def node_keys(self, nodes: np.ndarray) -> np.ndarray:
-        """Checkpoint keys of local `nodes`: their positions, and with contact which side of which
-        interface (a pair's two nodes share their position)."""
+        """Checkpoint keys of local `nodes`: their positions, and with contact their roles (`pair_side`:
+        a pair's nodes share their position)."""
         keys = point_keys(self.coords[nodes])
         if self.pair_side is None:
             return keys
@@ -483,18 +487,19 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
 
 def _rank_pairs(comm: MPI.Comm, pairs, ownership, local_nodes: np.ndarray, mass: np.ndarray):
     """(their indices in `pairs`, their global nodes, pyfem.interfaces.NodePairs) of the pairs this
-    rank steps (those whose side-i node dolfinx gave it), in the kernel's numbering, in `pairs`'
-    order (interface, then position)."""
+    rank steps (those whose side-i node it steps: dolfinx gave it that node, or its pair group's
+    first, `pair_moves`), in the kernel's numbering, in `pairs`' order (interface, then position)."""
     from pyfem.distributed_pairs import positions
     from pyfem.interfaces import NodePairs
 
     keep = ownership.owner(pairs.nodes[:, 0]) == comm.rank
     mine = pairs.select(keep)
     nodes = positions(local_nodes, mine.nodes.ravel(), "contact pairs").reshape(-1, 2).astype(np.int32)
-    return np.flatnonzero(keep), mine.nodes, NodePairs(names=mine.names, interface=np.ascontiguousarray(mine.interface, dtype=np.int32),
-                     nodes=np.ascontiguousarray(nodes), coords=np.ascontiguousarray(mine.coords),
-                     area=np.ascontiguousarray(mine.area), normal=np.ascontiguousarray(mine.normal),
-                     mass=np.ascontiguousarray(mass[nodes]))
+    found = NodePairs(names=mine.names, interface=np.ascontiguousarray(mine.interface, dtype=np.int32),
+                      nodes=np.ascontiguousarray(nodes), coords=np.ascontiguousarray(mine.coords),
+                      area=np.ascontiguousarray(mine.area), normal=np.ascontiguousarray(mine.normal),
+                      mass=np.ascontiguousarray(mass[nodes]))
+    return np.flatnonzero(keep), mine.nodes, found
 
 
 # --- the element loop on the ranks -----------------------------------------------------------------
@@ -963,8 +968,8 @@ def plan(part: RankModel, time_step, n_steps: int) -> dict:
             "ranks": part.comm.size, "dofs": part.n_dofs_global,
             "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e in counts],
             "time step": f"{time_step.dt:.6g} s ({time_step.reason})", "steps": n_steps,
-            **({"contact pairs": f"{part.n_pairs} ({part.moved_nodes} side-j nodes stepped on their side-i node's rank, "
-                                 "not dolfinx's owner: pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
+            **({"contact pairs": f"{part.n_pairs} ({part.moved_nodes} pair nodes stepped on their pair's rank, not "
+                                 "dolfinx's owner: pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
             "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
 
 
@@ -1033,7 +1038,24 @@ def _check(scene: Scene) -> dict:
         "time loop estimate": f"{seconds:.0f} s ({seconds / 3600:.2f} h) for {run.n_steps} steps; with the element "
                               "loop yielding or cracking a step costs up to several times this",
         "peak memory per rank (MiB, the set-up and the trial)": [m for *_, m in shares]})
+    imbalance = work_imbalance([c + h for c, h, _, _ in shares], part.n_pairs)
+    if imbalance is not None:
+        shown["balance"] = imbalance
     return shown
+
+
+def work_imbalance(loop_cells: list, n_pairs: int) -> str | None:
+    """`check`'s line when the ranks' element-loop cells (counted and halo) differ by more than 30 %
+    of their mean: dolfinx's parts balance cells, not the element loop's work (nor the pairs', which
+    fall on their side-i nodes' ranks), so the slowest rank sets the step, and the trial above, from
+    rest, does not show a yielding loop's cost."""
+    mean = sum(loop_cells) / max(1, len(loop_cells))
+    if len(loop_cells) < 2 or mean == 0 or max(loop_cells) <= 1.3 * mean:
+        return None
+    return (f"the element-loop cells per rank ({', '.join(map(str, loop_cells))}) reach {max(loop_cells) / mean:.2f}x "
+            "their mean: the distributed model's parts are dolfinx's, balanced by cell count, not by the work of the "
+            f"element loop{' and the pairs' if n_pairs else ''}; the whole model's partition weighs it "
+            "(parallel.model = \"whole\", docs/scaling.md \"Weighted partitions\")")
 
 
 def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:

@@ -5,7 +5,8 @@ each owned by whichever rank dolfinx's topology picks (a shared vertex gets a ra
 the ranks sharing it; a partitioner can put the two sides of an interface on different ranks, since
 the split interface joins no facets). The kernel steps a pair on one rank, with both of its nodes
 owned there (`Stepper.check_partition`). So the distributed model *moves* the stepping of a pair's
-side-j node to the rank that owns its side-i node when dolfinx gave them different owners:
+side-j node to the rank that owns its side-i node when dolfinx gave them different owners (the
+stepping rank numbers it after its owned nodes; the rank that gave it away keeps it as a ghost):
 
 - `Ownership`: the rank that steps each global node: dolfinx's owner, except the moved nodes;
 - `global_pairs`: every pair of every interface (global node numbers, position, lumped area and
@@ -27,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from mpi4py import MPI
-
 
 
 @dataclass

@@ -491,3 +491,14 @@ tensile_strength = 1.0e4
     assert len(lines) == 1 and "contact.interfaces" in lines[0] and "cross nor end on another" in lines[0], \
         result.stderr[-2000:]
     assert "Traceback" not in result.stderr
+
+
+def test_check_names_an_element_loop_the_parts_do_not_balance():
+    """`check`'s balance line (a new-user trial: 168 and 1 436 element-loop cells on 2 ranks, the time
+    loop 1.4x the whole model's): given above 1.3x the mean, not below, not on one rank."""
+    from pyfem.distributed_model import work_imbalance
+
+    line = work_imbalance([412, 1457], 615)
+    assert line is not None and "1.56x" in line and "pairs" in line and 'parallel.model = "whole"' in line
+    assert work_imbalance([100, 120], 0) is None and work_imbalance([500], 0) is None
+    assert work_imbalance([0, 0], 10) is None and "pairs" not in work_imbalance([10, 100], 0)
