@@ -100,54 +100,26 @@ def route_to(comm: MPI.Comm, destination: np.ndarray, *arrays: np.ndarray) -> li
 
 # --- the pairs -----------------------------------------------------------------------------------
 
-@dataclass
-class GlobalPairs:
-    """Every contact pair of the model, on every rank: `nodes` (n, 2) the global nodes of side i and
-    side j, as pyfem.interfaces.NodePairs holds them for the whole model."""
-
-    names: list
-    interface: np.ndarray
-    nodes: np.ndarray
-    coords: np.ndarray
-    area: np.ndarray
-    normal: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.area)
-
-    def select(self, keep: np.ndarray) -> "GlobalPairs":
-        return GlobalPairs(self.names, self.interface[keep], self.nodes[keep], self.coords[keep], self.area[keep],
-                           self.normal[keep])
-
-
 def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np.ndarray, global_of_local: np.ndarray,
-                 quadrature: dict) -> GlobalPairs:
-    """Every pair of the split interfaces (`pyfem.interfaces.interface_pairs` on the ranks): each
-    rank lumps the side-i area and normal and the side-j area over its cells (summed into their
-    owners), matches its owned side-i nodes with every rank's owned side-j nodes by position, and
-    every rank gets every pair, sorted by interface and position."""
-    import ufl
+                 quadrature: dict):
+    """pyfem.interfaces.NodePairs of every pair of the split interfaces, `nodes` global, `mass` None,
+    as `pyfem.interfaces.interface_pairs` finds them on one rank: each rank lumps the side-i area and
+    normal and the side-j area over its cells (summed into their owners), matches its owned side-i
+    nodes with every rank's owned side-j nodes by position, and every rank gets every pair, sorted by
+    interface and position."""
     from scipy.spatial import cKDTree
 
-    from pyfem.assembly import assemble_nodal_vector, facet_measure
-    from pyfem.interfaces import interfaces_meet
+    from pyfem.interfaces import NodePairs, interfaces_meet, lumped_sides
 
-    mesh = V.mesh
     n_owned = V.dofmap.index_map.size_local
-    test = ufl.TestFunction(V)
     lo = np.min(comm.allgather(coords.min(axis=0)), axis=0)
     hi = np.max(comm.allgather(coords.max(axis=0)), axis=0)
     span = float(np.max(hi - lo))
     names = list(interface_tags)
     mine = []
     for index, name in enumerate(names):
-        lumped = []
-        for tag in interface_tags[name]:
-            ds = facet_measure(mesh, facet_tags.indices[facet_tags.values == tag], quadrature)
-            area = assemble_nodal_vector(ufl.inner(ufl.as_vector((1.0, 0.0, 0.0)), test) * ds, V)[:, 0]
-            normal = assemble_nodal_vector(ufl.inner(ufl.FacetNormal(mesh), test) * ds, V)
-            lumped.append((np.flatnonzero(area[:n_owned] != 0.0), area, normal))
-        (nodes_i, area_i, normal_i), (nodes_j, _, _) = lumped
+        (nodes_i, area_i, normal_i), (nodes_j, _, _) = lumped_sides(V, facet_tags, interface_tags[name], quadrature,
+                                                                     n_owned)
         side_j = comm.allgather((global_of_local[nodes_j], coords[nodes_j]))
         global_j = np.concatenate([piece[0] for piece in side_j]).astype(np.int64)
         coords_j = np.concatenate([piece[1] for piece in side_j]).reshape(-1, 3)
@@ -178,10 +150,11 @@ def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np
         raise ValueError("interface pairs: a lumped pair area is <= 0")
     key = np.round(where, 9) + 0.0  # by position to 1e-9 m, as pyfem.interfaces.interface_pairs sorts
     order = np.lexsort((key[:, 2], key[:, 1], key[:, 0], interface))
-    return GlobalPairs(names, interface[order], nodes[order], where[order], area[order], normal[order])
+    return NodePairs(names=names, interface=interface[order], nodes=nodes[order], coords=where[order],
+                     area=area[order], normal=normal[order])
 
 
-def pair_moves(pairs: GlobalPairs, ownership: Ownership) -> tuple[np.ndarray, np.ndarray]:
+def pair_moves(pairs, ownership: Ownership) -> tuple[np.ndarray, np.ndarray]:
     """(moved nodes, their new rank) of the pairs whose nodes dolfinx gave to different ranks. A
     pair is stepped on the rank dolfinx gave its side-i node. Pairs that share a node (interfaces
     that meet in an L along the model's boundary) form a group, stepped whole on one rank as the

@@ -36,7 +36,8 @@ class NodePairs:
         coords: (n, 3) position of the pair (m).
         area: (n,) lumped area int phi_i ds over the side-i facets (m^2).
         normal: (n, 3) unit normal from side i towards side j (area-weighted).
-        mass: (n, 2) lumped masses of node i and node j (kg).
+        mass: (n, 2) lumped masses of node i and node j (kg); None in the distributed model's list
+            of every pair (pyfem.distributed_pairs.global_pairs: `nodes` are global there).
     """
 
     names: list[str]
@@ -45,10 +46,16 @@ class NodePairs:
     coords: np.ndarray
     area: np.ndarray
     normal: np.ndarray
-    mass: np.ndarray
+    mass: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.area)
+
+    def select(self, keep: np.ndarray) -> "NodePairs":
+        """The pairs `keep` (a mask or indices) selects, in their order."""
+        return dataclasses.replace(self, interface=self.interface[keep], nodes=self.nodes[keep],
+                                   coords=self.coords[keep], area=self.area[keep], normal=self.normal[keep],
+                                   mass=None if self.mass is None else self.mass[keep])
 
     def of_interface(self, name: str) -> np.ndarray:
         """Indices of the pairs of interface `name`."""
@@ -84,6 +91,22 @@ def interfaces_meet(name: str, found: str):
                       f"scene key 'contact.interfaces': interface {name!r}: {found}; allowed: {allowed}")
 
 
+def lumped_sides(V, facet_tags, tags: tuple[int, int], quadrature: dict, n_nodes: int) -> list[tuple]:
+    """Per side (i, j) of one interface (its facet tags `tags`): (the nodes among the first
+    `n_nodes` with a nonzero lumped area on that side, the lumped areas int phi ds of every local
+    node, the lumped int phi n ds) of the vector space V (owned + ghost values: summed into their
+    owners, forwarded to the ghosts)."""
+    mesh = V.mesh
+    test = ufl.TestFunction(V)
+    lumped = []
+    for tag in tags:
+        ds = facet_measure(mesh, facet_tags.indices[facet_tags.values == tag], quadrature)
+        area = assemble_nodal_vector(ufl.inner(ufl.as_vector((1.0, 0.0, 0.0)), test) * ds, V)[:, 0]
+        normal = assemble_nodal_vector(ufl.inner(ufl.FacetNormal(mesh), test) * ds, V)
+        lumped.append((np.flatnonzero(area[:n_nodes] != 0.0), area, normal))
+    return lumped
+
+
 def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int, int]], mass: np.ndarray,
                     node_coords: np.ndarray, quadrature: dict) -> NodePairs:
     """Node pairs of the split interfaces with their lumped areas, normals and masses.
@@ -104,19 +127,12 @@ def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int
         NodePairs over all interfaces, sorted by interface (in the order of `interface_tags`), then
         by position (x, then y, then z, to 1e-9 m).
     """
-    mesh = V.mesh
-    test = ufl.TestFunction(V)
     names = list(interface_tags)
     chunks = {key: [] for key in ("interface", "nodes", "coords", "area", "normal")}
     span = float(np.max(np.ptp(node_coords, axis=0))) if len(node_coords) else 1.0
     for index, name in enumerate(names):
-        lumped = []
-        for tag in interface_tags[name]:
-            ds = facet_measure(mesh, facet_tags.indices[facet_tags.values == tag], quadrature)
-            area = assemble_nodal_vector(ufl.inner(ufl.as_vector((1.0, 0.0, 0.0)), test) * ds, V)[:, 0]
-            normal = assemble_nodal_vector(ufl.inner(ufl.FacetNormal(mesh), test) * ds, V)
-            lumped.append((np.flatnonzero(area != 0.0), area, normal))
-        (nodes_i, area_i, normal_i), (nodes_j, _, _) = lumped
+        (nodes_i, area_i, normal_i), (nodes_j, _, _) = lumped_sides(V, facet_tags, interface_tags[name], quadrature,
+                                                                     len(node_coords))
         if len(nodes_i) != len(nodes_j):
             raise interfaces_meet(name, f"{len(nodes_i)} nodes on side i, {len(nodes_j)} on side j")
         distance, match = cKDTree(node_coords[nodes_j]).query(node_coords[nodes_i])
