@@ -80,23 +80,14 @@ def check_supported(scene: Scene) -> None:
 
 # --- numbering: owned nodes, the index map's ghosts, the extra ghosts ---------------------------
 
-def owners(comm: MPI.Comm, index_map, nodes: np.ndarray) -> np.ndarray:
-    """The rank owning each global node, from the ranks' owned ranges of `index_map`."""
-    starts = np.array([r[0] for r in comm.allgather(index_map.local_range)] + [index_map.size_global])
-    return np.searchsorted(starts, nodes, side="right") - 1
-
-
 def fetch_owned(comm: MPI.Comm, index_map, owned: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """(len(wanted), k) the owners' rows of `owned` ((owned nodes, k) on every rank) for the global
-    nodes `wanted` (the extra ghosts' values, the ghosts' diagonal blocks)."""
-    first = index_map.local_range[0]
-    owner = owners(comm, index_map, wanted)
-    asked = comm.alltoall([wanted[owner == q] for q in range(comm.size)])
-    replies = comm.alltoall([owned[np.asarray(nodes, dtype=np.int64) - first] for nodes in asked])
-    out = np.zeros((len(wanted), owned.shape[1]))
-    for q in range(comm.size):
-        out[owner == q] = replies[q]
-    return out
+    """(len(wanted), k) dolfinx's owners' rows of `owned` ((owned nodes, k) on every rank) for the
+    global nodes `wanted` (the extra ghosts' coordinates and masses): pyfem.distributed_pairs.fetch."""
+    from pyfem.distributed_pairs import Ownership, fetch
+
+    wanted = np.asarray(wanted, dtype=np.int64)
+    return fetch(comm, Ownership.of(comm, index_map).dolfinx_owner(wanted), np.arange(*index_map.local_range),
+                 owned, wanted)
 
 
 def owned_rows_global(matrix, n_owned: int, release: bool = False) -> tuple:
@@ -357,11 +348,9 @@ class RankModel:
 
 def _owned_face(face, n_owned: int):
     """The face's owned nodes (a ghost face node's values are its owner's)."""
-    keep = face.nodes < n_owned
-    traction_area = None if face.traction_area is None else face.traction_area[keep]
-    return replace(face, nodes=face.nodes[keep], area=face.area[keep], normal=face.normal[keep],
-                   rho_cp=face.rho_cp[keep], rho_cs=face.rho_cs[keep], shear_modulus=face.shear_modulus[keep],
-                   plane_distance=face.plane_distance[keep], traction_area=traction_area)
+    from pyfem.distributed_pairs import face_rows
+
+    return face_rows(face, face.nodes < n_owned)
 
 
 def _whole_faces(comm: MPI.Comm, faces: list) -> list[dict]:

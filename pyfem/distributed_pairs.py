@@ -109,7 +109,7 @@ def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np
     interface and position."""
     from scipy.spatial import cKDTree
 
-    from pyfem.interfaces import NodePairs, interfaces_meet, lumped_sides
+    from pyfem.interfaces import NodePairs, interfaces_meet, lumped_sides, pair_order
 
     n_owned = V.dofmap.index_map.size_local
     lo = np.min(comm.allgather(coords.min(axis=0)), axis=0)
@@ -148,8 +148,7 @@ def global_pairs(comm: MPI.Comm, V, facet_tags, interface_tags: dict, coords: np
         raise interfaces_meet(names[int(interface[twice])], "two side-i nodes matched one side-j node")
     if np.any(area <= 0.0):
         raise ValueError("interface pairs: a lumped pair area is <= 0")
-    key = np.round(where, 9) + 0.0  # by position to 1e-9 m, as pyfem.interfaces.interface_pairs sorts
-    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0], interface))
+    order = pair_order(where, interface)  # as pyfem.interfaces.interface_pairs sorts
     return NodePairs(names=names, interface=interface[order], nodes=nodes[order], coords=where[order],
                      area=area[order], normal=normal[order])
 
@@ -160,14 +159,11 @@ def pair_moves(pairs, ownership: Ownership) -> tuple[np.ndarray, np.ndarray]:
     that meet in an L along the model's boundary) form a group, stepped whole on one rank as the
     whole model's partition keeps it (pyfem.distributed.pair_groups): the rank of the side-i node of
     the group's first pair (in `pairs`' order)."""
-    import scipy.sparse as sp
+    from pyfem.distributed import pair_groups
 
-    nodes, inverse = np.unique(pairs.nodes.ravel(), return_inverse=True)
-    edges = inverse.reshape(-1, 2)
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(len(nodes), len(nodes)))
-    n_groups, group = sp.csgraph.connected_components(graph, directed=False)
-    pair_group = group[edges[:, 0]]
-    first = np.full(n_groups, len(pairs), dtype=np.int64)
+    nodes, group = pair_groups(pairs.nodes)
+    pair_group = group[np.searchsorted(nodes, pairs.nodes[:, 0])]
+    first = np.full(group.max(initial=-1) + 1, len(pairs), dtype=np.int64)
     np.minimum.at(first, pair_group, np.arange(len(pairs)))
     rank = ownership.dolfinx_owner(pairs.nodes[first, 0])[group]
     apart = ownership.dolfinx_owner(nodes) != rank
@@ -218,6 +214,18 @@ def move_rows(comm: MPI.Comm, ownership: Ownership, first: int, rows: tuple) -> 
     return new_nodes, (new_indptr, new_columns, new_blocks)
 
 
+def face_node_fields(face) -> list[str]:
+    """The per-node arrays of a truncation face (pyfem.operators.BoundaryFace) besides `nodes`."""
+    return [f.name for f in dataclasses.fields(face) if isinstance(getattr(face, f.name), np.ndarray)
+            and f.name != "nodes"]
+
+
+def face_rows(face, keep: np.ndarray):
+    """The face with the nodes `keep` (a mask or indices) selects, every per-node array alike."""
+    return dataclasses.replace(face, nodes=face.nodes[keep], **{name: getattr(face, name)[keep]
+                                                               for name in face_node_fields(face)})
+
+
 def route_faces(comm: MPI.Comm, ownership: Ownership, faces: list, global_of_local: np.ndarray,
                 local_nodes: np.ndarray) -> list:
     """The truncation faces of the nodes this rank steps: `faces` hold dolfinx's owned nodes
@@ -225,8 +233,7 @@ def route_faces(comm: MPI.Comm, ownership: Ownership, faces: list, global_of_loc
     the faces with `nodes` in the kernel's local numbering (`local_nodes`: its global nodes)."""
     out = []
     for face in faces:
-        per_node = [f.name for f in dataclasses.fields(face)
-                    if isinstance(getattr(face, f.name), np.ndarray) and f.name != "nodes"]
+        per_node = face_node_fields(face)
         nodes = global_of_local[face.nodes].astype(np.int64)
         if len(ownership.moved):
             received = route_to(comm, ownership.owner(nodes), nodes, *[getattr(face, name) for name in per_node])

@@ -79,6 +79,13 @@ def nearest_pair(coords: np.ndarray, interface: np.ndarray, point: typing.Sequen
     return index, (float(distance[index]), int(interface[index]), *map(float, where[index]))
 
 
+def pair_order(coords: np.ndarray, interface: np.ndarray) -> np.ndarray:
+    """The pairs' order by interface, then position (x, then y, then z, rounded to 1e-9 m: one
+    position one key whatever the round-off of the mesh's coordinates, -0.0 as 0.0)."""
+    where = np.round(coords, 9) + 0.0
+    return np.lexsort((where[:, 2], where[:, 1], where[:, 0], interface))
+
+
 def interfaces_meet(name: str, found: str):
     """The SceneError of an interface whose two sides do not pair up node by node: what
     pyfem.interface_split cannot split (an interface that crosses another or ends on it inside the
@@ -148,8 +155,7 @@ def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int
     arrays = {key: np.concatenate(value) for key, value in chunks.items()}
     # By interface, then position: the order does not depend on the mesh's numbering (the
     # distributed model's pairs, pyfem/distributed_pairs.py, are in this order too).
-    where = np.round(arrays["coords"], 9) + 0.0  # (one position one key, -0.0 as 0.0)
-    order = np.lexsort((where[:, 2], where[:, 1], where[:, 0], arrays["interface"]))
+    order = pair_order(arrays["coords"], arrays["interface"])
     arrays = {key: value[order] for key, value in arrays.items()}
     if np.any(arrays["area"] <= 0.0):
         raise ValueError("interface pairs: a lumped pair area is <= 0")
