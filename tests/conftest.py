@@ -15,6 +15,56 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
+def rank_pids(mpirun_pid: int) -> dict:
+    """{rank: pid} of the ranks mpirun started (its children, by OMPI_COMM_WORLD_RANK)."""
+    ranks = {}
+    for task in Path(f"/proc/{mpirun_pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            try:
+                environ = Path(f"/proc/{child}/environ").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            for entry in environ:
+                if entry.startswith(b"OMPI_COMM_WORLD_RANK="):
+                    ranks[int(entry.split(b"=")[1])] = int(child)
+    return ranks
+
+
+def kill_9(process) -> None:
+    """kill -9 of a run started with start_new_session=True: a serial run, or mpirun and every rank.
+    Open MPI puts each rank in a process group of its own, so killing mpirun's group alone leaves the
+    ranks stepping (and writing checkpoints) until they notice mpirun is gone; the ranks are killed
+    first, then mpirun's group, and this returns once all of them are gone."""
+    import signal
+    import time
+
+    try:
+        ranks = list(rank_pids(process.pid).values())
+    except OSError:  # mpirun already gone, or a serial run
+        ranks = []
+    for pid in ranks:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    process.wait(timeout=60)
+    deadline = time.monotonic() + 60
+    while any(Path(f"/proc/{pid}").exists() and "Z" not in _state(pid) for pid in ranks):
+        assert time.monotonic() < deadline, "a rank outlived kill -9 by 60 s"
+        time.sleep(0.02)
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "gone"
+
+
 def rel_error(a, b):
     """Relative L2 error of `a` against the reference `b` (1 if b is zero and a is not)."""
     a = np.asarray(a, dtype=float)

@@ -36,6 +36,7 @@ import h5py
 import numpy as np
 import pytest
 
+from conftest import kill_9
 from pyfem.compare import largest_differences
 from test_mpi import CHECKPOINTED_RUN, kill_after_first_checkpoint, sigterm_to_rank_one
 
@@ -387,8 +388,9 @@ def test_the_whole_model_refuses_a_distributed_checkpoint_in_one_line(tmp_path):
 
 def kill_after_a_checkpoint_past(ranks: int, scene: str, out: Path, t: float, extra: tuple) -> float:
     """Starts a distributed `pyfem run` on `ranks` ranks and kills it (kill -9: mpirun and every
-    rank) once its checkpoint has passed `t` s of model time; returns the checkpoint's time."""
-    import signal
+    rank) once its checkpoint has passed `t` s of model time; returns the time of the checkpoint
+    the kill left (read again after the kill: another may have been written between the read that
+    saw `t` passed and the kill)."""
     import time
 
     command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), PYTHON, "-m", "pyfem", "run",
@@ -405,9 +407,11 @@ def kill_after_a_checkpoint_past(ranks: int, scene: str, out: Path, t: float, ex
                 reached = json.loads(data["meta"].tobytes())["t"]
         except (OSError, KeyError, ValueError):  # not there yet
             pass
-    os.killpg(process.pid, signal.SIGKILL)
-    process.wait(timeout=60)
-    return reached
+    kill_9(process)
+    with np.load(out / "checkpoint.npz") as data:
+        left = json.loads(data["meta"].tobytes())["t"]
+    assert left >= reached
+    return left
 
 
 def test_contact_killed_on_two_ranks_resumes_on_three(tmp_path):

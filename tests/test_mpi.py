@@ -37,6 +37,7 @@ import h5py
 import numpy as np
 import pytest
 
+from conftest import kill_9, rank_pids
 from pyfem import checkpoint
 from pyfem.compare import histories, largest_difference, largest_differences, relative_difference, scales
 
@@ -287,8 +288,7 @@ def kill_after_first_checkpoint(ranks: int, scene: str, out: Path, window: float
         assert time.monotonic() < deadline, "no checkpoint after 300 s"
         time.sleep(0.05)
     time.sleep(random.uniform(0.0, window))
-    os.killpg(process.pid, signal.SIGKILL)
-    process.wait(timeout=60)
+    kill_9(process)
     assert json.loads((out / "run.json").read_text())["status"] == "running"  # as a killed run leaves it
 
 
@@ -329,21 +329,6 @@ def test_a_serial_checkpoint_resumes_on_three_ranks(tmp_path):
     worst = largest_difference(out, reference)
     print(f"largest difference from the uninterrupted serial run {worst:.2e}")
     assert worst < TOLERANCE
-
-
-def rank_pids(mpirun_pid: int) -> dict:
-    """{rank: pid} of the ranks mpirun started (its children, by OMPI_COMM_WORLD_RANK)."""
-    ranks = {}
-    for task in Path(f"/proc/{mpirun_pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            try:
-                environ = Path(f"/proc/{child}/environ").read_bytes().split(b"\0")
-            except OSError:
-                continue
-            for entry in environ:
-                if entry.startswith(b"OMPI_COMM_WORLD_RANK="):
-                    ranks[int(entry.split(b"=")[1])] = int(child)
-    return ranks
 
 
 def sigterm_to_rank_one(scene: str, out: Path, settings: tuple, rows: int) -> tuple:
