@@ -36,8 +36,11 @@ its side-j node, when owned elsewhere, is moved there with its stiffness rows an
 the kernel's numbering (owned nodes first) differs from the function space's, and what dolfinx
 numbers (fields, monitors, element arrays) is mapped through `RankModel.kernel_of_dolfinx`.
 
-Not built yet (each refused with the key and what is allowed): the static stage, local time
-stepping, one point per cell, quadratic tetrahedra.
+The static stage (pyfem/distributed_stage.py): its dynamic relaxation on the ranks' parts, handed over
+to the run as the whole model's is.
+
+Not built yet (each refused with the key and what is allowed): a linear static stage's solves, local
+time stepping, one point per cell, quadratic tetrahedra.
 """
 from __future__ import annotations
 
@@ -66,9 +69,10 @@ FLUSH_SECONDS = 2.0
 def check_supported(scene: Scene) -> None:
     """Raises SceneError naming the first part of the scene that the distributed model does not
     build yet (every rank says the same: the scene is the same on every rank)."""
+    from pyfem import distributed_stage
+
     allowed = "\"whole\" here: the distributed model does not build {} yet (docs/scaling.md)"
-    if "static" in scene:
-        raise SceneError(KEY, "distributed", allowed.format("a [static] stage"))
+    distributed_stage.check_supported(scene)
     for name, table in scene["materials"].items():
         for law in ("plasticity", "damage"):
             if (table.get(law) or {}).get("integration") == "reduced":
@@ -957,6 +961,9 @@ def plan(part: RankModel, time_step, n_steps: int) -> dict:
             "ranks": part.comm.size, "dofs": part.n_dofs_global,
             "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e in counts],
             "time step": f"{time_step.dt:.6g} s ({time_step.reason})", "steps": n_steps,
+            **({"static stage": f"dynamic relaxation on the ranks' parts before the motion: 2 stages of at most "
+                                f"{int(part.scene['static']['max_steps'])} relaxation steps each and a frequency "
+                                "probe (pyfem/distributed_stage.py)"} if "static" in part.scene else {}),
             **({"contact pairs": f"{part.n_pairs} ({part.moved_nodes} pair nodes stepped on their pair's rank, not "
                                  "dolfinx's owner: pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
             "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
@@ -1002,6 +1009,11 @@ def _check(scene: Scene) -> dict:
     comm = MPI.COMM_WORLD
     run = DistributedRun(scene, Path("."), comm)
     part, ts, loop = run.part, run.time_step, run.loop
+    if "static" in scene:  # the stage's keys (its faces, its regions), as the run reads them
+        from pyfem.static import _install_cells, stage_boundary
+
+        stage_boundary(scene, part.model)
+        _install_cells(scene, part.model)
     kernel_threads()
     stepper, exchange = run.stepper()
     n = 3 * part.n_local
@@ -1183,6 +1195,7 @@ class DistributedRun:
             self.pair_monitors = locate_pair_monitors(part)
             self.pair_names = [m["name"] for m in scene.get("pair_monitor", [])]
         self.pair_rows_kept, self.state_counts = [], []
+        self.stage = None  # pyfem.distributed_stage.RankStage once the [static] stage ran (go)
         self.contact = None  # the kernel's ContactPairs of this rank's pairs (set with the stepper)
         self.names = [m["name"] for m in scene.get("monitor", [])]
         self.points = np.array([m["point"] for m in scene.get("monitor", [])], dtype=float).reshape(-1, 3)
@@ -1217,7 +1230,9 @@ class DistributedRun:
     def stepper(self) -> tuple:
         """(the kernel's Stepper of this rank's part, its exchange), with the ContactPairs of the
         rank's pairs (`self.contact`; a rank without pairs has none)."""
-        if self.contact_arrays is not None and len(self.part.pairs):
+        if self.stage is not None:  # the stage's pairs go on (rebased; pyfem/distributed_stage.py hand_over)
+            self.contact = self.stage.contact
+        elif self.contact_arrays is not None and len(self.part.pairs):
             from pyfem.solver import make_contact_pairs
 
             self.contact = make_contact_pairs(self.contact_arrays)
@@ -1238,6 +1253,8 @@ class DistributedRun:
                 saved._refuse(f"the model's {key} differs from the checkpoint's (another mesh or build?)")
 
     def _summary(self) -> dict:
+        from pyfem import distributed_stage
+
         part, model, ts = self.part, self.part.model, self.time_step
         return {"title": self.scene["title"], "scene": self.scene.to_json(), "effects": list(self.scene.effects),
                 "model": "distributed", "ranks": self.comm.size,
@@ -1247,6 +1264,7 @@ class DistributedRun:
                 "regions": dict(sorted(model.regions.items(), key=lambda item: item[1])),
                 "boundary_faces": part.faces_report, "traction_free_surfaces": dict(model.free_surfaces),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(getattr(self.scene, "warnings", [])),
+                **({"static": distributed_stage.brief(self.stage.report)} if self.stage is not None else {}),
                 **({"local_stepping": "\"auto\": off: the distributed model steps globally (local time stepping "
                                       "on it is not built yet, docs/scaling.md)"}
                    if self.scene["time"].get("local_stepping") == "auto" else {}),
@@ -1287,6 +1305,9 @@ class DistributedRun:
         self.summary = summary
         if self.root:
             _write_json(out / "run.json", summary)
+            if self.stage is not None:  # (a resumed run's stage, solved again, writes it again)
+                (out / "static").mkdir(exist_ok=True)
+                _write_json(out / "static" / "static.json", self.stage.report)
             at = (lambda name: None) if sizes is None else sizes.get
             self.histories["energy"] = CsvHistory(out / "energy.csv", self.energy_columns, ENERGY_FORMAT,
                                                   at("energy"))
@@ -1332,6 +1353,10 @@ class DistributedRun:
                 self.fields_files = [self.fields_file]
             self.comm.Barrier()
             self.fields = _Fields(part, out / self.fields_file, self.loop, append=append)
+            if self.stage is not None and getattr(self.fields, "strain", None) is not None:  # the stage's stress in the matrix cells
+                from pyfem.distributed_stage import cell_static_stress
+
+                self.fields.strain.static = cell_static_stress(self.stage, part, self.fields.strain)
         return u, v, a
 
     # -- the samples ------------------------------------------------------------------------------------
@@ -1585,6 +1610,13 @@ class DistributedRun:
                                          f"{self.scene['time']['duration']:g} s", **shown}
                 on_plan(shown)
         kernel_threads()
+        if "static" in self.scene:  # (a resumed run solves it again; the checkpoint's state is loaded over it)
+            from pyfem import distributed_stage
+
+            self.stage = distributed_stage.solve(part, self.loop, self.contact_arrays)
+            distributed_stage.hand_over(self.stage, part, self.loop, self.monitors, self.contact_arrays)
+            self.stage.report["monitors"] = distributed_stage.monitor_report(self.stage, self.monitors, self.names,
+                                                                             comm)
         stepper, exchange = self.stepper()
         n_outputs = self.n_steps // ts.steps_per_output
         clock = checkpoints.CheckpointClock(self.scene["output"]["checkpoint_interval"],

@@ -155,7 +155,9 @@ def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
     """
     space = space or _default_space(stepper)
     u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor, space=space)
-    omega = space.agreed(_rayleigh(u, load - result.out_of_balance, np.repeat(mass, 3)))
+    rows = space.owned_rows(len(load))  # relax's result may be whole (a DistributedStage's) or the owned dofs
+    internal = np.asarray(load)[rows] - result.out_of_balance[rows]
+    omega = space.agreed(_rayleigh(u[rows], internal, np.repeat(mass, 3)[rows], space))
     return (omega if omega > 0.0 else 2.0 * SAFETY / PSEUDO_STEP), result.steps
 
 

@@ -240,7 +240,7 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
 
 
 @pytest.mark.parametrize("scene, extra, key", [
-    ("workflows/scenes/case1_vertical_coarse.toml", (), "[static]"),
+    ("workflows/scenes/case1_vertical_coarse.toml", ("--set", 'static.solver="direct"'), "static.solver"),
     ("tests/scenes/mpi_weak_layer.toml", ("--set", 'materials.weak.plasticity.integration="reduced"'),
      "integration"),
     ("workflows/scenes/box_vertical_sv.toml", ("--set", "time.local_stepping=true"), "local_stepping"),

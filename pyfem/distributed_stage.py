@@ -1,0 +1,553 @@
+"""The static stage on the distributed model (`[parallel] model = "distributed"` with [static];
+docs/static.md, docs/scaling.md "The static stage on the distributed model").
+
+The stage is the whole model's dynamic relaxation (pyfem/static.py `solve_relaxation_stage`,
+pyfem/relaxation.py `relax`), built from each rank's part of dolfinx's mesh as the dynamic run is
+(pyfem/distributed_model.py): no rank holds the whole model at any time.
+
+Each rank:
+1. assembles the stage's loads with the whole model's dolfinx forms (`static.stage_loads`: f_exc
+   = traction of the in-situ stress on the truncation faces + body force - B^T sigma0 over the
+   rock's cells; the installed regions' weight with gravity) on its cells, summed onto dolfinx's
+   owners and taken into the kernel's numbering (a moved pair node's from its dolfinx owner);
+2. assembles three elastic matrices on the same rows as the dynamic run's (no boundary springs):
+   every cell (its Gershgorin row sums give the relaxation's scaled mass, as `scaled_mass`), every
+   cell but the installed ones (the frequency probe's), and the stages' matrices: all but the
+   element-loop cells (stage 2) and, with an install, all but the element-loop and the installed
+   cells (stage 1);
+3. holds the stage's faces (`static.boundary`: rollers by default) on the nodes it steps, keeps
+   its pairs with their static forces F0 = A sigma0 n and no deterioration, and steps its counted
+   and halo element-loop cells, the rock's from the in-situ stress, the installed regions' from
+   zero in stage 2;
+4. relaxes with `relax`'s arithmetic on its owned dofs (`RankSpace`: norms and Rayleigh quotients
+   summed over the ranks, rank 0's ratio and damping for every rank), so the ranks take the same
+   steps and stop together.
+
+The end state is handed to the dynamic run as the whole model's `hand_over` hands it: the element-
+loop components and the pairs go on (rebased: the stage's stress is their initial stress, the
+pairs' total force their F0, with the deterioration now on); the monitors in matrix cells and the
+fields' matrix cells get sigma0 + C : eps(u1 + u2) in the rock, C : eps(u2) in the installed
+regions. A relaxed stage's out-of-balance is its error and is not applied (as in the whole model).
+
+Not built here (each refused with the key and what is allowed): a linear stage's PETSc solves
+(static.solver "direct" or "iterative", or "auto" without a nonlinear material). A resumed run
+solves the stage again (the same arithmetic on the same rank count; on another, the same to
+round-off) and then loads the checkpoint's state over it.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from mpi4py import MPI
+
+from pyfem.scene import SceneError
+
+KEY = "static.solver"
+
+
+def check_supported(scene) -> None:
+    """Raises SceneError when the scene's stage is one the distributed model does not solve."""
+    from pyfem.static import uses_relaxation
+
+    if "static" in scene and not uses_relaxation(scene):
+        solver = scene["static"]["solver"]
+        raise SceneError(KEY, solver, "\"relaxation\" with parallel.model = \"distributed\" (its linear stage's "
+                         "PETSc solves are not built on the ranks yet; \"auto\" chooses relaxation only with a "
+                         "[plasticity] or [damage] table), or parallel.model = \"whole\" (docs/scaling.md)")
+
+
+# --- the rank's arrays in the kernel's numbering ----------------------------------------------------
+
+def kernel_nodal(part, values) -> np.ndarray:
+    """(n_local, k) per-node values of the function space's local nodes (owned and ghosts, dolfinx's
+    numbering, ghosts valid) in the kernel's numbering: the nodes dolfinx does not hold on this rank
+    (extra ghosts, pair nodes moved here) from dolfinx's owners. A collective."""
+    from pyfem.distributed_model import fetch_owned
+
+    values = np.asarray(values, dtype=np.float64).reshape(len(part.model.node_coords), -1)
+    index_map = part.model.V.dofmap.index_map
+    out = np.zeros((part.n_local, values.shape[1]))
+    held = np.arange(len(values)) if part.kernel_of_dolfinx is None else part.kernel_of_dolfinx
+    out[held] = values
+    missing = np.ones(part.n_local, dtype=bool)
+    missing[held] = False
+    out[missing] = fetch_owned(part.comm, index_map, values[:index_map.size_local], part.local_nodes[missing])
+    return out
+
+
+def owned_force(part, nodal: np.ndarray) -> np.ndarray:
+    """(3 n_local,) a nodal force in the kernel's numbering on the nodes this rank steps, zero on its
+    ghosts (pyfem.static.local_force's convention: each force acts once, where its node is stepped)."""
+    force = np.array(nodal, dtype=np.float64).reshape(part.n_local, 3)
+    force[part.n_owned:] = 0.0
+    return force.reshape(-1)
+
+
+def stage_matrix(part, removed_cells: np.ndarray) -> tuple:
+    """The kernel's (indptr, indices, blocks) of the elastic stiffness of every cell but the local
+    `removed_cells`, on the dynamic run's rows and numbering (no boundary springs; all-zero blocks
+    dropped, as pyfem.elements.linear_stiffness drops them)."""
+    from pyfem.assembly import elastic_stiffness_matrix
+    from pyfem.distributed_model import (_without_cells, drop_zero_blocks, local_stiffness, localize,
+                                         owned_rows_global)
+    from pyfem.distributed_pairs import move_rows
+
+    model = part.model
+    V, materials = model.V, model._materials
+    quadrature = {"quadrature_degree": 2 * model.order}
+    first, last = V.dofmap.index_map.local_range
+    if len(removed_cells):
+        matrix = elastic_stiffness_matrix(V, *_without_cells(materials, removed_cells), quadrature)
+    else:
+        matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
+    _, global_rows = move_rows(part.comm, part.ownership, first, owned_rows_global(matrix, last - first,
+                                                                                    release=True))
+    rows = localize(global_rows, part.local_nodes)
+    return drop_zero_blocks(local_stiffness(part.comm, part.ownership, rows, part.n_local, part.local_nodes))
+
+
+def row_sums(part, matrix: tuple) -> np.ndarray:
+    """(n_owned,) the largest of each owned node's three scalar rows' sums of |K_rc| (Gershgorin)."""
+    indptr, _, blocks = matrix
+    per_block = np.abs(blocks[:indptr[part.n_owned]]).sum(axis=2)  # (blocks, 3): each scalar row's share
+    row = np.repeat(np.arange(part.n_owned), np.diff(indptr[:part.n_owned + 1]))
+    sums = np.zeros((part.n_owned, 3))
+    np.add.at(sums, row, per_block)
+    return sums.max(axis=1)
+
+
+def scaled_mass(part, matrix: tuple, frequency_factor: float) -> np.ndarray:
+    """(n_local,) pyfem.relaxation.scaled_mass of the ranks' owned rows, the ghosts' from the ranks
+    stepping them (the ghost exchange)."""
+    from pyfem.relaxation import PSEUDO_STEP, SAFETY
+
+    mass = np.zeros(part.n_local)
+    mass[:part.n_owned] = 0.25 * PSEUDO_STEP ** 2 * (frequency_factor / SAFETY) ** 2 * row_sums(part, matrix)
+    positive = mass[:part.n_owned] > 0.0
+    largest = part.comm.allreduce(float(mass[:part.n_owned][positive].max(initial=0.0)), op=MPI.MAX)
+    mass[:part.n_owned][~positive] = largest if largest > 0.0 else 1.0
+    column = mass[:, None].copy()
+    part.plan.update(part.comm, column)
+    return np.ascontiguousarray(column[:, 0])
+
+
+# --- relax's stepper and arithmetic on a rank ---------------------------------------------------
+
+class RankSpace:
+    """One stage's kernel Stepper of this rank's part behind the Stepper calls `relax` makes, and
+    relax's `space` (pyfem.relaxation.WholeModel's calls): relax's arrays are the owned dofs, the
+    kernel's (owned and ghost) are kept here; sums over the ranks, rank 0's decisions."""
+
+    def __init__(self, comm: MPI.Comm, kernel, exchange, n_owned: int, n_local: int) -> None:
+        self.comm, self.kernel, self.exchange = comm, kernel, exchange
+        self.n_owned, self.n_local = n_owned, n_local
+        self.local = tuple(np.zeros(3 * n_local) for _ in range(3))
+
+    def owned_rows(self, n_dofs: int) -> slice:
+        return slice(0, 3 * self.n_owned)
+
+    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
+        return float(self.comm.allreduce(float(x @ y), op=MPI.SUM))
+
+    def norm(self, x: np.ndarray) -> float:
+        return float(np.sqrt(self.dot(x, x)))
+
+    def all_finite(self, *arrays: np.ndarray) -> bool:
+        return bool(self.comm.allreduce(all(bool(np.isfinite(x).all()) for x in arrays), op=MPI.LAND))
+
+    def agreed(self, value):
+        return self.comm.bcast(value, root=0)
+
+    def whole(self, x: np.ndarray) -> np.ndarray:
+        """relax's result: this rank's owned dofs (the distributed model never gathers a whole vector)."""
+        return x
+
+    def set_mass_damping(self, alpha: float) -> None:
+        self.kernel.set_mass_damping(alpha)
+
+    def run(self, u, v, a, n_steps: int, t0: float) -> float:
+        """Steps n_steps from pseudo time t0; u, v, a: (3 n_owned,) relax's, written after the steps."""
+        lu, lv, la = self.local
+        end = self.kernel.run(lu, lv, la, n_steps, t0)
+        n = 3 * self.n_owned
+        u[:], v[:], a[:] = lu[:n], lv[:n], la[:n]
+        return end
+
+    def reactions(self) -> np.ndarray:
+        return self.kernel.reactions()
+
+    @property
+    def u(self) -> np.ndarray:
+        """(3 n_local,) the kernel's displacement, ghosts included (valid after every step)."""
+        return self.local[0]
+
+
+# --- the stage --------------------------------------------------------------------------------------
+
+@dataclass
+class RankStage:
+    """The stage's end on this rank and what run.json's "static" says of it (rank 0's summary).
+
+    Attributes:
+        counted, halo: the element-loop components (the rank's counted and halo cells, in the
+            region order of pyfem.distributed_model.RankRegions), rebased: the dynamic run's.
+        contact: the kernel's ContactPairs of the rank's pairs, rebased (None: none here).
+        u_total, u_support: (3 n_local,) u1 + u2 and u2 in the kernel's numbering (m).
+        installed_regions: the regions cast in stage 2.
+        report: static/static.json's content (every rank; its "monitors" added by the run).
+    """
+
+    counted: list
+    halo: list
+    contact: object
+    u_total: np.ndarray
+    u_support: np.ndarray
+    installed_regions: list
+    report: dict = field(default_factory=dict)
+
+
+def _stage_stepper(part, matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray, counted: list,
+                   halo: list, contact, ramp: float) -> RankSpace:
+    """A relaxation stage's kernel Stepper of this rank's part (pyfem.static._stage_stepper's
+    objects: the stage's matrix, the scaled mass, dt = 1 and no damping yet, the held faces, the
+    ramped load on the nodes it steps, the counted and halo cells, the pairs), partitioned."""
+    from pyfem import _kernels
+    from pyfem.relaxation import PSEUDO_STEP
+    from pyfem.static import hand_over_force_provider
+
+    kernel = _kernels.Stepper(*matrix, mass, PSEUDO_STEP, 0.0, 0.0)
+    if constraints is not None:
+        kernel.set_constraints(np.ascontiguousarray(constraints.nodes, dtype=np.int32),
+                               np.ascontiguousarray(constraints.projection, dtype=np.float64))
+    if np.any(load):
+        kernel.add_seismic_input(hand_over_force_provider(load, ramp))
+    for component in counted:
+        kernel.add_internal_force(component)
+    for component in halo:
+        kernel.add_internal_force(component, count_energy=False)
+    if contact is not None:
+        kernel.add_contact(contact)
+    exchange = part.plan.kernel_exchange(part.comm, part.n_local)
+    kernel.set_partition(part.n_owned, exchange)
+    return RankSpace(part.comm, kernel, exchange, part.n_owned, part.n_local)
+
+
+def _largest_displacement(comm: MPI.Comm, u_owned: np.ndarray, coords: np.ndarray) -> tuple[float, list]:
+    """(the largest nodal displacement over the ranks (m), its node's position)."""
+    magnitude = np.linalg.norm(u_owned.reshape(-1, 3), axis=1)
+    worst = int(np.argmax(magnitude)) if len(magnitude) else -1
+    offer = (float(magnitude[worst]), coords[worst].tolist()) if worst >= 0 else (-1.0, [])
+    return max(comm.allgather(offer), key=lambda item: item[0])
+
+
+def solve(part, loop, contact_arrays: dict | None) -> RankStage:
+    """Runs the two stages of docs/static.md by dynamic relaxation on the ranks (module docstring).
+
+    Args:
+        part: pyfem.distributed_model.RankModel of the scene.
+        loop: the rank's element loop (pyfem.distributed_model.RankRegions) or None.
+        contact_arrays: `pyfem.solver.contact_arguments` of the rank's pairs or None.
+    """
+    from pyfem.elements import plastic_frequency_factor, scene_laws
+    from pyfem.relaxation import PSEUDO_STEP, load_factor, probe_frequency, ramp_length, relax
+    from pyfem.solver import make_contact_pairs
+    from pyfem.static import (_install_cells, _stage_constraints, face_support_resultants, stage_boundary,
+                              stage_loads, stage_tolerance)
+
+    start = time.perf_counter()
+    scene, comm, model = part.scene, part.comm, part.model
+    root = comm.rank == 0
+    settings = scene["static"]
+    tolerance, max_steps = stage_tolerance(scene), int(settings["max_steps"])
+    boundary = stage_boundary(scene, model)
+    installed_regions, installed_cells = _install_cells(scene, model)
+    loads = stage_loads(scene, model, installed_cells)
+    f_exc = owned_force(part, kernel_nodal(part, loads.excavation))
+    weight = owned_force(part, kernel_nodal(part, loads.installed_weight))
+    traction = owned_force(part, kernel_nodal(part, loads.in_situ_traction))
+    _, _, constraints = _stage_constraints(model, boundary)
+
+    # The matrices: every cell (the scaled mass), all but the installed ones (the probe's), the stages'.
+    from pyfem.distributed_model import element_loop_cells
+
+    loop_cells = element_loop_cells(scene, model)
+    element_cells = (np.concatenate([cells for cells, _ in loop_cells.values()]) if loop_cells
+                     else np.zeros(0, dtype=np.int32))
+    laws, _ = scene_laws(scene)
+    factor = max([plastic_frequency_factor(p["poisson_ratio"], p["friction_angle"], p["dilation_angle"])
+                  for p in laws.values() if p["law"] == "mohr_coulomb"], default=1.0)
+    everything = stage_matrix(part, np.zeros(0, dtype=np.int32))
+    mass = scaled_mass(part, everything, factor)
+    elastic = stage_matrix(part, installed_cells) if len(installed_cells) else everything
+    del everything
+    K_support = stage_matrix(part, element_cells)
+    K_excavation = (stage_matrix(part, np.union1d(element_cells, installed_cells)) if len(installed_cells)
+                    else K_support)
+    # A node of no active cell in stage 1 (only the installed regions use it) does not count as free.
+    active = np.zeros(part.n_owned, dtype=bool)
+    indptr = elastic[0]
+    active[np.repeat(np.arange(part.n_owned), np.diff(indptr[:part.n_owned + 1]))] = True
+
+    # Components: the rock's from the in-situ stress now, the installed regions' stress-free in stage 2.
+    def fresh(regions, region_names, installed: bool):
+        if regions is None:
+            return []
+        return [regions.new_component(name, initial_stress=None) if installed else regions.new_component(name)
+                for name in region_names]
+
+    counted_names = [] if loop is None else list(loop.counted.arrays)
+    halo_names = [] if loop is None or loop.halo is None else list(loop.halo.arrays)
+    counted = {name: None for name in counted_names}
+    halo = {name: None for name in halo_names}
+    for names, table, regions in ((counted_names, counted, None if loop is None else loop.counted),
+                                  (halo_names, halo, None if loop is None else loop.halo)):
+        for name in names:
+            if name not in installed_regions:
+                table[name] = regions.new_component(name)
+    has_pairs = contact_arrays is not None and len(contact_arrays["pairs"])
+    stage_pairs = None if contact_arrays is None else dict(contact_arrays, deterioration=None)
+    contact = make_contact_pairs(stage_pairs) if has_pairs else None
+    if has_pairs:  # F0 on node i and -F0 on j in the load (pyfem.static._pair_force_vector)
+        pair_force = np.zeros((part.n_local, 3))
+        nodes = np.asarray(contact_arrays["pairs"], dtype=np.int64)
+        F0 = np.asarray(contact_arrays["static_force"], dtype=np.float64)
+        np.add.at(pair_force, nodes[:, 0], F0)
+        np.add.at(pair_force, nodes[:, 1], -F0)
+        f_exc = f_exc + pair_force.reshape(-1)
+    owned = slice(0, 3 * part.n_owned)
+
+    def global_norm(x):
+        return math.sqrt(comm.allreduce(float(x[owned] @ x[owned])))
+
+    floor = 1.0e-3 * global_norm(traction)
+    ramp, probe_steps = 0.0, 0
+    path_dependent = comm.allreduce(bool(loop is not None or has_pairs), op=MPI.LOR)
+    probe_load = f_exc + weight
+    if path_dependent and comm.allreduce(bool(np.any(probe_load)), op=MPI.LOR):
+        probe_contact = make_contact_pairs(stage_pairs) if has_pairs else None
+        probe = _stage_stepper(part, elastic, mass, constraints, probe_load, [], [], probe_contact, 0.0)
+        omega, probe_steps = probe_frequency(probe, mass, probe_load, max_steps, floor=floor, space=probe)
+        ramp = ramp_length(omega)
+    del elastic
+    relaxation = settings["relaxation"]
+    weight_words = " + weight of the installed regions" if comm.allreduce(bool(np.any(weight)), op=MPI.LOR) else ""
+    stages, reactions, increments = [], [], []
+    carried = np.zeros(3 * part.n_local)
+    regions_summary_first = None
+    all_regions = sorted(model.regions)
+    rock_regions = [name for name in all_regions if name not in installed_regions]
+    from pyfem.distributed_model import region_summary
+
+    for index, (name, matrix, regions, fraction, words) in enumerate((
+            ("excavation", K_excavation, rock_regions, relaxation,
+             f"{relaxation:g} f_exc (released before {', '.join(installed_regions) or 'any support'})"),
+            ("support", K_support, all_regions, 1.0 - relaxation, f"{1.0 - relaxation:g} f_exc{weight_words}"))):
+        stage_start = time.perf_counter()
+        if index == 1:
+            for names, table, regions_of in ((counted_names, counted, None if loop is None else loop.counted),
+                                             (halo_names, halo, None if loop is None else loop.halo)):
+                for region in names:
+                    if table[region] is None:
+                        table[region] = regions_of.new_component(region, initial_stress=None)
+        load = fraction * f_exc + carried + (weight if index == 1 else 0.0)
+        active_counted = [c for c in counted.values() if c is not None]
+        active_halo = [c for c in halo.values() if c is not None]
+        stepper = _stage_stepper(part, matrix, mass, constraints, load, active_counted, active_halo, contact, ramp)
+
+        def report(steps, ratio, seconds, name=name):
+            if root:
+                print(f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), out-of-balance "
+                      f"{ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True)
+
+        u_owned, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor, report=report,
+                                space=stepper)
+        for component in active_counted + active_halo:
+            component.rebase()
+        if contact is not None:
+            contact.rebase(stepper.u)
+        carried = np.zeros(3 * part.n_local)
+        carried[owned] = result.out_of_balance
+        support = np.zeros((part.n_local, 3))
+        if constraints is not None:
+            support[constraints.nodes] = stepper.reactions()
+        reactions.append(support)
+        increments.append(stepper.u.copy())
+        largest, point = _largest_displacement(comm, u_owned, part.coords[:part.n_owned])
+        if loop is not None:  # the counted cells' summary (region_summary: rank 0's)
+            stage_regions = region_summary(comm, _Active(loop.counted, counted))
+        else:
+            stage_regions = {}
+        solver_words = "dynamic relaxation" + (f" on {comm.size} MPI ranks (distributed model)" if comm.size > 1
+                                               else " (distributed model)")
+        stage_seconds = comm.allreduce(time.perf_counter() - stage_start, op=MPI.MAX)
+        if root:
+            print(f"static stage '{name}': {'converged' if result.converged else 'NOT converged'} after "
+                  f"{result.steps} relaxation steps, out-of-balance {result.residual:.2e} (tolerance {tolerance:g}), "
+                  f"{stage_seconds:.0f} s ({solver_words})", flush=True)
+        free = 3 * comm.allreduce(int(np.count_nonzero(active)) if index == 0 else part.n_owned)
+        stages.append({"name": name, "active_regions": regions, "load": words, "load_fraction": fraction,
+                       "free_dofs": free, "solver": solver_words if comm.allreduce(bool(np.any(load)), op=MPI.LOR)
+                       else "none: no load", "iterations": result.steps, "residual": result.residual,
+                       "converged": result.converged, "seconds": stage_seconds, "max_displacement": largest,
+                       "max_displacement_point": point,
+                       "residual_history": [[step, ratio] for step, ratio, _ in result.history],
+                       "regions": stage_regions})
+        if index == 0:
+            regions_summary_first = stage_regions
+        if not result.converged:
+            applied_share = load_factor(result.steps * PSEUDO_STEP, ramp)
+            ramp_words = ("" if applied_share >= 1.0 else
+                          f"; the load was still rising: {100.0 * applied_share:.0f} % of it applied (its ramp is "
+                          f"{ramp:.0f} steps)")
+            scene.warn(f"static: the {name} stage did not reach static.tolerance = {tolerance:g} in static.max_steps = "
+                       f"{max_steps} relaxation steps (out-of-balance ratio {result.residual:.3g} of the whole load"
+                       f"{ramp_words}): the model may be collapsing (plastic flow without end) or need more steps; its "
+                       "state is handed over as it is, so the dynamic run starts out of balance by that much and moves "
+                       "from it")
+    u1, u2 = increments
+    applied = f_exc + weight
+    load_norm = max(global_norm(applied), floor)
+    out_of_balance = global_norm(carried) / load_norm if load_norm > 0.0 else 0.0
+    support = reactions[0] + reactions[1]
+    mine = face_support_resultants(model.faces, boundary, support)  # (a rank without held face nodes: {})
+    face_support = {face.name: comm.allreduce(np.asarray(mine.get(face.name, np.zeros(3)))).tolist()
+                    for face in model.faces if boundary[face.name] in ("roller", "fixed")}
+    largest, point = _largest_displacement(comm, (u1 + u2)[owned], part.coords[:part.n_owned])
+    report = {"settings": dict(settings, tolerance=tolerance, load_ramp_steps=ramp, probe_steps=probe_steps,
+                               ranks=comm.size, model="distributed"),
+              "initial_stress": scene.get("initial_stress"), "excavated": list(settings["excavate"]),
+              "installed": list(installed_regions), "boundary": boundary, "stages": stages,
+              "seconds": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
+              "max_displacement": {"value": largest, "point": point}, "out_of_balance": out_of_balance,
+              "hand_over": "the dynamic run starts from u = v = 0 with the stage's stress; the in-situ traction, "
+                           "body force, support forces and pair forces of the stage are held constant; a relaxed "
+                           "stage's out-of-balance above is its error and is not applied",
+              "load_ramp_steps": ramp, "support_forces": face_support,
+              "in_situ_tractions": {face.name: comm.allreduce(traction.reshape(-1, 3)[face.nodes].sum(axis=0)).tolist()
+                                    for face in model.faces},
+              **({"regions": stages[-1]["regions"], "regions_first_stage": regions_summary_first}
+                 if loop_cells else {})}
+    if contact_arrays is not None:
+        report["pairs"] = pair_report(comm, contact, contact_arrays)
+    return RankStage(counted=[counted[name] for name in counted_names], halo=[halo[name] for name in halo_names],
+                     contact=contact, u_total=u1 + u2, u_support=u2, installed_regions=list(installed_regions),
+                     report=report)
+
+
+def pair_report(comm: MPI.Comm, contact, contact_arrays: dict) -> dict:
+    """static.json's "pairs" (pyfem.static_output.static_report's) over every rank's pairs: their
+    count, the normal stress range (compression positive, Pa), the largest shear stress, how many
+    are in tension, their states at the hand-over and the largest open gap (m)."""
+    if contact is None:
+        force, state, gap = np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0)
+    else:
+        force, state, gap = contact.static_force(), np.asarray(contact.state()), contact.gap_offset()
+    normal = np.asarray(contact_arrays["normal"], dtype=float).reshape(-1, 3)
+    area = np.asarray(contact_arrays["area"], dtype=float)
+    N = -np.einsum("pc,pc->p", force, normal)
+    T = np.linalg.norm(force + N[:, None] * normal, axis=1)
+    counts = comm.allreduce(np.bincount(state, minlength=4)[:4].astype(np.int64))
+    return {"count": comm.allreduce(len(N)),
+            "normal_stress_min": comm.allreduce(float(np.min(N / area, initial=np.inf)), op=MPI.MIN),
+            "normal_stress_max": comm.allreduce(float(np.max(N / area, initial=-np.inf)), op=MPI.MAX),
+            "shear_stress_max": comm.allreduce(float(np.max(T / area, initial=-np.inf)), op=MPI.MAX),
+            "in_tension": comm.allreduce(int(np.count_nonzero(N < 0.0))),
+            "states": dict(zip(("bonded", "stick", "sliding", "separated"), (int(c) for c in counts))),
+            "largest_open_gap": comm.allreduce(float(np.max(gap, initial=0.0)), op=MPI.MAX)}
+
+
+def brief(report: dict) -> dict:
+    """run.json's "static" (pyfem.static.StaticState.summary's keys) from static.json's report."""
+    from pyfem.static import SUMMARY_KEYS
+
+    return {"stages": [{key: stage[key] for key in SUMMARY_KEYS} for stage in report["stages"]],
+            "max_displacement": report["max_displacement"]["value"], "out_of_balance": report["out_of_balance"],
+            "seconds": report["seconds"], "outputs": "static/static.json"}
+
+
+def monitor_report(stage: "RankStage", monitors, names: list, comm: MPI.Comm) -> dict:
+    """static.json's "monitors" (rank 0's; {} elsewhere): each monitor's displacement after stage 1
+    and at the end, and its static stress and region, from the rank that reports it."""
+    from pyfem.static_output import VOIGT_NAMES
+
+    mine = []
+    for k, j in enumerate(monitors.index):
+        nodes, weights = monitors.nodes[k], monitors.weights[k]
+        first = weights @ (stage.u_total - stage.u_support).reshape(-1, 3)[nodes]
+        total = weights @ stage.u_total.reshape(-1, 3)[nodes]
+        entry = {"displacement_stage_1": first.tolist(), "displacement": total.tolist()}
+        if monitors.stress is not None:
+            sigma = monitors.stress.static[k]
+            entry["stress"] = {key: float(sigma[a, b]) for key, (a, b) in VOIGT_NAMES.items()}
+            entry["region"] = monitors.stress.regions[k]
+        mine.append((int(j), entry))
+    gathered = comm.gather(mine, root=0)
+    if comm.rank != 0:
+        return {}
+    by_index = dict(item for rank_items in gathered for item in rank_items)
+    return {name: by_index[j] for j, name in enumerate(names)}
+
+
+class _Active:
+    """What region_summary reads of the counted regions: region_summary() of the given components."""
+
+    def __init__(self, regions, components: dict) -> None:
+        self.regions, self.components = regions, components
+
+    def region_summary(self) -> dict:
+        return self.regions.region_summary([self.components[name] for name in self.regions.arrays])
+
+
+def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | None) -> None:
+    """The stage's end becomes the dynamic run's start (pyfem.static.hand_over on the ranks): the
+    element loop's components and the pairs go on, the monitors' static stress is the stage's."""
+    from pyfem.elements import voigt_tensor
+    from pyfem.static import static_stress
+
+    if loop is not None:
+        loop.counted.components = list(stage.counted)
+        for name, component in zip(loop.counted.arrays, stage.counted):
+            loop.counted.initial_stress[name] = component.stress()
+        if loop.halo is not None:
+            loop.halo.components = list(stage.halo)
+            for name, component in zip(loop.halo.arrays, stage.halo):
+                loop.halo.initial_stress[name] = component.stress()
+    if contact_arrays is not None and stage.contact is not None:
+        contact_arrays["static_force"] = np.ascontiguousarray(stage.contact.static_force())
+        if contact_arrays["deterioration"] is not None:  # the wear's clock starts with the record
+            stage.contact.set_deterioration(*contact_arrays["deterioration"])
+    stress = monitors.stress
+    if stress is not None and len(monitors.index):
+        installed = np.array([region in stage.installed_regions for region in stress.regions], dtype=bool)
+        sigma = static_stress(stress.dynamic_stress, installed, stage.u_total, stage.u_support)
+        sigma[~installed] += stress.static[~installed]
+        if stress.kernel_points is not None:  # the law's stress where the cell is in the element loop
+            for j, found in enumerate(stress.kernel_points):
+                if found is not None:
+                    sigma[j] = voigt_tensor(loop.counted.components[found[0]].stress(
+                        np.array([found[1]], dtype=np.int64)))[0]
+        stress.static = sigma
+
+
+def cell_static_stress(stage: RankStage, part, strain) -> np.ndarray:
+    """(c, 3, 3) the stage's stress at the centroids of the rank's local cells (`strain`:
+    pyfem.output.cell_strain_operator of its part, dolfinx's numbering), as the whole model's
+    hand_over gives the fields: sigma0 + C : eps(u1 + u2) in the rock, C : eps(u2) in the installed
+    cells (the element loop's cells are the laws' stress, written by the fields themselves)."""
+    from pyfem.elements import region_cells
+    from pyfem.static import static_stress
+
+    installed = np.zeros(len(strain.nodes), dtype=bool)
+    for name in stage.installed_regions:
+        installed[region_cells(part.model, name)] = True
+    sigma0 = strain.static.copy()
+
+    def elastic(u):
+        return strain.stress(strain.strain(part.dolfinx_order(u))) - sigma0
+
+    final = static_stress(elastic, installed, stage.u_total, stage.u_support)
+    final[~installed] += sigma0[~installed]
+    return final
