@@ -237,11 +237,14 @@ def mesh_advice(scene: Scene) -> str:
             lines.append(f"  {element_size_for(scene, budget)['text']}")
         except (ValueError, FileNotFoundError) as error:
             lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
-    # A box without a static stage has no opening: no wall advice for it.
+    # A box without a static stage has no opening: no wall advice for it. A mesh file may or may not
+    # have one (the scene does not say): the advice says so.
     has_opening = scene["mesh"]["builder"] != "box" or "static" in scene
     if has_opening:
-        lines.append("wall stress advice (workflows/wall_stress_accuracy.py: hoop stress at a circular opening's "
-                     "wall against the exact dynamic answer, Pao & Mow's series):")
+        maybe = " for an opening, if the mesh has one" if scene["mesh"]["builder"] == "file" and "static" not in scene \
+            else ""
+        lines.append(f"wall stress advice{maybe} (workflows/wall_stress_accuracy.py: hoop stress at a circular "
+                     "opening's wall against the exact dynamic answer, Pao & Mow's series):")
         for budget in (0.05, 0.01):
             try:
                 advice = wall_size_for(budget)

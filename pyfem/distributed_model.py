@@ -952,8 +952,11 @@ class _Fields:
         self.file.close()
 
 
-def plan(part: RankModel, time_step, n_steps: int) -> dict:
-    """What `run` prints before it steps (rank 0)."""
+def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None = None) -> dict:
+    """What `run` prints before it steps (rank 0); with deteriorating pairs (`contact_arrays`) the
+    whole model's "interface wear" line."""
+    from pyfem.solver import wear_words
+
     counts = part.comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts), root=0)
     if part.comm.rank != 0:
         return {}
@@ -966,6 +969,8 @@ def plan(part: RankModel, time_step, n_steps: int) -> dict:
                                 "probe (pyfem/distributed_stage.py)"} if "static" in part.scene else {}),
             **({"contact pairs": f"{part.n_pairs} ({part.moved_nodes} pair nodes stepped on their pair's rank, not "
                                  "dolfinx's owner: pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
+            **({"interface wear": wear_words(contact_arrays["deterioration"], n_steps * time_step.dt)["note"]}
+               if contact_arrays is not None and contact_arrays["deterioration"] is not None else {}),
             "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
 
 
@@ -1027,7 +1032,7 @@ def _check(scene: Scene) -> dict:
         sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
         0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
     shares = comm.gather((*cells, int(exchange.bytes_sent_per_step), round(peak_memory_mib())), root=0)
-    shown = plan(part, ts, run.n_steps)
+    shown = plan(part, ts, run.n_steps, run.contact_arrays)
     if comm.rank != 0:
         return {}
     seconds = per_step * run.n_steps
@@ -1327,6 +1332,11 @@ class DistributedRun:
                 face_columns = ["t"] + [f"{f}_F{axis}" for f in part.constraints.face_names for axis in "xyz"]
                 self.histories["reactions"] = CsvHistory(out / "reactions.csv", face_columns, ENERGY_FORMAT,
                                                          at("reactions"))
+        if self.stage is not None:
+            from pyfem.distributed_stage import write_fields
+
+            self.comm.Barrier()  # (static/ made by rank 0)
+            write_fields(out / "static" / "fields.xdmf", self.stage, part)
         if self.scene["output"]["xdmf_interval"]:
             append = False
             if saved is not None:
@@ -1603,7 +1613,7 @@ class DistributedRun:
 
         comm, root, part, ts = self.comm, self.root, self.part, self.time_step
         if on_plan is not None:
-            shown = plan(part, ts, self.n_steps)
+            shown = plan(part, ts, self.n_steps, self.contact_arrays)
             if root:
                 if self.saved is not None:
                     shown = {"resuming": f"from the checkpoint at t = {self.saved.t:.6g} s of "
@@ -1621,7 +1631,7 @@ class DistributedRun:
         n_outputs = self.n_steps // ts.steps_per_output
         clock = checkpoints.CheckpointClock(self.scene["output"]["checkpoint_interval"],
                                             elapsed=time.perf_counter() - self.wall_start)
-        status, started = "failed", False
+        status, started, reason = "failed", False, "ended by another rank's failure"
         loop_start = time.perf_counter()
         u = v = a = None
         try:
@@ -1657,7 +1667,12 @@ class DistributedRun:
                     self.write_checkpoint(stepper, u, v, a, self.times[-1] if root else 0.0, loop_start)
             interrupted.time_reached = comm.bcast(self.times[-1] if root and self.times else None, root=0)
             interrupted.out_dir = self.out
+            reason = f"interrupted ({interrupted}); resume with --resume" if str(interrupted) else \
+                "interrupted; resume with --resume"
             raise interrupted from error
+        except BaseException as error:  # this rank's failure (another rank's ends this one by MPI_Abort)
+            reason = f"{type(error).__name__}: {error}"
+            raise
         finally:
             for history in self.histories.values():
                 history.close()
@@ -1668,6 +1683,7 @@ class DistributedRun:
             if root and status != "finished" and self.summary:
                 self.summary["status"] = status
                 self.summary["time_reached"] = self.times[-1] if self.times else None
+                self.summary["reason"] = reason  # (as the whole model's RunWriter.fail)
                 _write_json(self.out / "run.json", self.summary)
         timing = self.timing(loop_start)
         loop_seconds = comm.allreduce(timing["loop_seconds"], op=MPI.MAX)

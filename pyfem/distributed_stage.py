@@ -198,6 +198,7 @@ class RankStage:
         u_total, u_support: (3 n_local,) u1 + u2 and u2 in the kernel's numbering (m).
         installed_regions: the regions cast in stage 2.
         report: static/static.json's content (every rank; its "monitors" added by the run).
+        cell_averages: per stage, the counted cells' NonlinearRegions.cell_averages at its end.
     """
 
     counted: list
@@ -207,6 +208,7 @@ class RankStage:
     u_support: np.ndarray
     installed_regions: list
     report: dict = field(default_factory=dict)
+    cell_averages: list = field(default_factory=list)
 
 
 def _stage_stepper(part, matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray, counted: list,
@@ -334,7 +336,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     del elastic
     relaxation = settings["relaxation"]
     weight_words = " + weight of the installed regions" if comm.allreduce(bool(np.any(weight)), op=MPI.LOR) else ""
-    stages, reactions, increments = [], [], []
+    stages, reactions, increments, averages = [], [], [], []
     carried = np.zeros(3 * part.n_local)
     regions_summary_first = None
     all_regions = sorted(model.regions)
@@ -375,6 +377,8 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
             support[constraints.nodes] = stepper.reactions()
         reactions.append(support)
         increments.append(stepper.u.copy())
+        averages.append({} if loop is None else
+                        loop.counted.cell_averages([counted[region] for region in counted_names]))
         largest, point = _largest_displacement(comm, u_owned, part.coords[:part.n_owned])
         if loop is not None:  # the counted cells' summary (region_summary: rank 0's)
             stage_regions = region_summary(comm, _Active(loop.counted, counted))
@@ -434,7 +438,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
         report["pairs"] = pair_report(comm, contact, contact_arrays)
     return RankStage(counted=[counted[name] for name in counted_names], halo=[halo[name] for name in halo_names],
                      contact=contact, u_total=u1 + u2, u_support=u2, installed_regions=list(installed_regions),
-                     report=report)
+                     report=report, cell_averages=averages)
 
 
 def pair_report(comm: MPI.Comm, contact, contact_arrays: dict) -> dict:
@@ -465,7 +469,7 @@ def brief(report: dict) -> dict:
 
     return {"stages": [{key: stage[key] for key in SUMMARY_KEYS} for stage in report["stages"]],
             "max_displacement": report["max_displacement"]["value"], "out_of_balance": report["out_of_balance"],
-            "seconds": report["seconds"], "outputs": "static/static.json"}
+            "seconds": report["seconds"], "outputs": "static/static.json, static/fields.xdmf"}
 
 
 def monitor_report(stage: "RankStage", monitors, names: list, comm: MPI.Comm) -> dict:
@@ -532,11 +536,13 @@ def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | Non
         stress.static = sigma
 
 
-def cell_static_stress(stage: RankStage, part, strain) -> np.ndarray:
+def cell_static_stress(stage: RankStage, part, strain, first: bool = False) -> np.ndarray:
     """(c, 3, 3) the stage's stress at the centroids of the rank's local cells (`strain`:
-    pyfem.output.cell_strain_operator of its part, dolfinx's numbering), as the whole model's
-    hand_over gives the fields: sigma0 + C : eps(u1 + u2) in the rock, C : eps(u2) in the installed
-    cells (the element loop's cells are the laws' stress, written by the fields themselves)."""
+    pyfem.output.cell_strain_operator of its part, dolfinx's numbering, its `static` the in-situ
+    stress), as the whole model's hand_over gives the fields: sigma0 + C : eps(u1 + u2) in the rock,
+    C : eps(u2) in the installed cells (the element loop's cells are the laws' stress, written by
+    the fields themselves); `first`: after stage 1, sigma0 + C : eps(u1) in the rock, 0 in the
+    installed cells."""
     from pyfem.elements import region_cells
     from pyfem.static import static_stress
 
@@ -548,6 +554,66 @@ def cell_static_stress(stage: RankStage, part, strain) -> np.ndarray:
     def elastic(u):
         return strain.stress(strain.strain(part.dolfinx_order(u))) - sigma0
 
+    if first:
+        stress = elastic(stage.u_total - stage.u_support) + sigma0
+        stress[installed] = 0.0
+        return stress
     final = static_stress(elastic, installed, stage.u_total, stage.u_support)
     final[~installed] += sigma0[~installed]
     return final
+
+
+def write_fields(path, stage: RankStage, part) -> None:
+    """static/fields.xdmf by dolfinx on every rank (a collective), the whole model's fields of the
+    stage (pyfem.static_output.write_static_fields) in the distributed model's layout: at t = 1 and
+    t = 2 (the end of each stage) the displacement since the start and the stage's own (point data),
+    the stress (3 x 3 cell data: the laws' cell means in the element loop, as the run's fields), the
+    cells active in the stage, plastic strain, damage and damage type."""
+    from dolfinx import fem, io
+
+    from pyfem.elements import region_cells, voigt_tensor
+    from pyfem.output import cell_strain_operator
+
+    model = part.model
+    mesh, V = model.mesh, model.V
+    n_cells = model.n_cells
+    strain = cell_strain_operator(part.scene, model)
+    T = fem.TensorFunctionSpace(mesh, ("DG", 0))
+    Q = fem.FunctionSpace(mesh, ("DG", 0))
+    tensor_dofs = T.dofmap.list.array.reshape(-1, 1)[:n_cells, 0]
+    scalar_dofs = Q.dofmap.list.array.reshape(-1, 1)[:n_cells, 0]
+    V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1)) if model.order > 1 else None
+    installed = np.zeros(len(strain.nodes), dtype=bool)
+    for name in stage.installed_regions:
+        installed[region_cells(model, name)] = True
+    u1 = stage.u_total - stage.u_support
+    stages = ((1.0, u1, u1, cell_static_stress(stage, part, strain, first=True), (~installed).astype(float)),
+              (2.0, stage.u_total, stage.u_support, cell_static_stress(stage, part, strain),
+               np.ones(len(installed))))
+    with io.XDMFFile(part.comm, str(path), "w") as file:
+        file.write_mesh(mesh)
+        for (t, total, increment, stress, active), averages in zip(stages, stage.cell_averages):
+            for name, values in (("displacement", total), ("stage_displacement", increment)):
+                function = fem.Function(V, name=name)
+                function.x.array[:] = part.dolfinx_order(values)
+                if V1 is not None:
+                    corner = fem.Function(V1, name=name)
+                    corner.interpolate(function)
+                    function = corner
+                file.write_function(function, t)
+            cells = {"stress": stress[:n_cells].copy(), "active": active[:n_cells]}
+            for key in ("plastic_strain", "damage", "damage_type"):
+                cells[key] = np.zeros(n_cells)
+            for region in averages.values():
+                cells["stress"][region["cells"]] = voigt_tensor(region["stress"])
+                for key in ("plastic_strain", "damage", "damage_type"):
+                    cells[key][region["cells"]] = region[key]
+            for name, values in cells.items():
+                tensor = values.ndim == 3
+                function = fem.Function(T if tensor else Q, name=name)
+                if tensor:
+                    function.x.array.reshape(-1, 9)[tensor_dofs] = values.reshape(-1, 9)
+                else:
+                    function.x.array[scalar_dofs] = values
+                function.x.scatter_forward()
+                file.write_function(function, t)
