@@ -38,6 +38,8 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from pyfem.relaxation import RankSums
+
 
 def world():
     """The communicator of an `mpirun` launch (one rank: a serial run): mpi4py's COMM_WORLD
@@ -1172,7 +1174,7 @@ class ActiveRegions:
         self.arrays = {name: nonlinear.arrays[name] for name in regions}
 
 
-class DistributedStage:
+class DistributedStage(RankSums):
     """One relaxation stage's stepper shared among the ranks behind the Stepper calls of
     `pyfem.relaxation.relax`: the serial stage stepper (matrix, scaled mass, held faces, ramped load,
     element-loop components, pairs) cut into the dynamic run's shares (`partition` of the
@@ -1264,26 +1266,6 @@ class DistributedStage:
     def owned_rows(self, n_dofs: int) -> np.ndarray:
         """The rows of the model's dof vectors this rank's relax arrays hold: its owned dofs."""
         return self._owned_rows[self.comm.rank]
-
-    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
-        """x . y over the whole model: each rank's owned part, summed over the ranks."""
-        from mpi4py import MPI
-
-        return float(self.comm.allreduce(float(x @ y), op=MPI.SUM))
-
-    def norm(self, x: np.ndarray) -> float:
-        return float(np.sqrt(self.dot(x, x)))
-
-    def all_finite(self, *arrays: np.ndarray) -> bool:
-        from mpi4py import MPI
-
-        return bool(self.comm.allreduce(all(bool(np.isfinite(x).all()) for x in arrays), op=MPI.LAND))
-
-    def agreed(self, value):
-        """Rank 0's `value` on every rank (a collective): relax's decisions (out-of-balance ratio,
-        damping) are taken from rank 0's arithmetic, so that no rank can decide otherwise by the
-        last bit of a sum on another processor."""
-        return self.comm.bcast(value, root=0)
 
     def whole(self, x: np.ndarray) -> np.ndarray:
         """The model's (3n,) vector on every rank from each rank's owned rows of it (an allgather:

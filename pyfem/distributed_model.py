@@ -1693,6 +1693,10 @@ class DistributedRun:
             0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
         per_rank = comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts,
                                 int(exchange.bytes_sent_per_step), *cells, round(peak_memory_mib(), 1)), root=0)
+        # The time per step split into the kernel's phases (this sitting's steps): rank 0's as the whole
+        # model's run.json "time_per_step", and every rank's ms per step of each phase.
+        phases = comm.gather(dict(stepper.phase_seconds()), root=0)
+        sitting = comm.allreduce(time.perf_counter() - loop_start, op=MPI.MAX)
         nonlinear = None if loop is None else region_summary(comm, loop.counted)
         self.remove_checkpoint()
         if not root:
@@ -1710,6 +1714,12 @@ class DistributedRun:
                  "halo_cells", "peak_memory_mib"))}},
             **({"nonlinear_regions": nonlinear} if nonlinear is not None else {}),
         })
+        from pyfem.solver import DISTRIBUTED_PHASES, PHASES, phase_split
+
+        self.summary["time_per_step"] = phase_split(phases[0], sitting)
+        self.summary["mpi"]["ms_per_step"] = {
+            name: [round(1e3 * float(p.get(name, 0.0)) / max(1, int(p["steps"])), 4) for p in phases]
+            for name in PHASES + DISTRIBUTED_PHASES if any(p.get(name) for p in phases)}
         if self.contact_arrays is not None:
             from pyfem.output import pair_peaks, pair_state_summary
 

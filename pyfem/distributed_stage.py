@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from mpi4py import MPI
 
+from pyfem.relaxation import RankSums
 from pyfem.scene import SceneError
 
 KEY = "static.solver"
@@ -136,7 +137,7 @@ def scaled_mass(part, matrix: tuple, frequency_factor: float) -> np.ndarray:
 
 # --- relax's stepper and arithmetic on a rank ---------------------------------------------------
 
-class RankSpace:
+class RankSpace(RankSums):
     """One stage's kernel Stepper of this rank's part behind the Stepper calls `relax` makes, and
     relax's `space` (pyfem.relaxation.WholeModel's calls): relax's arrays are the owned dofs, the
     kernel's (owned and ghost) are kept here; sums over the ranks, rank 0's decisions."""
@@ -148,18 +149,6 @@ class RankSpace:
 
     def owned_rows(self, n_dofs: int) -> slice:
         return slice(0, 3 * self.n_owned)
-
-    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
-        return float(self.comm.allreduce(float(x @ y), op=MPI.SUM))
-
-    def norm(self, x: np.ndarray) -> float:
-        return float(np.sqrt(self.dot(x, x)))
-
-    def all_finite(self, *arrays: np.ndarray) -> bool:
-        return bool(self.comm.allreduce(all(bool(np.isfinite(x).all()) for x in arrays), op=MPI.LAND))
-
-    def agreed(self, value):
-        return self.comm.bcast(value, root=0)
 
     def whole(self, x: np.ndarray) -> np.ndarray:
         """relax's result: this rank's owned dofs (the distributed model never gathers a whole vector)."""
@@ -213,25 +202,12 @@ class RankStage:
 
 def _stage_stepper(part, matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray, counted: list,
                    halo: list, contact, ramp: float) -> RankSpace:
-    """A relaxation stage's kernel Stepper of this rank's part (pyfem.static._stage_stepper's
-    objects: the stage's matrix, the scaled mass, dt = 1 and no damping yet, the held faces, the
-    ramped load on the nodes it steps, the counted and halo cells, the pairs), partitioned."""
-    from pyfem import _kernels
-    from pyfem.relaxation import PSEUDO_STEP
-    from pyfem.static import hand_over_force_provider
+    """A relaxation stage's kernel Stepper of this rank's part (pyfem.static.stage_kernel: the stage's
+    matrix, the scaled mass, dt = 1 and no damping yet, the held faces, the ramped load on the nodes
+    it steps, the counted and halo cells, the pairs), partitioned."""
+    from pyfem.static import stage_kernel
 
-    kernel = _kernels.Stepper(*matrix, mass, PSEUDO_STEP, 0.0, 0.0)
-    if constraints is not None:
-        kernel.set_constraints(np.ascontiguousarray(constraints.nodes, dtype=np.int32),
-                               np.ascontiguousarray(constraints.projection, dtype=np.float64))
-    if np.any(load):
-        kernel.add_seismic_input(hand_over_force_provider(load, ramp))
-    for component in counted:
-        kernel.add_internal_force(component)
-    for component in halo:
-        kernel.add_internal_force(component, count_energy=False)
-    if contact is not None:
-        kernel.add_contact(contact)
+    kernel = stage_kernel(matrix, mass, constraints, load, counted, contact, ramp, halo)
     exchange = part.plan.kernel_exchange(part.comm, part.n_local)
     kernel.set_partition(part.n_owned, exchange)
     return RankSpace(part.comm, kernel, exchange, part.n_owned, part.n_local)

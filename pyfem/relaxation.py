@@ -122,6 +122,35 @@ class WholeModel:
         return x
 
 
+class RankSums:
+    """relax's arithmetic when each MPI rank holds its owned dofs (`comm`: the ranks): dot products
+    and norms summed over the ranks, rank 0's decisions for every rank. The subclasses
+    (pyfem.distributed.DistributedStage, pyfem.distributed_stage.RankSpace) say which rows a rank
+    holds (`owned_rows`) and what relax returns (`whole`)."""
+
+    comm = None
+
+    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
+        """x . y over the whole model: each rank's owned part, summed over the ranks."""
+        from mpi4py import MPI
+
+        return float(self.comm.allreduce(float(x @ y), op=MPI.SUM))
+
+    def norm(self, x: np.ndarray) -> float:
+        return float(np.sqrt(self.dot(x, x)))
+
+    def all_finite(self, *arrays: np.ndarray) -> bool:
+        from mpi4py import MPI
+
+        return bool(self.comm.allreduce(all(bool(np.isfinite(x).all()) for x in arrays), op=MPI.LAND))
+
+    def agreed(self, value):
+        """Rank 0's `value` on every rank (a collective): relax's decisions (out-of-balance ratio,
+        damping) are taken from rank 0's arithmetic, so that no rank can decide otherwise by the
+        last bit of a sum on another processor."""
+        return self.comm.bcast(value, root=0)
+
+
 def _default_space(stepper):
     """relax's `space` when none is given: a DistributedStage is its own, a Stepper the whole model."""
     return stepper if hasattr(stepper, "owned_rows") else WholeModel()

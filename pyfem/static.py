@@ -773,13 +773,22 @@ def _stage_stepper(stiffness, mass: np.ndarray, constraints, load: np.ndarray, c
                    ramp: float = 0.0):
     """A kernel Stepper for one relaxation stage: the matrix cells, the scaled mass (dt = 1, no
     damping yet), the stage's held faces, the constant load, the components and the pairs."""
-    from pyfem import _kernels
-    from pyfem.relaxation import PSEUDO_STEP
     from pyfem.solver import bsr_arrays, kernel_threads
 
     kernel_threads()
-    indptr, indices, blocks = bsr_arrays(stiffness.tobsr(blocksize=(3, 3)))
-    stepper = _kernels.Stepper(indptr, indices, blocks, mass, PSEUDO_STEP, 0.0, 0.0)
+    return stage_kernel(bsr_arrays(stiffness.tobsr(blocksize=(3, 3))), mass, constraints, load, components,
+                        contact, ramp)
+
+
+def stage_kernel(matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray, components: list, contact,
+                 ramp: float = 0.0, halo: list = ()):
+    """The kernel Stepper of a relaxation stage from its matrix's (indptr, indices, blocks): the
+    scaled mass, dt = 1 and no damping yet, the held faces, the load rising over `ramp`, the
+    components, an MPI rank's `halo` components (their energy their owner's) and the pairs."""
+    from pyfem import _kernels
+    from pyfem.relaxation import PSEUDO_STEP
+
+    stepper = _kernels.Stepper(*matrix, mass, PSEUDO_STEP, 0.0, 0.0)
     if constraints is not None:
         stepper.set_constraints(np.ascontiguousarray(constraints.nodes, dtype=np.int32),
                                 np.ascontiguousarray(constraints.projection, dtype=np.float64))
@@ -787,6 +796,8 @@ def _stage_stepper(stiffness, mass: np.ndarray, constraints, load: np.ndarray, c
         stepper.add_seismic_input(hand_over_force_provider(load, ramp))
     for component in components:
         stepper.add_internal_force(component)
+    for component in halo:
+        stepper.add_internal_force(component, count_energy=False)
     if contact is not None:
         stepper.add_contact(contact)
     return stepper
