@@ -100,10 +100,8 @@ def stage_matrix(part, removed_cells: np.ndarray) -> tuple:
     V, materials = model.V, model._materials
     quadrature = {"quadrature_degree": 2 * model.order}
     first, last = V.dofmap.index_map.local_range
-    if len(removed_cells):
-        matrix = elastic_stiffness_matrix(V, *_without_cells(materials, removed_cells), quadrature)
-    else:
-        matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
+    # (dolfinx's Functions and forms are collectives: every rank makes them, with or without removed cells)
+    matrix = elastic_stiffness_matrix(V, *_without_cells(materials, removed_cells), quadrature)
     _, global_rows = move_rows(part.comm, part.ownership, first, owned_rows_global(matrix, last - first,
                                                                                     release=True))
     rows = localize(global_rows, part.local_nodes)
@@ -213,11 +211,36 @@ def _stage_stepper(part, matrix: tuple, mass: np.ndarray, constraints, load: np.
     return RankSpace(part.comm, kernel, exchange, part.n_owned, part.n_local)
 
 
+def check_held_on_ranks(part, boundary: dict, constraints, active: np.ndarray) -> None:
+    """pyfem.static.check_held on the ranks (the whole model's refusal of a stage boundary that lets
+    the body move as a rigid body): each rank's free basis of the nodes it steps (held faces, its
+    bonded pairs, nodes of no stage-1 cell held), the Gram matrix summed over the ranks, the modes
+    about the whole model's centroid."""
+    from pyfem.static import check_held, free_basis
+
+    comm, n = part.comm, part.n_owned
+    held_nodes = np.zeros(0, dtype=np.int64) if constraints is None else np.asarray(constraints.nodes, np.int64)
+    projection = np.zeros((0, 3, 3)) if constraints is None else constraints.projection
+    pairs = None if part.pairs is None or not len(part.pairs.nodes) else np.asarray(part.pairs.nodes, np.int64)
+    inactive = np.flatnonzero(~active)
+    coords = part.coords[:n]
+    centre = comm.allreduce(coords.sum(axis=0)) / comm.allreduce(n)
+    check_held(free_basis(n, held_nodes, projection, pairs, inactive), coords, inactive, boundary, comm, centre)
+
+
 def _largest_displacement(comm: MPI.Comm, u_owned: np.ndarray, coords: np.ndarray) -> tuple[float, list]:
     """(the largest nodal displacement over the ranks (m), its node's position)."""
-    magnitude = np.linalg.norm(u_owned.reshape(-1, 3), axis=1)
+    largest, point, _ = _largest_displacement_vector(comm, u_owned, coords)
+    return largest, point
+
+
+def _largest_displacement_vector(comm: MPI.Comm, u_owned: np.ndarray, coords: np.ndarray) -> tuple:
+    """(the largest nodal displacement over the ranks (m), its node's position, its vector)."""
+    nodal = u_owned.reshape(-1, 3)
+    magnitude = np.linalg.norm(nodal, axis=1)
     worst = int(np.argmax(magnitude)) if len(magnitude) else -1
-    offer = (float(magnitude[worst]), coords[worst].tolist()) if worst >= 0 else (-1.0, [])
+    offer = ((float(magnitude[worst]), coords[worst].tolist(), nodal[worst].tolist()) if worst >= 0
+             else (-1.0, [], []))
     return max(comm.allgather(offer), key=lambda item: item[0])
 
 
@@ -230,10 +253,10 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
         contact_arrays: `pyfem.solver.contact_arguments` of the rank's pairs or None.
     """
     from pyfem.elements import plastic_frequency_factor, scene_laws
-    from pyfem.relaxation import PSEUDO_STEP, load_factor, probe_frequency, ramp_length, relax
+    from pyfem.relaxation import probe_frequency, ramp_length, relax
     from pyfem.solver import make_contact_pairs
     from pyfem.static import (_install_cells, _stage_constraints, face_support_resultants, stage_boundary,
-                              stage_loads, stage_tolerance)
+                              stage_loads, stage_tolerance, unconverged_warning)
 
     start = time.perf_counter()
     scene, comm, model = part.scene, part.comm, part.model
@@ -259,15 +282,16 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
                   for p in laws.values() if p["law"] == "mohr_coulomb"], default=1.0)
     everything = stage_matrix(part, np.zeros(0, dtype=np.int32))
     mass = scaled_mass(part, everything, factor)
-    elastic = stage_matrix(part, installed_cells) if len(installed_cells) else everything
+    installs = comm.allreduce(len(installed_cells)) > 0  # (a rank may hold none of the installed cells)
+    elastic = stage_matrix(part, installed_cells) if installs else everything
     del everything
     K_support = stage_matrix(part, element_cells)
-    K_excavation = (stage_matrix(part, np.union1d(element_cells, installed_cells)) if len(installed_cells)
-                    else K_support)
+    K_excavation = stage_matrix(part, np.union1d(element_cells, installed_cells)) if installs else K_support
     # A node of no active cell in stage 1 (only the installed regions use it) does not count as free.
     active = np.zeros(part.n_owned, dtype=bool)
     indptr = elastic[0]
     active[np.repeat(np.arange(part.n_owned), np.diff(indptr[:part.n_owned + 1]))] = True
+    check_held_on_ranks(part, boundary, constraints, active)
 
     # Components: the rock's from the in-situ stress now, the installed regions' stress-free in stage 2.
     def fresh(regions, region_names, installed: bool):
@@ -378,15 +402,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
         if index == 0:
             regions_summary_first = stage_regions
         if not result.converged:
-            applied_share = load_factor(result.steps * PSEUDO_STEP, ramp)
-            ramp_words = ("" if applied_share >= 1.0 else
-                          f"; the load was still rising: {100.0 * applied_share:.0f} % of it applied (its ramp is "
-                          f"{ramp:.0f} steps)")
-            scene.warn(f"static: the {name} stage did not reach static.tolerance = {tolerance:g} in static.max_steps = "
-                       f"{max_steps} relaxation steps (out-of-balance ratio {result.residual:.3g} of the whole load"
-                       f"{ramp_words}): the model may be collapsing (plastic flow without end) or need more steps; its "
-                       "state is handed over as it is, so the dynamic run starts out of balance by that much and moves "
-                       "from it")
+            scene.warn(unconverged_warning(name, tolerance, max_steps, result, ramp))
     u1, u2 = increments
     applied = f_exc + weight
     load_norm = max(global_norm(applied), floor)
@@ -395,13 +411,13 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     mine = face_support_resultants(model.faces, boundary, support)  # (a rank without held face nodes: {})
     face_support = {face.name: comm.allreduce(np.asarray(mine.get(face.name, np.zeros(3)))).tolist()
                     for face in model.faces if boundary[face.name] in ("roller", "fixed")}
-    largest, point = _largest_displacement(comm, (u1 + u2)[owned], part.coords[:part.n_owned])
+    largest, point, vector = _largest_displacement_vector(comm, (u1 + u2)[owned], part.coords[:part.n_owned])
     report = {"settings": dict(settings, tolerance=tolerance, load_ramp_steps=ramp, probe_steps=probe_steps,
                                ranks=comm.size, model="distributed"),
               "initial_stress": scene.get("initial_stress"), "excavated": list(settings["excavate"]),
               "installed": list(installed_regions), "boundary": boundary, "stages": stages,
               "seconds": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
-              "max_displacement": {"value": largest, "point": point}, "out_of_balance": out_of_balance,
+              "max_displacement": {"value": largest, "point": point, "vector": vector}, "out_of_balance": out_of_balance,
               "hand_over": "the dynamic run starts from u = v = 0 with the stage's stress; the in-situ traction, "
                            "body force, support forces and pair forces of the stage are held constant; a relaxed "
                            "stage's out-of-balance above is its error and is not applied",

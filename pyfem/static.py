@@ -311,7 +311,7 @@ def stage_loads(scene: typing.Mapping, model, installed_cells: np.ndarray) -> St
         body_force = materials.rho * fem.Constant(mesh, np.array([0.0, 0.0, -STANDARD_GRAVITY]))
     body = zero if body_force is None else assemble_nodal_vector(rock * ufl.inner(body_force, v) * dx, V)
     installed_weight = zero
-    if gravity and len(installed_cells):
+    if gravity and mesh.comm.allreduce(len(installed_cells)):  # (collective: the distributed model's ranks)
         installed_weight = assemble_nodal_vector(installed * ufl.inner(body_force, v) * dx, V)
     if sigma0 is None:
         return StageLoads(excavation=body.copy(), in_situ_traction=zero, body=body,
@@ -402,9 +402,10 @@ def free_basis(n_nodes: int, held_nodes: np.ndarray, held_projection: np.ndarray
     return FreeBasis(T=T, projection=projection, group=group)
 
 
-def rigid_body_modes(node_coords: np.ndarray) -> np.ndarray:
-    """(3 n, 6) translations and rotations about the centroid (the near null space of elasticity)."""
-    x = node_coords - node_coords.mean(axis=0)
+def rigid_body_modes(node_coords: np.ndarray, centre: np.ndarray | None = None) -> np.ndarray:
+    """(3 n, 6) translations and rotations about `centre` (default: the nodes' centroid): the near
+    null space of elasticity."""
+    x = node_coords - (node_coords.mean(axis=0) if centre is None else np.asarray(centre))
     n = len(x)
     modes = np.zeros((n, 3, 6))
     for axis in range(3):
@@ -415,19 +416,30 @@ def rigid_body_modes(node_coords: np.ndarray) -> np.ndarray:
     return modes.reshape(3 * n, 6)
 
 
-def check_held(basis: FreeBasis, node_coords: np.ndarray, inactive_nodes: np.ndarray, boundary: dict) -> None:
+def check_held(basis: FreeBasis, node_coords: np.ndarray, inactive_nodes: np.ndarray, boundary: dict,
+               comm=None, centre: np.ndarray | None = None) -> None:
     """The stage's boundary must hold the active body: no rigid-body motion may lie in the range of T.
+    Under the distributed model (`comm`, pyfem/distributed_stage.py) each rank checks the nodes it
+    steps, about the whole model's centroid `centre`, and the sums are taken over the ranks.
 
     Raises:
         SceneError (static.boundary) naming the motions left free.
     """
-    modes = rigid_body_modes(node_coords)
+    modes = rigid_body_modes(node_coords, centre)
     rows = np.ones(len(node_coords), dtype=bool)
     rows[inactive_nodes] = False
     rows = np.repeat(rows, 3)
-    outside = (modes - basis.T @ (basis.T.T @ modes))[rows]       # the part of each mode the stage forbids
+    # The part of each mode the stage forbids: modes - P modes, P the orthogonal projection onto the range
+    # of T. T's columns are orthogonal, each of squared norm its group's node count (a bonded pair's two
+    # nodes share columns), so P = T diag(1 / |column|^2) T^T (T T^T alone doubled a pair's nodes'
+    # modes, and a floating model with pairs was not refused).
+    norms = np.asarray(basis.T.multiply(basis.T).sum(axis=0)).ravel()
+    outside = (modes - basis.T @ ((basis.T.T @ modes) / np.where(norms > 0.0, norms, 1.0)[:, None]))[rows]
     gram = outside.T @ outside
-    scale = np.max(np.sum(modes[rows] ** 2, axis=0))
+    scale = np.sum(modes[rows] ** 2, axis=0)
+    if comm is not None:
+        gram, scale = comm.allreduce(gram), comm.allreduce(scale)
+    scale = np.max(scale)
     values, vectors = np.linalg.eigh(gram)
     free = vectors[:, values <= 1e-10 * scale]
     if free.shape[1]:
@@ -803,6 +815,21 @@ def stage_kernel(matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray,
     return stepper
 
 
+def unconverged_warning(name: str, tolerance: float, max_steps: int, result, ramp: float) -> str:
+    """The warning of a relaxation stage that did not reach its tolerance (both models)."""
+    from pyfem.relaxation import PSEUDO_STEP, load_factor
+
+    applied_share = load_factor(result.steps * PSEUDO_STEP, ramp)
+    ramp_words = ("" if applied_share >= 1.0 else
+                  f"; the load was still rising: {100.0 * applied_share:.0f} % of it applied (its ramp is "
+                  f"{ramp:.0f} steps)")
+    return (f"static: the {name} stage did not reach static.tolerance = {tolerance:g} in static.max_steps = "
+            f"{max_steps} relaxation steps (out-of-balance ratio {result.residual:.3g} of the whole load{ramp_words}): "
+            "the model may be collapsing (plastic flow without end) or need more steps; its state is handed over as "
+            "it is and the dynamic run starts at rest from it, the out-of-balance not applied: the static state is "
+            "wrong by about that share of the load (not in equilibrium with all of it)")
+
+
 def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     """The two stages of docs/static.md solved by dynamic relaxation (pyfem/relaxation.py) with the
     dynamic run's own kernel: material laws at every point of the [plasticity]/[damage] regions,
@@ -820,7 +847,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     """
     from pyfem.distributed import DistributedStage, partition, world
     from pyfem.elements import add_matrices, linear_stiffness, plastic_frequency_factor, scene_laws
-    from pyfem.relaxation import PSEUDO_STEP, load_factor, probe_frequency, ramp_length, relax, scaled_mass
+    from pyfem.relaxation import probe_frequency, ramp_length, relax, scaled_mass
     from pyfem.solver import make_contact_pairs
 
     start = time.perf_counter()
@@ -954,16 +981,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         if index == 0:
             cell_state_first = _cell_state(model, nonlinear, components)
         if not result.converged:
-            applied_share = load_factor(result.steps * PSEUDO_STEP, ramp)
-            ramp_words = ("" if applied_share >= 1.0 else
-                          f"; the load was still rising: {100.0 * applied_share:.0f} % of it applied (its ramp is "
-                          f"{ramp:.0f} steps)")
-            simulation.scene.warn(
-                f"static: the {name} stage did not reach static.tolerance = {tolerance:g} in static.max_steps = "
-                f"{max_steps} relaxation steps (out-of-balance ratio {result.residual:.3g} of the whole load"
-                f"{ramp_words}): the model may be collapsing (plastic flow without end) or need more steps; its "
-                "state is handed over as it is, so the dynamic run starts out of balance by that much and moves "
-                "from it")
+            simulation.scene.warn(unconverged_warning(name, tolerance, max_steps, result, ramp))
     u1, u2 = increments
     applied = f_exc + loads.installed_weight.ravel()
     load_norm = max(float(np.linalg.norm(applied)), floor)

@@ -76,8 +76,10 @@ def static_report(simulation) -> dict:
                              "vector": displacement[worst].tolist() if len(magnitude) else []},
         "out_of_balance": state.out_of_balance,
         "hand_over": "the dynamic run starts from u = v = 0 with the stage's stress; the in-situ traction, "
-                     "body force, support forces and pair forces of the stage are held constant; the "
-                     "out-of-balance above is applied as a constant external force",
+                     "body force, support forces and pair forces of the stage are held constant; " + (
+                         "the out-of-balance above is applied as a constant external force"
+                         if np.any(state.hand_over_force) else
+                         "the out-of-balance above (a relaxed stage's error) is not applied"),
         "load_ramp_steps": state.settings.get("load_ramp_steps"),
         "support_forces": state.face_support_forces,
         "in_situ_tractions": state.face_in_situ_tractions,

@@ -8,7 +8,7 @@ model on one rank the process's), the set-up (wall time before the time loop: me
 time step, the input forces), the time loop per step, and the largest history difference from the
 whole model's one-rank run (relative to each quantity's largest value).
 
-    /usr/bin/python3 workflows/distributed_memory.py [--quick | --large | --contact]
+    /usr/bin/python3 workflows/distributed_memory.py [--quick | --large | --contact | --case3]
 
 writes workflows/results/distributed_memory.json and prints the README's markdown table. The
 default scene is the free-field box refined to h = 2.5 m in a 160 x 80 x 160 m block (139 425
@@ -18,7 +18,11 @@ nodes, 3 244 995 dofs, 0.02 s; the whole model would need about 3.3 KB per dof o
 this machine's 24 GiB for 2 ranks), its row added to the results file as "large"; --contact: the
 four configurations on the contact scene (tests/scenes/mpi_hard_contact.toml: soft rock, a thin stiff
 layer, both interfaces in contact with deterioration, oblique SV) as a 160 x 80 x 160 m block of
-h = 2.5 m (4 290 pairs, 437 580 dofs, 0.2 s), added as "contact".
+h = 2.5 m (4 290 pairs, 437 580 dofs, 0.2 s), added as "contact"; --case3: the coarse case 3 as the
+case study runs it (workflows/scenes/case3_contact_coarse.toml: the static stage, Mohr-Coulomb rock,
+the lining's damage, 11 520 pairs, 175 056 dofs), 0.3 s of it without local stepping (not built on
+the distributed model), the whole and the distributed model on 2 ranks, added as "case3" with each
+run's static stage time and the distributed run's time per step by phase.
 Run it on a quiet machine: the ranks share the same 2 cores and memory bus.
 """
 import argparse
@@ -59,9 +63,15 @@ CONTACT = ["mesh.size=[160.0, 80.0, 160.0]",
            "pair_monitor.1.point=[80.0, 40.0, 79.5]", "output.interval=0.005"]
 
 
-def run(ranks: int, model: str, h: float, out: Path, settings: list = SETTINGS, scene: str = SCENE) -> dict:
-    command = [PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), "--set", f"mesh.h={h}",
-               "--set", f"parallel.model={model}"]
+CASE3_SCENE = "workflows/scenes/case3_contact_coarse.toml"
+CASE3 = ["time.duration=0.3", "time.local_stepping=false", "output.xdmf_interval=0.0"]
+
+
+def run(ranks: int, model: str, h: float | None, out: Path, settings: list = SETTINGS, scene: str = SCENE) -> dict:
+    """One run's row; h: mesh.h (None: the scene's builder sets it)."""
+    command = [PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), "--set", f"parallel.model={model}"]
+    if h is not None:
+        command += ["--set", f"mesh.h={h}"]
     for setting in settings:
         command += ["--set", setting]
     if ranks > 1:
@@ -80,7 +90,11 @@ def run(ranks: int, model: str, h: float, out: Path, settings: list = SETTINGS, 
             "peak_memory_mib": [round(p) for p in peaks], "command_seconds": round(wall, 1),
             "setup_seconds": round(summary["wall_seconds"] - loop, 1),
             "ms_per_step": round(1e3 * loop / summary["steps"], 2),
-            "owned_nodes": mpi.get("owned_nodes"), "ghost_nodes": mpi.get("ghost_nodes")}
+            "owned_nodes": mpi.get("owned_nodes"), "ghost_nodes": mpi.get("ghost_nodes"),
+            **({"static_stage_seconds": round(summary["static"]["seconds"], 1)} if "static" in summary else {}),
+            **({"ms_per_step_by_phase": {name: round(entry["ms_per_step"], 2)
+                                         for name, entry in summary["time_per_step"].items()}}
+               if "time_per_step" in summary else {})}
 
 
 def main(argv: list) -> int:
@@ -88,7 +102,23 @@ def main(argv: list) -> int:
     parser.add_argument("--quick", action="store_true", help="h = 5 m (20 k dofs)")
     parser.add_argument("--large", action="store_true", help="3.2 M dofs, the distributed model on 2 ranks only")
     parser.add_argument("--contact", action="store_true", help="the contact scene, 4 290 pairs")
+    parser.add_argument("--case3", action="store_true", help="the coarse case 3 with its static stage, 2 ranks")
     args = parser.parse_args(argv)
+    if args.case3:
+        rows = []
+        with tempfile.TemporaryDirectory() as scratch:
+            base = Path(scratch)
+            for model in ("whole", "distributed"):
+                rows.append(run(2, model, None, base / model, CASE3, CASE3_SCENE))
+                rows[-1]["difference_from_whole_one_rank"] = (  # (here: from the whole model on 2 ranks)
+                    0.0 if model == "whole" else largest_difference(base / model, base / "whole"))
+                print(json.dumps(rows[-1]), flush=True)
+        result = json.loads(RESULTS.read_text())
+        result["case3"] = {"date": time.strftime("%Y-%m-%d"), "scene": CASE3_SCENE, "settings": CASE3, "rows": rows,
+                           "difference": "from the whole model on 2 ranks"}
+        RESULTS.write_text(json.dumps(result, indent=1) + "\n")
+        print_table(rows)
+        return 0
     if args.contact:
         rows = compare_models(2.5, CONTACT, CONTACT_SCENE)
         result = json.loads(RESULTS.read_text())
