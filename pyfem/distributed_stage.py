@@ -228,13 +228,7 @@ def check_held_on_ranks(part, boundary: dict, constraints, active: np.ndarray) -
     check_held(free_basis(n, held_nodes, projection, pairs, inactive), coords, inactive, boundary, comm, centre)
 
 
-def _largest_displacement(comm: MPI.Comm, u_owned: np.ndarray, coords: np.ndarray) -> tuple[float, list]:
-    """(the largest nodal displacement over the ranks (m), its node's position)."""
-    largest, point, _ = _largest_displacement_vector(comm, u_owned, coords)
-    return largest, point
-
-
-def _largest_displacement_vector(comm: MPI.Comm, u_owned: np.ndarray, coords: np.ndarray) -> tuple:
+def _largest_displacement(comm: MPI.Comm, u_owned: np.ndarray, coords: np.ndarray) -> tuple:
     """(the largest nodal displacement over the ranks (m), its node's position, its vector)."""
     nodal = u_owned.reshape(-1, 3)
     magnitude = np.linalg.norm(nodal, axis=1)
@@ -255,8 +249,8 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     from pyfem.elements import plastic_frequency_factor, scene_laws
     from pyfem.relaxation import probe_frequency, ramp_length, relax
     from pyfem.solver import make_contact_pairs
-    from pyfem.static import (_install_cells, _stage_constraints, face_support_resultants, stage_boundary,
-                              stage_loads, stage_tolerance, unconverged_warning)
+    from pyfem.static import (_install_cells, _pair_force_vector, _stage_constraints, face_support_resultants,
+                              stage_boundary, stage_loads, stage_tolerance, unconverged_warning)
 
     start = time.perf_counter()
     scene, comm, model = part.scene, part.comm, part.model
@@ -294,12 +288,6 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     check_held_on_ranks(part, boundary, constraints, active)
 
     # Components: the rock's from the in-situ stress now, the installed regions' stress-free in stage 2.
-    def fresh(regions, region_names, installed: bool):
-        if regions is None:
-            return []
-        return [regions.new_component(name, initial_stress=None) if installed else regions.new_component(name)
-                for name in region_names]
-
     counted_names = [] if loop is None else list(loop.counted.arrays)
     halo_names = [] if loop is None or loop.halo is None else list(loop.halo.arrays)
     counted = {name: None for name in counted_names}
@@ -312,13 +300,8 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     has_pairs = contact_arrays is not None and len(contact_arrays["pairs"])
     stage_pairs = None if contact_arrays is None else dict(contact_arrays, deterioration=None)
     contact = make_contact_pairs(stage_pairs) if has_pairs else None
-    if has_pairs:  # F0 on node i and -F0 on j in the load (pyfem.static._pair_force_vector)
-        pair_force = np.zeros((part.n_local, 3))
-        nodes = np.asarray(contact_arrays["pairs"], dtype=np.int64)
-        F0 = np.asarray(contact_arrays["static_force"], dtype=np.float64)
-        np.add.at(pair_force, nodes[:, 0], F0)
-        np.add.at(pair_force, nodes[:, 1], -F0)
-        f_exc = f_exc + pair_force.reshape(-1)
+    if has_pairs:  # F0 on node i and -F0 on j in the load (as the whole model's stage)
+        f_exc = f_exc + _pair_force_vector(part.n_local, contact_arrays)
     owned = slice(0, 3 * part.n_owned)
 
     def global_norm(x):
@@ -379,7 +362,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
         increments.append(stepper.u.copy())
         averages.append({} if loop is None else
                         loop.counted.cell_averages([counted[region] for region in counted_names]))
-        largest, point = _largest_displacement(comm, u_owned, part.coords[:part.n_owned])
+        largest, point, _ = _largest_displacement(comm, u_owned, part.coords[:part.n_owned])
         if loop is not None:  # the counted cells' summary (region_summary: rank 0's)
             stage_regions = region_summary(comm, _Active(loop.counted, counted))
         else:
@@ -411,7 +394,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     mine = face_support_resultants(model.faces, boundary, support)  # (a rank without held face nodes: {})
     face_support = {face.name: comm.allreduce(np.asarray(mine.get(face.name, np.zeros(3)))).tolist()
                     for face in model.faces if boundary[face.name] in ("roller", "fixed")}
-    largest, point, vector = _largest_displacement_vector(comm, (u1 + u2)[owned], part.coords[:part.n_owned])
+    largest, point, vector = _largest_displacement(comm, (u1 + u2)[owned], part.coords[:part.n_owned])
     report = {"settings": dict(settings, tolerance=tolerance, load_ramp_steps=ramp, probe_steps=probe_steps,
                                ranks=comm.size, model="distributed"),
               "initial_stress": scene.get("initial_stress"), "excavated": list(settings["excavate"]),
