@@ -94,6 +94,21 @@ def fetch_owned(comm: MPI.Comm, index_map, owned: np.ndarray, wanted: np.ndarray
                  owned, wanted)
 
 
+def to_kernel_numbering(comm: MPI.Comm, index_map, kernel_of_dolfinx: np.ndarray, local_nodes: np.ndarray,
+                        values) -> np.ndarray:
+    """(len(local_nodes), k) per-node values of the function space's local nodes (dolfinx's numbering,
+    ghosts valid) in the kernel's numbering (`kernel_of_dolfinx`: each of those nodes' kernel number);
+    the nodes dolfinx does not hold on this rank (extra ghosts, pair nodes moved here) from
+    dolfinx's owners (`fetch_owned`). A collective."""
+    values = np.asarray(values, dtype=np.float64).reshape(len(kernel_of_dolfinx), -1)
+    out = np.zeros((len(local_nodes), values.shape[1]))
+    out[kernel_of_dolfinx] = values
+    missing = np.ones(len(local_nodes), dtype=bool)
+    missing[kernel_of_dolfinx] = False
+    out[missing] = fetch_owned(comm, index_map, values[:index_map.size_local], local_nodes[missing])
+    return out
+
+
 def owned_rows_global(matrix, n_owned: int, release: bool = False) -> tuple:
     """The owned rows of the PETSc `matrix` (getValuesCSR: owned rows, global columns) as (3, 3)
     blocks: (block_indptr, the blocks' global columns (nodes), blocks). Built block by block from
@@ -430,12 +445,8 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
         add_to_diagonal(rows, spring_nodes, springs)
     # Coordinates and masses in the kernel's numbering; the nodes the function space does not hold
     # (extra ghosts, moved pair nodes) from dolfinx's owners.
-    coords, mass = np.zeros((len(local_nodes), 3)), np.zeros(len(local_nodes))
-    coords[kernel_of_dolfinx], mass[kernel_of_dolfinx] = coords_d, mass_d
-    missing = np.ones(len(local_nodes), dtype=bool)
-    missing[kernel_of_dolfinx] = False
-    coords[missing] = fetch_owned(comm, index_map, coords_d[:index_map.size_local], local_nodes[missing])
-    mass[missing] = fetch_owned(comm, index_map, mass_d[:index_map.size_local, None], local_nodes[missing])[:, 0]
+    coords = to_kernel_numbering(comm, index_map, kernel_of_dolfinx, local_nodes, coords_d)
+    mass = to_kernel_numbering(comm, index_map, kernel_of_dolfinx, local_nodes, mass_d)[:, 0]
     kernel_matrix = local_stiffness(comm, ownership, rows, len(local_nodes), local_nodes)
     del rows  # (the kernel's matrix holds the owned rows)
     plan = ghost_plan(comm, ownership, local_nodes, n_owned)
@@ -614,10 +625,11 @@ def rank_regions(part: RankModel) -> RankRegions | None:
     return RankRegions(counted=counted, halo=regions(halo_arrays) if halo_arrays else None)
 
 
-def region_summary(comm: MPI.Comm, counted) -> dict:
+def region_summary(comm: MPI.Comm, counted, components=None) -> dict:
     """NonlinearRegions.region_summary of the whole model from the ranks' counted cells: counts,
-    volumes and energies summed, peaks the largest (rank 0; {} elsewhere)."""
-    pieces = comm.gather(counted.region_summary(), root=0)
+    volumes and energies summed, peaks the largest (rank 0; {} elsewhere). `components`: those to
+    read (as NonlinearRegions.region_summary's), default the regions' own."""
+    pieces = comm.gather(counted.region_summary(components), root=0)
     if comm.rank != 0:
         return {}
     summed = ("cells", "points", "volume", "damaged_volume", "yielded_volume", "tension_points", "shear_points",
@@ -1332,11 +1344,12 @@ class DistributedRun:
                 face_columns = ["t"] + [f"{f}_F{axis}" for f in part.constraints.face_names for axis in "xyz"]
                 self.histories["reactions"] = CsvHistory(out / "reactions.csv", face_columns, ENERGY_FORMAT,
                                                          at("reactions"))
+        stage_stress = None  # the stage's cell stress, the static part of the run's fields
         if self.stage is not None:
             from pyfem.distributed_stage import write_fields
 
             self.comm.Barrier()  # (static/ made by rank 0)
-            write_fields(out / "static" / "fields.xdmf", self.stage, part)
+            stage_stress = write_fields(out / "static" / "fields.xdmf", self.stage, part)
         if self.scene["output"]["xdmf_interval"]:
             append = False
             if saved is not None:
@@ -1363,10 +1376,8 @@ class DistributedRun:
                 self.fields_files = [self.fields_file]
             self.comm.Barrier()
             self.fields = _Fields(part, out / self.fields_file, self.loop, append=append)
-            if self.stage is not None and getattr(self.fields, "strain", None) is not None:  # the stage's stress in the matrix cells
-                from pyfem.distributed_stage import cell_static_stress
-
-                self.fields.strain.static = cell_static_stress(self.stage, part, self.fields.strain)
+            if stage_stress is not None and getattr(self.fields, "strain", None) is not None:  # the matrix cells'
+                self.fields.strain.static = stage_stress
         return u, v, a
 
     # -- the samples ------------------------------------------------------------------------------------

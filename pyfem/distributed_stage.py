@@ -64,19 +64,12 @@ def check_supported(scene) -> None:
 
 def kernel_nodal(part, values) -> np.ndarray:
     """(n_local, k) per-node values of the function space's local nodes (owned and ghosts, dolfinx's
-    numbering, ghosts valid) in the kernel's numbering: the nodes dolfinx does not hold on this rank
-    (extra ghosts, pair nodes moved here) from dolfinx's owners. A collective."""
-    from pyfem.distributed_model import fetch_owned
+    numbering, ghosts valid) in the kernel's numbering (pyfem.distributed_model.to_kernel_numbering).
+    A collective."""
+    from pyfem.distributed_model import to_kernel_numbering
 
-    values = np.asarray(values, dtype=np.float64).reshape(len(part.model.node_coords), -1)
-    index_map = part.model.V.dofmap.index_map
-    out = np.zeros((part.n_local, values.shape[1]))
-    held = np.arange(len(values)) if part.kernel_of_dolfinx is None else part.kernel_of_dolfinx
-    out[held] = values
-    missing = np.ones(part.n_local, dtype=bool)
-    missing[held] = False
-    out[missing] = fetch_owned(part.comm, index_map, values[:index_map.size_local], part.local_nodes[missing])
-    return out
+    held = np.arange(len(part.model.node_coords)) if part.kernel_of_dolfinx is None else part.kernel_of_dolfinx
+    return to_kernel_numbering(part.comm, part.model.V.dofmap.index_map, held, part.local_nodes, values)
 
 
 def owned_force(part, nodal: np.ndarray) -> np.ndarray:
@@ -121,14 +114,10 @@ def row_sums(part, matrix: tuple) -> np.ndarray:
 def scaled_mass(part, matrix: tuple, frequency_factor: float) -> np.ndarray:
     """(n_local,) pyfem.relaxation.scaled_mass of the ranks' owned rows, the ghosts' from the ranks
     stepping them (the ghost exchange)."""
-    from pyfem.relaxation import PSEUDO_STEP, SAFETY
+    from pyfem.relaxation import mass_of_row_sums
 
-    mass = np.zeros(part.n_local)
-    mass[:part.n_owned] = 0.25 * PSEUDO_STEP ** 2 * (frequency_factor / SAFETY) ** 2 * row_sums(part, matrix)
-    positive = mass[:part.n_owned] > 0.0
-    largest = part.comm.allreduce(float(mass[:part.n_owned][positive].max(initial=0.0)), op=MPI.MAX)
-    mass[:part.n_owned][~positive] = largest if largest > 0.0 else 1.0
-    column = mass[:, None].copy()
+    column = np.zeros((part.n_local, 1))
+    column[:part.n_owned, 0] = mass_of_row_sums(row_sums(part, matrix), frequency_factor, comm=part.comm)
     part.plan.update(part.comm, column)
     return np.ascontiguousarray(column[:, 0])
 
@@ -364,7 +353,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
                         loop.counted.cell_averages([counted[region] for region in counted_names]))
         largest, point, _ = _largest_displacement(comm, u_owned, part.coords[:part.n_owned])
         if loop is not None:  # the counted cells' summary (region_summary: rank 0's)
-            stage_regions = region_summary(comm, _Active(loop.counted, counted))
+            stage_regions = region_summary(comm, loop.counted, [counted[name] for name in counted_names])
         else:
             stage_regions = {}
         solver_words = "dynamic relaxation" + (f" on {comm.size} MPI ranks (distributed model)" if comm.size > 1
@@ -470,21 +459,10 @@ def monitor_report(stage: "RankStage", monitors, names: list, comm: MPI.Comm) ->
     return {name: by_index[j] for j, name in enumerate(names)}
 
 
-class _Active:
-    """What region_summary reads of the counted regions: region_summary() of the given components."""
-
-    def __init__(self, regions, components: dict) -> None:
-        self.regions, self.components = regions, components
-
-    def region_summary(self) -> dict:
-        return self.regions.region_summary([self.components[name] for name in self.regions.arrays])
-
-
 def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | None) -> None:
     """The stage's end becomes the dynamic run's start (pyfem.static.hand_over on the ranks): the
     element loop's components and the pairs go on, the monitors' static stress is the stage's."""
-    from pyfem.elements import voigt_tensor
-    from pyfem.static import static_stress
+    from pyfem.static import monitor_static_stress
 
     if loop is not None:
         loop.counted.components = list(stage.counted)
@@ -500,15 +478,8 @@ def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | Non
             stage.contact.set_deterioration(*contact_arrays["deterioration"])
     stress = monitors.stress
     if stress is not None and len(monitors.index):
-        installed = np.array([region in stage.installed_regions for region in stress.regions], dtype=bool)
-        sigma = static_stress(stress.dynamic_stress, installed, stage.u_total, stage.u_support)
-        sigma[~installed] += stress.static[~installed]
-        if stress.kernel_points is not None:  # the law's stress where the cell is in the element loop
-            for j, found in enumerate(stress.kernel_points):
-                if found is not None:
-                    sigma[j] = voigt_tensor(loop.counted.components[found[0]].stress(
-                        np.array([found[1]], dtype=np.int64)))[0]
-        stress.static = sigma
+        stress.static = monitor_static_stress(stress, stage.installed_regions, stage.u_total, stage.u_support,
+                                              None if loop is None else loop.counted.components)
 
 
 def cell_static_stress(stage: RankStage, part, strain, first: bool = False) -> np.ndarray:
@@ -538,12 +509,13 @@ def cell_static_stress(stage: RankStage, part, strain, first: bool = False) -> n
     return final
 
 
-def write_fields(path, stage: RankStage, part) -> None:
+def write_fields(path, stage: RankStage, part) -> np.ndarray:
     """static/fields.xdmf by dolfinx on every rank (a collective), the whole model's fields of the
     stage (pyfem.static_output.write_static_fields) in the distributed model's layout: at t = 1 and
     t = 2 (the end of each stage) the displacement since the start and the stage's own (point data),
     the stress (3 x 3 cell data: the laws' cell means in the element loop, as the run's fields), the
-    cells active in the stage, plastic strain, damage and damage type."""
+    cells active in the stage, plastic strain, damage and damage type. Returns the stage's final cell
+    stress (`cell_static_stress`), the static part of the run's fields."""
     from dolfinx import fem, io
 
     from pyfem.elements import region_cells, voigt_tensor
@@ -562,9 +534,9 @@ def write_fields(path, stage: RankStage, part) -> None:
     for name in stage.installed_regions:
         installed[region_cells(model, name)] = True
     u1 = stage.u_total - stage.u_support
+    final = cell_static_stress(stage, part, strain)
     stages = ((1.0, u1, u1, cell_static_stress(stage, part, strain, first=True), (~installed).astype(float)),
-              (2.0, stage.u_total, stage.u_support, cell_static_stress(stage, part, strain),
-               np.ones(len(installed))))
+              (2.0, stage.u_total, stage.u_support, final, np.ones(len(installed))))
     with io.XDMFFile(part.comm, str(path), "w") as file:
         file.write_mesh(mesh)
         for (t, total, increment, stress, active), averages in zip(stages, stage.cell_averages):
@@ -592,3 +564,4 @@ def write_fields(path, stage: RankStage, part) -> None:
                     function.x.array[scalar_dofs] = values
                 function.x.scatter_forward()
                 file.write_function(function, t)
+    return final

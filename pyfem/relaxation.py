@@ -89,10 +89,22 @@ def scaled_mass(stiffness, frequency_factor: float = 1.0, safety: float = SAFETY
 
     absolute = abs(sp.csr_matrix(stiffness))
     row_sums = np.asarray(absolute.sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
-    mass = 0.25 * dt * dt * (frequency_factor / safety) ** 2 * row_sums
+    return mass_of_row_sums(row_sums, frequency_factor, safety, dt)
+
+
+def mass_of_row_sums(row_sums: np.ndarray, frequency_factor: float = 1.0, safety: float = SAFETY,
+                     dt: float = PSEUDO_STEP, comm=None) -> np.ndarray:
+    """`scaled_mass` of each node's largest scalar row sum of |K_rc|; `comm`: the nodes are an MPI
+    rank's owned ones (pyfem/distributed_stage.py), the largest mass taken over the ranks."""
+    mass = 0.25 * dt * dt * (frequency_factor / safety) ** 2 * np.asarray(row_sums, dtype=np.float64)
     # A node no cell of the model touches cannot move either way: any positive mass.
     positive = mass > 0.0
-    mass[~positive] = mass[positive].max(initial=1.0)
+    largest = float(mass[positive].max(initial=1.0))
+    if comm is not None:
+        from mpi4py import MPI
+
+        largest = comm.allreduce(largest, op=MPI.MAX)
+    mass[~positive] = largest
     return mass
 
 

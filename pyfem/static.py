@@ -1053,15 +1053,8 @@ def hand_over(simulation, solve: bool = True) -> None:
     u_total, u_support = state.displacement, state.displacement - state.displacement_first
     monitors = simulation.monitor_stress
     if monitors is not None:
-        installed = np.array([region in installed_regions for region in monitors.regions], dtype=bool)
-        base = monitors.static.copy()
-        sigma = static_stress(monitors.dynamic_stress, installed, u_total, u_support)
-        sigma[~installed] += base[~installed]
-        if relaxed and monitors.kernel_points is not None:  # the law's stress where the cell is nonlinear
-            for j, found in enumerate(monitors.kernel_points):
-                if found is not None:
-                    voigt = state.components[found[0]].stress(np.array([found[1]], dtype=np.int64))
-                    sigma[j] = voigt_tensor(voigt)[0]
+        sigma = monitor_static_stress(monitors, installed_regions, u_total, u_support,
+                                      state.components if relaxed else None)
         monitors.static = sigma
         state.monitor_stress = sigma
     from pyfem.output import cell_strain_operator
@@ -1104,6 +1097,24 @@ def hand_over(simulation, solve: bool = True) -> None:
                     "that is not the earthquake's; static.solver = \"relaxation\" lets them open or slide "
                     "during the stage")
     simulation.static = state
+
+
+def monitor_static_stress(monitors, installed_regions, u_total: np.ndarray, u_support: np.ndarray,
+                          components: list | None) -> np.ndarray:
+    """(m, 3, 3) the stage's stress at the monitors (pyfem.solver.MonitorStress, its `static` still
+    the in-situ stress): sigma0 + C : eps(u_total) in the rock, C : eps(u_support) in the installed
+    regions, and where the monitor's cell is in the element loop (a relaxed stage's `components`, in
+    the monitors' kernel_points' order) the law's stress at its point. Both models' hand-over."""
+    from pyfem.elements import voigt_tensor
+
+    installed = np.array([region in installed_regions for region in monitors.regions], dtype=bool)
+    sigma = static_stress(monitors.dynamic_stress, installed, u_total, u_support)
+    sigma[~installed] += monitors.static[~installed]
+    if components is not None and monitors.kernel_points is not None:
+        for j, found in enumerate(monitors.kernel_points):
+            if found is not None:
+                sigma[j] = voigt_tensor(components[found[0]].stress(np.array([found[1]], dtype=np.int64)))[0]
+    return sigma
 
 
 def pairs_over_strength(contact_arrays: dict) -> dict:
