@@ -711,7 +711,7 @@ def local_lts_stepper(simulation, mine: Share, exchanges: list, bare: bool = Fal
     return stepper, layout, objects, pair_objects
 
 
-class _RankSum:
+class RankSummed:
     """A share's kernel LocalStepper (run() in global steps, a collective) whose energy() is the whole
     model's: summed over the ranks, each counting its owned rows and counted cells."""
 
@@ -746,7 +746,7 @@ def check_stability_on_ranks(simulation, comm: MPI.Comm, **check) -> dict:
 
     def make_kernel():
         stepper, *_ = local_lts_stepper(simulation, mine, exchanges, bare=True)
-        return _RankSum(stepper.kernel, comm)
+        return RankSummed(stepper.kernel, comm)
 
     with _alone():  # a kernel error on one rank's share ends every rank (rank 0 may be in its plan)
         report = check_stability(make_kernel, 3 * len(simulation.mass), rows=_dof_rows(mine.nodes), **check)

@@ -39,8 +39,11 @@ numbers (fields, monitors, element arrays) is mapped through `RankModel.kernel_o
 The static stage (pyfem/distributed_stage.py): its dynamic relaxation on the ranks' parts, handed over
 to the run as the whole model's is.
 
-Not built yet (each refused with the key and what is allowed): a linear static stage's solves, local
-time stepping, one point per cell, quadratic tetrahedra.
+Local time stepping (pyfem/distributed_lts.py): the whole model's levels and row split on the ranks'
+parts, one velocity exchange per level.
+
+Not built yet (each refused with the key and what is allowed): a linear static stage's solves, one
+point per cell, quadratic tetrahedra.
 """
 from __future__ import annotations
 
@@ -78,8 +81,6 @@ def check_supported(scene: Scene) -> None:
             if (table.get(law) or {}).get("integration") == "reduced":
                 raise SceneError(KEY, "distributed", allowed.format(f"materials.{name}.{law}.integration = "
                                                                     "\"reduced\""))
-    if scene["time"].get("local_stepping") is True:
-        raise SceneError(KEY, "distributed", allowed.format("time.local_stepping = true"))
 
 
 # --- numbering: owned nodes, the index map's ghosts, the extra ghosts ---------------------------
@@ -234,6 +235,16 @@ def local_stiffness(comm: MPI.Comm, ownership, rows: sp.bsr_matrix, n_local: int
             np.concatenate([rows.data, ghost_blocks[order]]))
 
 
+def owned_row_sums(matrix: tuple, n_owned: int) -> np.ndarray:
+    """(n_owned,) per owned node the largest absolute row sum of its three rows of the kernel's
+    (indptr, indices, blocks): the Gershgorin bound of its row (pyfem.local_stepping.node_levels)."""
+    indptr, _, blocks = matrix
+    sums = np.abs(np.asarray(blocks[:indptr[n_owned]]).reshape(-1, 3, 3)).sum(axis=2)
+    row = np.repeat(np.arange(n_owned), np.diff(indptr[:n_owned + 1]))
+    per_dof = np.stack([np.bincount(row, weights=sums[:, d], minlength=n_owned) for d in range(3)], axis=1)
+    return per_dof.max(axis=1) if n_owned else np.zeros(0)
+
+
 def drop_zero_blocks(matrix: tuple) -> tuple:
     """The kernel's (indptr, indices, blocks) without its all-zero blocks (the element loop's cells
     leave zero blocks where only they coupled two nodes; the whole model's matrix drops them too)."""
@@ -264,13 +275,24 @@ class GhostPlan:
         return _kernels.MpiNodeExchange(comm.py2f(), self.neighbours, self.send, self.recv, n_local)
 
     def update(self, comm: MPI.Comm, x: np.ndarray) -> None:
-        """The ghosts' rows of x (n_local, k) from their owners (the power iteration's exchange)."""
+        """The ghosts' rows of x (n_local, ...) from their owners (the power iteration's exchange)."""
         requests = [comm.Isend(np.ascontiguousarray(x[nodes]), dest=q, tag=77)
                     for q, nodes in zip(self.neighbours, self.send)]
         for q, nodes in zip(self.neighbours, self.recv):
-            buffer = np.empty((len(nodes),) + x.shape[1:])
+            buffer = np.empty((len(nodes),) + x.shape[1:], dtype=x.dtype)
             comm.Recv(buffer, source=q, tag=77)
             x[nodes] = buffer
+        MPI.Request.Waitall(requests)
+
+    def reduce(self, comm: MPI.Comm, x: np.ndarray, op=np.minimum) -> None:
+        """The owned rows of x (n_local, ...) combined by `op` (a numpy ufunc) with every rank's rows of
+        them as its ghosts: the reverse of `update`."""
+        requests = [comm.Isend(np.ascontiguousarray(x[nodes]), dest=q, tag=78)
+                    for q, nodes in zip(self.neighbours, self.recv)]
+        for q, nodes in zip(self.neighbours, self.send):
+            buffer = np.empty((len(nodes),) + x.shape[1:], dtype=x.dtype)
+            comm.Recv(buffer, source=q, tag=78)
+            op.at(x, nodes, buffer)
         MPI.Request.Waitall(requests)
 
 
@@ -332,6 +354,7 @@ class RankModel:
     moved_nodes: int = 0             # pair nodes stepped on another rank than dolfinx's owner (every rank's)
     n_extra: int = 0                 # extra ghosts: ghosts the function space's index map does not hold
     pair_side: np.ndarray | None = None    # per local node: its roles, bit side + 2 interface of each pair it is in
+    row_sums: np.ndarray | None = None     # per owned node: its largest absolute row sum of every cell's matrix
 
     def node_keys(self, nodes: np.ndarray) -> np.ndarray:
         """Checkpoint keys of local `nodes`: their positions, and with contact their roles (`pair_side`:
@@ -452,6 +475,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     plan = ghost_plan(comm, ownership, local_nodes, n_owned)
     mass = np.ascontiguousarray(mass)
     estimates = omega2_estimates(scene, comm, plan, kernel_matrix, mass, coords, n_owned)
+    row_sums = owned_row_sums(kernel_matrix, n_owned)  # every cell's: local stepping's levels
     loop_cells = element_loop_cells(scene, model)
     if loop_cells:  # the matrix of the other cells (the whole model's NonlinearRegions.stiffness)
         del kernel_matrix
@@ -486,7 +510,8 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
                      kernel_of_dolfinx=None if identity else kernel_of_dolfinx, pairs=rank_pairs,
                      pair_index=pair_index, pair_global=pair_global, pair_side=pair_side,
                      n_pairs=0 if pairs is None else len(pairs),
-                     moved_nodes=len(ownership.moved), n_extra=len(extra), setup_seconds=time.perf_counter() - began)
+                     moved_nodes=len(ownership.moved), n_extra=len(extra), row_sums=row_sums,
+                     setup_seconds=time.perf_counter() - began)
 
 
 def _rank_pairs(comm: MPI.Comm, pairs, ownership, local_nodes: np.ndarray, mass: np.ndarray):
@@ -964,9 +989,11 @@ class _Fields:
         self.file.close()
 
 
-def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None = None) -> dict:
+def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None = None, lts=None,
+         lts_decision: str | None = None) -> dict:
     """What `run` prints before it steps (rank 0); with deteriorating pairs (`contact_arrays`) the
-    whole model's "interface wear" line."""
+    whole model's "interface wear" line; with local time stepping (`lts`: distributed_lts.RankLevels,
+    `lts_decision`: "auto"'s reason) its levels."""
     from pyfem.solver import wear_words
 
     counts = part.comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts), root=0)
@@ -976,6 +1003,11 @@ def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None =
             "ranks": part.comm.size, "dofs": part.n_dofs_global,
             "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e in counts],
             "time step": f"{time_step.dt:.6g} s ({time_step.reason})", "steps": n_steps,
+            **({"local stepping": lts_decision} if lts_decision else {}),
+            **({"local time stepping": f"{len(lts.counts)} rate levels on the ranks' parts (nodes per level, finest "
+                                       f"first: {', '.join(str(int(c)) for c in lts.counts)}; global step "
+                                       f"{time_step.dt * lts.ratio:.6g} s), the row split, one velocity exchange per "
+                                       "level (pyfem/distributed_lts.py)"} if lts is not None else {}),
             **({"static stage": f"dynamic relaxation on the ranks' parts before the motion: 2 stages of at most "
                                 f"{int(part.scene['static']['max_steps'])} relaxation steps each and a frequency "
                                 "probe (pyfem/distributed_stage.py)"} if "static" in part.scene else {}),
@@ -1032,19 +1064,21 @@ def _check(scene: Scene) -> dict:
         stage_boundary(scene, part.model)
         _install_cells(scene, part.model)
     kernel_threads()
-    stepper, exchange = run.stepper()
+    stepper, exchange = run.stepper(check_stability=False)  # (local stepping's check runs with the run)
     n = 3 * part.n_local
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
     stepper.reset_energy(u, v, a, 0.0)
+    ratio = 1 if run.lts is None else run.lts.ratio
+    trial = ratio * math.ceil(TRIAL_STEPS / ratio)  # (local stepping: whole global steps)
     comm.Barrier()
     began = time.perf_counter()
-    stepper.run(u, v, a, TRIAL_STEPS, 0.0)
-    per_step = comm.allreduce(time.perf_counter() - began, op=MPI.MAX) / TRIAL_STEPS
+    stepper.run(u, v, a, trial, 0.0)
+    per_step = comm.allreduce(time.perf_counter() - began, op=MPI.MAX) / trial
     cells = (0, 0) if loop is None else (
         sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
         0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
     shares = comm.gather((*cells, int(exchange.bytes_sent_per_step), round(peak_memory_mib())), root=0)
-    shown = plan(part, ts, run.n_steps, run.contact_arrays)
+    shown = plan(part, ts, run.n_steps, run.contact_arrays, run.lts, run.lts_decision)
     if comm.rank != 0:
         return {}
     seconds = per_step * run.n_steps
@@ -1052,7 +1086,8 @@ def _check(scene: Scene) -> dict:
         "effects": ", ".join(scene.effects) or "none",
         "element loop cells / halo cells per rank": [f"{c} / {h}" for c, h, _, _ in shares] if loop else "none",
         "bytes sent per step per rank": [b for _, _, b, _ in shares],
-        "time per step": f"{1e3 * per_step:.3g} ms (the slowest rank, {TRIAL_STEPS} steps from rest timed here)",
+        "time per step": f"{1e3 * per_step:.3g} ms (the slowest rank, {trial} {'fine ' if ratio > 1 else ''}steps "
+                         "from rest timed here)",
         "time loop estimate": f"{seconds:.0f} s ({seconds / 3600:.2f} h) for {run.n_steps} steps; with the element "
                               "loop yielding or cracking a step costs up to several times this",
         "peak memory per rank (MiB, the set-up and the trial)": [m for *_, m in shares]})
@@ -1188,6 +1223,15 @@ class DistributedRun:
             for message in initial_warnings(loop.counted, scene, comm):  # (counts summed over the ranks)
                 scene.warn(message)
             flow_warnings(scene, scene_laws(scene)[0], self.time_step)
+        from pyfem import distributed_lts
+
+        # Local time stepping (pyfem/distributed_lts.py): its levels, step and "auto"'s decision.
+        self.lts, self.lts_decision = distributed_lts.choose(part, loop, self.time_step, scene["time"]["duration"])
+        self.lts_layout = None  # the LocalStepper's parts (distributed_lts.RankLayout), with the stepper
+        self.lts_stability = None  # the set-up check's report when it sent "auto" back to global stepping
+        if self.lts is not None:
+            self.time_step = self.lts.time_step
+            self.n_steps = whole_steps(scene["time"]["duration"], self.time_step)
         self.energy_columns = energy_columns(part.pairs is not None, loop is not None)
         self.freefield = input_arrays = None
         record = scene_record(scene) if {"seismic_input", "contact"} & set(scene.effects) else None
@@ -1244,9 +1288,21 @@ class DistributedRun:
         self.last_flush = time.monotonic()
 
     # -- set-up -------------------------------------------------------------------------------------
-    def stepper(self) -> tuple:
+    def stepper(self, check_stability: bool = True) -> tuple:
         """(the kernel's Stepper of this rank's part, its exchange), with the ContactPairs of the
-        rank's pairs (`self.contact`; a rank without pairs has none)."""
+        rank's pairs (`self.contact`; a rank without pairs has none). With local time stepping the
+        LocalStepper and its levels' exchanges (pyfem/distributed_lts.py), after the set-up check of
+        its map (`check_stability`; once): an unstable map is refused when local stepping was asked
+        for, and "auto" falls back to global stepping."""
+        if self.lts is not None and check_stability and self.lts.stability is None:
+            self._check_lts()
+        if self.lts is not None:
+            from pyfem.distributed_lts import rank_stepper
+
+            stepper, exchanges, self.lts_layout = rank_stepper(self.part, self.lts, self.loop, self.input_arrays,
+                                                               self.contact_arrays, self.stage)
+            self.contact = self.lts_layout.pairs
+            return stepper, exchanges
         if self.stage is not None:  # the stage's pairs go on (rebased; pyfem/distributed_stage.py hand_over)
             self.contact = self.stage.contact
         elif self.contact_arrays is not None and len(self.part.pairs):
@@ -1255,24 +1311,49 @@ class DistributedRun:
             self.contact = make_contact_pairs(self.contact_arrays)
         return _stepper(self.part, self.time_step.dt, self.input_arrays, self.loop, self.contact)
 
+    def _check_lts(self) -> None:
+        """The set-up check of the LTS map on the ranks (pyfem/distributed_lts.py), as the whole
+        model's (pyfem.solver._make_local_stepper)."""
+        from pyfem import local_stepping
+        from pyfem.distributed_lts import check_stability_on_ranks
+        from pyfem.solver import whole_steps
+
+        report = self.lts.stability = check_stability_on_ranks(self.part, self.lts, self.loop)
+        if report["stable"]:
+            return
+        if self.scene["time"].get("local_stepping") != "auto":
+            raise SceneError(local_stepping.KEY, True, "false for this model: its local time stepping map amplified "
+                             f"a random state's energy {report['growth']:.3g}x in {report['global_steps']} global "
+                             "steps (unstable); lower time.safety or turn local stepping off")
+        self.time_step, self.lts = self.lts.global_step, None
+        self.n_steps = whole_steps(self.scene["time"]["duration"], self.time_step)
+        self.lts_stability = report
+        self.lts_decision = (f"\"auto\": off: its set-up check found the local time stepping map unstable on this "
+                             f"model (a random state's energy grew {report['growth']:.3g}x in "
+                             f"{report['global_steps']} global steps); global stepping instead")
+        self.scene.warn("time.local_stepping = \"auto\": local stepping was predicted to pay, but its map is "
+                        "unstable on this model; the run steps globally (run.json \"local_stepping\")")
+
     def _fingerprint(self) -> dict:
         from pyfem.checkpoint import scene_fingerprint
 
         return {"scene": scene_fingerprint(self.scene), "dofs": self.part.n_dofs_global, "dt": self.time_step.dt,
-                "steps": self.n_steps, "ranks": self.comm.size}
+                "steps": self.n_steps, "ranks": self.comm.size,
+                "levels": None if self.lts is None else self.lts.counts.tolist()}
 
     def _check_model(self, saved) -> None:
         """Refuses (SceneError, key --resume, on every rank alike) a checkpoint of another model,
         rank count or partition."""
         theirs, ours = saved.meta["fingerprint"], self._fingerprint()
-        for key in ("dofs", "dt", "steps"):
-            if theirs[key] != ours[key]:
+        for key in ("dofs", "dt", "steps", "levels"):
+            if theirs.get(key) != ours[key]:
                 saved._refuse(f"the model's {key} differs from the checkpoint's (another mesh or build?)")
 
     def _summary(self) -> dict:
         from pyfem import distributed_stage
 
         part, model, ts = self.part, self.part.model, self.time_step
+        stability = self.lts.stability if self.lts is not None else self.lts_stability
         return {"title": self.scene["title"], "scene": self.scene.to_json(), "effects": list(self.scene.effects),
                 "model": "distributed", "ranks": self.comm.size,
                 "cells": self.comm.allreduce(model.n_cells), "nodes": part.n_dofs_global // 3,
@@ -1282,9 +1363,8 @@ class DistributedRun:
                 "boundary_faces": part.faces_report, "traction_free_surfaces": dict(model.free_surfaces),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(getattr(self.scene, "warnings", [])),
                 **({"static": distributed_stage.brief(self.stage.report)} if self.stage is not None else {}),
-                **({"local_stepping": "\"auto\": off: the distributed model steps globally (local time stepping "
-                                      "on it is not built yet, docs/scaling.md)"}
-                   if self.scene["time"].get("local_stepping") == "auto" else {}),
+                **({"local_stepping": self.lts_decision} if self.lts_decision else {}),
+                **({"local_stepping_stability": stability} if stability else {}),
                 "status": "running"}
 
     def _open(self, stepper) -> tuple:
@@ -1493,43 +1573,75 @@ class DistributedRun:
         self.checkpoint_id = identifier
 
     def _components(self) -> list:
-        """(region, "counted" or "halo", ElementArrays) of the stepper's components, in its order."""
+        """(region, "counted" or "halo", ElementArrays, [(the region's cell rows, archive prefix)] of
+        each kernel component of it) of the stepper's element loop, in its order: one component per
+        region, or with local time stepping one per level (pyfem/distributed_lts.py)."""
         loop = self.loop
         if loop is None:
             return []
-        found = [(name, "counted", arrays) for name, arrays in loop.counted.arrays.items()]
-        if loop.halo is not None:
-            found += [(name, "halo", arrays) for name, arrays in loop.halo.arrays.items()]
-        return found
+        kinds = [("counted", loop.counted)] + ([("halo", loop.halo)] if loop.halo is not None else [])
+        if self.lts_layout is not None:
+            regions = dict(kinds)
+            return [(name, kind, regions[kind].arrays[name], [(rows, prefix) for (rows, _), prefix
+                                                              in zip(region.parts, prefixes)])
+                    for name, kind, region, prefixes in self.lts_layout.components]
+        found = [(name, kind, arrays) for kind, regions in kinds for name, arrays in regions.arrays.items()]
+        return [(name, kind, arrays, [(np.arange(len(arrays.cells)), f"component/{k}/")])
+                for k, (name, kind, arrays) in enumerate(found)]
+
+    def _pair_parts(self) -> list:
+        """[(the rank's pair rows, archive prefix)] of the stepper's ContactPairs: one, or with local
+        time stepping one per level."""
+        if self.lts_layout is not None:
+            return [(rows, prefix) for (rows, _), prefix in zip(self.lts_layout.pairs.parts,
+                                                                self.lts_layout.pair_prefixes)]
+        return [(np.arange(len(self.part.pairs)), "contact/")]
 
     def rank_state(self, stepper, u, v, a) -> dict:
         """This rank's part of a checkpoint, keyed by position, not by its numbering: its owned nodes'
         u, v, a and internal force, its constraints' reactions, its counted cells' per-point state,
-        and its share of the energy account (a sum over the ranks)."""
+        and its share of the energy account (a sum over the ranks); with local time stepping the
+        LocalStepper's own state instead of the Stepper's (pyfem.distributed_lts.lts_rank_state)."""
+        from pyfem.distributed import pair_blocks, state_rows
+
         part, n = self.part, self.part.n_owned
         kernel = stepper.save_state()
         out = {"node_keys": part.node_keys(np.arange(n)), "u": u[:3 * n], "v": v[:3 * n], "a": a[:3 * n]}
-        force = np.frombuffer(kernel["stepper/internal_force"], dtype=np.float64)
-        if len(force):
-            out["internal_force"] = force[:3 * n]
         if part.constraints is not None:
             out["reaction_keys"] = part.node_keys(part.constraints.nodes)
-            out["reactions"] = np.frombuffer(kernel["stepper/reactions"], dtype=np.float64)
-        for name in ("stepper/energy", "stepper/provider_work", "stepper/provider_power", "stepper/energy_started"):
-            out[name] = np.frombuffer(kernel[name], dtype=np.uint8)
+        if self.lts is not None:
+            from pyfem.distributed_lts import lts_rank_state
+
+            out.update(lts_rank_state(kernel, self.lts, n))
+        else:
+            force = np.frombuffer(kernel["stepper/internal_force"], dtype=np.float64)
+            if len(force):
+                out["internal_force"] = force[:3 * n]
+            if part.constraints is not None:
+                out["reactions"] = np.frombuffer(kernel["stepper/reactions"], dtype=np.float64)
+            for name in ("stepper/energy", "stepper/provider_work", "stepper/provider_power",
+                         "stepper/energy_started"):
+                out[name] = np.frombuffer(kernel[name], dtype=np.uint8)
         if self.contact is not None:  # every pair's state, keyed by its interface and position
             out["pair_keys"] = self._pair_keys()
-            for name in self._contact_blocks(kernel):
-                out[f"pairs/{name}"] = np.frombuffer(kernel[name], dtype=np.uint8).reshape(len(part.pairs), -1)
-        for k, (name, kind, arrays) in enumerate(self._components()):
+            for rows, prefix in self._pair_parts():
+                for name in pair_blocks(kernel, prefix):
+                    piece = state_rows(kernel[prefix + name], len(rows))
+                    whole = out.setdefault(f"pairs/{name}", np.zeros((len(part.pairs), piece.shape[1]), np.uint8))
+                    whole[rows] = piece
+        for name, kind, arrays, parts in self._components():
             if kind != "counted":
                 continue
-            prefix, cells = f"component/{k}/", len(arrays.weights)
+            cells = len(arrays.weights)
             out[f"cells/{name}/keys"] = point_keys(arrays.points.mean(axis=1))
             for block in ("state", "initial_stress"):
-                out[f"cells/{name}/{block}"] = np.frombuffer(kernel[prefix + block], dtype=np.uint8).reshape(cells, -1)
+                for rows, prefix in parts:
+                    piece = state_rows(kernel[prefix + block], len(rows))
+                    whole = out.setdefault(f"cells/{name}/{block}", np.zeros((cells, piece.shape[1]), np.uint8))
+                    whole[rows] = piece
             for block in ("stored_energy", "dissipation"):
-                out[f"cells/{name}/{block}"] = np.frombuffer(kernel[prefix + block], dtype=np.uint8)
+                out[f"cells/{name}/{block}"] = np.sum([np.frombuffer(kernel[prefix + block], dtype=np.float64)
+                                                       for _, prefix in parts], axis=0)
         return out
 
     def _pair_keys(self) -> np.ndarray:
@@ -1537,32 +1649,94 @@ class DistributedRun:
         pairs = self.part.pairs
         return np.column_stack([pairs.interface.astype(np.int64), point_keys(pairs.coords)])
 
-    @staticmethod
-    def _contact_blocks(kernel: dict) -> list[str]:
-        """The kernel's per-pair contact state blocks: every contact/ entry but the pairs' node
-        numbers (the rank's own) and node_force (per pair node, the last correction's scratch: zeroed
-        before every correction, read by nothing)."""
-        return sorted(name for name in kernel if name.startswith("contact/")
-                      and name not in ("contact/pairs", "contact/node_force"))
-
     def load_rank_states(self, stepper, identifier: int, ranks: int) -> tuple:
         """The checkpoint's state for this rank's nodes and cells, from every rank file of checkpoint
         `identifier` (written by `ranks` ranks, any partition): returns (u, v, a); the kernel's state
         loaded (energy account on rank 0, summed; a region's scalars on its first counted component)."""
+        from pyfem.distributed import pair_blocks
+
         part, comm = self.part, self.comm
         files = [dict(np.load(rank_file(self.out, identifier, q), allow_pickle=False)) for q in range(ranks)]
         rows = rows_of(np.concatenate([f["node_keys"] for f in files]), part.node_keys(np.arange(part.n_local)), "nodes")
         u, v, a = (np.ascontiguousarray(np.concatenate([f[x].reshape(-1, 3) for f in files])[rows].reshape(-1))
                    for x in "uva")
-        state = dict(stepper.save_state())
+        reaction_rows = None
+        if part.constraints is not None:
+            reaction_rows = rows_of(np.concatenate([f["reaction_keys"] for f in files]),
+                                    part.node_keys(part.constraints.nodes), "constrained nodes")
+        started = True
+        if self.lts is not None:
+            from pyfem.distributed_lts import load_lts_state
+
+            started = bool(files[0]["lts/started"][0])
+            if started:  # the blocks a LocalStepper saves once it has run (a run of no steps starts it)
+                zeros = np.zeros(3 * part.n_local)
+                stepper.run(zeros, zeros.copy(), zeros.copy(), 0, 0.0)
+                state = load_lts_state(stepper.save_state(), files, rows, reaction_rows, self.lts, comm.rank == 0)
+            else:
+                state = dict(stepper.save_state())
+        else:
+            state = self._stepper_blocks(dict(stepper.save_state()), files, rows, reaction_rows)
+        first = {}  # region -> the lowest rank counting its cells takes its scalars
+        counted_here = {name for name, kind, *_ in self._components() if kind == "counted"}
+        lowest = comm.allgather(sorted(counted_here))
+        for name in {n for names in lowest for n in names}:
+            first[name] = min(q for q, names in enumerate(lowest) if name in names)
+        parts = {}  # archive prefix -> the component or pairs holding it (a LocalStepper not started: loaded here)
+        for name, kind, arrays, pieces in self._components():
+            having = [f for f in files if f"cells/{name}/keys" in f]
+            keys = point_keys(arrays.points.mean(axis=1))
+            data = {block: np.concatenate([f[f"cells/{name}/{block}"] for f in having])
+                    for block in ("state", "initial_stress")}
+            totals = {block: np.sum([f[f"cells/{name}/{block}"].view(np.float64) for f in having], axis=0)
+                      for block in ("stored_energy", "dissipation")}
+            all_keys = np.concatenate([f[f"cells/{name}/keys"] for f in having])
+            for index, (cells, prefix) in enumerate(pieces):
+                found = rows_of(all_keys, keys[cells], f"cells of {name!r}")
+                for block in ("state", "initial_stress"):
+                    state[prefix + block] = np.ascontiguousarray(data[block][found]).tobytes()
+                takes = kind == "counted" and comm.rank == first[name] and index == 0
+                for block, total in totals.items():
+                    state[prefix + block] = (total if takes else np.zeros_like(total)).tobytes()
+            if self.lts_layout is not None:
+                region = next(r for n, k, r, _ in self.lts_layout.components if n == name and k == kind)
+                parts.update({prefix: component for (_, component), (_, prefix) in zip(region.parts, pieces)})
+        if self.contact is not None:
+            having = [f for f in files if "pair_keys" in f]
+            found = rows_of(np.concatenate([f["pair_keys"] for f in having]), self._pair_keys(), "contact pairs")
+            for (pair_rows, prefix), contact in zip(self._pair_parts(), self._pair_objects()):
+                for name in pair_blocks(state, prefix) or pair_blocks(contact.save_state()):
+                    data = np.concatenate([f[f"pairs/{name}"] for f in having])
+                    state[prefix + name] = np.ascontiguousarray(data[found][pair_rows]).tobytes()
+                parts[prefix] = contact
+        if self.lts is not None:
+            stepper.load_state(state)
+            if not started:  # an unstarted LocalStepper loads none of its parts' states: each loads its own
+                for prefix, component in parts.items():
+                    own = component.save_state()
+                    component.load_state({name: state.get(prefix + name, block) for name, block in own.items()})
+        else:
+            stepper.load_state(state)
+        return u, v, a
+
+    def _pair_objects(self) -> list:
+        """The kernel's ContactPairs of `_pair_parts`, in its order."""
+        if self.lts_layout is not None:
+            return [contact for _, contact in self.lts_layout.pairs.parts]
+        return [self.contact]
+
+    def _stepper_blocks(self, state: dict, files: list, rows: np.ndarray, reaction_rows) -> dict:
+        """The global Stepper's own blocks of `state` (its save_state) from the checkpoint's rank
+        files: the internal force of this rank's local nodes (`rows` in the files' owned nodes), its
+        constraints' reactions, the energy account summed onto rank 0, the input's work onto the
+        lowest rank with an input node."""
+        comm = self.comm
         if len(state["stepper/internal_force"]):
             state["stepper/internal_force"] = np.ascontiguousarray(
                 np.concatenate([f["internal_force"].reshape(-1, 3) for f in files])[rows]).tobytes()
-        if part.constraints is not None:
-            found = rows_of(np.concatenate([f["reaction_keys"] for f in files]),
-                            part.node_keys(part.constraints.nodes), "constrained nodes")
+        if reaction_rows is not None:
             state["stepper/reactions"] = np.ascontiguousarray(
-                np.concatenate([f["reactions"].reshape(-1, 3) for f in files])[found]).tobytes()
+                np.concatenate([f["reactions"].reshape(-1, 3) for f in files])[reaction_rows]).tobytes()
         state["stepper/energy_started"] = files[0]["stepper/energy_started"].tobytes()
         total = np.sum([f["stepper/energy"].view(np.float64) for f in files], axis=0)
         state["stepper/energy"] = (total if comm.rank == 0 else np.zeros_like(total)).tobytes()
@@ -1578,31 +1752,7 @@ class DistributedRun:
             if comm.rank == taker:
                 mine[0] = sum(float(f[name].view(np.float64).sum()) for f in files)
             state[name] = mine.tobytes()
-        first = {}  # region -> the lowest rank counting its cells takes its scalars
-        counted_here = {name for name, kind, _ in self._components() if kind == "counted"}
-        lowest = comm.allgather(sorted(counted_here))
-        for name in {n for names in lowest for n in names}:
-            first[name] = min(q for q, names in enumerate(lowest) if name in names)
-        for k, (name, kind, arrays) in enumerate(self._components()):
-            prefix = f"component/{k}/"
-            having = [f for f in files if f"cells/{name}/keys" in f]
-            found = rows_of(np.concatenate([f[f"cells/{name}/keys"] for f in having]),
-                            point_keys(arrays.points.mean(axis=1)), f"cells of {name!r}")
-            for block in ("state", "initial_stress"):
-                data = np.concatenate([f[f"cells/{name}/{block}"] for f in having])
-                state[prefix + block] = np.ascontiguousarray(data[found]).tobytes()
-            takes = kind == "counted" and comm.rank == first[name]
-            for block in ("stored_energy", "dissipation"):
-                total = np.sum([f[f"cells/{name}/{block}"].view(np.float64) for f in having], axis=0)
-                state[prefix + block] = (total if takes else np.zeros_like(total)).tobytes()
-        if self.contact is not None:
-            having = [f for f in files if "pair_keys" in f]
-            found = rows_of(np.concatenate([f["pair_keys"] for f in having]), self._pair_keys(), "contact pairs")
-            for name in self._contact_blocks(state):
-                data = np.concatenate([f[f"pairs/{name}"] for f in having])
-                state[name] = np.ascontiguousarray(data[found]).tobytes()
-        stepper.load_state(state)
-        return u, v, a
+        return state
 
     def remove_checkpoint(self) -> None:
         from pyfem.checkpoint import CHECKPOINT_NAME
@@ -1624,7 +1774,7 @@ class DistributedRun:
 
         comm, root, part, ts = self.comm, self.root, self.part, self.time_step
         if on_plan is not None:
-            shown = plan(part, ts, self.n_steps, self.contact_arrays)
+            shown = plan(part, ts, self.n_steps, self.contact_arrays, self.lts, self.lts_decision)
             if root:
                 if self.saved is not None:
                     shown = {"resuming": f"from the checkpoint at t = {self.saved.t:.6g} s of "

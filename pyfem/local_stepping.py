@@ -76,6 +76,13 @@ def check_supported(scene, beta: float) -> None:
                                                     "stores double blocks)"))
 
 
+def held_pair_error(node: str) -> SceneError:
+    """The refusal of local stepping on a model whose contact pair `node` (its words) is on a fixed or
+    roller face."""
+    return SceneError(KEY, True, f"false for scenes with contact pairs on fixed or roller faces ({node} is both): "
+                                 "local time stepping does not correct a held pair node (docs/lts_plan.md)")
+
+
 def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: int = MAX_LEVEL,
                 pinned: np.ndarray | None = None, pairs: np.ndarray | None = None,
                 loop_cells: np.ndarray | None = None, rows: bool = False) -> np.ndarray:
@@ -104,16 +111,23 @@ def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: 
 
 
 def fit_levels_to_output(levels: np.ndarray, steps_per_output: int) -> np.ndarray:
-    """Levels capped at the top level L' <= max(levels) that costs least per output interval: the run
-    takes whole global steps of dt_fine 2^L' per interval (`local_time_step` lowers dt_fine to fit), so
-    a deep hierarchy can cost more fine steps than it saves. The cost of L' is the fine steps per
-    interval, ceil(steps_per_output / 2^L') 2^L', times the nodes' work per fine step, the sum of
-    2^-min(level, L') (every node's row once per step of its level). Capping only makes nodes step
-    finer, so it is as stable as the levels it caps. On the coarse case 3 (85 steps per 0.01 s, nodes
-    per level 19 756 / 8 710 / 8 880 / 17 869 / 3 039 / 98) it caps at 3: 88 fine steps instead of 96,
-    7.7 % less work (docs/lts_plan.md "The case study under the row split"). Returns an int32 array."""
+    """Levels capped at the top level L' <= max(levels) that costs least per output interval
+    (`fitted_top` of the nodes per level). Capping only makes nodes step finer, so it is as stable as
+    the levels it caps. Returns an int32 array."""
     levels = np.asarray(levels, dtype=np.int32)
-    counts = np.bincount(levels).astype(float)
+    return np.minimum(levels, fitted_top(np.bincount(levels), steps_per_output)).astype(np.int32)
+
+
+def fitted_top(counts, steps_per_output: int) -> int:
+    """The top level L' (<= the largest with nodes, `counts` the nodes per level) that costs least per
+    output interval: the run takes whole global steps of dt_fine 2^L' per interval (`local_time_step`
+    lowers dt_fine to fit), so a deep hierarchy can cost more fine steps than it saves. The cost of L'
+    is the fine steps per interval, ceil(steps_per_output / 2^L') 2^L', times the nodes' work per fine
+    step, the sum of 2^-min(level, L') (every node's row once per step of its level). On the coarse
+    case 3 (85 steps per 0.01 s, nodes per level 19 756 / 8 710 / 8 880 / 17 869 / 3 039 / 98) it caps
+    at 3: 88 fine steps instead of 96, 7.7 % less work (docs/lts_plan.md "The case study under the row
+    split"). The counts of an MPI rank's owned nodes summed over the ranks give the whole model's."""
+    counts = np.trim_zeros(np.asarray(counts, dtype=float), "b")
     best, best_cost = 0, math.inf
     for top in range(len(counts)):
         ratio = 2 ** top
@@ -122,7 +136,7 @@ def fit_levels_to_output(levels: np.ndarray, steps_per_output: int) -> np.ndarra
         cost = fine_steps * work
         if cost < best_cost * (1.0 - 1e-12):  # the shallower of two equal costs
             best, best_cost = top, cost
-    return np.minimum(levels, best).astype(np.int32)
+    return best
 
 
 def equalize_pair_levels(levels: np.ndarray, pairs: np.ndarray) -> np.ndarray:
@@ -449,28 +463,33 @@ def load_pair_parts(whole, parts: list, pair_nodes: np.ndarray) -> None:
         contact.load_state(out)
 
 
-def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, stiffness, pairs: np.ndarray | None,
-                       time_step, phases_ms: dict, rows: bool = True) -> dict:
-    """What local stepping would save on a model, from its rate levels and the measured phases of one
-    global step (`phases_ms`: ms per step of element_loop, stiffness, contact, update, input_forces). Each phase's work per simulated second relative to global stepping at time_step.dt:
-    - element loop: its points weighted by 2^-k of their cell's level (the row split, `rows`: the
-      finest of its nodes'; the column split: `cell_levels`, made finer around contact pairs by
-      `pair_cell_cap`), times dt / dt_fine;
-    - contact: the pairs weighted by their level;
-    - the rest (stiffness kicks, drifts, input): the matrix's blocks weighted by their column's level.
-    Returns {"speed_up" (global time / predicted local time per simulated second), "element_loop",
-    "matrix", "contact" (the relative work of each), "levels" (nodes per level)}. A model: it leaves out
-    the pair and interface rows stepped at their drift level and the kicks' own overhead: it over-predicts the
-    measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured, the column
-    split; docs/lts_plan.md "Where it pays"), and by 27 % on the coarse case 3 in the row split (1.69x predicted from
-    `check`'s steps at rest, 1.33x measured with the rock yielding; "The case study under the row split")."""
+WORK_SUMS = ("blocks", "weighted_blocks", "points", "weighted_points", "pairs", "weighted_pairs", "nodes")
+"""What the work model reads of a model (`work_sums`): sums over rows, cells and pairs, so that an MPI
+rank's sums over its owned rows, counted cells and pairs add up to the whole model's."""
+
+
+def work_sums(levels: np.ndarray, row_blocks: np.ndarray, cell_points: np.ndarray, cell_level: np.ndarray,
+              pair_levels: np.ndarray) -> np.ndarray:
+    """WORK_SUMS of the given rows (`levels` and `row_blocks`: each row's level and stiffness blocks),
+    element-loop cells (their points and levels) and contact pairs (their levels): each count and the
+    same weighted by 2^-level, the share of global stepping's steps it takes."""
+    levels = np.asarray(levels, dtype=float)
+    row_blocks = np.asarray(row_blocks, dtype=float)
+    cell_points = np.asarray(cell_points, dtype=float)
+    pair_levels = np.asarray(pair_levels, dtype=float)
+    return np.array([row_blocks.sum(), np.sum(row_blocks * 2.0 ** -levels), cell_points.sum(),
+                     np.sum(cell_points * 2.0 ** -np.asarray(cell_level, dtype=float)), len(pair_levels),
+                     np.sum(2.0 ** -pair_levels), len(levels)])
+
+
+def model_work_sums(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, stiffness, pairs: np.ndarray | None,
+                    rows: bool = True) -> np.ndarray:
+    """`work_sums` of the whole model: its matrix's rows, its element-loop cells at their level (the
+    row split, `rows`: the finest of its nodes'; the column split: `cell_levels`, made finer around
+    contact pairs by `pair_cell_cap`) and its pairs at their first node's level."""
     levels = np.asarray(levels)
-    fine_step, top = local_time_step(time_step, levels, "row" if rows else "column")
-    scale = time_step.dt / fine_step.dt
-    weight = 2.0 ** -levels.astype(float)
-    blocks_per_column = np.diff(stiffness.indptr).astype(float)
-    matrix = scale * float(np.sum(blocks_per_column * weight) / np.sum(blocks_per_column))
-    loop = 0.0
+    cell_level = np.zeros(len(cell_nodes), dtype=np.int64)
+    points = np.zeros(len(cell_nodes))
     loop_cells = loop_cell_mask(nonlinear, len(cell_nodes))
     if loop_cells is not None:
         if rows:
@@ -480,11 +499,42 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
             cell_level = cell_levels(levels, cell_nodes).astype(np.int64)
             if cap is not None:
                 cell_level = np.minimum(cell_level, cap)
-        points = np.zeros(len(cell_nodes))
         for arrays in nonlinear.arrays.values():
             points[arrays.cells] = arrays.weights.shape[1]
-        loop = scale * float(np.sum(points * 2.0 ** -cell_level) / np.sum(points))
-    contact = scale * float(np.mean(weight[np.asarray(pairs)[:, 0]])) if pairs is not None and len(pairs) else 0.0
+    pair_levels = levels[np.asarray(pairs)[:, 0]] if pairs is not None and len(pairs) else np.zeros(0)
+    return work_sums(levels, np.diff(stiffness.indptr), points, cell_level, pair_levels)
+
+
+def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, stiffness, pairs: np.ndarray | None,
+                       time_step, phases_ms: dict, rows: bool = True) -> dict:
+    """What local stepping would save on a model, from its rate levels and the measured phases of one
+    global step (`phases_ms`): `speed_up_of` its `model_work_sums`."""
+    levels = np.asarray(levels)
+    return speed_up_of(model_work_sums(levels, cell_nodes, nonlinear, stiffness, pairs, rows), np.bincount(levels),
+                       time_step, phases_ms, rows)
+
+
+def speed_up_of(sums: np.ndarray, counts, time_step, phases_ms: dict, rows: bool = True) -> dict:
+    """What local stepping would save on a model of these `work_sums` and nodes per level (`counts`),
+    from the phases of one global step (`phases_ms`: ms per step of element_loop, stiffness, contact,
+    update, input_forces). Each phase's work per simulated second relative to global stepping at
+    time_step.dt:
+    - element loop: its points weighted by 2^-k of their cell's level, times dt / dt_fine;
+    - contact: the pairs weighted by their level;
+    - the rest (stiffness kicks, drifts, input): the matrix's blocks weighted by their column's level.
+    Returns {"speed_up" (global time / predicted local time per simulated second), "element_loop",
+    "matrix", "contact" (the relative work of each), "levels" (nodes per level)}. A model: it leaves out
+    the pair and interface rows stepped at their drift level and the kicks' own overhead: it over-predicts the
+    measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured, the column
+    split; docs/lts_plan.md "Where it pays"), and by 27 % on the coarse case 3 in the row split (1.69x predicted from
+    `check`'s steps at rest, 1.33x measured with the rock yielding; "The case study under the row split")."""
+    work = dict(zip(WORK_SUMS, np.asarray(sums, dtype=float)))
+    counts = np.trim_zeros(np.asarray(counts, dtype=np.int64), "b")
+    fine_step, top = local_time_step(time_step, None, "row" if rows else "column", counts=counts)
+    scale = time_step.dt / fine_step.dt
+    matrix = scale * work["weighted_blocks"] / work["blocks"]
+    loop = scale * work["weighted_points"] / work["points"] if work["points"] else 0.0
+    contact = scale * work["weighted_pairs"] / work["pairs"] if work["pairs"] else 0.0
     # The kernel's phases only: a trial from rest spends milliseconds of "other" (first calls) that a
     # run does not (run.json: ~0.02 ms per step).
     global_ms = sum(phases_ms.get(name, 0.0) for name in ("element_loop", "stiffness", "contact", "update",
@@ -492,34 +542,43 @@ def predicted_speed_up(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, st
     local_ms = (phases_ms.get("element_loop", 0.0) * loop + phases_ms.get("contact", 0.0) * contact
                 + sum(phases_ms.get(name, 0.0) for name in ("stiffness", "update", "input_forces")) * matrix)
     return {"speed_up": global_ms / local_ms if local_ms > 0 else math.inf, "element_loop": loop, "matrix": matrix,
-            "contact": contact, "levels": np.bincount(levels, minlength=top + 1).tolist()}
+            "contact": contact, "levels": [int(c) for c in counts]}
 
 
-def estimated_phases_ms(stiffness, nonlinear, pairs: np.ndarray | None, n_nodes: int) -> dict:
-    """A global step's phases (ms) by the work model COST_NS: the stiffness product by its blocks, the
-    element loop by its points, the contact by its pairs, the update and input forces by the nodes;
-    `predicted_speed_up`'s phases where nothing was timed."""
-    points = sum(arrays.weights.size for arrays in nonlinear.arrays.values()) if nonlinear is not None else 0
-    return {"stiffness": 1e-6 * COST_NS["block"] * float(stiffness.indptr[-1]),
-            "element_loop": 1e-6 * COST_NS["point"] * points,
-            "contact": 1e-6 * COST_NS["pair"] * (len(pairs) if pairs is not None else 0),
-            "update": 1e-6 * COST_NS["node"] * n_nodes}
+def estimated_phases_ms(sums: np.ndarray) -> dict:
+    """A global step's phases (ms) by the work model COST_NS from a model's `work_sums`: the stiffness
+    product by its blocks, the element loop by its points, the contact by its pairs, the update and
+    input forces by the nodes; `speed_up_of`'s phases where nothing was timed."""
+    work = dict(zip(WORK_SUMS, np.asarray(sums, dtype=float)))
+    return {"stiffness": 1e-6 * COST_NS["block"] * work["blocks"],
+            "element_loop": 1e-6 * COST_NS["point"] * work["points"],
+            "contact": 1e-6 * COST_NS["pair"] * work["pairs"],
+            "update": 1e-6 * COST_NS["node"] * work["nodes"]}
 
 
 def auto_decision(levels: np.ndarray, cell_nodes: np.ndarray, nonlinear, stiffness, pairs: np.ndarray | None,
                   time_step, duration: float, rows: bool = True) -> tuple[bool, str]:
-    """`time.local_stepping = "auto"`: whether local stepping pays on this model over this run, and
-    why. The speed-up per step is `predicted_speed_up` with the phases of the work model
-    (`estimated_phases_ms`); the set-up check (`check_stability`, STABILITY_STEPS global steps of the
-    local stepper) is charged to the run, so a short run of a model that would pay in the long one
-    stays with global stepping. On when the run's predicted speed-up is at least AUTO_PAYS.
-    Returns (on, the reason for run.json and `check`)."""
+    """`time.local_stepping = "auto"` on the whole model: `decision_of` its `model_work_sums`."""
+    levels = np.asarray(levels)
     if not np.any(levels):
+        return decision_of(None, np.bincount(levels), time_step, duration, rows)
+    return decision_of(model_work_sums(levels, cell_nodes, nonlinear, stiffness, pairs, rows), np.bincount(levels),
+                       time_step, duration, rows)
+
+
+def decision_of(sums: np.ndarray | None, counts, time_step, duration: float, rows: bool = True) -> tuple[bool, str]:
+    """`time.local_stepping = "auto"`: whether local stepping pays on a model of these `work_sums` and
+    nodes per level (`counts`) over this run, and why. The speed-up per step is `speed_up_of` with the
+    phases of the work model (`estimated_phases_ms`); the set-up check (`check_stability`,
+    STABILITY_STEPS global steps of the local stepper) is charged to the run, so a short run of a model
+    that would pay in the long one stays with global stepping. On when the run's predicted speed-up is at
+    least AUTO_PAYS. Returns (on, the reason for run.json and `check`)."""
+    counts = np.trim_zeros(np.asarray(counts, dtype=np.int64), "b")
+    if len(counts) <= 1:
         return False, ("\"auto\": off: one rate level on this model (every node's stable step within 2x of the "
                        "finest), nothing to gain")
-    phases = estimated_phases_ms(stiffness, nonlinear, pairs, len(levels))
-    p = predicted_speed_up(levels, cell_nodes, nonlinear, stiffness, pairs, time_step, phases, rows)
-    fine_step, top = local_time_step(time_step, levels, "row" if rows else "column")
+    p = speed_up_of(sums, counts, time_step, estimated_phases_ms(sums), rows)
+    fine_step, top = local_time_step(time_step, None, "row" if rows else "column", counts=counts)
     run_steps = max(1.0, duration / time_step.dt)  # global stepping's steps
     check_steps = STABILITY_STEPS * 2 ** top * fine_step.dt / time_step.dt  # the check, in those steps
     over_run = p["speed_up"] * run_steps / (run_steps + check_steps)
@@ -545,17 +604,18 @@ def row_split(nonlinear, contact: bool) -> bool:
     return True
 
 
-def local_time_step(time_step, levels: np.ndarray, split: str = "column"):
+def local_time_step(time_step, levels: np.ndarray | None, split: str = "column", counts=None):
     """The scene's TimeStep with whole global steps per output interval: dt_fine lowered (never
     raised) so that steps_per_output is a multiple of 2^L; its reason names the levels and the split
-    ("row" or "column", `row_split`). Returns (TimeStep, L)."""
-    top = int(levels.max())
+    ("row" or "column", `row_split`). `counts`: the nodes per level instead of `levels` (an MPI rank's
+    owned nodes' summed over the ranks). Returns (TimeStep, L)."""
+    counts = np.trim_zeros(np.asarray(np.bincount(levels) if counts is None else counts, dtype=np.int64), "b")
+    top = len(counts) - 1
     ratio = 2 ** top
     interval = time_step.dt * time_step.steps_per_output
     global_steps = math.ceil(time_step.steps_per_output / ratio)
     steps_per_output = global_steps * ratio
     dt = interval / steps_per_output
-    counts = np.bincount(levels, minlength=top + 1)
     reason = re.sub(r"\d+ steps per output interval", f"{steps_per_output} fine steps per output interval",
                     time_step.reason)
     reason = (reason + f"; local time stepping: {top + 1} rate levels (nodes per level, finest first: "
@@ -605,7 +665,7 @@ class LocalSteppingAdapter:
 
 
 def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chunk: int = STABILITY_CHUNK,
-                    seed: int = 0, rows: np.ndarray | None = None) -> dict:
+                    seed: int = 0, rows: np.ndarray | None = None, state: np.ndarray | None = None) -> dict:
     """Iterates the LTS map on the user's model: `make_kernel()` gives a LocalStepper of the model
     (same matrix, mass, levels, step and boundary dashpots; element-loop cells without initial stress,
     so that a tiny state keeps their laws elastic: the linear map) without forces and without mass-
@@ -619,15 +679,21 @@ def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chun
     factor per global step), "stable", "seconds"}; stable when growth < STABILITY_RATIO, which
     catches amplitude growth of ~0.2 % per global step and more with the defaults. `rows`: the
     kernel steps these dofs of the model's n_dofs only (an MPI rank's share, owned then ghosts,
-    pyfem.distributed.check_stability_on_ranks), from the same random state."""
+    pyfem.distributed.check_stability_on_ranks), from the same random state. `state`: the start
+    displacement (STABILITY_AMPLITUDE times a pseudo-random vector, the kernel's dofs) instead of the
+    seeded one (the distributed model's, a function of the node coordinates:
+    pyfem.distributed_lts.check_stability_on_ranks)."""
     start = time.perf_counter()
     kernel = make_kernel()
     rng = np.random.default_rng(seed)
     # A tiny state (1e-9 m): the map is linear in it wherever the element-loop laws stay elastic, and
     # their return mappings (every point yielding at a unit displacement) cost nothing extra.
-    u = STABILITY_AMPLITUDE * rng.standard_normal(n_dofs)
-    if rows is not None:
-        u = np.ascontiguousarray(u[rows])
+    if state is not None:
+        u = np.array(state, dtype=np.float64)
+    else:
+        u = STABILITY_AMPLITUDE * rng.standard_normal(n_dofs)
+        if rows is not None:
+            u = np.ascontiguousarray(u[rows])
     v, a = np.zeros(len(u)), np.zeros(len(u))
     energies = []
     t = 0.0

@@ -546,10 +546,8 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
             if constraints is not None and "contact" in scene.effects:
                 held = np.intersect1d(constraints.nodes, model.pairs.nodes)
                 if len(held):
-                    raise SceneError("time.local_stepping", True,
-                                     "false for scenes with contact pairs on fixed or roller faces (node "
-                                     f"{int(held[0])} at {np.round(model.node_coords[held[0]], 3).tolist()} is both): "
-                                     "local time stepping does not correct a held pair node (docs/lts_plan.md)")
+                    raise local_stepping.held_pair_error(
+                        f"node {int(held[0])} at {np.round(model.node_coords[held[0]], 3).tolist()}")
         except SceneError as error:
             if local:
                 raise

@@ -243,7 +243,7 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
     ("workflows/scenes/case1_vertical_coarse.toml", ("--set", 'static.solver="direct"'), "static.solver"),
     ("tests/scenes/mpi_weak_layer.toml", ("--set", 'materials.weak.plasticity.integration="reduced"'),
      "integration"),
-    ("workflows/scenes/box_vertical_sv.toml", ("--set", "time.local_stepping=true"), "local_stepping"),
+    ("tests/scenes/mpi_tunnel_tet.toml", ("--set", "mesh.order=2"), "quadratic tetrahedra"),
 ])
 def test_what_the_distributed_model_does_not_build_is_refused_in_one_line(tmp_path, scene, extra, key):
     result = pyfem(2, "run", scene, "--out", str(tmp_path / "run"), *DISTRIBUTED, *extra)
