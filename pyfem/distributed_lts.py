@@ -166,12 +166,15 @@ def choose(part, loop, time_step, duration: float) -> tuple[RankLevels | None, s
 
 class LevelExchanges(list):
     """The kernel's MpiNodeExchange of each level (finest first), with the bytes a rank sends per
-    fine step (each level's exchange at each of its drifts: 2^(L - k) per global step)."""
+    fine step: each level's velocities at each of its drifts, 2^(L - k) per global step
+    (pyfem.distributed.level_bytes_per_fine_step; an exchange counts 48 bytes per node, v and a, as
+    the global Stepper sends them)."""
 
     @property
     def bytes_sent_per_step(self) -> float:
-        top = len(self) - 1
-        return sum(exchange.bytes_sent_per_step * 2 ** (top - k) for k, exchange in enumerate(self)) / 2 ** top
+        from pyfem.distributed import level_bytes_per_fine_step
+
+        return level_bytes_per_fine_step([exchange.bytes_sent_per_step // 48 for exchange in self])
 
 
 def level_exchanges(part, levels: np.ndarray, max_level: int) -> LevelExchanges:
@@ -272,11 +275,11 @@ def rank_stepper(part, rank_levels: RankLevels, loop, input_arrays: dict | None 
     return local_stepping.LocalSteppingAdapter(kernel, rank_levels.ratio), exchanges, layout
 
 
-def check_stability_on_ranks(part, rank_levels: RankLevels, loop) -> dict:
+def check_stability_on_ranks(part, rank_levels: RankLevels, loop, **check) -> dict:
     """local_stepping.check_stability of the whole model's LTS map stepped by the ranks' parts, from
     STABILITY_AMPLITUDE times `start_vector` of the node coordinates (the same state for any rank
-    count), the energy summed over the ranks; rank 0's report on every rank, with "ranks". A
-    collective."""
+    count), the energy summed over the ranks; rank 0's report on every rank, with "ranks". `check`:
+    check_stability's steps and chunk. A collective."""
     from pyfem.distributed import RankSummed
     from pyfem.distributed_model import start_vector
     from pyfem.local_stepping import STABILITY_AMPLITUDE, check_stability
@@ -288,7 +291,7 @@ def check_stability_on_ranks(part, rank_levels: RankLevels, loop) -> dict:
         return RankSummed(stepper.kernel, comm)
 
     state = STABILITY_AMPLITUDE * start_vector(part.coords).reshape(-1)
-    report = check_stability(make_kernel, len(state), state=state)
+    report = check_stability(make_kernel, len(state), state=state, **check)
     seconds = comm.allreduce(report["seconds"], op=MPI.MAX)
     return dict(comm.bcast(report, root=0), seconds=seconds, ranks=comm.size)
 

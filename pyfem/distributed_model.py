@@ -994,6 +994,7 @@ def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None =
     """What `run` prints before it steps (rank 0); with deteriorating pairs (`contact_arrays`) the
     whole model's "interface wear" line; with local time stepping (`lts`: distributed_lts.RankLevels,
     `lts_decision`: "auto"'s reason) its levels."""
+    from pyfem.local_stepping import STABILITY_STEPS
     from pyfem.solver import wear_words
 
     counts = part.comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts), root=0)
@@ -1003,11 +1004,12 @@ def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None =
             "ranks": part.comm.size, "dofs": part.n_dofs_global,
             "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e in counts],
             "time step": f"{time_step.dt:.6g} s ({time_step.reason})", "steps": n_steps,
-            **({"local stepping": lts_decision} if lts_decision else {}),
+            **({"local stepping (auto)": lts_decision} if lts_decision else {}),
             **({"local time stepping": f"{len(lts.counts)} rate levels on the ranks' parts (nodes per level, finest "
                                        f"first: {', '.join(str(int(c)) for c in lts.counts)}; global step "
                                        f"{time_step.dt * lts.ratio:.6g} s), the row split, one velocity exchange per "
-                                       "level (pyfem/distributed_lts.py)"} if lts is not None else {}),
+                                       "level (pyfem/distributed_lts.py); the set-up check of its map runs when the "
+                                       f"run starts ({STABILITY_STEPS} global steps)"} if lts is not None else {}),
             **({"static stage": f"dynamic relaxation on the ranks' parts before the motion: 2 stages of at most "
                                 f"{int(part.scene['static']['max_steps'])} relaxation steps each and a frequency "
                                 "probe (pyfem/distributed_stage.py)"} if "static" in part.scene else {}),
@@ -1789,6 +1791,7 @@ class DistributedRun:
             self.stage.report["monitors"] = distributed_stage.monitor_report(self.stage, self.monitors, self.names,
                                                                              comm)
         stepper, exchange = self.stepper()
+        ts = self.time_step  # (global stepping's when local stepping's set-up check sent "auto" back to it)
         n_outputs = self.n_steps // ts.steps_per_output
         clock = checkpoints.CheckpointClock(self.scene["output"]["checkpoint_interval"],
                                             elapsed=time.perf_counter() - self.wall_start)
@@ -1806,6 +1809,9 @@ class DistributedRun:
             while self.done < n_outputs:
                 with signals.deferred():  # a stop waits for the sample: the state is whole
                     stepper.run(u, v, a, ts.steps_per_output, self.done * ts.steps_per_output * ts.dt)
+                    if self.lts is not None:  # its ghosts' u, v, a (a monitor's cell reads them) from their owners
+                        for x in (u, v, a):
+                            part.plan.update(comm, x.reshape(-1, 3))
                     self.done += 1
                     t = self.done * ts.steps_per_output * ts.dt
                     if not comm.allreduce(bool(np.isfinite(u[:3 * part.n_owned]).all()), op=MPI.LAND):

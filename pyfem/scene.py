@@ -612,8 +612,8 @@ SCHEMA = Table({
     "parallel": Table({
         "model": Choice("how the MPI ranks hold the model: \"whole\" (every rank builds the whole model and "
                         "steps its share) or \"distributed\" (each rank builds and steps only its part of "
-                        "dolfinx's distributed mesh, with contact and a relaxation static stage since "
-                        "2026-11-29; scenes without local stepping or a linear static stage: docs/scaling.md "
+                        "dolfinx's distributed mesh, with contact, a relaxation static stage and local time "
+                        "stepping since 2026-11-29; scenes without a linear static stage: docs/scaling.md "
                         "\"The distributed model\")", ("whole", "distributed"),
                         default="whole"),
     }, "[parallel]"),

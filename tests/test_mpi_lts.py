@@ -21,6 +21,16 @@ The user's models, with local stepping forced on (`time.local_stepping=true`):
 - kill -9 of a 2-rank run after its first checkpoint and `--resume` on 2 ranks: the histories of
   the uninterrupted 2-rank run (the checkpoint is the serial stepper's); a serial checkpoint resumed
   on 2 ranks continues to the serial run's histories.
+
+The distributed model (`parallel.model = "distributed"`, pyfem/distributed_lts.py: no rank holds the
+whole model) against the same serial runs:
+- its levels node for node and its set-up check's verdicts (the graded mesh, 2 and 3 ranks);
+- the tunnel on 2 and 3 ranks and the small case 3 (stage, rock yielding, pairs sliding, lining) on 2,
+  to the tolerances above;
+- the small case 3 killed (kill -9) on 2 ranks and resumed on 3 (its LocalStepper's state keyed by
+  position): the uninterrupted 2-rank run's histories to the stage's round-off (the resume solves the
+  stage again on 3 ranks);
+- `check` prints its levels, and "auto" decides as the whole model does.
 """
 import numpy as np
 import pytest
@@ -30,10 +40,12 @@ from test_case_study_stage import SMALL_MODEL
 from test_mpi import (MPIRUN, NET_FORCE_TOLERANCE, TOLERANCE, assert_equal_to_serial, killed_and_resumed, pyfem_run,
                       summary)
 from test_mpi_stage import STAGE_ROUNDOFF
+from test_distributed_model import TOLERANCES as DISTRIBUTED_TOLERANCES
 
 pytestmark = pytest.mark.skipif(MPIRUN is None, reason="mpirun not found: scripts/setup.sh installs openmpi-bin")
 
 LOCAL = ("--set", "time.local_stepping=true")
+DISTRIBUTED = ("--set", "parallel.model=distributed")
 TUNNEL = "tests/scenes/mpi_tunnel_tet.toml"
 CASE3 = "workflows/scenes/case3_contact_coarse.toml"
 # The record's strong part (El Centro from 1.8 s) at 0.05 g after a 0.05 s lead-in, the wear off.
@@ -49,6 +61,18 @@ def levels_of(run: dict) -> int:
     reason = run["dt_reason"]
     assert "local time stepping:" in reason, reason
     return int(reason.split("local time stepping:")[1].split("rate levels")[0])
+
+
+def assert_shared_parts(run: dict, serial: dict, ranks: int) -> None:
+    """The distributed model's parts: every rank owned and ghosted nodes and exchanged them; its set-up
+    check ran on the ranks from its own random state (a function of the node coordinates, not the
+    serial check's seeded one): the same global steps, stable as the serial check found."""
+    mpi = run["mpi"]
+    assert mpi["ranks"] == ranks and all(n > 0 for n in mpi["owned_nodes"])
+    assert all(n > 0 for n in mpi["ghost_nodes"]) and all(b > 0 for b in mpi["bytes_sent_per_step"])
+    checked, alone = run["local_stepping_stability"], serial["local_stepping_stability"]
+    assert checked["ranks"] == ranks and checked["stable"] and alone["stable"]
+    assert checked["global_steps"] == alone["global_steps"]
 
 
 def assert_shared(run: dict, serial: dict, ranks: int) -> None:
@@ -69,6 +93,9 @@ def tunnel_runs(tmp_path_factory):
     runs = {ranks: base / f"tunnel_{ranks}" for ranks in (1, 2, 3)}
     for ranks, out in runs.items():
         pyfem_run(ranks, TUNNEL, out, *LOCAL)
+    for ranks in (2, 3):  # the distributed model
+        runs["distributed", ranks] = base / f"tunnel_distributed_{ranks}"
+        pyfem_run(ranks, TUNNEL, runs["distributed", ranks], *LOCAL, *DISTRIBUTED)
     return runs
 
 
@@ -88,18 +115,43 @@ def test_local_stepping_on_the_ranks_equals_the_serial_local_stepping(tunnel_run
           f"(serial {serial['loop_seconds']:.2f} s)")
 
 
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_local_stepping_on_the_distributed_model_equals_the_serial_local_stepping(tunnel_runs, ranks):
+    """The tunnel on the distributed model (each rank builds and steps its part): the whole model's
+    levels and step (run.json's dt_reason names the nodes per level), every history to the whole
+    model's tolerances on the ranks."""
+    serial, run = summary(tunnel_runs[1]), summary(tunnel_runs["distributed", ranks])
+    assert run["model"] == "distributed" and levels_of(run) >= 3
+    assert run["dt_reason"] == serial["dt_reason"] and run["steps"] == serial["steps"]
+    assert serial["monitors"]["crown"]["s1_dynamic_max"] > 1e3, "the wave reached the wall"
+    assert_shared_parts(run, serial, ranks)
+    # (the distributed model's tunnel tolerances, its net forces: test_distributed_model.TOLERANCES)
+    worst = assert_equal_to_serial(tunnel_runs["distributed", ranks], tunnel_runs[1], DISTRIBUTED_TOLERANCES["tunnel"])
+    assert run["energy"]["balance_error"] == pytest.approx(serial["energy"]["balance_error"], rel=1e-6)
+    print(f"tunnel, local stepping on the distributed model, {ranks} ranks: largest difference from serial "
+          f"{worst:.2e}; bytes per fine step {run['mpi']['bytes_sent_per_step']}, loop {run['loop_seconds']:.2f} s "
+          f"(serial {serial['loop_seconds']:.2f} s); set-up check growth {run['local_stepping_stability']['growth']:.4g}"
+          f" (serial {serial['local_stepping_stability']['growth']:.4g})")
+
+
 @pytest.fixture(scope="module")
 def case3_runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("mpi_lts_case3")
     runs = {ranks: base / f"case3_{ranks}" for ranks in (1, 2)}
     for ranks, out in runs.items():
         pyfem_run(ranks, CASE3, out, *CASE3_WINDOW)
+    runs["distributed", 2] = base / "case3_distributed_2"
+    pyfem_run(2, CASE3, runs["distributed", 2], *CASE3_WINDOW, *DISTRIBUTED)
     return runs
 
 
-@pytest.mark.parametrize("ranks", [2])
+@pytest.mark.parametrize("ranks", [2, ("distributed", 2)])
 def test_the_case_study_scene_under_local_stepping_on_the_ranks_equals_the_serial_run(case3_runs, ranks):
     serial, run = summary(case3_runs[1]), summary(case3_runs[ranks])
+    distributed = isinstance(ranks, tuple)
+    if distributed:
+        ranks = ranks[1]
+        assert run["model"] == "distributed" and run["dt_reason"] == serial["dt_reason"]
     assert levels_of(serial) == levels_of(run) >= 3
     assert [stage["converged"] for stage in serial["static"]["stages"]] == [True, True]
     # Things happened in the dynamic run at their own rates: pairs slid, the rock yielded further.
@@ -107,13 +159,17 @@ def test_the_case_study_scene_under_local_stepping_on_the_ranks_equals_the_seria
     assert states["sliding"][0] == 0 and max(states["sliding"]) >= 10
     assert serial["energy"]["internal_dissipation"] > 0.0 and serial["energy"]["friction_dissipation"] > 0.0
     assert run["pair_states"]["sliding"][-1] == states["sliding"][-1]
-    assert_shared(run, serial, ranks)
+    if distributed:
+        assert_shared_parts(run, serial, ranks)
+        assert run["mpi"]["moved_pair_nodes"] > 0
+    else:
+        assert_shared(run, serial, ranks)
     assert sum(run["mpi"]["element_loop_cells"]) == sum(region["cells"] for region in
                                                         serial["nonlinear_regions"].values())
     differences = largest_differences(case3_runs[ranks], case3_runs[1])
     for kind, difference in differences.items():
         assert difference < STAGE_ROUNDOFF.get(kind, TOLERANCE), (kind, difference)
-    print(f"case 3 (small), local stepping on {ranks} ranks: " +
+    print(f"case 3 (small), local stepping on {ranks} ranks{' (distributed model)' if distributed else ''}: " +
           ", ".join(f"{kind} {value:.1e}" for kind, value in sorted(differences.items()) if value))
 
 
@@ -210,3 +266,111 @@ def test_a_serial_checkpoint_under_local_stepping_resumes_on_two_ranks(tmp_path)
     for kind, difference in differences.items():
         assert difference < tolerances.get(kind, TOLERANCE), (kind, difference)
     print(f"largest difference from the uninterrupted serial run {max(differences.values()):.2e}")
+
+
+# --- the distributed model -------------------------------------------------------------------------
+
+DISTRIBUTED_LEVELS = """
+import json, sys
+from pathlib import Path
+sys.path.insert(0, "tests")
+import numpy as np
+from mpi4py import MPI
+from pyfem import distributed_lts, distributed_model, local_stepping, solver
+from test_local_stepping import GRADED_GEO, graded_scene
+
+local_stepping.fit_levels_to_output = lambda levels, steps_per_output: levels  # (conftest's unfitted_levels)
+
+comm = MPI.COMM_WORLD
+geo = Path(sys.argv[1])
+if comm.rank == 0:
+    geo.write_text(GRADED_GEO)
+comm.barrier()
+whole = solver.prepare(graded_scene(geo, True))  # (every rank the whole model, alone)
+part = distributed_model.build(graded_scene(geo, True), comm)
+levels = distributed_lts.node_levels(part)
+expected = {tuple(x): int(k) for x, k in zip(np.round(whole.model.node_coords, 6), whole.node_levels)}
+differ = sum(expected[tuple(x)] != int(k) for x, k in zip(np.round(part.coords, 6), levels))
+found = {"differ": comm.allreduce(differ), "nodes": comm.allreduce(part.n_local),
+         "counts": distributed_lts.level_counts(comm, levels, part.n_owned).tolist(),
+         "whole_counts": np.bincount(whole.node_levels).tolist()}
+# (one level coarser the energy overflows within the default 240 global steps: 60 keep it finite)
+for name, shift, steps in (("as set", 0, 240), ("one coarser", 1, 60)):
+    rank_levels = distributed_lts.RankLevels(levels + shift, np.array([0] * shift + found["counts"]), whole.time_step,
+                                             whole.time_step)
+    found[name] = distributed_lts.check_stability_on_ranks(part, rank_levels, None, steps=steps)
+if comm.rank == 0:
+    print("REPORT " + json.dumps(found))
+"""
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_the_distributed_models_levels_and_set_up_check_are_the_whole_models(tmp_path, ranks):
+    """pyfem.distributed_lts.node_levels (each rank its owned rows and cells, a node the finest of its
+    cells over the ranks) on the graded mesh of tests/test_local_stepping.py: every local node, owned
+    or ghost, at the whole model's level; the set-up check on the ranks' parts finds the map stable
+    with these levels, and unstable (growth above 1e3) with every node one rate coarser."""
+    import json
+    import subprocess
+
+    from test_mpi import ENV, PYTHON, REPO
+
+    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), PYTHON, "-c",
+                             DISTRIBUTED_LEVELS, str(tmp_path / "graded.geo")],
+                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    found = json.loads(result.stdout.split("REPORT ", 1)[1])
+    assert len(found["whole_counts"]) >= 3, "the graded mesh stepped at three rates or more"
+    assert found["differ"] == 0 and found["counts"] == found["whole_counts"]
+    good, coarse = found["as set"], found["one coarser"]
+    assert good["ranks"] == ranks and good["stable"] and good["growth"] < 1.5
+    assert not coarse["stable"] and coarse["growth"] > 1e3
+    print(f"{ranks} ranks: {found['nodes']} local nodes at the whole model's levels {found['counts']}; check growth "
+          f"{good['growth']:.4g}, one level coarser {coarse['growth']:.4g}")
+
+
+def test_the_distributed_case_study_scene_killed_on_two_ranks_resumes_on_three(tmp_path, case3_runs):
+    """The small case 3 under local stepping on the distributed model, killed (kill -9) on 2 ranks past
+    a checkpoint in the strong motion, resumed on 3 (another partition: each level's last forces by
+    node position, the cells' and pairs' states by position): every history within the stage's
+    round-off (the resume solves the stage again, on 3 ranks) of the uninterrupted 2-rank run."""
+    from test_distributed_model import kill_after_a_checkpoint_past
+
+    reference = case3_runs["distributed", 2]
+    settings = (*CASE3_WINDOW, *DISTRIBUTED, "--set", "output.checkpoint_interval=1.0")
+    out = tmp_path / "killed"
+    at = kill_after_a_checkpoint_past(2, CASE3, out, 0.1, settings)
+    pyfem_run(3, CASE3, out, *settings, "--resume")
+    resumed, expected = summary(out), summary(reference)
+    assert resumed["status"] == "finished" and resumed["resumed"][0]["t"] == pytest.approx(at) and at < 0.3
+    assert resumed["mpi"]["ranks"] == 3 and levels_of(resumed) >= 3
+    assert max(expected["pair_states"]["sliding"]) >= 10, "pairs slid"
+    assert resumed["pair_states"]["sliding"] == expected["pair_states"]["sliding"]
+    differences = largest_differences(out, reference)
+    for kind, difference in differences.items():
+        assert difference < STAGE_ROUNDOFF.get(kind, TOLERANCE), (kind, difference)
+    print(f"killed at {at:.3f} s on 2 ranks, resumed on 3: " +
+          ", ".join(f"{kind} {value:.1e}" for kind, value in sorted(differences.items()) if value))
+
+
+def test_check_of_the_distributed_model_shows_its_levels_and_auto_decides_as_the_whole_model(tmp_path):
+    """`check` of the tunnel with local_stepping = "auto": the distributed model on 2 ranks prints the
+    whole model's decision (the same work sums and nodes per level, summed over the ranks) and, on,
+    its levels; its trial steps whole global steps."""
+    import subprocess
+
+    from test_mpi import ENV, PYTHON, REPO
+
+    def check(*launch):
+        result = subprocess.run([*launch, PYTHON, "-m", "pyfem", "check", TUNNEL, "--set", 'time.local_stepping="auto"',
+                                 "--set", "time.duration=20.0", *(DISTRIBUTED if launch else ())], cwd=REPO, env=ENV,
+                                capture_output=True, text=True, timeout=600)
+        assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+        return {line.split(":")[0].strip(): line.split(":", 1)[1].strip() for line in result.stdout.splitlines()
+                if ":" in line}
+
+    whole, ours = check(), check(MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2")
+    assert whole["local stepping (auto)"].startswith('"auto": on'), whole["local stepping (auto)"]
+    assert ours["local stepping (auto)"] == whole["local stepping (auto)"]
+    assert ours["local time stepping"].startswith("3 rate levels") and "1693, 1354, 2026" in ours["local time stepping"]
+    assert "fine steps from rest" in ours["time per step"]

@@ -8,7 +8,7 @@ model on one rank the process's), the set-up (wall time before the time loop: me
 time step, the input forces), the time loop per step, and the largest history difference from the
 whole model's one-rank run (relative to each quantity's largest value).
 
-    /usr/bin/python3 workflows/distributed_memory.py [--quick | --large | --contact | --case3]
+    /usr/bin/python3 workflows/distributed_memory.py [--quick | --large | --contact | --case3 | --case3-lts]
 
 writes workflows/results/distributed_memory.json and prints the README's markdown table. The
 default scene is the free-field box refined to h = 2.5 m in a 160 x 80 x 160 m block (139 425
@@ -22,7 +22,9 @@ h = 2.5 m (4 290 pairs, 437 580 dofs, 0.2 s), added as "contact"; --case3: the c
 case study runs it (workflows/scenes/case3_contact_coarse.toml: the static stage, Mohr-Coulomb rock,
 the lining's damage, 11 520 pairs, 175 056 dofs), 0.3 s of it without local stepping (not built on
 the distributed model), the whole and the distributed model on 2 ranks, added as "case3" with each
-run's static stage time and the distributed run's time per step by phase.
+run's static stage time and the distributed run's time per step by phase; --case3-lts: the same with
+local time stepping on (both models step the whole model's levels by the row split), added as
+"case3_lts".
 Run it on a quiet machine: the ranks share the same 2 cores and memory bus.
 """
 import argparse
@@ -65,6 +67,7 @@ CONTACT = ["mesh.size=[160.0, 80.0, 160.0]",
 
 CASE3_SCENE = "workflows/scenes/case3_contact_coarse.toml"
 CASE3 = ["time.duration=0.3", "time.local_stepping=false", "output.xdmf_interval=0.0"]
+CASE3_LTS = ["time.duration=0.3", "time.local_stepping=true", "output.xdmf_interval=0.0"]
 
 
 def run(ranks: int, model: str, h: float | None, out: Path, settings: list = SETTINGS, scene: str = SCENE) -> dict:
@@ -103,19 +106,21 @@ def main(argv: list) -> int:
     parser.add_argument("--large", action="store_true", help="3.2 M dofs, the distributed model on 2 ranks only")
     parser.add_argument("--contact", action="store_true", help="the contact scene, 4 290 pairs")
     parser.add_argument("--case3", action="store_true", help="the coarse case 3 with its static stage, 2 ranks")
+    parser.add_argument("--case3-lts", action="store_true", help="the same with local time stepping")
     args = parser.parse_args(argv)
-    if args.case3:
+    if args.case3 or args.case3_lts:
+        settings, key = (CASE3_LTS, "case3_lts") if args.case3_lts else (CASE3, "case3")
         rows = []
         with tempfile.TemporaryDirectory() as scratch:
             base = Path(scratch)
             for model in ("whole", "distributed"):
-                rows.append(run(2, model, None, base / model, CASE3, CASE3_SCENE))
+                rows.append(run(2, model, None, base / model, settings, CASE3_SCENE))
                 rows[-1]["difference_from_whole_one_rank"] = (  # (here: from the whole model on 2 ranks)
                     0.0 if model == "whole" else largest_difference(base / model, base / "whole"))
                 print(json.dumps(rows[-1]), flush=True)
         result = json.loads(RESULTS.read_text())
-        result["case3"] = {"date": time.strftime("%Y-%m-%d"), "scene": CASE3_SCENE, "settings": CASE3, "rows": rows,
-                           "difference": "from the whole model on 2 ranks"}
+        result[key] = {"date": time.strftime("%Y-%m-%d"), "scene": CASE3_SCENE, "settings": settings, "rows": rows,
+                       "difference": "from the whole model on 2 ranks"}
         RESULTS.write_text(json.dumps(result, indent=1) + "\n")
         print_table(rows)
         return 0
