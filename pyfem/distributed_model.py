@@ -1323,18 +1323,13 @@ class DistributedRun:
         report = self.lts.stability = check_stability_on_ranks(self.part, self.lts, self.loop)
         if report["stable"]:
             return
+        refusal, decision, warning = local_stepping.unstable_words(report)
         if self.scene["time"].get("local_stepping") != "auto":
-            raise SceneError(local_stepping.KEY, True, "false for this model: its local time stepping map amplified "
-                             f"a random state's energy {report['growth']:.3g}x in {report['global_steps']} global "
-                             "steps (unstable); lower time.safety or turn local stepping off")
+            raise refusal
         self.time_step, self.lts = self.lts.global_step, None
         self.n_steps = whole_steps(self.scene["time"]["duration"], self.time_step)
-        self.lts_stability = report
-        self.lts_decision = (f"\"auto\": off: its set-up check found the local time stepping map unstable on this "
-                             f"model (a random state's energy grew {report['growth']:.3g}x in "
-                             f"{report['global_steps']} global steps); global stepping instead")
-        self.scene.warn("time.local_stepping = \"auto\": local stepping was predicted to pay, but its map is "
-                        "unstable on this model; the run steps globally (run.json \"local_stepping\")")
+        self.lts_stability, self.lts_decision = report, decision
+        self.scene.warn(warning)
 
     def _fingerprint(self) -> dict:
         from pyfem.checkpoint import scene_fingerprint

@@ -83,6 +83,20 @@ def held_pair_error(node: str) -> SceneError:
                                  "local time stepping does not correct a held pair node (docs/lts_plan.md)")
 
 
+def unstable_words(report: dict) -> tuple[SceneError, str, str]:
+    """What is said when the set-up check (`check_stability`'s `report`) found the LTS map unstable:
+    (the refusal when local stepping was asked for, "auto"'s reason for run.json, "auto"'s warning
+    as it falls back to global stepping)."""
+    growth = f"{report['growth']:.3g}x in {report['global_steps']} global steps"
+    refusal = SceneError(KEY, True, "false for this model: its local time stepping map amplified a random state's "
+                                    f"energy {growth} (unstable); lower time.safety or turn local stepping off")
+    decision = ("\"auto\": off: its set-up check found the local time stepping map unstable on this model (a random "
+                f"state's energy grew {growth}); global stepping instead")
+    warning = ("time.local_stepping = \"auto\": local stepping was predicted to pay, but its map is unstable on this "
+               "model; the run steps globally (run.json \"local_stepping\")")
+    return refusal, decision, warning
+
+
 def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: int = MAX_LEVEL,
                 pinned: np.ndarray | None = None, pairs: np.ndarray | None = None,
                 loop_cells: np.ndarray | None = None, rows: bool = False) -> np.ndarray:

@@ -500,12 +500,11 @@ def fall_back_to_global_stepping(simulation: Simulation, report: dict) -> None:
     simulation.lts_preview, simulation.node_levels, simulation.lts_split = simulation.node_levels, None, None
     simulation.time_step = simulation.lts_global_step
     simulation.n_steps = whole_steps(simulation.scene["time"]["duration"], simulation.time_step)
+    from pyfem.local_stepping import unstable_words
+
     simulation.lts_stability = report
-    simulation.lts_decision = (f"\"auto\": off: its set-up check found the local time stepping map unstable on this "
-                               f"model (a random state's energy grew {report['growth']:.3g}x in "
-                               f"{report['global_steps']} global steps); global stepping instead")
-    simulation.scene.warn("time.local_stepping = \"auto\": local stepping was predicted to pay, but its map is "
-                          "unstable on this model; the run steps globally (run.json \"local_stepping\")")
+    _, simulation.lts_decision, warning = unstable_words(report)
+    simulation.scene.warn(warning)
 
 
 def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = False) -> Simulation:
@@ -692,9 +691,7 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         if simulation.scene["time"].get("local_stepping") == "auto":
             fall_back_to_global_stepping(simulation, report)
             return None
-        raise SceneError(local_stepping.KEY, True, "false for this model: its local time stepping map amplified "
-                         f"a random state's energy {report['growth']:.3g}x in {report['global_steps']} global "
-                         "steps (unstable); lower time.safety or turn local stepping off")
+        raise local_stepping.unstable_words(report)[0]
     kernel = bare_kernel(simulation.alpha)
     stage = simulation.static
     if simulation.nonlinear is not None:
