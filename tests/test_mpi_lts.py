@@ -173,13 +173,13 @@ def test_the_case_study_scene_under_local_stepping_on_the_ranks_equals_the_seria
           ", ".join(f"{kind} {value:.1e}" for kind, value in sorted(differences.items()) if value))
 
 
-STABILITY_ON_RANKS = """
+GRADED_ON_RANKS = """
 import json, sys
 from pathlib import Path
 sys.path.insert(0, "tests")
 import numpy as np
 from mpi4py import MPI
-from pyfem import _kernels, distributed, local_stepping, solver
+from pyfem import _kernels, distributed, distributed_lts, distributed_model, local_stepping, solver
 from pyfem.local_stepping import check_stability
 from test_local_stepping import GRADED_GEO, graded_scene
 
@@ -190,8 +190,12 @@ geo = Path(sys.argv[1])
 if comm.rank == 0:
     geo.write_text(GRADED_GEO)
 comm.barrier()
-simulation = solver.prepare(graded_scene(geo, True))
-indptr, indices, blocks = solver.bsr_arrays(simulation.stiffness)
+simulation = solver.prepare(graded_scene(geo, True))  # (every rank the whole model, alone)
+"""
+"""The graded mesh of tests/test_local_stepping.py under local stepping (its levels not capped), the
+whole model on every rank: the start of the scripts the ranks run below."""
+
+STABILITY_ON_RANKS = GRADED_ON_RANKS + """indptr, indices, blocks = solver.bsr_arrays(simulation.stiffness)
 as_set = simulation.node_levels.copy()
 found = {}
 # (one level coarser the energy overflows within the default 240 global steps: 60 keep it finite)
@@ -270,23 +274,8 @@ def test_a_serial_checkpoint_under_local_stepping_resumes_on_two_ranks(tmp_path)
 
 # --- the distributed model -------------------------------------------------------------------------
 
-DISTRIBUTED_LEVELS = """
-import json, sys
-from pathlib import Path
-sys.path.insert(0, "tests")
-import numpy as np
-from mpi4py import MPI
-from pyfem import distributed_lts, distributed_model, local_stepping, solver
-from test_local_stepping import GRADED_GEO, graded_scene
-
-local_stepping.fit_levels_to_output = lambda levels, steps_per_output: levels  # (conftest's unfitted_levels)
-
-comm = MPI.COMM_WORLD
-geo = Path(sys.argv[1])
-if comm.rank == 0:
-    geo.write_text(GRADED_GEO)
-comm.barrier()
-whole = solver.prepare(graded_scene(geo, True))  # (every rank the whole model, alone)
+DISTRIBUTED_LEVELS = GRADED_ON_RANKS + """
+whole = simulation
 part = distributed_model.build(graded_scene(geo, True), comm)
 levels = distributed_lts.node_levels(part)
 expected = {tuple(x): int(k) for x, k in zip(np.round(whole.model.node_coords, 6), whole.node_levels)}
