@@ -413,10 +413,10 @@ def pair_report(comm: MPI.Comm, contact, contact_arrays: dict) -> dict:
         force, state, gap = np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0)
     else:
         force, state, gap = contact.static_force(), np.asarray(contact.state()), contact.gap_offset()
-    normal = np.asarray(contact_arrays["normal"], dtype=float).reshape(-1, 3)
+    from pyfem.static import normal_and_shear
+
     area = np.asarray(contact_arrays["area"], dtype=float)
-    N = -np.einsum("pc,pc->p", force, normal)
-    T = np.linalg.norm(force + N[:, None] * normal, axis=1)
+    N, T = normal_and_shear(force, contact_arrays["normal"])
     counts = comm.allreduce(np.bincount(state, minlength=4)[:4].astype(np.int64))
     return {"count": comm.allreduce(len(N)),
             "normal_stress_min": comm.allreduce(float(np.min(N / area, initial=np.inf)), op=MPI.MIN),

@@ -1117,6 +1117,15 @@ def monitor_static_stress(monitors, installed_regions, u_total: np.ndarray, u_su
     return sigma
 
 
+def normal_and_shear(force: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, T) of pair forces (p, 3) on unit normals (p, 3): N = -n.F, compression positive, and
+    T = |F + N n|, the shear's magnitude."""
+    force = np.asarray(force, dtype=float).reshape(-1, 3)
+    normal = np.asarray(normal, dtype=float).reshape(-1, 3)
+    compression = -np.einsum("pc,pc->p", normal, force)
+    return compression, np.linalg.norm(force + compression[:, None] * normal, axis=1)
+
+
 def pairs_over_strength(contact_arrays: dict) -> dict:
     """How many pairs the static forces F0 put beyond the interface strength at D = 1.
 
@@ -1126,12 +1135,8 @@ def pairs_over_strength(contact_arrays: dict) -> dict:
     Returns:
         {"opening": count, "sliding": count}
     """
-    force = np.asarray(contact_arrays["static_force"], dtype=float)
-    normal = np.asarray(contact_arrays["normal"], dtype=float)
     area = np.asarray(contact_arrays["area"], dtype=float)
-    normal_part = np.einsum("pc,pc->p", normal, force)
-    compression = -normal_part
-    shear = np.linalg.norm(force - normal_part[:, None] * normal, axis=1)
+    compression, shear = normal_and_shear(contact_arrays["static_force"], contact_arrays["normal"])
     opening = (compression < 0.0) & (-compression > contact_arrays["tensile_strength"] * area)
     sliding = (compression >= 0.0) & (shear > contact_arrays["friction_static"] * compression
                                       + contact_arrays["cohesion"] * area)

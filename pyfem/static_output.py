@@ -98,10 +98,10 @@ def static_report(simulation) -> dict:
             monitors[name] = entry
         report["monitors"] = monitors
     if state.pair_forces is not None and simulation.contact_arrays is not None:
-        normal = simulation.contact_arrays["normal"]
+        from pyfem.static import normal_and_shear
+
         area = simulation.contact_arrays["area"]
-        N = -np.einsum("pc,pc->p", state.pair_forces, normal)           # compression positive
-        T = np.linalg.norm(state.pair_forces + (N[:, None] * normal), axis=1)
+        N, T = normal_and_shear(state.pair_forces, simulation.contact_arrays["normal"])  # compression positive
         report["pairs"] = {"count": int(len(N)), "normal_stress_min": float(np.min(N / area)),
                            "normal_stress_max": float(np.max(N / area)),
                            "shear_stress_max": float(np.max(T / area)),
