@@ -109,3 +109,17 @@ def unfitted_levels(monkeypatch):
     from pyfem import local_stepping
 
     monkeypatch.setattr(local_stepping, "fit_levels_to_output", lambda levels, steps_per_output: levels)
+
+
+class RunsOnDemand(dict):
+    """A module fixture's {key: run directory} whose runs are made when a test first asks for them
+    (`make(key)` runs and returns the directory): a configuration that only slow-tier tests read
+    costs the default tier nothing."""
+
+    def __init__(self, make) -> None:
+        super().__init__()
+        self.make = make
+
+    def __missing__(self, key):
+        self[key] = self.make(key)
+        return self[key]

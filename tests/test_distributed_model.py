@@ -354,6 +354,7 @@ def test_kill_9_of_two_ranks_then_resume_gives_the_uninterrupted_run(tmp_path, u
     print(f"killed at t > {resumed['resumed'][0]['t']:.3f} s of 3 s; resumed on {resumed_on} ranks")
 
 
+@pytest.mark.slow  # (38 s; the whole model's SIGTERM test, tests/test_mpi.py, stays in the default tier)
 def test_sigterm_to_one_rank_stops_both_with_a_checkpoint_that_resumes(tmp_path):
     """SIGTERM to rank 1 only, once the first rows are on disk (2 s of wall time): both ranks stop at
     the same sample, write the checkpoint and an "interrupted" run.json (no traceback); the resume

@@ -321,6 +321,7 @@ def test_kill_9_of_two_ranks_then_resume_on_two_gives_the_uninterrupted_run(tmp_
             assert (out / name).read_bytes() == (reference / name).read_bytes(), name
 
 
+@pytest.mark.slow  # (68 s; the default tier resumes 2 ranks on 2 and 3, and a serial LTS checkpoint on 2 in the slow tier too)
 def test_a_serial_checkpoint_resumes_on_three_ranks(tmp_path):
     """A checkpoint is the serial stepper's state whatever the rank count that wrote it: a serial
     run killed after its first checkpoint continues on 3 ranks to the uninterrupted serial run's

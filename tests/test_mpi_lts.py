@@ -89,17 +89,23 @@ def assert_shared(run: dict, serial: dict, ranks: int) -> None:
 
 @pytest.fixture(scope="module")
 def tunnel_runs(tmp_path_factory):
+    """{ranks or ("distributed", ranks): run directory} of the tunnel, each run when first read."""
+    from conftest import RunsOnDemand
+
     base = tmp_path_factory.mktemp("mpi_lts_tunnel")
-    runs = {ranks: base / f"tunnel_{ranks}" for ranks in (1, 2, 3)}
-    for ranks, out in runs.items():
-        pyfem_run(ranks, TUNNEL, out, *LOCAL)
-    for ranks in (2, 3):  # the distributed model
-        runs["distributed", ranks] = base / f"tunnel_distributed_{ranks}"
-        pyfem_run(ranks, TUNNEL, runs["distributed", ranks], *LOCAL, *DISTRIBUTED)
-    return runs
+
+    def make(key):
+        distributed = isinstance(key, tuple)
+        ranks = key[1] if distributed else key
+        out = base / (f"tunnel_distributed_{ranks}" if distributed else f"tunnel_{ranks}")
+        pyfem_run(ranks, TUNNEL, out, *LOCAL, *(DISTRIBUTED if distributed else ()))
+        return out
+
+    return RunsOnDemand(make)
 
 
-@pytest.mark.parametrize("ranks", [2, 3])
+# (3 ranks of the whole model in the slow tier: the distributed model's tunnel runs on 3 below)
+@pytest.mark.parametrize("ranks", [2, pytest.param(3, marks=pytest.mark.slow)])
 def test_local_stepping_on_the_ranks_equals_the_serial_local_stepping(tunnel_runs, ranks):
     serial, run = summary(tunnel_runs[1]), summary(tunnel_runs[ranks])
     assert levels_of(serial) == levels_of(run) >= 3, "the tunnel's mesh stepped at three rates or more"
@@ -218,7 +224,7 @@ if comm.rank == 0:
 """
 
 
-@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("ranks", [2, pytest.param(3, marks=pytest.mark.slow)])
 def test_the_stability_check_on_the_ranks_is_the_serial_check_of_the_map_they_step(tmp_path, ranks):
     """check_stability_on_ranks (each rank steps its share of the LTS map from the same random
     state, the energy summed over the ranks) against the serial check of the same row-split map,
@@ -246,6 +252,7 @@ def test_the_stability_check_on_the_ranks_is_the_serial_check_of_the_map_they_st
           f"{good['ranks']['seconds']:.2f} s on the ranks, {good['serial']['seconds']:.2f} s whole")
 
 
+@pytest.mark.slow  # (83 s; the default tier: the distributed model's kill on 2, resume on 3, below)
 def test_kill_9_of_two_ranks_under_local_stepping_then_resume_gives_the_uninterrupted_run(tmp_path):
     out, reference, resumed = killed_and_resumed(tmp_path, ranks=2, resumed_on=2, window=1.0, name="cavity",
                                                  extra=LOCAL)
@@ -259,6 +266,7 @@ def test_kill_9_of_two_ranks_under_local_stepping_then_resume_gives_the_uninterr
             assert (out / name).read_bytes() == (reference / name).read_bytes(), name
 
 
+@pytest.mark.slow  # (70 s)
 def test_a_serial_checkpoint_under_local_stepping_resumes_on_two_ranks(tmp_path):
     out, reference, resumed = killed_and_resumed(tmp_path, ranks=1, resumed_on=2, window=0.5, name="cavity",
                                                  extra=LOCAL)
@@ -293,7 +301,7 @@ if comm.rank == 0:
 """
 
 
-@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("ranks", [pytest.param(2, marks=pytest.mark.slow), 3])
 def test_the_distributed_models_levels_and_set_up_check_are_the_whole_models(tmp_path, ranks):
     """pyfem.distributed_lts.node_levels (each rank its owned rows and cells, a node the finest of its
     cells over the ranks) on the graded mesh of tests/test_local_stepping.py: every local node, owned
