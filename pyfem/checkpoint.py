@@ -223,11 +223,8 @@ class Checkpoint:
         """Raises SceneError (key --resume) when this checkpoint is not of the simulation's model."""
         saved = self.saved_fingerprint()
         where = _first_difference(saved, model_fingerprint(simulation))
-        if where in ("dt", "steps", "levels_sha256") and ("levels_sha256" in saved) != (
-                getattr(simulation, "node_levels", None) is not None):
-            stepped = "locally" if "levels_sha256" in saved else "globally"
-            self._refuse(f"the interrupted run stepped {stepped} (time.local_stepping) and this one would not; "
-                         f"set time.local_stepping = {'true' if stepped == 'locally' else 'false'} to resume it")
+        if where in ("dt", "steps", "levels_sha256"):
+            self.refuse_other_stepping("levels_sha256" in saved, getattr(simulation, "node_levels", None) is not None)
         self._refuse_difference(where)
         contact = getattr(simulation, "contact_arrays", None)
         saved_pairs = self.kernel.get("contact/pairs")
@@ -236,6 +233,14 @@ class Checkpoint:
             self._refuse("the checkpoint lists the contact pairs in another order than this version (a checkpoint "
                          "with contact written before 2026-11-29 lists them in the mesh's numbering; they are now "
                          "sorted by interface and position)")
+
+    def refuse_other_stepping(self, stepped_locally: bool, steps_locally: bool) -> None:
+        """Refuses (SceneError, key --resume) a resume that would step globally where the interrupted
+        run stepped locally (time.local_stepping), or the other way round."""
+        if stepped_locally != steps_locally:
+            stepped = "locally" if stepped_locally else "globally"
+            self._refuse(f"the interrupted run stepped {stepped} (time.local_stepping) and this one would not; "
+                         f"set time.local_stepping = {'true' if stepped_locally else 'false'} to resume it")
 
     def _refuse_difference(self, where: str | None) -> None:
         if where is None:

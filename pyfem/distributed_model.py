@@ -1342,6 +1342,7 @@ class DistributedRun:
         """Refuses (SceneError, key --resume, on every rank alike) a checkpoint of another model,
         rank count or partition."""
         theirs, ours = saved.meta["fingerprint"], self._fingerprint()
+        saved.refuse_other_stepping(theirs.get("levels") is not None, ours["levels"] is not None)
         for key in ("dofs", "dt", "steps", "levels"):
             if theirs.get(key) != ours[key]:
                 saved._refuse(f"the model's {key} differs from the checkpoint's (another mesh or build?)")

@@ -331,12 +331,16 @@ def test_the_distributed_case_study_scene_killed_on_two_ranks_resumes_on_three(t
     a checkpoint in the strong motion, resumed on 3 (another partition: each level's last forces by
     node position, the cells' and pairs' states by position): every history within the stage's
     round-off (the resume solves the stage again, on 3 ranks) of the uninterrupted 2-rank run."""
-    from test_distributed_model import kill_after_a_checkpoint_past
+    from test_distributed_model import kill_after_a_checkpoint_past, pyfem
 
     reference = case3_runs["distributed", 2]
     settings = (*CASE3_WINDOW, *DISTRIBUTED, "--set", "output.checkpoint_interval=1.0")
     out = tmp_path / "killed"
     at = kill_after_a_checkpoint_past(2, CASE3, out, 0.1, settings)
+    # Resumed with global stepping: refused in one line that names the key (a new user's trial).
+    refused = pyfem(2, "run", CASE3, "--out", str(out), *settings, "--set", "time.local_stepping=false", "--resume")
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr, refused.stderr[-3000:]
+    assert "stepped locally (time.local_stepping)" in refused.stderr
     pyfem_run(3, CASE3, out, *settings, "--resume")
     resumed, expected = summary(out), summary(reference)
     assert resumed["status"] == "finished" and resumed["resumed"][0]["t"] == pytest.approx(at) and at < 0.3
