@@ -15,7 +15,12 @@
 namespace cavern {
 
 namespace {
-constexpr std::int64_t kMinRowsForThreadsLocal = 4096;
+// A level's loops run on the OpenMP threads from this many rows. It was 4 096 (the Stepper's
+// kMinRowsForThreads) until 2026-11-29: a small graded model (17 892 dofs, levels of 2 598 / 1 318 /
+// 1 162 / 886 nodes, a new user's trial) then stepped every level on one thread, and local stepping
+// took 1.21 s against global stepping's 0.62 s on 2 threads; from 512 rows, 0.68 s (256 to 1 024
+// measured alike, within this machine's noise; docs/lts_plan.md "Where the work model is wrong").
+constexpr std::int64_t kMinRowsForThreadsLocal = 512;
 
 const std::shared_ptr<NodeExchange>& nullptr_exchange() {
   static const std::shared_ptr<NodeExchange> none;
