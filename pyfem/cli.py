@@ -156,8 +156,9 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
 
 def show_plan(scene: Scene, plan: dict) -> None:
     """Prints the plan of a scene (check, and run before it starts), flushed."""
-    print(f"scene: {scene.source}")
-    if not any("effects" in str(key) for key in plan):
+    if any("effects" in str(key) for key in plan):
+        print(f"scene: {scene.source}")
+    else:  # (its first line names the scene)
         print(describe_scene(scene))
     print(format_plan(plan))
     if "seismic_input" in scene.effects:
