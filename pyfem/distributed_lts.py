@@ -43,7 +43,6 @@ class RankLevels:
         counts: the whole model's nodes per level, finest first.
         global_step: the scene's TimeStep (global stepping's).
         time_step: local_stepping.local_time_step's (dt the finest level's).
-        decision: time.local_stepping = "auto"'s reason (None when set to true).
         stability: the set-up check's report once it ran (`check_stability_on_ranks`).
     """
 
@@ -51,7 +50,6 @@ class RankLevels:
     counts: np.ndarray
     global_step: object
     time_step: object
-    decision: str | None = None
     stability: dict | None = None
 
     @property
@@ -75,16 +73,16 @@ def owned_cell_nodes(part) -> np.ndarray:
 def node_levels(part) -> np.ndarray:
     """int32 per local node: pyfem.local_stepping.node_levels (row split) of the whole model on the
     ranks (module docstring), before the cap to the output interval. A collective."""
-    from pyfem.local_stepping import MAX_LEVEL, equalize_pair_levels
+    from pyfem.local_stepping import MAX_LEVEL, equalize_pair_levels, node_stable_steps, rate_levels
 
     comm, n_owned = part.comm, part.n_owned
     dt_node = np.zeros(part.n_local)
-    dt_node[:n_owned] = 2.0 / np.sqrt(part.row_sums / part.mass[:n_owned])
+    dt_node[:n_owned] = node_stable_steps(part.row_sums, part.mass[:n_owned])
     dt_min = comm.allreduce(float(dt_node[:n_owned].min()) if n_owned else math.inf, op=MPI.MIN)
     dt_node[np.asarray(part.dashpot_nodes, dtype=np.int64)] = dt_min  # (owned face nodes)
     part.plan.update(comm, dt_node)
     cells = owned_cell_nodes(part)
-    cell_level = np.minimum(np.floor(np.log2(dt_node[cells].min(axis=1) / dt_min) + 1e-12).astype(np.int32), MAX_LEVEL)
+    cell_level = rate_levels(dt_node[cells].min(axis=1), dt_min, MAX_LEVEL)
     levels = np.full(part.n_local, MAX_LEVEL, dtype=np.int32)
     np.minimum.at(levels, cells.ravel(), np.repeat(cell_level, cells.shape[1]))
     part.plan.reduce(comm, levels, np.minimum)
@@ -102,24 +100,17 @@ def level_counts(comm: MPI.Comm, levels: np.ndarray, n_owned: int) -> np.ndarray
     return np.trim_zeros(counts, "b")
 
 
-def cell_levels(levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
-    """The row split's level of each cell: the finest of its nodes (local_stepping.row_cell_cap)."""
-    from pyfem.local_stepping import row_cell_cap
-
-    return np.asarray(row_cell_cap(levels, cell_nodes), dtype=np.int32)
-
-
 def work_sums_on_ranks(part, loop, levels: np.ndarray) -> np.ndarray:
     """local_stepping.work_sums of the whole model: each rank's owned rows, counted cells and pairs,
     summed over the ranks."""
-    from pyfem.local_stepping import work_sums
+    from pyfem.local_stepping import row_cell_cap, work_sums
 
     n_owned = part.n_owned
     points, cell_level = [np.zeros(0)], [np.zeros(0)]
     if loop is not None:
         for arrays in loop.counted.arrays.values():
             points.append(np.full(len(arrays.cells), float(arrays.weights.shape[1])))
-            cell_level.append(cell_levels(levels, arrays.cell_nodes))
+            cell_level.append(row_cell_cap(levels, arrays.cell_nodes))  # (the finest of its nodes)
     pair_levels = np.zeros(0)
     if part.pairs is not None and len(part.pairs.nodes):
         pair_levels = levels[np.asarray(part.pairs.nodes)[:, 0]]
@@ -161,7 +152,7 @@ def choose(part, loop, time_step, duration: float) -> tuple[RankLevels | None, s
     if not on:
         return None, decision
     fine_step, _ = local_stepping.local_time_step(time_step, None, "row", counts=counts)
-    return RankLevels(levels, counts, time_step, fine_step, decision), decision
+    return RankLevels(levels, counts, time_step, fine_step), decision
 
 
 class LevelExchanges(list):
@@ -179,18 +170,9 @@ class LevelExchanges(list):
 
 def level_exchanges(part, levels: np.ndarray, max_level: int) -> LevelExchanges:
     """One kernel MpiNodeExchange per level k: the ghost plan's nodes at level k (a ghost's level is
-    its owner's, so both sides keep the same nodes, in the plan's order). A collective."""
-    from pyfem import _kernels
-
-    plan, comm = part.plan, part.comm
-    exchanges = LevelExchanges()
-    for k in range(max_level + 1):
-        send = [np.ascontiguousarray(nodes[levels[nodes] == k], dtype=np.int32) for nodes in plan.send]
-        recv = [np.ascontiguousarray(nodes[levels[nodes] == k], dtype=np.int32) for nodes in plan.recv]
-        keep = [j for j in range(len(plan.neighbours)) if len(send[j]) or len(recv[j])]
-        exchanges.append(_kernels.MpiNodeExchange(comm.py2f(), [plan.neighbours[j] for j in keep],
-                                                  [send[j] for j in keep], [recv[j] for j in keep], part.n_local))
-    return exchanges
+    its owner's). A collective."""
+    return LevelExchanges(part.plan.kernel_exchange(part.comm, part.n_local, levels == k)
+                          for k in range(max_level + 1))
 
 
 @dataclass
@@ -242,7 +224,7 @@ def rank_stepper(part, rank_levels: RankLevels, loop, input_arrays: dict | None 
             continue
         split = []
         for index, (name, arrays) in enumerate(regions.arrays.items()):
-            cell_level = cell_levels(levels, arrays.cell_nodes)
+            cell_level = local_stepping.row_cell_cap(levels, arrays.cell_nodes)  # (the finest of its nodes)
             parts, prefixes = [], []
             for level in np.unique(cell_level):
                 rows = np.flatnonzero(cell_level == level)

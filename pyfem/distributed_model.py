@@ -268,11 +268,20 @@ class GhostPlan:
     send: list
     recv: list
 
-    def kernel_exchange(self, comm: MPI.Comm, n_local: int):
-        """The kernel's MpiNodeExchange of this plan."""
+    def kernel_exchange(self, comm: MPI.Comm, n_local: int, keep: np.ndarray | None = None):
+        """The kernel's MpiNodeExchange of this plan, or of its nodes where `keep` (per local node) is
+        true: a ghost's `keep` must be its owner's, so that both sides keep the same nodes in the
+        plan's order (local time stepping's one exchange per level, pyfem/distributed_lts.py). A
+        collective."""
         from pyfem import _kernels
 
-        return _kernels.MpiNodeExchange(comm.py2f(), self.neighbours, self.send, self.recv, n_local)
+        if keep is None:
+            return _kernels.MpiNodeExchange(comm.py2f(), self.neighbours, self.send, self.recv, n_local)
+        send = [np.ascontiguousarray(nodes[keep[nodes]], dtype=np.int32) for nodes in self.send]
+        recv = [np.ascontiguousarray(nodes[keep[nodes]], dtype=np.int32) for nodes in self.recv]
+        used = [j for j in range(len(self.neighbours)) if len(send[j]) or len(recv[j])]
+        return _kernels.MpiNodeExchange(comm.py2f(), [self.neighbours[j] for j in used], [send[j] for j in used],
+                                        [recv[j] for j in used], n_local)
 
     def update(self, comm: MPI.Comm, x: np.ndarray) -> None:
         """The ghosts' rows of x (n_local, ...) from their owners (the power iteration's exchange)."""

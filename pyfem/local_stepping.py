@@ -110,18 +110,27 @@ def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: 
     (`equalize_pair_levels`)."""
     csr = stiffness.tocsr()
     row_sums = np.asarray(abs(csr).sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
-    dt_node = 2.0 / np.sqrt(row_sums / mass)
+    dt_node = node_stable_steps(row_sums, mass)
     dt_min = dt_node.min()
     if pinned is not None and len(pinned):
-        dt_node = dt_node.copy()
         dt_node[np.asarray(pinned)] = dt_min
-    cell_level = np.minimum(np.floor(np.log2(dt_node[cell_nodes].min(axis=1) / dt_min) + 1e-12).astype(int),
-                            max_level)
+    cell_level = rate_levels(dt_node[cell_nodes].min(axis=1), dt_min, max_level)
     levels = _finest_of_cells(cell_level, cell_nodes, np.full(len(mass), max_level))
     if pairs is not None and len(pairs):
         levels = (equalize_pair_levels(levels, np.asarray(pairs)) if rows
                   else equalize_pair_drift(levels, cell_nodes, np.asarray(pairs), loop_cells))
     return levels
+
+
+def node_stable_steps(row_sums: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """Each node's stable step (s) by the Gershgorin bound of its rows: 2 / sqrt(largest absolute row
+    sum of its three rows / its mass)."""
+    return 2.0 / np.sqrt(np.asarray(row_sums, dtype=float) / np.asarray(mass, dtype=float))
+
+
+def rate_levels(dt: np.ndarray, dt_min: float, max_level: int) -> np.ndarray:
+    """int32 rate level of each stable step `dt`: floor(log2(dt / dt_min)), at most max_level."""
+    return np.minimum(np.floor(np.log2(np.asarray(dt) / dt_min) + 1e-12), max_level).astype(np.int32)
 
 
 def fit_levels_to_output(levels: np.ndarray, steps_per_output: int) -> np.ndarray:
