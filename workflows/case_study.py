@@ -219,6 +219,8 @@ def case_numbers(run: dict) -> dict:
                        "ms_per_step": 1e3 * summary["seconds_per_step"], "dt": summary["dt"],
                        "duration": summary["scene"]["time"]["duration"], "cells": summary["cells"],
                        "energy_balance_error": summary["energy"]["balance_error"]}
+    if summary.get("time_per_step"):
+        numbers["cost"]["time_per_step"] = summary["time_per_step"]
     if "n_pairs" in summary:
         numbers["cost"]["pairs"] = summary["n_pairs"]
         numbers["pair_states_final"] = summary["pair_states_final"]
@@ -611,12 +613,26 @@ def cost_table(numbers_by_preset: dict) -> str:
             lines.append(f"| case {case} {preset} | {c['cells']} | {c['dofs']} | {c.get('pairs', '-')} | {c['dt']:.4g} | "
                          f"{c['duration']:g} | {c['steps']} | {c['wall_seconds']:.0f} | {c['ms_per_step']:.2f} | "
                          f"{c['energy_balance_error']:.1e} |")
+    parts = ("stiffness", "element_loop", "input_forces", "contact", "update", "exchange", "merge", "output", "other")
+    split = [(f"case {case} {preset}", numbers[case]["cost"]["time_per_step"]) for preset, numbers in
+             numbers_by_preset.items() for case in sorted(numbers) if numbers[case]["cost"].get("time_per_step")]
+    if split:
+        shown = [part for part in parts if any(part in phases for _, phases in split)]
+        lines += ["", "Time per step by part (ms per step, share of the time loop; run.json \"time_per_step\": the "
+                  "kernel's phases, the samples' output, and the rest of the loop):", "",
+                  "| run | " + " | ".join(part.replace("_", " ") for part in shown) + " |",
+                  "|---" + "|---:" * len(shown) + "|"]
+        for label, phases in split:
+            lines.append(f"| {label} | " + " | ".join(
+                f"{phases[part]['ms_per_step']:.2f} ({100 * phases[part]['share']:.0f} %)" if part in phases else "-"
+                for part in shown) + " |")
     return "\n".join(lines) + "\n"
 
 
-def update_doc(text: str) -> None:
-    """Replaces the generated block of docs/case_study.md (between the two markers)."""
-    start, end = "<!-- case_study.py: start -->", "<!-- case_study.py: end -->"
+def update_doc(text: str, marker: str = "case_study.py") -> None:
+    """Replaces a generated block of docs/case_study.md: the one between the markers
+    <!-- MARKER: start --> and <!-- MARKER: end -->."""
+    start, end = f"<!-- {marker}: start -->", f"<!-- {marker}: end -->"
     if not DOC.exists():
         return
     doc = DOC.read_text()
