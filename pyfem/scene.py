@@ -483,6 +483,11 @@ _PLASTICITY = Table({
     "damage_max": Number("largest damage d_max (0: no damage)", "[0, 1)", default=0.9),
     "damage_plastic_strain": Number("equivalent plastic strain scale kappa_ref of the damage",
                                     POSITIVE, default=0.005),
+    "damage_plastic_displacement": Number("crack band: the damage's plastic displacement scale u_ref (m); "
+                                          "kappa_ref = u_ref / h in a cell of characteristic length h (the cube "
+                                          "root of its volume), so that a softening band one cell wide softens by "
+                                          "its plastic displacement, not its strain; 0: kappa_ref = "
+                                          "damage_plastic_strain in every cell", NON_NEGATIVE, default=0.0),
     # None: on for Q1 (volumetric locking of plastic flow), off for Q2.
     "mean_dilatation": Flag("mean dilatation (B-bar) in the region's cells", default=None),
     # Where the law acts: the region's cells whose centroid lies in the box; the others stay linear
