@@ -156,6 +156,8 @@ ROWS = (
     ("interlayer_max", "interlayer relative displacement, rock points 1.9 m either side of interface_8: max", 100, "cm"),
     ("interlayer_final", "same, at 3 s", 100, "cm"),
     ("pair_max", "node pair wall_up_8: max relative displacement", 1000, "mm"),
+    ("crown_pair_max", "node pair crown_9 (interface_9, 0.5 m above the crown): max relative displacement", 100, "cm"),
+    ("wall_pairs_bonded", "of the four wall pairs, still bonded at 3 s", 1, "-"),
     ("D_wall_min", "D(t) at the wall pairs: min", 1, "-"),
     ("D_crown_min", "D(t) at the crown pair: min", 1, "-"),
     ("relative_B", "upstream wall B against floor D: max over t of abs(u_B - u_D)", 100, "cm"),
@@ -180,9 +182,16 @@ ROWS = (
 PARTS = ("stiffness", "element_loop", "contact", "input_forces", "output")
 
 
-def flat_numbers(numbers: dict) -> dict:
-    """The rows' values (SI) from case_study.case_numbers' dict."""
+def flat_numbers(numbers: dict, run_pairs: dict | None = None) -> dict:
+    """The rows' values (SI) from case_study.case_numbers' dict and run.json's "pairs" (the pair
+    monitors' summaries)."""
     flat = {key: numbers.get(key) for key in ("interlayer_max", "interlayer_final", "pair_max")}
+    pairs = run_pairs or {}
+    if case_study.CROWN_PAIR in pairs:
+        flat["crown_pair_max"] = pairs[case_study.CROWN_PAIR]["max_relative_displacement"]
+    walls = [pairs[name]["final_state"] for name in case_study.WALL_PAIRS if name in pairs]
+    if walls:
+        flat["wall_pairs_bonded"] = sum(state == "bonded" for state in walls)
     if "D_wall_range" in numbers:
         flat["D_wall_min"] = numbers["D_wall_range"][0]
     if "D_crown_range" in numbers:
@@ -312,7 +321,7 @@ def report(runs: pathlib.Path = RUNS, results: pathlib.Path = RESULTS, doc: bool
         run = case_study.load_run(runs / variant.name)
         if run is not None:
             loaded[variant.name] = run
-            found[variant.name] = flat_numbers(case_study.case_numbers(run))
+            found[variant.name] = flat_numbers(case_study.case_numbers(run), run["summary"].get("pairs"))
     if not found:
         print(f"no finished variant in {runs}", file=sys.stderr)
         return ""
