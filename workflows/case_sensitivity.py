@@ -168,6 +168,7 @@ ROWS = (
     ("s1_dynamic_crown", "max principal stress at crown A, dynamic", 1e-6, "MPa"),
     ("s1_dynamic_wall", "max principal stress at wall B, dynamic", 1e-6, "MPa"),
     ("yielded", "rock yielded in the plastic zone, both rocks", 1, "m^3"),
+    ("lining_damaged", "lining damaged (d > 0.01; the whole lining is 28 053-28 100)", 1, "m^3"),
     ("sliding", "pairs sliding or separated at 3 s", 1, "-"),
     ("energy", "energy balance error", 1, "-"),
     ("static_seconds", "static stage (excavation, support)", 1, "s"),
@@ -205,6 +206,7 @@ def flat_numbers(numbers: dict, run_pairs: dict | None = None) -> dict:
     yielded = [regions[rock]["yielded_volume"] for rock in TABLE1_COHESION if rock in regions
                and regions[rock].get("yielded_volume") is not None]
     flat["yielded"] = sum(yielded) if yielded else None
+    flat["lining_damaged"] = (regions.get("lining") or {}).get("damaged_volume")
     states = numbers.get("pair_states_final") or {}
     flat["sliding"] = (states.get("sliding", 0) + states.get("separated", 0)) if states else None
     cost = numbers["cost"]
