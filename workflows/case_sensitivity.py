@@ -153,6 +153,9 @@ def convergence(values: tuple, ratio: float = REFINEMENT, safety: float = GCI_SA
 
 # The rows: (key, label, unit scale, unit) from case_study.case_numbers.
 ROWS = (
+    ("stage_displacement", "static stage: largest displacement when the excavation is released", 100, "cm"),
+    ("stage_yielded", "static stage: rock yielded at its end", 1, "m^3"),
+    ("stage_steps", "static stage: relaxation steps, excavation + support", 1, "-"),
     ("interlayer_max", "interlayer relative displacement, rock points 1.9 m either side of interface_8: max", 100, "cm"),
     ("interlayer_final", "same, at 3 s", 100, "cm"),
     ("pair_max", "node pair wall_up_8: max relative displacement", 1000, "mm"),
@@ -180,7 +183,26 @@ ROWS = (
     ("ms_input_forces", "of which the input forces", 1, "ms"),
     ("ms_output", "of which output", 1, "ms"),
 )
+NOT_CONVERGED = ("energy", "wall_seconds", "static_seconds", "stage_steps", "wall_pairs_bonded", "lining_damaged")
+"""Rows that are costs or counts, without an observed order."""
 PARTS = ("stiffness", "element_loop", "contact", "input_forces", "output")
+
+
+def stage_numbers(directory: pathlib.Path) -> dict:
+    """The static stage's rows from DIR/static/static.json (written when the stage ends, before the
+    motion), {} without it."""
+    import json
+
+    path = directory / "static" / "static.json"
+    if not path.exists():
+        return {}
+    static = json.loads(path.read_text())
+    stages = {stage["name"]: stage for stage in static["stages"]}
+    regions = static.get("regions") or {}
+    return {"stage_displacement": stages.get("excavation", {}).get("max_displacement"),
+            "stage_yielded": sum(regions[rock]["yielded_volume"] for rock in TABLE1_COHESION if rock in regions),
+            "stage_steps": sum(stage["iterations"] for stage in static["stages"]),
+            "stage_converged": all(stage.get("converged", True) for stage in static["stages"])}
 
 
 def flat_numbers(numbers: dict, run_pairs: dict | None = None) -> dict:
@@ -256,7 +278,7 @@ def tables(found: dict) -> str:
                 continue
             line = f"| {label} ({unit}) | " + " | ".join(_cell(value, scale, unit) for value in values) + " |"
             if complete_mesh:
-                if key in ("energy", "wall_seconds") or key.startswith("ms_") or any(value is None for value in values):
+                if key in NOT_CONVERGED or key.startswith("ms_") or any(value is None for value in values):
                     line += " | | |"
                 else:
                     c = convergence(values)
@@ -324,6 +346,7 @@ def report(runs: pathlib.Path = RUNS, results: pathlib.Path = RESULTS, doc: bool
         if run is not None:
             loaded[variant.name] = run
             found[variant.name] = flat_numbers(case_study.case_numbers(run), run["summary"].get("pairs"))
+            found[variant.name].update(stage_numbers(run["dir"]))
     if not found:
         print(f"no finished variant in {runs}", file=sys.stderr)
         return ""
