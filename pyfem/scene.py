@@ -1031,7 +1031,7 @@ def _check_rock_damage_scale(key: str, values: dict) -> None:
         lo, hi = PLASTIC_DISPLACEMENT_RANGE
         if not lo <= u_ref <= hi:
             raise SceneError(name, u_ref, f"a plastic displacement (m) in [{_scientific(lo)}, {_scientific(hi)}] "
-                             "(the opening across a band at which the rock has lost 63 % of damage_max)"
+                             "(kappa h, the plastic displacement across a band one cell wide at which the damage reaches 63 % of damage_max)"
                              + _unit_hint(u_ref, PLASTIC_DISPLACEMENT_RANGE, (("mm", 1.0e-3), ("cm", 1.0e-2))))
     if values["damage_plastic_strain"] is None:
         values["damage_plastic_strain"] = DAMAGE_PLASTIC_STRAIN
