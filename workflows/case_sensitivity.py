@@ -133,19 +133,28 @@ def convergence(values: tuple, ratio: float = REFINEMENT, safety: float = GCI_SA
         safety: the GCI's safety factor (1.25 for three meshes, Roache 1998).
 
     Returns:
-        {"order", "extrapolated", "gci_fine", "monotone"}: with monotone False (the changes alternate
-        in sign or the last one is zero) the sequence is not in its asymptotic range and order,
-        extrapolated and gci_fine are None; gci_fine is relative to the fine value.
+        {"status", "order", "extrapolated", "gci_fine"}: status "converging" (the two changes have one
+        sign and the second is the smaller: order > 0, gci_fine relative to the fine value), or, with
+        order, extrapolated and gci_fine None, "oscillating" (the changes alternate in sign),
+        "diverging" (the second change is the larger: refinement moves the value more, not less) or
+        "unchanged" (a change within 1e-9 of the values, round-off): the sequence is not in its
+        asymptotic range.
     """
     coarse, medium, fine = (float(v) for v in values)
     first, second = medium - coarse, fine - medium
-    if second == 0.0 or first == 0.0 or first * second < 0.0:
-        return {"order": None, "extrapolated": None, "gci_fine": None, "monotone": False}
+    none = {"order": None, "extrapolated": None, "gci_fine": None}
+    zero = 1e-9 * max(abs(coarse), abs(medium), abs(fine))  # round-off of a quantity that did not move
+    if abs(second) <= zero or abs(first) <= zero:
+        return {"status": "unchanged", **none}
+    if first * second < 0.0:
+        return {"status": "oscillating", **none}
+    if abs(second) >= abs(first):
+        return {"status": "diverging", **none}
     order = math.log(abs(first / second)) / math.log(ratio)
     growth = ratio ** order - 1.0
     extrapolated = fine + second / growth
     gci = safety * abs(second / fine) / growth if fine != 0.0 else None
-    return {"order": order, "extrapolated": extrapolated, "gci_fine": gci, "monotone": True}
+    return {"status": "converging", "order": order, "extrapolated": extrapolated, "gci_fine": gci}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -183,6 +192,7 @@ ROWS = (
     ("ms_input_forces", "of which the input forces", 1, "ms"),
     ("ms_output", "of which output", 1, "ms"),
 )
+STATUS_WORDS = {"oscillating": "oscillates", "diverging": "changes grow", "unchanged": "unchanged"}
 NOT_CONVERGED = ("energy", "wall_seconds", "static_seconds", "stage_steps", "wall_pairs_bonded", "lining_damaged")
 """Rows that are costs or counts, without an observed order."""
 PARTS = ("stiffness", "element_loop", "contact", "input_forces", "output")
@@ -282,11 +292,11 @@ def tables(found: dict) -> str:
                     line += " | | |"
                 else:
                     c = convergence(values)
-                    if c["monotone"]:
+                    if c["status"] == "converging":
                         gci = f"{100 * c['gci_fine']:.1f} %" if c["gci_fine"] is not None else "-"
                         line += f" {c['order']:.2f} | {_cell(c['extrapolated'], scale, unit)} | {gci} |"
                     else:
-                        line += " not monotone | | |"
+                        line += f" {STATUS_WORDS[c['status']]} | | |"
             out.append(line)
         out.append("")
     return "\n".join(out)
