@@ -10,7 +10,7 @@ the scene cannot answer:
    so they are not a refinement sequence. Group "mesh" runs the coarse scene with the size along the
    cavern, `mesh.parameters.h_cavern`, at 4.5 (the scene's), 3.0 and 2.0 m: a constant ratio of 1.5
    with everything else fixed (the extents, the 0.5 m first rock ring and lining cells, hence the
-   same time step; the grading away from the cavern). 47 936, 105 740 and 245 854 cells. Three
+   same time step; the grading away from the cavern): 43 904, 93 680 and 203 086 cells. Three
    meshes give the observed order and a Richardson estimate of the converged value, and with it
    the grid convergence index (Roache's GCI, safety factor 1.25) of the finest mesh:
    `convergence()`.
