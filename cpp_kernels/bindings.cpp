@@ -587,7 +587,8 @@ Args:
     parameters: dict name -> float of the law's parameters (SI, angles in deg):
         linear_elastic: lame_lambda, shear_modulus (Pa);
         mohr_coulomb: young_modulus, poisson_ratio, cohesion, friction_angle, tensile_strength,
-            optional dilation_angle (0), damage_max (0.9), damage_plastic_strain (0.005);
+            optional dilation_angle (0), damage_max (0.9), damage_plastic_strain (0.005),
+            damage_plastic_displacement (m; 0: no crack band, kappa_ref = u_ref / h otherwise);
         concrete_damage: young_modulus, poisson_ratio, tensile_strength, cohesion,
             friction_angle, optional fracture_energy (120 N/m), A_t, B_t, A_c, B_c,
             stiffness_recovery, damage_max (docs/materials.md).

@@ -1327,9 +1327,11 @@ class DistributedRun:
         model's (pyfem.solver._make_local_stepper)."""
         from pyfem import local_stepping
         from pyfem.distributed_lts import check_stability_on_ranks
-        from pyfem.solver import whole_steps
+        from pyfem.solver import lts_stability_line, whole_steps
 
         report = self.lts.stability = check_stability_on_ranks(self.part, self.lts, self.loop)
+        if self.comm.rank == 0:  # the whole model's console line (its plan is printed after the check)
+            print(f"{'local stepping:':<48}{lts_stability_line(report)}", flush=True)
         if report["stable"]:
             return
         refusal, decision, warning = local_stepping.unstable_words(report)

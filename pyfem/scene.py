@@ -481,8 +481,12 @@ _PLASTICITY = Table({
     "tensile_strength": Number("tensile strength of the cut-off (Pa; >= c cot(phi): none)",
                                NON_NEGATIVE, default=None),
     "damage_max": Number("largest damage d_max (0: no damage)", "[0, 1)", default=0.9),
+    # None: DAMAGE_PLASTIC_STRAIN, filled in by _check_nonlinear_material (which refuses it beside a crack band).
     "damage_plastic_strain": Number("equivalent plastic strain scale kappa_ref of the damage",
-                                    POSITIVE, default=0.005),
+                                    POSITIVE, default=None),
+    # The crack band (docs/materials.md "Crack band of the rock"): kappa_ref = u_ref / h per cell.
+    "damage_plastic_displacement": Number("plastic displacement scale u_ref of the damage's crack band (m; 0: none)",
+                                          NON_NEGATIVE, default=0.0),
     # None: on for Q1 (volumetric locking of plastic flow), off for Q2.
     "mean_dilatation": Flag("mean dilatation (B-bar) in the region's cells", default=None),
     # Where the law acts: the region's cells whose centroid lies in the box; the others stay linear
@@ -491,6 +495,13 @@ _PLASTICITY = Table({
                    "cells stay linear elastic", 6, default=None),
     "integration": _INTEGRATION,
 }, "[materials.NAME.plasticity]", presence="optional")
+DAMAGE_PLASTIC_STRAIN = 0.005
+"""The rock damage's kappa_ref without a crack band (docs/materials.md)."""
+PLASTIC_DISPLACEMENT_RANGE = (1.0e-5, 1.0)
+"""Plausible u_ref of the rock's crack band (m): outside it, a unit slip (mm or cm written as m)."""
+_ROCK_DAMAGE_NOT_READ = ("not read here: the rock's damage (damage_max, damage_plastic_strain and its crack band "
+                         "damage_plastic_displacement) goes in [materials.NAME.plasticity] (Mohr-Coulomb rock); "
+                         "the concrete law's crack band is fracture_energy in [materials.NAME.damage]")
 
 # Lining concrete: Eq. 21 of the paper with crack band (docs/materials.md). Strengths as above.
 _DAMAGE = Table({
@@ -505,7 +516,8 @@ _DAMAGE = Table({
     "stiffness_recovery": Number("share s of d_t acting in compression", "[0, 1]", default=0.0),
     "damage_max": Number("cap of the damage (stiffness floor)", "[0, 1)", default=0.9999),
     "integration": _INTEGRATION,
-}, "[materials.NAME.damage]", presence="optional")
+}, "[materials.NAME.damage]", presence="optional",
+   not_read={key: _ROCK_DAMAGE_NOT_READ for key in ("damage_plastic_strain", "damage_plastic_displacement")})
 
 _MATERIAL = Table({
     "preset": Choice("material preset (the paper's Table 1, docs/method.md section 10)", tuple(MATERIAL_PRESETS), default=None),
@@ -515,7 +527,8 @@ _MATERIAL = Table({
     "plasticity": _PLASTICITY,
     "damage": _DAMAGE,
 }, "a material", not_read={
-    key: _STRENGTH_NOT_READ for key in ("cohesion", "friction_angle", "dilation_angle", "tensile_strength")
+    **{key: _STRENGTH_NOT_READ for key in ("cohesion", "friction_angle", "dilation_angle", "tensile_strength")},
+    **{key: _ROCK_DAMAGE_NOT_READ for key in ("damage_max", "damage_plastic_strain", "damage_plastic_displacement")},
 })
 
 _WAVE_TYPE = Choice("wave type", ("P", "SV", "SH"))
@@ -987,6 +1000,7 @@ def _check_nonlinear_material(name: str, material: dict, order: int) -> None:
         if values["friction_angle"] == 0.0 and values["cohesion"] == 0.0:
             raise SceneError(f"{key}.cohesion", 0.0,
                              "must be > 0 when friction_angle = 0 (the material would have no shear strength)")
+        _check_rock_damage_scale(key, values)
         if values["mean_dilatation"] is None:
             values["mean_dilatation"] = order == 1
         zone = values.get("zone")
@@ -997,6 +1011,30 @@ def _check_nonlinear_material(name: str, material: dict, order: int) -> None:
         raise SceneError(f"{key}.A_t", values["A_t"], "must be 1 when fracture_energy > 0 (with A_t < 1 the "
                          "stress keeps (1 - A_t) f_t forever and no fracture energy can be matched); set "
                          "fracture_energy = 0 for the unregularised law")
+
+
+def _check_rock_damage_scale(key: str, values: dict) -> None:
+    """The rock damage's scale: damage_plastic_strain (kappa_ref in every cell, DAMAGE_PLASTIC_STRAIN
+    when not given) or the crack band's damage_plastic_displacement (u_ref / h per cell), not both;
+    a crack band needs damage, and a u_ref outside PLASTIC_DISPLACEMENT_RANGE is a unit slip."""
+    u_ref = values["damage_plastic_displacement"]
+    if u_ref > 0.0:
+        name = f"{key}.damage_plastic_displacement"
+        if values["damage_max"] == 0.0:
+            raise SceneError(name, u_ref, "0 when damage_max = 0 (no damage: the crack band would scale "
+                             "nothing); give damage_max > 0 to soften the rock")
+        if values["damage_plastic_strain"] is not None:
+            raise SceneError(name, u_ref, "0 beside damage_plastic_strain = "
+                             f"{_scientific(values['damage_plastic_strain'])}: give one scale of the damage, "
+                             "damage_plastic_strain (the same in every cell) or damage_plastic_displacement "
+                             "(the crack band: u_ref / h in each cell), not both")
+        lo, hi = PLASTIC_DISPLACEMENT_RANGE
+        if not lo <= u_ref <= hi:
+            raise SceneError(name, u_ref, f"a plastic displacement (m) in [{_scientific(lo)}, {_scientific(hi)}] "
+                             "(kappa h, the plastic displacement across a band one cell wide at which the damage reaches 63 % of damage_max)"
+                             + _unit_hint(u_ref, PLASTIC_DISPLACEMENT_RANGE, (("mm", 1.0e-3), ("cm", 1.0e-2))))
+    if values["damage_plastic_strain"] is None:
+        values["damage_plastic_strain"] = DAMAGE_PLASTIC_STRAIN
 
 
 def _scientific(x: float) -> str:

@@ -83,6 +83,7 @@ UNSET = {
     "materials.NAME.plasticity.friction_angle": "the preset's; required without a preset",
     "materials.NAME.plasticity.tensile_strength": "the preset's; required without a preset",
     "materials.NAME.plasticity.mean_dilatation": "true for `mesh.order` = 1, false for 2",
+    "materials.NAME.plasticity.damage_plastic_strain": "0.005; refused beside `materials.NAME.plasticity.damage_plastic_displacement` > 0",
     "materials.NAME.damage.cohesion": "the preset's (the paper's Table 1); required without a preset",
     "materials.NAME.damage.friction_angle": "the preset's; required without a preset",
     "materials.NAME.damage.tensile_strength": "the preset's; required without a preset",

@@ -1090,6 +1090,11 @@ def element_loop_plan(nonlinear, u: np.ndarray, per_step: float, time_step: Time
                          + (", one point per cell (its hourglass stiffness in the matrix)" if one_point else "")
                          + (", mean dilatation" if component.mean_dilatation else "")
                          + f", {component.owned_bytes / 2**20:.1f} MiB of state and buffers")
+        u_ref = parameters.get("damage_plastic_displacement", 0.0) if law == "mohr_coulomb" else 0.0
+        if u_ref > 0.0 and component.n_cells:  # the rock's crack band: kappa_ref per cell (docs/materials.md)
+            h = np.asarray(component.characteristic_length())
+            regions[name] += (f", crack band u_ref = {u_ref:g} m: kappa_ref {u_ref / h.max():.3g}-{u_ref / h.min():.3g} "
+                              f"in its cells (h {h.min():.3g}-{h.max():.3g} m, the cube root of a cell's volume)")
         if law == "mohr_coulomb":
             stiffening = max(stiffening, plastic_frequency_factor(parameters["poisson_ratio"],
                                                                   parameters["friction_angle"],

@@ -82,6 +82,9 @@ def replace(text, old, new):
     return text.replace(old, new, 1)
 
 
+ROCK_LAW = "[materials.rock.plasticity]\ncohesion = 1.1e6\nfriction_angle = 42.0\ntensile_strength = 1.9e6\n"
+
+
 def box(old=None, new=None, extra=""):
     """BOX with one line replaced and `extra` TOML appended: a scene without side files."""
     def setup(tmp):
@@ -170,6 +173,19 @@ BAD_INPUTS = [
      box(extra="[materials.rock.plasticity]\ncohesion = 1.1e6\nfriction_angle = 30.0\ntensile_strength = 1.9e6\n"
                "dilation_angle = 35.0\n"),
      "materials.rock.plasticity.dilation_angle", ["must not exceed the friction angle 30 deg"]),
+    ("rock crack band in mm",
+     box(extra=ROCK_LAW + "damage_plastic_displacement = 10.0\n"),
+     "materials.rock.plasticity.damage_plastic_displacement", ["looks like mm: write 1.0e-2"]),
+    ("rock crack band without damage",
+     box(extra=ROCK_LAW + "damage_max = 0.0\ndamage_plastic_displacement = 0.01\n"),
+     "materials.rock.plasticity.damage_plastic_displacement", ["damage_max = 0"]),
+    ("rock crack band beside a plastic strain scale",
+     box(extra=ROCK_LAW + "damage_plastic_strain = 0.002\ndamage_plastic_displacement = 0.01\n"),
+     "materials.rock.plasticity.damage_plastic_displacement", ["not both"]),
+    ("rock crack band in the concrete's table",
+     box(extra="[materials.rock.damage]\ndamage_plastic_displacement = 0.01\n"),
+     "materials.rock.damage.damage_plastic_displacement", ["not read here", "[materials.NAME.plasticity]",
+                                                           "fracture_energy"]),
     ("contact cohesion in MPa", box("h = 5.0", TWO_LAYERS, extra=LAYERED_BOX_CONTACT),
      "contact.cohesion", ["looks like MPa: write 1.0e6"]),
     ("damage with A_t < 1 and a crack band",

@@ -279,6 +279,45 @@ def test_q2_tensor_form_equals_the_dense_gradients_on_distorted_cells_through_yi
     assert yielded > 0.2                                                          # the region did yield
 
 
+@pytest.mark.parametrize("u_ref", [0.0, 2.0e-3])
+def test_rock_damage_crack_band_scales_with_each_cells_size(u_ref):
+    """The rock law's crack band in the element loop (docs/materials.md "Crack band of the rock"):
+    every point's damage is d_max (1 - exp(-kappa h / u_ref)) with h the cube root of its own cell's
+    volume, so cells of different sizes soften by their plastic displacement kappa h; without it
+    (u_ref = 0) by their strain, kappa / damage_plastic_strain, in every cell. Cells graded 1:4 in x,
+    driven through yield by random displacements."""
+    from mpi4py import MPI
+    import dolfinx.fem
+    import dolfinx.mesh
+
+    mesh = dolfinx.mesh.create_box(MPI.COMM_WORLD, [[0.0, 0.0, 0.0], [1.0, 4.0, 4.0]], [4, 2, 2],
+                                   dolfinx.mesh.CellType.hexahedron)
+    x = mesh.geometry.x
+    x[:, 0] = 16.0 * x[:, 0] ** 2                                   # cell widths 1, 3, 5, 7 m
+    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+    cells = np.arange(mesh.topology.index_map(3).size_local, dtype=np.int32)
+    arrays = element_arrays(V, cells)
+    rock = {"young_modulus": 2e9, "poisson_ratio": 0.3, "cohesion": 0.35e6, "friction_angle": 26.0,
+            "tensile_strength": 0.25e6, "damage_max": 0.9, "damage_plastic_strain": 1e-3,
+            "damage_plastic_displacement": u_ref}
+    component = _kernels.HexahedronElements(arrays.cell_nodes, arrays.kernel_gradients(), arrays.weights,
+                                            "mohr_coulomb", rock)
+    volume = arrays.weights.sum(axis=1)
+    h = np.asarray(component.characteristic_length())
+    assert h == pytest.approx(np.cbrt(volume), rel=1e-12)
+    assert h.max() / h.min() > 1.8                                   # the cells do differ
+    n_dofs = 3 * V.dofmap.index_map.size_local
+    rng = np.random.default_rng(3)
+    for scale in (1e-5, 1e-3, 3e-3):                                   # elastic, then yielding
+        component.compute(scale * rng.standard_normal(n_dofs), np.zeros(n_dofs))
+        component.commit()
+    kappa, damage = np.asarray(component.plastic_strain()), np.asarray(component.damage())
+    assert (kappa > 0).mean() > 0.5 and damage.max() > 0.3              # yielded and softened
+    scale_of_cell = u_ref / h if u_ref > 0 else np.full(len(h), rock["damage_plastic_strain"])
+    expected = 0.9 * (1.0 - np.exp(-kappa / scale_of_cell[:, None]))
+    assert np.abs(damage - expected).max() < 1e-12
+
+
 def test_bad_arguments_are_value_errors_naming_the_parameter():
     nodes = np.zeros((2, 8), dtype=np.int32)
     gradients, weights = np.zeros((2, 8, 8, 3)), np.ones((2, 8))

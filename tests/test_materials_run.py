@@ -196,6 +196,12 @@ def test_weak_layer_fields_and_plan(weak_layer_runs):
     assert "weak" in plan["nonlinear regions"] and "mohr_coulomb, 120 cells, 960 points" in plan["nonlinear regions"]["weak"]
     assert "mean dilatation" in plan["nonlinear regions"]["weak"]
     assert "ns per point" in plan["element loop"] and "soften" in plan["element loop dt"]
+    assert "crack band" not in plan["nonlinear regions"]["weak"]
+    # With the rock's crack band, check names u_ref and the kappa_ref of the layer's 5 m cells.
+    banded = weak_layer_scene(True)
+    banded["materials"]["weak"]["plasticity"].update(damage_max=0.5, damage_plastic_displacement=0.01)
+    line = solver.plan(banded)["nonlinear regions"]["weak"]
+    assert "crack band u_ref = 0.01 m: kappa_ref 0.002-0.002 in its cells (h 5-5 m" in line
 
 
 # ----------------------------------------------------------------------------- (c) concrete

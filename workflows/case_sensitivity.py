@@ -1,7 +1,7 @@
 """Variants of the case study's case 3 on the coarse mesh: the interfaces on three meshes, the rock's
 strength as the cause of the deformation gap, and the friction's normal lag.
 
-The case study (workflows/case_study.py, docs/case_study.md) leaves three questions that one run of
+The case study (workflows/case_study.py, docs/case_study.md) leaves four questions that one run of
 the scene cannot answer:
 
 1. **Do the interlayer quantities converge with the mesh?** The interlayer relative displacement
@@ -20,7 +20,12 @@ the scene cannot answer:
    (systematic bolting, shotcrete, the excavation sequence) is not given; bolted rock is commonly
    modelled as rock of raised cohesion. Group "strength" runs the scene with the cohesion of both
    rocks in the plastic zone raised 2x and 4x (friction angle and tension cut-off as Table 1).
-3. **How much do the friction's normal-stress lag's L and V* move the answer?** They are properties
+3. **What does the rock's damage change?** The scenes run the rock perfectly plastic (damage_max = 0):
+   its plastic-strain damage softened without regularisation and localised the coarse mesh's stage.
+   With the crack band (`damage_plastic_displacement`, docs/materials.md) a cell's damage follows
+   the plastic displacement across it; group "damage" runs the scene with the rock's damage on
+   (d_max 0.9, u_ref = 1 cm: kappa_ref 0.005 in a 2 m cell).
+4. **How much do the friction's normal-stress lag's L and V* move the answer?** They are properties
    of the interface for which we have no values for the paper's rocks (docs/interface_slip_accuracy.md);
    group "lag" runs the scene with `[contact.normal_lag]` at L = 1 cm and 10 cm (V* = 1 m/s), against
    the scene without it (L -> 0 is no lag).
@@ -91,10 +96,13 @@ VARIANTS = (
             ("mesh.parameters.h_cavern=2.0", "parallel.model=distributed"), ranks=2, h_cavern=2.0),
     Variant("cohesion_x2", "strength", "rock cohesion x2 (2.2 / 0.7 MPa)", _cohesion(2.0)),
     Variant("cohesion_x4", "strength", "rock cohesion x4 (4.4 / 1.4 MPa)", _cohesion(4.0)),
+    Variant("rock_damage", "damage", "rock damage on, crack band u_ref = 1 cm",
+            tuple(f"materials.{rock}.plasticity.{key}" for rock in TABLE1_COHESION
+                  for key in ("damage_max=0.9", "damage_plastic_displacement=0.01"))),
     Variant("lag_10cm", "lag", "normal lag L = 10 cm, V* = 1 m/s", _lag(0.1)),
     Variant("lag_1cm", "lag", "normal lag L = 1 cm, V* = 1 m/s", _lag(0.01)),
 )
-GROUPS = ("mesh", "strength", "lag")
+GROUPS = ("mesh", "strength", "damage", "lag")
 
 
 def command(variant: Variant, runs: pathlib.Path = RUNS) -> list[str]:

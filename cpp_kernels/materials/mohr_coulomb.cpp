@@ -229,6 +229,9 @@ MohrCoulombMaterial mohr_coulomb_material(const MohrCoulombParameters& p) {
           p.damage_max, "in [0, 1)");
   require(std::isfinite(p.damage_plastic_strain) && p.damage_plastic_strain > 0.0,
           "damage_plastic_strain", p.damage_plastic_strain, "finite and > 0");
+  require(std::isfinite(p.damage_plastic_displacement) && p.damage_plastic_displacement >= 0.0,
+          "damage_plastic_displacement", p.damage_plastic_displacement,
+          "finite and >= 0 (m; 0: no crack band)");
 
   MohrCoulombMaterial m{};
   m.young_modulus = p.young_modulus;
@@ -246,6 +249,7 @@ MohrCoulombMaterial mohr_coulomb_material(const MohrCoulombParameters& p) {
   m.tensile_strength = std::min(p.tensile_strength, m.apex);
   m.damage_max = p.damage_max;
   m.damage_plastic_strain = p.damage_plastic_strain;
+  m.damage_plastic_displacement = p.damage_plastic_displacement;
   m.planes = make_planes(m);  // once per material, not per return mapping
   return m;
 }
@@ -266,7 +270,7 @@ double mohr_coulomb_yield(const MohrCoulombMaterial& m, const std::array<double,
 }
 
 MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& m, const MohrCoulombState& old,
-                                    const Voigt& strain_increment) {
+                                    const Voigt& strain_increment, double characteristic_length) {
   const Voigt stress_increment = isotropic_stress(m.lambda, m.shear_modulus, strain_increment);
   Voigt trial_tensor = old.effective_stress;
   for (int k = 0; k < 6; ++k) trial_tensor[k] += stress_increment[k];
@@ -283,13 +287,15 @@ MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& m, const MohrCoul
     step.state.effective_stress = trial_tensor;
     return finish_step(m, old, strain_increment, step);
   }
-  return mohr_coulomb_update_screened(m, old, strain_increment, trial_tensor);
+  return mohr_coulomb_update_screened(m, old, strain_increment, trial_tensor,
+                                      characteristic_length);
 }
 
 MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& m,
                                              const MohrCoulombState& old,
                                              const Voigt& strain_increment,
-                                             const Voigt& trial_tensor) {
+                                             const Voigt& trial_tensor,
+                                             double characteristic_length) {
   MohrCoulombStep step;
   step.state = old;
   MohrCoulombState& next = step.state;
@@ -380,7 +386,8 @@ MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& m,
     if (m.damage_max > 0.0) {
       const double kappa = next.kappa_tension + next.kappa_shear;
       next.damage =
-          std::max(old.damage, m.damage_max * (1.0 - std::exp(-kappa / m.damage_plastic_strain)));
+          std::max(old.damage, m.damage_max * (1.0 - std::exp(-kappa / damage_strain_scale(
+                                                                       m, characteristic_length))));
     }
     if (next.kappa_tension + next.kappa_shear > 0.0)
       next.damage_type =

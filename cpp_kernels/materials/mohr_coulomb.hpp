@@ -32,10 +32,15 @@ struct MohrCoulombParameters {
   double friction_angle = 42.0;      // phi (deg), in [0, 90)
   double dilation_angle = 0.0;       // psi (deg), in [0, phi]
   double tensile_strength = 1.95e6;  // t (Pa), >= 0; +inf or >= c cot(phi): no cut-off
-  // Damage d = damage_max (1 - exp(-kappa / damage_plastic_strain)), kappa the accumulated
-  // equivalent plastic strain; stress = (1 - d) effective stress. damage_max = 0: no damage.
-  double damage_max = 0.9;               // in [0, 1)
-  double damage_plastic_strain = 0.005;  // kappa_ref, > 0
+  // Damage d = damage_max (1 - exp(-kappa / kappa_ref)), kappa the accumulated equivalent
+  // plastic strain; stress = (1 - d) effective stress. damage_max = 0: no damage.
+  // kappa_ref = damage_plastic_strain, or, with damage_plastic_displacement u_ref > 0, the crack
+  // band's u_ref / h (h the cell's characteristic length, the cube root of its volume): the
+  // softening then follows the plastic displacement across a band one cell wide, h kappa, and
+  // the energy a softening band dissipates per unit area does not depend on the cell size.
+  double damage_max = 0.9;                  // in [0, 1)
+  double damage_plastic_strain = 0.005;     // kappa_ref, > 0
+  double damage_plastic_displacement = 0.0;  // u_ref (m), >= 0; 0: kappa_ref the same in every cell
 };
 
 namespace detail {
@@ -66,7 +71,7 @@ struct MohrCoulombMaterial {
   double tensile_strength;       // min(t, apex): the Rankine planes s_i <= this
   bool tension_cutoff;           // t < apex: the Rankine planes cut the M-C pyramid
   double apex;                   // c cot(phi) (+inf for phi = 0)
-  double damage_max, damage_plastic_strain;
+  double damage_max, damage_plastic_strain, damage_plastic_displacement;
   detail::MohrCoulombPlanes planes;  // the yield surface's planes (a return mapping reads them)
 };
 
@@ -76,6 +81,15 @@ struct MohrCoulombMaterial {
 /// lowered to the apex, where the Rankine planes only supply the volumetric plastic flow that
 /// the apex return needs when psi = 0 (the M-C potential then has purely deviatoric flow).
 MohrCoulombMaterial mohr_coulomb_material(const MohrCoulombParameters& parameters);
+
+/// The damage's plastic strain scale kappa_ref at a point of characteristic length h (m):
+/// damage_plastic_displacement / h with the crack band (u_ref > 0 and h > 0), else
+/// damage_plastic_strain.
+inline double damage_strain_scale(const MohrCoulombMaterial& m, double characteristic_length) {
+  return m.damage_plastic_displacement > 0.0 && characteristic_length > 0.0
+             ? m.damage_plastic_displacement / characteristic_length
+             : m.damage_plastic_strain;
+}
 
 /// Per-integration-point state (owned by the caller, 22 doubles + type).
 struct MohrCoulombState {
@@ -164,7 +178,8 @@ inline bool elastic_by_invariants(const MohrCoulombMaterial& m, const Voigt& s) 
 ///             potential with psi in place of phi (non-associated); Rankine flow associated.
 ///   plastic:  d_eps_p = C^-1 : (sigma_tr - sigma_eff,n+1), coaxial with the trial.
 ///   damage:   kappa += sqrt(2/3) |d_eps_p| (split into tension and shear by the active planes),
-///             d = max(d_n, d_max (1 - exp(-(kappa_t + kappa_s) / kappa_ref))),
+///             d = max(d_n, d_max (1 - exp(-(kappa_t + kappa_s) / kappa_ref))), kappa_ref =
+///             damage_strain_scale(material, characteristic_length) (0: no crack band),
 ///             sigma_n+1 = (1 - d) sigma_eff,n+1.
 ///   energy:   dissipation = 1/2 (sigma_n + sigma_n+1) : d_eps - (W_n+1 - W_n), so that
 ///             W + dissipation equals the trapezoid work of an explicit integrator exactly; it
@@ -173,7 +188,8 @@ inline bool elastic_by_invariants(const MohrCoulombMaterial& m, const Voigt& s) 
 /// strain_increment: engineering shear.
 MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& material,
                                     const MohrCoulombState& old_state,
-                                    const Voigt& strain_increment);
+                                    const Voigt& strain_increment,
+                                    double characteristic_length = 0.0);
 
 /// mohr_coulomb_update after its first screen: trial_effective_stress = old.effective_stress +
 /// C : strain_increment, for which elastic_by_invariants was false (the same result as
@@ -181,7 +197,8 @@ MohrCoulombStep mohr_coulomb_update(const MohrCoulombMaterial& material,
 MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& material,
                                              const MohrCoulombState& old_state,
                                              const Voigt& strain_increment,
-                                             const Voigt& trial_effective_stress);
+                                             const Voigt& trial_effective_stress,
+                                             double characteristic_length = 0.0);
 
 /// The rock law in the element loop (material_law.hpp), law name "mohr_coulomb".
 ///
@@ -217,12 +234,14 @@ struct MohrCoulombLaw {
 
   /// Keys: young_modulus, poisson_ratio (Pa, -), cohesion (Pa), friction_angle (deg),
   /// tensile_strength (Pa; a value >= c cot(phi), or inf, cuts nothing off) required;
-  /// dilation_angle (deg, default 0), damage_max (0.9), damage_plastic_strain (0.005) optional
-  /// (MohrCoulombParameters). Ranges as mohr_coulomb_material.
+  /// dilation_angle (deg, default 0), damage_max (0.9), damage_plastic_strain (0.005),
+  /// damage_plastic_displacement (m, 0: no crack band) optional (MohrCoulombParameters). Ranges
+  /// as mohr_coulomb_material.
   static Parameters parameters_from(const ParameterMap& parameters) {
     static constexpr const char* kKnown[] = {
-        "young_modulus",  "poisson_ratio", "cohesion",   "friction_angle",
-        "dilation_angle", "tensile_strength", "damage_max", "damage_plastic_strain"};
+        "young_modulus",  "poisson_ratio",    "cohesion",   "friction_angle",
+        "dilation_angle", "tensile_strength", "damage_max", "damage_plastic_strain",
+        "damage_plastic_displacement"};
     check_parameter_names(parameters, kName, kKnown);
     MohrCoulombParameters p;
     p.young_modulus = required_parameter(parameters, kName, "young_modulus");
@@ -234,6 +253,8 @@ struct MohrCoulombLaw {
     p.damage_max = optional_parameter(parameters, "damage_max", p.damage_max);
     p.damage_plastic_strain =
         optional_parameter(parameters, "damage_plastic_strain", p.damage_plastic_strain);
+    p.damage_plastic_displacement = optional_parameter(parameters, "damage_plastic_displacement",
+                                                       p.damage_plastic_displacement);
     try {
       return mohr_coulomb_material(p);
     } catch (const std::invalid_argument& error) {
@@ -243,11 +264,12 @@ struct MohrCoulombLaw {
 
   static ElasticModuli elastic_moduli(const Parameters& m) { return {m.lambda, m.shear_modulus}; }
 
-  static State initial_state(const Parameters& m, const double initial_stress[6], double) {
+  static State initial_state(const Parameters& m, const double initial_stress[6],
+                             double characteristic_length) {
     State state;
     for (int c = 0; c < 6; ++c) state.stress[c] = state.effective_stress[c] = initial_stress[c];
     // A zero increment: sigma0 itself when admissible (bit for bit), else its return.
-    const MohrCoulombStep step = mohr_coulomb_update(m, state, Voigt{});
+    const MohrCoulombStep step = mohr_coulomb_update(m, state, Voigt{}, characteristic_length);
     Voigt sigma0;
     for (int c = 0; c < 6; ++c) sigma0[c] = initial_stress[c];
     state.energy_offset = isotropic_complementary_energy(m.young_modulus, m.poisson_ratio, sigma0);
@@ -292,8 +314,9 @@ struct MohrCoulombLaw {
       return history_point_energy(false, work, committed.stored, 0.0, committed.energy_offset,
                                   point, trial.stored);
     }
-    const MohrCoulombStep step =
-        mohr_coulomb_update_screened(m, committed, increment, trial_effective);
+    const MohrCoulombStep step = mohr_coulomb_update_screened(m, committed, increment,
+                                                              trial_effective,
+                                                              point.characteristic_length);
     static_cast<MohrCoulombState&>(trial) = step.state;
     trial.energy_offset = committed.energy_offset;
     double work = 0.0;

@@ -94,13 +94,15 @@ Voigt strain_voigt(const Matrix3& T) {
 // stresses held at `lateral_stress` with equal lateral strain increments (the paths below are
 // axisymmetric about `axis`), shear strains zero. Solves the scalar lateral strain by the
 // Illinois variant of regula falsi (the response is continuous and increasing in it).
+// `h`: the point's characteristic length (m; the crack band's, 0 for none).
 MohrCoulombStep drive_axisymmetric(const MohrCoulombMaterial& m, const MohrCoulombState& state,
-                                   int axis, double axial_increment, double lateral_stress) {
+                                   int axis, double axial_increment, double lateral_stress,
+                                   double h = 0.0) {
   const int lateral = (axis + 1) % 3;
   auto step_for = [&](double e) {
     Voigt d{};
     for (int i = 0; i < 3; ++i) d[i] = (i == axis) ? axial_increment : e;
-    return mohr_coulomb_update(m, state, d);
+    return mohr_coulomb_update(m, state, d, h);
   };
   auto residual = [&](double e) { return step_for(e).state.stress[lateral] - lateral_stress; };
   const double width = std::abs(axial_increment) + 1e-12;
@@ -772,6 +774,65 @@ TEST(MohrCoulomb, DamageFollowsAccumulatedPlasticStrain) {
   EXPECT_EQ(shear.state.kappa_tension, 0.0);
 }
 
+TEST(MohrCoulomb, CrackBandMakesSofteningAFunctionOfThePlasticDisplacement) {
+  // A softening band one cell wide opens by w = h eps_p. With damage_plastic_displacement u_ref
+  // the damage is d_max (1 - exp(-sqrt(2/3) w / u_ref)) whatever the cell size h, so a bar's
+  // nominal stress at a given opening, and the work it does on the opening per unit area, are
+  // properties of the rock, not of the mesh; with kappa_ref fixed (no crack band) the damage at
+  // the same opening falls with h and the work grows with it. Uniaxial tension on the cut-off
+  // (soft rock), strain steps of dw / h for every h.
+  MohrCoulombParameters p = soft_rock();
+  p.damage_max = 0.9;
+  p.damage_plastic_strain = 2e-4;
+  MohrCoulombParameters band = p;
+  band.damage_plastic_displacement = 2e-4;  // m: kappa_ref = 2e-4 at h = 1 m
+  const MohrCoulombMaterial plain = mohr_coulomb_material(p), m = mohr_coulomb_material(band);
+  const double t = m.tensile_strength, u_ref = band.damage_plastic_displacement;
+  const std::array<double, 4> sizes{0.5, 1.0, 2.0, 4.0};
+  std::array<double, 4> band_work{}, plain_work{}, plain_damage{};
+  int checks = 0;
+  for (int i = 0; i < 4; ++i) {
+    const double h = sizes[i];
+    EXPECT_NEAR(damage_strain_scale(m, h), u_ref / h, 1e-15);
+    EXPECT_EQ(damage_strain_scale(plain, h), 2e-4);
+    for (const MohrCoulombMaterial* law : {&m, &plain}) {
+      MohrCoulombState state;
+      double work = 0.0;  // of the nominal stress on the opening: sum of sigma_avg dw (J/m^2)
+      // Up to the cut-off, then on to an opening of 3 u_ref.
+      for (int k = 0; h * state.plastic_strain[0] < 3.0 * u_ref && k < 100000; ++k) {
+        const MohrCoulombStep step = drive_axisymmetric(*law, state, 0, u_ref / 400.0 / h, 0.0, h);
+        EXPECT_GE(step.dissipation, -1e-12 * step.stored_energy);  // round-off while elastic
+        work += 0.5 * (state.stress[0] + step.state.stress[0]) * h *
+                (step.state.plastic_strain[0] - state.plastic_strain[0]);
+        state = step.state;
+        const double w = h * state.plastic_strain[0];
+        if (law == &m && w > 0.0) {
+          const double d = 0.9 * (1.0 - std::exp(-std::sqrt(2.0 / 3.0) * w / u_ref));
+          EXPECT_NEAR(state.damage, d, 1e-10);
+          EXPECT_NEAR(state.stress[0], (1.0 - d) * t, 1e-9 * t);
+          ++checks;
+        }
+      }
+      const double w = h * state.plastic_strain[0];
+      ASSERT_GE(w, 3.0 * u_ref);
+      ASSERT_LT(w, 3.0 * u_ref * (1.0 + 1e-2));
+      ASSERT_GT(state.damage, 0.3);  // the band did soften
+      (law == &m ? band_work : plain_work)[i] = work;
+      if (law == &plain) plain_damage[i] = state.damage;
+    }
+  }
+  EXPECT_GT(checks, 4 * 1000);
+  for (int i = 0; i < 4; ++i)
+    std::printf("[ info ] h = %.1f m: work on the opening %.2f J/m^2 with the band, %.2f without "
+                "(damage %.3f)\n", sizes[i], band_work[i], plain_work[i], plain_damage[i]);
+  for (int i = 1; i < 4; ++i) {
+    // The same up to where the last step stops past 3 u_ref (< 1 % of it, at the residual stress).
+    EXPECT_NEAR(band_work[i] / band_work[0], 1.0, 2e-3) << "h = " << sizes[i];
+    EXPECT_LT(plain_damage[i], plain_damage[i - 1]);  // without: less damage in larger cells
+  }
+  EXPECT_GT(plain_work[3] / plain_work[0], 1.5);  // without: the work grows with h
+}
+
 TEST(MohrCoulomb, EnergyAccountAlongCyclicPath) {
   // A cyclic shear-compression path with damage: per step W_n+1 - W_n + dissipation equals the
   // trapezoid work; every step dissipates >= 0; without damage the dissipation equals the
@@ -842,6 +903,9 @@ TEST(MohrCoulomb, RejectsInvalidParameters) {
   expect_throw(p);
   p = {};
   p.damage_max = 1.0;
+  expect_throw(p);
+  p = {};
+  p.damage_plastic_displacement = -1e-3;
   expect_throw(p);
   // Table 1 sandstone: t = 1.95 MPa exceeds the apex c cot(phi) = 1.22 MPa, no cut-off.
   const MohrCoulombMaterial sandstone = mohr_coulomb_material(MohrCoulombParameters{});
