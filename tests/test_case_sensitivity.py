@@ -44,6 +44,8 @@ def test_variants_are_scenes_pyfem_accepts(variant):
     assert scene["time"]["duration"] == case_sensitivity.DURATION
     if variant.h_cavern is not None and variant.h_cavern != 4.5:
         assert scene["mesh"]["parameters"]["h_cavern"] == variant.h_cavern
+    if variant.group == "interface":
+        assert scene["contact"]["cohesion"] < 1.0e6 and scene["contact"]["friction_angle"] < 30.0
     if variant.group == "lag":
         assert scene["contact"]["normal_lag"]["length"] > 0
     if variant.group == "strength":

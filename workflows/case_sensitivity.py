@@ -1,7 +1,7 @@
 """Variants of the case study's case 3 on the coarse mesh: the interfaces on three meshes, the rock's
 strength as the cause of the deformation gap, and the friction's normal lag.
 
-The case study (workflows/case_study.py, docs/case_study.md) leaves four questions that one run of
+The case study (workflows/case_study.py, docs/case_study.md) leaves five questions that one run of
 the scene cannot answer:
 
 1. **Do the interlayer quantities converge with the mesh?** The interlayer relative displacement
@@ -25,7 +25,11 @@ the scene cannot answer:
    With the crack band (`damage_plastic_displacement`, docs/materials.md) a cell's damage follows
    the plastic displacement across it; group "damage" runs the scene with the rock's damage on
    (d_max 0.9, u_ref = 1 cm: kappa_ref 0.005 in a 2 m cell).
-4. **How much do the friction's normal-stress lag's L and V* move the answer?** They are properties
+4. **Would weaker interfaces slip by centimetres?** Table 1 gives the interfaces c = 1.0 MPa and
+   30 deg; a clay-filled bedding plane may have a tenth of that cohesion and 20 deg. Group
+   "interface" runs the scene with c = 0.1 MPa, 20 deg (static and dynamic) and a tensile strength
+   of 0.1 MPa.
+5. **How much do the friction's normal-stress lag's L and V* move the answer?** They are properties
    of the interface for which we have no values for the paper's rocks (docs/interface_slip_accuracy.md);
    group "lag" runs the scene with `[contact.normal_lag]` at L = 1 cm and 10 cm (V* = 1 m/s), against
    the scene without it (L -> 0 is no lag).
@@ -99,10 +103,13 @@ VARIANTS = (
     Variant("rock_damage", "damage", "rock damage on, crack band u_ref = 1 cm",
             tuple(f"materials.{rock}.plasticity.{key}" for rock in TABLE1_COHESION
                   for key in ("damage_max=0.9", "damage_plastic_displacement=0.01"))),
+    Variant("weak_interfaces", "interface", "interfaces c 0.1 MPa, 20 deg (Table 1: 1.0 MPa, 30 deg)",
+            ("contact.cohesion=1.0e5", "contact.friction_angle=20.0", "contact.dynamic_friction_angle=20.0",
+             "contact.tensile_strength=1.0e5")),
     Variant("lag_10cm", "lag", "normal lag L = 10 cm, V* = 1 m/s", _lag(0.1)),
     Variant("lag_1cm", "lag", "normal lag L = 1 cm, V* = 1 m/s", _lag(0.01)),
 )
-GROUPS = ("mesh", "strength", "damage", "lag")
+GROUPS = ("mesh", "strength", "damage", "interface", "lag")
 
 
 def command(variant: Variant, runs: pathlib.Path = RUNS) -> list[str]:
