@@ -63,6 +63,7 @@ sys.path.insert(0, str(REPOSITORY))
 sys.path.insert(0, str(REPOSITORY / "workflows"))
 
 import case_study  # noqa: E402  (workflows/case_study.py: load_run, case_numbers, update_doc)
+from pyfem.scene import PRESET_STRENGTHS  # noqa: E402
 
 PYTHON = "/usr/bin/python3"
 SCENE = REPOSITORY / "workflows" / "scenes" / "case3_contact_coarse.toml"
@@ -72,7 +73,7 @@ DURATION = 3.0          # s: the 1 s lead-in and the record's first 2 s (its PGA
 REFINEMENT = 1.5        # ratio of neighbouring meshes' h_cavern in group "mesh"
 GCI_SAFETY = 1.25       # Roache's safety factor for a three-mesh study
 MARKER = "case_sensitivity.py"
-TABLE1_COHESION = {"sandstone": 1.10e6, "non_sandstone": 0.35e6}   # Pa, the paper's Table 1
+TABLE1_COHESION = {rock: PRESET_STRENGTHS[rock]["cohesion"] for rock in ("sandstone", "non_sandstone")}  # Pa
 
 
 @dataclasses.dataclass(frozen=True)
