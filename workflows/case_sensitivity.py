@@ -219,8 +219,7 @@ def stage_numbers(directory: pathlib.Path) -> dict:
     regions = static.get("regions") or {}
     return {"stage_displacement": stages.get("excavation", {}).get("max_displacement"),
             "stage_yielded": sum(regions[rock]["yielded_volume"] for rock in TABLE1_COHESION if rock in regions),
-            "stage_steps": sum(stage["iterations"] for stage in static["stages"]),
-            "stage_converged": all(stage.get("converged", True) for stage in static["stages"])}
+            "stage_steps": sum(stage["iterations"] for stage in static["stages"])}
 
 
 def flat_numbers(numbers: dict, run_pairs: dict | None = None) -> dict:
