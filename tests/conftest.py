@@ -123,3 +123,14 @@ class RunsOnDemand(dict):
     def __missing__(self, key):
         self[key] = self.make(key)
         return self[key]
+
+
+@pytest.fixture(scope="session")
+def mpi_launcher() -> str:
+    """The MPI launcher, or a failure: the MPI tests never skip silently (scripts/setup.sh installs
+    openmpi-bin, so a missing launcher is a broken set-up, not an optional feature)."""
+    import shutil
+
+    path = shutil.which("mpirun")
+    assert path is not None, "mpirun not found: scripts/setup.sh installs openmpi-bin"
+    return path

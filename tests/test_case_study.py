@@ -250,6 +250,17 @@ def test_case_study_report_reads_the_run(short_case3, tmp_path):
     assert "| case 3 coarse |" in (tmp_path / "comparison.md").read_text()
 
 
+
+def test_case_study_report_without_runs_refuses_and_erases_nothing(tmp_path, capsys):
+    """A report asked for on a fresh clone (no finished runs) exits 2 and writes nothing: catches a
+    report that empties docs/case_study.md's generated table and the committed results."""
+    import case_study
+
+    assert case_study.main(["--report-only", "--runs", str(tmp_path / "runs")]) == 2
+    assert "no finished run" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()  # no results folder, no figures, no tables
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["case1_vertical_coarse", "case2_oblique_coarse", "case3_contact_coarse"])
 def test_coarse_case_runs_to_its_end(case, tmp_path):

@@ -21,7 +21,6 @@ import pytest
 from scipy.spatial import cKDTree
 
 from conftest import ROUNDOFF, rel_error
-from pyfem import _kernels
 from pyfem.initial_stress import STANDARD_GRAVITY
 from pyfem.output import PAIR_COLUMNS, PAIR_STATES
 from pyfem.scene import SceneError, parse_scene
@@ -30,9 +29,6 @@ from pyfem.solver import make_stepper, prepare, run
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 WORKFLOW = REPOSITORY / "workflows" / "scenes" / "contact_two_layer_sv.toml"
 HELD_MASS_FACTOR = 1.0e20
-
-pytestmark = pytest.mark.skipif(not hasattr(_kernels, "ContactPairs"), reason="kernel built without ContactPairs")
-
 
 def workflow_data(path=WORKFLOW) -> dict:
     with open(path, "rb") as stream:

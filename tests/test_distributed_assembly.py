@@ -23,7 +23,8 @@ import pytest
 
 from test_mpi import ENV, MPIRUN, PYTHON, REPO
 
-pytestmark = pytest.mark.skipif(MPIRUN is None, reason="mpirun not found: scripts/setup.sh installs openmpi-bin")
+# One rule for the MPI tests: a missing launcher fails (conftest.mpi_launcher), never skips.
+pytestmark = pytest.mark.usefixtures("mpi_launcher")
 
 
 @pytest.mark.parametrize("ghost_mode", ["shared_facet", "none"])

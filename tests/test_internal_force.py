@@ -152,7 +152,6 @@ def test_element_arrays_integrate_the_region_volume_with_dolfinx_quadrature():
     assert np.abs(arrays.gradients.sum(axis=2)).max() < EXACT * np.abs(arrays.gradients).max()
 
 
-@pytest.mark.skipif(not hasattr(_kernels, "ContactPairs"), reason="kernel built without ContactPairs")
 def test_element_loop_beside_sliding_contact_equals_the_matrix_run_and_closes_the_balance():
     # The contact correction reads the internal force of the pair nodes (F = M a + K u + g).
     with open(CONTACT_WORKFLOW, "rb") as stream:

@@ -42,7 +42,8 @@ from test_mpi import (MPIRUN, NET_FORCE_TOLERANCE, TOLERANCE, assert_equal_to_se
 from test_mpi_stage import STAGE_ROUNDOFF
 from test_distributed_model import TOLERANCES as DISTRIBUTED_TOLERANCES
 
-pytestmark = pytest.mark.skipif(MPIRUN is None, reason="mpirun not found: scripts/setup.sh installs openmpi-bin")
+# One rule for the MPI tests: a missing launcher fails (conftest.mpi_launcher), never skips.
+pytestmark = pytest.mark.usefixtures("mpi_launcher")
 
 LOCAL = ("--set", "time.local_stepping=true")
 DISTRIBUTED = ("--set", "parallel.model=distributed")

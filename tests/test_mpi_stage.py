@@ -46,7 +46,8 @@ SETTINGS = [*SMALL_MODEL, "time.duration=0.05", "time.local_stepping=false", "ou
 STAGE_ROUNDOFF = {"acceleration": 2.0e-7, "velocity": 2.0e-9, "length": 1.0e-9, "energy": 3.0e-8}
 HANDED_OVER = ("cell_stress", "monitor_stress", "pair_forces")
 
-pytestmark = pytest.mark.skipif(MPIRUN is None, reason="mpirun not found: scripts/setup.sh installs openmpi-bin")
+# One rule for the MPI tests: a missing launcher fails (conftest.mpi_launcher), never skips.
+pytestmark = pytest.mark.usefixtures("mpi_launcher")
 
 
 @pytest.fixture(scope="module")

@@ -657,12 +657,22 @@ def report(presets=("coarse", "paper"), cases=tuple(CASES), runs_dir: pathlib.Pa
     Returns:
         {preset: {case: numbers}} of the runs found.
     """
+    found = {preset: {case: run for case in cases if (run := load_run(run_dir(case, preset, runs_dir))) is not None}
+             for preset in presets}
+    if not any(found.values()):  # a fresh clone: nothing to report, and nothing already reported is erased
+        print(f"report: no finished run of {', '.join(presets)} in {runs_dir}: nothing written (run the cases "
+              "first, or --runs DIR)", file=sys.stderr)
+        return {}
+    missing = [preset for preset, runs in found.items() if not runs]
+    if doc and missing:  # a partial set would drop the other preset's rows from the generated table
+        print(f"report: no finished run for preset {', '.join(missing)} in {runs_dir}: docs/case_study.md "
+              "left as it is", file=sys.stderr)
+        doc = False
     results.mkdir(parents=True, exist_ok=True)
     numbers_by_preset, tables = {}, []
     for preset in presets:
-        runs = {case: run for case in cases if (run := load_run(run_dir(case, preset, runs_dir))) is not None}
+        runs = found[preset]
         if not runs:
-            print(f"no finished run for preset {preset!r} in {runs_dir}", file=sys.stderr)
             continue
         suffix = "" if preset == "coarse" else f"_{preset}"
         numbers = {case: case_numbers(run) for case, run in runs.items()}
@@ -732,10 +742,10 @@ def main(argv=None) -> int:
     # The report always covers every finished run of both sizes, so one case's rerun
     # refreshes the figures without dropping the others.
     if args.runs is None:
-        report()
+        numbers = report()
     else:
-        report(runs_dir=runs, results=runs / "results", doc=False)
-    return 0
+        numbers = report(runs_dir=runs, results=runs / "results", doc=False)
+    return 0 if numbers else 2
 
 
 if __name__ == "__main__":
