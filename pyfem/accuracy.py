@@ -387,7 +387,7 @@ def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
     if pairs is None or len(pairs) == 0 or scene.get("wave") is None:
         return {}
     frequency = highest_frequency(scene)
-    from pyfem.output import cell_regions
+    from pyfem.operators import cell_regions
 
     n_basis = model.V.element.basix_element.dim
     cells = model.V.dofmap.list.array.reshape(-1, n_basis)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pyfem.scene import SceneError
+from pyfem.errors import SceneError
 
 CHECKPOINT_NAME = "checkpoint.npz"
 FORMAT = 1  # bumped when the content changes; an older checkpoint is refused, not misread

@@ -1004,7 +1004,7 @@ def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None =
     whole model's "interface wear" line; with local time stepping (`lts`: distributed_lts.RankLevels,
     `lts_decision`: "auto"'s reason) its levels."""
     from pyfem.local_stepping import STABILITY_STEPS
-    from pyfem.solver import wear_words
+    from pyfem.interfaces import wear_words
 
     counts = part.comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts), root=0)
     if part.comm.rank != 0:

@@ -90,7 +90,7 @@ def interfaces_meet(name: str, found: str):
     """The SceneError of an interface whose two sides do not pair up node by node: what
     pyfem.interface_split cannot split (an interface that crosses another or ends on it inside the
     model, a T or a cross: a node on two split interfaces needs more than two copies)."""
-    from pyfem.scene import SceneError
+    from pyfem.errors import SceneError
 
     allowed = ("interfaces that neither cross nor end on another interface inside the model (they may reach "
                "the outer boundary); a T or a cross of split interfaces is not supported")
@@ -161,3 +161,17 @@ def interface_pairs(V, facet_tags, interface_tags: typing.Mapping[str, tuple[int
         raise ValueError("interface pairs: a lumped pair area is <= 0")
     arrays["mass"] = np.ascontiguousarray(mass[arrays["nodes"]])
     return NodePairs(names=names, **{k: np.ascontiguousarray(v) for k, v in arrays.items()})
+
+
+def wear_words(deterioration, t_end: float) -> dict:
+    """The wear of the interfaces for run.json and `check`: when its clock starts, t_s, and eta at
+    t_end (Eq. 9, computed by the kernel's wear_factor)."""
+    from pyfem import _kernels
+
+    R0, _, duration, _, _, _, start = deterioration
+    eta = _kernels.wear_factor(*deterioration, t=t_end)
+    which = " (the record window's start)" if start > 0.0 else ""
+    return {"wear_start": start, "t_s": duration, "eta_at_end": eta,
+            "note": f"eta falls from 1 at t = {start:.3g} s{which} "
+                    f"towards R0 = {R0:g} over t_s = {duration:g} s, whether or not the ground shakes: {eta:.3f} at "
+                    f"t = {t_end:.3g} s"}

@@ -24,7 +24,7 @@ from mpi4py import MPI
 
 from pyfem.geometry import build_box, build_layered_box, build_layered_cavern, gmsh_session, load_msh
 from pyfem.interface_split import incidence, split_topology
-from pyfem.scene import SceneError
+from pyfem.errors import SceneError
 
 # gmsh element type numbers of the volume elements accepted as cells.
 GMSH_HEXAHEDRON_8 = 5

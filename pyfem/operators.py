@@ -31,7 +31,7 @@ from pyfem.geometry import BOX_FACES
 from pyfem.interfaces import interface_pairs
 from pyfem.material import Material
 from pyfem.mesh import create_mesh_with_interfaces
-from pyfem.scene import SceneError
+from pyfem.errors import SceneError
 
 SUPPORTED_ORDERS = (1, 2)
 
@@ -531,3 +531,28 @@ def face_kinds(scene: typing.Mapping, faces: typing.Mapping) -> dict[str, str]:
                              + " (set boundary.faces to choose them)")
     default = boundary.get("type", "viscoelastic")
     return {name: (per_face.get(name) or {}).get("type") or default for name in faces}
+
+
+def face_report(model) -> list[dict]:
+    """Per truncation face: name, type, nodes, facets, area (m^2), whether it carries input, how
+    it was found; for `check`, run.json and the README."""
+    from pyfem.seismic.forces import INPUT_TYPES
+
+    return [{"name": face.name, "type": face.kind, "nodes": int(len(face.nodes)), "facets": face.n_facets,
+             "area": face.total_area, "input": face.kind in INPUT_TYPES, "source": face.source}
+            for face in model.faces]
+
+
+NO_REGION = -1
+"""The region id of a cell without a region tag."""
+
+
+def cell_regions(model) -> np.ndarray:
+    """(n_cells,) int32 region id of every cell of the dofmap: its cell tag (`Model.regions` maps
+    the names to these ids), NO_REGION where a cell has none."""
+    n_cells = len(model.V.dofmap.list.array) // model.V.dofmap.dof_layout.num_dofs
+    regions = np.full(n_cells, NO_REGION, dtype=np.int32)
+    indices = np.asarray(model.cell_tags.indices)
+    keep = indices < n_cells
+    regions[indices[keep]] = np.asarray(model.cell_tags.values)[keep]
+    return regions

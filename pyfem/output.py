@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pyfem.operators import NO_REGION, cell_regions  # noqa: F401  (also pyfem.output.cell_regions)
+
 MONITOR_COLUMNS = ["t", "ux", "uy", "uz", "vx", "vy", "vz", "ax", "ay", "az"]
 FREEFIELD_COLUMNS = ["ux_ff", "uy_ff", "uz_ff", "vx_ff", "vy_ff", "vz_ff"]
 # Stress at the monitor (Pa, tension positive): total = initial (geostatic) + dynamic, its
@@ -49,7 +51,6 @@ TENSOR6_COMPONENTS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # xx, xy,
 # The 8 vertices of a hexahedron in VTK/XDMF order, as (x, y, z) steps on its reference grid.
 _VTK_HEXAHEDRON = ((0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1))
 # Cell field "region" of a cell without a region tag (none in a mesh the builders accept).
-NO_REGION = -1
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -286,17 +287,6 @@ def _p2_tetrahedron_parts(points: np.ndarray) -> np.ndarray:
     ring = [m[0, 1], m[0, 3], m[2, 3], m[1, 2]]
     inner = [[m[0, 2], m[1, 3], ring[k], ring[(k + 1) % 4]] for k in range(4)]
     return np.array(corners + inner, dtype=np.int64)
-
-
-def cell_regions(model) -> np.ndarray:
-    """(n_cells,) int32 region id of every cell of the dofmap: its cell tag (`Model.regions` maps
-    the names to these ids), NO_REGION where a cell has none."""
-    n_cells = len(model.V.dofmap.list.array) // model.V.dofmap.dof_layout.num_dofs
-    regions = np.full(n_cells, NO_REGION, dtype=np.int32)
-    indices = np.asarray(model.cell_tags.indices)
-    keep = indices < n_cells
-    regions[indices[keep]] = np.asarray(model.cell_tags.values)[keep]
-    return regions
 
 
 def time_decimals(*intervals) -> int:
@@ -968,7 +958,7 @@ def pair_state_summary(times: np.ndarray, counts: np.ndarray, n_pairs: int, dete
            "pair_states_final": {name: int(counts[-1, k]) for k, name in enumerate(PAIR_STATES)},
            "n_pairs": int(n_pairs)}
     if deterioration is not None:
-        from pyfem.solver import wear_words
+        from pyfem.interfaces import wear_words
 
         out["deterioration"] = wear_words(deterioration, float(times[-1]))
     return out
@@ -1052,7 +1042,7 @@ def peak_memory_mib() -> float:
 
 
 def _face_report(model) -> list:
-    """The truncation faces of the model (pyfem.solver.face_report)."""
-    from pyfem.solver import face_report
+    """The truncation faces of the model (pyfem.operators.face_report)."""
+    from pyfem.operators import face_report
 
     return face_report(model)

@@ -34,6 +34,7 @@ import numpy as np
 
 from pyfem import material as _material
 from pyfem.material import DENSITY_RANGE, NONLINEAR_TABLES, YOUNG_MODULUS_RANGE
+from pyfem.errors import SceneError, _show  # noqa: F401  (SceneError: the public name is pyfem.scene.SceneError)
 
 EFFECT_ORDER = ("seismic_input", "damping", "initial_stress", "contact", "deterioration")
 """Every effect a scene can switch on, in the order `Scene.effects` lists them."""
@@ -79,43 +80,6 @@ FIELDS_NOT_PRODUCED: dict = {}
 """Field names a user may expect that nothing produces yet, and why."""
 
 _FILENAME_SAFE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
-
-
-class SceneError(ValueError):
-    """A scene key with a missing, unknown, mistyped or out-of-range value.
-
-    Attributes:
-        key: Dotted path of the offending key (``"materials.rock.nu"``,
-            ``"monitor.0.point"``); ``None`` when the problem is not one key
-            (a file that is not TOML).
-        value: The value found (``None`` when missing).
-        allowed: What would have been accepted, in words.
-        source: The scene file (or ``"<dict>"``), set by `load_scene`/`parse_scene`.
-    """
-
-    def __init__(self, key: str | None, value: Any, allowed: str, message: str | None = None):
-        self.key = key
-        self.value = value
-        self.allowed = allowed
-        self.source: str | None = None
-        if message is None:
-            message = f"scene key '{key}' = {_show(value)}: {allowed}"
-        super().__init__(message)
-
-
-def _show(value: Any) -> str:
-    """A value as it would be written in TOML (strings double-quoted)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if value is None:
-        return "null"
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_show(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{k} = {_show(v)}" for k, v in value.items()) + "}"
-    return repr(value)
 
 
 def _missing(key: str, allowed: str) -> SceneError:

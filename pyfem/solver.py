@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from pyfem.interfaces import wear_words  # noqa: F401  (also pyfem.solver.wear_words)
+from pyfem.operators import face_report  # noqa: F401  (also pyfem.solver.face_report)
 from pyfem.scene import Scene, SceneError, rayleigh_coefficients
 
 # Memory traffic assumed by the time estimate before a measurement exists (bytes/s).
@@ -204,20 +206,6 @@ def earthquake_clock(scene: Scene, processed=None) -> tuple[float, float]:
         return 0.0, float(scene["time"]["duration"])
     start, end = processed.window
     return float(processed.record_start), float(end - start)
-
-
-def wear_words(deterioration, t_end: float) -> dict:
-    """The wear of the interfaces for run.json and `check`: when its clock starts, t_s, and eta at
-    t_end (Eq. 9, computed by the kernel's wear_factor)."""
-    from pyfem import _kernels
-
-    R0, _, duration, _, _, _, start = deterioration
-    eta = _kernels.wear_factor(*deterioration, t=t_end)
-    which = " (the record window's start)" if start > 0.0 else ""
-    return {"wear_start": start, "t_s": duration, "eta_at_end": eta,
-            "note": f"eta falls from 1 at t = {start:.3g} s{which} "
-                    f"towards R0 = {R0:g} over t_s = {duration:g} s, whether or not the ground shakes: {eta:.3f} at "
-                    f"t = {t_end:.3g} s"}
 
 
 def contact_arguments(scene: Scene, model, processed=None) -> dict:
@@ -475,16 +463,6 @@ def warn_input_medium(scene: Scene, model, comm=None) -> None:
         scene.warn(f"wave.medium = '{medium}': {100 * other / total:.0f} % of the input faces' area lies in other "
                    f"materials, which receive the free field of a homogeneous '{medium}' half-space, not their "
                    "own (the input is approximate there; docs/method.md section 5, \"Limit\")")
-
-
-def face_report(model) -> list[dict]:
-    """Per truncation face: name, type, nodes, facets, area (m^2), whether it carries input, how
-    it was found; for `check`, run.json and the README."""
-    from pyfem.seismic.forces import INPUT_TYPES
-
-    return [{"name": face.name, "type": face.kind, "nodes": int(len(face.nodes)), "facets": face.n_facets,
-             "area": face.total_area, "input": face.kind in INPUT_TYPES, "source": face.source}
-            for face in model.faces]
 
 
 def whole_steps(duration: float, time_step) -> int:

@@ -21,7 +21,7 @@ def load_msh(path: str | os.PathLike) -> None:
     Raises:
         SceneError (key mesh.file): no such file, a file gmsh cannot read, or no physical volume.
     """
-    from pyfem.scene import SceneError
+    from pyfem.errors import SceneError
 
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -42,7 +42,7 @@ def load_msh(path: str | os.PathLike) -> None:
 def _merge(msh: str, given: str) -> None:
     """gmsh.merge of a .msh into the current model (gmsh.open would replace the model that
     gmsh_session made current with a new unnamed one). SceneError (mesh.file = given) if unreadable."""
-    from pyfem.scene import SceneError
+    from pyfem.errors import SceneError
 
     try:
         gmsh.merge(msh)
@@ -72,7 +72,7 @@ def _mesh_geo_script(geo: str, msh: str) -> None:
     import subprocess
     import sys
 
-    from pyfem.scene import SceneError
+    from pyfem.errors import SceneError
 
     result = subprocess.run([sys.executable, "-c", _MESH_GEO, os.path.abspath(geo), msh], capture_output=True,
                             text=True, cwd=os.path.dirname(os.path.abspath(geo)) or None)

@@ -1,0 +1,91 @@
+"""The package's import graph, counting function-local imports: no module may take part in an
+import cycle, except the execution-path cluster listed in KNOWN_CYCLE (solver, static and the
+distributed modules), a known defect that the one-model rework removes. The list may only shrink:
+a new cycle, or a module joining the cluster, fails here."""
+import ast
+import pathlib
+import sys
+
+PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "pyfem"
+
+KNOWN_CYCLE = {
+    "pyfem.distributed", "pyfem.distributed_lts", "pyfem.distributed_model", "pyfem.distributed_pairs",
+    "pyfem.distributed_stage", "pyfem.local_stepping", "pyfem.solver", "pyfem.static", "pyfem.static_output",
+}
+
+
+def import_graph() -> dict[str, set[str]]:
+    """{module: modules of the package it imports anywhere in its body}. `from pkg import sub`
+    counts as an import of pkg.sub (the package's __init__ runs first either way; that is not a
+    cycle of the code's design)."""
+    modules = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        modules[name] = path
+    graph = {name: set() for name in modules}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    source = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    source = node.module or ""
+                subs = [f"{source}.{alias.name}" for alias in node.names if f"{source}.{alias.name}" in modules]
+                targets = subs if len(subs) == len(node.names) else [source] + subs
+            else:
+                continue
+            graph[name].update(t for t in targets if t in modules and t != name)
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[set[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+    sys.setrecursionlimit(max(10000, sys.getrecursionlimit()))
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.add(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(component)
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_graph_is_read():
+    graph = import_graph()
+    assert len(graph) > 40 and "pyfem.scene" in graph["pyfem.solver"]  # a guard: the walk found the edges
+
+
+def test_no_import_cycle_outside_the_known_cluster():
+    found = cycles(import_graph())
+    outside = [sorted(component - KNOWN_CYCLE) for component in found if not component <= KNOWN_CYCLE]
+    assert not outside, f"import cycles outside the known cluster: {outside}"
+
+
+def test_the_cycle_detector_finds_a_cycle():
+    """A control: the detector sees a cycle made of function-local imports."""
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [{"a", "b", "c"}]
