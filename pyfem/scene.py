@@ -539,6 +539,12 @@ SCHEMA = Table({
             "angle": Number("incidence angle from vertical (deg)", "[0, 90)", default=0.0),
             "azimuth": Number("azimuth (deg)", default=0.0),
         }, "a wave component"), "[[wave.component]]"),
+        # Horizontal layers over the half-space of wave.medium, top down from wave.surface: the free
+        # field is then that of the layered site (pyfem.seismic.layered, docs/method.md).
+        "layers": TableList(Table({
+            "medium": Text("layer material (a [materials] table)"),
+            "thickness": Number("layer thickness (m)", POSITIVE),
+        }, "a free-field layer"), "[[wave.layers]] (top down from wave.surface)", default=None),
         "motion": Table({
             "ricker": Table({
                 "f0": Number("Ricker peak frequency (Hz)", POSITIVE),
@@ -1265,6 +1271,12 @@ def _check_wave(settings: dict) -> None:
     elif wave["medium"] not in materials:
         raise SceneError("wave.medium", wave["medium"],
                          "must name a material of [materials]: " + ", ".join(materials))
+    for index, layer in enumerate(wave["layers"] or []):
+        if layer["medium"] not in materials:
+            raise SceneError(f"wave.layers.{index}.medium", layer["medium"],
+                             "must name a material of [materials]: " + ", ".join(materials))
+    if wave["layers"] and wave["surface"] is None:
+        raise _missing("wave.surface", "[[wave.layers]] hang from the free surface: give its z (m)")
 
 
 def _check_boundary(settings: dict) -> None:

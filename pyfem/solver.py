@@ -441,28 +441,63 @@ def check_input_faces(scene: Scene, model) -> None:
 
 
 def warn_input_medium(scene: Scene, model, comm=None) -> None:
-    """Warns when other materials than `[wave] medium` reach the input faces: they receive the free
-    field of the medium's homogeneous half-space, not their own (docs/method.md section 5, "Limit").
-    A node's material is read off its face's lumped impedance, rho c_s over its area. comm: the
-    ranks of a distributed model (pyfem/distributed_model.py), whose faces are each rank's part."""
+    """Warns when the rock at the input faces is not the rock of the free field: other materials than
+    `[wave] medium` (or, with [[wave.layers]], than the layer at the node's depth) receive a field
+    that is not their own (docs/method.md section 5, "Limit"). A node's material is read off its
+    face's lumped impedance, rho c_s over its area; the warning gives the share of the area and the
+    largest impedance ratio. comm: the ranks of a distributed model (pyfem/distributed_model.py),
+    whose faces are each rank's part."""
     from pyfem.material import Material
     from pyfem.seismic.forces import INPUT_TYPES
 
     if "seismic_input" not in scene.effects:
         return
-    medium = scene["wave"]["medium"]
-    table = scene["materials"][medium]
-    reference = table["rho"] * Material.from_scene(medium, table).s_wave_speed
+    wave = scene["wave"]
+    medium = wave["medium"]
+
+    def impedance(name):
+        table = scene["materials"][name]
+        return table["rho"] * Material.from_scene(name, table).s_wave_speed
+
+    layers = wave.get("layers") or []
+    bottoms = np.cumsum([layer["thickness"] for layer in layers])
+    site = [impedance(layer["medium"]) for layer in layers] + [impedance(medium)]
     faces = [face for face in model.faces if face.kind in INPUT_TYPES]
-    total = sum(float(np.sum(face.area)) for face in faces)
-    other = sum(float(np.sum(face.area[np.abs(face.rho_cs / face.area / reference - 1.0) > 0.01]))
-                for face in faces)
+    total = other = 0.0
+    worst = 1.0
+    for face in faces:
+        lumped = face.rho_cs / face.area
+        if layers:
+            # A node on a layer interface lumps the rock above and below it: either, or a mix, fits.
+            depth = wave["surface"] - model.node_coords[np.asarray(face.nodes), 2]
+            tolerance = 1e-6 * max(float(bottoms[-1]), 1.0)
+            above = np.asarray(site)[np.searchsorted(bottoms, depth - tolerance)]
+            below = np.asarray(site)[np.searchsorted(bottoms, depth + tolerance)]
+            low, high = np.minimum(above, below), np.maximum(above, below)
+            reference = np.clip(lumped, low, high)
+        else:
+            reference = site[-1]
+        ratio = lumped / reference
+        mismatch = np.abs(ratio - 1.0) > 0.01
+        total += float(np.sum(face.area))
+        other += float(np.sum(face.area[mismatch]))
+        if np.any(mismatch):
+            worst = max(worst, float(np.max(np.maximum(ratio[mismatch], 1.0 / ratio[mismatch]))))
     if comm is not None:  # a distributed model's faces hold each rank's owned nodes: the whole's sums
-        total, other = comm.allreduce(total), comm.allreduce(other)
+        total, other, worst = comm.allreduce(total), comm.allreduce(other), comm.allreduce(worst, op=_mpi_max())
     if total > 0.0 and other > 0.01 * total:
-        scene.warn(f"wave.medium = '{medium}': {100 * other / total:.0f} % of the input faces' area lies in other "
-                   f"materials, which receive the free field of a homogeneous '{medium}' half-space, not their "
-                   "own (the input is approximate there; docs/method.md section 5, \"Limit\")")
+        field = (f"the layered site of [[wave.layers]] over '{medium}'" if layers
+                 else f"a homogeneous '{medium}' half-space")
+        scene.warn(f"wave.medium = '{medium}': {100 * other / total:.0f} % of the input faces' area lies in other materials "
+                   f"than the free field's at its depth (impedance ratio up to {worst:.2f}), and "
+                   f"receives the free field of {field}, not its own (the input is approximate there; "
+                   "docs/method.md section 5, \"Limit\"; horizontal layers: [[wave.layers]])")
+
+
+def _mpi_max():
+    from mpi4py import MPI
+
+    return MPI.MAX
 
 
 def whole_steps(duration: float, time_step) -> int:

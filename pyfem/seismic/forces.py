@@ -135,6 +135,10 @@ def equivalent_input_forces(faces, node_coords, freefield, boundary_type=None,
     """
     faces = [f for f in faces if face_kind(f, boundary_type) in INPUT_TYPES]
     node_coords = np.asarray(node_coords, dtype=float)
+    if faces:  # the free field may make its tables as it meets the nodes' depths: ask first
+        all_nodes = np.concatenate([np.asarray(f.nodes, dtype=np.int64) for f in faces])
+        unique_nodes, inverse = np.unique(all_nodes, return_inverse=True)
+        arrays = freefield.component_arrays(node_coords[unique_nodes])
     tables = freefield.tables
     result = {"table_t0": float(tables.t0), "table_dt": float(tables.dt),
               "g": np.ascontiguousarray(tables.g), "dg": np.ascontiguousarray(tables.dg),
@@ -143,9 +147,6 @@ def equivalent_input_forces(faces, node_coords, freefield, boundary_type=None,
         result.update(node_ptr=np.zeros(1, dtype=np.int64), nodes=np.zeros(0, dtype=np.int32),
                       table=np.zeros(0, dtype=np.int32), tau=np.zeros(0), P=np.zeros((0, 3)), Q=np.zeros((0, 3)))
         return result
-    all_nodes = np.concatenate([np.asarray(f.nodes, dtype=np.int64) for f in faces])
-    unique_nodes, inverse = np.unique(all_nodes, return_inverse=True)
-    arrays = freefield.component_arrays(node_coords[unique_nodes])
     n_slots = arrays["tau"].shape[1]
     P = np.zeros((len(unique_nodes), n_slots, 3))
     Q = np.zeros((len(unique_nodes), n_slots, 3))

@@ -103,9 +103,19 @@ def seismic_input_from_scene(scene, model, processed=None, boundary_points=None)
     for component in components:
         # wave.scale multiplies the motion g(t) that all components share.
         component["scale"] = component.get("scale", 1.0) * wave.get("scale", 1.0)
-    freefield = FreeField(components, medium["E"], medium["nu"], medium["rho"],
-                          surface=wave.get("surface"), waveform=waveform, table_grid=table_grid,
-                          reference_point=wave.get("reference_point"), model_bounds=model.bounds)
+    if wave.get("layers"):
+        from pyfem.seismic.layered import layered_freefield_from_scene
+
+        try:
+            freefield = layered_freefield_from_scene(scene, components, waveform, table_grid, model.bounds)
+        except ValueError as error:
+            from pyfem.errors import SceneError
+
+            raise SceneError("wave.layers", [layer["thickness"] for layer in wave["layers"]], str(error)) from None
+    else:
+        freefield = FreeField(components, medium["E"], medium["nu"], medium["rho"],
+                              surface=wave.get("surface"), waveform=waveform, table_grid=table_grid,
+                              reference_point=wave.get("reference_point"), model_bounds=model.bounds)
     if wave.get("reference_point") is not None:
         if boundary_points is None:
             boundary_nodes = np.unique(np.concatenate([face.nodes for face in model.faces])) if model.faces else \
