@@ -1,4 +1,4 @@
-"""The reference documents name only things that exist: README.md and docs/*.md.
+"""The documents name only things that exist: README.md, CHANGELOG.md and docs/*.md.
 
 - Every repository file path they name exists: a path under one of the repository's top-level
   folders (`pyfem/operators.py`, `workflows/results/strong_scaling.json`, ...) and every relative
@@ -25,7 +25,7 @@ from pyfem import scene_keys
 from pyfem.scene import FreeTable
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
-DOCUMENTS = [REPOSITORY / "README.md"] + sorted((REPOSITORY / "docs").glob("*.md"))
+DOCUMENTS = [REPOSITORY / "README.md", REPOSITORY / "CHANGELOG.md"] + sorted((REPOSITORY / "docs").glob("*.md"))
 TOP_FOLDERS = sorted(path.name for path in REPOSITORY.iterdir()
                      if path.is_dir() and not path.name.startswith(".")
                      and path.name not in {"build", "runs", "__pycache__"})
