@@ -596,8 +596,8 @@ SCHEMA = Table({
         "model": Choice("how the MPI ranks hold the model: \"whole\" (every rank builds the whole model and "
                         "steps its share) or \"distributed\" (each rank builds and steps only its part of "
                         "dolfinx's distributed mesh, with contact, a relaxation static stage and local time "
-                        "stepping since 2026-11-29; scenes without a linear static stage: docs/scaling.md "
-                        "\"The distributed model\")", ("whole", "distributed"),
+                        "stepping; not for a linear static stage, one point per cell or quadratic tetrahedra: "
+                        "docs/scaling.md \"The distributed model\")", ("whole", "distributed"),
                         default="whole"),
     }, "[parallel]"),
     "damping": Table({

@@ -1,6 +1,8 @@
 """What local time stepping would buy on the case study's meshes: the rate clusters of cells and
-the work they leave (docs/lts_plan.md). A measurement of the mesh, not of an LTS run: local time
-stepping is not implemented yet.
+the work they leave (docs/lts_plan.md). A measurement of the mesh, not of an LTS run. Local time
+stepping itself is implemented (`[time] local_stepping`: pyfem/local_stepping.py and the kernel's
+LocalStepper); this script is the early cluster estimate, by cells, that preceded it, and its levels
+are not the ones the program uses (those are `pyfem.local_stepping`'s, by the row split).
 
 Per node i, the Gershgorin bound of M^-1 K gives a stable step dt_i = 2 / sqrt(max row sum of
 |K| / m_i) (K the full elastic stiffness, every cell in it). A cell may step at
