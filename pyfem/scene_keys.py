@@ -83,7 +83,9 @@ UNSET = {
     "materials.NAME.plasticity.friction_angle": "the preset's; required without a preset",
     "materials.NAME.plasticity.tensile_strength": "the preset's; required without a preset",
     "materials.NAME.plasticity.mean_dilatation": "true for `mesh.order` = 1, false for 2",
-    "materials.NAME.plasticity.damage_plastic_strain": "0.005; refused beside `materials.NAME.plasticity.damage_plastic_displacement` > 0",
+    "materials.NAME.plasticity.damage_plastic_strain": "none: without damage (`materials.NAME.plasticity.damage_max` = 0) "
+                                                       "it scales nothing; with damage it or "
+                                                       "`materials.NAME.plasticity.damage_plastic_displacement` is required",
     "materials.NAME.damage.cohesion": "the preset's (the paper's Table 1); required without a preset",
     "materials.NAME.damage.friction_angle": "the preset's; required without a preset",
     "materials.NAME.damage.tensile_strength": "the preset's; required without a preset",
@@ -143,6 +145,11 @@ RULES = {
         "`materials.NAME.plasticity.dilation_angle` <= `materials.NAME.plasticity.friction_angle`",
         "`materials.NAME.plasticity.cohesion` > 0 when the friction angle is 0",
         "a strength in (0, 100) Pa is refused (a value in MPa written as Pa); 0 means none",
+        "without `materials.NAME.plasticity.damage_max` (0) the rock is perfectly plastic; "
+        "`materials.NAME.plasticity.damage_max` > 0 (softening) needs its scale, "
+        "`materials.NAME.plasticity.damage_plastic_strain` or the crack band's "
+        "`materials.NAME.plasticity.damage_plastic_displacement` > 0, not both; a crack band needs "
+        "`materials.NAME.plasticity.damage_max` > 0",
     ],
     "materials.NAME.damage": [
         "`materials.NAME.damage.A_t` = 1 when `materials.NAME.damage.fracture_energy` > 0",
@@ -218,7 +225,8 @@ EFFECTS = {
 
 SWITCHES = {
     "materials.NAME.plasticity": "the region's cells leave the stiffness matrix for the kernel's element "
-                                 "loop: Mohr-Coulomb with tension cut-off and plastic-strain damage "
+                                 "loop: perfectly plastic Mohr-Coulomb with tension cut-off, softening "
+                                 "plastic-strain damage only with `materials.NAME.plasticity.damage_max` > 0 "
                                  "(docs/materials.md)",
     "materials.NAME.damage": "the region's cells leave the stiffness matrix for the kernel's element "
                              "loop: the paper's concrete damage (Eq. 21) with crack band (docs/materials.md)",
@@ -236,7 +244,8 @@ PURPOSE = {
     "mesh": "the model's geometry and elements",
     "mesh.layers.0": "one horizontal layer of a box, bottom up; regions and interfaces are named after them",
     "materials.NAME": "the material of one region, named as the mesh's region (physical volume)",
-    "materials.NAME.plasticity": "rock: Mohr-Coulomb with tension cut-off and plastic-strain damage",
+    "materials.NAME.plasticity": "rock: perfectly plastic Mohr-Coulomb with tension cut-off; softening damage "
+                                 "if asked (`materials.NAME.plasticity.damage_max` > 0)",
     "materials.NAME.damage": "lining concrete: the paper's damage law (Eq. 21) with crack band",
     "time": "duration and time step",
     "wave": "seismic input: incident plane waves under a free surface (see Wave conventions)",
