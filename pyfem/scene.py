@@ -589,6 +589,12 @@ SCHEMA = Table({
                 "units": Choice("record units", ("g", "m/s2", "cm/s2")),
                 "dt": Number("sample step of a one-column record (s)", POSITIVE, default=None),
                 "pga": Number("target peak ground acceleration (g)", POSITIVE, default=None),
+                # Where pga is set (pyfem.seismic.records.SCALE_MODES): on the processed window (its
+                # peak is pga) or on the whole raw record before the window, taper, filter, correction.
+                "scale": Choice("where `pga` is set: \"after_filter\" (the processed motion's peak is pga) or "
+                                "\"before_filter\" (the whole raw record is scaled to peak pga, then windowed, "
+                                "tapered, filtered and baseline-corrected: the processed peak is lower)",
+                                ("after_filter", "before_filter"), default="after_filter"),
                 "window": Vector("time window [start, end] (s)", 2, NON_NEGATIVE,
                                  default=None, increasing=True),
                 "band": Vector("band-pass [f_low, f_high] (Hz)", 2, POSITIVE,
@@ -1171,6 +1177,9 @@ def _check_record(settings: dict, warnings: list[str]) -> None:
         except ValueError as error:
             raise SceneError("wave.motion.record", None, "",
                              f"scene key 'wave.motion.record': cannot process the record: {error}") from None
+    if spec["pga"] is None and spec["scale"] != "after_filter":
+        warnings.append(f"wave.motion.record.scale = {_show(spec['scale'])} without wave.motion.record.pga: "
+                        "nothing is scaled, the record keeps its own amplitude")
     duration, motion = settings["time"]["duration"], float(processed.t[-1])
     if duration < motion * (1.0 - 1e-9):
         start, end = processed.window

@@ -175,6 +175,9 @@ RULES = {
     "wave.motion.record": [
         "`wave.motion.record.file` is looked up next to the scene, then in the current directory",
         "`wave.motion.record.window` lies inside the record",
+        "`wave.motion.record.scale` other than \"after_filter\" without `wave.motion.record.pga` is a "
+        "warning (nothing is scaled); `pyfem check` prints the raw record's peak, the window's raw peak "
+        "and the processed motion's PGA, PGV and PGD",
         "a `time.duration` shorter than the processed motion (lead-in + window) is a warning",
     ],
     "damping": [

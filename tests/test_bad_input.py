@@ -9,6 +9,7 @@ import os
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import write_msh_with_quadratic_tetrahedra
@@ -223,6 +224,8 @@ BAD_INPUTS = [
     ("record file malformed", malformed_record, "wave.motion.record.file", ["line 2", "expected numbers"]),
     ("record window outside the record", box(extra=record_wave(RECORD, ", window = [0.0, 99.0]")),
      "wave.motion.record.window", ["inside the record"]),
+    ("record scale not a mode", box(extra=record_wave(RECORD, ', pga = 0.32, scale = "before"')),
+     "wave.motion.record.scale", ['"before"', '"after_filter"', '"before_filter"']),
 ]
 
 
@@ -334,6 +337,29 @@ def test_warnings_are_printed_by_check(capsys, tmp_path):
     status, out, err = run_cli(capsys, tmp_path, WARNED, [], command="check")
     assert status == 0, err
     assert_the_two_warnings(err.splitlines())
+
+
+@pytest.mark.parametrize("scale", ["after_filter", "before_filter"])
+def test_check_prints_the_record_peaks_and_where_pga_is_set(capsys, tmp_path, scale):
+    """check's "input record" line: the whole record's raw peak, the window's raw peak (both as read),
+    where pga was set, and the processed motion's PGA, PGV, PGD; with "after_filter" the PGA is pga."""
+    from pyfem.seismic.records import STANDARD_GRAVITY, read_record
+
+    scene = replace(WARNED, 'window = [0.0, 2.0] }', f'window = [0.0, 2.0], pga = 0.32, scale = "{scale}" }}')
+    status, out, err = run_cli(capsys, tmp_path, scene, [], command="check")
+    assert status == 0, err
+    lines = [line for line in out.splitlines() if line.startswith("input record: ")]
+    assert len(lines) == 1, out
+    record = read_record(RECORD)
+    whole = np.abs(record.acceleration).max() / STANDARD_GRAVITY
+    window = np.abs(record.acceleration[record.t <= 2.0 + 1e-9]).max() / STANDARD_GRAVITY
+    assert f"raw record peak {whole:.3g} g, window [0, 2] s raw peak {window:.3g} g" in lines[0]
+    assert f'scale "{scale}"' in lines[0] and "PGV" in lines[0] and "PGD" in lines[0]
+    pga = float(lines[0].split("processed motion PGA ")[1].split(" g")[0])
+    if scale == "after_filter":
+        assert pga == 0.32
+    else:  # the whole record's peak is 0.32 g; the processed window's is lower
+        assert pga < 0.32 * window / whole * 1.01
 
 
 def test_a_heavy_density_is_a_warning_not_an_error(capsys, tmp_path):
