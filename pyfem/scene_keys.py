@@ -164,7 +164,8 @@ RULES = {
     "wave": [
         "either `wave.type` (with `wave.angle`, `wave.azimuth`) or `wave.component`, not both",
         "`wave.medium` names a table of `materials`",
-        "`wave.surface` not below the model top",
+        "`wave.surface` not below the model top (its highest mesh node; for builders \"file\" and "
+        "\"layered_cavern\" checked once the mesh is read, the message giving the top z)",
         "at least one truncation face must be viscoelastic or viscous (they carry the input)",
         "a mesh more than twice as coarse as the accuracy study advises for 5 % error at the wave's "
         "highest frequency is a warning (`pyfem check` prints the advice)",
@@ -187,7 +188,8 @@ RULES = {
     "initial_stress": [
         "geostatic form: `initial_stress.surface`, `initial_stress.rho` (and `initial_stress.k`); "
         "uniform form: `initial_stress.stress`; not both",
-        "`initial_stress.surface` not below the model top",
+        "`initial_stress.surface` not below the model top (its highest mesh node; for builders \"file\" and "
+        "\"layered_cavern\" checked once the mesh is read, the message giving the top z)",
         "initial stresses beyond a nonlinear material's strength are a warning (returned to it at t = 0)",
     ],
     "static": [

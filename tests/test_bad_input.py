@@ -66,6 +66,39 @@ def write_msh_without_volumes(path):
         gmsh.write(str(path))
 
 
+def write_hexahedral_box_msh(path):
+    """A user's 4 x 2 x 3 m box of 1 m hexahedra (z from 0 to 3 m), physical volume "rock"."""
+    with gmsh_session("hexahedra"):
+        gmsh.model.occ.addBox(0, 0, 0, 4, 2, 3)
+        gmsh.model.occ.synchronize()
+        gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, [1]), "rock")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 1.0)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 1.0)
+        for dim, tag in gmsh.model.getEntities(1):
+            lo = gmsh.model.getBoundingBox(dim, tag)
+            length = max(abs(lo[3] - lo[0]), abs(lo[4] - lo[1]), abs(lo[5] - lo[2]))
+            gmsh.model.mesh.setTransfiniteCurve(tag, int(round(length)) + 1)
+        for dim, tag in gmsh.model.getEntities(2):
+            gmsh.model.mesh.setTransfiniteSurface(tag)
+            gmsh.model.mesh.setRecombine(dim, tag)
+        gmsh.model.mesh.setTransfiniteVolume(1)
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+
+
+def file_mesh_with(extra):
+    """A file-builder scene on write_hexahedral_box_msh's box (top z = 3 m), `extra` TOML appended."""
+    def setup(tmp):
+        path = tmp / "box.msh"
+        write_hexahedral_box_msh(path)
+        return replace(file_scene(path), "duration = 0.01", "duration = 1.0") + extra, []
+    return setup
+
+
+WAVE_ON_SURFACE = ('[wave]\ntype = "SV"\nsurface = {surface}\n[wave.motion.ricker]\nf0 = 5.0\n'
+                   'amplitude = 1.0e-3\n[boundary]\ntype = "viscoelastic"\n')
+
+
 def file_scene(msh):
     return f"""
 [mesh]
@@ -204,6 +237,11 @@ BAD_INPUTS = [
     ("msh without volumes", mesh_file(write_msh_without_volumes), "mesh.file", ["no physical volume"]),
     ("msh with gmsh's quadratic tetrahedra", mesh_file(write_msh_with_quadratic_tetrahedra), "mesh.file",
      ["Tetrahedron 10", "8-node hexahedra", "4-node tetrahedra"]),
+    ("wave surface below a file mesh's top", file_mesh_with(WAVE_ON_SURFACE.format(surface=2.0)),
+     "wave.surface", ["2.0", "below the model's top z = 3 m", "mesh.file"]),
+    ("initial stress surface below a file mesh's top",
+     file_mesh_with("[initial_stress]\nsurface = 2.5\nrho = 2600.0\n"),
+     "initial_stress.surface", ["2.5", "below the model's top z = 3 m", "mesh.file"]),
     ("msh garbage", mesh_file(lambda path: path.write_bytes(b"\x00\x01garbage\n")), "mesh.file",
      ["gmsh cannot read"]),
     ("msh empty", mesh_file(lambda path: path.write_bytes(b"")), "mesh.file", ["gmsh cannot read"]),
@@ -272,6 +310,15 @@ def test_bad_input_in_a_child_process_prints_only_the_error_line(tmp_path, case)
     assert result.returncode == 2
     assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith("error: "), result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_surfaces_at_a_file_mesh_top_are_accepted(capsys, tmp_path):
+    """The same hexahedral box with both surfaces at its top z = 3 m (and one above it) checks cleanly."""
+    extra = WAVE_ON_SURFACE.format(surface=3.0) + "[initial_stress]\nsurface = 3.5\nrho = 2600.0\n"
+    scene_text, _ = file_mesh_with(extra)(tmp_path)
+    status, out, err = run_cli(capsys, tmp_path, scene_text, [], command="check")
+    assert status == 0, err
+    assert "hexahedra" in out or "Q1" in out, out
 
 
 def test_a_directory_as_the_scene_file_is_an_error_line(capsys, tmp_path):
