@@ -38,7 +38,8 @@ RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
 # A key's path through the scene's tables; "*" stands for every table at that depth (materials.NAME).
 LATER_KEYS = ((("time", "matrix_precision"), "double"),
               (("materials", "*", "plasticity", "integration"), "full"),
-              (("materials", "*", "damage", "integration"), "full"))
+              (("materials", "*", "damage", "integration"), "full"),
+              (("wave", "motion", "record", "scale"), "after_filter"))
 
 # Keys left out of the scene's fingerprint whatever their value, because the model's part holds what
 # they decide: time.local_stepping (true, false or "auto", which decides on the model) by dt, steps

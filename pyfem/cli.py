@@ -161,6 +161,10 @@ def show_plan(scene: Scene, plan: dict) -> None:
     else:  # (its first line names the scene)
         print(describe_scene(scene))
     print(format_plan(plan))
+    if (scene.get("wave") or {}).get("motion", {}).get("record") is not None:
+        from pyfem.seismic.setup import scene_record
+
+        print(f"input record: {scene_record(scene).peaks_line()}")
     if "seismic_input" in scene.effects:
         print(mesh_advice(scene))
     sys.stdout.flush()

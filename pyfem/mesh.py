@@ -77,11 +77,12 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
                 load_msh(mesh_settings["file"])
             else:
                 raise ValueError(f"mesh.builder = {builder!r}: allowed here are 'box', 'layered_cavern' and 'file'")
-            model_facts = _physical_groups_and_cell_types()
+            model_facts = (*_physical_groups_and_cell_types(), _height_range())
         model_facts = comm.bcast(model_facts, root=model_rank)
-        regions, boundaries, cell_types = model_facts
+        regions, boundaries, cell_types, heights = model_facts
         source = ("mesh.file", mesh_settings["file"]) if builder == "file" else ("mesh.builder", builder)
         _check_cell_types(cell_types, *source)
+        check_surfaces_on_top(scene, *heights)
         excavated = _excavated_regions(scene, regions)
         if any(number == GMSH_TETRAHEDRON_4 for number, _ in cell_types):
             _check_tetrahedra_uses(scene)
@@ -305,6 +306,38 @@ def _physical_groups_and_cell_types() -> tuple[dict[str, int], dict[str, int], l
             cell_types.update((int(t), gmsh.model.mesh.getElementProperties(t)[0]) for t in element_types)
     boundaries = {_physical_name(dim, tag): tag for dim, tag in gmsh.model.getPhysicalGroups(2)}
     return regions, boundaries, sorted(cell_types)
+
+
+def _height_range() -> tuple[float, float]:
+    """(lowest, highest) z of the current gmsh model's mesh nodes (m); (0, 0) without nodes."""
+    _, coords, _ = gmsh.model.mesh.getNodes()
+    if len(coords) == 0:
+        return 0.0, 0.0
+    z = np.asarray(coords, dtype=float).reshape(-1, 3)[:, 2]
+    return float(z.min()), float(z.max())
+
+
+SURFACE_KEYS = ("wave.surface", "initial_stress.surface")
+"""The scene keys that place the ground surface, which must not lie below the model's top."""
+
+
+def check_surfaces_on_top(scene: typing.Mapping, bottom: float, top: float) -> None:
+    """Refuses a ground surface (`SURFACE_KEYS`) below the model's top z (its highest mesh node), for
+    every builder: the box's is checked with the scene already, a file's or the layered cavern's
+    only once the mesh is read. Tolerance 1e-9 of the model's height.
+
+    Raises:
+        SceneError naming the key, its value and the model's top z.
+    """
+    builder = scene["mesh"].get("builder")
+    where = f"the highest node of mesh.file {scene['mesh']['file']}" if builder == "file" else \
+        f"the highest node of the mesh.builder {builder!r} mesh"
+    for key in SURFACE_KEYS:
+        table, name = key.split(".")
+        surface = (scene.get(table) or {}).get(name)
+        if surface is not None and surface < top - 1e-9 * max(top - bottom, 1.0):
+            raise SceneError(key, surface, f"the surface must not lie below the model's top z = {top:.6g} m "
+                             f"({where}); give {key} >= {top:.6g}")
 
 
 def _physical_name(dim: int, tag: int) -> str:

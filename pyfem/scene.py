@@ -436,16 +436,19 @@ _INTEGRATION = Choice("points of the law per cell: \"full\" (the matrix's quadra
                       "\"reduced\" (one at the cell's mean strain, Q1 only; the elastic stiffness of the strain's "
                       "variation in the cell stays in the matrix)", ("full", "reduced"), default="full")
 
-# Rock: Mohr-Coulomb with tension cut-off and plastic-strain damage (docs/materials.md). The three
-# strengths default to PRESET_STRENGTHS of the material's preset (required without a preset).
+# Rock: Mohr-Coulomb with tension cut-off, perfectly plastic unless the scene asks for softening
+# damage (damage_max > 0, with its scale; docs/materials.md). The three strengths default to
+# PRESET_STRENGTHS of the material's preset (required without a preset).
 _PLASTICITY = Table({
     "cohesion": Number("cohesion c (Pa)", NON_NEGATIVE, default=None),
     "friction_angle": Number("friction angle phi (deg)", "[0, 90)", default=None),
     "dilation_angle": Number("dilation angle psi (deg)", "[0, 90)", default=0.0),
     "tensile_strength": Number("tensile strength of the cut-off (Pa; >= c cot(phi): none)",
                                NON_NEGATIVE, default=None),
-    "damage_max": Number("largest damage d_max (0: no damage)", "[0, 1)", default=0.9),
-    # None: DAMAGE_PLASTIC_STRAIN, filled in by _check_nonlinear_material (which refuses it beside a crack band).
+    "damage_max": Number("largest damage d_max (0: no damage, perfect plasticity; > 0: softening, with its "
+                         "scale damage_plastic_strain or damage_plastic_displacement)", "[0, 1)", default=0.0),
+    # None: DAMAGE_PLASTIC_STRAIN when damage_max = 0 (unused), filled in by _check_nonlinear_material;
+    # with damage_max > 0 the scene gives it or the crack band's damage_plastic_displacement (not both).
     "damage_plastic_strain": Number("equivalent plastic strain scale kappa_ref of the damage",
                                     POSITIVE, default=None),
     # The crack band (docs/materials.md "Crack band of the rock"): kappa_ref = u_ref / h per cell.
@@ -460,7 +463,7 @@ _PLASTICITY = Table({
     "integration": _INTEGRATION,
 }, "[materials.NAME.plasticity]", presence="optional")
 DAMAGE_PLASTIC_STRAIN = 0.005
-"""The rock damage's kappa_ref without a crack band (docs/materials.md)."""
+"""The kappa_ref handed to the kernel when the rock has no damage (damage_max = 0: it scales nothing)."""
 PLASTIC_DISPLACEMENT_RANGE = (1.0e-5, 1.0)
 """Plausible u_ref of the rock's crack band (m): outside it, a unit slip (mm or cm written as m)."""
 _ROCK_DAMAGE_NOT_READ = ("not read here: the rock's damage (damage_max, damage_plastic_strain and its crack band "
@@ -556,6 +559,12 @@ SCHEMA = Table({
                 "units": Choice("record units", ("g", "m/s2", "cm/s2")),
                 "dt": Number("sample step of a one-column record (s)", POSITIVE, default=None),
                 "pga": Number("target peak ground acceleration (g)", POSITIVE, default=None),
+                # Where pga is set (pyfem.seismic.records.SCALE_MODES): on the processed window (its
+                # peak is pga) or on the whole raw record before the window, taper, filter, correction.
+                "scale": Choice("where `pga` is set: \"after_filter\" (the processed motion's peak is pga) or "
+                                "\"before_filter\" (the whole raw record is scaled to peak pga, then windowed, "
+                                "tapered, filtered and baseline-corrected: the processed peak is lower)",
+                                ("after_filter", "before_filter"), default="after_filter"),
                 "window": Vector("time window [start, end] (s)", 2, NON_NEGATIVE,
                                  default=None, increasing=True),
                 "band": Vector("band-pass [f_low, f_high] (Hz)", 2, POSITIVE,
@@ -984,10 +993,16 @@ def _check_nonlinear_material(name: str, material: dict, order: int) -> None:
 
 
 def _check_rock_damage_scale(key: str, values: dict) -> None:
-    """The rock damage's scale: damage_plastic_strain (kappa_ref in every cell, DAMAGE_PLASTIC_STRAIN
-    when not given) or the crack band's damage_plastic_displacement (u_ref / h per cell), not both;
-    a crack band needs damage, and a u_ref outside PLASTIC_DISPLACEMENT_RANGE is a unit slip."""
+    """The rock damage's scale: damage_plastic_strain (kappa_ref in every cell) or the crack band's
+    damage_plastic_displacement (u_ref / h per cell), not both; damage (damage_max > 0) needs one of
+    them, a crack band needs damage, and a u_ref outside PLASTIC_DISPLACEMENT_RANGE is a unit slip.
+    Without damage, damage_plastic_strain becomes DAMAGE_PLASTIC_STRAIN (the kernel's, unused)."""
     u_ref = values["damage_plastic_displacement"]
+    if values["damage_max"] > 0.0 and u_ref == 0.0 and values["damage_plastic_strain"] is None:
+        raise SceneError(f"{key}.damage_max", values["damage_max"], "softening damage needs its scale: give "
+                         "damage_plastic_strain (kappa_ref, the same in every cell, e.g. 0.005) or "
+                         "damage_plastic_displacement (the crack band's u_ref in m, e.g. 0.01), or leave "
+                         "damage_max out (0: perfectly plastic Mohr-Coulomb)")
     if u_ref > 0.0:
         name = f"{key}.damage_plastic_displacement"
         if values["damage_max"] == 0.0:
@@ -1132,6 +1147,9 @@ def _check_record(settings: dict, warnings: list[str]) -> None:
         except ValueError as error:
             raise SceneError("wave.motion.record", None, "",
                              f"scene key 'wave.motion.record': cannot process the record: {error}") from None
+    if spec["pga"] is None and spec["scale"] != "after_filter":
+        warnings.append(f"wave.motion.record.scale = {_show(spec['scale'])} without wave.motion.record.pga: "
+                        "nothing is scaled, the record keeps its own amplitude")
     duration, motion = settings["time"]["duration"], float(processed.t[-1])
     if duration < motion * (1.0 - 1e-9):
         start, end = processed.window

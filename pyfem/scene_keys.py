@@ -83,7 +83,9 @@ UNSET = {
     "materials.NAME.plasticity.friction_angle": "the preset's; required without a preset",
     "materials.NAME.plasticity.tensile_strength": "the preset's; required without a preset",
     "materials.NAME.plasticity.mean_dilatation": "true for `mesh.order` = 1, false for 2",
-    "materials.NAME.plasticity.damage_plastic_strain": "0.005; refused beside `materials.NAME.plasticity.damage_plastic_displacement` > 0",
+    "materials.NAME.plasticity.damage_plastic_strain": "none: without damage (`materials.NAME.plasticity.damage_max` = 0) "
+                                                       "it scales nothing; with damage it or "
+                                                       "`materials.NAME.plasticity.damage_plastic_displacement` is required",
     "materials.NAME.damage.cohesion": "the preset's (the paper's Table 1); required without a preset",
     "materials.NAME.damage.friction_angle": "the preset's; required without a preset",
     "materials.NAME.damage.tensile_strength": "the preset's; required without a preset",
@@ -144,6 +146,11 @@ RULES = {
         "`materials.NAME.plasticity.dilation_angle` <= `materials.NAME.plasticity.friction_angle`",
         "`materials.NAME.plasticity.cohesion` > 0 when the friction angle is 0",
         "a strength in (0, 100) Pa is refused (a value in MPa written as Pa); 0 means none",
+        "without `materials.NAME.plasticity.damage_max` (0) the rock is perfectly plastic; "
+        "`materials.NAME.plasticity.damage_max` > 0 (softening) needs its scale, "
+        "`materials.NAME.plasticity.damage_plastic_strain` or the crack band's "
+        "`materials.NAME.plasticity.damage_plastic_displacement` > 0, not both; a crack band needs "
+        "`materials.NAME.plasticity.damage_max` > 0",
     ],
     "materials.NAME.damage": [
         "`materials.NAME.damage.A_t` = 1 when `materials.NAME.damage.fracture_energy` > 0",
@@ -158,7 +165,8 @@ RULES = {
     "wave": [
         "either `wave.type` (with `wave.angle`, `wave.azimuth`) or `wave.component`, not both",
         "`wave.medium` names a table of `materials`",
-        "`wave.surface` not below the model top",
+        "`wave.surface` not below the model top (its highest mesh node; for builders \"file\" and "
+        "\"layered_cavern\" checked once the mesh is read, the message giving the top z)",
         "at least one truncation face must be viscoelastic or viscous (they carry the input)",
         "a mesh more than twice as coarse as the accuracy study advises for 5 % error at the wave's "
         "highest frequency is a warning (`pyfem check` prints the advice)",
@@ -169,6 +177,9 @@ RULES = {
     "wave.motion.record": [
         "`wave.motion.record.file` is looked up next to the scene, then in the current directory",
         "`wave.motion.record.window` lies inside the record",
+        "`wave.motion.record.scale` other than \"after_filter\" without `wave.motion.record.pga` is a "
+        "warning (nothing is scaled); `pyfem check` prints the raw record's peak, the window's raw peak "
+        "and the processed motion's PGA, PGV and PGD",
         "a `time.duration` shorter than the processed motion (lead-in + window) is a warning",
     ],
     "damping": [
@@ -178,7 +189,8 @@ RULES = {
     "initial_stress": [
         "geostatic form: `initial_stress.surface`, `initial_stress.rho` (and `initial_stress.k`); "
         "uniform form: `initial_stress.stress`; not both",
-        "`initial_stress.surface` not below the model top",
+        "`initial_stress.surface` not below the model top (its highest mesh node; for builders \"file\" and "
+        "\"layered_cavern\" checked once the mesh is read, the message giving the top z)",
         "initial stresses beyond a nonlinear material's strength are a warning (returned to it at t = 0)",
     ],
     "static": [
@@ -219,7 +231,8 @@ EFFECTS = {
 
 SWITCHES = {
     "materials.NAME.plasticity": "the region's cells leave the stiffness matrix for the kernel's element "
-                                 "loop: Mohr-Coulomb with tension cut-off and plastic-strain damage "
+                                 "loop: perfectly plastic Mohr-Coulomb with tension cut-off, softening "
+                                 "plastic-strain damage only with `materials.NAME.plasticity.damage_max` > 0 "
                                  "(docs/materials.md)",
     "materials.NAME.damage": "the region's cells leave the stiffness matrix for the kernel's element "
                              "loop: the paper's concrete damage (Eq. 21) with crack band (docs/materials.md)",
@@ -237,7 +250,8 @@ PURPOSE = {
     "mesh": "the model's geometry and elements",
     "mesh.layers.0": "one horizontal layer of a box, bottom up; regions and interfaces are named after them",
     "materials.NAME": "the material of one region, named as the mesh's region (physical volume)",
-    "materials.NAME.plasticity": "rock: Mohr-Coulomb with tension cut-off and plastic-strain damage",
+    "materials.NAME.plasticity": "rock: perfectly plastic Mohr-Coulomb with tension cut-off; softening damage "
+                                 "if asked (`materials.NAME.plasticity.damage_max` > 0)",
     "materials.NAME.damage": "lining concrete: the paper's damage law (Eq. 21) with crack band",
     "time": "duration and time step",
     "wave": "seismic input: incident plane waves under a free surface (see Wave conventions)",

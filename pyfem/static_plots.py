@@ -10,7 +10,8 @@
 
 Each cell cut by the section is drawn as the convex hull of its vertices projected on the plane (a
 quadrilateral for the layered cavern's cells, extruded along y); the excavated cells are not in the
-model (pyfem/mesh.py drops them), and the excavation surface is where the stage's excavation load acts.
+model (pyfem/mesh.py drops them), and the excavation surface is the wall they left: the stage-1 body's
+exterior facets off the truncation faces and the interfaces (`excavation_surface`).
 """
 from __future__ import annotations
 
@@ -35,13 +36,47 @@ def cell_vertices(model) -> np.ndarray:
     return model.node_coords[nodes]
 
 
-def excavation_surface(state, node_coords: np.ndarray) -> np.ndarray:
-    """(k, 3) the nodes the excavation load acts on (m): the surface the removed regions left (the
-    excavated cells are never in the model, pyfem/mesh.py); empty without an excavation."""
-    load = np.linalg.norm(np.asarray(state.excavation_load).reshape(-1, 3), axis=1)
-    if not len(load) or load.max() == 0.0:
+# Each facet of a cell as its local vertices (dolfinx's reference cells: a hexahedron's vertices in
+# tensor-product order, a tetrahedron's any three of four).
+_CELL_FACETS = {8: ((0, 1, 2, 3), (0, 1, 4, 5), (0, 2, 4, 6), (1, 3, 5, 7), (2, 3, 6, 7), (4, 5, 6, 7)),
+                4: ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3))}
+
+
+def excavation_surface(state, model) -> np.ndarray:
+    """(k, 3) the nodes of the surface the excavation left (m); empty without an excavation load.
+
+    Found from the mesh, not from the load: the stage-1 body's (the model without the installed
+    regions) exterior facets that are neither on a truncation face nor on a split interface (the
+    excavated cells are never in the model, pyfem/mesh.py, so their wall is exterior; a cavity
+    already in the mesh counts too), and the nodes an installed region shares with the rest. The
+    excavation load itself is no guide: it also has the round-off of the volume terms and the
+    mismatch of the pairs' static forces on the interfaces, large enough to put every pair on it."""
+    load = np.asarray(state.excavation_load)
+    if not len(load) or not np.any(load):
         return np.zeros((0, 3))
-    return node_coords[load > 1e-3 * load.max()]  # above the round-off of the volume terms
+    n_vertices = 8 if model.mesh.topology.cell_type.name == "hexahedron" else 4
+    n_basis = model.V.dofmap.dof_layout.num_dofs
+    cell_nodes = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :n_vertices]
+    installed = np.zeros(len(cell_nodes), dtype=bool)
+    installed[np.asarray(getattr(state, "installed_cells", ()), dtype=np.int64)] = True
+    rock = cell_nodes[~installed]
+    facets = np.sort(np.concatenate([rock[:, list(local)] for local in _CELL_FACETS[n_vertices]]), axis=1)
+    unique, counts = np.unique(facets, axis=0, return_counts=True)
+    exterior = unique[counts == 1]
+    excluded = np.zeros(len(model.node_coords), dtype=bool)  # truncation faces and split interfaces
+    for face in model.faces:
+        excluded[face.nodes] = True
+    on_face = excluded[exterior].all(axis=1)
+    on_interface = np.zeros_like(on_face)
+    if model.pairs is not None and len(model.pairs):
+        paired = np.zeros(len(model.node_coords), dtype=bool)
+        paired[np.asarray(model.pairs.nodes).ravel()] = True
+        on_interface = paired[exterior].all(axis=1)
+    surface = np.zeros(len(model.node_coords), dtype=bool)
+    surface[exterior[~on_face & ~on_interface].ravel()] = True
+    if installed.any():
+        surface[np.intersect1d(cell_nodes[installed].ravel(), rock.ravel())] = True
+    return model.node_coords[surface]
 
 
 def section_plane(vertices: np.ndarray, surface: np.ndarray) -> float:
@@ -162,7 +197,7 @@ def write_static_plots(folder: Path, simulation) -> dict:
     state = simulation.static
     model = simulation.model
     vertices = cell_vertices(model)
-    surface = excavation_surface(state, model.node_coords)
+    surface = excavation_surface(state, model)
     title = simulation.scene.get("title", "")
     figures = {"section_stress": section_stress(folder / "section_stress.png", vertices, state.cell_stress,
                                                 surface, state.cell_state, title)}

@@ -9,6 +9,7 @@ import os
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import write_msh_with_quadratic_tetrahedra
@@ -63,6 +64,39 @@ def write_msh_without_volumes(path):
         gmsh.option.setNumber("Mesh.RecombineAll", 1)
         gmsh.model.mesh.generate(2)
         gmsh.write(str(path))
+
+
+def write_hexahedral_box_msh(path):
+    """A user's 4 x 2 x 3 m box of 1 m hexahedra (z from 0 to 3 m), physical volume "rock"."""
+    with gmsh_session("hexahedra"):
+        gmsh.model.occ.addBox(0, 0, 0, 4, 2, 3)
+        gmsh.model.occ.synchronize()
+        gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, [1]), "rock")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 1.0)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 1.0)
+        for dim, tag in gmsh.model.getEntities(1):
+            lo = gmsh.model.getBoundingBox(dim, tag)
+            length = max(abs(lo[3] - lo[0]), abs(lo[4] - lo[1]), abs(lo[5] - lo[2]))
+            gmsh.model.mesh.setTransfiniteCurve(tag, int(round(length)) + 1)
+        for dim, tag in gmsh.model.getEntities(2):
+            gmsh.model.mesh.setTransfiniteSurface(tag)
+            gmsh.model.mesh.setRecombine(dim, tag)
+        gmsh.model.mesh.setTransfiniteVolume(1)
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+
+
+def file_mesh_with(extra):
+    """A file-builder scene on write_hexahedral_box_msh's box (top z = 3 m), `extra` TOML appended."""
+    def setup(tmp):
+        path = tmp / "box.msh"
+        write_hexahedral_box_msh(path)
+        return replace(file_scene(path), "duration = 0.01", "duration = 1.0") + extra, []
+    return setup
+
+
+WAVE_ON_SURFACE = ('[wave]\ntype = "SV"\nsurface = {surface}\n[wave.motion.ricker]\nf0 = 5.0\n'
+                   'amplitude = 1.0e-3\n[boundary]\ntype = "viscoelastic"\n')
 
 
 def file_scene(msh):
@@ -174,14 +208,18 @@ BAD_INPUTS = [
                "dilation_angle = 35.0\n"),
      "materials.rock.plasticity.dilation_angle", ["must not exceed the friction angle 30 deg"]),
     ("rock crack band in mm",
-     box(extra=ROCK_LAW + "damage_plastic_displacement = 10.0\n"),
+     box(extra=ROCK_LAW + "damage_max = 0.9\ndamage_plastic_displacement = 10.0\n"),
      "materials.rock.plasticity.damage_plastic_displacement", ["looks like mm: write 1.0e-2"]),
     ("rock crack band without damage",
      box(extra=ROCK_LAW + "damage_max = 0.0\ndamage_plastic_displacement = 0.01\n"),
      "materials.rock.plasticity.damage_plastic_displacement", ["damage_max = 0"]),
     ("rock crack band beside a plastic strain scale",
-     box(extra=ROCK_LAW + "damage_plastic_strain = 0.002\ndamage_plastic_displacement = 0.01\n"),
+     box(extra=ROCK_LAW + "damage_max = 0.9\ndamage_plastic_strain = 0.002\ndamage_plastic_displacement = 0.01\n"),
      "materials.rock.plasticity.damage_plastic_displacement", ["not both"]),
+    ("rock damage without its scale",
+     box(extra=ROCK_LAW + "damage_max = 0.9\n"),
+     "materials.rock.plasticity.damage_max", ["0.9", "damage_plastic_strain", "damage_plastic_displacement",
+                                              "perfectly plastic"]),
     ("rock crack band in the concrete's table",
      box(extra="[materials.rock.damage]\ndamage_plastic_displacement = 0.01\n"),
      "materials.rock.damage.damage_plastic_displacement", ["not read here", "[materials.NAME.plasticity]",
@@ -199,6 +237,11 @@ BAD_INPUTS = [
     ("msh without volumes", mesh_file(write_msh_without_volumes), "mesh.file", ["no physical volume"]),
     ("msh with gmsh's quadratic tetrahedra", mesh_file(write_msh_with_quadratic_tetrahedra), "mesh.file",
      ["Tetrahedron 10", "8-node hexahedra", "4-node tetrahedra"]),
+    ("wave surface below a file mesh's top", file_mesh_with(WAVE_ON_SURFACE.format(surface=2.0)),
+     "wave.surface", ["2.0", "below the model's top z = 3 m", "mesh.file"]),
+    ("initial stress surface below a file mesh's top",
+     file_mesh_with("[initial_stress]\nsurface = 2.5\nrho = 2600.0\n"),
+     "initial_stress.surface", ["2.5", "below the model's top z = 3 m", "mesh.file"]),
     ("msh garbage", mesh_file(lambda path: path.write_bytes(b"\x00\x01garbage\n")), "mesh.file",
      ["gmsh cannot read"]),
     ("msh empty", mesh_file(lambda path: path.write_bytes(b"")), "mesh.file", ["gmsh cannot read"]),
@@ -219,6 +262,8 @@ BAD_INPUTS = [
     ("record file malformed", malformed_record, "wave.motion.record.file", ["line 2", "expected numbers"]),
     ("record window outside the record", box(extra=record_wave(RECORD, ", window = [0.0, 99.0]")),
      "wave.motion.record.window", ["inside the record"]),
+    ("record scale not a mode", box(extra=record_wave(RECORD, ', pga = 0.32, scale = "before"')),
+     "wave.motion.record.scale", ['"before"', '"after_filter"', '"before_filter"']),
 ]
 
 
@@ -265,6 +310,15 @@ def test_bad_input_in_a_child_process_prints_only_the_error_line(tmp_path, case)
     assert result.returncode == 2
     assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith("error: "), result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_surfaces_at_a_file_mesh_top_are_accepted(capsys, tmp_path):
+    """The same hexahedral box with both surfaces at its top z = 3 m (and one above it) checks cleanly."""
+    extra = WAVE_ON_SURFACE.format(surface=3.0) + "[initial_stress]\nsurface = 3.5\nrho = 2600.0\n"
+    scene_text, _ = file_mesh_with(extra)(tmp_path)
+    status, out, err = run_cli(capsys, tmp_path, scene_text, [], command="check")
+    assert status == 0, err
+    assert "hexahedra" in out or "Q1" in out, out
 
 
 def test_a_directory_as_the_scene_file_is_an_error_line(capsys, tmp_path):
@@ -330,6 +384,29 @@ def test_warnings_are_printed_by_check(capsys, tmp_path):
     status, out, err = run_cli(capsys, tmp_path, WARNED, [], command="check")
     assert status == 0, err
     assert_the_two_warnings(err.splitlines())
+
+
+@pytest.mark.parametrize("scale", ["after_filter", "before_filter"])
+def test_check_prints_the_record_peaks_and_where_pga_is_set(capsys, tmp_path, scale):
+    """check's "input record" line: the whole record's raw peak, the window's raw peak (both as read),
+    where pga was set, and the processed motion's PGA, PGV, PGD; with "after_filter" the PGA is pga."""
+    from pyfem.seismic.records import STANDARD_GRAVITY, read_record
+
+    scene = replace(WARNED, 'window = [0.0, 2.0] }', f'window = [0.0, 2.0], pga = 0.32, scale = "{scale}" }}')
+    status, out, err = run_cli(capsys, tmp_path, scene, [], command="check")
+    assert status == 0, err
+    lines = [line for line in out.splitlines() if line.startswith("input record: ")]
+    assert len(lines) == 1, out
+    record = read_record(RECORD)
+    whole = np.abs(record.acceleration).max() / STANDARD_GRAVITY
+    window = np.abs(record.acceleration[record.t <= 2.0 + 1e-9]).max() / STANDARD_GRAVITY
+    assert f"raw record peak {whole:.3g} g, window [0, 2] s raw peak {window:.3g} g" in lines[0]
+    assert f'scale "{scale}"' in lines[0] and "PGV" in lines[0] and "PGD" in lines[0]
+    pga = float(lines[0].split("processed motion PGA ")[1].split(" g")[0])
+    if scale == "after_filter":
+        assert pga == 0.32
+    else:  # the whole record's peak is 0.32 g; the processed window's is lower
+        assert pga < 0.32 * window / whole * 1.01
 
 
 def test_a_heavy_density_is_a_warning_not_an_error(capsys, tmp_path):

@@ -167,7 +167,7 @@ def stateful_scene(duration=0.45):
     interfaces in contact with deterioration, a relaxation stage under a geostatic stress, an
     oblique SV wave strong enough to slide the pairs, yield the rock and crack the layer."""
     soft = {"E": 2.0e9, "nu": 0.30, "rho": 2400.0,
-            "plasticity": {"cohesion": 1.0 * MPa, "friction_angle": 25.0, "tensile_strength": 0.1 * MPa}}
+            "plasticity": {"cohesion": 1.0 * MPa, "friction_angle": 25.0, "tensile_strength": 0.1 * MPa, "damage_max": 0.9, "damage_plastic_strain": 0.005}}
     stiff = {"E": 28.0e9, "nu": 0.167, "rho": 2500.0,
              "damage": {"cohesion": 1.8 * MPa, "friction_angle": 46.0, "tensile_strength": 1.5 * MPa}}
     return parse_scene({

@@ -58,7 +58,7 @@ SETTINGS = {"zone": ("--set", "materials.weak.plasticity.zone=[0.0, 0.0, 0.0, 40
             "contact": ("--set", "output.xdmf_interval=0.1"),
             # contact and the element loop together (the case study's): the soft rock yields
             "contact_yield": ("--set", "materials.soft.plasticity={cohesion=2.0e5, friction_angle=30.0, "
-                              "tensile_strength=1.0e5}", "--set", "output.xdmf_interval=0.1",
+                              "tensile_strength=1.0e5, damage_max=0.9, damage_plastic_strain=0.005}", "--set", "output.xdmf_interval=0.1",
                               "--set", 'output.fields=["displacement", "stress", "damage"]')}
 RANKS = {"box": (1, 2, 3), "tunnel": (1, 3), "layers": (1, 2, 3), "zone": (1, 2), "contact": (1, 2, 3),
          "contact_yield": (1, 3), "contact_l": (1, 3)}

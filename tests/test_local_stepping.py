@@ -229,7 +229,7 @@ def two_layer_plastic_scene(local: bool):
                  "layers": [{"material": "stiff", "thickness": 30.0}, {"material": "soft", "thickness": 30.0}]},
         "materials": {"stiff": {"E": 32.0e9, "nu": 0.25, "rho": 2600.0},
                       "soft": {"E": 2.0e9, "nu": 0.25, "rho": 2600.0,
-                               "plasticity": {"cohesion": 4.0e5, "friction_angle": 30.0, "tensile_strength": 2.0e5}}},
+                               "plasticity": {"cohesion": 4.0e5, "friction_angle": 30.0, "tensile_strength": 2.0e5, "damage_max": 0.9, "damage_plastic_strain": 0.005}}},
         "time": {"duration": 0.4, "safety": 0.8, "local_stepping": local},
         "wave": {"type": "SV", "angle": 0.0, "surface": 100.0, "medium": "stiff",
                  "motion": {"ricker": {"f0": 10.0, "amplitude": 1.0e-3}}},
@@ -554,7 +554,7 @@ def test_a_local_stepping_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_p
     MPa = 1.0e6
     data = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
                                    soft_plasticity={"cohesion": 0.05 * MPa, "friction_angle": 25.0,
-                                                    "tensile_strength": 0.02 * MPa}).to_json()
+                                                    "tensile_strength": 0.02 * MPa, "damage_max": 0.9, "damage_plastic_strain": 0.005}).to_json()
     data["contact"]["deterioration"] = {"R0": 0.75, "lambda": 5.0}
     data["output"]["checkpoint_interval"] = 1.0e-9
     scene = parse_scene(data, source="test")
@@ -628,7 +628,7 @@ def test_local_stepping_after_a_static_stage_resumes_without_solving_it_again(tm
     MPa = 1.0e6
     data = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
                                    soft_plasticity={"cohesion": 0.05 * MPa, "friction_angle": 25.0,
-                                                    "tensile_strength": 0.02 * MPa}).to_json()
+                                                    "tensile_strength": 0.02 * MPa, "damage_max": 0.9, "damage_plastic_strain": 0.005}).to_json()
     data["static"] = {"solver": "relaxation"}
     data["time"]["duration"] = 0.24
     data["output"]["checkpoint_interval"] = 1.0e-9
@@ -668,7 +668,7 @@ def test_the_kernel_refuses_a_coarser_element_loop_cell_on_a_pair_node(monkeypat
     MPa = 1.0e6
     scene = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
                                     soft_plasticity={"cohesion": 0.05 * MPa, "friction_angle": 25.0,
-                                                     "tensile_strength": 0.02 * MPa})
+                                                     "tensile_strength": 0.02 * MPa, "damage_max": 0.9, "damage_plastic_strain": 0.005})
     simulation = solver.prepare(scene)
     monkeypatch.setattr(local_stepping, "pair_cell_cap",
                         lambda levels, cell_nodes, pairs, loop_cells: np.full(len(cell_nodes), local_stepping.UNCAPPED))

@@ -32,6 +32,7 @@ def test_a_plastic_layer_in_one_half_is_shared_by_work(integration):
                  "layers": [{"material": "soft", "thickness": 12.0}, {"material": "rock", "thickness": 36.0}]},
         "materials": {"soft": {"E": 2.0e9, "nu": 0.3, "rho": 2400.0,
                                "plasticity": {"cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e5,
+                                              "damage_max": 0.9, "damage_plastic_strain": 0.005,
                                               "integration": integration}},
                       "rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}},
         "time": {"duration": 0.01},

@@ -56,7 +56,7 @@ def test_local_stepping_reports_its_phases(tmp_path):
     from test_local_stepping import two_layer_contact_scene
 
     scene = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
-                                    soft_plasticity={"cohesion": 4.0e5, "friction_angle": 30.0, "tensile_strength": 2.0e5})
+                                    soft_plasticity={"cohesion": 4.0e5, "friction_angle": 30.0, "tensile_strength": 2.0e5, "damage_max": 0.9, "damage_plastic_strain": 0.005})
     solver.run(scene, tmp_path / "run")
     summary = time_per_step(tmp_path / "run")
     split = summary["time_per_step"]

@@ -246,6 +246,45 @@ def test_process_record_removes_out_of_band_sinusoids():
     assert processed.residual_velocity < 1e-10 and processed.residual_displacement < 1e-10
 
 
+def _two_amplitude_record(amplitude=1.0, dt=0.005):
+    """A 2 Hz sine of `amplitude` (m/s^2) for 0 <= t < 15 s and of 3 x `amplitude` for 15 <= t <= 30 s:
+    the window [0, 14] s holds a third of the whole record's peak."""
+    t = dt * np.arange(int(round(30.0 / dt)) + 1)
+    acceleration = amplitude * np.where(t < 15.0, 1.0, 3.0) * np.sin(2 * np.pi * 2.0 * t)
+    return records.Record(t=t, acceleration=acceleration, dt=dt, source="two_amplitudes", units="m/s2")
+
+
+@pytest.mark.parametrize("scale", ["after_filter", "before_filter"])
+def test_pga_scales_the_processed_window_or_the_whole_raw_record(scale):
+    """wave.motion.record scale: "after_filter" makes the processed window's peak the pga; "before_filter"
+    scales the whole raw record to the pga, so a window holding a third of the record's peak comes out
+    at pga / 3 (a 2 Hz sine passes the 0.1-25 Hz band, the taper and the baseline correction within 2 %,
+    as test_process_record_removes_out_of_band_sinusoids shows)."""
+    amplitude, pga = 1.0, 0.3
+    record = _two_amplitude_record(amplitude)
+    processed = process_record(record, window=(0.0, 14.0), pga=pga, scale=scale)
+    g = records.STANDARD_GRAVITY
+    assert processed.scale == scale and processed.target_pga_g == pga
+    assert processed.raw_pga_g == pytest.approx(3.0 * amplitude / g, rel=1e-12)
+    assert processed.window_raw_pga_g == pytest.approx(amplitude / g, rel=1e-6)  # sin peaks at 1 - 5e-13
+    if scale == "after_filter":
+        assert processed.pga_g == pytest.approx(pga, rel=1e-12)
+    else:
+        assert processed.scale_factor == pytest.approx(pga * g / (3.0 * amplitude), rel=1e-12)
+        assert processed.pga_g == pytest.approx(pga / 3.0, rel=0.02)
+    line = processed.peaks_line()
+    assert f'scale "{scale}"' in line and "raw record peak 0.306 g" in line and "raw peak 0.102 g" in line
+
+
+def test_scale_is_checked_and_read_only_with_a_pga():
+    record = _two_amplitude_record()
+    with pytest.raises(ValueError, match="scale='both'"):
+        process_record(record, window=(0.0, 14.0), pga=0.3, scale="both")
+    own = process_record(record, window=(0.0, 14.0), scale="before_filter")
+    assert own.scale_factor == 1.0 and own.target_pga_g is None and "no pga" in own.peaks_line()
+    assert own.pga_g == pytest.approx(1.0 / records.STANDARD_GRAVITY, rel=0.02)
+
+
 def test_resampling_downwards_and_the_nyquist_warning():
     record = read_record(ELCENTRO_AT2)
     with warnings.catch_warnings(record=True) as caught:

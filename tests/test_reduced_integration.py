@@ -101,7 +101,8 @@ def layer_scene(integration: str, strong: bool):
     """Two layers, the upper one Mohr-Coulomb (strong: 100 MPa, never yields; weak: 0.1 MPa),
     under geostatic stress and a vertical SV pulse."""
     plasticity = {"cohesion": (100.0 if strong else 0.1) * MPa, "friction_angle": 30.0,
-                  "tensile_strength": (100.0 if strong else 0.05) * MPa, "integration": integration}
+                  "tensile_strength": (100.0 if strong else 0.05) * MPa, "integration": integration,
+                  "damage_max": 0.9, "damage_plastic_strain": 0.005}
     return parse_scene({
         "title": f"layer {integration}",
         "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [40.0, 20.0, 60.0], "h": 5.0, "order": 1,

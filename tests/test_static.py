@@ -398,3 +398,93 @@ def test_pairs_over_strength_counts_opening_and_sliding_pairs():
     counts = pairs_over_strength({"static_force": force, "normal": normal, "area": area, "cohesion": 1.0e6,
                                   "tensile_strength": 1.0e6, "friction_static": 0.5})
     assert counts == {"opening": 1, "sliding": 1}
+
+
+# The interfaces' distance from the excavation (static/interface_stress.png, static.json): a section
+# 16 x 2 x 16 m of 1 m hexahedra, a 4 x 4 m excavation through it (x 6-10 m, z 4-8 m) and a bedding
+# plane at z = 12 m, 4 m above the excavation's roof.
+EXCAVATION_BOX = ((6.0, 10.0), (4.0, 8.0))  # (x range, z range) (m), through the whole y
+BEDDING_Z = 12.0
+
+
+def write_excavated_section_msh(path):
+    """Twelve boxes meshed as 1 m hexahedra: the excavation (x 6-10, z 4-8) among the 8 blocks of
+    "lower" below z = 12, "upper" above it, the plane z = 12 between them "interface_1"."""
+    from pyfem._gmsh import gmsh
+    from pyfem.geometry import gmsh_session
+
+    columns, rows = ((0.0, 6.0), (6.0, 10.0), (10.0, 16.0)), ((0.0, 4.0), (4.0, 8.0), (8.0, 12.0), (12.0, 16.0))
+    with gmsh_session("excavated section"):
+        blocks = [gmsh.model.occ.addBox(x0, 0.0, z0, x1 - x0, 2.0, z1 - z0) for (x0, x1) in columns
+                  for (z0, z1) in rows]
+        gmsh.model.occ.fragment([(3, tag) for tag in blocks], [])
+        gmsh.model.occ.synchronize()
+        for _, tag in gmsh.model.getEntities(1):
+            box = gmsh.model.getBoundingBox(1, tag)
+            length = max(box[3] - box[0], box[4] - box[1], box[5] - box[2])
+            gmsh.model.mesh.setTransfiniteCurve(tag, int(round(length)) + 1)
+        for _, tag in gmsh.model.getEntities(2):
+            gmsh.model.mesh.setTransfiniteSurface(tag)
+            gmsh.model.mesh.setRecombine(2, tag)
+        for _, tag in gmsh.model.getEntities(3):
+            gmsh.model.mesh.setTransfiniteVolume(tag)
+        regions = {"lower": [], "upper": [], "excavation": []}
+        for _, tag in gmsh.model.getEntities(3):  # by position: the fragment renumbers
+            box = gmsh.model.getBoundingBox(3, tag)
+            x, z = 0.5 * (box[0] + box[3]), 0.5 * (box[2] + box[5])
+            (ex0, ex1), (ez0, ez1) = EXCAVATION_BOX
+            name = ("upper" if z > BEDDING_Z else "excavation" if ex0 < x < ex1 and ez0 < z < ez1 else "lower")
+            regions[name].append(tag)
+        for name, tags in regions.items():
+            gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, tags), name)
+        plane = [tag for _, tag in gmsh.model.getEntities(2)
+                 if abs(gmsh.model.getBoundingBox(2, tag)[2] - BEDDING_Z) < 1e-6
+                 and abs(gmsh.model.getBoundingBox(2, tag)[5] - BEDDING_Z) < 1e-6]
+        gmsh.model.setPhysicalName(2, gmsh.model.addPhysicalGroup(2, plane), "interface_1")
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+
+
+@pytest.mark.parametrize("stage_solver", ["direct", "relaxation"])
+def test_interface_distance_from_the_excavation_is_the_hand_computed_one(tmp_path, stage_solver):
+    """Every pair of the bedding plane lies at the distance of its point from the excavation's
+    4 x 4 m section: hypot(dx, 4 m) with dx its x beyond [6, 10] m (4 to 7.21 m), not at 0 as when the
+    surface was taken from where the excavation load acts (the interface's own static forces put every
+    pair on it: all 51 pairs at 0 m after the direct solve); the pairs "near the wall" are those within
+    near_wall of it."""
+    from scipy.spatial import cKDTree
+
+    from pyfem.static_plots import excavation_surface, interface_stress
+
+    path = tmp_path / "section.msh"
+    write_excavated_section_msh(path)
+    scene = parse_scene({
+        "title": "excavated section with a bedding plane",
+        "mesh": {"builder": "file", "file": str(path), "order": 1},
+        "materials": {"lower": dict(ROCK), "upper": dict(ROCK)},
+        "time": {"duration": 0.01},
+        "boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}},
+        "initial_stress": {"stress": [-5.0e6, -5.0e6, -5.0e6, 0.0, 0.0, 0.0]},
+        "static": {"excavate": ["excavation"], "relaxation": 0.0, "solver": stage_solver},
+        "contact": {"interfaces": ["interface_1"], "cohesion": 1.0e6, "friction_angle": 30.0},
+        "output": {"xdmf_interval": 0.0},
+    })
+    simulation = solver.prepare(scene)
+    model, state = simulation.model, simulation.static
+    assert model.n_cells == 16 * 2 * 16 - 4 * 2 * 4
+    surface = excavation_surface(state, model)
+    (x0, x1), (z0, z1) = EXCAVATION_BOX
+    x, z = surface[:, 0], surface[:, 2]
+    on_wall = ((np.isclose(x, x0) | np.isclose(x, x1)) & (z >= z0 - 1e-9) & (z <= z1 + 1e-9)) | \
+              ((np.isclose(z, z0) | np.isclose(z, z1)) & (x >= x0 - 1e-9) & (x <= x1 + 1e-9))
+    assert on_wall.all() and len(surface) == 16 * 3, "the surface is the excavation's wall, its 16 x 3 nodes"
+    pairs = model.pairs.coords
+    assert len(pairs) == 17 * 3 and np.allclose(pairs[:, 2], BEDDING_Z)
+    beyond = np.maximum.reduce([x0 - pairs[:, 0], pairs[:, 0] - x1, np.zeros(len(pairs))])
+    by_hand = np.hypot(beyond, BEDDING_Z - z1)
+    distance, _ = cKDTree(surface).query(pairs)
+    np.testing.assert_allclose(distance, by_hand, rtol=0.0, atol=1e-9)
+    arrays = simulation.contact_arrays
+    figure = interface_stress(tmp_path / "interface_stress.png", pairs, arrays["normal"], arrays["area"],
+                              state.pair_forces_in_situ, state.pair_forces, surface, near_wall=4.2)
+    assert figure["pairs"] == 51 and figure["pairs_near_wall"] == int(np.sum(by_hand <= 4.2)) == 3 * 7

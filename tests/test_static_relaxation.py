@@ -114,6 +114,80 @@ def test_salencon_cavity(meshes, dilation):
         assert abs(error) < 0.05, where
 
 
+SALENCON_AS_WRITTEN = """\
+title = "Salencon's cavity, the rock written with its strengths only"
+[mesh]
+builder = "file"
+file = "{mesh}"
+[materials.rock]
+E = {E!r}
+nu = {nu!r}
+rho = 2600.0
+[materials.rock.plasticity]
+cohesion = {c!r}
+friction_angle = {phi!r}
+dilation_angle = 0.0
+tensile_strength = 1.0e9
+[time]
+duration = 0.01
+[boundary.face]
+ymin = {{type = "roller"}}
+ymax = {{type = "roller"}}
+[initial_stress]
+stress = [{s!r}, {s!r}, {s!r}, 0.0, 0.0, 0.0]
+[static]
+excavate = ["excavation"]
+relaxation = 0.0
+[output]
+xdmf_interval = 0.0
+"""
+
+
+def test_salencon_cavity_written_with_the_strengths_only_is_perfectly_plastic(meshes, tmp_path):
+    """A [plasticity] table with only the four strengths, as a new user writes Salencon's cavity, is
+    perfectly plastic Mohr-Coulomb (no damage by default): it yields (the wall ring is plastic, the
+    plastic zone reaches past 1.5 a) and reproduces the closed form: plastic radius within 3 %, wall
+    convergence within 5 %, hoop stress at the wall and at R0 within 5 % (the old default, damage
+    0.9 with no scale, gave 1.49 m at the wall and stresses 94 % off)."""
+    from pyfem.scene import load_scene
+
+    path = tmp_path / "salencon.toml"
+    path.write_text(SALENCON_AS_WRITTEN.format(mesh=meshes["filled"], E=YOUNG, nu=POISSON, c=COHESION,
+                                               phi=FRICTION, s=-P0))
+    scene = load_scene(path)
+    assert scene["materials"]["rock"]["plasticity"]["damage_max"] == 0.0
+    simulation = solver.prepare(scene)
+    state = simulation.static
+    assert all(stage.converged for stage in state.stages)
+    plastic = state.cell_state["plastic_strain"]
+    damage = state.cell_state["damage"]
+    exact = salencon(np.array([RADIUS]), RADIUS, P0, SHEAR_MODULUS, BULK_MODULUS, COHESION, FRICTION, 0.0)
+    R0 = float(exact["R0"])
+    assert R0 > 1.5 * RADIUS, "the closed form yields: the test is about plastic flow"
+    result = compare_to_stage(simulation, CENTRE, RADIUS, cell_plastic_strain=plastic)
+    r_cells = in_plane(centroids(simulation.model))[0] * RADIUS
+    # It yielded first: every cell inside 0.9 R0 has plastic strain; and it did not soften.
+    assert np.all(plastic[r_cells < 0.9 * R0] > 0.0) and np.all(plastic[r_cells > 1.15 * R0] == 0.0)
+    assert np.max(plastic[result["cells_wall"]]) > 1e-3
+    assert np.max(np.abs(damage)) == 0.0
+    radius_error = result["plastic_radius"] / R0 - 1
+    wall_error = result["wall_displacement"] / float(exact["u_r"][0]) - 1
+    print(f"strengths only: plastic radius {result['plastic_radius'] / RADIUS:.3f} a vs {R0 / RADIUS:.3f} a "
+          f"({radius_error:+.2%}); wall convergence {result['wall_displacement'] * 1e3:.2f} mm vs "
+          f"{float(exact['u_r'][0]) * 1e3:.2f} mm ({wall_error:+.2%}); wall plastic strain up to "
+          f"{np.max(plastic[result['cells_wall']]):.2e}")
+    assert abs(radius_error) < 0.03
+    assert abs(wall_error) < 0.05
+    for where in ("wall", "R0"):
+        r = result[f"r_{where}"]
+        reference = float(salencon(np.array([r]), RADIUS, P0, SHEAR_MODULUS, BULK_MODULUS, COHESION, FRICTION,
+                                   0.0)["sigma_theta"][0])
+        error = result[f"sigma_theta_{where}"] / reference - 1
+        print(f"  hoop stress at r = {r / RADIUS:.3f} a: {result[f'sigma_theta_{where}'] / 1e6:.2f} MPa vs "
+              f"{reference / 1e6:.2f} ({error:+.2%})")
+        assert abs(error) < 0.05, where
+
+
 def test_plastic_stage_hands_over_at_rest(meshes, tmp_path):
     """After the Salencon stage (plastic zone around the wall), a dynamic run with no wave stays at
     rest: the element loop continues from the stage's stress and plastic strain (rebased), the

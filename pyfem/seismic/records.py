@@ -99,7 +99,13 @@ class ProcessedRecord:
         residual_velocity: |final velocity| / max |velocity| (dimensionless).
         residual_displacement: |final displacement| / max |displacement| (dimensionless).
         notes: what each processing step did, in words and numbers.
-        scale_factor: factor applied to the filtered, corrected record to reach the PGA.
+        scale_factor: the factor that brought the motion to the target PGA (1 without one): applied
+            to the whole raw record (scale "before_filter") or to the filtered, corrected window
+            (scale "after_filter").
+        scale: where the PGA was set, "before_filter" or "after_filter" (SCALE_MODES).
+        target_pga_g: the pga asked for (g), None without one.
+        raw_pga_g: max |acceleration| of the whole record as read, unscaled (g).
+        window_raw_pga_g: max |acceleration| of the window as read, unscaled, before the taper (g).
         record_start: time in `t` (s) at which the window start of the record sits
             (the zero pad before it holds the zero-phase filter's precursor).
         window: (start, end) of the record used, in the record's own time (s).
@@ -117,10 +123,39 @@ class ProcessedRecord:
     residual_displacement: float
     notes: list
     scale_factor: float = 1.0
+    scale: str = "after_filter"
+    target_pga_g: float | None = None
+    raw_pga_g: float = 0.0
+    window_raw_pga_g: float = 0.0
     record_start: float = 0.0
     window: tuple = (0.0, 0.0)
     band: tuple = (0.0, 0.0)
     source: str = ""
+
+    @property
+    def pgv(self) -> float:
+        """max |velocity| of the processed motion (m/s)."""
+        return float(np.abs(self.velocity).max())
+
+    @property
+    def pgd(self) -> float:
+        """max |displacement| of the processed motion (m)."""
+        return float(np.abs(self.displacement).max())
+
+    def peaks_line(self) -> str:
+        """One line: the raw record's peak, the window's raw peak, how the PGA was set, and the
+        processed motion's PGA, PGV and PGD (`pyfem check` prints it)."""
+        start, end = self.window
+        if self.target_pga_g is None:
+            how = "no pga: the record's own amplitude"
+        elif self.scale == "before_filter":
+            how = (f"scale \"before_filter\": the whole raw record x {self.scale_factor:.4g} (its peak "
+                   f"{self.raw_pga_g * self.scale_factor:.3g} g), then windowed, tapered, filtered, corrected")
+        else:
+            how = f"scale \"after_filter\": the processed window x {self.scale_factor:.4g}"
+        return (f"{pathlib.Path(self.source).name}: raw record peak {self.raw_pga_g:.3g} g, window [{start:g}, {end:g}] s "
+                f"raw peak {self.window_raw_pga_g:.3g} g; {how}; processed motion PGA {self.pga_g:.3g} g, "
+                f"PGV {100 * self.pgv:.3g} cm/s, PGD {100 * self.pgd:.3g} cm")
 
 
 def units_factor(units: str) -> float:
@@ -441,9 +476,14 @@ def _baseline_correction(acceleration, dt: float, degree: int):
     return basis @ (solution[:m] * scale)
 
 
+SCALE_MODES = ("before_filter", "after_filter")
+"""Where `process_record` sets the PGA: on the whole raw record before the window, taper, filter and
+baseline correction (the processed peak is then lower), or on the processed window (its peak is the PGA)."""
+
+
 def process_record(record: Record, window=None, taper: float = 0.05, band=(0.1, 25.0),
                    pga: float | None = None, table_dt: float | None = None, pad: float | None = None,
-                   order: int = 4, baseline_degree: int = 5) -> ProcessedRecord:
+                   order: int = 4, baseline_degree: int = 5, scale: str = "after_filter") -> ProcessedRecord:
     """Process an accelerogram into a consistent (acceleration, velocity, displacement) input motion.
 
     Steps, in order:
@@ -457,7 +497,9 @@ def process_record(record: Record, window=None, taper: float = 0.05, band=(0.1, 
     6. integrate from rest (exact for piecewise-linear acceleration) and subtract from
        the acceleration the low-order polynomial that minimises the displacement while
        making a(0) = a(T) = v(T) = d(T) = 0; re-integrate;
-    7. scale all three series to max |a| = pga (g) exactly.
+    7. scale all three series to max |a| = pga (g) exactly (scale "after_filter").
+    With scale "before_filter" the whole raw record is scaled to max |a| = pga first (before step 1)
+    and step 7 is skipped: the processed peak is then the window's share of it, lower.
 
     Args:
         record: the accelerogram (not modified).
@@ -478,12 +520,14 @@ def process_record(record: Record, window=None, taper: float = 0.05, band=(0.1, 
         order: Butterworth order (each pass).
         baseline_degree: degree of the polynomial acceleration correction (>= 3 for the
             four end conditions).
+        scale: "after_filter" (the processed motion's peak is pga) or "before_filter" (the
+            whole raw record's peak is pga); read only with a pga.
 
     Returns:
         The processed record (time from 0, step table_dt).
 
     Raises:
-        ValueError: bad window, taper, band, pga, table_dt, pad, order or degree.
+        ValueError: bad window, taper, band, pga, table_dt, pad, order, degree or scale.
     """
     dt_in = record.dt
     table_dt = dt_in if table_dt is None else float(table_dt)
@@ -493,6 +537,8 @@ def process_record(record: Record, window=None, taper: float = 0.05, band=(0.1, 
         raise ValueError(f"taper={taper!r} must be a fraction of the window at each end, 0 <= taper <= 0.5")
     if pga is not None and not (math.isfinite(pga) and pga > 0.0):
         raise ValueError(f"pga={pga!r} must be a positive peak acceleration in g (or None)")
+    if scale not in SCALE_MODES:
+        raise ValueError(f"scale={scale!r} must be one of {', '.join(repr(m) for m in SCALE_MODES)}")
     if pad is not None and not (math.isfinite(pad) and pad >= 0.0):
         raise ValueError(f"pad={pad!r} must be a non-negative number of seconds (or None)")
     if int(order) != order or order < 1:
@@ -515,10 +561,21 @@ def process_record(record: Record, window=None, taper: float = 0.05, band=(0.1, 
     if not (start < end and 0 <= first and last <= len(record.t) - 1 and last - first >= 2):
         raise ValueError(f"window={window!r} must satisfy start < end inside the record "
                          f"[{t_first:.6g}, {t_last:.6g}] s of {record.source}")
+    raw_peak = float(np.abs(record.acceleration).max())
     window_acceleration = np.array(record.acceleration[first:last + 1], dtype=float)
+    window_raw_peak = float(np.abs(window_acceleration).max())
     start, end = float(record.t[first]), float(record.t[last])
+    scale_factor = 1.0
+    if pga is not None and scale == "before_filter":
+        if raw_peak == 0.0:
+            raise ValueError(f"pga={pga!r}: the record {record.source} is zero everywhere, nothing to scale")
+        scale_factor = pga * STANDARD_GRAVITY / raw_peak
+        window_acceleration *= scale_factor
+        notes.append(f"whole record scaled by {scale_factor:.6g} to PGA {pga:.6g} g before the window "
+                     f"(raw peak {raw_peak / STANDARD_GRAVITY:.6g} g)")
     notes.append(f"window [{start:.6g}, {end:.6g}] s of {record.source}: {len(window_acceleration)} samples, "
-                 f"dt = {dt_in:.6g} s")
+                 f"dt = {dt_in:.6g} s, raw peak {window_raw_peak / STANDARD_GRAVITY:.6g} g "
+                 f"(whole record {raw_peak / STANDARD_GRAVITY:.6g} g)")
 
     # 2. Taper (scipy's alpha is the tapered fraction of the whole window).
     window_acceleration *= scipy.signal.windows.tukey(len(window_acceleration), alpha=2.0 * taper)
@@ -579,8 +636,7 @@ def process_record(record: Record, window=None, taper: float = 0.05, band=(0.1, 
                  f"correction of max {np.abs(correction).max() / peak_before:.3e} x peak acceleration")
 
     # 7. Scale (linear: the triple stays consistent).
-    scale_factor = 1.0
-    if pga is not None:
+    if pga is not None and scale == "after_filter":
         scale_factor = pga * STANDARD_GRAVITY / np.abs(acceleration).max()
         acceleration *= scale_factor
         velocity *= scale_factor
@@ -594,7 +650,9 @@ def process_record(record: Record, window=None, taper: float = 0.05, band=(0.1, 
         t=_uniform_time(len(acceleration), table_dt), acceleration=acceleration, velocity=velocity,
         displacement=displacement, dt=table_dt, pga_g=float(np.abs(acceleration).max() / STANDARD_GRAVITY),
         residual_velocity=float(residual_velocity), residual_displacement=float(residual_displacement),
-        notes=notes, scale_factor=float(scale_factor), record_start=float(record_start), window=(start, end),
+        notes=notes, scale_factor=float(scale_factor), scale=scale,
+        target_pga_g=None if pga is None else float(pga), raw_pga_g=raw_peak / STANDARD_GRAVITY,
+        window_raw_pga_g=window_raw_peak / STANDARD_GRAVITY, record_start=float(record_start), window=(start, end),
         band=(low, high), source=record.source)
 
 

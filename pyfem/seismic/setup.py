@@ -59,7 +59,7 @@ def processed_record(spec, record=None):
 
     Args:
         spec: the validated wave.motion.record table (file, units, dt, format, window, band,
-            pga, lead_in).
+            pga, scale, lead_in).
         record: the file already read (pyfem.seismic.records.Record), or None to read it.
 
     Returns:
@@ -73,7 +73,8 @@ def processed_record(spec, record=None):
     if record is None:
         record = read_record(spec["file"], units=spec["units"], dt=spec.get("dt"), format=spec["format"])
     return process_record(record, window=spec.get("window"), band=tuple(spec["band"]), pga=spec.get("pga"),
-                          table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"))
+                          table_dt=_RECORD_TABLE_DT, pad=spec.get("lead_in"),
+                          scale=spec.get("scale", "after_filter"))
 
 
 def scene_record(scene):
