@@ -631,7 +631,7 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
         damping[d] = alpha_ * m * vi[d] + C_v[d];
       }
     } else if (constraint_slot_[i] >= 0) {  // P A P v_new = P rhs (constraints.hpp)
-      double A[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, A_inverse[9], C_v[3] = {0.0, 0.0, 0.0};
+      double A[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, A_inverse[9] = {}, C_v[3] = {0.0, 0.0, 0.0};
       if (slot >= 0)
         for (int k = 0; k < 9; ++k) A[k] = half * dashpot_C_[9 * slot + k];
       for (int d = 0; d < 3; ++d) A[4 * d] += m * (1.0 + half * alpha_);
@@ -727,7 +727,7 @@ void LocalStepper::prepare_structure() {
     const std::int32_t slot = dashpot_slot_[i];
     for (const Level& level : levels_) {
       const double half = 0.5 * level.step;
-      double A[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, A_inverse[9];
+      double A[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, A_inverse[9] = {};
       if (slot >= 0)
         for (int c = 0; c < 9; ++c) A[c] = half * dashpot_C_[9 * slot + c];
       for (int d = 0; d < 3; ++d) A[4 * d] += mass_[i] * (1.0 + half * alpha_);
