@@ -61,6 +61,7 @@ import scipy.sparse as sp
 from mpi4py import MPI
 
 from pyfem.scene import Scene, SceneError
+from pyfem.clock import run_origin
 
 KEY = "parallel.model"
 # The histories go to disk (and run.json's time reached) when this much wall time (s) passed since the last time.
@@ -1220,7 +1221,8 @@ class DistributedRun:
         from pyfem.elements import initial_warnings, scene_laws
         from pyfem.output import DAMAGE_COLUMNS, FREEFIELD_COLUMNS, MONITOR_COLUMNS, STRESS_COLUMNS, energy_columns
         from pyfem.seismic.setup import scene_record, seismic_input_from_scene
-        from pyfem.solver import flow_warnings, whole_steps
+        from pyfem.clock import record_lead_in, run_steps
+        from pyfem.solver import flow_warnings
 
         self.scene, self.out, self.comm, self.saved = scene, out, comm, saved
         self.root = comm.rank == 0
@@ -1228,7 +1230,10 @@ class DistributedRun:
         part = self.part = build(scene, comm)
         part.setup_seconds = comm.allreduce(part.setup_seconds, op=MPI.MAX)
         self.time_step = choose_time_step(part)
-        self.n_steps = whole_steps(scene["time"]["duration"], self.time_step)
+        # The record is processed once: the input forces and the interfaces' wear clock share it.
+        record = scene_record(scene) if {"seismic_input", "contact"} & set(scene.effects) else None
+        self.lead_in = record_lead_in(record) if "seismic_input" in scene.effects else 0.0
+        self.n_steps = run_steps(scene["time"]["duration"], self.lead_in, self.time_step)
         loop = self.loop = rank_regions(part)
         if loop is not None:  # every rank's warnings on every rank (run.json is rank 0's)
             for message in initial_warnings(loop.counted, scene, comm):  # (counts summed over the ranks)
@@ -1242,10 +1247,9 @@ class DistributedRun:
         self.lts_stability = None  # the set-up check's report when it sent "auto" back to global stepping
         if self.lts is not None:
             self.time_step = self.lts.time_step
-            self.n_steps = whole_steps(scene["time"]["duration"], self.time_step)
+            self.n_steps = run_steps(scene["time"]["duration"], self.lead_in, self.time_step)
         self.energy_columns = energy_columns(part.pairs is not None, loop is not None)
         self.freefield = input_arrays = None
-        record = scene_record(scene) if {"seismic_input", "contact"} & set(scene.effects) else None
         if "seismic_input" in scene.effects:
             model = part.model
             view = _InputView(model.faces, part.coords, model.bounds)
@@ -1338,7 +1342,7 @@ class DistributedRun:
         if self.scene["time"].get("local_stepping") != "auto":
             raise refusal
         self.time_step, self.lts = self.lts.global_step, None
-        self.n_steps = whole_steps(self.scene["time"]["duration"], self.time_step)
+        self.n_steps = run_steps(self.scene["time"]["duration"], self.lead_in, self.time_step)
         self.lts_stability, self.lts_decision = report, decision
         self.scene.warn(warning)
 
@@ -1392,7 +1396,7 @@ class DistributedRun:
                 out.mkdir(parents=True, exist_ok=True)
             n = 3 * part.n_local
             u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-            stepper.reset_energy(u, v, a, 0.0)
+            stepper.reset_energy(u, v, a, run_origin(self.lead_in, self.time_step))
         else:
             meta = saved.meta
             self.checkpoint_id, self.done = int(meta["id"]), int(meta["outputs_done"])
@@ -1800,6 +1804,7 @@ class DistributedRun:
         stepper, exchange = self.stepper()
         ts = self.time_step  # (global stepping's when local stepping's set-up check sent "auto" back to it)
         n_outputs = self.n_steps // ts.steps_per_output
+        origin = run_origin(self.lead_in, ts)  # record time: a record's lead-in at t < 0
         clock = checkpoints.CheckpointClock(self.scene["output"]["checkpoint_interval"],
                                             elapsed=time.perf_counter() - self.wall_start)
         status, started, reason = "failed", False, "ended by another rank's failure"
@@ -1810,17 +1815,17 @@ class DistributedRun:
                 u, v, a = self._open(stepper)
                 started = True
                 if self.saved is None:
-                    self.sample(0.0, 0, stepper, u, v, a)
+                    self.sample(origin, 0, stepper, u, v, a)
             if progress is not None and root:
-                progress.start(self.done * ts.steps_per_output * ts.dt)
+                progress.start(origin + self.done * ts.steps_per_output * ts.dt)
             while self.done < n_outputs:
                 with signals.deferred():  # a stop waits for the sample: the state is whole
-                    stepper.run(u, v, a, ts.steps_per_output, self.done * ts.steps_per_output * ts.dt)
+                    stepper.run(u, v, a, ts.steps_per_output, origin + self.done * ts.steps_per_output * ts.dt)
                     if self.lts is not None:  # its ghosts' u, v, a (a monitor's cell reads them) from their owners
                         for x in (u, v, a):
                             part.plan.update(comm, x.reshape(-1, 3))
                     self.done += 1
-                    t = self.done * ts.steps_per_output * ts.dt
+                    t = origin + self.done * ts.steps_per_output * ts.dt
                     if not comm.allreduce(bool(np.isfinite(u[:3 * part.n_owned]).all()), op=MPI.LAND):
                         raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
                     self.sample(t, self.done, stepper, u, v, a)

@@ -324,7 +324,9 @@ def input_motion(simulation) -> dict | None:
     tables = freefield.tables
     t = np.round(tables.t0 + tables.dt * np.arange(tables.g.shape[1]), time_decimals(tables.dt) + 3)
     d, v, a = (scale * np.asarray(values[0], dtype=float) for values in (tables.g, tables.dg, tables.ddg))
-    run_end = simulation.n_steps * simulation.time_step.dt
+    from pyfem.clock import run_origin
+
+    run_end = run_origin(simulation.lead_in, simulation.time_step) + simulation.n_steps * simulation.time_step.dt
     motion = scene["wave"]["motion"]
     record = motion.get("record")
     if record is None:

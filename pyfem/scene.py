@@ -1150,13 +1150,14 @@ def _check_record(settings: dict, warnings: list[str]) -> None:
     if spec["pga"] is None and spec["scale"] != "after_filter":
         warnings.append(f"wave.motion.record.scale = {_show(spec['scale'])} without wave.motion.record.pga: "
                         "nothing is scaled, the record keeps its own amplitude")
-    duration, motion = settings["time"]["duration"], float(processed.t[-1])
+    # Record time is run time: t = 0 is the window's start, the filter's lead-in runs before it.
+    duration, motion = settings["time"]["duration"], float(processed.t[-1] - processed.record_start)
     if duration < motion * (1.0 - 1e-9):
         start, end = processed.window
         warnings.append(
-            f"time.duration = {duration:g} s is shorter than the record's motion of {motion:.4g} s "
-            f"({processed.record_start:.3g} s filter lead-in + window [{start:g}, {end:g}] s = "
-            f"{end - start:g} s; see wave.motion.record.lead_in): the run stops before the record ends")
+            f"time.duration = {duration:g} s is shorter than the record's window [{start:g}, {end:g}] s = "
+            f"{motion:.4g} s (record time; the run starts {processed.record_start:.3g} s earlier, at the filter's "
+            "lead-in, see wave.motion.record.lead_in): the run stops before the record ends")
 
 
 def _check_ricker_duration(settings: dict, warnings: list[str]) -> None:

@@ -180,7 +180,7 @@ RULES = {
         "`wave.motion.record.scale` other than \"after_filter\" without `wave.motion.record.pga` is a "
         "warning (nothing is scaled); `pyfem check` prints the raw record's peak, the window's raw peak "
         "and the processed motion's PGA, PGV and PGD",
-        "a `time.duration` shorter than the processed motion (lead-in + window) is a warning",
+        "a `time.duration` shorter than the window is a warning (record time: t = 0 is the window's start; the lead-in runs at t < 0)",
     ],
     "damping": [
         "`damping.ratio` with `damping.frequencies` (converted to alpha, beta), or `damping.alpha` "

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from pyfem.clock import record_lead_in, run_origin, run_steps, whole_steps  # noqa: F401  (also pyfem.solver.*)
 from pyfem.interfaces import wear_words  # noqa: F401  (also pyfem.solver.wear_words)
 from pyfem.operators import face_report  # noqa: F401  (also pyfem.solver.face_report)
 from pyfem.scene import Scene, SceneError, rayleigh_coefficients
@@ -65,6 +66,7 @@ class Simulation:
     monitor_weights: np.ndarray | None = None
     monitor_stress: "MonitorStress | None" = None
     n_steps: int = 0
+    lead_in: float = 0.0                 # s of a record's filter lead-in before its window (t < 0)
     contact_arrays: dict | None = None   # ContactPairs arguments (see contact_arguments)
     contact_pairs: object = None         # the kernel's ContactPairs, set by make_stepper
     pair_monitor_names: list = field(default_factory=list)
@@ -194,18 +196,17 @@ def attach_kernel_points(stress: MonitorStress, points: np.ndarray, nonlinear) -
 
 def earthquake_clock(scene: Scene, processed=None) -> tuple[float, float]:
     """(start, t_s) of the deterioration's wear (Eq. 9, docs/method.md section 9): the run time (s)
-    at which the record's window starts, after the zero-phase filter's lead-in that precedes it
-    (0 without a record), and t_s, the window's length (else time.duration). The lead-in is the
-    filter's quiet precursor, not shaking: the paper's t = 0 is the window's start. The record
-    is the one the seismic input is driven with: `processed` (pyfem.seismic.setup.scene_record),
-    processed here when None."""
+    at which the record's window starts, which is 0 (record time is run time: the zero-phase
+    filter's lead-in runs at negative times, and it is the filter's quiet precursor, not shaking),
+    and t_s, the window's length (else time.duration). The record is the one the seismic input is
+    driven with: `processed` (pyfem.seismic.setup.scene_record), processed here when None."""
     from pyfem.seismic.setup import scene_record
 
     processed = scene_record(scene) if processed is None else processed
     if processed is None:
         return 0.0, float(scene["time"]["duration"])
     start, end = processed.window
-    return float(processed.record_start), float(end - start)
+    return 0.0, float(end - start)  # record time: the window starts at t = 0
 
 
 def contact_arguments(scene: Scene, model, processed=None) -> dict:
@@ -500,19 +501,13 @@ def _mpi_max():
     return MPI.MAX
 
 
-def whole_steps(duration: float, time_step) -> int:
-    """The steps of a run: whole output intervals, the last sample on or just after the duration."""
-    n_steps = math.ceil(duration / time_step.dt - 1e-9)
-    return time_step.steps_per_output * math.ceil(n_steps / time_step.steps_per_output)
-
-
 def fall_back_to_global_stepping(simulation: Simulation, report: dict) -> None:
     """`time.local_stepping = "auto"` turned local stepping on but its set-up check found the map
     unstable on this model (`report`, local_stepping.check_stability): the run steps globally at the
     scene's step instead, and run.json and a warning say why."""
     simulation.lts_preview, simulation.node_levels, simulation.lts_split = simulation.node_levels, None, None
     simulation.time_step = simulation.lts_global_step
-    simulation.n_steps = whole_steps(simulation.scene["time"]["duration"], simulation.time_step)
+    simulation.n_steps = run_steps(simulation.scene["time"]["duration"], simulation.lead_in, simulation.time_step)
     from pyfem.local_stepping import unstable_words
 
     simulation.lts_stability = report
@@ -583,16 +578,17 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
                 time_step, _ = local_stepping.local_time_step(time_step, node_levels, lts_split)
             else:
                 preview = levels
-    n_steps = whole_steps(scene["time"]["duration"], time_step)
-    simulation = Simulation(scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
-                            time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
-                            constraints=constraints, n_steps=n_steps, nonlinear=nonlinear,
-                            node_levels=node_levels, lts_preview=preview, lts_split=lts_split,
-                            lts_decision=lts_decision, lts_global_step=global_step)
     from pyfem.seismic.setup import scene_record, seismic_input_from_scene
 
     # The record is processed once: the input forces and the interfaces' wear clock share it.
     record = scene_record(scene) if {"seismic_input", "contact"} & set(scene.effects) else None
+    lead_in = record_lead_in(record) if "seismic_input" in scene.effects else 0.0
+    n_steps = run_steps(scene["time"]["duration"], lead_in, time_step)
+    simulation = Simulation(lead_in=lead_in, scene=scene, model=model, stiffness=stiffness, mass=mass, alpha=alpha, beta=beta,
+                            time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
+                            constraints=constraints, n_steps=n_steps, nonlinear=nonlinear,
+                            node_levels=node_levels, lts_preview=preview, lts_split=lts_split,
+                            lts_decision=lts_decision, lts_global_step=global_step)
     if "seismic_input" in scene.effects:
         simulation.freefield, simulation.input_arrays = seismic_input_from_scene(scene, model, record)
     monitors = scene.get("monitor", [])
@@ -928,7 +924,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         "dofs": n,
         **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
         **({"interface wear": wear_words(simulation.contact_arrays["deterioration"],
-                                         simulation.n_steps * ts.dt)["note"]}
+                                         run_origin(simulation.lead_in, ts) + simulation.n_steps * ts.dt)["note"]}
            if simulation.contact_arrays and simulation.contact_arrays["deterioration"] is not None else {}),
         "truncation faces": {face["name"]: f"{face['type']}, {face['nodes']} nodes, {face['area']:.4g} m^2"
                              + (", input" if face["input"] else "") + f" ({face['source']})"
@@ -1239,7 +1235,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
 
                         write_static_outputs(writer)
                 u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-                t = 0.0
+                origin = run_origin(simulation.lead_in, ts)
+                t = origin
                 done = 0
                 stepper.reset_energy(u, v, a, t)
                 with signals.deferred():
@@ -1254,6 +1251,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                 stepper.load_state(saved.kernel)
                 u, v, a = saved.u.copy(), saved.v.copy(), saved.a.copy()
                 t, done = saved.t, saved.outputs_done
+                origin = run_origin(simulation.lead_in, ts)
                 previous = saved.meta["timing"]
             stepper.reset_phase_seconds()
             output_seconds = 0.0
@@ -1290,9 +1288,9 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                     with signals.deferred():
                         # The block's start and end times as products, not sums: no drift over a
                         # long record (2.0 is written 2.0, not 1.9999999999999793), the same on resume.
-                        stepper.run(u, v, a, ts.steps_per_output, done * ts.steps_per_output * ts.dt)
+                        stepper.run(u, v, a, ts.steps_per_output, origin + done * ts.steps_per_output * ts.dt)
                         done += 1
-                        t = done * ts.steps_per_output * ts.dt
+                        t = origin + done * ts.steps_per_output * ts.dt
                         if comm.size > 1 and comm.bcast(root and (done == n_outputs or writer.next_sample_writes_fields()),
                                                         root=0):
                             stepper.gather_whole(u, v, a)  # fields and the final summary read every point

@@ -133,6 +133,8 @@ def elastic_case3(overrides=()):
         material.pop("plasticity", None)
         material.pop("damage", None)
     data["output"].pop("fields", None)  # the damage fields need the nonlinear tables
+    # Short runs start at the record's window, without the 1 s lead-in that would run first at t < 0.
+    data["wave"]["motion"]["record"]["lead_in"] = 0.0
     return parse_scene(data, source=str(CASE3), overrides=overrides, base_dir=CASE3.parent)
 
 
@@ -151,9 +153,9 @@ def test_case_scenes_plan_their_static_stage():
     assert "dynamic relaxation" in stages["solver"] and "lining installed stress-free" in stages["stage 2 (support)"]
     # Its time is bounded before the motion's (a new user's run spent minutes in it unannounced).
     assert planned["static stage estimate"].startswith("2 stages of at most 6000 relaxation steps")
-    # Case 3's wear is announced with its clock: from the window's start, 1 s into the run.
-    assert planned["interface wear"].startswith("eta falls from 1 at t = 1 s (the record window's start)")
-    assert planned["interface wear"].endswith("0.844 at t = 4.9 s")
+    # Case 3's wear is announced with its clock: from the window's start, t = 0 (the lead-in at t < 0).
+    assert planned["interface wear"].startswith("eta falls from 1 at t = 0 s")  # record time: the window's start
+    assert planned["interface wear"].endswith("0.844 at t = 3.9 s")
 
 
 def test_case3_wear_starts_with_the_record_window_not_the_lead_in():
@@ -166,7 +168,7 @@ def test_case3_wear_starts_with_the_record_window_not_the_lead_in():
     scene = load_scene(REPOSITORY / "workflows" / "scenes" / "case3_contact_coarse.toml")
     start, duration = earthquake_clock(scene)
     assert scene["wave"]["motion"]["record"]["lead_in"] == 1.0
-    assert abs(start - 1.0) < 1e-9 and duration == 20.0
+    assert start == 0.0 and duration == 20.0  # record time: the window starts at t = 0, the lead-in before
 
     class NoPairs:
         pairs = type("P", (), {"nodes": np.zeros((0, 2)), "area": np.zeros(0), "normal": np.zeros((0, 3)),
@@ -175,9 +177,9 @@ def test_case3_wear_starts_with_the_record_window_not_the_lead_in():
     arguments = contact_arguments(scene, NoPairs())
     assert arguments["deterioration"] == (0.75, 5.0, 20.0, 0.883, 0.02, 0.032, start)
     # eta as run.json and `check` report it is the kernel's own Eq. 9 (wear_words calls wear_factor).
-    words = wear_words(arguments["deterioration"], 4.9)
+    words = wear_words(arguments["deterioration"], 3.9)
     assert words["eta_at_end"] == pytest.approx(0.75 + 0.25 * np.exp(-5.0 * 3.9 / 20.0), rel=1e-14)
-    assert wear_words(arguments["deterioration"], 0.5)["eta_at_end"] == 1.0  # the lead-in does not wear
+    assert wear_words(arguments["deterioration"], -0.5)["eta_at_end"] == 1.0  # the lead-in (t < 0) does not wear
 
 
 @pytest.fixture(scope="module")

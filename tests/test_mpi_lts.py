@@ -36,7 +36,7 @@ import numpy as np
 import pytest
 
 from pyfem.compare import histories, largest_differences, relative_difference, scales
-from test_case_study_stage import SMALL_MODEL
+from test_case_study_stage import NO_LEAD_IN, SMALL_MODEL
 from test_mpi import (MPIRUN, NET_FORCE_TOLERANCE, TOLERANCE, assert_equal_to_serial, killed_and_resumed, pyfem_run,
                       summary)
 from test_mpi_stage import STAGE_ROUNDOFF
@@ -50,7 +50,7 @@ DISTRIBUTED = ("--set", "parallel.model=distributed")
 TUNNEL = "tests/scenes/mpi_tunnel_tet.toml"
 CASE3 = "workflows/scenes/case3_contact_coarse.toml"
 # The record's strong part (El Centro from 1.8 s) at 0.05 g after a 0.05 s lead-in, the wear off.
-CASE3_WINDOW = tuple(arg for setting in [*SMALL_MODEL, "time.duration=0.3", "time.local_stepping=true",
+CASE3_WINDOW = tuple(arg for setting in [*SMALL_MODEL, NO_LEAD_IN, "time.duration=0.3", "time.local_stepping=true",
                                          "output.xdmf_interval=0.1", "wave.motion.record.window=[1.8, 4.0]",
                                          "wave.motion.record.lead_in=0.05", "wave.motion.record.pga=0.05",
                                          "contact.deterioration.R0=1.0"]

@@ -35,12 +35,12 @@ import pytest
 from conftest import EXACT, ROUNDOFF
 from pyfem.compare import largest_differences
 from pyfem.static import LINEAR_TOLERANCE
-from test_case_study_stage import SMALL_MODEL
+from test_case_study_stage import NO_LEAD_IN, SMALL_MODEL
 from test_distributed_model import last_fields
 from test_mpi import CHECKPOINTED_RUN, MPIRUN, kill_after_first_checkpoint, pyfem_run
 
 SCENE = "workflows/scenes/case3_contact_coarse.toml"
-SETTINGS = [*SMALL_MODEL, "time.duration=0.05", "time.local_stepping=false", "output.xdmf_interval=0.05"]
+SETTINGS = [*SMALL_MODEL, NO_LEAD_IN, "time.duration=0.05", "time.local_stepping=false", "output.xdmf_interval=0.05"]
 # Per dimension (pyfem.compare.dimension), about ten times the largest difference measured on 2 and 3
 # ranks (docstring).
 STAGE_ROUNDOFF = {"acceleration": 2.0e-7, "velocity": 2.0e-9, "length": 1.0e-9, "energy": 3.0e-8}

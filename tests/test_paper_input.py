@@ -23,7 +23,7 @@ MONITORS = ("centre", "low", "high")
 # filter precursor: the motion starts 2.7 s into the table), 20-m elements (11 per shortest
 # shear wavelength at 5 Hz).
 SHORT = ["mesh.h=20", "wave.motion.record.window=[0,4]", "wave.motion.record.band=[0.5,5]",
-         "time.duration=7.5"]
+         "time.duration=4.8"]  # record time: the 2.7 s precursor runs before t = 0
 
 
 def histories(run_dir):

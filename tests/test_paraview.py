@@ -71,7 +71,7 @@ def case3_run(tmp_path_factory):
     from pyfem.scene import load_scene
     from pyfem.solver import run
 
-    scene = load_scene(CASE3, ["time.duration=0.06", "output.xdmf_interval=0.02"])
+    scene = load_scene(CASE3, ["time.duration=0.06", "output.xdmf_interval=0.02", "wave.motion.record.lead_in=0.0"])
     out = tmp_path_factory.mktemp("paraview") / "run"
     run(scene, out)
     return out

@@ -344,3 +344,38 @@ def test_scene_lead_in_sets_the_seconds_kept_before_the_window():
         assert abs(processed.residual_displacement) < 1e-10
         checks += 1
     assert checks == 2
+
+
+def test_record_time_is_run_time(tmp_path):
+    """A record's window [0, 3] s run for time.duration = 3 s: t = 0 is the window's start in the
+    monitors, the filter's lead-in runs at negative times, and the record's PGA (at 2.0 s of its
+    window, after the default 5.6 s lead-in) lies inside the run. Catches the old clock, where the
+    lead-in counted in time.duration and the run ended before the record's strong motion (0.012 g
+    at the centre of a user's model instead of the record's 0.32 g)."""
+    from pyfem import solver
+    from pyfem.scene import parse_scene
+    from pyfem.seismic.setup import processed_record
+
+    scene = parse_scene({
+        "title": "record time", "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [40.0, 40.0, 40.0],
+                                         "h": 20.0},
+        "materials": {"rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}}, "time": {"duration": 3.0},
+        "wave": {"type": "SV", "surface": 60.0,
+                 "motion": {"record": {"file": str(ELCENTRO), "units": "g", "pga": 0.32, "window": [0.0, 3.0]}}},
+        "monitor": [{"name": "c", "point": [20.0, 20.0, 20.0]}],
+        "output": {"interval": 0.02, "xdmf_interval": 0.0}})
+    summary = solver.run(scene, tmp_path / "run")
+    data = np.genfromtxt(tmp_path / "run" / "monitors" / "c.csv", delimiter=",", names=True)
+    lead_in = processed_record(scene["wave"]["motion"]["record"]).record_start
+    assert lead_in > 5.0  # the default lead-in of a 0.1 Hz filter
+    assert data["t"][0] == pytest.approx(-0.02 * np.ceil(lead_in / 0.02 - 1e-9), abs=1e-9)
+    assert np.count_nonzero(data["t"] == 0.0) == 1 and data["t"][-1] == pytest.approx(3.0, abs=1e-9)
+    before = data["t"] < 0.0
+    peak = np.max(np.abs(data["ax_ff"] if "ax_ff" in data.dtype.names else data["ax"]))
+    assert peak > 0.25 * STANDARD_GRAVITY  # the record's strong motion is inside the run
+    assert 1.5 < data["t"][np.argmax(np.abs(data["ax"]))] < 2.5  # at about 2 s of record time
+    assert np.max(np.abs(data["ax"][before])) < 0.1 * peak  # the lead-in: the filter's precursor (6.6 %)
+    motion = summary["input_motion"] if "input_motion" in summary else None
+    if motion is not None:
+        assert motion["within_run"]["until"] == pytest.approx(3.0, abs=1e-9)
+        assert 1.5 < motion["t_pga"] < 2.5  # El Centro's PGA, at about 2 s of record time

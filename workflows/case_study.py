@@ -50,7 +50,7 @@ Sample runs (from the repository root, Debian's Python):
     /usr/bin/python3 workflows/case_study.py --report-only      # figures from finished runs
     /usr/bin/python3 workflows/case_study.py --preset paper --case 3 --report-only
     # a variant in its own directory (figures in DIR/results, docs/case_study.md untouched):
-    /usr/bin/python3 workflows/case_study.py --runs runs/whole_record --set time.duration=21.0
+    /usr/bin/python3 workflows/case_study.py --runs runs/whole_record --set time.duration=20.0
 
 A stopped run (session end, kill, Ctrl-C) continues from its checkpoint when the same command is
 given again (docs/checkpoint.md; --no-resume starts it again).
@@ -716,14 +716,14 @@ def main(argv=None) -> int:
                         help="scene size: the coarse mesh (default) or the paper's")
     parser.add_argument("--report-only", action="store_true", help="read finished run directories; run nothing")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="scene override for the runs, e.g. --set time.duration=21.0")
+                        help="scene override for the runs, e.g. --set time.duration=20.0")
     parser.add_argument("--no-resume", dest="resume", action="store_false",
                         help="start every run again even where a stopped run of the same settings left a "
                              "checkpoint (default: continue it)")
     parser.add_argument("--runs", type=pathlib.Path, default=None, metavar="DIR",
                         help=f"run directories caseN_PRESET here (default {RUNS}); with it, the figures go to "
                              "DIR/results and docs/case_study.md is left alone (a variant, e.g. --set "
-                             "time.duration=21.0)")
+                             "time.duration=20.0)")
     args = parser.parse_args(argv)
     cases = args.case or sorted(CASES)
     runs = args.runs if args.runs is not None else RUNS

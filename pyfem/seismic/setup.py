@@ -51,6 +51,9 @@ def input_waveform(scene, processed=None):
     if processed is None:
         processed = processed_record(motion["record"])
     t0, dt, g, dg, ddg = as_waveform(processed)
+    # Record time is run time: t = 0 is the start of the record's window; the filter's lead-in (the
+    # precursor kept before it) lies at negative times, where the run starts (solver.run_origin).
+    t0 -= float(processed.record_start)
     return WaveformTables(t0=t0, dt=dt, g=g[None, :], dg=dg[None, :], ddg=ddg[None, :]), None, processed
 
 
