@@ -22,13 +22,14 @@ matches its own analytic coefficient, so the measurement itself is sound.
 (tests/test_run.py::test_boundary_absorbs_normally_incident_pulse measures energy left in a
 column whose side faces carry dashpots too: every dashpot scale from 0.1 to 2.5 passes it.)
 """
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from conftest import REFLECTION_1D, REFLECTION_HISTORY_1D, ROUNDOFF
+from conftest import REFLECTION_1D, REFLECTION_HISTORY_1D, REFLECTION_OBLIQUE, ROUNDOFF
 from pyfem import solver
 from pyfem.scene import parse_scene
 from pyfem.seismic.waveforms import ricker
@@ -291,3 +292,143 @@ def test_viscoelastic_face_reflects_as_r_of_omega(wave):
               f"measured {spectral_ratio(reflected, control):.4f}")
         assert wrong > 10 * REFLECTION_HISTORY_1D
         assert own < REFLECTION_HISTORY_1D
+
+
+# ---------------------------------------------------------------------------------------------
+# Oblique incidence: a plane-strain slab whose top face zmax is the face under test
+
+
+F0_OBLIQUE, H_OBLIQUE = 10.0, 2.5  # 18 elements per shortest S wavelength (c_s / 2.5 f0)
+SLAB = (1000.0, 300.0)             # width (x) and height (z) of the slab (m), one element thick in y
+MONITOR_X, MONITOR_DEPTH = 750.0, 120.0  # the monitor, below the top face (m)
+
+
+def lysmer_as_free_surface(wave_type, angle, c_p, c_s):
+    """lysmer_coefficients in pyfem.seismic.reflection's conventions (its free_surface_coefficients'
+    signature): the reflected polarisations are the same; its incident SV is minus ours."""
+    r_p, r_s = lysmer_coefficients(wave_type, angle)
+    return {"PP": r_p, "PS": r_s} if wave_type == "P" else {"SS": -r_s, "SP": -r_p}
+
+
+def slab_scene(wave, angle, surface):
+    width, height = SLAB
+    return parse_scene({
+        "title": f"absorption {wave} {angle:g} deg",
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [width, H_OBLIQUE, height], "h": H_OBLIQUE,
+                 "order": 1},
+        "materials": {"rock": {"E": E, "nu": NU, "rho": RHO}},
+        "time": {"duration": 1.0},
+        "wave": {"type": wave, "angle": angle, "azimuth": 0.0, "surface": surface,
+                 "motion": {"ricker": {"f0": F0_OBLIQUE, "amplitude": AMPLITUDE}}},
+        "boundary": {"type": "viscous", "face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}},
+        "output": {"interval": 0.01, "xdmf_interval": 0.0},
+    })
+
+
+def _in_slab(vector):
+    """Our x-z vectors (face at z = 0, medium above) in the slab's (face on top, medium below)."""
+    return np.array([vector[0], -vector[1]])
+
+
+@pytest.fixture(scope="module")
+def oblique_sv():
+    """Plane SV at 30 degrees (below the critical 35.8) going up to the slab's top face zmax, viscous,
+    without input; xmin, xmax, zmin carry the input of the analytic field of the correct face:
+    incident plus its Lysmer-Kuhlemeyer reflections (pyfem's FreeField with lysmer_as_free_surface
+    as the 'surface' coefficients at z = top). They are then transparent to that field, and no
+    edge of theirs diffracts into the monitor (with the incident field alone on them the upstream
+    corner's diffraction put R_SP off by 0.01-0.04 at the monitor, 300-700 m from it).
+
+    Returns {dashpot scale of zmax: (R_P, R_SV) measured, energy}, the analytic field, the runs'
+    monitor data and the LK residual of the analytic field on the top face.
+    """
+    from pyfem.seismic import reflection
+    from pyfem.seismic.forces import boundary_springs_and_dashpots, equivalent_input_forces
+    from pyfem.seismic.setup import seismic_input_from_scene
+
+    width, height = SLAB
+    simulation = solver.prepare(slab_scene("SV", 30.0, height + 1.0e5))  # incident only in the window
+    model = simulation.model
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(reflection, "free_surface_coefficients", lysmer_as_free_surface)
+        analytic, _ = seismic_input_from_scene(slab_scene("SV", 30.0, height), model)
+    others = [face for face in model.faces if face.name != "zmax"]
+    top = next(face for face in model.faces if face.name == "zmax")
+    simulation.input_arrays = equivalent_input_forces(others, model.node_coords, analytic, None, ALPHA_N, ALPHA_T)
+    x = model.node_coords
+    monitor = np.flatnonzero(np.isclose(x[:, 0], MONITOR_X) & np.isclose(x[:, 2], height - MONITOR_DEPTH))
+    assert len(monitor) == 2
+    # The analytic field meets the face's condition sigma e_z = -C_b v / A (the 2x2 solve and the
+    # conventions above): residual over the traction's scale, at two points of the face.
+    points, times = np.array([[MONITOR_X, 0.0, height], [MONITOR_X - 300.0, 0.0, height]]), np.linspace(0, 1, 500)
+    traction = analytic.stress(points, times)[..., :, 2]
+    velocity = analytic.velocity(points, times)
+    residual = traction + RHO * velocity * np.array([C_S, C_S, C_P])
+    lk_residual = np.abs(residual).max() / np.abs(traction).max()
+    results = {}
+    speed = C_S
+    theta = math.radians(30.0)
+    t_end = (MONITOR_X * math.sin(theta) + (height - MONITOR_DEPTH) * math.cos(theta)) / speed + 3.6 / F0_OBLIQUE
+    for scale in (1.0,) + CONTROL_SCALES:
+        scaled = dataclasses.replace(top, rho_cp=scale * np.asarray(top.rho_cp), rho_cs=scale * np.asarray(top.rho_cs))
+        _, _, simulation.dashpot_nodes, simulation.dashpot_matrices = boundary_springs_and_dashpots(
+            others + [scaled], len(simulation.mass), None, ALPHA_N, ALPHA_T)
+        stepper = solver.make_stepper(simulation)
+        u, v, a = (np.zeros(3 * len(simulation.mass)) for _ in range(3))
+        stepper.reset_energy(u, v, a, 0.0)
+        dt = simulation.time_step.dt
+        steps = int(math.ceil(t_end / dt))
+        history = np.zeros((steps + 1, 3))
+        t = 0.0
+        for k in range(steps):
+            t = stepper.run(u, v, a, 1, t)
+            history[k + 1] = u.reshape(-1, 3)[monitor].mean(axis=0)
+        results[scale] = {"t": dt * np.arange(steps + 1), "measured": history, "energy": stepper.energy()}
+    times = results[1.0]["t"]
+    incident = simulation.freefield.displacement(x[monitor[:1]], times)[:, 0]
+    return {"runs": results, "incident": incident, "lk_residual": lk_residual}
+
+
+def oblique_coefficients(run, incident, wave="SV", angle=30.0):
+    """Least-squares (R_P, R_SV) of the measured reflection (measured - analytic incident) on the two
+    reflected plane waves: R d_r y(t - lag_r), y the incident's amplitude along its polarisation at
+    the monitor, lag_r = depth (eta_incident + eta_r) the trip to the face and back."""
+    speed = C_P if wave == "P" else C_S
+    p = math.sin(math.radians(angle)) / speed
+    slowness, polarisation = _plane_wave(wave, p, False, speed)
+    amplitude = incident[:, [0, 2]] @ _in_slab(polarisation)
+    columns = []
+    for kind, c in (("P", C_P), ("SV", C_S)):
+        reflected_slowness, reflected_polarisation = _plane_wave(kind, p, True, c)
+        lag = MONITOR_DEPTH * (abs(slowness[1]) + abs(reflected_slowness[1]))
+        shape = np.interp(run["t"] - lag, run["t"], amplitude, left=0.0)
+        columns.append(np.concatenate(np.outer(_in_slab(reflected_polarisation), shape)))
+    reflected = (run["measured"] - incident)[:, [0, 2]]
+    coefficients, *_ = np.linalg.lstsq(np.column_stack(columns), np.concatenate(reflected.T), rcond=None)
+    return coefficients, amplitude
+
+
+def test_viscous_face_reflects_oblique_sv_as_lysmer_kuhlemeyer(oblique_sv):
+    """Catches a viscous face that is not Lysmer-Kuhlemeyer's at 30 degrees (R_SP 0.130, R_SS 0.138;
+    dashpots x0.5 give -0.20, x2 +0.44)."""
+    assert oblique_sv["lk_residual"] < ROUNDOFF
+    expected = lysmer_coefficients("SV", 30.0)
+    run = oblique_sv["runs"][1.0]
+    measured, amplitude = oblique_coefficients(run, oblique_sv["incident"])
+    # Guard: the incident arrived with its amplitude (along its polarisation, before any reflection).
+    early = run["t"] < run["t"][np.argmax(np.abs(amplitude))] + 0.05
+    assert np.max(np.abs(run["measured"][early][:, [0, 2]] @ _in_slab(_plane_wave("SV", 0.5 / C_S, False, C_S)[1]))) \
+        == pytest.approx(AMPLITUDE, rel=0.01)
+    energy = run["energy"]
+    assert abs(energy["balance"]) < ROUNDOFF * energy["external_work"]
+    print(f"SV 30 deg viscous: (R_SP, R_SS) analytic {expected.round(4)}, measured {measured.round(4)}")
+    assert np.all(np.abs(measured - expected) < REFLECTION_OBLIQUE)
+    for scale in CONTROL_SCALES:
+        control = oblique_sv["runs"][scale]
+        wrong, _ = oblique_coefficients(control, oblique_sv["incident"])
+        own = lysmer_coefficients("SV", 30.0, scale)
+        print(f"SV 30 deg viscous, top dashpots x{scale}: analytic of its own {own.round(4)}, measured {wrong.round(4)}")
+        assert abs(control["energy"]["balance"]) < ROUNDOFF * control["energy"]["external_work"]
+        assert np.max(np.abs(wrong - expected)) > 20 * REFLECTION_OBLIQUE  # the test would catch it
+        # The monitor sees the face, not the side faces' input (which carries the correct face's field).
+        assert np.max(np.abs(wrong - own)) < 0.25 * np.max(np.abs(own - expected))
