@@ -1,20 +1,24 @@
 """Absorption of one truncation face, measured against the analytic reflection coefficient.
 
-A plane pulse meets ONE face (zmin) of a model and nothing else touches it before the reflection
-is recorded: the reflected wave at a monitor above the face is compared with the reflection
-coefficient of the boundary (docs/boundaries.md)
+A plane pulse meets ONE face of a model and no other face's dashpot touches it: the reflected
+wave at a monitor near the face is compared with the reflection coefficient of the boundary
+(docs/boundaries.md)
 
     C_b = A (rho c_p n n^T + rho c_s (I - n n^T)),
     K_b = A (alpha_N G/R n n^T + alpha_T G/R (I - n n^T))   (viscoelastic only).
 
-1D columns (one element wide) carry no side dashpots: rollers on the side faces for P (the
-uniaxial-strain column), and for S a constraint that leaves only the shear component free at
-every node (the side faces of a shear column must hold u_z and free u_x, which no face type
-does; the projection goes to the kernel through solver.BoundaryConstraints, as the roller faces'
-does). The pulse is put into the column as initial conditions of a downward-travelling Ricker
-wave, so the bottom face is its only source of reflection.
+Normal incidence, 1D columns one element wide, the face zmin: no side dashpots; rollers on the
+side faces for P (the uniaxial-strain column), and for S a constraint that leaves only u_x free at
+every node (the side faces of a shear column must hold u_z and free u_x, which no face type does;
+the projection goes to the kernel through solver.BoundaryConstraints, as the rollers' does). The
+pulse is put in as the initial state of a downward-travelling Ricker wave, so zmin is the only
+source of a reflection. Viscous: R = 0; viscoelastic: R(omega) = -K/(K + 2 i omega rho c).
 
-Each case has a negative control: the same run with the dashpots scaled by 0.5 and 2 (the
+Oblique incidence, a plane-strain slab, the face zmax (viscous, no input): P at 60 and SV at 30
+degrees against the Lysmer-Kuhlemeyer coefficients (a 2x2 solve below, checked against its
+normal-incidence limits, the energy balance and as the analytic field's traction on the face).
+
+Each case has a negative control: the same run with the face's dashpots scaled by 0.5 and 2 (the
 arrays solver.prepare hands to the kernel, scaled before solver.make_stepper) must miss the
 analytic answer of the correct boundary by far more than the tolerance; the control also
 matches its own analytic coefficient, so the measurement itself is sound.
@@ -43,12 +47,11 @@ ALPHA_N, ALPHA_T = 4.0 / 3.0, 2.0 / 3.0
 AMPLITUDE = 1.0e-3
 CONTROL_SCALES = (0.5, 2.0)
 
-# 1D columns: Ricker of 12 Hz, h = 2 m (18 elements per shortest S wavelength, c_s / 2.5 f0).
+# 1D columns: Ricker of 12 Hz, h = 1 m (37 elements per shortest S wavelength, c_s / 2.5 f0).
 F0_1D, H_1D = 12.0, 1.0
 # Spring distance of the viscoelastic column: [boundary] centre 10 m above the face, so that
 # K = alpha G/R is comparable with 2 omega rho c at f0 and |R(omega)| ~ 0.4 there.
 R_SPRING = 10.0
-
 
 
 # ---------------------------------------------------------------------------------------------
@@ -86,13 +89,14 @@ def _plane_wave(kind, horizontal_slowness, upward, speed):
 
 
 def _residual(slowness, polarisation, dashpot_scale):
-    """(x, z) traction residual sigma.e_z - C v / (i omega A) per unit amplitude of one plane wave
-    u = d f(t - s.x) at the face z = 0 with outward normal -e_z (traction on the body
-    -sigma e_z = -C_b v, i.e. sigma_xz = rho c_s v_x, sigma_zz = rho c_p v_z)."""
+    """(x, z) components of sigma e_z - C_b v / A, per unit f', of one plane wave u = d f(t - s.x) at
+    the face z = 0 with outward normal -e_z, whose traction on the body is -sigma e_z = -C_b v / A
+    (sigma_xz = rho c_s v_x, sigma_zz = rho c_p v_z): the waves' residuals must sum to zero."""
     s, d = slowness, polarisation
     sigma_xz = -MU * (d[0] * s[1] + d[1] * s[0])
     sigma_zz = -(LAM * (d @ s) + 2.0 * MU * d[1] * s[1])
-    return np.array([sigma_xz - dashpot_scale * RHO * C_S * d[0], sigma_zz - dashpot_scale * RHO * C_P * d[1]])
+    return np.array([sigma_xz - dashpot_scale * RHO * C_S * d[0],
+                     sigma_zz - dashpot_scale * RHO * C_P * d[1]])
 
 
 def lysmer_coefficients(kind, angle, dashpot_scale=1.0):
@@ -107,8 +111,10 @@ def lysmer_coefficients(kind, angle, dashpot_scale=1.0):
 
 
 def test_analytic_coefficients_have_their_limits():
-    """Catches a wrong 2x2 system or R(omega): normal incidence must give 0 (matched) and
-    -/+(1 - s)/(1 + s) for dashpots scaled by s; the viscous limit of R(omega) is the same."""
+    """Catches a wrong 2x2 system or R(omega): limits (normal incidence, s x rho c) and the energy flux.
+
+    Normal incidence gives 0 for the matched face and -/+(1 - s)/(1 + s) for dashpots scaled by s;
+    R(omega) without springs the same; with springs -1 at rest and 0 fast."""
     for kind in ("P", "SV"):
         assert np.allclose(lysmer_coefficients(kind, 0.0), 0.0, atol=ROUNDOFF)
         for s in CONTROL_SCALES:
@@ -150,7 +156,8 @@ def column(wave, face_type):
     faces.update(zmin={"type": face_type}, zmax={"type": "free"})
     scene = parse_scene({
         "title": f"absorption {wave} {face_type}",
-        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [H_1D, H_1D, height], "h": H_1D, "order": 1},
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [H_1D, H_1D, height], "h": H_1D,
+                 "order": 1},
         "materials": {"rock": {"E": E, "nu": NU, "rho": RHO}},
         "time": {"duration": 1.0},
         "boundary": {"type": face_type, "face": faces, "centre": [H_1D / 2, H_1D / 2, R_SPRING]},
@@ -254,8 +261,9 @@ def viscoelastic_error(run, wave, dashpot_scale=1.0):
     stiffness = (ALPHA_N if wave == "P" else ALPHA_T) * MU / R_SPRING
     # The incident at the monitor delayed by the trip to the face and back, filtered by R(omega).
     delayed = ricker(run["t"] - run["delay"], F0_1D, AMPLITUDE, 1.5 / F0_1D)[0]
+    dashpot = dashpot_scale * impedance
     expected = filtered(delayed, run["dt"],
-                        lambda omega: viscoelastic_reflection(omega, stiffness, impedance, dashpot_scale * impedance))
+                        lambda omega: viscoelastic_reflection(omega, stiffness, impedance, dashpot))
     reflected = run["measured"] - run["incident"]
     return float(np.linalg.norm(reflected - expected) / np.linalg.norm(run["incident"])), expected, reflected
 
@@ -270,7 +278,7 @@ def spectral_ratio(reflected, run, frequency=F0_1D):
 
 @pytest.mark.parametrize("wave", ["P", "S"])
 def test_viscoelastic_face_reflects_as_r_of_omega(wave):
-    """Catches a spring or dashpot off its formula: the reflection must follow R = -K/(K + 2 i omega rho c)."""
+    """Catches a spring or dashpot off its formula: the reflection must be R = -K/(K + 2 i omega rho c)."""
     run = column_pulse(wave, "viscoelastic")
     arrived(run)
     check_energy(run)
@@ -299,8 +307,10 @@ def test_viscoelastic_face_reflects_as_r_of_omega(wave):
 
 
 F0_OBLIQUE, H_OBLIQUE = 10.0, 2.5  # 18 elements per shortest S wavelength (c_s / 2.5 f0)
-SLAB = (1000.0, 300.0)             # width (x) and height (z) of the slab (m), one element thick in y
-MONITOR_X, MONITOR_DEPTH = 750.0, 120.0  # the monitor, below the top face (m)
+WIDTH, MONITOR_X = 1000.0, 750.0   # slab width (x, m) and the monitor's x; one element thick in y
+# wave: (angle in degrees, slab height, monitor depth below the top face); the depth puts the
+# reflections' trips (lag = depth (eta_incident + eta_reflected)) mostly after the incident.
+OBLIQUE = {"SV": (30.0, 300.0, 120.0), "P": (60.0, 400.0, 250.0)}
 
 
 def lysmer_as_free_surface(wave_type, angle, c_p, c_s):
@@ -310,12 +320,12 @@ def lysmer_as_free_surface(wave_type, angle, c_p, c_s):
     return {"PP": r_p, "PS": r_s} if wave_type == "P" else {"SS": -r_s, "SP": -r_p}
 
 
-def slab_scene(wave, angle, surface):
-    width, height = SLAB
+def slab_scene(wave, surface):
+    angle, height, _ = OBLIQUE[wave]
     return parse_scene({
         "title": f"absorption {wave} {angle:g} deg",
-        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [width, H_OBLIQUE, height], "h": H_OBLIQUE,
-                 "order": 1},
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [WIDTH, H_OBLIQUE, height],
+                 "h": H_OBLIQUE, "order": 1},
         "materials": {"rock": {"E": E, "nu": NU, "rho": RHO}},
         "time": {"duration": 1.0},
         "wave": {"type": wave, "angle": angle, "azimuth": 0.0, "surface": surface,
@@ -330,47 +340,62 @@ def _in_slab(vector):
     return np.array([vector[0], -vector[1]])
 
 
-@pytest.fixture(scope="module")
-def oblique_sv():
-    """Plane SV at 30 degrees (below the critical 35.8) going up to the slab's top face zmax, viscous,
-    without input; xmin, xmax, zmin carry the input of the analytic field of the correct face:
-    incident plus its Lysmer-Kuhlemeyer reflections (pyfem's FreeField with lysmer_as_free_surface
-    as the 'surface' coefficients at z = top). They are then transparent to that field, and no
-    edge of theirs diffracts into the monitor (with the incident field alone on them the upstream
-    corner's diffraction put R_SP off by 0.01-0.04 at the monitor, 300-700 m from it).
+def _incident(wave):
+    """(slowness, polarisation) of the incident wave in our x-z frame."""
+    speed = C_P if wave == "P" else C_S
+    return _plane_wave(wave, math.sin(math.radians(OBLIQUE[wave][0])) / speed, False, speed)
 
-    Returns {dashpot scale of zmax: (R_P, R_SV) measured, energy}, the analytic field, the runs'
-    monitor data and the LK residual of the analytic field on the top face.
+
+@pytest.fixture(scope="module", params=["SV", pytest.param("P", marks=pytest.mark.slow)])
+def oblique(request):
+    """A plane wave going up to the top face zmax of a plane-strain slab (roller y faces), viscous
+    and without input: SV at 30 degrees (below the critical 35.8; 27 s) or P at 60 (slow, 55 s).
+
+    xmin, xmax and zmin carry the input of the analytic field of the correct face: the incident
+    plus its Lysmer-Kuhlemeyer reflections (pyfem's FreeField with lysmer_as_free_surface as the
+    coefficients of a 'surface' at the top face). They are transparent to that field, and no edge
+    of theirs diffracts into the monitor: with the incident alone on them (a surface 100 km up),
+    the upstream corner's diffraction put the SV case's R_SP off by 0.01-0.04 at monitors 300-700 m
+    from it. The incident alone (prepare's own free field) is what the reflection is measured from.
+
+    Returns dict: wave, runs {dashpot scale of zmax: t, measured, energy}, incident (analytic at
+    the monitor), lk_residual (the analytic field's traction residual on the top face).
     """
     from pyfem.seismic import reflection
     from pyfem.seismic.forces import boundary_springs_and_dashpots, equivalent_input_forces
     from pyfem.seismic.setup import seismic_input_from_scene
 
-    width, height = SLAB
-    simulation = solver.prepare(slab_scene("SV", 30.0, height + 1.0e5))  # incident only in the window
+    wave = request.param
+    angle, height, depth = OBLIQUE[wave]
+    simulation = solver.prepare(slab_scene(wave, height + 1.0e5))  # incident only in the window
     model = simulation.model
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(reflection, "free_surface_coefficients", lysmer_as_free_surface)
-        analytic, _ = seismic_input_from_scene(slab_scene("SV", 30.0, height), model)
+        analytic, _ = seismic_input_from_scene(slab_scene(wave, height), model)
     others = [face for face in model.faces if face.name != "zmax"]
     top = next(face for face in model.faces if face.name == "zmax")
-    simulation.input_arrays = equivalent_input_forces(others, model.node_coords, analytic, None, ALPHA_N, ALPHA_T)
+    simulation.input_arrays = equivalent_input_forces(others, model.node_coords, analytic, None,
+                                                      ALPHA_N, ALPHA_T)
     x = model.node_coords
-    monitor = np.flatnonzero(np.isclose(x[:, 0], MONITOR_X) & np.isclose(x[:, 2], height - MONITOR_DEPTH))
+    monitor = np.flatnonzero(np.isclose(x[:, 0], MONITOR_X) & np.isclose(x[:, 2], height - depth))
     assert len(monitor) == 2
-    # The analytic field meets the face's condition sigma e_z = -C_b v / A (the 2x2 solve and the
-    # conventions above): residual over the traction's scale, at two points of the face.
-    points, times = np.array([[MONITOR_X, 0.0, height], [MONITOR_X - 300.0, 0.0, height]]), np.linspace(0, 1, 500)
+    # The analytic field meets the face's condition sigma e_z = -C_b v / A (checks the 2x2 solve
+    # and the conventions above): residual over the traction's scale, at two points of the face.
+    points = np.array([[MONITOR_X, 0.0, height], [MONITOR_X - 300.0, 0.0, height]])
+    times = np.linspace(0.0, 1.0, 500)
     traction = analytic.stress(points, times)[..., :, 2]
-    velocity = analytic.velocity(points, times)
-    residual = traction + RHO * velocity * np.array([C_S, C_S, C_P])
-    lk_residual = np.abs(residual).max() / np.abs(traction).max()
-    results = {}
-    speed = C_S
-    theta = math.radians(30.0)
-    t_end = (MONITOR_X * math.sin(theta) + (height - MONITOR_DEPTH) * math.cos(theta)) / speed + 3.6 / F0_OBLIQUE
+    residual = traction + RHO * analytic.velocity(points, times) * np.array([C_S, C_S, C_P])
+    speed = C_P if wave == "P" else C_S
+    theta = math.radians(angle)
+    # Until the slower reflection's Ricker (t0 = 1.5/f0, ~1e-6 of its peak 1/f0 from it) has passed.
+    slowness = _incident(wave)[0]
+    last_lag = depth * (abs(slowness[1]) + abs(_plane_wave("SV", slowness[0], True, C_S)[0][1]))
+    arrival = (MONITOR_X * math.sin(theta) + (height - depth) * math.cos(theta)) / speed  # of the start
+    t_end = arrival + last_lag + 2.5 / F0_OBLIQUE
+    runs = {}
     for scale in (1.0,) + CONTROL_SCALES:
-        scaled = dataclasses.replace(top, rho_cp=scale * np.asarray(top.rho_cp), rho_cs=scale * np.asarray(top.rho_cs))
+        scaled = dataclasses.replace(top, rho_cp=scale * np.asarray(top.rho_cp),
+                                     rho_cs=scale * np.asarray(top.rho_cs))
         _, _, simulation.dashpot_nodes, simulation.dashpot_matrices = boundary_springs_and_dashpots(
             others + [scaled], len(simulation.mass), None, ALPHA_N, ALPHA_T)
         stepper = solver.make_stepper(simulation)
@@ -383,24 +408,23 @@ def oblique_sv():
         for k in range(steps):
             t = stepper.run(u, v, a, 1, t)
             history[k + 1] = u.reshape(-1, 3)[monitor].mean(axis=0)
-        results[scale] = {"t": dt * np.arange(steps + 1), "measured": history, "energy": stepper.energy()}
-    times = results[1.0]["t"]
-    incident = simulation.freefield.displacement(x[monitor[:1]], times)[:, 0]
-    return {"runs": results, "incident": incident, "lk_residual": lk_residual}
+        runs[scale] = {"t": dt * np.arange(steps + 1), "measured": history, "energy": stepper.energy()}
+    incident = simulation.freefield.displacement(x[monitor[:1]], runs[1.0]["t"])[:, 0]
+    return {"wave": wave, "runs": runs, "incident": incident,
+            "lk_residual": np.abs(residual).max() / np.abs(traction).max()}
 
 
-def oblique_coefficients(run, incident, wave="SV", angle=30.0):
+def oblique_coefficients(wave, run, incident):
     """Least-squares (R_P, R_SV) of the measured reflection (measured - analytic incident) on the two
-    reflected plane waves: R d_r y(t - lag_r), y the incident's amplitude along its polarisation at
+    reflected plane waves R d_r y(t - lag_r): y the incident's amplitude along its polarisation at
     the monitor, lag_r = depth (eta_incident + eta_r) the trip to the face and back."""
-    speed = C_P if wave == "P" else C_S
-    p = math.sin(math.radians(angle)) / speed
-    slowness, polarisation = _plane_wave(wave, p, False, speed)
+    depth = OBLIQUE[wave][2]
+    slowness, polarisation = _incident(wave)
     amplitude = incident[:, [0, 2]] @ _in_slab(polarisation)
     columns = []
     for kind, c in (("P", C_P), ("SV", C_S)):
-        reflected_slowness, reflected_polarisation = _plane_wave(kind, p, True, c)
-        lag = MONITOR_DEPTH * (abs(slowness[1]) + abs(reflected_slowness[1]))
+        reflected_slowness, reflected_polarisation = _plane_wave(kind, slowness[0], True, c)
+        lag = depth * (abs(slowness[1]) + abs(reflected_slowness[1]))
         shape = np.interp(run["t"] - lag, run["t"], amplitude, left=0.0)
         columns.append(np.concatenate(np.outer(_in_slab(reflected_polarisation), shape)))
     reflected = (run["measured"] - incident)[:, [0, 2]]
@@ -408,26 +432,28 @@ def oblique_coefficients(run, incident, wave="SV", angle=30.0):
     return coefficients, amplitude
 
 
-def test_viscous_face_reflects_oblique_sv_as_lysmer_kuhlemeyer(oblique_sv):
-    """Catches a viscous face that is not Lysmer-Kuhlemeyer's at 30 degrees (R_SP 0.130, R_SS 0.138;
-    dashpots x0.5 give -0.20, x2 +0.44)."""
-    assert oblique_sv["lk_residual"] < ROUNDOFF
-    expected = lysmer_coefficients("SV", 30.0)
-    run = oblique_sv["runs"][1.0]
-    measured, amplitude = oblique_coefficients(run, oblique_sv["incident"])
+def test_viscous_face_reflects_oblique_wave_as_lysmer_kuhlemeyer(oblique):
+    """Catches a viscous face off Lysmer-Kuhlemeyer obliquely (dashpots x0.5, x2 move a coefficient 0.3)."""
+    wave, angle = oblique["wave"], OBLIQUE[oblique["wave"]][0]
+    assert oblique["lk_residual"] < ROUNDOFF
+    expected = lysmer_coefficients(wave, angle)
+    run = oblique["runs"][1.0]
+    measured, amplitude = oblique_coefficients(wave, run, oblique["incident"])
     # Guard: the incident arrived with its amplitude (along its polarisation, before any reflection).
     early = run["t"] < run["t"][np.argmax(np.abs(amplitude))] + 0.05
-    assert np.max(np.abs(run["measured"][early][:, [0, 2]] @ _in_slab(_plane_wave("SV", 0.5 / C_S, False, C_S)[1]))) \
-        == pytest.approx(AMPLITUDE, rel=0.01)
+    arrived = run["measured"][early][:, [0, 2]] @ _in_slab(_incident(wave)[1])
+    assert np.max(np.abs(arrived)) == pytest.approx(AMPLITUDE, rel=0.01)
     energy = run["energy"]
     assert abs(energy["balance"]) < ROUNDOFF * energy["external_work"]
-    print(f"SV 30 deg viscous: (R_SP, R_SS) analytic {expected.round(4)}, measured {measured.round(4)}")
+    print(f"{wave} {angle:g} deg viscous: (R_P, R_SV) analytic {expected.round(4)}, "
+          f"measured {measured.round(4)}")
     assert np.all(np.abs(measured - expected) < REFLECTION_OBLIQUE)
     for scale in CONTROL_SCALES:
-        control = oblique_sv["runs"][scale]
-        wrong, _ = oblique_coefficients(control, oblique_sv["incident"])
-        own = lysmer_coefficients("SV", 30.0, scale)
-        print(f"SV 30 deg viscous, top dashpots x{scale}: analytic of its own {own.round(4)}, measured {wrong.round(4)}")
+        control = oblique["runs"][scale]
+        wrong, _ = oblique_coefficients(wave, control, oblique["incident"])
+        own = lysmer_coefficients(wave, angle, scale)
+        print(f"{wave} {angle:g} deg viscous, top dashpots x{scale}: analytic of its own {own.round(4)}, "
+              f"measured {wrong.round(4)}")
         assert abs(control["energy"]["balance"]) < ROUNDOFF * control["energy"]["external_work"]
         assert np.max(np.abs(wrong - expected)) > 20 * REFLECTION_OBLIQUE  # the test would catch it
         # The monitor sees the face, not the side faces' input (which carries the correct face's field).
