@@ -304,7 +304,8 @@ def test_viscoelastic_face_reflects_as_r_of_omega(wave):
         own, own_expected, _ = viscoelastic_error(control, wave, dashpot_scale, spring_scale)
         print(f"{wave} viscoelastic, dashpots x{dashpot_scale} springs x{spring_scale}: L2 error against the "
               f"correct face {wrong:.5f}, against its own {own:.5f}; R(f0) its own "
-              f"{spectral_ratio(own_expected, control):.4f}, measured {spectral_ratio(reflected, control):.4f}")
+              f"{spectral_ratio(own_expected, control):.4f}, "
+              f"measured {spectral_ratio(reflected, control):.4f}")
         assert wrong > 10 * REFLECTION_HISTORY_1D  # the test would catch it
         assert own < REFLECTION_HISTORY_1D         # and the measurement is sound
 
