@@ -151,6 +151,11 @@ def _pulse_energy_left(tmp_path, boundary):
 
 @pytest.mark.parametrize("boundary", ["viscous", "viscoelastic"])
 def test_boundary_absorbs_normally_incident_pulse(tmp_path, boundary):
+    """Smoke test only: the pulse leaves a column whose six faces all carry the boundary, and the
+    energy account balances. It does NOT discriminate the impedance: the side faces' dashpots damp
+    the plane pulse along its whole path, and every dashpot scaled by 0.1 to 2.5 still leaves
+    0.03-1.26 % (< 5 %; 0.08 % as built). tests/test_absorption.py measures one face's reflection
+    against the analytic coefficient and catches dashpots x0.5 and x2."""
     left, end = _pulse_energy_left(tmp_path, boundary)
     print(f"{boundary}: energy left after the pulse passed = {100 * left:.3f} %")
     assert left < 0.05
