@@ -915,7 +915,8 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         nonlinear.components = kept
     model = simulation.model
     ts = simulation.time_step
-    element_loop = element_loop_plan(simulation.nonlinear, u, per_step, simulation.time_step)
+    element_loop = element_loop_plan(simulation.nonlinear, per_step, simulation.time_step,
+                                     phases.get("element_loop", {}).get("ms_per_step", 0.0) * 1e-3)
     return {
         "title": scene["title"],
         "effects on": ", ".join(scene.effects) or "none (free vibration)",
@@ -945,7 +946,9 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         "time per step": f"{per_step * 1e3:.3f} ms (measured over {trial_steps} steps, from rest): "
                          + ", ".join(f"{name} {entry['ms_per_step']:.3f} ms" for name, entry in phases.items()
                                      if name != "other" or entry["ms_per_step"] > 0.0),
-        "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion",
+        "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion"
+                         + (f" and the record's {simulation.lead_in:.3g} s lead-in before it (t < 0)"
+                            if simulation.lead_in > 0.0 else ""),
         **static_stage_estimate(scene, per_step),
         **distributed_plan(simulation),
     }
@@ -1084,9 +1087,11 @@ def phase_split(phase_seconds: dict, loop_seconds: float, output_seconds: float 
     return {name: {"ms_per_step": 1e3 * value / steps, "share": value / total} for name, value in seconds.items()}
 
 
-def element_loop_plan(nonlinear, u: np.ndarray, per_step: float, time_step: TimeStep) -> dict:
+def element_loop_plan(nonlinear, per_step: float, time_step: TimeStep, loop: float) -> dict:
     """The plan's lines on the element loop: its regions, points, state bytes and measured time,
-    and why the elastic stable step holds."""
+    and why the elastic stable step holds. loop: the element loop's seconds per step in the same
+    trial steps as per_step (the kernel's phase times), so that its share and the per-step
+    breakdown are one measurement."""
     from pyfem.elements import plastic_frequency_factor
 
     if nonlinear is None:
@@ -1109,17 +1114,11 @@ def element_loop_plan(nonlinear, u: np.ndarray, per_step: float, time_step: Time
                                                                   parameters["friction_angle"],
                                                                   parameters.get("dilation_angle", 0.0)))
     margin = time_step.critical / time_step.dt
-    scratch = np.zeros_like(u)
-    repeats = 5
-    start = time.perf_counter()
-    for _ in range(repeats):  # trial states only: nothing is committed
-        for component in nonlinear.components:
-            component.compute(u, scratch)
-    loop = (time.perf_counter() - start) / repeats
     return {
         "nonlinear regions": regions,
         "element loop": (f"{loop * 1e3:.3f} ms per step ({loop / max(1, nonlinear.n_points) * 1e9:.0f} ns per "
-                         f"point, {100 * loop / per_step:.0f} % of the step), measured at rest; a yielding "
+                         f"point, {100 * loop / max(per_step, 1e-300):.0f} % of the step, in the trial steps of "
+                         "'time per step'), measured at rest; a yielding "
                          "Mohr-Coulomb point costs about 6x, a damaging concrete point 3x (README)"),
         "element loop dt": ("from the full elastic stiffness: damage and mean dilatation only soften the cells"
                             + ("" if stiffening == 1.0 else
