@@ -475,3 +475,58 @@ def lining_elements_for(error_budget: float, results_csv=LINING_RESULTS) -> dict
                                       "low): read the face's stress from the field's gradient"})
     return {"per_order": per_order, "text": "; ".join(item["text"] for item in per_order)}
 
+
+
+def region_cell_sizes(model) -> dict:
+    """{region: (n_cells, smallest, largest) element size h (m)} of a model's cells, h being a cell's
+    largest vertex distance (a tetrahedron's longest edge; a hexahedron's diagonal over sqrt 3, its
+    edge when it is a cube), as the accuracy study's h (the edge of its cubes)."""
+    from pyfem.operators import cell_regions
+
+    mesh = model.mesh
+    tdim = mesh.topology.dim
+    connectivity = mesh.geometry.dofmap
+    n_cells = mesh.topology.index_map(tdim).size_local
+    offsets = np.asarray(connectivity.offsets)
+    vertices = np.asarray(connectivity.array, dtype=np.int64).reshape(-1, int(offsets[1] - offsets[0]))[:n_cells]
+    corners = 4 if mesh.topology.cell_type.name == "tetrahedron" else 8  # the first nodes are the vertices
+    x = mesh.geometry.x[vertices[:, :corners]]
+    largest = np.zeros(n_cells)
+    for i in range(corners):
+        for j in range(i + 1, corners):
+            largest = np.maximum(largest, np.linalg.norm(x[:, i] - x[:, j], axis=1))
+    h = largest if corners == 4 else largest / np.sqrt(3.0)
+    regions = cell_regions(model)[:n_cells]
+    names = {tag: name for name, tag in model.regions.items()}
+    return {names.get(int(tag), f"tag {int(tag)}"): (int(np.count_nonzero(regions == tag)),
+                                                    float(h[regions == tag].min()), float(h[regions == tag].max()))
+            for tag in np.unique(regions)}
+
+
+def resolution_report(scene, model, error_budget: float = 0.05, results_csv=DEFAULT_RESULTS) -> tuple[dict, list]:
+    """Each region's measured element sizes against the study's advice for its own shear speed.
+
+    Returns:
+        ({region: one line for `check`}, [warnings]): a warning where a region's largest cell is
+        more than twice the advised h (the box and layered_cavern builders warn from their scene
+        keys already; a mesh file is measured here).
+    """
+    frequency = highest_frequency(scene)
+    advice = recommend(error_budget, results_csv, order=scene["mesh"]["order"])
+    tetrahedra = model.mesh.topology.cell_type.name == "tetrahedron"
+    family = ("P" if tetrahedra else "Q") + str(scene["mesh"]["order"])
+    lines, warnings = {}, []
+    for name, (count, smallest, largest) in region_cell_sizes(model).items():
+        table = scene["materials"].get(name)
+        if table is None or any(table.get(key) is None for key in ("E", "nu", "rho")):
+            continue
+        speed = Material.from_scene(name, table).s_wave_speed
+        h = speed / frequency / advice["elements_per_wavelength"]
+        lines[name] = (f"{count} {family} cells, h {smallest:.3g}-{largest:.3g} m; {100 * error_budget:g} % advice "
+                       f"for its shear speed {speed:.4g} m/s at {frequency:.3g} Hz: h <= {h:.3g} m"
+                       + (" (the study ran hexahedra: for tetrahedra a lower bound)" if tetrahedra else ""))
+        if largest > 2.0 * h:
+            warnings.append(f"mesh: region '{name}' has cells of h up to {largest:.3g} m, {largest / h:.1f}x the "
+                            f"{h:.3g} m the accuracy study advises for a {100 * error_budget:g} % error with {family} "
+                            f"elements at its shear speed {speed:.4g} m/s and {frequency:.3g} Hz: expect a larger error")
+    return lines, warnings

@@ -235,13 +235,21 @@ def mesh_advice(scene: Scene) -> str:
     from pyfem.accuracy import curved_wall_size_for, element_size_for, lining_elements_for, wall_size_for
 
     h = scene["mesh"].get("h")
-    lines = [f"mesh advice (workflows/accuracy_cost.py; scene h = {'set by the mesh builder' if h is None else h}, "
-             f"order {scene['mesh']['order']}):"]
+    from_file = scene["mesh"]["builder"] == "file"
+    size = ("the mesh file's (measured per region under 'mesh resolution')" if from_file
+            else "set by the mesh builder" if h is None else h)
+    lines = [f"mesh advice (workflows/accuracy_cost.py; scene h = {size}, order {scene['mesh']['order']}):"]
+    texts = {}
     for budget in (0.05, 0.01):
         try:
-            lines.append(f"  {element_size_for(scene, budget)['text']}")
+            # A mesh file's element family and order are its own: the advice is for them, not the cheapest.
+            advice = element_size_for(scene, budget, order=scene["mesh"]["order"] if from_file else None)
+            text = advice["text"].split(": ", 1)[1]
+            texts.setdefault(text, []).append(budget)
         except (ValueError, FileNotFoundError) as error:
             lines.append(f"  {100 * budget:.0f} % error: no advice ({error})")
+    for text, budgets in texts.items():  # one line where both budgets get the same advice
+        lines.append(f"  for a {' and '.join(f'{100 * b:g} %' for b in budgets)} error: {text}")
     # A box without a static stage has no opening: no wall advice for it. A mesh file may or may not
     # have one (the scene does not say): the advice says so.
     has_opening = scene["mesh"]["builder"] != "box" or "static" in scene

@@ -869,6 +869,25 @@ def plan(scene: Scene) -> dict:
     return simulation_plan(simulation)
 
 
+def resolution_plan(scene: Scene, model) -> dict:
+    """{"mesh resolution": {region: its element sizes against the accuracy study's advice}} of a scene
+    with a wave (pyfem.accuracy.resolution_report); a mesh file's too-coarse regions are warned of
+    (the box and layered_cavern builders are checked from their scene keys)."""
+    from pyfem.accuracy import resolution_report
+
+    if "seismic_input" not in scene.effects:
+        return {}
+    try:
+        lines, warnings = resolution_report(scene, model)
+    except Exception as error:  # advice only: it must never stop a run
+        return {"mesh resolution": f"no advice ({type(error).__name__}: {error})"}
+    if scene["mesh"]["builder"] == "file":
+        for warning in warnings:
+            if warning not in scene.warnings:
+                scene.warn(warning)
+    return {"mesh resolution": lines} if lines else {}
+
+
 def interface_slip_plan(scene: Scene, model) -> dict:
     """{"interface slip": {name: what the slip study says at its resolution}} of a contact scene with
     a wave (pyfem.accuracy.interface_slip_advice), else {}."""
@@ -941,6 +960,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         **element_loop,
         **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
         **interface_slip_plan(scene, model),
+        **resolution_plan(scene, model),
         "steps": simulation.n_steps,
         "memory": f"{memory_estimate(simulation) / 2**20:.1f} MiB",
         "time per step": f"{per_step * 1e3:.3f} ms (measured over {trial_steps} steps, from rest): "

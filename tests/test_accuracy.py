@@ -295,3 +295,36 @@ def test_slip_advice_reads_the_interface_resolution_and_the_rocks_on_its_sides(t
     scene["contact"]["normal_lag"] = {"length": 0.01, "velocity": 1.0}
     (_, text), = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model).items()
     assert "(bimaterial, lag, Q1)" in text and "converges slowly" not in text
+
+
+def test_a_mesh_files_cells_are_measured_against_the_advice(tmp_path):
+    """A user's gmsh .geo of 25 m tetrahedra under an 8 Hz Ricker (advice at most 6.25 m for 5 %):
+    `check` measures the cells per region and warns; under a 0.5 Hz wavelet it does not. Catches the
+    advice that read "scene h = set by the mesh builder" and never looked at a mesh file's cells."""
+    from pyfem import solver
+    from pyfem.accuracy import region_cell_sizes
+    from pyfem.scene import parse_scene
+
+    geo = tmp_path / "box.geo"
+    geo.write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 100, 100, 100};\nPhysical Volume("rock") = {1};\n'
+                   "Mesh.CharacteristicLengthMin = 25;\nMesh.CharacteristicLengthMax = 25;\n")
+
+    def scene(f0):
+        return parse_scene({"title": "user mesh", "mesh": {"builder": "file", "file": str(geo)},
+                            "materials": {"rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}}, "time": {"duration": 0.05},
+                            "wave": {"type": "SV", "surface": 120.0, "motion": {"ricker": {"f0": f0, "amplitude": 1e-3}}},
+                            "monitor": [{"name": "c", "point": [50.0, 50.0, 50.0]}]})
+
+    coarse = scene(8.0)
+    plan = solver.plan(coarse)
+    line = plan["mesh resolution"]["rock"]
+    assert "P1 cells" in line and "h <= 6.25 m" in line
+    warned = [w for w in coarse.warnings if w.startswith("mesh: region 'rock' has cells of h up to")]
+    assert len(warned) == 1 and "6.25 m" in warned[0]
+    fine = scene(0.5)
+    solver.plan(fine)
+    assert not [w for w in fine.warnings if w.startswith("mesh: region")]
+    # The measure: a tetrahedron's longest edge, within gmsh's size field.
+    simulation = solver.prepare(fine, solve_static=False)
+    count, smallest, largest = region_cell_sizes(simulation.model)["rock"]
+    assert count == simulation.model.n_cells and 10.0 < smallest < 25.0 * 1.1 < largest < 60.0
