@@ -745,6 +745,38 @@ class RunWriter:
         deformed = self.deformation.plot(plot_dir / "deformed_section.png", names, self.scene.get("title", ""))
         if deformed is not None and self._summary is not None:
             self._summary["deformed_section"] = deformed
+        if self.nonlinear is not None:
+            section = self._section_state(plot_dir / "section_end.png")
+            if section is not None and self._summary is not None:
+                self._summary["section_end"] = section
+
+    def _section_state(self, png_path):
+        """plots/section_end.png: the nonlinear regions' plastic strain, damage, its type and the largest
+        principal stress at the end of the run, in the section through the first monitor (else the
+        model's middle), without ParaView."""
+        from pyfem.static_plots import principal_stresses, section_state
+
+        model = self.simulation.model
+        n_cells = model.n_cells
+        values = {name: np.full(n_cells, np.nan) for name in ("s1", "plastic_strain", "damage", "damage_type")}
+        averages = self.nonlinear.cell_averages()
+        if not averages:
+            return None
+        for region in averages.values():
+            cells = region["cells"]
+            xx, yy, zz, xy, yz, xz = region["stress"].T
+            tensor = np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], 1)
+            values["s1"][cells] = principal_stresses(tensor)[:, 2]
+            for name in ("plastic_strain", "damage", "damage_type"):
+                values[name][cells] = region[name]
+        points = self._monitor_points
+        y0 = float(points[0][1]) if points is not None and len(points) else \
+            float(0.5 * (model.node_coords[:, 1].min() + model.node_coords[:, 1].max()))
+        try:
+            return section_state(png_path, model, values, y0, self.scene.get("title", ""))
+        except Exception as error:  # a picture must never fail a finished run
+            print(f"warning: plots/section_end.png not drawn ({type(error).__name__}: {error})", file=sys.stderr)
+            return None
 
     # -- pieces -------------------------------------------------------------------------
     def _base_summary(self) -> dict:

@@ -207,3 +207,61 @@ def write_static_plots(folder: Path, simulation) -> dict:
             folder / "interface_stress.png", model.pairs.coords, arrays["normal"], arrays["area"],
             state.pair_forces_in_situ, state.pair_forces, surface, title)
     return figures
+
+
+def section_state(png_path, model, cell_values: dict, y0: float, title: str = "") -> dict:
+    """The nonlinear regions' state at the end of a run in the section y = y0: the largest principal
+    stress, plastic strain, damage and the damage's type (1 tension, 2 shear), per cell (cell means of
+    the points; cells outside the nonlinear regions grey).
+
+    Args:
+        png_path: output image.
+        model: pyfem.operators.Model.
+        cell_values: {"s1" (Pa), "plastic_strain", "damage", "damage_type"}: (n_cells,) arrays, NaN
+            outside the nonlinear regions.
+        y0: section plane (m).
+        title: figure title.
+
+    Returns:
+        {"y", "cells", "peak_damage", "peak_plastic_strain"} over the drawn cells.
+    """
+    vertices = cell_vertices(model)[:model.n_cells]
+    y = vertices[..., 1]
+    cells = np.flatnonzero((y.min(axis=1) <= y0) & (y.max(axis=1) >= y0))
+    polygons = [convex_hull(vertices[c][:, [0, 2]]) for c in cells]
+    panels = [("max principal stress (MPa)", cell_values["s1"][cells] * MPA, "RdBu_r", True),
+              ("plastic strain (-)", cell_values["plastic_strain"][cells], "magma_r", False),
+              ("damage (-)", cell_values["damage"][cells], "inferno_r", False),
+              ("damage type (0 none, 1 tension, 2 shear)", cell_values["damage_type"][cells], "viridis", False)]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.8), squeeze=False)
+    for ax, (label, values, cmap, centred) in zip(axes[0], panels):
+        colour_map = plt.get_cmap(cmap).copy()
+        colour_map.set_bad("0.85")  # the elastic cells
+        collection = PolyCollection(polygons, array=np.ma.masked_invalid(values), cmap=colour_map,
+                                    edgecolors="face", linewidths=0.2)
+        finite = values[np.isfinite(values)]
+        if centred and finite.size:
+            bound = max(float(np.max(np.abs(finite))), 1e-12)
+            collection.set_clim(-bound, bound)
+        elif label.startswith("damage"):  # damage in [0, 1]; its type 0, 1, 2
+            collection.set_clim(0, 2 if label.startswith("damage type") else 1)
+        elif finite.size:
+            collection.set_clim(0.0, max(float(finite.max()), 1e-12))
+        ax.add_collection(collection)
+        ax.autoscale_view()
+        ax.set_aspect("equal")
+        ax.set_title(label, fontsize=9)
+        ax.set_xlabel("x (m)")
+        bar = fig.colorbar(collection, ax=ax, shrink=0.8)
+        if label.startswith("damage type"):
+            bar.set_ticks([0, 1, 2])
+    axes[0][0].set_ylabel("z (m)")
+    fig.suptitle(f"{title[:60]}: the nonlinear regions at the end of the run, section y = {y0:.3g} m".lstrip(": "),
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+    drawn = {name: cell_values[name][cells] for name in ("damage", "plastic_strain")}
+    return {"y": float(y0), "cells": int(len(cells)),
+            "peak_damage": float(np.nanmax(drawn["damage"], initial=0.0)),
+            "peak_plastic_strain": float(np.nanmax(drawn["plastic_strain"], initial=0.0))}

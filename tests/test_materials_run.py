@@ -179,6 +179,20 @@ def test_weak_layer_energy_balance_closes_with_the_plastic_dissipation(weak_laye
     assert np.max(np.abs(rows["balance"])) < BALANCE * energy["reference_energy"]
 
 
+def test_the_section_after_the_earthquake_is_drawn_without_paraview(weak_layer_runs):
+    """plots/section_end.png: the weak layer's plastic strain, damage and its type at the end of the
+    run, in the section through the first monitor; run.json's figures are the regions' own peaks
+    (catches an empty or mis-coloured section: the layer yielded, so its peak must show)."""
+    summary, out = weak_layer_runs[True]
+    assert (out / "plots" / "section_end.png").stat().st_size > 20000
+    section = json.loads((out / "run.json").read_text())["section_end"]
+    weak = summary["nonlinear_regions"]["weak"]
+    assert weak["peak_plastic_strain"] > 0.0  # the layer yielded
+    assert section["cells"] > 0 and 0.0 < section["peak_plastic_strain"] <= weak["peak_plastic_strain"] * (1 + 1e-12)
+    # The elastic run's element loop is empty: no section of a nonlinear state.
+    assert "section_end" not in json.loads((weak_layer_runs[False][1] / "run.json").read_text())
+
+
 def test_weak_layer_fields_and_plan(weak_layer_runs):
     plastic, plastic_dir = weak_layer_runs[True]
     with meshio.xdmf.TimeSeriesReader(str(plastic_dir / "fields.xdmf")) as reader:
