@@ -59,25 +59,12 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
   external_.assign(3 * n, 0.0);
   internal_.assign(3 * n, 0.0);
   own_power_.assign(2 * n, 0.0);
-  dashpot_slot_.assign(n, -1);
-  constraint_slot_.assign(n, -1);
+  effects_ = NodalEffects(n);
 }
 
 void LocalStepper::set_constraints(const std::int32_t* nodes, std::int64_t count,
                                    const double* projection) {
-  std::vector<std::int32_t> slots(n_nodes(), -1);
-  for (std::int64_t k = 0; k < count; ++k) {
-    const std::int32_t node = nodes[k];
-    if (node < 0 || node >= n_nodes())
-      throw std::invalid_argument("constraint nodes[" + std::to_string(k) + "] is not a node");
-    if (slots[node] >= 0)
-      throw std::invalid_argument("constraint nodes[" + std::to_string(k) + "] = " +
-                                  std::to_string(node) + " is repeated");
-    check_projection(projection + 9 * k, k);
-    slots[node] = static_cast<std::int32_t>(k);
-  }
-  constraint_slot_ = std::move(slots);
-  constraint_P_.assign(projection, projection + 9 * count);
+  effects_.set_constraints(nodes, count, projection);  // (unchanged when it throws)
   reactions_.assign(3 * count, 0.0);
   initialised_ = false;
 }
@@ -101,15 +88,9 @@ void LocalStepper::check_partition() const {
     throw std::invalid_argument("set_partition: " + std::to_string(exchanges_.size()) + " exchanges for " +
                                 std::to_string(max_level_ + 1) + " levels (one per level, null: none)");
   auto require_owned = [this](std::int64_t node, const std::string& what) {
-    if (node >= n_owned_)
-      throw std::invalid_argument(what + " at node " + std::to_string(node) +
-                                  ", a ghost of this share (owned nodes: [0, " + std::to_string(n_owned_) +
-                                  ")): a share's effects must be on its own nodes");
+    if (node >= n_owned_) throw NodalEffects::ghost_error(what, node, n_owned_);
   };
-  for (std::int64_t i = n_owned_; i < n_nodes(); ++i) {
-    if (dashpot_slot_[i] >= 0) require_owned(i, "a dashpot");
-    if (constraint_slot_[i] >= 0) require_owned(i, "a constraint");
-  }
+  effects_.require_owned(n_owned_);
   for (const auto& provider : providers_)
     for (const std::int32_t node : provider->nodes()) require_owned(node, provider->name());
   for (const Level& level : levels_)
@@ -124,10 +105,10 @@ void LocalStepper::set_row_split(bool on) {
 }
 
 void LocalStepper::project(std::int64_t i, double* dv) const {
-  const std::int32_t k = constraint_slot_[i];
+  const std::int32_t k = effects_.constraint_slot[i];
   if (k < 0) return;
   double projected[3];
-  multiply_3x3(constraint_P_.data() + 9 * k, dv, projected);
+  multiply_3x3(effects_.constraint_P.data() + 9 * k, dv, projected);
   for (int d = 0; d < 3; ++d) dv[d] = projected[d];
 }
 
@@ -347,7 +328,7 @@ void LocalStepper::check_contacts() const {
     const int k = max_level_ - c;
     for (const auto& pairs : levels_[c].contacts)
       for (const std::int32_t node : pairs->unique_nodes()) {
-        if (constraint_slot_[node] >= 0)
+        if (effects_.constraint_slot[node] >= 0)
           throw std::invalid_argument("contact pair node " + std::to_string(node) +
                                       " is constrained: local time stepping does not take contact "
                                       "pairs on fixed or roller faces");
@@ -373,8 +354,8 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
   operators.dt = h;
   operators.alpha = alpha_;
   operators.mass = mass_;
-  operators.dashpot_slot = dashpot_C_.empty() ? nullptr : dashpot_slot_.data();
-  operators.dashpot_C = dashpot_C_.data();
+  operators.dashpot_slot = effects_.dashpot_C.empty() ? nullptr : effects_.dashpot_slot.data();
+  operators.dashpot_C = effects_.dashpot_C.data();
   operators.dashpot_inverse = level.implicit_inverse.data();
   // The slip rate the pairs keep for their next correction (the deterioration's gamma, the normal
   // lag's decay) is Stepper's: that of v(t) + dv, the velocity at the step's start with half the
@@ -410,39 +391,29 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
 }
 
 void LocalStepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
-  std::fill(dashpot_slot_.begin(), dashpot_slot_.end(), -1);
-  dashpot_C_.clear();
-  for (std::int64_t k = 0; k < count; ++k) {
-    const std::int32_t node = nodes[k];
-    if (node < 0 || node >= n_nodes())
-      throw std::invalid_argument("dashpot nodes[" + std::to_string(k) + "] is not a node");
-    if (dashpot_slot_[node] < 0) {
-      dashpot_slot_[node] = static_cast<std::int32_t>(dashpot_C_.size() / 9);
-      dashpot_C_.resize(dashpot_C_.size() + 9, 0.0);
-    }
-    for (int c = 0; c < 9; ++c) dashpot_C_[9 * dashpot_slot_[node] + c] += C[9 * k + c];
+  NodalEffects previous = effects_;
+  effects_.set_dashpots(nodes, count, C);  // (unchanged when it throws)
+  try {
+    build_dashpot_inverses();
+  } catch (...) {
+    effects_ = std::move(previous);
+    build_dashpot_inverses();
+    throw;
   }
-  build_dashpot_inverses();
 }
 
 void LocalStepper::build_dashpot_inverses() {
   for (Level& level : levels_) {
-    level.implicit_inverse.assign(dashpot_C_.size(), 0.0);
+    level.implicit_inverse.assign(effects_.dashpot_C.size(), 0.0);
     const double half = 0.5 * level.step;
     // Every dashpot node at every level's step: the end kicks use their own level's, the contact
     // impulses (correct_contacts) their drift level's.
     for (std::int64_t node = 0; node < n_nodes(); ++node) {
-      const std::int32_t slot = dashpot_slot_[node];
+      const std::int32_t slot = effects_.dashpot_slot[node];
       if (slot < 0) continue;
       double A[9];
-      for (int c = 0; c < 9; ++c) A[c] = half * dashpot_C_[9 * slot + c];
-      const double diagonal = mass_[node] * (1.0 + half * alpha_);
-      A[0] += diagonal;
-      A[4] += diagonal;
-      A[8] += diagonal;
-      if (!(invert_3x3(A, level.implicit_inverse.data() + 9 * slot) > 0.0))
-        throw std::invalid_argument("dashpot C at node " + std::to_string(node) +
-                                    " is not positive semi-definite");
+      implicit_node_operator(mass_[node], alpha_, half, effects_.dashpot_C.data() + 9 * slot, nullptr, node,
+                             A, level.implicit_inverse.data() + 9 * slot);
     }
   }
 }
@@ -501,10 +472,10 @@ void LocalStepper::start_kick(int c, double h, double* v) {
     // The node's own level: its damping at the velocity it has now (other levels' kicks may have
     // changed it since this level's last end kick), explicit in this half as in Stepper's pass A.
     double damping[3] = {alpha_ * m * vi[0], alpha_ * m * vi[1], alpha_ * m * vi[2]};
-    const std::int32_t slot = dashpot_slot_[i];
+    const std::int32_t slot = effects_.dashpot_slot[i];
     if (slot >= 0) {
       double C_v[3];
-      multiply_3x3(dashpot_C_.data() + 9 * slot, vi, C_v);
+      multiply_3x3(effects_.dashpot_C.data() + 9 * slot, vi, C_v);
       for (int d = 0; d < 3; ++d) damping[d] += C_v[d];
     }
     const double* external = level.external.data() + 3 * r;
@@ -622,24 +593,24 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
     }
     double rhs[3], v_new[3], damping[3];
     for (int d = 0; d < 3; ++d) rhs[d] = m * vi[d] + half * (f[d] + external[d]);
-    const std::int32_t slot = dashpot_slot_[i];
+    const std::int32_t slot = effects_.dashpot_slot[i];
     if (initial) {  // the state's own force and damping at v, nothing stepped
       double C_v[3] = {0.0, 0.0, 0.0};
-      if (slot >= 0) multiply_3x3(dashpot_C_.data() + 9 * slot, vi, C_v);
+      if (slot >= 0) multiply_3x3(effects_.dashpot_C.data() + 9 * slot, vi, C_v);
       for (int d = 0; d < 3; ++d) {
         v_new[d] = vi[d];
         damping[d] = alpha_ * m * vi[d] + C_v[d];
       }
-    } else if (constraint_slot_[i] >= 0) {  // P A P v_new = P rhs (constraints.hpp)
+    } else if (effects_.constraint_slot[i] >= 0) {  // P A P v_new = P rhs (constraints.hpp)
       double A[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, A_inverse[9] = {}, C_v[3] = {0.0, 0.0, 0.0};
       if (slot >= 0)
-        for (int k = 0; k < 9; ++k) A[k] = half * dashpot_C_[9 * slot + k];
+        for (int k = 0; k < 9; ++k) A[k] = half * effects_.dashpot_C[9 * slot + k];
       for (int d = 0; d < 3; ++d) A[4 * d] += m * (1.0 + half * alpha_);
       // A is positive definite (m > 0, C positive semi-definite: set_dashpots checks it), so the
       // restricted matrix is regular.
-      constrained_inverse(A, constraint_P_.data() + 9 * constraint_slot_[i], A_inverse);
+      constrained_inverse(A, effects_.constraint_P.data() + 9 * effects_.constraint_slot[i], A_inverse);
       multiply_3x3(A_inverse, rhs, v_new);
-      if (slot >= 0) multiply_3x3(dashpot_C_.data() + 9 * slot, v_new, C_v);
+      if (slot >= 0) multiply_3x3(effects_.dashpot_C.data() + 9 * slot, v_new, C_v);
       for (int d = 0; d < 3; ++d) damping[d] = alpha_ * m * v_new[d] + C_v[d];
     } else if (slot < 0) {
       const double inverse = 1.0 / (m * (1.0 + half * alpha_));
@@ -649,7 +620,7 @@ void LocalStepper::end_kick(int c, double h, double t, const double* u, double* 
       }
     } else {
       multiply_3x3(level.implicit_inverse.data() + 9 * slot, rhs, v_new);
-      multiply_3x3(dashpot_C_.data() + 9 * slot, v_new, damping);
+      multiply_3x3(effects_.dashpot_C.data() + 9 * slot, v_new, damping);
       for (int d = 0; d < 3; ++d) damping[d] += alpha_ * m * v_new[d];
     }
     double external_power = 0.0, damping_power = 0.0;
@@ -722,19 +693,14 @@ void LocalStepper::prepare_structure() {
   // Each constrained node's implicit update at every level's step (its own end kicks use its own
   // level's; checked at all, before any OpenMP loop can meet a singular one).
   for (std::int64_t i = 0; i < n_nodes(); ++i) {
-    const std::int32_t k = constraint_slot_[i];
+    const std::int32_t k = effects_.constraint_slot[i];
     if (k < 0) continue;
-    const std::int32_t slot = dashpot_slot_[i];
+    const std::int32_t slot = effects_.dashpot_slot[i];
     for (const Level& level : levels_) {
-      const double half = 0.5 * level.step;
-      double A[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, A_inverse[9] = {};
-      if (slot >= 0)
-        for (int c = 0; c < 9; ++c) A[c] = half * dashpot_C_[9 * slot + c];
-      for (int d = 0; d < 3; ++d) A[4 * d] += mass_[i] * (1.0 + half * alpha_);
-      if (!constrained_inverse(A, constraint_P_.data() + 9 * k, A_inverse))
-        throw std::invalid_argument("constraint at node " + std::to_string(i) +
-                                    ": the implicit update restricted to its free directions is singular "
-                                    "(a dashpot C that is not symmetric positive semi-definite?)");
+      double A[9], A_inverse[9];
+      implicit_node_operator(mass_[i], alpha_, 0.5 * level.step,
+                             slot >= 0 ? effects_.dashpot_C.data() + 9 * slot : nullptr,
+                             effects_.constraint_P.data() + 9 * k, i, A, A_inverse);
     }
   }
   if (contact_a_.empty())
@@ -814,16 +780,16 @@ double LocalStepper::run(double* u, double* v, double* a, std::int64_t n_steps, 
       for (int d = 0; d < 3; ++d) a[3 * static_cast<std::int64_t>(level.rows[r]) + d] += level.force[3 * r + d];
   for (std::int64_t i = 0; i < n; ++i) {
     double damping[3] = {alpha_ * mass_[i] * v[3 * i], alpha_ * mass_[i] * v[3 * i + 1], alpha_ * mass_[i] * v[3 * i + 2]};
-    if (dashpot_slot_[i] >= 0) {
+    if (effects_.dashpot_slot[i] >= 0) {
       double C_v[3];
-      multiply_3x3(dashpot_C_.data() + 9 * dashpot_slot_[i], v + 3 * i, C_v);
+      multiply_3x3(effects_.dashpot_C.data() + 9 * effects_.dashpot_slot[i], v + 3 * i, C_v);
       for (int d = 0; d < 3; ++d) damping[d] += C_v[d];
     }
     for (int d = 0; d < 3; ++d) a[3 * i + d] -= damping[d];
-    const std::int32_t k = constraint_slot_[i];
+    const std::int32_t k = effects_.constraint_slot[i];
     if (k >= 0) {  // the held part of the net force is the support's reaction, R = -(I - P)(r - d)
       double free_part[3];
-      multiply_3x3(constraint_P_.data() + 9 * k, a + 3 * i, free_part);
+      multiply_3x3(effects_.constraint_P.data() + 9 * k, a + 3 * i, free_part);
       for (int d = 0; d < 3; ++d) {
         reactions_[3 * k + d] = free_part[d] - a[3 * i + d];
         a[3 * i + d] = free_part[d];
@@ -866,7 +832,7 @@ std::string local_parameter_name(std::size_t j, std::size_t levels) {
 std::vector<double> LocalStepper::checkpoint_parameters() const {
   std::vector<double> parameters{dt_fine_, alpha_, static_cast<double>(n_nodes()),
                                  static_cast<double>(max_level_), static_cast<double>(providers_.size()),
-                                 static_cast<double>(constraint_P_.size() / 9)};
+                                 static_cast<double>(effects_.constraint_P.size() / 9)};
   for (const Level& level : levels_) {
     parameters.push_back(static_cast<double>(level.components.size()));
     parameters.push_back(static_cast<double>(level.contacts.size()));

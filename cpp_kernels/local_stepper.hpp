@@ -16,6 +16,7 @@
 #include "contact.hpp"
 #include "force_provider.hpp"
 #include "internal_force.hpp"
+#include "nodal_effects.hpp"
 #include "state_archive.hpp"
 #include "stepper.hpp"
 
@@ -277,13 +278,10 @@ class LocalStepper {
   double alpha_;
   int max_level_ = 0;
   std::vector<Level> levels_;  // by coarse index c = max_level_ - k
-  std::vector<std::int32_t> dashpot_slot_;  // per node, -1: none
-  std::vector<std::int32_t> constraint_slot_;  // per node, -1: none
-  std::vector<double> constraint_P_;           // (constraints, 9) projections
+  NodalEffects effects_;                       // dashpots and constraints as given, validated
   std::vector<double> reactions_;              // (constraints, 3) of the last run()
   // v += P dv at node i (dv unchanged without a constraint); in place on dv.
   void project(std::int64_t i, double* dv) const;
-  std::vector<double> dashpot_C_;           // (slots, 9)
   std::vector<std::shared_ptr<ForceProvider>> providers_;
   std::vector<std::int32_t> provider_nodes_;  // union of the providers' nodes (sorted)
   std::vector<double> external_;              // (3 n) scratch for the providers' forces

@@ -14,7 +14,7 @@ namespace cavern {
 
 Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
                  const StepperParameters& parameters)
-    : stiffness_(stiffness), mass_(mass), parameters_(parameters) {
+    : stiffness_(stiffness), mass_(mass), parameters_(parameters), effects_(stiffness.n_block_rows) {
   if (!(std::isfinite(parameters.dt) && parameters.dt > 0.0))
     throw std::invalid_argument("dt must be finite and > 0, got " + std::to_string(parameters.dt));
   if (!(std::isfinite(parameters.alpha) && parameters.alpha >= 0.0))
@@ -46,20 +46,12 @@ Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
 
 void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
   partition_checked_ = false;  // check_partition again at the next run
-  for (std::int64_t k = 0; k < count; ++k)
-    if (nodes[k] < 0 || nodes[k] >= n_nodes())
-      throw std::invalid_argument("dashpot nodes[" + std::to_string(k) +
-                                  "] = " + std::to_string(nodes[k]) + " is not a node in [0, " +
-                                  std::to_string(n_nodes()) + ")");
-  std::vector<std::int32_t> previous_nodes = std::move(dashpot_nodes_given_);
-  std::vector<double> previous_C = std::move(dashpot_C_given_);
-  dashpot_nodes_given_.assign(nodes, nodes + count);
-  dashpot_C_given_.assign(C, C + 9 * count);
+  NodalEffects previous = effects_;
+  effects_.set_dashpots(nodes, count, C);  // (unchanged when it throws)
   try {
     build_implicit_slots();
   } catch (...) {
-    dashpot_nodes_given_ = std::move(previous_nodes);
-    dashpot_C_given_ = std::move(previous_C);
+    effects_ = std::move(previous);
     throw;
   }
 }
@@ -67,29 +59,12 @@ void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const 
 void Stepper::set_constraints(const std::int32_t* nodes, std::int64_t count,
                               const double* projection) {
   partition_checked_ = false;  // check_partition again at the next run
-  std::vector<char> seen(n_nodes(), 0);
-  for (std::int64_t k = 0; k < count; ++k) {
-    const std::int32_t node = nodes[k];
-    if (node < 0 || node >= n_nodes())
-      throw std::invalid_argument("constraint nodes[" + std::to_string(k) +
-                                  "] = " + std::to_string(node) + " is not a node in [0, " +
-                                  std::to_string(n_nodes()) + ")");
-    if (seen[node])
-      throw std::invalid_argument("constraint nodes[" + std::to_string(k) + "] = " +
-                                  std::to_string(node) +
-                                  " is listed twice; combine its held directions in one P");
-    seen[node] = 1;
-    check_projection(projection + 9 * k, k);
-  }
-  std::vector<std::int32_t> previous_nodes = std::move(constraint_nodes_);
-  std::vector<double> previous_projection = std::move(constraint_projection_);
-  constraint_nodes_.assign(nodes, nodes + count);
-  constraint_projection_.assign(projection, projection + 9 * count);
+  NodalEffects previous = effects_;
+  effects_.set_constraints(nodes, count, projection);  // (unchanged when it throws)
   try {
     build_implicit_slots();
   } catch (...) {
-    constraint_nodes_ = std::move(previous_nodes);
-    constraint_projection_ = std::move(previous_projection);
+    effects_ = std::move(previous);
     build_implicit_slots();
     throw;
   }
@@ -104,58 +79,32 @@ void Stepper::set_mass_damping(double alpha) {
 }
 
 void Stepper::build_implicit_slots() {
-  std::vector<std::int32_t> slot(n_nodes(), -1);
-  std::vector<double> summed_C;
-  auto slot_of = [&](std::int32_t node) {
+  // One implicit slot per node with a dashpot, a constraint or both: the dashpots' slots first
+  // (NodalEffects' order), then the nodes held without a dashpot.
+  std::vector<std::int32_t> slot = effects_.dashpot_slot;
+  std::vector<double> summed_C = effects_.dashpot_C;
+  const std::int64_t n_constraints = effects_.n_constraints();
+  for (std::int64_t k = 0; k < n_constraints; ++k) {
+    const std::int32_t node = effects_.constraint_nodes[k];
     if (slot[node] < 0) {
       slot[node] = static_cast<std::int32_t>(summed_C.size() / 9);
       summed_C.resize(summed_C.size() + 9, 0.0);
     }
-    return slot[node];
-  };
-  const std::int64_t n_dashpots = static_cast<std::int64_t>(dashpot_nodes_given_.size());
-  for (std::int64_t k = 0; k < n_dashpots; ++k) {
-    const std::int32_t node_slot = slot_of(dashpot_nodes_given_[k]);  // may grow summed_C
-    double* target = summed_C.data() + 9 * node_slot;
-    for (int c = 0; c < 9; ++c) target[c] += dashpot_C_given_[9 * k + c];
   }
-  const std::int64_t n_constraints = static_cast<std::int64_t>(constraint_nodes_.size());
-  for (std::int64_t k = 0; k < n_constraints; ++k) slot_of(constraint_nodes_[k]);
   const std::size_t n_slots = summed_C.size() / 9;
   std::vector<std::int32_t> constraint_of_slot(n_slots, -1);
   for (std::int64_t k = 0; k < n_constraints; ++k)
-    constraint_of_slot[slot[constraint_nodes_[k]]] = static_cast<std::int32_t>(k);
+    constraint_of_slot[slot[effects_.constraint_nodes[k]]] = static_cast<std::int32_t>(k);
 
   const double half_dt = 0.5 * parameters_.dt;
   std::vector<double> inverse(summed_C.size());
   for (std::int64_t node = 0; node < n_nodes(); ++node) {
     if (slot[node] < 0) continue;
-    const double* Ci = summed_C.data() + 9 * slot[node];
-    double scale = 0.0;
-    for (int c = 0; c < 9; ++c) scale = std::max(scale, std::abs(Ci[c]));
-    for (int r = 0; r < 3; ++r)
-      for (int c = r + 1; c < 3; ++c)
-        if (std::abs(Ci[3 * r + c] - Ci[3 * c + r]) > 1e-10 * scale)
-          throw std::invalid_argument("dashpot C at node " + std::to_string(node) +
-                                      " is not symmetric");
-    double A[9];
-    const double diagonal = mass_[node] * (1.0 + half_dt * parameters_.alpha);
-    for (int c = 0; c < 9; ++c) A[c] = half_dt * Ci[c];
-    A[0] += diagonal;
-    A[4] += diagonal;
-    A[8] += diagonal;
-    // (M (1 + dt/2 alpha) I + dt/2 C) is positive definite iff C is not too negative.
-    const double minor2 = A[0] * A[4] - A[1] * A[3];
-    double* node_inverse = inverse.data() + 9 * slot[node];
-    const double determinant = invert_3x3(A, node_inverse);
-    if (!(A[0] > 0.0 && minor2 > 0.0 && determinant > 0.0))
-      throw std::invalid_argument("dashpot C at node " + std::to_string(node) +
-                                  " is not positive semi-definite");
     const std::int32_t constraint = constraint_of_slot[slot[node]];
-    if (constraint >= 0)
-      if (!constrained_inverse(A, constraint_projection_.data() + 9 * constraint, node_inverse))
-        throw std::invalid_argument("constraint at node " + std::to_string(node) +
-                                    ": the implicit system is singular in the free directions");
+    double A[9];
+    implicit_node_operator(mass_[node], parameters_.alpha, half_dt, summed_C.data() + 9 * slot[node],
+                           constraint >= 0 ? effects_.constraint_P.data() + 9 * constraint : nullptr, node,
+                           A, inverse.data() + 9 * slot[node]);
   }
 
   if (n_slots == 0) slot.clear();  // nothing implicit: pass B skips the slot look-up
@@ -186,8 +135,8 @@ ImplicitNodeOperators Stepper::implicit_operators() const {
   operators.dashpot_slot = dashpot_slot_.empty() ? nullptr : dashpot_slot_.data();
   operators.dashpot_C = dashpot_C_.data();
   operators.dashpot_inverse = dashpot_inverse_.data();
-  operators.constraint_of_slot = constraint_nodes_.empty() ? nullptr : constraint_of_slot_.data();
-  operators.constraint_projection = constraint_projection_.data();
+  operators.constraint_of_slot = effects_.constraint_nodes.empty() ? nullptr : constraint_of_slot_.data();
+  operators.constraint_projection = effects_.constraint_P.data();
   return operators;
 }
 
@@ -275,14 +224,9 @@ void Stepper::check_partition() {
   if (n_owned_ < 0 || partition_checked_) return;
   auto require_owned = [this](const std::vector<std::int32_t>& nodes, const std::string& what) {
     for (const std::int32_t node : nodes)
-      if (node >= n_owned_)
-        throw std::invalid_argument(what + " at node " + std::to_string(node) +
-                                    ", a ghost of this share (owned nodes: [0, " +
-                                    std::to_string(n_owned_) +
-                                    ")): a share's effects must be on its own nodes");
+      if (node >= n_owned_) throw NodalEffects::ghost_error(what, node, n_owned_);
   };
-  require_owned(dashpot_nodes_given_, "a dashpot");
-  require_owned(constraint_nodes_, "a constraint");
+  effects_.require_owned(n_owned_);
   for (const auto& provider : providers_) require_owned(provider->nodes(), provider->name());
   if (contact_) require_owned(contact_->unique_nodes(), "a contact pair");
   partition_checked_ = true;
@@ -330,8 +274,8 @@ void Stepper::pass_b(double* u, double* v, double* a) {
   const double* dashpot_C = dashpot_C_.data();
   const double* dashpot_inverse = dashpot_inverse_.data();
   const std::int32_t* constraint_of_slot =
-      constraint_nodes_.empty() ? nullptr : constraint_of_slot_.data();
-  const double* projection = constraint_projection_.data();
+      effects_.constraint_nodes.empty() ? nullptr : constraint_of_slot_.data();
+  const double* projection = effects_.constraint_P.data();
   double* reactions = reactions_.data();
   const double* g = internal_force_.data();
   const double* g_damping = internal_damping_.data();  // beta K0 v_{n+1/2} of the components

@@ -13,6 +13,7 @@
 #include "force_provider.hpp"
 #include "state_archive.hpp"
 #include "internal_force.hpp"
+#include "nodal_effects.hpp"
 #include "symmetric_bsr.hpp"
 
 namespace cavern {
@@ -247,10 +248,7 @@ class Stepper {
 
   // Dashpots and constraints as given (copied), then per node its slot (-1: none) and per slot
   // C, the inverse of the implicit 3x3 system and the constraint (-1: none).
-  std::vector<std::int32_t> dashpot_nodes_given_;
-  std::vector<double> dashpot_C_given_;
-  std::vector<std::int32_t> constraint_nodes_;
-  std::vector<double> constraint_projection_;  // (constraints, 9)
+  NodalEffects effects_;                       // dashpots and constraints as given, validated
   std::vector<double> reactions_;              // (constraints, 3)
   std::vector<std::int32_t> dashpot_slot_;
   std::vector<double> dashpot_C_;              // (slots, 9)
