@@ -589,3 +589,49 @@ if __name__ == "__main__":
     n_dofs, n_blocks, results = time_per_step()
     print(f"threads={_kernels.max_threads()} dofs={n_dofs} blocks={n_blocks} "
           + " ".join(f"{key}: {1e3 * seconds:.2f} ms/step" for key, seconds in results.items()))
+
+
+@pytest.mark.parametrize("kind", ["global", "local"])
+def test_nodal_effects_are_validated_alike_and_a_bad_call_changes_nothing(kind):
+    """Global and local stepping share one NodalEffects (cpp_kernels/nodal_effects.hpp): the same
+    words for the same mistake, and a refused set_dashpots or set_constraints leaves the stepper as
+    it was (catches LocalStepper's old half-built dashpot table after a bad C)."""
+    K, mass = random_spd_system(6, 2, 3)
+    indptr, indices, blocks = bsr_arrays(K)
+    good = np.array([[[2.0, 0.5, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 3.0]]])
+
+    def make():
+        if kind == "global":
+            stepper = _kernels.Stepper(indptr, indices, blocks, mass, 1e-3)
+        else:
+            stepper = _kernels.LocalStepper(indptr, indices, blocks, mass, np.zeros(6, dtype=np.int32), 1e-3, 0.0)
+        stepper.set_dashpots(np.array([1], dtype=np.int32), good.copy())
+        return stepper
+
+    rng = np.random.default_rng(1)
+    u0, v0 = rng.standard_normal(18), rng.standard_normal(18)
+
+    def steps(stepper):
+        u, v, a = u0.copy(), v0.copy(), np.zeros(18)
+        if kind == "global":
+            stepper.reset_energy(u, v, a, 0.0)
+        stepper.run(u, v, a, 8, 0.0)
+        return u
+
+    before = steps(make())
+    stepper = make()
+    checks = 0
+    for nodes, C, words in ((np.array([1], dtype=np.int32), np.array([[[1.0, 2, 0], [0, 1, 0], [0, 0, 1]]]),
+                             r"^dashpot C at node 1 is not symmetric"),
+                            (np.array([7], dtype=np.int32), good.copy(), r"^dashpot nodes\[0\] = 7 is not a node in \[0, 6\)"),
+                            (np.array([2], dtype=np.int32), -1e9 * np.eye(3)[None], r"^dashpot C at node 2 is not positive semi-definite")):
+        with pytest.raises(ValueError, match=words):
+            stepper.set_dashpots(nodes, np.ascontiguousarray(C))
+        checks += 1
+    P = np.eye(3)[None].copy()
+    with pytest.raises(ValueError, match=r"^constraint nodes\[1\] = 3 is listed twice"):
+        stepper.set_constraints(np.array([3, 3], dtype=np.int32), np.ascontiguousarray(np.repeat(P, 2, axis=0)))
+    checks += 1
+    assert checks == 4
+    assert np.array_equal(steps(stepper), before)  # the refused calls changed nothing
+    assert np.abs(before - u0).max() > 0.0  # (and the steps moved something)
