@@ -30,19 +30,52 @@ How to use it
 
 `--check` reruns each scene with the same command line on the path asked (`--ranks N` runs
 `mpirun --allow-run-as-root --oversubscribe -n N /usr/bin/python3 -m pyfem run ...`, `--model` adds
-`--set parallel.model="..."`) into `--runs` (default runs/reference_histories/) and compares every
-column of every recorded history with the rerun's: the largest |difference| over the rows divided by
-the column's largest |value| in the record (`column_differences`), and summary.json's and static.json's
-numbers likewise (`number_differences`). It prints the worst column per scene and exits 1 when one is
-above its tolerance (`tolerance`: 1e-10 unless the entry states a measured, explained exception).
-tests/test_reference_histories.py does the same under pytest. Every run is forced to
-OMP_NUM_THREADS=1.
+`--set parallel.model="..."`) into `--runs` (default runs/reference_histories/), compares, prints the
+worst difference per scene and exits 1 when one is above its tolerance. tests/test_reference_histories.py
+does the same under pytest. Every run is forced to OMP_NUM_THREADS=1 (below).
+
+How a rerun is compared
+-----------------------
+- Histories (`column_differences`): every column of every recorded CSV, the largest |difference| over
+  the rows divided by the column's largest |value| in the record, within TOLERANCE = 1e-10. A column
+  smaller than FLOOR = 1 % of the largest value of its dimension in the scene (`pyfem.compare.dimension`:
+  length, velocity, acceleration, stress, ...; energy.csv: the largest energy) is divided by that 1 %:
+  such columns are round-off or nearly so (u_y, v_y, a_y under an SV wave in the x-z plane: 1e-18 m
+  against 1e-3 m; a bonded pair's gap of 1e-21 m; energy.csv's balance, 1e-15 of the energy), and their
+  own peak would turn a round-off difference of 1e-16 of the dimension into O(1).
+- Reports (`number_differences`): every number of summary.json and static/static.json (wall times,
+  memory and rank counts left out) relative to itself (a vector's component to the vector's largest;
+  the energy terms to the largest energy; the monitors' and pairs' peaks with the same 1 % floor of
+  their dimension), within 1e-10; `title`, `status` and `effects` equal.
+- Exceptions, on the MPI paths only, measured and explained at their entries (`Entry.mpi`): a dimension
+  whose columns are measured against the dimension's largest value (tests/test_mpi.py's rule) to a
+  larger tolerance, where the ranks' other order of the sums is amplified: the tetrahedral tunnel's
+  and the cavity's accelerations (net forces a = (f - K u) / m of a long wave on a fine mesh), the
+  small case 3 (round-off of its static stage's 1 600 relaxation steps in the 0.04 s quiet precursor:
+  tests/test_mpi_stage.py STAGE_ROUNDOFF). The distributed model's critical step is its own power
+  iteration's (`DISTRIBUTED_REPORTS`, 1e-3; its time step is the same), and it writes no deformed
+  section (`ABSENT`).
+
+Two runs of today's code
+------------------------
+Two serial runs with OMP_NUM_THREADS=1 are identical to the last bit (every column of every scene: 0).
+With OMP_NUM_THREADS=2 the scenes of 4 096 nodes or more differ by round-off: the kernel threads the
+stiffness product only from cpp_kernels/stepper.hpp kMinRowsForThreads = 4 096 block rows, and its
+symmetric (upper-triangle) product adds each thread's contributions to the columns beyond its row
+range from a per-thread spill buffer after a barrier (cpp_kernels/symmetric_bsr.hpp `partition`), so
+those sums are ordered by the thread count. Measured on the free-field box (16 606 nodes): 2.1e-11 of
+the column (the small s_xz), 7e-12 of the largest acceleration; the contact and layer scenes (546 and
+1 209 nodes) are identical with 2 threads. Hence the forced single thread: the records compare equal to
+the bit serially, and the tolerances hold for 2 threads too.
 
 Records made with the code of commit d13262b (the base of branch `refhist`: "Merge the docs rework;
 ..."), 2026-12-07, Debian's Python, dolfinx 0.5.2, gmsh 4.8. Regenerate only on purpose (a change of
 the product's results that is wanted), with `--record`, and commit the records with the reason.
 
 The scenes (`SCENES`; the exact overrides are there) and what each exercises: see `Entry.effects`.
+None of the six is refused by a path: the distributed model refuses a linear static stage (case 3's
+stage is dynamic relaxation), one point per cell (`integration = "reduced"`) and quadratic tetrahedra,
+none of which is here (`REFUSED` stays empty; the MPI test would assert the one-line refusal).
 
 Measured agreement with the serial record
 -----------------------------------------
@@ -147,6 +180,12 @@ SCENES = {
 
 # The paths a record is checked on: (model, ranks); model None: the serial `pyfem run` without MPI.
 PATHS = ((None, 1), ("whole", 2), ("whole", 3), ("distributed", 1), ("distributed", 2), ("distributed", 3))
+# Keys of summary.json a path's run.json does not write today: not compared there.
+ABSENT = {"distributed": ("deformed_section",)}  # the distributed model draws no deformed section
+# The distributed model's critical step comes from its own power iteration (a start vector of the node
+# coordinates, pyfem/distributed_model.py): within 1e-3 of the whole model's (tests/test_distributed_model.py;
+# measured here up to 8.0e-5). Its time step, rounded to divide the output interval, is the same.
+DISTRIBUTED_REPORTS = {"dt_critical": 1.0e-3}
 # Scenes a path refuses (the one-line error it prints): none of the six today (filled from measurement).
 REFUSED: dict = {}
 
@@ -321,11 +360,13 @@ def number_kind(path: str) -> str | None:
     return None
 
 
-def number_differences(got: dict, expected: dict, peaks: dict | None = None, against_dimension=()) -> dict:
+def number_differences(got: dict, expected: dict, peaks: dict | None = None, against_dimension=(),
+                       absent=()) -> dict:
     """{key: relative difference} of every number of a recorded report (summary.json, static.json)
     against the rerun's: |a - b| / |b| (a vector's component: / the vector's largest |component|; a
     pair's or monitor's peak: / max(|b|, FLOOR x its dimension's largest in the histories, `peaks`), or
     / that largest for the dimensions in `against_dimension`).
+    Keys in `absent` (a path's run.json does not write them) are not compared.
     Energy terms are measured against the run's largest energy (the balance is round-off of it), the
     balance error (already a ratio to the energy put in) as it is. Text (`TEXT_COMPARED`) must be
     equal (1.0 where not)."""
@@ -334,7 +375,7 @@ def number_differences(got: dict, expected: dict, peaks: dict | None = None, aga
     energy_scale = max((abs(v) for k, v in energy.items() if isinstance(v, float) and "error" not in k), default=0.0)
     out = {}
     for path, value, scale in _leaves(expected):
-        if path.startswith("record"):
+        if path.startswith("record") or path.split(".")[0].split("[")[0] in absent:
             continue
         other = got_leaves.get(path, None)
         if scale is None:
@@ -367,6 +408,8 @@ def tolerance(name: str, model: str | None, ranks: int, part: str = "histories",
     """The tolerance of a difference (`compare`): TOLERANCE, or the entry's explained exception."""
     if model is None:
         return TOLERANCE
+    if model == "distributed" and key in DISTRIBUTED_REPORTS:
+        return DISTRIBUTED_REPORTS[key]
     entry = SCENES[name]
     if part == "histories":
         relative, column = key.split(":")
@@ -382,7 +425,7 @@ def compare(name: str, run_dir: Path, model: str | None = None, ranks: int = 1,
     out = {"histories": column_differences(run_dir, record_dir, special)}
     peaks = dimension_peaks(record_dir)
     out["summary"] = number_differences(key_numbers(run_dir), json.loads((record_dir / "summary.json").read_text()),
-                                        peaks, special)
+                                        peaks, special, ABSENT.get(model, ()))
     static = record_dir / "static" / "static.json"
     if static.exists():
         out["static"] = number_differences(json.loads((run_dir / "static" / "static.json").read_text()),
