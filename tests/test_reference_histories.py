@@ -9,9 +9,10 @@ of run.json's key numbers and of the static stage's static.json. The MPI paths' 
 and why: the workflow's docstring and `Entry.mpi`.
 - default tier: the records are complete and were made with today's scene settings, and the three
   cheap scenes (the free-field box, the contact layers, the yielding layer under cracking concrete)
-  rerun serially (~40 s in all);
+  rerun serially (20 s in all, measured);
 - slow tier: the other three serially, and every scene on the whole model on 2 and 3 ranks and on
-  the distributed model on 1, 2 and 3 ranks (`mpirun`; a missing launcher fails).
+  the distributed model on 1, 2 and 3 ranks (`mpirun`; a missing launcher fails): 33 tests, 12 min 48 s
+  on the 2 shared cores (the four case-3 MPI runs 56-69 s each).
 """
 import json
 import sys
