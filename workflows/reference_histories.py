@@ -13,7 +13,8 @@ today's code and keeps, per scene, a compact record under workflows/results/refe
   (every column, the run's own 11 significant digits), and energy.csv (full precision);
 - summary.json: run.json's key numbers (cells, nodes, dofs, dt, steps, time reached, effects, the
   energy account with its balance, the monitors' and pairs' peaks, the pair-state counts, the element
-  loop's regions, the local stepping's levels), plus the command line that made the record;
+  loop's regions, dt_reason with local stepping's levels, its stability check), plus the command
+  line that made the record;
 - static/static.json where a static stage ran (its wall time removed).
 
 No history is decimated: the longest has 151 rows (`MAX_ROWS` would keep every k-th row of a history
@@ -44,17 +45,20 @@ How a rerun is compared
   against 1e-3 m; a bonded pair's gap of 1e-21 m; energy.csv's balance, 1e-15 of the energy), and their
   own peak would turn a round-off difference of 1e-16 of the dimension into O(1).
 - Reports (`number_differences`): every number of summary.json and static/static.json (wall times,
-  memory and rank counts left out) relative to itself (a vector's component to the vector's largest;
-  the energy terms to the largest energy; the monitors' and pairs' peaks with the same 1 % floor of
-  their dimension), within 1e-10; `title`, `status` and `effects` equal.
-- Exceptions, on the MPI paths only, measured and explained at their entries (`Entry.mpi`): a dimension
+  memory, rank counts and points left out: `compared`) relative to itself (a vector's component to
+  the vector's largest; the energy terms to the largest energy; the monitors' and pairs' peaks with
+  the same 1 % floor of their dimension), within 1e-10; `title`, `status`, `effects` and the local
+  stepping check's verdict equal.
+- Exceptions, on the MPI paths only (the whole model on 2 and 3 ranks, the distributed model on 1, 2
+  and 3), measured and explained at their entries (`Entry.mpi`): a dimension
   whose columns are measured against the dimension's largest value (tests/test_mpi.py's rule) to a
   larger tolerance, where the ranks' other order of the sums is amplified: the tetrahedral tunnel's
-  and the cavity's accelerations (net forces a = (f - K u) / m of a long wave on a fine mesh), the
+  and the cavity's accelerations (net forces a = (f - K u) / m of a long wave on a fine mesh; the
+  tunnel's velocities and stresses too), the
   small case 3 (round-off of its static stage's 1 600 relaxation steps in the 0.04 s quiet precursor:
   tests/test_mpi_stage.py STAGE_ROUNDOFF). The distributed model's critical step is its own power
-  iteration's (`DISTRIBUTED_REPORTS`, 1e-3; its time step is the same), and it writes no deformed
-  section (`ABSENT`).
+  iteration's (`DISTRIBUTED_REPORTS`, 1e-3; its time step is the same), so is its local stepping
+  check's start state, and it writes no deformed section nor the stage's pictures (`ABSENT`).
 
 Two runs of today's code
 ------------------------
