@@ -143,6 +143,10 @@ sys.path.insert(0, str(ROOT))  # pyfem.compare, when run as a script
 RECORDS = ROOT / "workflows" / "results" / "reference_histories"
 PYTHON = "/usr/bin/python3"
 BASE_COMMIT = "d13262b"  # the commit the committed records were made with
+# Records made again later, on purpose: {scene: (commit, why)}.
+RERECORDED = {"case3_small": ("4b87761", "record time is run time: the record's 1 s lead-in now runs at t < 0, "
+                              "so the scene starts at its window (lead_in = 0) to keep its 0.04 s; the other "
+                              "five scenes reproduce d13262b's records to the bit on this commit")}
 TOLERANCE = 1.0e-10  # relative to each column's largest |value|
 FLOOR = 1.0e-2  # a column is measured against at least this share of its dimension's largest value
 MAX_ROWS = 2000  # a history longer than this is kept every k-th row (none is today)
@@ -196,7 +200,8 @@ SCENES = {
         # s_xx, s_yy at the crown, 1 % of the largest stress, then differ by 1.0e-10 of themselves).
         mpi={"acceleration": 3.0e-9, "velocity": 1.0e-10, "stress": 1.0e-10}),
     "case3_small": Entry(
-        "workflows/scenes/case3_contact_coarse.toml", (*SMALL_CASE3, "time.duration=0.04", "output.xdmf_interval=0.0"),
+        "workflows/scenes/case3_contact_coarse.toml", (*SMALL_CASE3, "wave.motion.record.lead_in=0.0", "time.duration=0.04",
+                                                   "output.xdmf_interval=0.0"),
         "the case-3 scene on the small model of tests/test_case_study_stage.py: the static stage "
         "(excavation, lining installed, dynamic relaxation), Mohr-Coulomb rock, the lining's concrete "
         "damage, two interfaces of contact pairs with deterioration, oblique P + SV El Centro record; "
