@@ -25,12 +25,15 @@ from pathlib import Path
 
 import numpy as np
 
+from pyfem.clock import run_origin
+
 from pyfem.errors import SceneError
 
 CHECKPOINT_NAME = "checkpoint.npz"
 FORMAT = 1  # bumped when the content changes; an older checkpoint is refused, not misread
 # Scene keys a resumed run may change: they do not alter the computed state.
-RESUMABLE_CHANGES = (("output", "checkpoint_interval"),)
+# time.duration: an interrupted run may be continued to a later (or an earlier, not yet reached) end.
+RESUMABLE_CHANGES = (("output", "checkpoint_interval"), ("time", "duration"))
 
 # Keys added after checkpoints were first written, with the value that reproduces the run before
 # they existed: left out of the fingerprint at that value, so an earlier run's checkpoint still
@@ -129,6 +132,9 @@ def model_fingerprint(simulation) -> dict:
         "dofs": int(simulation.stiffness.shape[0]),
         "dt": float(simulation.time_step.dt),
         "steps": int(simulation.n_steps),
+        # Record time is run time: a record's lead-in runs from this origin (absent: t starts at 0).
+        **({"time_origin": float(run_origin(simulation.lead_in, simulation.time_step))}
+           if getattr(simulation, "lead_in", 0.0) > 0.0 else {}),
         "mass_sha256": hashlib.sha256(np.ascontiguousarray(simulation.mass).tobytes()).hexdigest(),
         **({"levels_sha256": hashlib.sha256(np.ascontiguousarray(simulation.node_levels, dtype=np.int32).tobytes())
             .hexdigest()} if getattr(simulation, "node_levels", None) is not None else {}),
@@ -223,7 +229,15 @@ class Checkpoint:
     def check_model(self, simulation) -> None:
         """Raises SceneError (key --resume) when this checkpoint is not of the simulation's model."""
         saved = self.saved_fingerprint()
-        where = _first_difference(saved, model_fingerprint(simulation))
+        current = model_fingerprint(simulation)
+        # The steps follow time.duration, which a resume may change: the run continues to the new end,
+        # as long as the checkpoint has not passed it.
+        saved.pop("steps", None)
+        current.pop("steps", None)
+        where = _first_difference(saved, current)
+        if where == "time_origin":
+            self._refuse("the checkpoint was written before record time became run time (its record's lead-in "
+                         "ran from t = 0, now it runs at t < 0): start the run again")
         if where in ("dt", "steps", "levels_sha256"):
             self.refuse_other_stepping("levels_sha256" in saved, getattr(simulation, "node_levels", None) is not None)
         self._refuse_difference(where)
@@ -234,6 +248,13 @@ class Checkpoint:
             self._refuse("the checkpoint lists the contact pairs in another order than this version (a checkpoint "
                          "with contact written before 2026-11-29 lists them in the mesh's numbering; they are now "
                          "sorted by interface and position)")
+
+    def check_end(self, end: float, duration: float) -> None:
+        """Refuses (SceneError, key --resume) a time.duration that ends before the checkpoint's time."""
+        t = float(self.meta["t"])
+        if t > end + 1e-9 * max(abs(end), 1.0):
+            self._refuse(f"time.duration = {duration:g} s ends before the checkpoint's t = {t:.6g} s: give at least "
+                         f"{t:.6g} s to continue the run")
 
     def refuse_other_stepping(self, stepped_locally: bool, steps_locally: bool) -> None:
         """Refuses (SceneError, key --resume) a resume that would step globally where the interrupted

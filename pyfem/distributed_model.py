@@ -1351,6 +1351,7 @@ class DistributedRun:
 
         return {"scene": scene_fingerprint(self.scene), "dofs": self.part.n_dofs_global, "dt": self.time_step.dt,
                 "steps": self.n_steps, "ranks": self.comm.size,
+                "time_origin": run_origin(self.lead_in, self.time_step),
                 "levels": None if self.lts is None else self.lts.counts.tolist()}
 
     def _check_model(self, saved) -> None:
@@ -1358,9 +1359,13 @@ class DistributedRun:
         rank count or partition."""
         theirs, ours = saved.meta["fingerprint"], self._fingerprint()
         saved.refuse_other_stepping(theirs.get("levels") is not None, ours["levels"] is not None)
-        for key in ("dofs", "dt", "steps", "levels"):
+        for key in ("dofs", "dt", "levels"):  # (not the steps: a resume may change time.duration)
             if theirs.get(key) != ours[key]:
                 saved._refuse(f"the model's {key} differs from the checkpoint's (another mesh or build?)")
+        if theirs.get("time_origin", 0.0) != ours["time_origin"]:
+            saved._refuse("the checkpoint was written before record time became run time (its record's lead-in "
+                          "ran from t = 0, now it runs at t < 0): start the run again")
+        saved.check_end(ours["time_origin"] + self.n_steps * self.time_step.dt, self.scene["time"]["duration"])
 
     def _summary(self) -> dict:
         from pyfem import distributed_stage

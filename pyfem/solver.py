@@ -1211,6 +1211,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             raise
         if saved is not None:
             saved.check_model(simulation)  # before a stage is solved again for a checkpoint it would refuse
+            saved.check_end(run_origin(simulation.lead_in, simulation.time_step)
+                            + simulation.n_steps * simulation.time_step.dt, scene["time"]["duration"])
         restored = stage is not None and static_output.restore_hand_over(simulation, stage)
         if stage is not None and not restored:
             simulation = as_first_sitting(prepare(scene))  # the file is of another model: the stage is solved again

@@ -454,3 +454,33 @@ def test_a_checkpoint_from_before_the_integration_key_still_resumes(tmp_path):
     saved.check_scene(scene_with("full"))
     with pytest.raises(SceneError, match=r"materials\.rock\.plasticity\.integration"):
         saved.check_scene(scene_with("reduced"))
+
+
+def test_an_interrupted_run_continues_to_a_later_duration(tmp_path):
+    """A run stopped (SIGTERM) after its first checkpoint resumes with a longer time.duration and
+    ends as a run of that duration from the start would (histories byte for byte); a duration that
+    ends before the checkpoint's time is refused in one line. Catches the refusal a user met when
+    extending a long record's run, and a continuation that restarts or drops the earlier part."""
+    long_run = ("--set", "time.duration=2.0")
+    pyfem_run(tmp_path / "reference", *long_run)
+    out = tmp_path / "stopped"
+    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), *KILL_RUN,
+                                "--set", "time.duration=60"], cwd=REPO, env=ENV, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while not (out / checkpoint.CHECKPOINT_NAME).exists():
+        assert process.poll() is None and time.monotonic() < deadline
+        time.sleep(0.05)
+    process.send_signal(signal.SIGTERM)
+    process.wait(timeout=120)
+    assert process.returncode == 128 + signal.SIGTERM
+    reached = json.loads((out / "run.json").read_text())["time_reached"]
+    assert 0.0 < reached < 2.0, reached  # stopped before the reference's end
+    before = history_files(out)
+    short = pyfem_run(out, "--set", f"time.duration={reached / 2:.6g}", "--resume", check=False)
+    errors = [line for line in short.stderr.splitlines() if line.startswith("error: ")]
+    assert short.returncode == 2 and len(errors) == 1 and "ends before the checkpoint's t" in errors[0], short.stderr
+    assert history_files(out) == before  # a refused resume touches nothing
+    resumed = pyfem_run(out, *long_run, "--resume")
+    assert "run finished" in resumed.stdout
+    assert_same_run(out, tmp_path / "reference")
