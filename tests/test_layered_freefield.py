@@ -207,7 +207,7 @@ def test_layers_need_a_surface_and_known_media():
         parse_scene(base)
 
 
-@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("ranks", [2, pytest.param(3, marks=pytest.mark.slow)])
 def test_layered_input_is_the_same_on_every_rank_count(tmp_path, mpi_launcher, ranks):
     """The distributed model builds each rank's input from its own faces' depths: its monitor equals
     the serial run's to round-off (measured 3e-16 on 2 ranks)."""
