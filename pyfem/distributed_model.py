@@ -1004,8 +1004,9 @@ def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None =
     """What `run` prints before it steps (rank 0); with deteriorating pairs (`contact_arrays`) the
     whole model's "interface wear" line; with local time stepping (`lts`: distributed_lts.RankLevels,
     `lts_decision`: "auto"'s reason) its levels."""
-    from pyfem.local_stepping import STABILITY_STEPS
     from pyfem.interfaces import wear_words
+    from pyfem.local_stepping import STABILITY_STEPS
+    from pyfem.solver import free_field_words
 
     counts = part.comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts), root=0)
     if part.comm.rank != 0:
@@ -1014,6 +1015,7 @@ def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None =
             "ranks": part.comm.size, "dofs": part.n_dofs_global,
             "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e in counts],
             "time step": f"{time_step.dt:.6g} s ({time_step.reason})", "steps": n_steps,
+            **({"free field": free_field_words(part.scene)} if "seismic_input" in part.scene.effects else {}),
             **({"local stepping (auto)": lts_decision} if lts_decision else {}),
             **({"local time stepping": f"{len(lts.counts)} rate levels on the ranks' parts (nodes per level, finest "
                                        f"first: {', '.join(str(int(c)) for c in lts.counts)}; global step "

@@ -869,6 +869,18 @@ def plan(scene: Scene) -> dict:
     return simulation_plan(simulation)
 
 
+def free_field_words(scene: Scene) -> str:
+    """Which free field the input faces get: the homogeneous half-space of wave.medium, or the layered
+    site of [[wave.layers]] over it (the rock of each face against it: warn_input_medium)."""
+    wave = scene["wave"]
+    surface = "no free surface" if wave.get("surface") is None else f"free surface at z = {wave['surface']:g} m"
+    layers = wave.get("layers") or []
+    if not layers:
+        return f"homogeneous '{wave['medium']}' half-space, {surface} (pyfem.seismic.freefield)"
+    stack = ", ".join(f"{layer['thickness']:g} m of '{layer['medium']}'" for layer in layers)
+    return f"layered site: {stack} (top down) over a '{wave['medium']}' half-space, {surface} (pyfem.seismic.layered)"
+
+
 def resolution_plan(scene: Scene, model) -> dict:
     """{"mesh resolution": {region: its element sizes against the accuracy study's advice}} of a scene
     with a wave (pyfem.accuracy.resolution_report); a mesh file's too-coarse regions are warned of
@@ -942,6 +954,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         "mesh": f"{scene['mesh']['builder']}, {element_name(model, scene['mesh']['order'])}, {model.n_cells} cells",
         "nodes": len(simulation.mass),
         "dofs": n,
+        **({"free field": free_field_words(scene)} if "seismic_input" in scene.effects else {}),
         **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
         **({"interface wear": wear_words(simulation.contact_arrays["deterioration"],
                                          run_origin(simulation.lead_in, ts) + simulation.n_steps * ts.dt)["note"]}

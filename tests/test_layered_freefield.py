@@ -227,3 +227,11 @@ def test_layered_input_is_the_same_on_every_rank_count(tmp_path, mpi_launcher, r
     b = np.loadtxt(tmp_path / "ranks" / "monitors" / "m.csv", delimiter=",", skiprows=1)[:, 1:4]
     assert np.abs(a).max() > 5.0e-4  # the wave arrived
     assert np.abs(a - b).max() < 1e-10 * np.abs(a).max()
+
+
+def test_check_says_which_free_field_the_faces_get():
+    """`check` names the free field: the layered site with its layers, or the half-space."""
+    plan = solver.plan(layered_box_scene("SH", 0.0))
+    assert plan["free field"].startswith("layered site: 110 m of 'soft' (top down) over a 'sandstone' half-space")
+    plan = solver.plan(layered_box_scene("SH", 0.0, layers=False))
+    assert plan["free field"].startswith("homogeneous 'sandstone' half-space, free surface at z = 230 m")
