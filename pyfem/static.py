@@ -1246,6 +1246,16 @@ def plan_report(scene: typing.Mapping, model) -> dict:
             "direct" if n_dofs <= DIRECT_SOLVER_LIMIT else "iterative")
         solver_words = (f"{method} (up to {n_dofs} unknowns; direct up to {DIRECT_SOLVER_LIMIT}), tolerance "
                         f"{stage_tolerance(scene):g}")
+    pair_words = {}
+    if "contact" in scene:
+        pair_words["contact pairs"] = (
+            "welded during the stage (contact.split = \"after_static\"), split for the dynamic run with the "
+            "welded stage's forces" if welded(scene) else
+            "with their law during the stage (bond, slip, opening; no deterioration)" if uses_relaxation(scene)
+            else "bonded during the stage (a linear stage)")
+    hand_over_words = ("; plastic strain, damage and pair states go on" if uses_relaxation(scene) else "")
+    if welded(scene) and uses_relaxation(scene):
+        hand_over_words = "; plastic strain and damage go on, the pairs start bonded"
     return {
         "initial stress": source + (", gravity on" if settings["gravity"] else ""),
         "stage 1 (excavation)": (f"{', '.join(excavated) or 'no region'} removed (absent from the model)"
@@ -1256,6 +1266,7 @@ def plan_report(scene: typing.Mapping, model) -> dict:
                               + f"the remaining {1.0 - relaxation:g} released"),
         "boundary": ", ".join(f"{name} {kind}" for name, kind in boundary.items()),
         "solver": solver_words,
+        **pair_words,
         "hand-over": "static stress, pair forces and support reactions to the dynamic run (u = v = 0)"
-                     + ("; plastic strain, damage and pair states go on" if uses_relaxation(scene) else ""),
+                     + hand_over_words,
     }
