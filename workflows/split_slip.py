@@ -12,7 +12,8 @@ writes OUT.csv and OUT.md: per run and pair monitor, the pair's state and static
 largest slip (|tangential relative displacement|) and when, the x component of the relative
 displacement (the paper's Fig. 6 quantity: max -6.01 cm, residual -5.93 cm in case 3) at its
 largest magnitude, with its sign, and at the end, whether it kept one sign (never beyond 1 % of its
-peak on the other side), and the final state and D. Run directories are read as they are (a run
+peak on the other side), the same for the component (x, y or z) with the largest excursion, and the
+final state and D. Run directories are read as they are (a run
 still going is read up to where it is).
 """
 from __future__ import annotations
@@ -27,7 +28,8 @@ import numpy as np
 CM = 100.0
 STATES = ("bonded", "stick", "sliding", "separated")
 COLUMNS = ("split", "pair", "t_end_s", "state_0", "N0_MN", "T0_MN", "peak_slip_cm", "t_peak_slip_s",
-           "dux_peak_cm", "sign", "dux_end_cm", "one_signed", "state_end", "D_end")
+           "dux_peak_cm", "sign", "dux_end_cm", "one_signed", "main_component", "main_peak_cm", "main_end_cm",
+           "main_one_signed", "state_end", "D_end")
 
 
 def split_of(run: pathlib.Path) -> str:
@@ -48,6 +50,10 @@ def pair_rows(run: pathlib.Path) -> list[dict]:
         k, j = int(np.argmax(slip)), int(np.argmax(np.abs(dux)))
         peak = dux[j]
         other_side = -np.sign(peak) * dux
+        # The component of the relative displacement with the largest excursion, signed.
+        name = max(("dux", "duy", "duz"), key=lambda c: np.abs(data[c]).max())
+        main = data[name]
+        main_peak = main[int(np.argmax(np.abs(main)))]
         rows.append({
             "split": split, "pair": path.stem, "t_end_s": f"{data['t'][-1]:.3f}",
             "state_0": STATES[int(data["state"][0])], "N0_MN": f"{data['N'][0] / 1e6:.3f}",
@@ -56,6 +62,8 @@ def pair_rows(run: pathlib.Path) -> list[dict]:
             "dux_peak_cm": f"{CM * peak:+.3f}", "sign": "-" if peak < 0 else "+",
             "dux_end_cm": f"{CM * dux[-1]:+.3f}",
             "one_signed": "yes" if np.all(other_side <= 0.01 * abs(peak)) else "no",
+            "main_component": name, "main_peak_cm": f"{CM * main_peak:+.3f}", "main_end_cm": f"{CM * main[-1]:+.3f}",
+            "main_one_signed": "yes" if np.all(-np.sign(main_peak) * main <= 0.01 * abs(main_peak)) else "no",
             "state_end": STATES[int(data["state"][-1])], "D_end": f"{data['D'][-1]:.4f}",
         })
     return rows
@@ -75,7 +83,8 @@ def main() -> None:
     lines = ["# Case 3 (coarse): interlayer slip at the pair monitors, split before / after the static stage", "",
              "Made by workflows/split_slip.py (its docstring has the commands). N0, T0: the pair's normal and",
              "shear force at t = 0 (compression positive); dux: x component of the relative displacement",
-             "(the paper's Fig. 6 quantity, max -6.01 cm, residual -5.93 cm in case 3).", "",
+             "(the paper's Fig. 6 quantity, max -6.01 cm, residual -5.93 cm in case 3); main: the component",
+             "of the relative displacement with the largest excursion (a separated pair's includes its opening).", "",
              "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines += ["| " + " | ".join(str(row[c]) for c in COLUMNS) + " |" for row in rows]
     args.out.with_suffix(".md").write_text("\n".join(lines) + "\n")
