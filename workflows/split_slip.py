@@ -87,6 +87,18 @@ def main() -> None:
              "of the relative displacement with the largest excursion (a separated pair's includes its opening).", "",
              "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines += ["| " + " | ".join(str(row[c]) for c in COLUMNS) + " |" for row in rows]
+    lines += ["", "All pairs (run.json pair_states): states at t = 0 and at the end, the most sliding at once.", "",
+              "| split | pairs | t = 0 (bonded/stick/sliding/separated) | end | most sliding (t) |", "|---|---|---|---|---|"]
+    for run in args.runs:
+        summary = json.loads((run / "run.json").read_text())
+        states = summary.get("pair_states")
+        if not states:
+            continue
+        first = "/".join(str(states[name][0]) for name in STATES)
+        last = "/".join(str(states[name][-1]) for name in STATES)
+        k = int(np.argmax(states["sliding"]))
+        lines.append(f"| {split_of(run)} | {summary.get('n_pairs')} | {first} | {last} | "
+                     f"{states['sliding'][k]} ({states['t'][k]:.2f} s) |")
     args.out.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
