@@ -39,6 +39,14 @@ def split_of(run: pathlib.Path) -> str:
     return scene.get("contact", {}).get("split", "before_static") if isinstance(scene, dict) else "?"
 
 
+def signed_words(other_side: np.ndarray, peak: float) -> str:
+    """Whether a history kept one sign: never beyond 1 % of its peak on the other side ("-" below
+    1 micrometre: nothing moved)."""
+    if abs(peak) < 1e-6:
+        return "-"
+    return "yes" if np.all(other_side <= 0.01 * abs(peak)) else "no"
+
+
 def pair_rows(run: pathlib.Path) -> list[dict]:
     rows = []
     split = split_of(run)
@@ -61,9 +69,9 @@ def pair_rows(run: pathlib.Path) -> list[dict]:
             "peak_slip_cm": f"{CM * slip[k]:.3f}", "t_peak_slip_s": f"{data['t'][k]:.3f}",
             "dux_peak_cm": f"{CM * peak:+.3f}", "sign": "-" if peak < 0 else "+",
             "dux_end_cm": f"{CM * dux[-1]:+.3f}",
-            "one_signed": "yes" if np.all(other_side <= 0.01 * abs(peak)) else "no",
+            "one_signed": signed_words(other_side, peak),
             "main_component": name, "main_peak_cm": f"{CM * main_peak:+.3f}", "main_end_cm": f"{CM * main[-1]:+.3f}",
-            "main_one_signed": "yes" if np.all(-np.sign(main_peak) * main <= 0.01 * abs(main_peak)) else "no",
+            "main_one_signed": signed_words(-np.sign(main_peak) * main, main_peak),
             "state_end": STATES[int(data["state"][-1])], "D_end": f"{data['D'][-1]:.4f}",
         })
     return rows
