@@ -1320,8 +1320,8 @@ class DistributedRun:
                                                                self.contact_arrays, self.stage)
             self.contact = self.lts_layout.pairs
             return stepper, exchanges
-        if self.stage is not None:  # the stage's pairs go on (rebased; pyfem/distributed_stage.py hand_over)
-            self.contact = self.stage.contact
+        if self.stage is not None and self.stage.contact is not None:
+            self.contact = self.stage.contact  # the stage's pairs go on (rebased; pyfem/distributed_stage.py hand_over)
         elif self.contact_arrays is not None and len(self.part.pairs):
             from pyfem.solver import make_contact_pairs
 

@@ -239,7 +239,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     from pyfem.relaxation import probe_frequency, ramp_length, relax
     from pyfem.solver import make_contact_pairs
     from pyfem.static import (_install_cells, _pair_force_vector, _stage_constraints, face_support_resultants,
-                              stage_boundary, stage_loads, stage_tolerance, unconverged_warning)
+                              stage_boundary, stage_loads, stage_pair_arrays, stage_tolerance, unconverged_warning)
 
     start = time.perf_counter()
     scene, comm, model = part.scene, part.comm, part.model
@@ -287,7 +287,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
             if name not in installed_regions:
                 table[name] = regions.new_component(name)
     has_pairs = contact_arrays is not None and len(contact_arrays["pairs"])
-    stage_pairs = None if contact_arrays is None else dict(contact_arrays, deterioration=None)
+    stage_pairs = stage_pair_arrays(scene, contact_arrays)  # no deterioration; welded with split "after_static"
     contact = make_contact_pairs(stage_pairs) if has_pairs else None
     if has_pairs:  # F0 on node i and -F0 on j in the load (as the whole model's stage)
         f_exc = f_exc + _pair_force_vector(part.n_local, contact_arrays)
@@ -462,7 +462,7 @@ def monitor_report(stage: "RankStage", monitors, names: list, comm: MPI.Comm) ->
 def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | None) -> None:
     """The stage's end becomes the dynamic run's start (pyfem.static.hand_over on the ranks): the
     element loop's components and the pairs go on, the monitors' static stress is the stage's."""
-    from pyfem.static import monitor_static_stress
+    from pyfem.static import monitor_static_stress, welded
 
     if loop is not None:
         loop.counted.components = list(stage.counted)
@@ -474,7 +474,9 @@ def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | Non
                 loop.halo.initial_stress[name] = component.stress()
     if contact_arrays is not None and stage.contact is not None:
         contact_arrays["static_force"] = np.ascontiguousarray(stage.contact.static_force())
-        if contact_arrays["deterioration"] is not None:  # the wear's clock starts with the record
+        if welded(part.scene):  # split after the stage: new bonded pairs with the real strengths and F0
+            stage.contact = None
+        elif contact_arrays["deterioration"] is not None:  # the wear's clock starts with the record
             stage.contact.set_deterioration(*contact_arrays["deterioration"])
     stress = monitors.stress
     if stress is not None and len(monitors.index):

@@ -499,6 +499,8 @@ _MATERIAL = Table({
 })
 
 _WAVE_TYPE = Choice("wave type", ("P", "SV", "SH"))
+CONTACT_SPLITS = ("before_static", "after_static")
+"""`contact.split`: the interfaces split before the static stage (their law acts in it) or after it."""
 
 SCHEMA = Table({
     "title": Text("title", default="untitled"),
@@ -656,6 +658,11 @@ SCHEMA = Table({
                                          default=None),  # = friction_angle
         "tensile_strength": Number("interface tensile strength (Pa)", NON_NEGATIVE,
                                    default=None),        # = cohesion
+        "split": Choice("when the interfaces are split: \"before_static\": the pairs act with their law in the "
+                        "static stage (bond, slip, opening; no deterioration); \"after_static\": the stage runs "
+                        "welded (the pairs bonded whatever their force: the unsplit mesh's stage) and the dynamic "
+                        "run starts with the pairs carrying the welded stage's forces under their real strengths "
+                        "and D(t); without [static] the two are the same", CONTACT_SPLITS, default="before_static"),
         "deterioration": Table({
             "R0": Number("residual factor R0", "(0, 1]", default=0.75),
             "lambda": Number("decay rate lambda", NON_NEGATIVE, default=5.0),

@@ -781,6 +781,29 @@ def _pair_force_vector(n_nodes: int, contact_arrays: dict) -> np.ndarray:
     return force.ravel()
 
 
+WELDED_STRENGTH = 1.0e300
+"""Cohesion and tensile strength (Pa) of a welded pair in the stage (`contact.split = "after_static"`):
+finite, as the kernel requires, and beyond any force, so the pair stays bonded (the kernel's bonded
+pair is the unsplit mesh to round-off)."""
+
+
+def welded(scene: typing.Mapping) -> bool:
+    """The stage runs with the pairs welded (`contact.split = "after_static"`)."""
+    return "contact" in scene and scene["contact"].get("split", "before_static") == "after_static"
+
+
+def stage_pair_arrays(scene: typing.Mapping, contact_arrays: dict | None) -> dict | None:
+    """The pairs' arrays as the relaxation stage runs them (every model): no deterioration (the wear's
+    clock starts with the record) and, with `contact.split = "after_static"`, welded (cohesion and
+    tensile strength `WELDED_STRENGTH`, so no force breaks the bond)."""
+    if contact_arrays is None:
+        return None
+    arrays = dict(contact_arrays, deterioration=None)
+    if welded(scene):
+        arrays.update(cohesion=WELDED_STRENGTH, tensile_strength=WELDED_STRENGTH)
+    return arrays
+
+
 def _stage_stepper(stiffness, mass: np.ndarray, constraints, load: np.ndarray, components: list, contact,
                    ramp: float = 0.0):
     """A kernel Stepper for one relaxation stage: the matrix cells, the scaled mass (dt = 1, no
@@ -889,8 +912,9 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     for k, name in enumerate(element_regions):
         if name not in installed_regions:
             components[k] = nonlinear.new_component(name)
-    # The pairs act in the stage without deterioration (the wear's clock starts with the record).
-    stage_pairs = None if simulation.contact_arrays is None else dict(simulation.contact_arrays, deterioration=None)
+    # The pairs act in the stage without deterioration (the wear's clock starts with the record), or
+    # welded with contact.split = "after_static".
+    stage_pairs = stage_pair_arrays(scene, simulation.contact_arrays)
     contact = None if stage_pairs is None else make_contact_pairs(stage_pairs)
 
     # Under mpirun each stage is stepped by the ranks, cut as the dynamic run will be (its partition).
@@ -1084,19 +1108,33 @@ def hand_over(simulation, solve: bool = True) -> None:
     if simulation.contact_arrays is not None and state.pair_forces is not None:
         state.pair_forces_in_situ = np.array(simulation.contact_arrays["static_force"], dtype=np.float64)
         simulation.contact_arrays["static_force"] = np.ascontiguousarray(state.pair_forces, dtype=np.float64)
+        if welded(scene):
+            # Split after the stage: the dynamic run's pairs are new ones with the real strengths,
+            # bonded and carrying the welded stage's forces (a welded pair has no other state).
+            state.contact = None
         if state.contact is not None:  # the dynamic run continues the stage's pairs, now with D(t)
             if simulation.contact_arrays["deterioration"] is not None:
                 state.contact.set_deterioration(*simulation.contact_arrays["deterioration"])
         else:
-            over = pairs_over_strength(simulation.contact_arrays)
-            if over["opening"] or over["sliding"]:
-                simulation.scene.warn(
-                    f"static: {over['opening']} contact pairs are in tension beyond their tensile strength and "
-                    f"{over['sliding']} beyond their shear strength at the end of the stage (a linear stage keeps "
-                    "pairs bonded): they open or slide in the first steps of the dynamic run, a sudden release "
-                    "that is not the earthquake's; static.solver = \"relaxation\" lets them open or slide "
-                    "during the stage")
+            warn_pairs_over_strength(simulation.scene, simulation.contact_arrays)
     simulation.static = state
+
+
+def warn_pairs_over_strength(scene, contact_arrays: dict) -> None:
+    """The warning of pairs the stage hands over beyond their strength at D = 1 (a linear stage keeps
+    them bonded; `contact.split = "after_static"` welds them)."""
+    over = pairs_over_strength(contact_arrays)
+    if not (over["opening"] or over["sliding"]):
+        return
+    beyond = (f"static: {over['opening']} contact pairs are in tension beyond their tensile strength and "
+              f"{over['sliding']} beyond their shear strength at the end of the stage")
+    if welded(scene):
+        scene.warn(f"{beyond} (contact.split = \"after_static\": the stage ran welded): they open or slide in the "
+                   "first steps of the dynamic run, before the wave arrives")
+    else:
+        scene.warn(f"{beyond} (a linear stage keeps pairs bonded): they open or slide in the first steps of the "
+                   "dynamic run, a sudden release that is not the earthquake's; static.solver = \"relaxation\" "
+                   "lets them open or slide during the stage")
 
 
 def monitor_static_stress(monitors, installed_regions, u_total: np.ndarray, u_support: np.ndarray,
@@ -1208,6 +1246,16 @@ def plan_report(scene: typing.Mapping, model) -> dict:
             "direct" if n_dofs <= DIRECT_SOLVER_LIMIT else "iterative")
         solver_words = (f"{method} (up to {n_dofs} unknowns; direct up to {DIRECT_SOLVER_LIMIT}), tolerance "
                         f"{stage_tolerance(scene):g}")
+    pair_words = {}
+    if "contact" in scene:
+        pair_words["contact pairs"] = (
+            "welded during the stage (contact.split = \"after_static\"), split for the dynamic run with the "
+            "welded stage's forces" if welded(scene) else
+            "with their law during the stage (bond, slip, opening; no deterioration)" if uses_relaxation(scene)
+            else "bonded during the stage (a linear stage)")
+    hand_over_words = ("; plastic strain, damage and pair states go on" if uses_relaxation(scene) else "")
+    if welded(scene) and uses_relaxation(scene):
+        hand_over_words = "; plastic strain and damage go on, the pairs start bonded"
     return {
         "initial stress": source + (", gravity on" if settings["gravity"] else ""),
         "stage 1 (excavation)": (f"{', '.join(excavated) or 'no region'} removed (absent from the model)"
@@ -1218,6 +1266,7 @@ def plan_report(scene: typing.Mapping, model) -> dict:
                               + f"the remaining {1.0 - relaxation:g} released"),
         "boundary": ", ".join(f"{name} {kind}" for name, kind in boundary.items()),
         "solver": solver_words,
+        **pair_words,
         "hand-over": "static stress, pair forces and support reactions to the dynamic run (u = v = 0)"
-                     + ("; plastic strain, damage and pair states go on" if uses_relaxation(scene) else ""),
+                     + hand_over_words,
     }

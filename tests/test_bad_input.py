@@ -226,6 +226,9 @@ BAD_INPUTS = [
                                                            "fracture_energy"]),
     ("contact cohesion in MPa", box("h = 5.0", TWO_LAYERS, extra=LAYERED_BOX_CONTACT),
      "contact.cohesion", ["looks like MPa: write 1.0e6"]),
+    ("contact.split not one of its two moments", box("h = 5.0", TWO_LAYERS,
+                                                     extra=LAYERED_BOX_CONTACT + 'split = "welded"\n'),
+     "contact.split", ['"before_static", "after_static"']),
     ("damage with A_t < 1 and a crack band",
      box(extra="[materials.rock.damage]\ncohesion = 1.8e6\nfriction_angle = 46.0\ntensile_strength = 1.27e6\n"
                "A_t = 0.8\n"),

@@ -342,3 +342,25 @@ def test_the_linear_stage_solved_by_two_ranks_equals_the_serial_solve(linear_run
         for name in ("cell_stress", "monitor_stress"):
             assert np.abs(a[name]).max() > 1e6, name  # MPa: the geostatic stress and the opening's
             assert largest_relative(b[name], a[name]) < tolerance, name
+
+
+SPLIT = "tests/scenes/split_after_static.toml"
+
+
+@pytest.mark.parametrize("model, ranks", [("whole", 2), ("distributed", 2),
+                                          pytest.param("whole", 3, marks=pytest.mark.slow),
+                                          pytest.param("distributed", 3, marks=pytest.mark.slow)])
+def test_pairs_split_after_the_stage_slip_on_the_ranks_as_in_serial(tmp_path, model, ranks):
+    """contact.split = "after_static" (tests/scenes/split_after_static.toml: the stage welded, a pair
+    sheared at 0.8 of its strength slips when the wear falls below it) on the ranks of either model:
+    the pair slipped in every run, and the histories equal the serial run's."""
+    serial, shared = tmp_path / "serial", tmp_path / f"{model}_{ranks}"
+    pyfem_run(1, SPLIT, serial)
+    pyfem_run(ranks, SPLIT, shared, "--set", f'parallel.model="{model}"')
+    for run in (serial, shared):
+        rows = np.genfromtxt(run / "pairs" / "middle.csv", delimiter=",", names=True)
+        assert rows["state"][0] == 0 and np.abs(rows["slip"]).max() > 1e-3, "the pair started bonded and slipped"
+    differences = largest_differences(shared, serial)
+    print(f"{model} model on {ranks} ranks vs serial: {differences}")
+    for kind, difference in differences.items():
+        assert difference < STAGE_ROUNDOFF.get(kind, ROUNDOFF), (kind, difference)
