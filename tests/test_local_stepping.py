@@ -13,7 +13,6 @@ docs/lts_plan.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
 - What the local stepper does not do yet is refused with one line naming time.local_stepping.
 """
 import json
-import math
 import pathlib
 
 import numpy as np
@@ -684,17 +683,27 @@ def test_levels_fit_the_output_interval_where_a_deep_hierarchy_costs_more_than_i
     with 85 steps per interval six levels (global step 32 dt_fine) need 96 fine steps where four
     (8 dt_fine) need 88. The coarse case 3's levels are capped at 3, 7.7 % less work by the node
     count; an interval of 96 steps keeps all six, and capping never makes a node coarser."""
-    from pyfem.local_stepping import fit_levels_to_output
+    from pyfem.local_stepping import fit_levels_to_output, local_time_step
+    from pyfem.solver import TimeStep
 
     levels = np.repeat(np.arange(6), [19756, 8710, 8880, 17869, 3039, 98]).astype(np.int32)
     capped = fit_levels_to_output(levels, 85)
     assert capped.max() == 3 and np.array_equal(capped, np.minimum(levels, 3))
 
-    def cost(lv, steps):
-        top = int(lv.max())
-        return math.ceil(steps / 2 ** top) * 2 ** top * np.sum(2.0 ** -lv)
+    def work(lv):
+        """Node-steps per output interval: the fine steps the run takes (the product's
+        local_time_step) times each node's row once per step of its level."""
+        step, _ = local_time_step(TimeStep(dt=1.0e-4, critical=1.25e-4, omega_max=1.0, reason="",
+                                           steps_per_output=85), lv)
+        return step.steps_per_output * np.sum(2.0 ** -lv)
 
-    assert cost(capped, 85) == pytest.approx(0.923 * cost(levels, 85), abs=0.002 * cost(levels, 85))
+    caps = {cap: work(np.minimum(levels, cap)) for cap in range(6)}
+    # the product's cap is the cheapest of every cap the run could take: catches a wrong choice
+    assert min(caps, key=caps.get) == 3
+    # 88 fine steps instead of 96: catches local_time_step no longer fitting whole global steps
+    assert local_time_step(TimeStep(dt=1.0e-4, critical=1.25e-4, omega_max=1.0, reason="", steps_per_output=85),
+                           capped)[0].steps_per_output == 88
+    assert caps[3] == pytest.approx(0.923 * caps[5], abs=0.002 * caps[5])  # 7.7 % less work (docs/lts_plan.md)
     assert np.array_equal(fit_levels_to_output(levels, 96), levels)
     assert np.all(fit_levels_to_output(levels, 85) <= levels)
 

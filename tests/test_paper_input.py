@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import rel_error
+from conftest import ENERGY_BALANCE, rel_error
 from pyfem import solver
 from pyfem.scene import load_scene
 from pyfem.seismic.freefield import ReferencePointWarning
@@ -84,11 +84,11 @@ def test_paper_input_reproduces_free_field_short(tmp_path):
     error_u, error_v = rel_error(u, u_ff), rel_error(v, v_ff)
     print(f"paper input, short: displacement error {error_u:.2e}, velocity error {error_v:.2e}, "
           f"peak |u_ff| {np.abs(u_ff).max():.4f} m, {summary['steps']} steps, "
-          f"loop {summary['loop_seconds']:.2f} s")
+          f"loop {summary['loop_seconds']:.2f} s, energy balance {summary['energy']['balance_error']:.2e}")
     assert np.abs(v_ff).max() > 0.1  # the strong motion is inside the window (m/s)
     assert np.abs(u_ff[..., 2]).max() > 0.1 * np.abs(u_ff[..., 0]).max()  # the P (and SV) move z too
     assert error_u < 0.02 and error_v < 0.02
-    assert summary["energy"]["balance_error"] < 0.01
+    assert summary["energy"]["balance_error"] < ENERGY_BALANCE  # global stepping's identity: catches a work term missing by any fraction (El Centro input's work)
 
 
 @pytest.mark.slow
@@ -110,4 +110,4 @@ def test_paper_input_full_record_has_no_drift(tmp_path):
     assert rel_error(u, u_ff) < 0.02 and rel_error(v, v_ff) < 0.02
     assert np.abs(u - u_ff)[:, after].max() < 1e-3 * peak
     assert np.abs(u[:, -1]).max() < 1e-3 * peak  # the record ends at rest, and so does the box
-    assert summary["energy"]["balance_error"] < 0.01
+    assert summary["energy"]["balance_error"] < ENERGY_BALANCE  # global stepping's identity: catches a work term missing by any fraction (El Centro input's work)
