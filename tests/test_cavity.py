@@ -36,10 +36,14 @@ RADII = (1.05, 2.0)
 KIRSCH_PEAK_TOLERANCE = 0.035
 KIRSCH_HISTORY_TOLERANCE = 0.045
 KIRSCH_WALL_STRESS_TOLERANCE = 0.055
-# History error against the exact answer, per order: measured 0.54-2.95 % (Q1; the first element
-# row's stress is the gradient of a bilinear field) and 0.46-0.82 % (Q2) at the four monitors,
-# the Q2 error mostly the truncation faces' reflections (docs/wall_stress_accuracy.md).
-EXACT_TOLERANCE = {1: 0.04, 2: 0.015}
+# History error against the exact answer, per order and monitor: measured (Q1, global / local stepping)
+# 0.54 / 0.54, 2.95 / 2.96, 0.54 / 0.54, 1.06 / 1.07 % at 1.05 a 45 / 135 deg and 2 a 45 / 135 deg
+# (the first element row's stress is the gradient of a bilinear field), (Q2) 0.82, 0.46, 0.80, 0.47 %,
+# the Q2 error mostly the truncation faces' reflections (docs/wall_stress_accuracy.md). About twice
+# the measured, the earlier 4 % (Q1) and 1.5 % (Q2) where that is less. Per monitor, since the FE
+# error's sign differs between them: a wall stress scaled by 1.02 is caught at 1.05 a and 2 a, 45 deg.
+EXACT_TOLERANCE = {1: {"r1.05_t45": 0.011, "r1.05_t135": 0.04, "r2_t45": 0.011, "r2_t135": 0.022},
+                   2: {"r1.05_t45": 0.015, "r1.05_t135": 0.01, "r2_t45": 0.015, "r2_t135": 0.01}}
 # With local time stepping (3 rate levels: the wall's cells and the truncation faces finest) every
 # monitor meets the same tolerances. This linear model steps by the row split (every node at its own
 # rate with its whole stiffness row, pyfem/local_stepping.py row_split): at safety 0.8 0.54 / 2.96 %
@@ -194,7 +198,7 @@ def test_cavity_wall_follows_kirsch(tmp_path, tunnel_meshes, order, local, safet
         # catches a stress concentration off by 2 % (a wall or monitor stress scaled, a wrong tau)
         assert abs(peak_ratio - 1.0) < KIRSCH_PEAK_TOLERANCE, name
         assert history_error < KIRSCH_HISTORY_TOLERANCE, name  # and its history off by as much
-        assert exact_error < EXACT_TOLERANCE[order], name
+        assert exact_error < EXACT_TOLERANCE[order][name], name  # catches a wall stress off by 2 % (45 deg)
         # The wall is traction-free: radial and shear stress as Kirsch says (near 0 at the wall).
         scale = 4.0 * tau_peak
         print(f"    radial {np.max(np.abs(rr - k_rr * tau)) / scale:.4f}, shear "

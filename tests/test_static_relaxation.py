@@ -34,9 +34,10 @@ RELAXED_DISPLACEMENT, RELAXED_STRESS, RELAXED_LINING_STRESS = 1.0e-4, 1.5e-6, 2.
 RELAXED_LINED_DISPLACEMENT = 2.0e-4  # the lined tunnel's two stages, measured 9.3e-5 and 7.9e-5
 # Salencon's cavity (Q1, mean dilatation) against the closed form, about twice the measured: plastic
 # radius +1.21 % (psi 0) / +2.01 % (psi 30), wall convergence -1.16 % / -3.13 %, hoop stress at
-# 1.05 a and 1.755 a +1.46 % / -1.52 % (psi 0).
-SALENCON_RADIUS = {0.0: 0.025, 30.0: 0.04}
-SALENCON_WALL = {0.0: 0.025, 30.0: 0.065}
+# 1.05 a and 1.755 a +1.46 % / -1.52 % (psi 0). For psi 30 twice the measured is above the earlier
+# 3 % / 5 %, which stay.
+SALENCON_RADIUS = {0.0: 0.025, 30.0: 0.03}
+SALENCON_WALL = {0.0: 0.025, 30.0: 0.05}
 SALENCON_HOOP = 0.03
 # A dynamic run with no wave after a plastic stage: the peak velocity measured 0 (Salencon) and
 # 1.85e-21 m/s (the layered box), round-off of a state handed over in equilibrium; a stage that hands
@@ -97,10 +98,10 @@ def test_relaxation_with_an_installed_lining_is_the_linear_solve(meshes):
 
 @pytest.mark.parametrize("dilation", [0.0, 30.0])
 def test_salencon_cavity(meshes, dilation):
-    """Mohr-Coulomb cavity under hydrostatic P0, unsupported: the plastic radius within 3 %, the
-    wall convergence within 5 % (psi = 0 and 30 deg), the hoop stress at the cells nearest the
-    wall and nearest R0 against the closed form at their own radius within 5 %; the elastic rock
-    beyond R0 stays elastic and the zone inside yields."""
+    """Mohr-Coulomb cavity under hydrostatic P0, unsupported: the plastic radius within 2.5 % (psi = 0)
+    / 3 % (psi = 30 deg), the wall convergence within 2.5 % / 5 %, the hoop stress at the cells nearest
+    the wall and nearest R0 against the closed form at their own radius within 3 % (SALENCON_*); the
+    elastic rock beyond R0 stays elastic and the zone inside yields."""
     simulation = solver.prepare(salencon_scene(meshes["filled"], dilation))
     state = simulation.static
     assert all(stage.converged for stage in state.stages)
@@ -118,7 +119,7 @@ def test_salencon_cavity(meshes, dilation):
           f"radius {result['plastic_radius'] / RADIUS:.3f} a vs {R0 / RADIUS:.3f} a ({radius_error:+.2%}); wall "
           f"convergence {result['wall_displacement'] * 1e3:.2f} mm vs {float(exact['u_r'][0]) * 1e3:.2f} mm "
           f"({wall_error:+.2%})")
-    # catches a yield surface off by 2 % (cohesion x 1.02 moves R0 by ~1 %, the wall by ~3 %)
+    # the wall catches a yield surface off by 2 % (cohesion x 1.02: wall -2.8 % (psi 0), -6.1 % (psi 30))
     assert abs(radius_error) < SALENCON_RADIUS[dilation]
     assert abs(wall_error) < SALENCON_WALL[dilation]
     # The hoop stress for psi = 0 only: the closed form takes sigma_z as the intermediate stress, which
