@@ -18,6 +18,7 @@ import pathlib
 import numpy as np
 import pytest
 
+from conftest import ENERGY_BALANCE, LOCAL_STEPPING_BALANCE
 from pyfem import local_stepping, solver
 from pyfem.scene import SceneError, parse_scene
 
@@ -75,9 +76,11 @@ def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_steppin
         glob, loc = (summaries[k]["monitors"][name]["freefield_error"] for k in (False, True))
         print(f"{name}: free-field error global {100 * glob:.3f} %, local stepping {100 * loc:.3f} %")
         assert summaries[True]["monitors"][name]["displacement"] > 1e-4  # the wave arrived
-        assert loc < 0.02                      # the free-field tests' tolerance (P1)
+        assert loc < 0.0125                    # twice the largest measured (0.62 %, P1)
         assert loc < 1.5 * glob + 0.001        # and no worse than global stepping, to 0.1 %
-    assert local["energy"]["balance_error"] < 1e-3
+    print(f"energy balance (local stepping's plain account) {local['energy']['balance_error']:.2e}")
+    # measured 3.8e-5; the plain account's stated O(dt^2) bound: catches a level's work booked wrong
+    assert local["energy"]["balance_error"] < LOCAL_STEPPING_BALANCE
     stability = local["local_stepping_stability"]  # the set-up check of the LTS map on this mesh
     assert stability["stable"] and stability["growth"] < 2.0 and stability["global_steps"] >= 200
 
@@ -402,7 +405,10 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path, 
     # The plain account of local stepping, O(dt^2): 1.2e-4 of the work with the impulses' work
     # over their drifts (as kinetic energy added, the pairs' holding force drifted it by h^2 f^2 / m
     # per substep: docs/lts_plan.md "The contact work under local stepping").
-    assert np.abs(energy["balance"]).max() < 1e-3 * work
+    # about twice the measured 1.29e-4 (global stepping 3.6e-15): catches the contact work booked wrong
+    assert np.abs(energy["balance"]).max() < 2.6e-4 * work
+    # the global run's account is an identity: catches the contact work 1 % off (1.7e-4 of the work)
+    assert np.abs(energy_global["balance"]).max() < ENERGY_BALANCE * work
     assert pair_rows[-1, 4] == pytest.approx(pair_rows_global[-1, 4], rel=0.01)
     assert energy["friction_dissipation"][-1] == pytest.approx(energy_global["friction_dissipation"][-1], rel=0.02)
 
