@@ -29,7 +29,8 @@ REFERENCE = 1e-6
 YIELD = 1e-10
 # Energy balance of a run relative to the largest energy in play (round-off of the account).
 BALANCE = 1e-12
-WEAK_LAYER_CAP = 1.5e-6  # max |sxz| / (c cos phi + p sin phi) - 1 at the weak layer's monitors (measured 7e-7)
+# max |sxz| / (c cos phi + p sin phi) - 1 at the weak layer's monitors (measured 7e-7)
+WEAK_LAYER_CAP = 1.5e-6
 
 # ------------------------------------------------------------------ (a) single integration point
 
