@@ -272,7 +272,7 @@ def test_coarse_case_runs_to_its_end(case, tmp_path):
                if name != "lining") > 0.0
     # global stepping's identity, or local stepping's plain account (O(dt^2), docs/method.md) when
     # "auto" turned it on: catches a contact, plastic or damage work term missing over the whole run.
-    # The coarse case 3's account: 1.5e-4 of the work at 0.75 s (the lead-in), 4.9e-5 at 3.3 s.
+    # The coarse case 3's account: 1.5e-4 of the work at 0.75 s (the lead-in), 3.9e-5 at 4.53 s.
     local = "local time stepping" in summary["dt_reason"]
     print(f"{case}: {summary['dt_reason']}; energy balance {summary['energy']['balance_error']:.2e}")
     assert summary["energy"]["balance_error"] < (LOCAL_STEPPING_BALANCE if local else ENERGY_BALANCE)
