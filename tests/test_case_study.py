@@ -16,7 +16,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROUNDOFF
+from conftest import ENERGY_BALANCE, LOCAL_STEPPING_BALANCE, ROUNDOFF
 from pyfem.initial_stress import STANDARD_GRAVITY
 from pyfem.operators import build_model, lame_parameters
 from pyfem.output import MONITOR_COLUMNS, PAIR_COLUMNS, STRESS_COLUMNS, max_principal
@@ -199,7 +199,11 @@ def test_short_case3_finishes_with_energy_balance_and_all_outputs(short_case3):
     assert on_disk["status"] == "finished"
     assert on_disk["steps"] >= 250
     assert set(on_disk["effects"]) >= {"seismic_input", "initial_stress", "contact", "deterioration"}
-    assert on_disk["energy"]["balance_error"] < 0.01
+    print(f"{on_disk['dt_reason']}; energy balance {on_disk['energy']['balance_error']:.2e}")
+    local = "local time stepping" in on_disk["dt_reason"]
+    # global stepping's identity (local stepping's O(dt^2) plain account if "auto" turned it on):
+    # catches a contact, input or damping work term missing from the account
+    assert on_disk["energy"]["balance_error"] < (LOCAL_STEPPING_BALANCE if local else ENERGY_BALANCE)
     assert on_disk["n_pairs"] > 1000
     for name in ("A", "B", "C", "D"):
         assert on_disk["monitors"][name]["region"] == "lining"   # 1 cm inside the lining's inner face
@@ -279,6 +283,11 @@ def test_coarse_case_runs_to_its_end(case, tmp_path):
     assert all(stage["converged"] for stage in summary["static"]["stages"])
     assert sum(region["yielded_volume"] for name, region in summary["nonlinear_regions"].items()
                if name != "lining") > 0.0
-    assert summary["energy"]["balance_error"] < 0.01
+    # global stepping's identity, or local stepping's plain account (O(dt^2), docs/method.md) when
+    # "auto" turned it on: catches a contact, plastic or damage work term missing over the whole run.
+    # The coarse case 3's account: 1.5e-4 of the work at 0.75 s (the lead-in), 3.9e-5 at 4.53 s.
+    local = "local time stepping" in summary["dt_reason"]
+    print(f"{case}: {summary['dt_reason']}; energy balance {summary['energy']['balance_error']:.2e}")
+    assert summary["energy"]["balance_error"] < (LOCAL_STEPPING_BALANCE if local else ENERGY_BALANCE)
     peaks = [summary["monitors"][name]["displacement"] for name in ("A", "B", "C", "D")]
     assert all(math.isfinite(p) and p > 1e-3 for p in peaks), peaks  # centimetres of motion arrived

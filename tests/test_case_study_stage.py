@@ -29,8 +29,13 @@ from pyfem import solver
 from pyfem.scene import load_scene, parse_scene
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
+PRESTRESSED_BALANCE = 3.0e-9  # the small case 3's energy balance after its plastic stage (measured 1.3e-9)
 CASE3 = REPOSITORY / "workflows" / "scenes" / "case3_contact_coarse.toml"
-REST_VELOCITY = 1.0e-6  # m/s
+# The small case 3 after its stage with no wave, peak monitor velocity over the run: measured 8.1e-14
+# m/s (global stepping, 0.02 s) and 1.8e-13 m/s (local stepping, 0.2 s), the round-off of a state
+# handed over in equilibrium; about twice that. A hand-over out of equilibrium (a pair's or a cell's
+# stage state not rebased) moves the walls by orders more.
+REST_VELOCITY = {False: 2.0e-13, True: 4.0e-13}  # m/s, by local_stepping
 SMALL_MODEL = ["mesh.parameters.half_width_x=45.0", "mesh.parameters.below=25.0", "mesh.parameters.above=25.0",
                "mesh.parameters.margin_y=25.0", "mesh.parameters.length=24.0", "mesh.parameters.h_cavern=6.0",
                "mesh.parameters.h_far=15.0", 'contact.interfaces=["interface_1", "interface_2"]']
@@ -85,7 +90,7 @@ def test_small_case3_without_wave_stays_at_rest(tmp_path, local_stepping, integr
         peaks = summary["monitors"][name]
         print(f"{name}: peak velocity {peaks['velocity']:.2e} m/s, displacement {peaks['displacement']:.2e} m "
               f"(stage {stage_max:.3e} m)")
-        assert peaks["velocity"] < REST_VELOCITY
+        assert peaks["velocity"] < REST_VELOCITY[local_stepping]  # catches a hand-over out of equilibrium
         assert peaks["displacement"] < 1e-6 * stage_max
         checks += 1
     assert checks == 4
@@ -106,7 +111,13 @@ def test_small_case3_runs_all_physics_with_energy_balance(small_run):
     stage_checks(summary)
     assert set(summary["effects"]) >= {"seismic_input", "initial_stress", "contact", "deterioration"}
     assert set(summary["nonlinear_regions"]) == {"sandstone", "non_sandstone", "lining"}
-    assert summary["energy"]["balance_error"] < 0.01
+    assert "local time stepping" not in summary["dt_reason"]  # "auto" keeps global stepping for 0.04 s
+    print(f"{summary['dt_reason']}; energy balance {summary['energy']['balance_error']:.2e}")
+    # Global stepping's identity, measured 1.3e-9 here, not 1e-15: the rock yields from a stage left at
+    # its strength under 20 MPa, and its stored energy and plastic dissipation (-182 / +182 J at 0.04 s)
+    # are differences of the prestress's energy, whose round-off (2.4e-7 J) is 1.3e-9 of them. Catches
+    # a contact, plastic, damage or input work term missing from the account by more than 1e-8.
+    assert summary["energy"]["balance_error"] < PRESTRESSED_BALANCE
     moved = [summary["monitors"][name]["displacement"] for name in ("A", "B", "C", "D")]
     assert all(math.isfinite(value) and value > 0.0 for value in moved), "the input arrived at the lining"
     assert summary["deformed_section"]["largest"] > 0.0 and abs(summary["deformed_section"]["y"]) < 1.0

@@ -19,6 +19,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import LOCAL_STEPPING_BALANCE
 from pyfem import solver
 from pyfem.scene import SceneError, parse_scene
 
@@ -29,11 +30,20 @@ CENTRE = np.array([SECTION / 2, THICKNESS / 2, SECTION / 2])
 # Monitors: theta = 45 and 135 deg (largest hoop stress), at r = 1.05 a (first element row) and 2 a.
 ANGLES = (45.0, 135.0)
 RADII = (1.05, 2.0)
-KIRSCH_TOLERANCE = 0.10  # the issue's 10 %
-# History error against the exact answer, per order: measured 0.54-2.95 % (Q1; the first element
-# row's stress is the gradient of a bilinear field) and 0.46-0.82 % (Q2) at the four monitors,
-# the Q2 error mostly the truncation faces' reflections (docs/wall_stress_accuracy.md).
-EXACT_TOLERANCE = {1: 0.04, 2: 0.015}
+# Against Kirsch (quasi-static), about twice the measured at the four monitors (Q1, global and local
+# stepping alike): the hoop stress's peak within 1.62 %, its history within 2.11 %, the radial and shear
+# stress within 2.63 % of 4 tau (the wall's largest stress).
+KIRSCH_PEAK_TOLERANCE = 0.035
+KIRSCH_HISTORY_TOLERANCE = 0.045
+KIRSCH_WALL_STRESS_TOLERANCE = 0.055
+# History error against the exact answer, per order and monitor: measured (Q1, global / local stepping)
+# 0.54 / 0.54, 2.95 / 2.96, 0.54 / 0.54, 1.06 / 1.07 % at 1.05 a 45 / 135 deg and 2 a 45 / 135 deg
+# (the first element row's stress is the gradient of a bilinear field), (Q2) 0.82, 0.46, 0.80, 0.47 %,
+# the Q2 error mostly the truncation faces' reflections (docs/wall_stress_accuracy.md). About twice
+# the measured, the earlier 4 % (Q1) and 1.5 % (Q2) where that is less. Per monitor, since the FE
+# error's sign differs between them: a wall stress scaled by 1.02 is caught at 1.05 a and 2 a, 45 deg.
+EXACT_TOLERANCE = {1: {"r1.05_t45": 0.011, "r1.05_t135": 0.04, "r2_t45": 0.011, "r2_t135": 0.022},
+                   2: {"r1.05_t45": 0.015, "r1.05_t135": 0.01, "r2_t45": 0.015, "r2_t135": 0.01}}
 # With local time stepping (3 rate levels: the wall's cells and the truncation faces finest) every
 # monitor meets the same tolerances. This linear model steps by the row split (every node at its own
 # rate with its whole stiffness row, pyfem/local_stepping.py row_split): at safety 0.8 0.54 / 2.96 %
@@ -154,7 +164,9 @@ def test_cavity_wall_follows_kirsch(tmp_path, tunnel_meshes, order, local, safet
         print(summary["dt_reason"])
         assert levels >= 3 and summary["local_stepping_stability"]["stable"]
         assert summary["dt_reason"].endswith("the row split")
-        assert summary["energy"]["balance_error"] < 0.01
+        print(f"energy balance (local stepping's plain account) {summary['energy']['balance_error']:.2e}")
+        # the plain account's O(dt^2) bound: catches a level's work booked wrong (e.g. the kicks' work)
+        assert summary["energy"]["balance_error"] < LOCAL_STEPPING_BALANCE
     faces = {face["name"]: face for face in summary["boundary_faces"]}
     assert sorted(faces) == ["xmax", "xmin", "ymax", "ymin", "zmax", "zmin"], "the wall is no truncation face"
     assert faces["ymin"]["type"] == "roller" and not faces["ymin"]["input"]
@@ -183,13 +195,17 @@ def test_cavity_wall_follows_kirsch(tmp_path, tunnel_meshes, order, local, safet
         print(f"Q{order} {name}: hoop peak / Kirsch = {peak_ratio:.4f}, history error {history_error:.3%}, "
               f"concentration {np.max(np.abs(tt)) / tau_peak:.3f} (Kirsch {abs(k_tt):.3f}); against the exact "
               f"answer: history error {exact_error:.3%}, peak {np.max(np.abs(tt)) / np.max(np.abs(exact)):.4f}")
-        assert abs(peak_ratio - 1.0) < KIRSCH_TOLERANCE, name
-        assert history_error < KIRSCH_TOLERANCE, name
-        assert exact_error < EXACT_TOLERANCE[order], name
+        # catches a stress concentration off by 2 % (a wall or monitor stress scaled, a wrong tau)
+        assert abs(peak_ratio - 1.0) < KIRSCH_PEAK_TOLERANCE, name
+        assert history_error < KIRSCH_HISTORY_TOLERANCE, name  # and its history off by as much
+        assert exact_error < EXACT_TOLERANCE[order][name], name  # catches a wall stress off by 2 % (45 deg)
         # The wall is traction-free: radial and shear stress as Kirsch says (near 0 at the wall).
         scale = 4.0 * tau_peak
-        assert np.max(np.abs(rr - k_rr * tau)) < KIRSCH_TOLERANCE * scale, name
-        assert np.max(np.abs(rt - k_rt * tau)) < KIRSCH_TOLERANCE * scale, name
+        print(f"    radial {np.max(np.abs(rr - k_rr * tau)) / scale:.4f}, shear "
+              f"{np.max(np.abs(rt - k_rt * tau)) / scale:.4f} of 4 tau off Kirsch's")
+        # catches a wall that carries traction (radial or shear stress of a few % of 4 tau)
+        assert np.max(np.abs(rr - k_rr * tau)) < KIRSCH_WALL_STRESS_TOLERANCE * scale, name
+        assert np.max(np.abs(rt - k_rt * tau)) < KIRSCH_WALL_STRESS_TOLERANCE * scale, name
         checks += 1
     assert checks == len(RADII) * len(ANGLES)
 

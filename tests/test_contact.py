@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from conftest import ROUNDOFF, rel_error
+from conftest import ENERGY_BALANCE, LOCAL_STEPPING_BALANCE, ROUNDOFF, rel_error
 from pyfem.initial_stress import STANDARD_GRAVITY
 from pyfem.output import PAIR_COLUMNS, PAIR_STATES
 from pyfem.scene import SceneError, parse_scene
@@ -29,6 +29,9 @@ from pyfem.solver import make_stepper, prepare, run
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 WORKFLOW = REPOSITORY / "workflows" / "scenes" / "contact_two_layer_sv.toml"
 HELD_MASS_FACTOR = 1.0e20
+
+SLIDING_BLOCK_TOLERANCE = 1.5e-3  # the block's permanent slip against Newmark's rigid block (measured 6.7e-4)
+
 
 def workflow_data(path=WORKFLOW) -> dict:
     with open(path, "rb") as stream:
@@ -204,15 +207,19 @@ def test_sliding_block_matches_newmark_rigid_block_displacement():
     # The weight is in the static forces: sum N = m g, so the yield acceleration is mu g.
     _, reference = newmark_sliding_block(lambda t: float(acceleration(t)), mu * STANDARD_GRAVITY,
                                          simulation.scene["time"]["duration"])
-    print(f"slip {slip:.6f} m, Newmark rigid block {reference[-1]:.6f} m")
+    print(f"slip {slip:.7f} m, Newmark rigid block {reference[-1]:.7f} m, "
+          f"off by {abs(slip - reference[-1]) / abs(reference[-1]):.2e}")
     assert abs(reference[-1]) > 0.05  # a real permanent displacement
-    assert abs(slip - reference[-1]) < 0.05 * abs(reference[-1])
+    # measured 6.7e-4 (0.070283 against 0.070236 m): catches the friction coefficient off by 0.2 %
+    assert abs(slip - reference[-1]) < SLIDING_BLOCK_TOLERANCE * abs(reference[-1])
     assert np.allclose(np.asarray(simulation.contact_pairs.normal_force()).sum(),
                        2500.0 * 2.0 * 1.0 * STANDARD_GRAVITY, rtol=0.05)
     # Energy: balance including contact work closes; friction dissipates.
     final = energies[-1]
     scale = max(max(abs(e["external_work"]) for e in energies), max(e["kinetic"] + e["strain"] for e in energies))
-    assert max(abs(e["balance"]) for e in energies) < 0.01 * scale
+    print(f"largest energy balance {max(abs(e['balance']) for e in energies) / scale:.2e} of the scale")
+    # global stepping's identity: catches the contact (friction) work missing or off by any fraction
+    assert max(abs(e["balance"]) for e in energies) < ENERGY_BALANCE * scale
     assert min(e["friction_dissipation"] for e in energies) >= 0.0
     assert final["friction_dissipation"] > 0.1 * scale
     assert len(pairs) == 15
@@ -244,7 +251,9 @@ def test_contact_chatter_interface_opens_and_closes_thousands_of_times():
     # Bounded: the block bounces by millimetres (free flight at ~1 g for ~1/50 s), it does not fly away.
     assert peak["u"] < 0.05
     scale = max(max(abs(e["external_work"]) for e in energies), max(e["kinetic"] + e["strain"] for e in energies))
-    assert max(abs(e["balance"]) for e in energies) < 0.01 * scale
+    print(f"largest energy balance {max(abs(e['balance']) for e in energies) / scale:.2e} of the scale")
+    # global stepping's identity: catches the opening/closing pairs' work missing or off by any fraction
+    assert max(abs(e["balance"]) for e in energies) < ENERGY_BALANCE * scale
     stored = np.array([e["kinetic"] + e["strain"] for e in energies])
     assert np.max(stored[len(stored) // 2:]) < 3.0 * np.max(stored[: len(stored) // 2])  # no growth
 
@@ -282,7 +291,11 @@ def assert_stable_run(summary, out_dir):
     assert summary["status"] == "finished"
     energy = summary["energy"]
     assert all(math.isfinite(value) for value in energy.values())
-    assert energy["balance_error"] < 0.01
+    local = "local time stepping" in summary["dt_reason"]
+    print(f"{summary['dt_reason']}; energy balance {energy['balance_error']:.2e}")
+    # global stepping's identity (local stepping's O(dt^2) plain account if "auto" turned it on):
+    # catches the contact or damping work missing from the account
+    assert energy["balance_error"] < (LOCAL_STEPPING_BALANCE if local else ENERGY_BALANCE)
     assert energy["friction_dissipation"] >= 0.0
     rows = np.loadtxt(out_dir / "energy.csv", delimiter=",", skiprows=1)
     assert np.all(np.isfinite(rows))

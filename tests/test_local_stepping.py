@@ -13,12 +13,12 @@ docs/lts_plan.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
 - What the local stepper does not do yet is refused with one line naming time.local_stepping.
 """
 import json
-import math
 import pathlib
 
 import numpy as np
 import pytest
 
+from conftest import ENERGY_BALANCE, LOCAL_STEPPING_BALANCE
 from pyfem import local_stepping, solver
 from pyfem.scene import SceneError, parse_scene
 
@@ -76,9 +76,11 @@ def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_steppin
         glob, loc = (summaries[k]["monitors"][name]["freefield_error"] for k in (False, True))
         print(f"{name}: free-field error global {100 * glob:.3f} %, local stepping {100 * loc:.3f} %")
         assert summaries[True]["monitors"][name]["displacement"] > 1e-4  # the wave arrived
-        assert loc < 0.02                      # the free-field tests' tolerance (P1)
+        assert loc < 0.0125                    # twice the largest measured (0.62 %, P1)
         assert loc < 1.5 * glob + 0.001        # and no worse than global stepping, to 0.1 %
-    assert local["energy"]["balance_error"] < 1e-3
+    print(f"energy balance (local stepping's plain account) {local['energy']['balance_error']:.2e}")
+    # measured 3.8e-5; the plain account's stated O(dt^2) bound: catches a level's work booked wrong
+    assert local["energy"]["balance_error"] < LOCAL_STEPPING_BALANCE
     stability = local["local_stepping_stability"]  # the set-up check of the LTS map on this mesh
     assert stability["stable"] and stability["growth"] < 2.0 and stability["global_steps"] >= 200
 
@@ -403,7 +405,10 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path, 
     # The plain account of local stepping, O(dt^2): 1.2e-4 of the work with the impulses' work
     # over their drifts (as kinetic energy added, the pairs' holding force drifted it by h^2 f^2 / m
     # per substep: docs/lts_plan.md "The contact work under local stepping").
-    assert np.abs(energy["balance"]).max() < 1e-3 * work
+    # about twice the measured 1.29e-4 (global stepping 3.6e-15): catches the contact work booked wrong
+    assert np.abs(energy["balance"]).max() < 2.6e-4 * work
+    # the global run's account is an identity: catches the contact work 1 % off (1.7e-4 of the work)
+    assert np.abs(energy_global["balance"]).max() < ENERGY_BALANCE * work
     assert pair_rows[-1, 4] == pytest.approx(pair_rows_global[-1, 4], rel=0.01)
     assert energy["friction_dissipation"][-1] == pytest.approx(energy_global["friction_dissipation"][-1], rel=0.02)
 
@@ -684,17 +689,29 @@ def test_levels_fit_the_output_interval_where_a_deep_hierarchy_costs_more_than_i
     with 85 steps per interval six levels (global step 32 dt_fine) need 96 fine steps where four
     (8 dt_fine) need 88. The coarse case 3's levels are capped at 3, 7.7 % less work by the node
     count; an interval of 96 steps keeps all six, and capping never makes a node coarser."""
-    from pyfem.local_stepping import fit_levels_to_output
+    from pyfem.local_stepping import fit_levels_to_output, local_time_step
+    from pyfem.solver import TimeStep
 
     levels = np.repeat(np.arange(6), [19756, 8710, 8880, 17869, 3039, 98]).astype(np.int32)
     capped = fit_levels_to_output(levels, 85)
     assert capped.max() == 3 and np.array_equal(capped, np.minimum(levels, 3))
 
-    def cost(lv, steps):
-        top = int(lv.max())
-        return math.ceil(steps / 2 ** top) * 2 ** top * np.sum(2.0 ** -lv)
+    def work(lv):
+        """Node-steps per output interval: the fine steps the run takes (the product's
+        local_time_step) times each node's row once per step of its level."""
+        fitted, _ = local_time_step(TimeStep(dt=1.0e-4, critical=1.25e-4, omega_max=1.0, reason="",
+                                             steps_per_output=85), lv)
+        return fitted.steps_per_output * np.sum(2.0 ** -lv)
 
-    assert cost(capped, 85) == pytest.approx(0.923 * cost(levels, 85), abs=0.002 * cost(levels, 85))
+    caps = {cap: work(np.minimum(levels, cap)) for cap in range(6)}
+    # the product's cap is the cheapest of every cap the run could take: catches a wrong choice
+    assert min(caps, key=caps.get) == 3
+    # 88 fine steps instead of 96: catches local_time_step no longer fitting whole global steps
+    step = TimeStep(dt=1.0e-4, critical=1.25e-4, omega_max=1.0, reason="", steps_per_output=85)
+    fitted, _ = local_time_step(step, capped)
+    assert fitted.steps_per_output == 88
+    # 7.7 % less work (docs/lts_plan.md)
+    assert caps[3] == pytest.approx(0.923 * caps[5], abs=0.002 * caps[5])
     assert np.array_equal(fit_levels_to_output(levels, 96), levels)
     assert np.all(fit_levels_to_output(levels, 85) <= levels)
 

@@ -29,6 +29,8 @@ REFERENCE = 1e-6
 YIELD = 1e-10
 # Energy balance of a run relative to the largest energy in play (round-off of the account).
 BALANCE = 1e-12
+# max |sxz| / (c cos phi + p sin phi) - 1 at the weak layer's monitors (measured 7e-7)
+WEAK_LAYER_CAP = 1.5e-6
 
 # ------------------------------------------------------------------ (a) single integration point
 
@@ -151,8 +153,9 @@ def test_weak_layer_shear_stress_is_capped_by_mohr_coulomb(weak_layer_runs):
         ratio = np.max(np.abs(history["sxz"])) / cap
         elastic_ratio = np.max(np.abs(reference["sxz"])) / shear_cap(reference)
         print(f"{name}: p = {-history['szz'][0] / MPa:.4f} MPa, cap {cap / MPa:.4f} MPa, max |sxz| / cap: "
-              f"plastic {ratio:.5f}, elastic {elastic_ratio:.2f}")
-        assert 0.99 < ratio < 1.02
+              f"plastic {ratio:.7f}, elastic {elastic_ratio:.2f}")
+        # measured 0.9999993 / 0.9999998: catches the yield surface off by 0.01 % (cohesion x 1.02: 0.3 %)
+        assert abs(ratio - 1.0) < WEAK_LAYER_CAP
         assert elastic_ratio > 5.0
         checks += 1
     assert checks == 2

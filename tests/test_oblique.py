@@ -18,7 +18,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import observed_orders, rel_error
+from conftest import ENERGY_BALANCE, observed_orders, rel_error
 from pyfem import solver
 from pyfem.scene import parse_scene
 from pyfem.seismic import reflection
@@ -80,11 +80,17 @@ def incident_only_field(wave_type, angle, azimuth, width=80.0):
 
 CASES = [("SV", 0.0, 0.0), ("SV", 15.0, 0.0), ("SV", 30.0, 0.0), ("P", 0.0, 0.0), ("P", 30.0, 0.0),
          ("SH", 30.0, 0.0), ("SV", 30.0, 45.0)]
+# Relative L2 error against the exact free field per case, about twice the measured (Q1, h = 4.45 m):
+# SV 0/15/30 deg 0.172 / 0.163 / 0.156 %, P 0/30 deg 0.089 / 0.157 %, SH 30 deg 0.195 %, SV 30 deg at
+# azimuth 45 0.170 %.
+FREE_FIELD_TOLERANCE = {("SV", 0.0, 0.0): 0.0035, ("SV", 15.0, 0.0): 0.0033, ("SV", 30.0, 0.0): 0.0032,
+                        ("P", 0.0, 0.0): 0.0018, ("P", 30.0, 0.0): 0.0032, ("SH", 30.0, 0.0): 0.004,
+                        ("SV", 30.0, 45.0): 0.0035}
 
 
 @pytest.mark.parametrize("wave_type,angle,azimuth", CASES)
 def test_oblique_wave_reproduces_free_field(tmp_path, wave_type, angle, azimuth):
-    """20 elements per shortest wavelength (h = 4.45 m, Q1): relative L2 error < 2 %.
+    """20 elements per shortest wavelength (h = 4.45 m, Q1): relative L2 error about twice the measured.
 
     Measured (relative L2 over 3 monitors, 3 components, 0..1.2 s): SV 0/15/30 deg
     0.17 / 0.16 / 0.16 %, P 0/30 deg 0.09 / 0.16 %, SH 30 deg 0.20 %, SV 30 deg
@@ -100,10 +106,13 @@ def test_oblique_wave_reproduces_free_field(tmp_path, wave_type, angle, azimuth)
     print(f"{wave_type} {angle:g} deg azimuth {azimuth:g}: relative L2 error {error:.5f}, "
           f"loop {summary['loop_seconds']:.2f} s, {summary['dofs']} dofs")
     assert summary["status"] == "finished"
-    assert error < 0.02
+    # catches an input traction, wave speed or reflection coefficient off by a fraction of a %
+    assert error < FREE_FIELD_TOLERANCE[(wave_type, angle, azimuth)]
     assert rel_error(incident, exact) > 0.5
     assert np.abs(exact[:, -1]).max() < 0.01 * np.abs(exact).max()
-    assert summary["energy"]["balance_error"] < 0.01
+    print(f"energy balance {summary['energy']['balance_error']:.2e}")
+    # global stepping's identity: catches any fraction of a work term missing (oblique input's work)
+    assert summary["energy"]["balance_error"] < ENERGY_BALANCE
     if azimuth == 45.0:
         # A 3D motion: the y component is as large as the x component (SV along e_h).
         assert np.abs(exact[..., 1]).max() == pytest.approx(np.abs(exact[..., 0]).max(), rel=1e-6)
@@ -173,8 +182,12 @@ def test_post_critical_sv_reproduces_free_field(tmp_path):
           f"table-borne parts off by {share:.3f}")
     assert reference_error < 5e-3
     assert share > 0.1
-    assert error < 0.02 and error_analytic < 0.02
-    assert summary["energy"]["balance_error"] < 0.01
+    # about twice the measured 0.242 % (0.375 % against the analytic signal): catches the evanescent
+    # P or the Hilbert-transformed SV off by a fraction of a %
+    assert error < 0.005 and error_analytic < 0.0075
+    print(f"energy balance {summary['energy']['balance_error']:.2e}")
+    # global stepping's identity: catches any fraction of a work term missing (post-critical input's work)
+    assert summary["energy"]["balance_error"] < ENERGY_BALANCE
 
 
 @pytest.mark.slow

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import rel_error
+from conftest import ENERGY_BALANCE, rel_error
 from pyfem import solver
 from pyfem.scene import load_scene
 from pyfem.seismic.freefield import ReferencePointWarning
@@ -84,11 +84,14 @@ def test_paper_input_reproduces_free_field_short(tmp_path):
     error_u, error_v = rel_error(u, u_ff), rel_error(v, v_ff)
     print(f"paper input, short: displacement error {error_u:.2e}, velocity error {error_v:.2e}, "
           f"peak |u_ff| {np.abs(u_ff).max():.4f} m, {summary['steps']} steps, "
-          f"loop {summary['loop_seconds']:.2f} s")
+          f"loop {summary['loop_seconds']:.2f} s, energy balance {summary['energy']['balance_error']:.2e}")
     assert np.abs(v_ff).max() > 0.1  # the strong motion is inside the window (m/s)
     assert np.abs(u_ff[..., 2]).max() > 0.1 * np.abs(u_ff[..., 0]).max()  # the P (and SV) move z too
-    assert error_u < 0.02 and error_v < 0.02
-    assert summary["energy"]["balance_error"] < 0.01
+    # about twice the measured 1.32e-3 / 4.11e-3: catches a free field off by more than 0.3 % of the peak
+    # (not the input traction 1 % off: 2.7e-3 / 7.5e-3 then; the full record's test catches that)
+    assert error_u < 3e-3 and error_v < 8e-3
+    # global stepping's identity: catches any fraction of a work term missing (El Centro input's work)
+    assert summary["energy"]["balance_error"] < ENERGY_BALANCE
 
 
 @pytest.mark.slow
@@ -107,7 +110,11 @@ def test_paper_input_full_record_has_no_drift(tmp_path):
           f"after the shaking max |u - u_ff| / peak {np.abs(u - u_ff)[:, after].max() / peak:.2e}, "
           f"final |u| / peak {np.abs(u[:, -1]).max() / peak:.2e}, energy balance "
           f"{summary['energy']['balance_error']:.2e}, loop {summary['loop_seconds']:.1f} s")
-    assert rel_error(u, u_ff) < 0.02 and rel_error(v, v_ff) < 0.02
-    assert np.abs(u - u_ff)[:, after].max() < 1e-3 * peak
-    assert np.abs(u[:, -1]).max() < 1e-3 * peak  # the record ends at rest, and so does the box
-    assert summary["energy"]["balance_error"] < 0.01
+    # about twice the measured 4.4e-5 / 4.0e-4: catches the input traction 1 % off (2.6e-4 / 2.3e-3)
+    assert rel_error(u, u_ff) < 1e-4 and rel_error(v, v_ff) < 8e-4
+    # measured 4.5e-6: catches a drift after the shaking
+    assert np.abs(u - u_ff)[:, after].max() < 1e-5 * peak
+    # measured 1.0e-11: the record ends at rest, and so does the box
+    assert np.abs(u[:, -1]).max() < 3e-11 * peak
+    # global stepping's identity: catches any fraction of a work term missing (El Centro input's work)
+    assert summary["energy"]["balance_error"] < ENERGY_BALANCE

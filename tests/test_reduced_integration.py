@@ -156,8 +156,9 @@ def test_weak_layer_with_one_point_cells_is_capped_and_balances(weak_layer_one_p
         history = monitor(out, name)
         assert history["plastic_strain"][-1] > 1e-3  # yielded at this monitor
         ratio = np.max(np.abs(history["sxz"])) / shear_cap(history)
-        print(f"{name}: max |sxz| / cap {ratio:.5f}")
-        assert 0.99 < ratio < 1.02
+        print(f"{name}: max |sxz| / cap {ratio:.7f}")
+        # measured 1.0002429 (the one point's stress read at the monitor): catches the cap off by 0.05 %
+        assert abs(ratio - 1.0) < 5.0e-4
         checks += 1
     assert checks == 2
     region = summary["nonlinear_regions"]["weak"]

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import ROUNDOFF, observed_orders, rel_error
+from conftest import ENERGY_BALANCE, ROUNDOFF, observed_orders, rel_error
 from pyfem import solver
 from pyfem.scene import SceneError, parse_scene
 
@@ -59,17 +59,26 @@ def monitor_error(run_dir, names=("z40", "z100", "z160")):
     return rel_error(np.array(computed), np.array(exact))
 
 
+# The vertical column's relative L2 error against the exact free field (Q1, 20 elements per wavelength),
+# about twice the measured 0.100 % (P), 0.177 % (SV), 0.177 % (SH).
+FREE_FIELD_TOLERANCE = {"P": 0.002, "SV": 0.0035, "SH": 0.0035}
+
+
 @pytest.mark.parametrize("wave_type", ["P", "SV", "SH"])
 def test_vertical_wave_reproduces_free_field(tmp_path, wave_type):
-    """A homogeneous column under a free surface equals incident + reflected wave (< 2 %, 20 el/wavelength)."""
+    """A homogeneous column under a free surface equals incident + reflected wave (20 el/wavelength;
+    measured 0.10 % (P), 0.18 % (SV, SH))."""
     summary = solver.run(column_scene(wave_type), tmp_path / "run")
     error = monitor_error(tmp_path / "run")
-    print(f"{wave_type}: relative L2 error {error:.4f}")
+    print(f"{wave_type}: relative L2 error {error:.6f}")
     assert summary["status"] == "finished"
-    assert error < 0.02
+    # about twice the measured error: catches a wave speed or input traction off by a fraction of a %
+    assert error < FREE_FIELD_TOLERANCE[wave_type]
     # The reflection is in the record: the exact field at z=160 has two pulses, so matching it
-    # to 2 % means the surface-reflected wave entered through the boundary as well.
-    assert summary["energy"]["balance_error"] < 0.01
+    # to a fraction of a % means the surface-reflected wave entered through the boundary as well.
+    print(f"{wave_type}: energy balance {summary['energy']['balance_error']:.2e}")
+    # global stepping's identity: catches any fraction of a work term missing (input or dashpot work)
+    assert summary["energy"]["balance_error"] < ENERGY_BALANCE
 
 
 def test_q1_converges_at_order_two_in_h(tmp_path):
@@ -178,7 +187,8 @@ def test_energy_balance_with_input_absorption_and_damping(tmp_path):
     energy = summary["energy"]
     print("energy", energy)
     assert energy["damping_work"] > 0.05 * energy["external_work"] > 0
-    assert energy["balance_error"] < 0.01
+    # global stepping's identity: catches any fraction of a work term missing (e.g. Rayleigh damping's)
+    assert energy["balance_error"] < ENERGY_BALANCE
 
 
 def test_run_directory_contents(tmp_path):

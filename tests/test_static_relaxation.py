@@ -18,7 +18,7 @@ import pytest
 from pyfem import solver, static
 from pyfem.scene import parse_scene
 from salencon import compare_to_stage, salencon
-from test_static import (CENTRE, LINING, P, RADIUS, REST_VELOCITY, ROCK, centroids, in_plane, layered_box,
+from test_static import (CENTRE, LINING, P, RADIUS, ROCK, centroids, in_plane, layered_box,
                          meshes, polar, tunnel_scene)
 
 SHEAR_MODULUS, BULK_MODULUS = 2.8e9, 3.9e9
@@ -28,6 +28,22 @@ YOUNG = 9 * SHEAR_MODULUS * BULK_MODULUS / (3 * BULK_MODULUS + SHEAR_MODULUS)
 POISSON = (3 * BULK_MODULUS - 2 * SHEAR_MODULUS) / (2 * (3 * BULK_MODULUS + SHEAR_MODULUS))
 
 __all__ = ["meshes"]  # the module-scoped mesh fixture of test_static.py
+
+# Relaxed against the direct linear solve (Kirsch tunnel), about twice the measured 4.6e-5
+# (displacement, L2) and 6.7e-7 (stress, of the largest); the lined tunnel's lining stress 1.0e-6.
+RELAXED_DISPLACEMENT, RELAXED_STRESS, RELAXED_LINING_STRESS = 1.0e-4, 1.5e-6, 2.0e-6
+RELAXED_LINED_DISPLACEMENT = 2.0e-4  # the lined tunnel's two stages, measured 9.3e-5 and 7.9e-5
+# Salencon's cavity (Q1, mean dilatation) against the closed form, about twice the measured: plastic
+# radius +1.21 % (psi 0) / +2.01 % (psi 30), wall convergence -1.16 % / -3.13 %, hoop stress at
+# 1.05 a and 1.755 a +1.46 % / -1.52 % (psi 0). For psi 30 twice the measured is above the earlier
+# 3 % / 5 %, which stay.
+SALENCON_RADIUS = {0.0: 0.025, 30.0: 0.03}
+SALENCON_WALL = {0.0: 0.025, 30.0: 0.05}
+SALENCON_HOOP = 0.03
+# A dynamic run with no wave after a plastic stage: the peak velocity measured 0 (Salencon) and
+# 1.85e-21 m/s (the layered box), round-off of a state handed over in equilibrium; a stage that hands
+# over an out-of-balance force of its own tolerance (1e-5) moves the monitors by ~1e-9 m/s and more.
+HANDED_OVER_REST_VELOCITY = 5.0e-21  # m/s
 
 
 def salencon_scene(mesh_file, dilation, **extra):
@@ -54,7 +70,8 @@ def test_relaxation_of_linear_materials_is_the_linear_solve(meshes):
                     / np.abs(direct.static.cell_stress).max())
     print(f"relaxation vs direct: {stage.iterations} steps, {stage.seconds:.2f} s, displacement "
           f"{u_error:.2e}, stress {stress_error:.2e}")
-    assert u_error < 1e-3 and stress_error < 1e-4
+    # catches the relaxation stopped short (a looser out-of-balance tolerance) or a wrong load
+    assert u_error < RELAXED_DISPLACEMENT and stress_error < RELAXED_STRESS
 
 
 def test_relaxation_with_an_installed_lining_is_the_linear_solve(meshes):
@@ -69,20 +86,23 @@ def test_relaxation_with_an_installed_lining_is_the_linear_solve(meshes):
     assert np.abs(direct.static.cell_stress[cells]).max() > 1e6, "the lining carries load"
     for name in ("displacement_first", "displacement"):
         a, b = getattr(relaxed.static, name), getattr(direct.static, name)
-        assert np.linalg.norm(a - b) / np.linalg.norm(b) < 1e-3, name
+        print(f"{name} relaxed vs direct: {np.linalg.norm(a - b) / np.linalg.norm(b):.2e}")
+        # measured 9.3e-5 (first stage) and 7.9e-5: catches a stage relaxed short or a wrong relaxation share
+        assert np.linalg.norm(a - b) / np.linalg.norm(b) < RELAXED_LINED_DISPLACEMENT, name
     lining_error = (np.abs(relaxed.static.cell_stress[cells] - direct.static.cell_stress[cells]).max()
                     / np.abs(direct.static.cell_stress[cells]).max())
     print(f"lining stress relaxed vs direct: {lining_error:.2e}")
-    assert lining_error < 1e-3
+    # catches the lining loaded by a wrong share of the relaxation (or installed a stage off)
+    assert lining_error < RELAXED_LINING_STRESS
     assert np.abs(relaxed.static.cell_stress_first[cells]).max() == 0.0
 
 
 @pytest.mark.parametrize("dilation", [0.0, 30.0])
 def test_salencon_cavity(meshes, dilation):
-    """Mohr-Coulomb cavity under hydrostatic P0, unsupported: the plastic radius within 3 %, the
-    wall convergence within 5 % (psi = 0 and 30 deg), the hoop stress at the cells nearest the
-    wall and nearest R0 against the closed form at their own radius within 5 %; the elastic rock
-    beyond R0 stays elastic and the zone inside yields."""
+    """Mohr-Coulomb cavity under hydrostatic P0, unsupported: the plastic radius within 2.5 % (psi = 0)
+    / 3 % (psi = 30 deg), the wall convergence within 2.5 % / 5 %, the hoop stress at the cells nearest
+    the wall and nearest R0 against the closed form at their own radius within 3 % (SALENCON_*); the
+    elastic rock beyond R0 stays elastic and the zone inside yields."""
     simulation = solver.prepare(salencon_scene(meshes["filled"], dilation))
     state = simulation.static
     assert all(stage.converged for stage in state.stages)
@@ -100,8 +120,9 @@ def test_salencon_cavity(meshes, dilation):
           f"radius {result['plastic_radius'] / RADIUS:.3f} a vs {R0 / RADIUS:.3f} a ({radius_error:+.2%}); wall "
           f"convergence {result['wall_displacement'] * 1e3:.2f} mm vs {float(exact['u_r'][0]) * 1e3:.2f} mm "
           f"({wall_error:+.2%})")
-    assert abs(radius_error) < 0.03
-    assert abs(wall_error) < 0.05
+    # the wall catches a yield surface off by 2 % (cohesion x 1.02: wall -2.8 % (psi 0), -6.1 % (psi 30))
+    assert abs(radius_error) < SALENCON_RADIUS[dilation]
+    assert abs(wall_error) < SALENCON_WALL[dilation]
     # The hoop stress for psi = 0 only: the closed form takes sigma_z as the intermediate stress, which
     # the 3D law does not assume; near the wall sigma_z exceeds sigma_theta (Reed 1988), and with
     # dilation the (z, r) plane yields too (the FE hoop stress at 1.05 a is then 6 % above).
@@ -112,7 +133,7 @@ def test_salencon_cavity(meshes, dilation):
         error = result[f"sigma_theta_{where}"] / reference - 1
         print(f"  hoop stress at r = {r / RADIUS:.3f} a: {result[f'sigma_theta_{where}'] / 1e6:.2f} MPa vs "
               f"{reference / 1e6:.2f} ({error:+.2%})")
-        assert abs(error) < 0.05, where
+        assert abs(error) < SALENCON_HOOP, where  # catches a hoop stress off by the FE error again
 
 
 SALENCON_AS_WRITTEN = """\
@@ -198,7 +219,8 @@ def test_plastic_stage_hands_over_at_rest(meshes, tmp_path):
     plans = []  # as the command line runs it: the plan (a trial stepper of its own) comes first
     summary = solver.run(scene, tmp_path / "run", on_plan=plans.append)
     assert "static stage" in plans[0]
-    assert summary["monitors"]["wall"]["velocity"] < REST_VELOCITY
+    # catches a stage handed over out of equilibrium (stress or plastic strain not rebased)
+    assert summary["monitors"]["wall"]["velocity"] < HANDED_OVER_REST_VELOCITY
     rows = np.genfromtxt(tmp_path / "run" / "monitors" / "wall.csv", delimiter=",", names=True)
     assert rows["plastic_strain"][0] > 0.0, "the monitor point yielded during the stage"
     assert np.ptp(rows["plastic_strain"]) < 1e-9 * rows["plastic_strain"][0]
@@ -340,7 +362,8 @@ def test_layered_box_with_contact_and_yielding_hands_over_at_rest(tmp_path):
           f"{summary['monitors']['soft']['velocity']:.2e} m/s")
     assert all(s["converged"] for s in summary["static"]["stages"])
     assert simulation_regions["yielded_volume"] > 0.0, "the soft layer yielded in the stage"
-    assert summary["monitors"]["soft"]["velocity"] < REST_VELOCITY
+    # catches the pairs' or the layer's stage state handed over out of equilibrium
+    assert summary["monitors"]["soft"]["velocity"] < HANDED_OVER_REST_VELOCITY
 
 
 # ---------------------------------------------------------------------------------------------

@@ -25,7 +25,7 @@ from test_cavity import (ANGLES, RADII, free_field_shear, kirsch, monitor_points
 
 REPO = Path(__file__).resolve().parents[1]
 TUNNEL_GEO = REPO / "meshes" / "tunnel_in_box_tet.geo"
-KIRSCH_TOLERANCE = 0.10  # as tests/test_cavity.py
+KIRSCH_TOLERANCE = 0.10  # not yet tightened to the measured (tests/test_cavity.py: 3.5 % peak, 4.5 % history)
 
 
 def box_geo(folder: Path, h: float) -> Path:
