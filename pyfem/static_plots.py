@@ -233,6 +233,13 @@ def section_state(png_path, model, cell_values: dict, y0: float, title: str = ""
               ("plastic strain (-)", cell_values["plastic_strain"][cells], "magma_r", False),
               ("damage (-)", cell_values["damage"][cells], "inferno_r", False),
               ("damage type (0 none, 1 tension, 2 shear)", cell_values["damage_type"][cells], "viridis", False)]
+    inside = [polygon for polygon, value in zip(polygons, cell_values["plastic_strain"][cells]) if np.isfinite(value)]
+    zoom = None
+    if inside:
+        corners = np.concatenate(inside)
+        low, high = corners.min(axis=0), corners.max(axis=0)
+        margin = 0.15 * float(np.max(high - low))
+        zoom = ((low[0] - margin, high[0] + margin), (low[1] - margin, high[1] + margin))
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.8), squeeze=False)
     for ax, (label, values, cmap, centred) in zip(axes[0], panels):
         colour_map = plt.get_cmap(cmap).copy()
@@ -249,6 +256,9 @@ def section_state(png_path, model, cell_values: dict, y0: float, title: str = ""
             collection.set_clim(0.0, max(float(finite.max()), 1e-12))
         ax.add_collection(collection)
         ax.autoscale_view()
+        if zoom is not None:  # the nonlinear regions and a margin, not the whole far field
+            ax.set_xlim(*zoom[0])
+            ax.set_ylim(*zoom[1])
         ax.set_aspect("equal")
         ax.set_title(label, fontsize=9)
         ax.set_xlabel("x (m)")
