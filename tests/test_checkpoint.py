@@ -87,6 +87,21 @@ def pyfem_run(out_dir: Path, *extra: str, check: bool = True) -> subprocess.Comp
     return result
 
 
+def stop_after_first_checkpoint(out: Path) -> None:
+    """Starts a 60 s run of SCENE into `out`, stops it with SIGTERM once its first checkpoint is on
+    disk, and checks that it stopped as an interrupted run does (exit 128 + SIGTERM)."""
+    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), *KILL_RUN,
+                                "--set", "time.duration=60"], cwd=REPO, env=ENV, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while not (out / checkpoint.CHECKPOINT_NAME).exists():
+        assert process.poll() is None and time.monotonic() < deadline
+        time.sleep(0.05)
+    process.send_signal(signal.SIGTERM)
+    process.wait(timeout=120)
+    assert process.returncode == 128 + signal.SIGTERM
+
+
 def test_kill_9_at_a_random_time_then_resume_gives_the_uninterrupted_histories(tmp_path):
     pyfem_run(tmp_path / "reference")
     out = tmp_path / "killed"
@@ -111,16 +126,7 @@ def test_kill_9_at_a_random_time_then_resume_gives_the_uninterrupted_histories(t
 
 def test_resume_refuses_another_scene_a_finished_run_and_no_checkpoint(tmp_path):
     out = tmp_path / "run"
-    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), *KILL_RUN,
-                                "--set", "time.duration=60"], cwd=REPO, env=ENV, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 300
-    while not (out / checkpoint.CHECKPOINT_NAME).exists():
-        assert process.poll() is None and time.monotonic() < deadline
-        time.sleep(0.05)
-    process.send_signal(signal.SIGTERM)
-    process.wait(timeout=120)
-    assert process.returncode == 128 + signal.SIGTERM
+    stop_after_first_checkpoint(out)
     before = history_files(out)
 
     other = pyfem_run(out, "--set", "time.duration=60", "--set", "materials.rock.E=1.0e10", "--resume", check=False)
@@ -464,16 +470,7 @@ def test_an_interrupted_run_continues_to_a_later_duration(tmp_path):
     long_run = ("--set", "time.duration=2.0")
     pyfem_run(tmp_path / "reference", *long_run)
     out = tmp_path / "stopped"
-    process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), *KILL_RUN,
-                                "--set", "time.duration=60"], cwd=REPO, env=ENV, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 300
-    while not (out / checkpoint.CHECKPOINT_NAME).exists():
-        assert process.poll() is None and time.monotonic() < deadline
-        time.sleep(0.05)
-    process.send_signal(signal.SIGTERM)
-    process.wait(timeout=120)
-    assert process.returncode == 128 + signal.SIGTERM
+    stop_after_first_checkpoint(out)
     reached = json.loads((out / "run.json").read_text())["time_reached"]
     assert 0.0 < reached < 2.0, reached  # stopped before the reference's end
     before = history_files(out)
