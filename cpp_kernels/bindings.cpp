@@ -13,6 +13,7 @@
 
 #include "bsr.hpp"
 #include "contact.hpp"
+#include "held_force.hpp"
 #include "internal_force.hpp"
 #include "local_stepper.hpp"
 #include "mpi_exchange.hpp"
@@ -331,6 +332,23 @@ Borrowed arrays are kept alive by this object and must not be modified while it 
           py::arg("t"),
           "Forces (N) of every input node at time t (s): new float64 array (n_input_nodes, 3).")
       .def_property_readonly("n_input_nodes", &SeismicInput::n_input_nodes);
+
+  py::class_<HeldForce, ForceProvider, std::shared_ptr<HeldForce>>(
+      m, "HeldForce",
+      R"(A constant nodal force (the static stage's loads and hand-over force): f = s(t) F at the
+nodes, s = 1 (ramp = 0) or the smoothstep 3 x^2 - 2 x^3 of x = clamp(t / ramp, 0, 1).
+
+Args:
+    nodes: int32 (k,) distinct nodes.
+    forces: float64 (k, 3) force per node (N), copied.
+    ramp: rise time (s), >= 0; 0: held from the start.)")
+      .def(py::init([](const py::object& nodes_object, const py::object& forces_object, double ramp) {
+             auto nodes = checked_array<std::int32_t>(nodes_object, "nodes", {kAny});
+             auto forces = checked_array<double>(forces_object, "forces", {nodes.shape(0), 3});
+             return std::make_shared<HeldForce>(nodes.data(), nodes.shape(0), forces.data(), ramp);
+           }),
+           py::arg("nodes"), py::arg("forces"), py::arg("ramp") = 0.0)
+      .def("factor", &HeldForce::factor, py::arg("t"), "The factor s(t) of the forces.");
 
   def_state_methods(py::class_<ContactPairs, std::shared_ptr<ContactPairs>>(
       m, "ContactPairs",
@@ -873,6 +891,14 @@ save_state(points=False), the per-point and per-node state left as it was.)")
           },
           "Reactions (k, 3) of the constraints at the last step (N), in set_constraints order (a copy).")
       .def(
+          "add_provider",
+          [](Stepper& stepper, std::shared_ptr<ForceProvider> provider) {
+            stepper.add_provider(std::move(provider));
+          },
+          py::arg("provider"), py::keep_alive<1, 2>(),
+          "Adds a force provider (SeismicInput, HeldForce; kept alive). ValueError names a node "
+          "outside the model.")
+      .def(
           "add_seismic_input",
           [](Stepper& stepper, std::shared_ptr<SeismicInput> input) {
             stepper.add_provider(std::move(input));
@@ -1067,6 +1093,13 @@ Args:
             return out;
           },
           "The supports' reactions (k, 3) at the end of the last run (N), as Stepper.reactions.")
+      .def(
+          "add_provider",
+          [](LocalStepper& stepper, std::shared_ptr<ForceProvider> provider) {
+            stepper.add_provider(std::move(provider));
+          },
+          py::arg("provider"), py::keep_alive<1, 2>(),
+          "Adds a force provider (SeismicInput, HeldForce) that lists its nodes.")
       .def(
           "add_seismic_input",
           [](LocalStepper& stepper, std::shared_ptr<SeismicInput> input) {

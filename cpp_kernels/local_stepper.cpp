@@ -30,7 +30,7 @@ const std::shared_ptr<NodeExchange>& nullptr_exchange() {
 
 LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
                            const std::int32_t* node_level, double dt_fine, double alpha, int max_level)
-    : stiffness_(stiffness), mass_(mass), dt_fine_(dt_fine), alpha_(alpha) {
+    : SteppingBase(stiffness, mass), dt_fine_(dt_fine), alpha_(alpha) {
   if (!(std::isfinite(dt_fine) && dt_fine > 0.0))
     throw std::invalid_argument("dt_fine must be finite and > 0, got " + std::to_string(dt_fine));
   if (!(std::isfinite(alpha) && alpha >= 0.0))
@@ -38,8 +38,6 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
   const std::int64_t n = stiffness.n_block_rows;
   level_.assign(node_level, node_level + n);
   for (std::int64_t i = 0; i < n; ++i) {
-    if (!(mass[i] > 0.0 && std::isfinite(mass[i])))
-      throw std::invalid_argument("mass[" + std::to_string(i) + "] must be finite and > 0");
     if (level_[i] < 0 || level_[i] >= kMaxLevels)
       throw std::invalid_argument("node_level[" + std::to_string(i) + "] = " +
                                   std::to_string(level_[i]) + " must be in [0, " +
@@ -59,22 +57,16 @@ LocalStepper::LocalStepper(const BlockCsrView& stiffness, const double* mass,
   external_.assign(3 * n, 0.0);
   internal_.assign(3 * n, 0.0);
   own_power_.assign(2 * n, 0.0);
-  effects_ = NodalEffects(n);
 }
 
-void LocalStepper::set_constraints(const std::int32_t* nodes, std::int64_t count,
-                                   const double* projection) {
-  effects_.set_constraints(nodes, count, projection);  // (unchanged when it throws)
-  reactions_.assign(3 * count, 0.0);
-  initialised_ = false;
+void LocalStepper::nodal_effects_changed(bool constraints) {
+  build_dashpot_inverses();
+  if (constraints) initialised_ = false;
 }
 
 void LocalStepper::set_partition(std::int64_t n_owned,
                                  std::vector<std::shared_ptr<NodeExchange>> exchanges) {
-  if (n_owned < 0 || n_owned > n_nodes())
-    throw std::invalid_argument("n_owned = " + std::to_string(n_owned) + " must be in [0, " +
-                                std::to_string(n_nodes()) + "]");
-  n_owned_ = n_owned;
+  set_owned(n_owned);
   exchanges_ = std::move(exchanges);
   initialised_ = false;
 }
@@ -87,15 +79,10 @@ void LocalStepper::check_partition() const {
   if (exchanges_.size() != static_cast<std::size_t>(max_level_ + 1))
     throw std::invalid_argument("set_partition: " + std::to_string(exchanges_.size()) + " exchanges for " +
                                 std::to_string(max_level_ + 1) + " levels (one per level, null: none)");
-  auto require_owned = [this](std::int64_t node, const std::string& what) {
-    if (node >= n_owned_) throw NodalEffects::ghost_error(what, node, n_owned_);
-  };
-  effects_.require_owned(n_owned_);
-  for (const auto& provider : providers_)
-    for (const std::int32_t node : provider->nodes()) require_owned(node, provider->name());
+  std::vector<const ContactPairs*> pairs;
   for (const Level& level : levels_)
-    for (const auto& pairs : level.contacts)
-      for (const std::int32_t node : pairs->unique_nodes()) require_owned(node, "a contact pair");
+    for (const auto& set : level.contacts) pairs.push_back(set.get());
+  require_effects_owned(pairs);
 }
 
 void LocalStepper::set_row_split(bool on) {
@@ -390,18 +377,6 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
   }
 }
 
-void LocalStepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
-  NodalEffects previous = effects_;
-  effects_.set_dashpots(nodes, count, C);  // (unchanged when it throws)
-  try {
-    build_dashpot_inverses();
-  } catch (...) {
-    effects_ = std::move(previous);
-    build_dashpot_inverses();
-    throw;
-  }
-}
-
 void LocalStepper::build_dashpot_inverses() {
   for (Level& level : levels_) {
     level.implicit_inverse.assign(effects_.dashpot_C.size(), 0.0);
@@ -419,16 +394,15 @@ void LocalStepper::build_dashpot_inverses() {
 }
 
 void LocalStepper::add_provider(std::shared_ptr<ForceProvider> provider) {
-  provider->check_nodes(n_nodes());
   const std::vector<std::int32_t> nodes = provider->nodes();
   if (nodes.empty())
     throw std::invalid_argument("LocalStepper: provider '" + provider->name() +
                                 "' does not list its nodes");
+  attach_provider(provider);
   provider_nodes_.insert(provider_nodes_.end(), nodes.begin(), nodes.end());
   std::sort(provider_nodes_.begin(), provider_nodes_.end());
   provider_nodes_.erase(std::unique(provider_nodes_.begin(), provider_nodes_.end()),
                         provider_nodes_.end());
-  providers_.push_back(std::move(provider));
   initialised_ = false;  // its rows are found at the next run (rebuild)
 }
 
@@ -859,11 +833,7 @@ void LocalStepper::save_state(StateArchive& archive) const {
       archive.put(prefix + "force", level.force);
       archive.put(prefix + "external", level.external);
     }
-    for (std::size_t k = 0; k < level.components.size(); ++k) {
-      const std::string component = prefix + "component/" + std::to_string(k) + "/";
-      archive.put_text(component + "name", level.components[k]->name());
-      level.components[k]->save_state(archive, component);
-    }
+    save_components(archive, prefix + "component/", level.components);
     for (std::size_t k = 0; k < level.contacts.size(); ++k)
       level.contacts[k]->save_state(archive, prefix + "contact/" + std::to_string(k) + "/");
   }
@@ -888,14 +858,8 @@ void LocalStepper::load_state(const StateArchive& archive) {
                                   " was at rate level " + std::to_string(levels[i]) + ", the model's is " +
                                   std::to_string(level_[i]) + " (another mesh or time step?)");
   for (int c = 0; c <= max_level_; ++c)
-    for (std::size_t k = 0; k < levels_[c].components.size(); ++k) {
-      const std::string name =
-          archive.text(level_prefix(c) + "component/" + std::to_string(k) + "/name");
-      if (name != levels_[c].components[k]->name())
-        throw std::invalid_argument("checkpoint: level " + std::to_string(c) + " component " +
-                                    std::to_string(k) + " is a " + name + ", the model's is a " +
-                                    levels_[c].components[k]->name());
-    }
+    check_component_names(archive, level_prefix(c) + "component/", levels_[c].components,
+                          "level " + std::to_string(c) + " ");
   std::uint8_t started = 0;
   archive.get_value("lts/started", started);
   if (!started) {
@@ -915,8 +879,7 @@ void LocalStepper::load_state(const StateArchive& archive) {
       archive.get(prefix + "force", level.force);
       archive.get(prefix + "external", level.external);
     }
-    for (std::size_t k = 0; k < level.components.size(); ++k)
-      level.components[k]->load_state(archive, prefix + "component/" + std::to_string(k) + "/");
+    load_components(archive, prefix + "component/", level.components);
     for (std::size_t k = 0; k < level.contacts.size(); ++k)
       level.contacts[k]->load_state(archive, prefix + "contact/" + std::to_string(k) + "/");
   }

@@ -19,6 +19,7 @@
 #include "nodal_effects.hpp"
 #include "state_archive.hpp"
 #include "stepper.hpp"
+#include "stepping_base.hpp"
 
 namespace cavern {
 
@@ -47,7 +48,7 @@ namespace cavern {
 /// Energy: kinetic and strain energy of the state and the external and damping work by the
 /// trapezoid rule at each node's own kicks. The scheme conserves a modified energy, not this
 /// plain one: the reported balance oscillates at O(dt^2) (bounded), it is not round-off.
-class LocalStepper {
+class LocalStepper : public SteppingBase {
  public:
   /// K borrowed (full block CSR, symmetric), mass borrowed; node_level (n_nodes) copied. The
   /// largest level L is the nodes' largest, or max_level if given (>= 0: an MPI rank's share steps
@@ -59,17 +60,11 @@ class LocalStepper {
 
   static constexpr int kMaxLevels = 10;
 
-  /// Implicit 3x3 dashpots C (count, 3, 3) at nodes (count) (Stepper::set_dashpots).
-  void set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C);
-
-  /// Kinematic constraints (constraints.hpp, Stepper::set_constraints): node k moves only in the
-  /// range of the orthogonal projection P_k (count, 3, 3; fixed: 0, roller: I - n n^T). Every kick
-  /// of a constrained node is projected (its own end kick solves the constrained implicit update,
-  /// P A P v = P rhs, as Stepper's pass B), so from a state in the range of P its u and v stay
-  /// there at every level; the held part of the force is the support's reaction, which does no
-  /// work (reactions()). A contact pair node may not be constrained (checked at the first run). Throws std::invalid_argument for a node outside the mesh, a repeated node or a P that is
-  /// not an orthogonal projection.
-  void set_constraints(const std::int32_t* nodes, std::int64_t count, const double* projection);
+  // set_dashpots, set_constraints (SteppingBase): every kick of a constrained node is projected
+  // (its own end kick solves the constrained implicit update, P A P v = P rhs, as Stepper's pass B),
+  // so from a state in the range of P its u and v stay there at every level; the held part of the
+  // force is the support's reaction, which does no work (reactions()). A contact pair node may not
+  // be constrained (checked at the first run).
 
   /// Adds a force provider; its nodes() must be listed (non-empty). Its forces act in the end
   /// kicks of each node's own level at that kick's time.
@@ -148,8 +143,6 @@ class LocalStepper {
   /// the row split, one entry per level, effects on owned nodes. Throws std::invalid_argument for
   /// n_owned outside [0, n_nodes].
   void set_partition(std::int64_t n_owned, std::vector<std::shared_ptr<NodeExchange>> exchanges);
-  /// Nodes whose u, v and a this stepper keeps: n_owned of set_partition, else every node.
-  std::int64_t n_owned_nodes() const { return n_owned_ < 0 ? n_nodes() : n_owned_; }
 
   /// Advances (u, v, a) by n_steps global steps from t0; returns t0 + n_steps dt(). a holds on
   /// return each node's own-level acceleration of its last end kick (the FSAL value the next
@@ -162,7 +155,6 @@ class LocalStepper {
   double dt() const { return dt_fine_ * static_cast<double>(std::int64_t{1} << max_level_); }
   double dt_fine() const { return dt_fine_; }
   int max_level() const { return max_level_; }
-  std::int64_t n_nodes() const { return stiffness_.n_block_rows; }
   /// Kicks of level-k forces per global step, summed over the rows they touch, relative to
   /// global stepping at dt_fine (1: no saving): the work model of workflows/lts_clusters.py.
   double work_fraction() const;
@@ -180,11 +172,6 @@ class LocalStepper {
   /// Energies of the state of the last run() (strain by one product at the end of each run call).
   Energy energy() const { return energy_; }
 
-  /// The supports' reactions (constraints, 3) at the end of the last run(): the held part of each
-  /// constrained node's net force, R = -(I - P)(r - d), r the sum of its levels' last forces (all
-  /// levels end together at a global step's end), as Stepper::reactions.
-  const std::vector<double>& reactions() const { return reactions_; }
-
   /// The run's state beyond u, v, a and t (checkpoint, docs/checkpoint.md): each level's force of
   /// its last end kick (the FSAL force the next start kick uses) and own external force (its power
   /// at the next start kick), the energy account, and the state of every
@@ -198,14 +185,12 @@ class LocalStepper {
   /// assumed about the stepper's state).
   void load_state(const StateArchive& archive);
 
-  /// Wall time of each part of the steps run so far (s), as Stepper's phases: update (the drifts),
-  /// element_loop (the components' forces and commits), input_forces (the providers), stiffness
-  /// (the kicks' block products and velocity updates), contact (the pairs' impulses); steps counts
-  /// fine steps (dt_fine). Two clock reads per phase per kick, nothing per node.
-  const PhaseTimes& phase_times() const { return phase_times_; }
-  void reset_phase_times() { phase_times_ = PhaseTimes{}; }
+  // phase_times() (SteppingBase), as Stepper's phases: update (the drifts), element_loop (the
+  // components' forces and commits), input_forces (the providers), stiffness (the kicks' block
+  // products and velocity updates), contact (the pairs' impulses); steps counts fine steps.
 
  private:
+  void nodal_effects_changed(bool constraints) override;
   struct Level {
     // Rows touched by the level's columns, and per row the blocks of those columns.
     std::vector<std::int32_t> rows;
@@ -271,18 +256,13 @@ class LocalStepper {
   // components' dissipation since their construction (initialise and the end of run).
   double measure_state(const double* u, const double* v);
 
-  BlockCsrView stiffness_;
-  const double* mass_;
   std::vector<std::int32_t> level_;  // per node, fine index k
   double dt_fine_;
   double alpha_;
   int max_level_ = 0;
   std::vector<Level> levels_;  // by coarse index c = max_level_ - k
-  NodalEffects effects_;                       // dashpots and constraints as given, validated
-  std::vector<double> reactions_;              // (constraints, 3) of the last run()
   // v += P dv at node i (dv unchanged without a constraint); in place on dv.
   void project(std::int64_t i, double* dv) const;
-  std::vector<std::shared_ptr<ForceProvider>> providers_;
   std::vector<std::int32_t> provider_nodes_;  // union of the providers' nodes (sorted)
   std::vector<double> external_;              // (3 n) scratch for the providers' forces
   std::vector<double> own_power_;             // (n) f.v - d.v of each node at its last end kick
@@ -302,10 +282,8 @@ class LocalStepper {
   std::vector<double> drift_end_;
   double dissipation_at_start_ = 0.0;         // the components' dissipation when the run started
   bool initialised_ = false;
-  std::int64_t n_owned_ = -1;  // set_partition (-1: not a share, every node owned)
   std::vector<std::shared_ptr<NodeExchange>> exchanges_;  // per fine level k (set_partition)
   Energy energy_;
-  PhaseTimes phase_times_;
 };
 
 }  // namespace cavern

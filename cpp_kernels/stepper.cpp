@@ -14,7 +14,7 @@ namespace cavern {
 
 Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
                  const StepperParameters& parameters)
-    : stiffness_(stiffness), mass_(mass), parameters_(parameters), effects_(stiffness.n_block_rows) {
+    : SteppingBase(stiffness, mass), parameters_(parameters) {
   if (!(std::isfinite(parameters.dt) && parameters.dt > 0.0))
     throw std::invalid_argument("dt must be finite and > 0, got " + std::to_string(parameters.dt));
   if (!(std::isfinite(parameters.alpha) && parameters.alpha >= 0.0))
@@ -23,10 +23,6 @@ Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
   if (!(std::isfinite(parameters.beta) && parameters.beta >= 0.0))
     throw std::invalid_argument("beta must be finite and >= 0, got " +
                                 std::to_string(parameters.beta));
-  for (std::int64_t i = 0; i < stiffness.n_block_rows; ++i)
-    if (!(mass[i] > 0.0 && std::isfinite(mass[i])))
-      throw std::invalid_argument("mass[" + std::to_string(i) + "] = " + std::to_string(mass[i]) +
-                                  " must be finite and > 0");
   external_force_.assign(n_dofs(), 0.0);
   if (parameters.beta != 0.0) v_half_.assign(n_dofs(), 0.0);
   threaded_ = stiffness.n_block_rows >= kMinRowsForThreads;
@@ -44,31 +40,9 @@ Stepper::Stepper(const BlockCsrView& stiffness, const double* mass,
   }
 }
 
-void Stepper::set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C) {
+void Stepper::nodal_effects_changed(bool) {
   partition_checked_ = false;  // check_partition again at the next run
-  NodalEffects previous = effects_;
-  effects_.set_dashpots(nodes, count, C);  // (unchanged when it throws)
-  try {
-    build_implicit_slots();
-  } catch (...) {
-    effects_ = std::move(previous);
-    throw;
-  }
-}
-
-void Stepper::set_constraints(const std::int32_t* nodes, std::int64_t count,
-                              const double* projection) {
-  partition_checked_ = false;  // check_partition again at the next run
-  NodalEffects previous = effects_;
-  effects_.set_constraints(nodes, count, projection);  // (unchanged when it throws)
-  try {
-    build_implicit_slots();
-  } catch (...) {
-    effects_ = std::move(previous);
-    build_implicit_slots();
-    throw;
-  }
-  reactions_.assign(3 * count, 0.0);
+  build_implicit_slots();
 }
 
 void Stepper::set_mass_damping(double alpha) {
@@ -212,30 +186,22 @@ void Stepper::contact_post_pass(double t, const double* u, double* v, double* a)
 }
 
 void Stepper::set_partition(std::int64_t n_owned, std::shared_ptr<NodeExchange> exchange) {
-  if (n_owned < 0 || n_owned > n_nodes())
-    throw std::invalid_argument("n_owned = " + std::to_string(n_owned) +
-                                " must be in [0, " + std::to_string(n_nodes()) + "]");
-  n_owned_ = n_owned;
+  set_owned(n_owned);
   exchange_ = std::move(exchange);
   partition_checked_ = false;
 }
 
 void Stepper::check_partition() {
   if (n_owned_ < 0 || partition_checked_) return;
-  auto require_owned = [this](const std::vector<std::int32_t>& nodes, const std::string& what) {
-    for (const std::int32_t node : nodes)
-      if (node >= n_owned_) throw NodalEffects::ghost_error(what, node, n_owned_);
-  };
-  effects_.require_owned(n_owned_);
-  for (const auto& provider : providers_) require_owned(provider->nodes(), provider->name());
-  if (contact_) require_owned(contact_->unique_nodes(), "a contact pair");
+  std::vector<const ContactPairs*> pairs;
+  if (contact_) pairs.push_back(contact_.get());
+  require_effects_owned(pairs);
   partition_checked_ = true;
 }
 
 void Stepper::add_provider(std::shared_ptr<ForceProvider> provider) {
   partition_checked_ = false;  // check_partition again at the next run
-  provider->check_nodes(n_nodes());
-  providers_.push_back(std::move(provider));
+  attach_provider(std::move(provider));
   // A provider added mid-run has done no work so far and applied no force at the last step.
   provider_work_.push_back(0.0);
   provider_power_.push_back(0.0);
@@ -642,11 +608,7 @@ void Stepper::save_state(StateArchive& archive) const {
   if (archive.per_point()) archive.put("stepper/internal_force", internal_force_);
   archive.put("stepper/reactions", reactions_);
   if (contact_) contact_->save_state(archive, "contact/");
-  for (std::size_t k = 0; k < components_.size(); ++k) {
-    const std::string prefix = "component/" + std::to_string(k) + "/";
-    archive.put_text(prefix + "name", components_[k]->name());
-    components_[k]->save_state(archive, prefix);
-  }
+  save_components(archive, "component/", components_);
 }
 
 void Stepper::load_state(const StateArchive& archive) {
@@ -659,12 +621,7 @@ void Stepper::load_state(const StateArchive& archive) {
                                   std::to_string(saved[j]) + ", the model's is " +
                                   std::to_string(expected[j]) +
                                   " (a checkpoint of another scene?)");
-  for (std::size_t k = 0; k < components_.size(); ++k) {
-    const std::string saved_name = archive.text("component/" + std::to_string(k) + "/name");
-    if (saved_name != components_[k]->name())
-      throw std::invalid_argument("checkpoint: component " + std::to_string(k) + " is a " +
-                                  saved_name + ", the model's is a " + components_[k]->name());
-  }
+  check_component_names(archive, "component/", components_, "");
   // Everything checked that can be checked without reading: now restore.
   std::uint8_t started = 0;
   archive.get_value("stepper/energy_started", started);
@@ -676,8 +633,7 @@ void Stepper::load_state(const StateArchive& archive) {
   if (archive.per_point()) archive.get("stepper/internal_force", internal_force_);
   archive.get("stepper/reactions", reactions_);
   if (contact_) contact_->load_state(archive, "contact/");
-  for (std::size_t k = 0; k < components_.size(); ++k)
-    components_[k]->load_state(archive, "component/" + std::to_string(k) + "/");
+  load_components(archive, "component/", components_);
   energy_started_ = started != 0;
   for (std::size_t j = 0; j < terms.size(); ++j) *terms[j] = energy[j];
 }

@@ -14,6 +14,7 @@
 #include "state_archive.hpp"
 #include "internal_force.hpp"
 #include "nodal_effects.hpp"
+#include "stepping_base.hpp"
 #include "symmetric_bsr.hpp"
 
 namespace cavern {
@@ -58,30 +59,6 @@ struct EnergyReport {
   std::vector<double> provider_work;  // each provider's share of external_work
 };
 
-/// Wall time of each part of the steps run so far (s): where the time goes (issue 12). Two clock
-/// reads per phase per step (omp_get_wtime, ~20 ns each), nothing per node.
-struct PhaseTimes {
-  double update = 0.0;         // pass A: v_{n+1/2}, u_{n+1} (and the components' g_n.v bookkeeping)
-  double element_loop = 0.0;   // the internal-force components: g(u_{n+1}), its power, commit
-  double input_forces = 0.0;   // the force providers (seismic input, held forces) and their work
-  double stiffness = 0.0;      // pass B: K u (+ beta K v) and the per-node velocity/energy update
-  double contact = 0.0;        // the contact pairs' correction
-  double exchange = 0.0;       // the ghost exchange between MPI ranks (NodeExchange)
-  std::int64_t steps = 0;      // steps timed
-};
-
-/// The nodes a rank shares with other ranks (MPI, docs/scaling.md "The distributed step"): a
-/// rank numbers its owned nodes first, then its ghosts (the other ranks' nodes its matrix rows
-/// and cells touch). After every step, exchange() sends v_{n+1} and a_{n+1} of the owned nodes
-/// other ranks ghost and overwrites this rank's ghost rows with their owners' values; the next
-/// pass A then gives the ghosts the owners' u_{n+2} bit for bit. A serial run has none.
-class NodeExchange {
- public:
-  virtual ~NodeExchange() = default;
-  /// v, a: (3 n_nodes) of this rank, owned first. a null: v only (LocalStepper::set_partition).
-  virtual void exchange(double* v, double* a) = 0;
-};
-
 /// Velocity-Verlet central difference for M a + d(v) + K u = f_ext(t), lumped M.
 /// Per step, from (u_n, v_n, a_n) at t_n:
 ///   pass A (per dof):  v_{n+1/2} = v_n + dt/2 a_n,  u_{n+1} = u_n + dt v_{n+1/2}
@@ -120,30 +97,20 @@ class NodeExchange {
 /// which is round-off when Psi_n - Psi_0 + D = W_int (elastic laws, and the rules of
 /// materials/material_law.hpp) and otherwise shows the law's own energy error.
 /// The stiffness, mass and providers are borrowed; u, v, a are modified in place.
-class Stepper {
+class Stepper : public SteppingBase {
  public:
   /// Throws std::invalid_argument for a non-positive mass or dt, or negative alpha, beta.
   Stepper(const BlockCsrView& stiffness, const double* mass, const StepperParameters& parameters);
 
-  /// Implicit 3x3 dashpots C (k, 3, 3) at nodes (k); replaces any previous set. A node listed
-  /// twice gets the sum of its dashpots. Precomputes (M(1 + dt/2 alpha) I + dt/2 C)^-1.
-  void set_dashpots(const std::int32_t* nodes, std::int64_t count, const double* C);
-
-  /// Kinematic constraints (constraints.hpp): node k moves only in the range of the orthogonal
-  /// projection P_k (count, 3, 3); P = 0 holds the node (fixed), I - n n^T holds its normal
-  /// component (roller). Replaces any previous set; nodes must be distinct. The support's
-  /// reaction R = -(I - P)(r - d) of the last step is reported by reactions(). u, v, a of a
-  /// constrained node must start in the range of P (zero for the held components).
-  void set_constraints(const std::int32_t* nodes, std::int64_t count, const double* projection);
+  // set_dashpots, set_constraints, reactions, phase_times, n_nodes, n_owned_nodes: SteppingBase.
+  // Dashpots: (M(1 + dt/2 alpha) I + dt/2 C)^-1 precomputed per node; constraints: u, v, a of a
+  // constrained node must start in the range of P (zero for the held components).
 
   /// Changes the mass-proportional damping coefficient alpha (1/s, finite, >= 0) for the
   /// following steps (the static stage's dynamic relaxation adapts it to the lowest frequency,
   /// pyfem/static.py). The energy account keeps running; its damping work uses the new alpha.
   /// Throws std::invalid_argument for a bad alpha.
   void set_mass_damping(double alpha);
-
-  /// Reactions (count, 3) of the constraints at the last step (N), in set_constraints order.
-  const std::vector<double>& reactions() const { return reactions_; }
 
   /// Adds a force provider (shared: the caller may keep and query it).
   void add_provider(std::shared_ptr<ForceProvider> provider);
@@ -191,17 +158,10 @@ class Stepper {
   /// std::invalid_argument naming the first block that does not fit.
   void load_state(const StateArchive& archive);
 
-  /// Wall time per phase of the steps since construction or the last reset_phase_times().
-  const PhaseTimes& phase_times() const { return phase_times_; }
-  void reset_phase_times() { phase_times_ = PhaseTimes{}; }
-
   double dt() const { return parameters_.dt; }
-  std::int64_t n_nodes() const { return stiffness_.n_block_rows; }
-  std::int64_t n_dofs() const { return 3 * stiffness_.n_block_rows; }
-  /// Nodes whose energy the account sums (all of them unless set_partition said otherwise).
-  std::int64_t n_owned_nodes() const { return n_owned_ < 0 ? n_nodes() : n_owned_; }
 
  private:
+  void nodal_effects_changed(bool constraints) override;
   // With a partition: throws unless dashpots, constraints, listed providers and pairs are on
   // owned nodes (set_partition); once until an effect or the partition changes.
   void check_partition();
@@ -239,27 +199,21 @@ class Stepper {
   // velocity system (restricted to the free directions for a constrained node).
   void build_implicit_slots();
 
-  BlockCsrView stiffness_;
   std::unique_ptr<SymmetricProduct> symmetric_;  // owned upper triangle, when symmetric_storage
   std::vector<double> Ku_, Kv_;                   // K u_{n+1}, K v_{n+1/2} for the symmetric path
   bool threaded_ = true;                          // n_nodes >= kMinRowsForThreads
-  const double* mass_;
   StepperParameters parameters_;
 
-  // Dashpots and constraints as given (copied), then per node its slot (-1: none) and per slot
-  // C, the inverse of the implicit 3x3 system and the constraint (-1: none).
-  NodalEffects effects_;                       // dashpots and constraints as given, validated
-  std::vector<double> reactions_;              // (constraints, 3)
+  // Per node its slot (-1: none) and per slot C, the inverse of the implicit 3x3 system and the
+  // constraint (-1: none), from effects_.
   std::vector<std::int32_t> dashpot_slot_;
   std::vector<double> dashpot_C_;              // (slots, 9)
   std::vector<double> dashpot_inverse_;        // (slots, 9)
   std::vector<std::int32_t> constraint_of_slot_;  // (slots) constraint index or -1
 
-  std::vector<std::shared_ptr<ForceProvider>> providers_;
   std::shared_ptr<ContactPairs> contact_;  // null: no contact, no cost
   std::vector<std::shared_ptr<InternalForceComponent>> components_;  // empty: no cost
   std::vector<char> component_counted_;  // per component: its energy is in this account
-  std::int64_t n_owned_ = -1;            // set_partition; -1: every node
   bool partition_checked_ = false;       // the effects were found on owned nodes (check_partition)
   std::shared_ptr<NodeExchange> exchange_;
   std::vector<double> internal_force_;  // g (3 n_nodes) of the last compute, with components
@@ -291,7 +245,6 @@ class Stepper {
   double dissipation_at_reset_ = 0.0;  // sum of the components' dissipation() at the reset
   std::vector<double> provider_work_;
   std::vector<double> provider_power_;
-  PhaseTimes phase_times_;
 };
 
 }  // namespace cavern

@@ -704,7 +704,7 @@ def local_lts_stepper(simulation, mine: Share, exchanges: list, bare: bool = Fal
 
         force = local_force(hand_over, mine.nodes[:mine.n_owned], mine.local_of, len(mine.nodes))
         if np.any(force):  # (the kernel takes no provider without nodes)
-            kernel.add_seismic_input(hand_over_force_provider(force))
+            kernel.add_provider(hand_over_force_provider(force))
     kernel.set_partition(mine.n_owned, exchanges)
     layout = LevelLayout(max_level, [mine.nodes[np.flatnonzero(local_levels == k)] for k in range(max_level + 1)],
                          components, pairs)
@@ -1246,7 +1246,7 @@ class DistributedStage(RankSums):
         _add_constraints(kernel, constraints, mine)
         local_load = local_force(load, mine.nodes[:mine.n_owned], mine.local_of, len(mine.nodes))
         if np.any(local_load):
-            kernel.add_seismic_input(hand_over_force_provider(local_load, ramp))
+            kernel.add_provider(hand_over_force_provider(local_load, ramp))
         components = []
         if self.model.nonlinear is not None:
             components, _ = _add_components(kernel, simulation.nonlinear, regions, mine)

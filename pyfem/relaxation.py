@@ -177,7 +177,7 @@ def _rayleigh(x: np.ndarray, force: np.ndarray, m: np.ndarray, space=None) -> fl
 
 def load_factor(t: float, ramp: float) -> float:
     """The share of the load applied at pseudo time t: the smoothstep 3 s^2 - 2 s^3 of s = t / ramp
-    (pyfem.static.hand_over_force_provider's cubic Hermite table), 1 after the ramp."""
+    (pyfem.static.hand_over_force_provider's smoothstep), 1 after the ramp."""
     if ramp <= 0.0 or t >= ramp:
         return 1.0
     s = max(t, 0.0) / ramp

@@ -828,7 +828,7 @@ def stage_kernel(matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray,
         stepper.set_constraints(np.ascontiguousarray(constraints.nodes, dtype=np.int32),
                                 np.ascontiguousarray(constraints.projection, dtype=np.float64))
     if np.any(load):
-        stepper.add_seismic_input(hand_over_force_provider(load, ramp))
+        stepper.add_provider(hand_over_force_provider(load, ramp))
     for component in components:
         stepper.add_internal_force(component)
     for component in halo:
@@ -1182,22 +1182,14 @@ def pairs_over_strength(contact_arrays: dict) -> dict:
 
 
 def hand_over_force_provider(force: np.ndarray, ramp: float = 0.0):
-    """A kernel force provider holding `force` (dofs, N): constant for the whole run (ramp = 0: a
-    SeismicInput with one table that is 1 from long before the run starts), or rising smoothly
-    from 0 at t = 0 to 1 at t = ramp (cubic Hermite, zero slope at both ends) and constant after."""
+    """A kernel force provider holding `force` (dofs, N) at its nonzero nodes: constant for the
+    whole run (ramp = 0), or rising smoothly from 0 at t = 0 to 1 at t = ramp (3 x^2 - 2 x^3, zero
+    slope at both ends) and constant after (the kernel's HeldForce)."""
     from pyfem import _kernels
 
     nodal = np.asarray(force, dtype=np.float64).reshape(-1, 3)
     nodes = np.flatnonzero(np.any(nodal != 0.0, axis=1)).astype(np.int32)
-    if ramp > 0.0:
-        t0, dt, g = 0.0, float(ramp), np.array([[0.0, 1.0]])
-        # g' of the smoothstep 3s^2 - 2s^3 is 0 at both ends; the g'' table's slopes: 6/ramp^2, -6/ramp^2.
-        tables = (g, np.zeros((1, 2)), np.array([[6.0, -6.0]]) / ramp ** 2)
-    else:
-        t0, dt, tables = -1.0e6, 1.0, (np.ones((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)))  # g = 1
-    return _kernels.SeismicInput(t0, dt, *tables, np.arange(len(nodes) + 1, dtype=np.int64), nodes,
-                                 np.zeros(len(nodes), dtype=np.int32), np.zeros(len(nodes)),
-                                 np.ascontiguousarray(nodal[nodes]), np.zeros((len(nodes), 3)))
+    return _kernels.HeldForce(nodes, np.ascontiguousarray(nodal[nodes]), float(ramp))
 
 
 def add_hand_over_force(stepper, simulation, nodes=None, local_of=None, n_local: int = 0) -> None:
@@ -1210,7 +1202,7 @@ def add_hand_over_force(stepper, simulation, nodes=None, local_of=None, n_local:
     force = state.hand_over_force
     if nodes is not None:
         force = local_force(force, nodes, local_of, n_local)
-    stepper.add_seismic_input(hand_over_force_provider(force))
+    stepper.add_provider(hand_over_force_provider(force))
 
 
 def local_force(force: np.ndarray, nodes: np.ndarray, local_of: np.ndarray, n_local: int) -> np.ndarray:

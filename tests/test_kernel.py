@@ -635,3 +635,53 @@ def test_nodal_effects_are_validated_alike_and_a_bad_call_changes_nothing(kind):
     assert checks == 4
     assert np.array_equal(steps(stepper), before)  # the refused calls changed nothing
     assert np.abs(before - u0).max() > 0.0  # (and the steps moved something)
+
+
+@pytest.mark.parametrize("kind", ["global", "local"])
+def test_a_held_force_steps_as_the_constant_seismic_input_it_replaced_and_ramps_by_the_smoothstep(kind):
+    """HeldForce (cpp_kernels/held_force.hpp), the stage's loads and hand-over force: held, bit for
+    bit the run of the one-table SeismicInput that was 1 from long before the run (what the stage
+    used before); ramped, s(t) = 3x^2 - 2x^3 with zero slope at both ends; its work in the energy
+    account (global stepping's balance to round-off). Catches a force applied twice, at the wrong
+    nodes, or ramped another way."""
+    K, mass = random_spd_system(40, 3, 5)
+    indptr, indices, blocks = bsr_arrays(K)
+    rng = np.random.default_rng(2)
+    nodes = np.array([3, 7, 8, 30], dtype=np.int32)
+    forces = rng.standard_normal((4, 3))
+    dt = 0.5 / np.sqrt(largest_eigenvalue(K, mass))
+
+    def constant_table():
+        n = len(nodes)
+        return _kernels.SeismicInput(-1.0e6, 1.0, np.ones((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)),
+                                     np.arange(n + 1, dtype=np.int64), nodes, np.zeros(n, dtype=np.int32),
+                                     np.zeros(n), np.ascontiguousarray(forces), np.zeros((n, 3)))
+
+    def run(provider):
+        if kind == "global":
+            stepper = _kernels.Stepper(indptr, indices, blocks, mass, dt)
+        else:
+            stepper = _kernels.LocalStepper(indptr, indices, blocks, mass, np.zeros(40, dtype=np.int32), dt, 0.0)
+        stepper.add_provider(provider)
+        u, v, a = np.zeros(120), np.zeros(120), np.zeros(120)
+        if kind == "global":
+            stepper.reset_energy(u, v, a, 0.0)
+        stepper.run(u, v, a, 50, 0.0)
+        return u, stepper.energy()
+
+    held, energy = run(_kernels.HeldForce(nodes, forces))
+    table, _ = run(constant_table())
+    assert np.abs(held).max() > 0.0  # the force moved the model
+    assert np.array_equal(held, table)
+    if kind == "global":
+        assert energy["external_work"] > 0.0 and abs(energy["balance"]) <= 1e-12 * energy["external_work"]
+    ramped = _kernels.HeldForce(nodes, forces, 0.2)
+    x = np.array([0.0, 0.05, 0.1, 0.15])
+    assert [ramped.factor(t) for t in (-1.0, 0.2, 5.0)] == [0.0, 1.0, 1.0]
+    assert np.allclose([ramped.factor(t) for t in x], 3 * (x / 0.2) ** 2 - 2 * (x / 0.2) ** 3,
+                       rtol=0, atol=1e-15)
+    for arguments, words in (((nodes, forces, -1.0), r"^ramp = -1\.0+ must be finite and >= 0"),
+                             ((np.array([3, 3], dtype=np.int32), forces[:2]), r"^node 3 is listed twice"),
+                             ((nodes, np.full((4, 3), np.nan)), r"^forces\[0\] is not finite")):
+        with pytest.raises(ValueError, match=words):
+            _kernels.HeldForce(*arguments)
