@@ -1042,7 +1042,7 @@ is the laws' own energy error, round-off for linear_elastic).)")
       "Estimate (from below) of omega_max^2 (1/s^2): Rayleigh quotient of power iteration on "
       "M^-1/2 K M^-1/2.");
 
-  py::class_<LocalStepper>(m, "LocalStepper", R"(Multi-rate explicit stepping (docs/lts_plan.md):
+  py::class_<LocalStepper>(m, "LocalStepper", R"(Multi-rate explicit stepping (docs/local_stepping.md):
 each node steps at dt_fine 2^level; one run step is dt_fine 2^max(level). Stiffness (split by
 columns), mass-proportional damping, dashpots, SeismicInput providers and element-loop
 components at their own levels (split by cells), ContactPairs at theirs; no constraints yet. One level gives
@@ -1148,8 +1148,8 @@ account sums the owned nodes and counted components only.)")
           "each node must step at its drift level itself (checked at the first run).")
       .def("set_row_split", &LocalStepper::set_row_split, py::arg("on"),
            "The row split (nodal subcycling) instead of the column split: each node at its own level with "
-           "its whole row, a coarser neighbour read along its drift (docs/lts_plan.md \"The row split, "
-           "prototyped\"); not yet with element-loop components or contact pairs. Before the first run.")
+           "its whole row, a coarser neighbour read along its drift (docs/local_stepping.md \"The scheme: the row "
+           "split\"). Before the first run.")
       .def_property_readonly("row_split", &LocalStepper::row_split)
       .def("phase_seconds", [](const LocalStepper& stepper) { return phase_dict(stepper.phase_times()); },
            "Wall time (s) of each part of the steps (Stepper.phase_seconds; update: the drifts, stiffness: "

@@ -19,7 +19,7 @@ namespace {
 // kMinRowsForThreads) until 2026-11-29: a small graded model (17 892 dofs, levels of 2 598 / 1 318 /
 // 1 162 / 886 nodes, a new user's trial) then stepped every level on one thread, and local stepping
 // took 1.21 s against global stepping's 0.62 s on 2 threads; from 512 rows, 0.68 s (256 to 1 024
-// measured alike, within this machine's noise; docs/lts_plan.md "Where the work model is wrong").
+// measured alike, within this machine's noise; docs/local_stepping.md "When it is on").
 constexpr std::int64_t kMinRowsForThreadsLocal = 512;
 
 const std::shared_ptr<NodeExchange>& nullptr_exchange() {
@@ -354,7 +354,7 @@ void LocalStepper::correct_contacts(int c, double t, const double* u, double* v)
   // between halves of mass m each takes back, in every substep, the h f / m by which the two kicks
   // around it drove the halves apart: the kinetic energy falls by h^2 f^2 / m each time and the
   // kicks give it back, but a kinetic measure would book it as work every substep (a drift of the
-  // balance, docs/lts_plan.md "The contact work under local stepping").
+  // balance, docs/local_stepping.md "The energy account").
   for (const auto& pairs : level.contacts) {
     const std::vector<std::int32_t>& nodes = pairs->unique_nodes();
     for (const std::int64_t i : nodes)

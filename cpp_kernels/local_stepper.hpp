@@ -1,8 +1,8 @@
 // Multi-rate explicit stepping (local time stepping) for M a + d(v) + K u = f_ext(t), lumped M:
-// the scheme of docs/lts_plan.md (multi-level by recursion, velocity-Verlet kicks and drifts; a
+// the scheme of docs/local_stepping.md (multi-level by recursion, velocity-Verlet kicks and drifts; a
 // coarser level's force reaches finer nodes as kicks at the ends of its step, the impulse form of
-// multiple time stepping, not Diaz & Grote's force held over the substeps: docs/lts_plan.md "The
-// cavity under local stepping" for what that costs in stress where levels meet): the linear part (stiffness, mass-proportional damping, dashpots, force
+// multiple time stepping, not Diaz & Grote's force held over the substeps: docs/local_stepping.md "The
+// column split" for what that costs in stress where levels meet): the linear part (stiffness, mass-proportional damping, dashpots, force
 // providers) split by columns, element-loop components (nonlinear cells) split by cells, each at
 // its own level, contact pairs corrected before their nodes' drifts, fixed and roller nodes
 // projected at every kick.
@@ -71,8 +71,8 @@ class LocalStepper : public SteppingBase {
   void add_provider(std::shared_ptr<ForceProvider> provider);
 
   /// Adds an element-loop component (internal_force.hpp: cells not in the stiffness) whose cells
-  /// step at rate level `level` (dt_fine 2^level): the cell split of docs/lts_plan.md "Nonlinear
-  /// cells at their own rates". Its force -f_int(u) joins the level's kicks: computed at the new
+  /// step at rate level `level` (dt_fine 2^level): the cell split of docs/local_stepping.md "The
+  /// scheme: the row split". Its force -f_int(u) joins the level's kicks: computed at the new
   /// u in each of the level's end kicks and committed there (its history advances once per
   /// substep of its level), reused by the next start kick. Its nodes drift at that rate or a finer
   /// one (a node drifts at the finest level that kicks it), so none drifts slower than a cell that
@@ -98,7 +98,7 @@ class LocalStepper : public SteppingBase {
   /// velocity: a one-level run gives Stepper's displacements; the velocities at a sample time lack
   /// R's first half (h/2 A^-1 R, given with the next impulse) and the returned a has no R. The
   /// contact work is the impulses' work over the drift they start, m dv . v (not the kinetic
-  /// energy they add: docs/lts_plan.md "The contact work under local stepping"); friction
+  /// energy they add: docs/local_stepping.md "The energy account"); friction
   /// dissipation as ContactPairs reports it. Checked at
   /// the first run: std::invalid_argument naming a pair node of another drift level.
   void add_contact(std::shared_ptr<ContactPairs> pairs, int level);
@@ -108,14 +108,14 @@ class LocalStepper : public SteppingBase {
   /// neighbour's force then reaches the node at each of its substeps, not as kicks at the ends of
   /// the coarse step. add_contact does it for the pair nodes (a pair's friction threshold must not
   /// see a coarse level's force arrive within one substep: that made sliding first order in dt,
-  /// docs/lts_plan.md). Each such node must step at its drift level itself (checked at the first
+  /// docs/local_stepping.md). Each such node must step at its drift level itself (checked at the first
   /// run: std::invalid_argument), so that it is a column of that level in every neighbour's row and
   /// every neighbour it reads drifts there too; otherwise a neighbour drifting coarser would be read
   /// ahead of time (first order, and unstable). The caps are set at the first run. The moved
-  /// blocks break the column split's exact momentum balance at O(dt^2) (docs/lts_plan.md).
+  /// blocks break the column split's exact momentum balance at O(dt^2) (docs/local_stepping.md).
   void step_rows_at_drift_level(const std::vector<std::int32_t>& nodes);
 
-  /// The row split (nodal subcycling, docs/lts_plan.md "The row split, prototyped") instead of the
+  /// The row split (nodal subcycling, docs/local_stepping.md "The scheme: the row split") instead of the
   /// column split: every node steps at its own level with its whole stiffness row, its force at
   /// the end of each of its steps read from the positions of that time, a coarser neighbour j along
   /// its drift, u_j - (T_j - t) v_j (T_j the end of j's drift: exact, no kick changes v_j within it);
@@ -156,7 +156,7 @@ class LocalStepper : public SteppingBase {
   double dt_fine() const { return dt_fine_; }
   int max_level() const { return max_level_; }
   /// Kicks of level-k forces per global step, summed over the rows they touch, relative to
-  /// global stepping at dt_fine (1: no saving): the work model of workflows/lts_clusters.py.
+  /// global stepping at dt_fine (1: no saving): the work model of pyfem/local_stepping.py (work_sums).
   double work_fraction() const;
 
   struct Energy {

@@ -1,7 +1,7 @@
 // A 60 m box of rock with a 4 m spherical cavity, tetrahedra graded from 0.5 m at the wall to 7 m
 // (17 892 dofs at order 1): a new user's gmsh script (2026-11-29), the small graded model on which
 // local stepping was 2x slower than global stepping before the kernel threaded small levels
-// (docs/lts_plan.md "On where it pays"; workflows/scenes/spherical_cavity_lts.toml).
+// (docs/local_stepping.md "When it is on"; workflows/scenes/spherical_cavity_lts.toml).
 SetFactory("OpenCASCADE");
 Box(1) = {0, 0, 0, 60, 60, 60};
 Sphere(2) = {30, 30, 30, 4};

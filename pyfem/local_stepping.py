@@ -1,5 +1,5 @@
 """Local time stepping from a scene (`[time] local_stepping`: true, false or "auto", the default, which
-turns it on where it pays, `auto_decision`; docs/lts_plan.md): the rate
+turns it on where it pays, `auto_decision`; docs/local_stepping.md): the rate
 level of every node, the time step made a whole number of global steps per output interval, and
 an adapter that gives the kernel's LocalStepper the interface the run loop uses.
 
@@ -13,10 +13,10 @@ here) of its own Gershgorin bound, which is itself conservative. Stability of th
 user's mesh is checked at set-up (`check_stability`): the LTS map itself, undamped and unforced
 but with the model's boundary dashpots, is iterated from a random state for STABILITY_STEPS global
 steps, and its energy must not grow (a growth of 0.2 % per global step or more is caught; the 1D
-prototype and the kernel's tests are stable up to the global safety factor, docs/lts_plan.md).
+prototype and the kernel's tests are stable up to the global safety factor, docs/local_stepping.md).
 
-Every model steps by the row split (`row_split`, LocalStepper.set_row_split; docs/lts_plan.md "The
-row split, prototyped", "The contact work under local stepping"): every node at its own level with its
+Every model steps by the row split (`row_split`, LocalStepper.set_row_split; docs/local_stepping.md "The
+scheme: the row split", "The energy account"): every node at its own level with its
 whole stiffness row. The levels are then capped where a deep hierarchy costs more fine steps per
 output interval than it saves (`fit_levels_to_output`). Element-loop materials (`plasticity`,
 `damage` tables) step at their cells' own rates: each cell at the finest level of its nodes (the
@@ -58,7 +58,7 @@ COST_NS = {"block": 5.0, "point": 172.0, "pair": 350.0, "node": 11.2}
 """The kernel's cost per step (ns, 2 threads) of a 3x3 block of the stiffness product, a point of an
 element-loop law, a contact pair and a node's update and input forces: the coarse case 3's global steps
 with the rock yielding (2.73 ms for 548 268 blocks, 36.2 ms for 210 560 points, 4.03 ms for 11 520
-pairs, 0.66 ms for 58 352 nodes; docs/lts_plan.md "On where it pays"). `auto_decision` predicts by
+pairs, 0.66 ms for 58 352 nodes; docs/local_stepping.md "When it is on"). `auto_decision` predicts by
 these fixed figures, not by timing this machine, so that a scene makes the same decision on every
 machine and when a run resumes."""
 
@@ -68,7 +68,7 @@ def check_supported(scene, beta: float) -> None:
     does not do yet."""
     allowed = ("false for scenes with {}: local time stepping covers the stiffness, mass-proportional "
                "damping, viscoelastic, viscous, fixed and roller faces, seismic input, element-loop materials, "
-               "contact and a static stage (docs/lts_plan.md)")
+               "contact and a static stage (docs/local_stepping.md)")
     if beta != 0.0:
         raise SceneError(KEY, True, allowed.format("stiffness-proportional Rayleigh damping (beta > 0)"))
     if scene["time"].get("matrix_precision", "double") != "double":
@@ -80,7 +80,7 @@ def held_pair_error(node: str) -> SceneError:
     """The refusal of local stepping on a model whose contact pair `node` (its words) is on a fixed or
     roller face."""
     return SceneError(KEY, True, f"false for scenes with contact pairs on fixed or roller faces ({node} is both): "
-                                 "local time stepping does not correct a held pair node (docs/lts_plan.md)")
+                                 "local time stepping does not correct a held pair node (docs/local_stepping.md)")
 
 
 def unstable_words(report: dict) -> tuple[SceneError, str, str]:
@@ -104,7 +104,7 @@ def node_levels(stiffness, mass: np.ndarray, cell_nodes: np.ndarray, max_level: 
     truncation faces' dashpot nodes) and the cells they belong to step at the finest rate: a
     boundary dashpot at a coarse node's own step is accurate only to (h C / M)^2, which is of order
     the coarse cells' Courant number squared, and it degraded the free field several times
-    (docs/lts_plan.md). `pairs` (n_pairs, 2): the two nodes of every contact pair are made to drift at
+    (docs/local_stepping.md). `pairs` (n_pairs, 2): the two nodes of every contact pair are made to drift at
     one rate (`equalize_pair_drift`; `loop_cells`: `loop_cell_mask` of the element-loop cells), or, for
     the row split (`rows`), the two nodes of every pair at the finer of their levels and nothing else
     (`equalize_pair_levels`)."""
@@ -148,8 +148,8 @@ def fitted_top(counts, steps_per_output: int) -> int:
     is the fine steps per interval, ceil(steps_per_output / 2^L') 2^L', times the nodes' work per fine
     step, the sum of 2^-min(level, L') (every node's row once per step of its level). On the coarse
     case 3 (85 steps per 0.01 s, nodes per level 19 756 / 8 710 / 8 880 / 17 869 / 3 039 / 98) it caps
-    at 3: 88 fine steps instead of 96, 7.7 % less work (docs/lts_plan.md "The case study under the row
-    split"). The counts of an MPI rank's owned nodes summed over the ranks give the whole model's."""
+    at 3: 88 fine steps instead of 96, 7.7 % less work (docs/local_stepping.md
+    "Speed"). The counts of an MPI rank's owned nodes summed over the ranks give the whole model's."""
     counts = np.trim_zeros(np.asarray(counts, dtype=float), "b")
     best, best_cost = 0, math.inf
     for top in range(len(counts)):
@@ -224,7 +224,7 @@ def interface_rows(levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndar
     coarser level and drifts at its own level (`drift_levels`). The run steps their stiffness rows at
     that level (LocalStepper.step_rows_at_drift_level): a coarser neighbour's force then reaches them
     at each of their substeps, read from its drifting position, instead of as two kicks at the ends of
-    the coarse step, which rang the fine cells' modes (docs/lts_plan.md "Interface rows")."""
+    the coarse step, which rang the fine cells' modes (docs/local_stepping.md "The column split")."""
     coarsest_in_cell = levels[cell_nodes].max(axis=1)
     coarser = np.zeros(len(levels), dtype=bool)
     for k in range(cell_nodes.shape[1]):
@@ -549,7 +549,7 @@ def speed_up_of(sums: np.ndarray, counts, time_step, phases_ms: dict, rows: bool
     "matrix", "contact" (the relative work of each), "levels" (nodes per level)}. A model: it leaves out
     the pair and interface rows stepped at their drift level and the kicks' own overhead: it over-predicts the
     measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured, the column
-    split; docs/lts_plan.md "Where it pays"), and by 27 % on the coarse case 3 in the row split (1.69x predicted from
+    split; docs/local_stepping.md "When it is on"), and by 27 % on the coarse case 3 in the row split (1.69x predicted from
     `check`'s steps at rest, 1.33x measured with the rock yielding; "The case study under the row split")."""
     work = dict(zip(WORK_SUMS, np.asarray(sums, dtype=float)))
     counts = np.trim_zeros(np.asarray(counts, dtype=np.int64), "b")
@@ -618,10 +618,10 @@ def row_split(nonlinear, contact: bool) -> bool:
     its own level with its whole stiffness row, a coarser neighbour read along its drift) rather than
     the column split: every model, element-loop regions (`nonlinear`) and contact pairs (`contact`)
     included. The row split's stresses where levels meet are global stepping's (the cavity test at
-    safety 0.8: 0.53-1.07 % against 0.54-1.06 %; the column split 1.5-8.7 %, docs/lts_plan.md "The row
-    split, prototyped"); on the small case 3 with all physics its displacements are as close to global
+    safety 0.8: 0.53-1.07 % against 0.54-1.06 %; the column split 1.5-8.7 %, docs/local_stepping.md "The
+    column split"); on the small case 3 with all physics its displacements are as close to global
     stepping's as global stepping at the same safety, and its energy balance 4.0e-5 of the work (the
-    column split's 4.6e-5; docs/lts_plan.md "The contact work under local stepping"), and its pairs
+    column split's 4.6e-5; docs/local_stepping.md "The energy account"), and its pairs
     step at their own nodes' rates instead of pinning the finest rate along every interface. The
     column split stays in the kernel for comparisons (workflows/lts_small_case3.py patches this)."""
     return True

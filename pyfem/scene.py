@@ -527,7 +527,7 @@ SCHEMA = Table({
                                    default="double"),
         "local_stepping": Choice("multi-rate stepping: each cell and contact pair at its own stable rate; \"auto\": "
                                  "on where the scene allows it and it is predicted to pay over the whole run "
-                                 "(docs/lts_plan.md \"On where it pays\")", (True, False, "auto"),
+                                 "(docs/local_stepping.md \"When it is on\")", (True, False, "auto"),
                                  default="auto"),
     }, "[time]"),
     "wave": Table({

@@ -675,7 +675,7 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
             return kernel
         # Column split: rows stepped at their drift level: the pair nodes (add_contact), and the fine
         # side of every level boundary, so that a coarser neighbour's force reaches them at each of
-        # their substeps instead of as kicks at the ends of the coarse step (docs/lts_plan.md
+        # their substeps instead of as kicks at the ends of the coarse step (docs/local_stepping.md
         # "Interface rows").
         rows = [local_stepping.interface_rows(levels, cell_nodes, cell_cap, loop_cells)]
         if simulation.contact_arrays is not None:
@@ -1058,11 +1058,11 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
                    "costs more than it saves (\"auto\" above)")
     elif rows:
         verdict = ("it would pay (time.local_stepping = true; the row split: stresses where levels meet as global "
-                   "stepping's, docs/lts_plan.md \"The row split, prototyped\")")
+                   "stepping's, docs/local_stepping.md \"The scheme: the row split\")")
     else:
         verdict = ("it would pay (time.local_stepping = true), but it would step by the column split, whose stresses "
                    "where a finer level meets a coarser one are less accurate (a cavity test: 8.7 % off the exact "
-                   "history at safety 0.8, global stepping 0.5 %; docs/lts_plan.md \"Interface rows\")")
+                   "history at safety 0.8, global stepping 0.5 %; docs/local_stepping.md \"The column split\")")
     return {"local stepping (off)": (
         f"predicted {p['speed_up']:.2f}x the speed of global stepping per simulated second ({len(p['levels'])} "
         f"rate level{'s' if len(p['levels']) != 1 else ''}, nodes per level {p['levels']}; work against global "

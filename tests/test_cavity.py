@@ -49,7 +49,7 @@ EXACT_TOLERANCE = {1: {"r1.05_t45": 0.011, "r1.05_t135": 0.04, "r2_t45": 0.011, 
 # rate with its whole stiffness row, pyfem/local_stepping.py row_split): at safety 0.8 0.54 / 2.96 %
 # at 1.05 a and 0.53 / 1.07 % at 2 a, where the finest level meets a coarser one (global stepping
 # 0.54 / 2.95 / 0.54 / 1.06 %). The column split, which models with element-loop cells or contact
-# pairs still use, was 8.7 % off at 2 a, 45 deg (docs/lts_plan.md "The row split, prototyped").
+# pairs still use, was 8.7 % off at 2 a, 45 deg (docs/local_stepping.md "The scheme: the row split").
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,5 @@
 """Local time stepping from a scene (`[time] local_stepping = true`, pyfem/local_stepping.py,
-docs/lts_plan.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
+docs/local_stepping.md; the kernel's own checks are tests/cpp/test_local_stepper.cpp).
 
 - A homogeneous box of tetrahedra refined around its centre (cells 1.5 m inside, 8 m outside)
   under an oblique SV wave: several rate levels, and the monitors follow the free field as closely
@@ -107,7 +107,7 @@ def test_check_predicts_what_local_stepping_would_save_where_the_scene_allows_it
     the graded mesh, whose finest level holds most nodes, is not worth it; the coarse case 1 (its rock
     zone's element loop at coarser rates than the lining's) is: the row split predicts 1.46x (its cells
     step at the finest rate of their nodes; the column split's, at the coarsest, measured 1.68x,
-    docs/lts_plan.md "Where it pays"); a scene it does not support (stiffness-proportional damping)
+    docs/local_stepping.md "When it is on"); a scene it does not support (stiffness-proportional damping)
     gets no prediction."""
     box = {"builder": "box", "size": [60.0, 10.0, 60.0], "h": 5.0}
     uniform = solver.plan(graded_scene(pathlib.Path("unused.geo"), False, mesh=box,
@@ -189,7 +189,7 @@ def test_stability_check_passes_the_levels_and_catches_levels_too_coarse(tmp_pat
 
 def test_kernel_local_stepper_takes_yielding_cells_at_their_level():
     """The kernel's LocalStepper with a Mohr-Coulomb region's cells in the element loop
-    (`add_internal_force(component, level)`; docs/lts_plan.md "Nonlinear cells at their own rates"):
+    (`add_internal_force(component, level)`; docs/local_stepping.md "The scheme: the row split"):
     with one level it is the global Stepper with the same component, and the rock yielded."""
     from pyfem import _kernels, bench
     from pyfem.elements import nonlinear_component
@@ -345,7 +345,7 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path, 
     mesh under local stepping is the unsplit mesh under local stepping with the same levels, to
     round-off, while the soft layer steps at a coarser rate. Then by the default split: a weak
     interface that slides follows global stepping at second order in dt; the scene path end to end,
-    its energy account included (docs/lts_plan.md "Contact pairs at their own rates", "The contact
+    its energy account included (docs/local_stepping.md "Contact pairs", "The contact
     work under local stepping")."""
     monkeypatch.setattr(local_stepping, "row_split", lambda *_: False)
     split = solver.prepare(two_layer_contact_scene(True, True))
@@ -404,7 +404,7 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path, 
           np.abs(energy_global["balance"]).max() / work)
     # The plain account of local stepping, O(dt^2): 1.2e-4 of the work with the impulses' work
     # over their drifts (as kinetic energy added, the pairs' holding force drifted it by h^2 f^2 / m
-    # per substep: docs/lts_plan.md "The contact work under local stepping").
+    # per substep: docs/local_stepping.md "The energy account").
     # about twice the measured 1.29e-4 (global stepping 3.6e-15): catches the contact work booked wrong
     assert np.abs(energy["balance"]).max() < 2.6e-4 * work
     # the global run's account is an identity: catches the contact work 1 % off (1.7e-4 of the work)
@@ -710,7 +710,7 @@ def test_levels_fit_the_output_interval_where_a_deep_hierarchy_costs_more_than_i
     step = TimeStep(dt=1.0e-4, critical=1.25e-4, omega_max=1.0, reason="", steps_per_output=85)
     fitted, _ = local_time_step(step, capped)
     assert fitted.steps_per_output == 88
-    # 7.7 % less work (docs/lts_plan.md)
+    # 7.7 % less work (docs/local_stepping.md)
     assert caps[3] == pytest.approx(0.923 * caps[5], abs=0.002 * caps[5])
     assert np.array_equal(fit_levels_to_output(levels, 96), levels)
     assert np.all(fit_levels_to_output(levels, 85) <= levels)

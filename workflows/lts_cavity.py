@@ -5,17 +5,17 @@ under a 2 Hz SV wavelet, run with global stepping (safety 0.1 and 0.8) and local
 0.8, 0.4, 0.2). For each run: the history error of the hoop stress at the four monitors (r = 1.05 a
 and 2 a, 45 and 135 deg) against Pao & Mow's exact answer, the largest displacement difference
 from global stepping at safety 0.1 relative to its peak, the energy balance and the wall time.
-The table of docs/lts_plan.md "Interface rows" (the "kicks" row is the commit before the interface
+The table of docs/local_stepping.md "The column split" (the "kicks" row is the commit before the interface
 rows, 1bfd44c).
 
     /usr/bin/python3 workflows/lts_cavity.py [--out DIR]     # about 2 minutes on 2 cores
 
 `--rows` runs local stepping with the kernel's row split (LocalStepper.set_row_split: nodal
-subcycling, docs/lts_plan.md "The row split, prototyped") instead of its column split.
+subcycling, docs/local_stepping.md "The scheme: the row split") instead of its column split.
 
 `--buffer B` moves every level boundary B node layers out (each node sharing a cell with a finer node
-takes that level, B times) and runs local stepping at safety 0.8 only: docs/lts_plan.md "A buffer
-does not remove it".
+takes that level, B times) and runs local stepping at safety 0.8 only: docs/local_stepping.md "The
+column split".
 """
 from __future__ import annotations
 

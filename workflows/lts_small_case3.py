@@ -1,12 +1,12 @@
 """Local stepping on the small case 3 with all physics: the row split against the column split and
-global stepping (docs/lts_plan.md "The row split, prototyped").
+global stepping (docs/local_stepping.md "The scheme: the row split").
 
 The small model of tests/test_case_study_stage.py (workflows/scenes/case3_contact_coarse.toml shrunk
 to a 90 x 74 x 110 m block around a 24 m cavern, two interfaces with contact pairs): its static
 stage, then `--duration` s of oblique El Centro with the rock yielding, the lining cracking and the
 pairs sticking and slipping. Runs global stepping at safety 0.2 (the reference) and 0.8, and local
 stepping at 0.8 by the column split and by the row split (each forced through
-`pyfem.local_stepping.row_split`; the row split is the default since this comparison, docs/lts_plan.md
+`pyfem.local_stepping.row_split`; the row split is the default since this comparison, docs/local_stepping.md
 "The contact work under local stepping"). Prints per run: the largest difference of u at the lining monitors A-D from the
 reference relative to its peak, the largest slip at the pair monitors, the yielded rock, the lining's damaged
 volume, the energy balance error and the wall time of the run (nan: a finished run directory read

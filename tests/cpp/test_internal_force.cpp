@@ -627,7 +627,7 @@ TEST(InternalForce, LocalStepperRunsPlasticCellsAtTheirCoarserRate) {
   for (std::int64_t node = 0; node < mesh.n_nodes; ++node)
     node_level[node] = mesh.coords[3 * node] > 1.0 ? 1 : 0;
   // The dashpots' nodes at the finest rate, as pyfem/local_stepping.py pins the truncation faces
-  // (an implicit dashpot at a coarse rate is accurate only to (h C / M)^2, docs/lts_plan.md).
+  // (an implicit dashpot at a coarse rate is accurate only to (h C / M)^2, docs/local_stepping.md).
   for (const std::int32_t node : kBlockDashpots) node_level[node] = 0;
   std::vector<std::int64_t> matrix_cells, loop_cells;
   for (std::int64_t cell = 0; cell < mesh.n_cells; ++cell) {
@@ -665,7 +665,7 @@ TEST(InternalForce, LocalStepperRunsPlasticCellsAtTheirCoarserRate) {
   // Measured 2026-11-25: errors 7.6e-2, 2.2e-2 (order 1.77; the column split with the same cells
   // in the matrix, linear: 2.9e-1, 6.1e-2); the plain energy balance 0.28, 0.057 of the external
   // work (the account's trapezoid damping work at the nodes' own kicks is second order, not
-  // round-off, docs/lts_plan.md).
+  // round-off, docs/local_stepping.md).
   EXPECT_GT(std::log2(errors[0] / errors[1]), 1.7) << errors[0] << " " << errors[1];
   EXPECT_LT(errors[1], 0.03);
   EXPECT_GT(balances[0] / balances[1], 3.0) << balances[0] << " " << balances[1];

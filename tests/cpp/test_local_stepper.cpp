@@ -741,7 +741,7 @@ TEST(LocalStepper, ConstrainedNodesAsStepperAndHeldAtEveryLevel) {
   EXPECT_GT(moved, 1e-3);  // the rollers' free components moved
 }
 
-// The row split (LocalStepper::set_row_split, docs/lts_plan.md "The row split, prototyped").
+// The row split (LocalStepper::set_row_split, docs/local_stepping.md "The scheme: the row split").
 namespace {
 
 // Link strains (u_{e+1} - u_e, x component) of the chain after every global step of a run from the
