@@ -173,10 +173,10 @@ def test_pretensioned_cable_carries_its_pretension_self_equilibrated():
     energy = bolts.compute(np.zeros(3 * n_rock), force)
     N = bolts.axial_force()
     free = s[1:] <= 2.0 + 1e-9
-    assert np.all(np.abs(N[free] - pretension) < 1e-12 * pretension)  # locked off at the pretension
+    assert np.all(np.abs(N[free] - pretension) < 1e-14 * pretension)  # locked off at the pretension
     assert np.all(N[~free] < pretension) and N[~free][-1] < 1e-3 * pretension  # the anchor takes it
     assert np.max(np.abs(force)) > 0.9 * pretension  # the head and the anchor act on the rock
-    assert abs(force.sum()) < 1e-9 * pretension
+    assert abs(force.sum()) < 1e-14 * pretension  # measured 4e-15 and 2e-16
     assert energy["stored"] > 0.0
 
 
