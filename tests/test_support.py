@@ -11,7 +11,9 @@ hand-made host arrays against independent answers:
 - a pretensioned cable's free length carries its pretension, self-equilibrated on the rock;
 - energy: in a kernel Stepper the balance closes to round-off (elastic) and to the trapezoid
   rule's error with bond slip (measured);
-- checkpoint: save_state / load_state continue bit for bit; rebase makes the force zero at u = 0.
+- checkpoint: save_state / load_state continue bit for bit; rebase makes the force zero at u = 0;
+- placement (pyfem.support): a bolt across a Q2 mesh in a linear field equals the same bolt on
+  hand-made hosts to round-off (slip, and the work of its force on the rock).
 """
 import numpy as np
 import pytest
@@ -311,3 +313,54 @@ def test_bad_arguments_are_value_errors():
     bolts = one_bolt(s, nodes + 5, weights)
     with pytest.raises(ValueError, match="host node 5"):
         bolts.compute(np.zeros(6), np.zeros(6))
+
+
+# --- placement in a mesh (pyfem.support) -------------------------------------------------------
+
+def test_bolts_placed_in_a_q2_mesh_see_the_rock_field_exactly():
+    """A bolt across a Q2 box in a linear displacement field u = G x: its slip and the work of its
+    force on the rock equal those of the same bolt on hand-made hosts carrying d . G x at its
+    nodes (the mesh's interpolation is exact for the field)."""
+    from pyfem.operators import build_model
+    from pyfem.scene import parse_scene
+    from pyfem.support import bolt_group, segment_rows
+
+    scene = parse_scene({
+        "title": "bolted box",
+        "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [10.0, 10.0, 10.0], "h": 5.0, "order": 2,
+                 "layers": [{"material": "rock", "thickness": 5.0}, {"material": "upper", "thickness": 5.0}]},
+        "materials": {"rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}, "upper": {"E": 2.0e9, "nu": 0.3, "rho": 2400.0}},
+        "time": {"duration": 0.1},
+        "wave": {"type": "P", "angle": 0.0, "surface": 10.0, "medium": "rock",
+                 "motion": {"ricker": {"f0": 8.0, "amplitude": 1.0e-3}}},
+    })
+    model = build_model(scene)
+    line = [1.0, 2.0, 3.0, 8.5, 7.0, 6.0]
+    diameter, E = 0.032, 2.0e11
+    group = bolt_group(model, [line], diameter=diameter, E=E, yield_force=1e15, bond_stiffness=K_BOND,
+                       bond_strength=1e15, segment=0.25)
+    G = np.array([[2.0, 0.5, -1.0], [0.3, -1.0, 0.8], [1.2, 0.4, 1.5]]) * 1e-4
+    u = (model.node_coords @ G.T).reshape(-1)
+    force = np.zeros_like(u)
+    group.component.compute(u, force)
+    group.component.commit()
+    d = group.directions[0]
+    s = group.arc_length
+    axial = group.positions @ G.T @ d
+    reference = one_bolt(s, np.arange(s.size, dtype=np.int32)[:, None], np.ones((s.size, 1)))
+    force_1d = np.zeros(3 * s.size)
+    reference.compute(field(s.size, axial), force_1d)
+    reference.commit()
+    slip = group.component.bond_slip()
+    assert np.max(np.abs(slip)) > 1e-6 and np.max(group.component.axial_force()) > 1e3  # loaded
+    # Measured: slip 6.7e-15 of its peak, work 1.5e-14, net force 6.2e-14 of the largest.
+    assert np.max(np.abs(slip - reference.bond_slip())) < 2e-14 * np.max(np.abs(slip))
+    H = np.array([[0.0, 1.0, 2.0], [-1.0, 0.5, 0.0], [3.0, 0.0, -2.0]])  # a virtual linear field
+    work = force @ (model.node_coords @ H.T).reshape(-1)
+    work_1d = force_1d[0::3] @ (group.positions @ H.T @ d)
+    assert abs(work) > 1.0 and abs(work - work_1d) < 5e-14 * abs(work)
+    assert abs(force.reshape(-1, 3).sum(axis=0)).max() < 2e-13 * np.abs(force).max()  # free ends
+    rows = segment_rows(group, "radial")
+    assert len(rows) == group.component.n_segments == s.size - 1
+    assert rows[0][:2] == ("radial", 0) and abs(rows[0][2] - 0.5 * s[1]) < 1e-15
+    assert abs(rows[-1][6] - group.component.axial_force()[-1]) == 0.0
