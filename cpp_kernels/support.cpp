@@ -184,7 +184,10 @@ int GroutedBolts::solve_bolt(std::int64_t j, const double* ubar, double* w, doub
   const double* slip_p = plastic_slip_.data() + begin;
   const double* L = bond_length_.data() + begin;
   const double* ub = ubar + begin;
-  std::vector<double> R(m), diag(m), off(m), step(m), trial(m), c(m);
+  // Scratch of this thread, reused from bolt to bolt (no allocation per bolt and step).
+  thread_local std::vector<double> R, diag, off, step, trial, c;
+  for (std::vector<double>* buffer : {&R, &diag, &off, &step, &trial, &c})
+    buffer->assign(static_cast<std::size_t>(m), 0.0);
 
   // A flowing spring keeps 1e-8 of its elastic stiffness in the Newton matrix only (the
   // residual is exact): the matrix stays definite when every tie flows (a floating bolt), and

@@ -12,6 +12,8 @@ hand-made host arrays against independent answers:
 - energy: in a kernel Stepper the balance closes to round-off (elastic) and to the trapezoid
   rule's error with bond slip (measured);
 - checkpoint: save_state / load_state continue bit for bit; rebase makes the force zero at u = 0;
+- the stiffness-proportional damping force is beta times the condensed elastic force; 1 and 2
+  threads give the same bits;
 - placement (pyfem.support): a bolt across a Q2 mesh in a linear field equals the same bolt on
   hand-made hosts to round-off (slip, and the work of its force on the rock).
 """
@@ -299,6 +301,49 @@ def test_save_and_load_continue_bit_for_bit_and_rebase_zeroes_the_force():
     assert np.max(np.abs(before)) > 1e3 and np.max(np.abs(at_zero)) < 1e-9 * np.max(np.abs(before))
     step = load(rebased, [1e-3])[0][0]
     assert np.max(np.abs(step + before - continued)) < 1e-9 * np.max(np.abs(continued))
+
+
+def test_stiffness_damping_is_beta_times_the_condensed_elastic_force():
+    s, bolts, _, _ = bolt_in_linear_field(32)
+    grid, n_rock = rock_line(0.25, 2.0)
+    nodes, weights = hosts(s, grid)
+    fresh = one_bolt(s, nodes, weights)
+    v = field(n_rock, np.sin(3.0 * grid), uy=np.cos(grid))
+    elastic = np.zeros_like(v)
+    fresh.compute(v, elastic)
+    damping = np.zeros_like(v)
+    bolts.add_stiffness_damping(v, 0.01, damping)  # the loaded bolts: damping uses K0 only
+    assert np.max(np.abs(elastic)) > 1e3
+    assert np.max(np.abs(damping - 0.01 * elastic)) < 5e-16 * np.max(np.abs(0.01 * elastic))
+
+
+def test_one_and_two_threads_give_the_same_bits():
+    """100 bolts (threaded from 64) with slip and yield in a random rock field."""
+    rng = np.random.default_rng(3)
+    b, m, n_rock = 100, 13, 400
+    offsets = np.arange(b + 1, dtype=np.int64) * m
+    s = np.tile(np.linspace(0.0, 6.0, m), b)
+    directions = rng.normal(size=(b, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    nodes = rng.integers(0, n_rock, size=(b * m, 8)).astype(np.int32)
+    weights = rng.random((b * m, 8))
+    weights /= weights.sum(axis=1)[:, None]
+    u = rng.normal(size=3 * n_rock) * 1e-3
+    previous = _kernels.max_threads()
+    runs = []
+    try:
+        for threads in (1, 2):
+            _kernels.set_num_threads(threads)
+            bolts = _kernels.GroutedBolts(offsets, s, directions, nodes, weights, axial_stiffness=EA,
+                                          yield_force=2e4, bond_stiffness=K_BOND, bond_strength=5e4)
+            force = np.zeros_like(u)
+            energy = bolts.compute(u, force)
+            runs.append((force, energy["stored"], energy["dissipation_increment"]))
+            bolts.commit()
+            assert np.any(bolts.plastic_slip() != 0.0) and np.any(bolts.plastic_strain() != 0.0)  # both flowed
+    finally:
+        _kernels.set_num_threads(previous)
+    assert np.array_equal(runs[0][0], runs[1][0]) and runs[0][1:] == runs[1][1:]
 
 
 def test_bad_arguments_are_value_errors():
