@@ -11,7 +11,8 @@ hand-made host arrays against independent answers:
 - a pretensioned cable's free length carries its pretension, self-equilibrated on the rock;
 - energy: in a kernel Stepper the balance closes to round-off (elastic) and to the trapezoid
   rule's error with bond slip (measured);
-- checkpoint: save_state / load_state continue bit for bit; rebase makes the force zero at u = 0;
+- checkpoint: save_state / load_state continue bit for bit (the component, and a Stepper with
+  slipping and yielding bolts); rebase makes the force zero at u = 0;
 - the stiffness-proportional damping force is beta times the condensed elastic force; 1 and 2
   threads give the same bits;
 - placement (pyfem.support): a bolt across a Q2 mesh in a linear field equals the same bolt on
@@ -301,6 +302,36 @@ def test_save_and_load_continue_bit_for_bit_and_rebase_zeroes_the_force():
     assert np.max(np.abs(before)) > 1e3 and np.max(np.abs(at_zero)) < 1e-9 * np.max(np.abs(before))
     step = load(rebased, [1e-3])[0][0]
     assert np.max(np.abs(step + before - continued)) < 1e-9 * np.max(np.abs(continued))
+
+
+def test_a_stepper_with_slipping_bolts_resumes_bit_for_bit():
+    def build():
+        length, spacing = 10.0, 0.5
+        grid, n_rock = rock_line(spacing, length)
+        rock_stiffness, mass = 1.0e10 / spacing, 2600.0 * spacing
+        dt = 0.5 * 2.0 / np.sqrt(4.0 * (rock_stiffness + K_BOND * spacing) / mass)
+        stepper, arrays = chain_stepper(n_rock, spacing, dt, rock_stiffness, mass)
+        s = np.linspace(0.0, 8.0, 33)
+        nodes, weights = hosts(s + 1.0, grid)
+        bolts = one_bolt(s, nodes, weights, bond_strength=5.0e3, yield_force=2.0e3)
+        stepper.add_internal_force(bolts)
+        v = field(n_rock, 0.05 * np.sin(np.pi * grid / length * 3.0))
+        return stepper, bolts, arrays, np.zeros_like(v), v, np.zeros_like(v)
+
+    stepper, bolts, arrays, u, v, a = build()
+    stepper.reset_energy(u, v, a, 0.0)
+    t = stepper.run(u, v, a, 200, 0.0)
+    saved = (u.copy(), v.copy(), a.copy(), t, stepper.save_state())
+    stepper.run(u, v, a, 200, t)
+    assert np.any(bolts.plastic_slip() != 0.0) and np.any(bolts.plastic_strain() != 0.0)  # history
+    other, other_bolts, other_arrays, *_ = build()
+    u2, v2, a2, t2, state = saved
+    u2, v2, a2 = u2.copy(), v2.copy(), a2.copy()
+    other.load_state(state)
+    other.run(u2, v2, a2, 200, t2)
+    assert np.array_equal(u, u2) and np.array_equal(v, v2) and np.array_equal(a, a2)
+    assert np.array_equal(bolts.axial_force(), other_bolts.axial_force())
+    assert stepper.energy() == other.energy()
 
 
 def test_stiffness_damping_is_beta_times_the_condensed_elastic_force():
