@@ -21,6 +21,7 @@
 #include "seismic_input.hpp"
 #include "stable_step.hpp"
 #include "stepper.hpp"
+#include "support.hpp"
 
 namespace py = pybind11;
 using namespace cavern;
@@ -225,6 +226,12 @@ auto sample_load_state() {
 
 /// A new float64 array (n,) holding a copy of `values` (the per-pair outputs of ContactPairs).
 py::array_t<double> array_copy(const std::vector<double>& values) {
+  py::array_t<double> out(static_cast<py::ssize_t>(values.size()));
+  std::copy(values.begin(), values.end(), out.mutable_data());
+  return out;
+}
+
+py::array_t<double> vector_array(const std::vector<double>& values) {
   py::array_t<double> out(static_cast<py::ssize_t>(values.size()));
   std::copy(values.begin(), values.end(), out.mutable_data());
   return out;
@@ -767,6 +774,86 @@ Returns:
                              })
       .def_property_readonly("owned_bytes", &HexahedronElementsBase::owned_bytes,
                              "Bytes of state and buffers owned (the borrowed geometry excluded).");
+
+  def_state_methods(py::class_<GroutedBolts, InternalForceComponent, std::shared_ptr<GroutedBolts>>(
+      m, "GroutedBolts",
+      R"(A group of rock bolts / anchor cables (cpp_kernels/support.hpp, docs/method.md "Rock bolts
+and cables"): chains of two-node axial bars tied to the rock by a grout bond lumped at the bolt
+nodes, their own displacements condensed (solved at each compute() from the rock's; no mass).
+
+Args:
+    bolt_offsets: int64 (b + 1,) bolt j has the bolt nodes [offsets[j], offsets[j + 1]), >= 2,
+        head first.
+    arc_length: float64 (m,) s of each bolt node from its head (m), 0 at the head, increasing.
+    directions: float64 (b, 3) unit axis of each bolt, head to tip.
+    host_nodes: int32 (m, k) rock nodes of the host cell of each bolt node.
+    host_weights: float64 (m, k) interpolation weights N_a(x) at the bolt node.
+    axial_stiffness: EA (N). yield_force: N, perfectly plastic in tension and compression.
+    bond_stiffness: N/m per m. bond_strength: N/m. pretension: N in the free length's segments
+    (needs head_stiffness > 0). free_length: m, ungrouted from the head (on a bolt node).
+    head_stiffness: N/m, head plate spring to the rock (0: none).
+    tolerance: relative equilibrium residual of each bolt; max_iterations: Newton's limit.
+All arrays copied.)"))
+      .def(py::init([](const py::object& offsets_object, const py::object& s_object,
+                       const py::object& directions_object, const py::object& nodes_object,
+                       const py::object& weights_object, double axial_stiffness,
+                       double yield_force, double bond_stiffness, double bond_strength,
+                       double pretension, double free_length, double head_stiffness,
+                       double tolerance, int max_iterations) {
+             auto offsets = checked_array<std::int64_t>(offsets_object, "bolt_offsets", {kAny});
+             if (offsets.shape(0) < 1) throw py::value_error("bolt_offsets: needs b + 1 >= 1 entries");
+             const py::ssize_t n_bolts = offsets.shape(0) - 1;
+             auto s = checked_array<double>(s_object, "arc_length", {kAny});
+             const py::ssize_t m = s.shape(0);
+             if (offsets.data()[n_bolts] != m)
+               throw py::value_error("bolt_offsets: last entry " +
+                                     std::to_string(offsets.data()[n_bolts]) +
+                                     " is not the number of bolt nodes " + std::to_string(m));
+             auto directions = checked_array<double>(directions_object, "directions", {n_bolts, 3});
+             auto nodes = checked_array<std::int32_t>(nodes_object, "host_nodes", {m, kAny});
+             auto weights = checked_array<double>(weights_object, "host_weights", {m, nodes.shape(1)});
+             BoltGeometry geometry{n_bolts, nodes.shape(1), offsets.data(), s.data(),
+                                   directions.data(), nodes.data(), weights.data()};
+             BoltParameters parameters{axial_stiffness, yield_force, bond_stiffness,
+                                       bond_strength, pretension, free_length, head_stiffness,
+                                       tolerance, max_iterations};
+             return std::make_shared<GroutedBolts>(geometry, parameters);
+           }),
+           py::arg("bolt_offsets"), py::arg("arc_length"), py::arg("directions"),
+           py::arg("host_nodes"), py::arg("host_weights"), py::kw_only(),
+           py::arg("axial_stiffness"), py::arg("yield_force"), py::arg("bond_stiffness"),
+           py::arg("bond_strength"), py::arg("pretension") = 0.0, py::arg("free_length") = 0.0,
+           py::arg("head_stiffness") = 0.0, py::arg("tolerance") = 1e-12,
+           py::arg("max_iterations") = 200)
+      .def("add_stiffness_damping",
+           [](GroutedBolts& bolts, const py::object& v_object, double beta,
+              const py::object& force_object) {
+             auto v = checked_array<double>(v_object, "v", {kAny});
+             auto force = checked_array<double>(force_object, "force", {v.shape(0)}, true);
+             bolts.check_nodes(v.shape(0) / 3);
+             bolts.add_stiffness_damping(v.data(), beta, force.mutable_data());
+           },
+           py::arg("v"), py::arg("beta"), py::arg("force").noconvert(),
+           "Adds beta K0 v (K0 the condensed elastic stiffness) to force (3 n_nodes).")
+      .def("axial_force", [](const GroutedBolts& b) { return vector_array(b.axial_force()); },
+           "Committed axial force of each segment (N, tension positive), bolt by bolt: new array.")
+      .def("peak_axial_force", [](const GroutedBolts& b) { return vector_array(b.peak_axial_force()); },
+           "Largest |axial force| of each segment over the commits (N): new array.")
+      .def("bond_slip", [](const GroutedBolts& b) { return vector_array(b.bond_slip()); },
+           "Committed slip w - ubar of each bolt node along the bolt (m): new array.")
+      .def("plastic_slip", [](const GroutedBolts& b) { return vector_array(b.plastic_slip()); },
+           "Committed plastic bond slip of each bolt node (m): new array.")
+      .def("plastic_strain", [](const GroutedBolts& b) { return vector_array(b.plastic_strain()); },
+           "Committed plastic axial strain of each segment: new array.")
+      .def("bolt_displacement", [](const GroutedBolts& b) { return vector_array(b.bolt_displacement()); },
+           "Committed axial displacement w of each bolt node (m): new array.")
+      .def("bond_length", [](const GroutedBolts& b) { return vector_array(b.bond_length()); },
+           "Tributary grouted length of each bolt node (m): new array.")
+      .def_property_readonly("last_iterations", &GroutedBolts::last_iterations,
+                             "Newton iterations of the last compute(), summed over the bolts.")
+      .def_property_readonly("n_bolts", &GroutedBolts::n_bolts)
+      .def_property_readonly("n_bolt_nodes", &GroutedBolts::n_bolt_nodes)
+      .def_property_readonly("n_segments", &GroutedBolts::n_segments);
 
   m.def("known_laws", &known_laws, "Names of the material laws HexahedronElements accepts.");
   m.def(
