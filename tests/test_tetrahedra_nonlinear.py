@@ -347,15 +347,21 @@ def test_a_run_of_yielding_tetrahedra_stopped_and_resumed_is_the_uninterrupted_r
 
 
 # Salencon's cavity on tetrahedra against the closed form (tests/salencon.py), about twice the measured
-# (the error's sign in parentheses): P2 with 0.8 m at the wall, psi 0: plastic radius (+2.61 %), wall
-# convergence (-0.06 %: held to 1 %, the hexahedra's 2.5 % resolved further; cohesion x 1.02 moves it by
-# TBD), hoop stress at the cells nearest the wall, r = 1.03 a (-4.85 %: the centroid of a 0.8 m P2 cell
-# where sigma_theta climbs steeply) and nearest R0 (-1.14 %).
-SALENCON_TETRAHEDRA = {(2, 0.8): {"radius": 0.055, "wall": 0.01, "hoop_wall": 0.10, "hoop_R0": 0.025}}
+# (the error's sign in parentheses). P2 with 0.8 m at the wall: plastic radius (+2.61 %), wall
+# convergence (-0.06 %: held to 1 %, where cohesion x 1.02 moves it by MUTATION), hoop stress at the cells
+# nearest the wall, r = 1.03 a (-4.85 %: the centroid of a 0.8 m P2 cell where sigma_theta climbs
+# steeply) and nearest R0 (-1.14 %). P1 with 0.4 m at the wall (one strain per cell, no mean dilatation
+# to free the isochoric flow: it locks): plastic radius (-1.44 %), wall convergence (-4.40 %), hoop
+# stress at R0 (+0.32 %); at the wall the first row of P1 cells is 37.5 % off (not held, as
+# tests/test_tetrahedra.py does not hold P1 at 1.05 a).
+SALENCON_TETRAHEDRA = {(2, 0.8): {"radius": 0.055, "wall": 0.01, "hoop_wall": 0.10, "hoop_R0": 0.025},
+                       (1, 0.4): {"radius": 0.03, "wall": 0.09, "hoop_wall": None, "hoop_R0": 0.0075}}
 
 
-@pytest.mark.slow  # 9 949 P2 cells, 3 300 relaxation steps: 80 s on a quiet machine, minutes on a busy one
-@pytest.mark.parametrize("order, wall_size", [(2, 0.8)])
+# P2: 9 949 cells, 3 300 relaxation steps; P1: 19 598 cells, 1 900 steps; 11 and 15 minutes on the busy
+# 2-core machine (load 16-20)
+@pytest.mark.slow
+@pytest.mark.parametrize("order, wall_size", [(2, 0.8), (1, 0.4)])
 def test_salencon_cavity_on_tetrahedra(tmp_path, order, wall_size):
     """tests/test_static_relaxation.py's Salencon cavity (a = 5 m, P0 = 30 MPa, c = 3.45 MPa, phi = 30 deg,
     psi = 0, unsupported) cut out of the 240 m plane-strain slab of tests/test_tetrahedra.py's .geo
@@ -374,5 +380,6 @@ def test_salencon_cavity_on_tetrahedra(tmp_path, order, wall_size):
     tolerance = SALENCON_TETRAHEDRA[order, wall_size]
     assert abs(found["radius_error"]) < tolerance["radius"]
     assert abs(found["wall_error"]) < tolerance["wall"]  # catches the yield surface off by 2 % (cohesion x 1.02)
-    assert abs(found["hoop_errors"]["wall"]) < tolerance["hoop_wall"]
+    if tolerance["hoop_wall"] is not None:
+        assert abs(found["hoop_errors"]["wall"]) < tolerance["hoop_wall"]
     assert abs(found["hoop_errors"]["R0"]) < tolerance["hoop_R0"]
