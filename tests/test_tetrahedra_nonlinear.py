@@ -348,10 +348,9 @@ def test_a_run_of_yielding_tetrahedra_stopped_and_resumed_is_the_uninterrupted_r
 
 # Salencon's cavity on tetrahedra against the closed form (tests/salencon.py), about twice the measured
 # (the error's sign in parentheses). P2 with 0.8 m at the wall: plastic radius (+2.61 %), wall
-# convergence (-0.06 %: held to 1 %, where cohesion x 1.02 in the scene moves it to
-# -1.74 %), hoop stress at the cells
-# nearest the wall, r = 1.03 a (-4.85 %: the centroid of a 0.8 m P2 cell where sigma_theta climbs
-# steeply) and nearest R0 (-1.14 %). P1 with 0.4 m at the wall (one strain per cell, no mean dilatation
+# convergence (-0.06 %: held to 1 %, where cohesion x 1.02 in the scene moves it to -1.74 %), hoop
+# stress at the cells nearest the wall, r = 1.03 a (-4.85 %: the centroid of a 0.8 m P2 cell where
+# sigma_theta climbs steeply) and nearest R0 (-1.14 %). P1 with 0.4 m at the wall (one strain per cell, no mean dilatation
 # to free the isochoric flow: it locks): plastic radius (-1.44 %), wall convergence (-4.40 %), hoop
 # stress at R0 (+0.32 %); at the wall the first row of P1 cells is 37.5 % off (not held, as
 # tests/test_tetrahedra.py does not hold P1 at 1.05 a).
