@@ -591,7 +591,7 @@ next displacement, its stored energy 0; plastic strain, damage and dissipation k
   def_state_methods(py::class_<HexahedronElementsBase, InternalForceComponent,
              std::shared_ptr<HexahedronElementsBase>>(
       m, "HexahedronElements",
-      R"(Hexahedral cells of one region integrated point by point with a material law.
+      R"(Hexahedral or tetrahedral cells of one region integrated point by point with a material law.
 
 At each quadrature point q of cell c: eps = sym(sum_a u_a (x) gradients[c, q, a]) (engineering
 shear, Voigt order xx, yy, zz, xy, yz, xz), the law gives the trial stress sigma (total, Pa) from
@@ -600,7 +600,8 @@ law="linear_elastic" this is the cells' stiffness matrix times u, to round-off.
 Deterministic: the same bits for any number of threads.
 
 Args:
-    cell_nodes: int32 (c, k) node of each basis function, k = 8 (Q1) or 27 (Q2). Borrowed.
+    cell_nodes: int32 (c, k) node of each basis function, k = 8 (Q1) or 27 (Q2) hexahedra,
+        4 (P1) or 10 (P2) tetrahedra. Borrowed.
     gradients: float64 (c, q, k, 3) basis gradients dphi/dx at the points (1/m), or for Q2
         cells with the 27-point Gauss rule the tensor form, a tuple (inverse_jacobians float64
         (c, q, 3, 3) dX_m/dx_l, node_order int32 (27,), point_order int32 (27,), basis float64

@@ -21,9 +21,10 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
     geometry_.tensor = &tensor_;
   }
   const std::int64_t n_cells = geometry.n_cells, n_points = geometry.n_points, k = geometry.n_basis;
-  if (k != 8 && k != 27)
+  if (k != 4 && k != 10 && k != 8 && k != 27)
     throw std::invalid_argument("cell_nodes: " + std::to_string(k) +
-                                " nodes per cell; hexahedra have 8 (Q1) or 27 (Q2)");
+                                " nodes per cell; tetrahedra have 4 (P1) or 10 (P2), hexahedra 8 "
+                                "(Q1) or 27 (Q2)");
   if (n_cells < 0 || (n_cells > 0 && n_points < 1))
     throw std::invalid_argument("weights: need at least one quadrature point per cell");
   for (std::int64_t j = 0; j < n_cells * k; ++j)

@@ -76,7 +76,8 @@ class InternalForceComponent {
   virtual std::string name() const = 0;
 };
 
-/// Borrowed element arrays of hexahedral cells (Q1: k = 8, Q2: k = 27), from pyfem/elements.py.
+/// Borrowed element arrays of hexahedral cells (Q1: k = 8, Q2: k = 27) or tetrahedral cells (P1:
+/// k = 4 with one point, P2: k = 10 with four), from pyfem/elements.py.
 /// The basis gradients dphi_a/dx at the points come in one of two forms:
 ///   dense:    gradients (c, q, k, 3);
 ///   tensor:   (Q2 with its 27-point Gauss rule) the cell type's TensorQ2 (tensor_q2.hpp) and
@@ -115,7 +116,7 @@ struct ElementOptions {
 /// the energies are the same bits for any number of threads.
 class HexahedronElementsBase : public InternalForceComponent {
  public:
-  /// Throws std::invalid_argument for k not in {8, 27}, a negative node, a non-finite gradient
+  /// Throws std::invalid_argument for k not in {4, 10, 8, 27}, a negative node, a non-finite gradient
   /// or a weight <= 0, or an initial_stress that is not finite. initial_stress (c, q, 6) is
   /// copied (null: zero).
   HexahedronElementsBase(const HexahedronGeometry& geometry, const ElementOptions& options,
@@ -133,7 +134,8 @@ class HexahedronElementsBase : public InternalForceComponent {
   std::int64_t n_points() const { return geometry_.n_points; }
   std::int64_t n_basis() const { return geometry_.n_basis; }
   const ElementOptions& options() const { return options_; }
-  /// Cube root of each cell's volume sum_q w_q (m), the law's characteristic length.
+  /// Cube root of each cell's volume sum_q w_q (m), the law's characteristic length (the same
+  /// formula for tetrahedra: the cube root of the tetrahedron's volume).
   const std::vector<double>& characteristic_length() const { return characteristic_length_; }
   /// Distinct nodes of the cells, sorted.
   const std::vector<std::int32_t>& nodes() const { return unique_nodes_; }
@@ -219,19 +221,13 @@ class HexahedronElements final : public HexahedronElementsBase {
   }
 
   InternalEnergy compute(const double* u, double* out_force) override {
-    if (geometry_.n_basis == 8)
-      cell_loop<8>(u, false);
-    else
-      cell_loop<27>(u, false);
+    dispatch(u, false);
     return gather(out_force);
   }
 
   void add_stiffness_damping(const double* v, double beta, double* out_force) override {
     beta_ = beta;
-    if (geometry_.n_basis == 8)
-      cell_loop<8>(v, true);
-    else
-      cell_loop<27>(v, true);
+    dispatch(v, true);
     add_element_forces(out_force);
   }
 
@@ -264,7 +260,10 @@ class HexahedronElements final : public HexahedronElementsBase {
            static_cast<std::int64_t>(2 * committed_.size() * sizeof(typename Law::State));
   }
 
-  std::string name() const override { return std::string("hexahedra/") + Law::kName; }
+  std::string name() const override {
+    return std::string(geometry_.n_basis == 4 || geometry_.n_basis == 10 ? "tetrahedra/" : "hexahedra/") +
+           Law::kName;
+  }
   const typename Law::Parameters& parameters() const { return parameters_; }
   const std::vector<typename Law::State>& committed_state() const { return committed_; }
 
@@ -286,6 +285,16 @@ class HexahedronElements final : public HexahedronElementsBase {
       for (int c = 0; c < 6; ++c) initial_stress[6 * p + c] = committed_[p].stress[c];
     }
     trial_ = committed_;
+  }
+
+  // The cell loop compiled for the cell's node count: P1 and P2 tetrahedra, Q1 and Q2 hexahedra.
+  void dispatch(const double* x, bool damping) {
+    switch (geometry_.n_basis) {
+      case 4: return cell_loop<4>(x, damping);
+      case 10: return cell_loop<10>(x, damping);
+      case 8: return cell_loop<8>(x, damping);
+      default: return cell_loop<27>(x, damping);
+    }
   }
 
   template <int kBasis>

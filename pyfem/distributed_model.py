@@ -614,10 +614,12 @@ def rank_regions(part: RankModel) -> RankRegions | None:
     def regions(arrays: dict):
         stresses = {name: None if field is None else quadrature_initial_stress(a.points, field)
                     for name, a in arrays.items()}
+        # One point per cell (P1 tetrahedra): its strain is the cell's mean, no B-bar (as the serial model)
+        cell_options = {name: dict(options[name], mean_dilatation=options[name]["mean_dilatation"]
+                                   and a.weights.shape[1] > 1) for name, a in arrays.items()}
         found = NonlinearRegions(stiffness=None, components=[], arrays=arrays,
                                  laws={name: laws[name] for name in arrays}, initial_stress=stresses,
-                                 options={name: options[name] for name in arrays}, zones=zones,
-                                 integration=integration)
+                                 options=cell_options, zones=zones, integration=integration)
         found.new_components()
         return found
 

@@ -5,10 +5,13 @@ and handed to the kernel as a `pyfem._kernels.HexahedronElements` component: per
 per quadrature point the basis gradients dphi/dx and the weight x |det J|, and a material law
 with a state at every point (docs/ARCHITECTURE.md "Kernel"). The other cells stay in the matrix.
 
-The quadrature is the one of `pyfem.operators.elastic_stiffness`: basix's default rule of
-degree 2 * order on the hexahedron (2^3 Gauss points for Q1, 3^3 for Q2), and the geometry is
-the mesh's coordinate element, as dolfinx's assembler has them; so a region given to the element
-loop with the linear elastic law reproduces the all-matrix run to round-off.
+The quadrature on hexahedra is the one of `pyfem.operators.elastic_stiffness`: basix's default
+rule of degree 2 * order (2^3 Gauss points for Q1, 3^3 for Q2), and the geometry is the mesh's
+coordinate element, as dolfinx's assembler has them; so a region given to the element loop with
+the linear elastic law reproduces the all-matrix run to round-off. On tetrahedra (affine cells)
+the rule is basix's default of degree `order`: one point for P1 (its strain is constant), four for
+P2 (its strain is linear, so B^T C B is quadratic and the 4-point rule integrates it exactly): the
+linear elastic law reproduces the matrix (assembled with a higher-degree rule) to round-off too.
 
 The linear part of the stiffness is assembled with the same form as the full one, with lambda
 and G set to zero on the element-loop cells (a DG0 coefficient, not a measure restricted by
@@ -55,11 +58,12 @@ water-retaining structures 0.1-0.2 mm), 1 mm a crack well open, 10 mm a lining b
 
 @dataclasses.dataclass
 class ElementArrays:
-    """Kernel arrays of a set of hexahedral cells (docs/ARCHITECTURE.md numbering).
+    """Kernel arrays of a set of hexahedral or tetrahedral cells (docs/ARCHITECTURE.md numbering).
 
     Attributes:
         cells: (c,) int32 local dolfinx cell indices.
-        cell_nodes: (c, k) int32 node of each basis function, k = 8 (Q1) or 27 (Q2).
+        cell_nodes: (c, k) int32 node of each basis function, k = 8 (Q1) or 27 (Q2) hexahedra,
+            4 (P1) or 10 (P2) tetrahedra.
         reference_gradients: (q, k, 3) float64 basis gradients dphi/dX on the reference cell.
         inverse_jacobians: (c, q, 3, 3) float64 dX_m/dx_l at the quadrature points (1/m):
             dphi/dx = reference_gradients @ inverse_jacobians (the property `gradients`).
@@ -311,10 +315,15 @@ def voigt_tensor(voigt: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], -2)
 
 
-def quadrature_rule(order: int) -> tuple[np.ndarray, np.ndarray]:
-    """Points (q, 3) and weights (q,) on the reference hexahedron [0, 1]^3 of basix's default rule
-    of degree 2 * order, the rule dolfinx uses for `quadrature_degree = 2 * order`."""
-    points, weights = basix.make_quadrature(basix.QuadratureType.Default, basix.CellType.hexahedron, 2 * order)
+def quadrature_rule(order: int, cell: str = "hexahedron") -> tuple[np.ndarray, np.ndarray]:
+    """Points (q, 3) and weights (q,) of the element loop's rule on the reference cell: on the
+    hexahedron [0, 1]^3 basix's default rule of degree 2 * order, the rule dolfinx uses for
+    `quadrature_degree = 2 * order`; on the tetrahedron basix's default rule of degree `order`
+    (1 point for P1, 4 for P2: exact for the stiffness of affine cells)."""
+    if cell == "tetrahedron":
+        points, weights = basix.make_quadrature(basix.QuadratureType.Default, basix.CellType.tetrahedron, order)
+    else:
+        points, weights = basix.make_quadrature(basix.QuadratureType.Default, basix.CellType.hexahedron, 2 * order)
     return np.asarray(points, dtype=np.float64), np.asarray(weights, dtype=np.float64)
 
 
@@ -325,21 +334,22 @@ def element_arrays(V, cells: np.ndarray) -> ElementArrays:
     element, x_g its geometry nodes), dphi/dx = dphi/dX J^-1, weight = w_q |det J|.
 
     Args:
-        V: dolfinx vector Lagrange space of order 1 or 2 on a hexahedral mesh.
+        V: dolfinx vector Lagrange space of order 1 or 2 on a hexahedral or tetrahedral mesh.
         cells: local cell indices.
 
     Returns:
         ElementArrays of the cells, in the given order.
     """
     mesh = V.mesh
-    if mesh.topology.cell_type.name != "hexahedron":
-        raise ValueError(f"element_arrays: hexahedral cells only, the mesh has {mesh.topology.cell_type.name}")
+    cell_type = mesh.topology.cell_type.name
+    if cell_type not in ("hexahedron", "tetrahedron"):
+        raise ValueError(f"element_arrays: hexahedral or tetrahedral cells only, the mesh has {cell_type}")
     element = V.element.basix_element
     if not element.dof_transformations_are_identity:
-        raise NotImplementedError("element_arrays: the space needs dof transformations (not Lagrange Q1/Q2)")
+        raise NotImplementedError("element_arrays: the space needs dof transformations (not Lagrange Q1/Q2/P1/P2)")
     order = element.degree
     cells = np.asarray(cells, dtype=np.int32)
-    reference_points, reference_weights = quadrature_rule(order)
+    reference_points, reference_weights = quadrature_rule(order, cell_type)
 
     # tabulate(1, X): [value, d/dX, d/dY, d/dZ] x points x basis x value size.
     basis_gradients = element.tabulate(1, reference_points)[1:, :, :, 0].transpose(1, 2, 0)       # (q, k, 3)
@@ -421,7 +431,7 @@ def _coordinate_element(mesh):
     if degree > 2:
         raise NotImplementedError(f"element_arrays: geometry of degree {degree} (only 1 and 2: the Lagrange "
                                   "variant of higher degrees is not known here)")
-    return basix.create_element(basix.ElementFamily.P, basix.CellType.hexahedron, degree,
+    return basix.create_element(basix.ElementFamily.P, getattr(basix.CellType, mesh.topology.cell_type.name), degree,
                                 basix.LagrangeVariant.gll_warped)
 
 
@@ -686,6 +696,8 @@ def nonlinear_component(model, region_names: typing.Sequence[str],
             options[name]["mean_dilatation"] = False  # one point: its volumetric strain is the mean
         elif schemes[name] != "full":
             raise ValueError(f"integration of region {name!r}: {schemes[name]!r}, not 'full' or 'reduced'")
+        if region_arrays.weights.shape[1] == 1:
+            options[name]["mean_dilatation"] = False  # P1 tetrahedra: one point, its strain is the mean
         if min_cells_for_threads is not None:
             options[name]["min_cells_for_threads"] = int(min_cells_for_threads)
         arrays[name] = region_arrays

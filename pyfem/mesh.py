@@ -367,11 +367,13 @@ def _check_cell_types(cell_types: list[tuple[int, str]], key: str = "mesh.file",
 
 
 def _check_tetrahedra_uses(scene: typing.Mapping) -> None:
-    """What a tetrahedral mesh cannot do yet (docs/tetrahedra.md): nonlinear materials (the kernel's
-    element loop has hexahedra only) and contact pairs on quadratic triangles (the consistent load
+    """What a tetrahedral mesh cannot do yet (docs/tetrahedra.md): one-point (reduced) integration of
+    a nonlinear material (its hourglass control is Q1's; a P1 tetrahedron has one point already) and
+    contact pairs on quadratic triangles (the consistent load
     of a uniform traction vanishes at their vertices: a vertex pair would carry no static force
     while its lumped area is positive, so its strength and the force it releases on opening would
-    not match the continuum). Contact on linear triangles and excavation are supported.
+    not match the continuum). Nonlinear materials, contact on linear triangles and excavation are
+    supported.
 
     Raises:
         SceneError naming the key.
@@ -383,10 +385,10 @@ def _check_tetrahedra_uses(scene: typing.Mapping) -> None:
                          "vertices carry no consistent load; docs/tetrahedra.md)")
     for name, material in (scene.get("materials") or {}).items():
         for table in ("plasticity", "damage"):
-            if material.get(table) is not None:
-                raise SceneError(f"materials.{name}.{table}", "present", "a mesh of hexahedra: the element loop "
-                                 "of nonlinear materials has hexahedra only; tetrahedral meshes are linear elastic "
-                                 "(docs/tetrahedra.md)")
+            if (material.get(table) or {}).get("integration") == "reduced":
+                raise SceneError(f"materials.{name}.{table}.integration", "reduced", "\"full\" on tetrahedra "
+                                 "(one point per cell with hourglass control is for Q1 hexahedra; a P1 "
+                                 "tetrahedron has one point already; docs/tetrahedra.md)")
 
 
 def _check_regions_match_materials(regions: dict[str, int], materials: typing.Mapping,

@@ -115,9 +115,11 @@ def salencon(r, a, P0, G, K, cohesion, friction_angle_deg, dilation_angle_deg, p
 # --- Finite-element comparison (draft: not run yet; needs a plastic static stage) -------------------
 
 def centroids(model):
-    """Cell centroids from the first 8 (vertex) nodes of each cell, as tests/test_static.py."""
+    """Cell centroids from the vertex nodes of each cell (the first 8 of a hexahedron, 4 of a tetrahedron), as
+    tests/test_static.py."""
     n_basis = model.V.element.basix_element.dim
-    nodes = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :8]
+    n_vertices = 4 if model.mesh.topology.cell_type.name == "tetrahedron" else 8  # the first nodes of a cell
+    nodes = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :n_vertices]
     return model.node_coords[nodes].mean(axis=1)
 
 

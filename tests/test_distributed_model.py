@@ -15,7 +15,8 @@ ghosts*, nodes an owned row reaches that dolfinx's index map does not hold) on t
 - the element loop: a Mohr-Coulomb layer that yields between rock and a concrete layer that cracks
   (the lining's damage law) under an oblique SV pulse over geostatic stress
   (tests/scenes/distributed_layers.toml): each cell counted by one rank, the other ranks' cells that
-  touch its nodes computed as its halo (their arrays sent once by their owners).
+  touch its nodes computed as its halo (their arrays sent once by their owners); the same layers meshed
+  to P1 tetrahedra by gmsh (tests/scenes/distributed_layers_tet.toml), on 1 and 2 ranks.
 Every monitor, energy and reaction history (with the laws' stress, damage and plastic strain at the
 monitors, and their stored and dissipated energy) equals the whole model's to 1e-10 of its dimension's
 largest value (the tunnel's accelerations and reactions to a few 1e-9: net forces of a long wave on
@@ -48,7 +49,8 @@ TOLERANCE = 1.0e-10
 DISTRIBUTED = ("--set", "parallel.model=distributed")
 
 SCENES = {"box": "tests/scenes/distributed_box.toml", "tunnel": "tests/scenes/mpi_tunnel_tet.toml",
-          "layers": "tests/scenes/distributed_layers.toml", "zone": "tests/scenes/mpi_weak_layer.toml",
+          "layers": "tests/scenes/distributed_layers.toml",
+          "layers_tet": "tests/scenes/distributed_layers_tet.toml", "zone": "tests/scenes/mpi_weak_layer.toml",
           "contact": "tests/scenes/mpi_hard_contact.toml", "contact_yield": "tests/scenes/mpi_hard_contact.toml",
           "contact_l": "tests/scenes/inclusion_l_contact.toml"}
 # The zone: a plasticity zone at x < 40 m of a 150 m box, which one of 2 ranks does not reach (no
@@ -60,7 +62,7 @@ SETTINGS = {"zone": ("--set", "materials.weak.plasticity.zone=[0.0, 0.0, 0.0, 40
             "contact_yield": ("--set", "materials.soft.plasticity={cohesion=2.0e5, friction_angle=30.0, "
                               "tensile_strength=1.0e5, damage_max=0.9, damage_plastic_strain=0.005}", "--set", "output.xdmf_interval=0.1",
                               "--set", 'output.fields=["displacement", "stress", "damage"]')}
-RANKS = {"box": (1, 2, 3), "tunnel": (1, 3), "layers": (1, 2, 3), "zone": (1, 2), "contact": (1, 2, 3),
+RANKS = {"box": (1, 2, 3), "tunnel": (1, 3), "layers": (1, 2, 3), "layers_tet": (1, 2), "zone": (1, 2), "contact": (1, 2, 3),
          "contact_yield": (1, 3), "contact_l": (1, 3)}
 # The tunnel's net forces (tests/test_mpi.py NET_FORCE_TOLERANCE): measured 1.7e-9 and 9e-10 on 3 ranks.
 TOLERANCES = {"tunnel": {"acceleration": 3.0e-9, "reaction": 2.0e-9}}
@@ -150,7 +152,7 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
         assert whole["nonlinear_regions"]["weak"]["yielded_volume"] > 0.0
         if ranks == 2:
             assert 0 in ours["mpi"]["element_loop_cells"] and 0 in ours["mpi"]["halo_cells"]
-    elif name == "layers":  # the weak layer yielded, the concrete cracked in part
+    elif name in ("layers", "layers_tet"):  # the weak layer yielded, the concrete cracked in part
         weak, concrete = whole["nonlinear_regions"]["weak"], whole["nonlinear_regions"]["concrete"]
         assert weak["yielded_volume"] > 0.0 and weak["peak_damage"] > 0.0
         assert 0.0 < concrete["damaged_volume"] < 0.9 * concrete["volume"] and concrete["tension_points"] > 0
@@ -194,9 +196,9 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
         assert all(b > 0 for b in mpi["bytes_sent_per_step"])
     if ranks == 3 and name == "box" or name == "tunnel" and ranks == 3:  # (the thin boxes have none)
         assert sum(mpi["extra_ghost_nodes"]) > 0, "the partition exercised the extra ghosts"
-    if name in ("layers", "zone", "contact_yield"):  # each cell counted once, the halo computed where it acts
+    if name in ("layers", "layers_tet", "zone", "contact_yield"):  # each cell counted once, the halo computed where it acts
         assert sum(mpi["element_loop_cells"]) == sum(r["cells"] for r in whole["nonlinear_regions"].values())
-        if name == "layers":
+        if name in ("layers", "layers_tet"):
             assert (min(mpi["halo_cells"]) > 0) == (ranks > 1)
         for region, values in whole["nonlinear_regions"].items():
             for key, value in values.items():
@@ -224,7 +226,7 @@ def test_the_distributed_model_equals_the_whole_model(runs, name, ranks):
         assert written <= set(got) and "displacement" in written
         if name.startswith("contact"):  # the interface fields on both nodes of every pair
             assert written >= {"pair_state", "pair_slip", "pair_D"} and expected["pair_slip"].max() > 1e-4
-        if name == "layers":
+        if name in ("layers", "layers_tet"):
             assert written >= {"acceleration", "stress", "strain", "damage", "damage_type", "plastic_strain",
                                "crack_opening"} and expected["damage"].max() > 0.5
         for field in written:

@@ -99,7 +99,8 @@ def kirsch_radial_displacement(r_over_a, theta):
 
 def centroids(model):
     n_basis = model.V.element.basix_element.dim
-    nodes = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :8]
+    n_vertices = 4 if model.mesh.topology.cell_type.name == "tetrahedron" else 8  # the first nodes of a cell
+    nodes = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :n_vertices]
     return model.node_coords[nodes].mean(axis=1)
 
 

@@ -9,8 +9,8 @@ row-sum lumped) or quadratic (P2, HRZ-lumped) tetrahedra.
 - The tunnel of meshes/tunnel_in_box_tet.geo under a long SV wave: the wall's hoop stress follows
   Kirsch (the cavity check of tests/test_cavity.py, its 10 %).
 - The static stage excavates on tetrahedra: a filled tunnel cut out of a slab follows Kirsch.
-- What tetrahedra cannot do yet (nonlinear materials, contact on quadratic tetrahedra) and mixed
-  meshes are refused with one line naming the key.
+- What tetrahedra cannot do yet (one point per cell with hourglass control, contact on quadratic
+  tetrahedra) and mixed meshes are refused with one line naming the key.
 """
 import math
 from pathlib import Path
@@ -139,10 +139,14 @@ def test_what_tetrahedra_cannot_do_yet_is_refused_by_key(tmp_path):
     from pyfem.operators import build_model
 
     geo = box_geo(tmp_path, 40.0)
+    # Nonlinear materials run on tetrahedra (tests/test_tetrahedra_nonlinear.py); one point per cell
+    # with Q1's hourglass control does not.
     plastic = box_scene(geo, 1, materials={"rock": {"preset": "sandstone", "plasticity": {
-        "cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e6}}})
-    with pytest.raises(SceneError, match=r"materials\.rock\.plasticity.*hexahedra"):
+        "cohesion": 1.0e6, "friction_angle": 30.0, "tensile_strength": 1.0e6, "integration": "reduced"}}})
+    with pytest.raises(SceneError, match=r"materials\.rock\.plasticity\.integration.*tetrahedra"):
         build_model(plastic)
+    plastic["materials"]["rock"]["plasticity"]["integration"] = "full"
+    assert build_model(plastic).mesh.topology.cell_type.name == "tetrahedron"
     mixed = tmp_path / "mixed.geo"
     # Two separate boxes: one meshed to tetrahedra, the other transfinite and recombined to hexahedra.
     mixed.write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 40, 40, 40};\nBox(2) = {100, 0, 0, 40, 40, 40};\n'
