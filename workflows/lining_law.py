@@ -15,11 +15,11 @@ c 1.8 MPa, phi 46 deg, A_t 1, B_t 5e4, A_c 1.4, B_c 1500, G_f 120 N/m) along str
    paper's criterion gives read literally (sqrt(sum <eps_i>^2) of the total strain: the Poisson
    expansion, f_t / (nu sqrt 2));
 3. compression with a tensile principal stress (s_3 = -5 MPa held, s_1 growing, s_2 = 0, the
-   lining wall's state under dynamic shear): the s_1 at which tension damage starts, against
-   f_t (Mazars' own split of the strain) and against the literal reading;
-4. the strain path of the lining at monitor C of the coarse case-1 run (total stress of its
-   monitor CSV, strain = C^-1 : sigma, exact while the point is undamaged): when and at which
-   principal stresses the law damages it.
+   lining wall's state under dynamic shear): the s_1 at which damage starts, against the tension
+   criterion's, Mazars' own split of the strain (f_t) and the literal reading;
+4. the strain path of the lining at monitor C of the case-1 check run (the small model of
+   workflows/results/case_study/case1_small; total stress of its monitor CSV, strain = C^-1 : sigma,
+   exact while the point is undamaged): when and at which principal stresses the law damages it.
 
     /usr/bin/python3 workflows/lining_law.py        # about 20 s
     -> workflows/results/lining_law.md, lining_law.png
@@ -50,7 +50,7 @@ B_T = (1.0e4, 2.0e4, 5.0e4, 1.0e5)
 F_T = (1.27e6, 1.78e6, 2.2e6)             # Pa
 GRADED = 0.3                              # the paper's case-1 lining damage
 S3_HELD = -5.0e6                          # Pa, the wall's vertical compression of path 3
-MONITOR_C = REPOSITORY / "workflows" / "results" / "case_study" / "case1_coarse" / "monitors" / "C.csv"
+MONITOR_C = REPOSITORY / "workflows" / "results" / "case_study" / "case1_small" / "monitors" / "C.csv"
 RESULTS = REPOSITORY / "workflows" / "results"
 MPA = 1.0e-6
 
@@ -239,7 +239,7 @@ def main() -> int:
         lines += ["## The path at monitor C", "", f"No monitor file {MONITOR_C.relative_to(REPOSITORY)}: not drawn.", ""]
     else:
         t = path["t"]
-        lines += ["## The path at monitor C (coarse case 1, the calibrated input)", "",
+        lines += ["## The path at monitor C (case 1 on the small model, the calibrated input)", "",
                   "Total stress of the run's monitor C (static + dynamic; the monitor reads the nearest quadrature "
                   "point's committed stress), driven through the law alone.", ""]
         for label, key in (("the law alone", "law_onset"), ("the run's own damage at C", "run_onset"),
@@ -273,7 +273,7 @@ def main() -> int:
         axes[2].plot(path["t"], path["law_damage"], lw=1.2, label="damage, law alone")
         if path["run_damage"] is not None:
             axes[2].plot(path["t"], path["run_damage"], "--", lw=1.0, label="damage, run")
-        axes[2].set(xlabel="t (s)", title="monitor C, coarse case 1")
+        axes[2].set(xlabel="t (s)", title="monitor C, case 1 (small model)")
         axes[2].legend(fontsize=7)
     for ax in axes:
         ax.grid(alpha=0.3)
