@@ -17,9 +17,10 @@ c 1.8 MPa, phi 46 deg, A_t 1, B_t 5e4, A_c 1.4, B_c 1500, G_f 120 N/m) along str
 3. compression with a tensile principal stress (s_3 = -5 MPa held, s_1 growing, s_2 = 0, the
    lining wall's state under dynamic shear): the s_1 at which damage starts, against the tension
    criterion's, Mazars' own split of the strain (f_t) and the literal reading;
-4. the strain path of the lining at monitor C of the case-1 check run (the small model of
-   workflows/results/case_study/case1_small; total stress of its monitor CSV, strain = C^-1 : sigma,
-   exact while the point is undamaged): when and at which principal stresses the law damages it.
+4. the lining monitors A-D of the case-1 check run (the small model,
+   workflows/results/case_study/case1_small): when each first damages, of which type, and the law's
+   two criteria at the last sample before (its stress columns are the law's stress at the monitor's
+   kernel point).
 
     /usr/bin/python3 workflows/lining_law.py        # about 20 s
     -> workflows/results/lining_law.md, lining_law.png
@@ -149,26 +150,39 @@ def read_monitor(path: Path) -> dict:
     return {name: data[:, i] for i, name in enumerate(rows[0])}
 
 
-def monitor_path(parameters: dict, path: Path = MONITOR_C) -> dict | None:
-    """The law along the total stress path of a lining monitor (strain = C^-1 : sigma, exact up to
-    the first damage of the run; beyond it the path is the run's damaged one, so only the onset is
-    compared)."""
-    if not path.exists():
+def measures(parameters: dict, stress: np.ndarray) -> dict:
+    """The law's two criteria at an undamaged point of total stress `stress` (Voigt, Pa), each as a
+    share of its threshold (1 = damage starts): the tension measure sqrt(sum <e+_i>^2) / (f_t / E) of
+    the energy split's tensile strain, and the Mohr-Coulomb measure / (f_c / E)."""
+    s = np.linalg.eigvalsh(np.array([[stress[0], stress[3], stress[5]], [stress[3], stress[1], stress[4]],
+                                     [stress[5], stress[4], stress[2]]]))[::-1]
+    positive, trace = np.maximum(s, 0.0), max(s.sum(), 0.0)
+    tensile = np.maximum(((1.0 + NU) * positive - NU * trace) / E, 0.0)
+    sin_phi = math.sin(math.radians(parameters["friction_angle"]))
+    f_c = 2.0 * parameters["cohesion"] * math.cos(math.radians(parameters["friction_angle"])) / (1.0 - sin_phi)
+    return {"principal_mpa": s * MPA, "tension": float(np.sqrt(np.sum(tensile ** 2))) * E / parameters["tensile_strength"],
+            "shear": ((s[0] - s[2]) + (s[0] + s[2]) * sin_phi) / (1.0 - sin_phi) / f_c}
+
+
+def monitor_onsets(parameters: dict, directory: Path = MONITOR_C.parent) -> dict | None:
+    """Where the run's lining monitors first damage: the time, the type, the damage one output
+    interval later, and the law's two criteria at the last undamaged sample (the monitor's stress
+    columns are the law's stress at its kernel point, so before the onset C^-1 : sigma is its strain;
+    the damage jumps within one interval, so the onset itself falls between two samples)."""
+    if not (directory / "C.csv").exists():
         return None
-    m = read_monitor(path)
-    stress = np.column_stack([m[k] for k in ("sxx", "syy", "szz", "sxy", "syz", "sxz")])
-    run = drive(parameters, elastic_strain(stress))
-    principal = np.array([np.linalg.eigvalsh(np.array([[s[0], s[3], s[5]], [s[3], s[1], s[4]], [s[5], s[4], s[2]]]))
-                          for s in stress])
-    out = {"t": m["t"], "s1": principal[:, 2], "s3": principal[:, 0], "law_damage": run["damage"],
-           "run_damage": m.get("damage"), "law_onset": None, "run_onset": None}
-    threshold = parameters["tensile_strength"] / E
-    literal = [i for i, eps in enumerate(elastic_strain(stress)) if literal_equivalent_strain(eps) > threshold]
-    out["literal_onset"] = None if not literal else literal[0]
-    if run["damage"].max() > 0.0:
-        out["law_onset"] = int(np.argmax(run["damage"] > 0.0))
-    if out["run_damage"] is not None and out["run_damage"].max() > 0.0:
-        out["run_onset"] = int(np.argmax(out["run_damage"] > 0.0))
+    out = {}
+    for name in ("A", "B", "C", "D"):
+        m = read_monitor(directory / f"{name}.csv")
+        stress = np.column_stack([m[k] for k in ("sxx", "syy", "szz", "sxy", "syz", "sxz")])
+        entry = {"t": m["t"], "damage": m["damage"], "s1": m["s1"], "onset": None,
+                 "largest": max((measures(parameters, row) for row in stress), key=lambda r: r["tension"])}
+        if m["damage"].max() > 0.0:
+            i = int(np.argmax(m["damage"] > 0.0))
+            entry.update(onset=i, onset_t=m["t"][i], onset_type=int(m["damage_type"][i]),
+                         damage_next=float(m["damage"][min(i + 1, len(m["t"]) - 1)]),
+                         before=measures(parameters, stress[i - 1]))
+        out[name] = entry
     return out
 
 
@@ -233,24 +247,26 @@ def main() -> int:
               f"- Mazars' split (nu acting on the sum of the positive principal stresses): {held['mazars_onset_mpa']:.3f} "
               "MPa, f_t itself.",
               f"- The literal reading (total principal strains): {held['literal_onset_mpa']:.3f} MPa.", ""]
-    # 4. The path at C.
-    path = monitor_path(dict(LINING))
+    # 4. The lining monitors of the case-1 check run.
+    path = monitor_onsets(dict(LINING))
     if path is None:
-        lines += ["## The path at monitor C", "", f"No monitor file {MONITOR_C.relative_to(REPOSITORY)}: not drawn.", ""]
+        lines += ["## The lining monitors of case 1", "", f"No monitor files in {MONITOR_C.parent.relative_to(REPOSITORY)}: "
+                  "not drawn.", ""]
     else:
-        t = path["t"]
-        lines += ["## The path at monitor C (case 1 on the small model, the calibrated input)", "",
-                  "Total stress of the run's monitor C (static + dynamic; the monitor reads the nearest quadrature "
-                  "point's committed stress), driven through the law alone.", ""]
-        for label, key in (("the law alone", "law_onset"), ("the run's own damage at C", "run_onset"),
-                           ("the literal reading", "literal_onset")):
-            i = path[key]
-            if i is None:
-                lines.append(f"- {label}: no damage up to t = {t[-1]:.2f} s (largest s_1 {path['s1'].max() * MPA:.3f} "
-                             f"MPa, most compressive s_3 {path['s3'].min() * MPA:.3f} MPa).")
-            else:
-                lines.append(f"- {label}: damage from t = {t[i]:.3f} s, at s_1 = {path['s1'][i] * MPA:.3f} MPa, "
-                             f"s_3 = {path['s3'][i] * MPA:.3f} MPa.")
+        lines += ["## The lining monitors of case 1 (the small model, the calibrated input)", "",
+                  f"The run in {MONITOR_C.parent.relative_to(REPOSITORY)}: where each monitor's kernel point first "
+                  "damages, and the law's two criteria (as shares of their thresholds) at the last sample before, "
+                  "0.01 s earlier. Principal stresses total (static + dynamic), MPa.", "",
+                  "| monitor | onset (s) | type | damage 0.01 s later | principal stresses before (MPa) | "
+                  "tension criterion | Mohr-Coulomb criterion |", "|---|---:|---|---:|---|---:|---:|"]
+        for name, r in path.items():
+            if r["onset"] is None:
+                lines.append(f"| {name} | - | - | - | - | {r['largest']['tension']:.3f} (largest) | - |")
+                continue
+            b4 = r["before"]
+            lines.append(f"| {name} | {r['onset_t']:.2f} | {'tension' if r['onset_type'] == 1 else 'shear'} | "
+                         f"{r['damage_next']:.4f} | {', '.join(f'{v:.2f}' for v in b4['principal_mpa'])} | "
+                         f"{b4['tension']:.3f} | {b4['shear']:.3f} |")
         lines.append("")
     (RESULTS / "lining_law.md").write_text("\n".join(lines))
     # Figure.
@@ -268,13 +284,11 @@ def main() -> int:
     axes[1].set(xlabel="axial compressive strain (1e-3)", title="uniaxial compression")
     axes[1].legend(fontsize=7)
     if path is not None:
-        axes[2].plot(path["t"], path["s1"] * MPA, lw=0.8, label="s_1 (MPa)")
-        axes[2].plot(path["t"], path["s3"] * MPA, lw=0.8, label="s_3 (MPa)")
-        axes[2].plot(path["t"], path["law_damage"], lw=1.2, label="damage, law alone")
-        if path["run_damage"] is not None:
-            axes[2].plot(path["t"], path["run_damage"], "--", lw=1.0, label="damage, run")
-        axes[2].set(xlabel="t (s)", title="monitor C, case 1 (small model)")
-        axes[2].legend(fontsize=7)
+        for name, r in path.items():
+            line, = axes[2].plot(r["t"], r["s1"] * MPA, lw=0.8, label=f"{name}: s_1 (MPa)")
+            axes[2].plot(r["t"], r["damage"], "--", lw=1.0, color=line.get_color(), label=f"{name}: damage")
+        axes[2].set(xlabel="t (s, record time)", title="lining monitors, case 1 (small model)")
+        axes[2].legend(fontsize=6)
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.tight_layout()
