@@ -17,7 +17,7 @@ and high-pass corners from 0.1 to 0.6 Hz, everything else as the scene (low-pass
     /usr/bin/python3 workflows/input_calibration.py      # about 10 s
     -> workflows/results/input_calibration.md, .csv
 
-The finite element check of the chosen corner (one coarse case-1 run) is in docs/case_study.md.
+The finite element check of the chosen corner (case 1 on the small model) is in docs/case_study.md.
 """
 from __future__ import annotations
 
