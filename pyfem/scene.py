@@ -997,6 +997,13 @@ def _check_nonlinear_material(name: str, material: dict, order: int) -> None:
         raise SceneError(f"{key}.A_t", values["A_t"], "must be 1 when fracture_energy > 0 (with A_t < 1 the "
                          "stress keeps (1 - A_t) f_t forever and no fracture energy can be matched); set "
                          "fracture_energy = 0 for the unregularised law")
+    elif values["fracture_energy"] > 0.0 and values["B_t"] * values["tensile_strength"] < material["E"]:
+        # The crack band stretches Eq. 21's softening from the peak at f_t; with B_t f_t / E < 1 the curve
+        # first hardens past f_t (peak at 1 / B_t), and the stretch lifts that branch further (B_t = 1e4:
+        # 1.62 MPa for f_t = 1.27 MPa; workflows/results/lining_law.md).
+        raise SceneError(f"{key}.B_t", values["B_t"], f"at least E / f_t = {material['E'] / values['tensile_strength']:.4g} "
+                         "when fracture_energy > 0 (a smaller B_t gives Eq. 21 a hardening branch past f_t, which the "
+                         "crack band lifts above f_t); set fracture_energy = 0 for the unregularised law")
 
 
 def _check_rock_damage_scale(key: str, values: dict) -> None:

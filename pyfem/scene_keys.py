@@ -154,6 +154,8 @@ RULES = {
     ],
     "materials.NAME.damage": [
         "`materials.NAME.damage.A_t` = 1 when `materials.NAME.damage.fracture_energy` > 0",
+        "`materials.NAME.damage.B_t` >= E / `materials.NAME.damage.tensile_strength` when "
+        "`materials.NAME.damage.fracture_energy` > 0",
         "a strength below 100 Pa is refused (a value in MPa written as Pa)",
     ],
     "time": [

@@ -233,6 +233,10 @@ BAD_INPUTS = [
      box(extra="[materials.rock.damage]\ncohesion = 1.8e6\nfriction_angle = 46.0\ntensile_strength = 1.27e6\n"
                "A_t = 0.8\n"),
      "materials.rock.damage.A_t", ["must be 1 when fracture_energy > 0"]),
+    ("damage with B_t below E / f_t and a crack band",  # the peak would rise above f_t (lining_law.md)
+     box(extra="[materials.rock.damage]\ncohesion = 1.8e6\nfriction_angle = 46.0\ntensile_strength = 1.27e6\n"
+               "B_t = 5.0e3\n"),
+     "materials.rock.damage.B_t", ["5000", "at least E / f_t = 6299", "fracture_energy = 0"]),
     ("time.safety with time.dt", box("duration = 0.02", "duration = 0.02\ndt = 1.0e-4\nsafety = 0.5"),
      "time.safety", ["not both"]),
     ("mesh.h with a file mesh", two_layer("[mesh]", "[mesh]\nh = 0.1"), "mesh.h",

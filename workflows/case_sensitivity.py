@@ -44,9 +44,9 @@ distributed model with 2 ranks (a third of the whole model's memory, docs/scalin
 
 Runs go to runs/case_sensitivity/NAME (a stopped run continues from its checkpoint when the same
 command is given again); the table goes to workflows/results/case_sensitivity.csv and .md, each
-group's histories to workflows/results/case_sensitivity_GROUP.png, and the table between the
-markers of docs/case_study.md's section "The interfaces on three meshes, the rock's strength and the
-normal lag".
+group's histories to workflows/results/case_sensitivity_GROUP.png (docs/case_study.md's section "The
+interfaces on three meshes, the rock's strength and the normal lag" summarises them; a block between
+the markers <!-- case_sensitivity.py: start/end --> of that page, where there is one, is replaced).
 """
 from __future__ import annotations
 

@@ -144,9 +144,11 @@ RECORDS = ROOT / "workflows" / "results" / "reference_histories"
 PYTHON = "/usr/bin/python3"
 BASE_COMMIT = "d13262b"  # the commit the committed records were made with
 # Records made again later, on purpose: {scene: (commit, why)}.
-RERECORDED = {"case3_small": ("4b87761", "record time is run time: the record's 1 s lead-in now runs at t < 0, "
-                              "so the scene starts at its window (lead_in = 0) to keep its 0.04 s; the other "
-                              "five scenes reproduce d13262b's records to the bit on this commit")}
+RERECORDED = {"case3_small": ("d03367c", "the case scenes' input changed (the record scaled before filtering, "
+                              "high-pass 0.52 Hz: docs/case_study.md); before that, 4b87761: record time is run "
+                              "time, the record's 1 s lead-in runs at t < 0, so the scene starts at its window "
+                              "(lead_in = 0) to keep its 0.04 s; the other five scenes reproduce d13262b's records "
+                              "to the bit")}
 TOLERANCE = 1.0e-10  # relative to each column's largest |value|
 FLOOR = 1.0e-2  # a column is measured against at least this share of its dimension's largest value
 MAX_ROWS = 2000  # a history longer than this is kept every k-th row (none is today)

@@ -1,0 +1,110 @@
+"""The case study's one free input parameter, the high-pass corner, calibrated on case 1.
+
+The paper gives its record processing (El Centro 1940 N-S scaled to 0.32 g, its first 20 s,
+filtered and baseline-corrected, Sec. 4.2) but not the filter band. The corner of the high-pass
+sets the input's displacement (workflows/results/input_processing.md), so it is calibrated, and
+only it, on one number of the paper: case 1's absolute lining displacement, 6.83 cm.
+
+Cheap estimate: for vertical incidence and waves long against the cavern (25 m wide; the
+S wave in the sandstone is 370 m long at the 3 Hz low-pass, 2 km at 0.5 Hz) the lining moves with the free field
+at its depth, so the peak of |u| of the half-space's free field (incident + reflected P and SV,
+pyfem.seismic.freefield, exactly as the run builds it) at the lining monitors A-D stands for the
+lining's absolute displacement. This workflow evaluates it for the scene
+workflows/scenes/case1_vertical_coarse.toml with `scale = "before_filter"` (the paper's order)
+and high-pass corners from 0.1 to 0.6 Hz, everything else as the scene (low-pass 3 Hz, window
+0-20 s, lead-in 1 s), and writes the sensitivity table:
+
+    /usr/bin/python3 workflows/input_calibration.py      # about 10 s
+    -> workflows/results/input_calibration.md, .csv
+
+The finite element check of the chosen corner (case 1 on the small model) is in docs/case_study.md.
+"""
+from __future__ import annotations
+
+import csv
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPOSITORY))
+
+from pyfem.scene import load_scene  # noqa: E402
+from pyfem.seismic.freefield import FreeField  # noqa: E402
+from pyfem.seismic.setup import input_waveform  # noqa: E402
+
+# Parameters
+SCENE = REPOSITORY / "workflows" / "scenes" / "case1_vertical_coarse.toml"
+CORNERS = (0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.51, 0.52, 0.53, 0.55, 0.6)  # Hz
+LOW_PASS = 3.0                      # Hz, as the scenes
+TARGET_CM = 6.83                    # the paper's case 1, largest absolute lining displacement
+CHOSEN = 0.52                       # Hz: the corner the case scenes use (the closest to TARGET_CM)
+RUN_WINDOW = 5.0                    # s, an early window of the record (record time): the table's second peak column
+MONITORS = {"A": (0.0, 0.0, 58.91), "B": (-11.46, 0.0, 30.075), "C": (11.46, 0.0, 30.075), "D": (0.0, 0.0, 0.99)}
+TIME_STEP = 0.005                   # s, sampling of the free field
+RESULTS = REPOSITORY / "workflows" / "results"
+
+
+def free_field_peaks(corner: float, scale: str = "before_filter") -> dict:
+    """Peak |u| (cm) of the case-1 free field at the monitors, over the whole record and over the
+    first RUN_WINDOW s, the processed input's PGA (g) and PGD (cm) and when |u| peaks at A."""
+    scene = load_scene(SCENE, [f"wave.motion.record.band=[{corner},{LOW_PASS}]",
+                               f'wave.motion.record.scale="{scale}"', "time.duration=20.0"])
+    wave = scene["wave"]
+    medium = scene["materials"][wave["medium"]]
+    waveform, grid, processed = input_waveform(scene)
+    field = FreeField(scene.wave_components(), medium["E"], medium["nu"], medium["rho"], surface=wave["surface"],
+                      waveform=waveform, table_grid=grid, reference_point=wave["reference_point"],
+                      model_bounds=((-300.0, -100.0, -300.0), (300.0, 100.0, wave["surface"])))
+    points = np.array(list(MONITORS.values()))
+    t = np.arange(-1.0, 20.0, TIME_STEP)
+    magnitude = np.linalg.norm(field.displacement(points, t), axis=2)  # (nt, 4)
+    early = t <= RUN_WINDOW
+    return {"scale": scale, "high_pass_hz": corner,
+            "pga_g": float(np.max(np.abs(processed.acceleration)) / 9.80665), "pgd_cm": 100.0 * processed.pgd,
+            "peak_cm": {name: 100.0 * float(magnitude[:, i].max()) for i, name in enumerate(MONITORS)},
+            "peak_run_cm": {name: 100.0 * float(magnitude[early, i].max()) for i, name in enumerate(MONITORS)},
+            "t_peak_A": float(t[np.argmax(magnitude[:, 0])])}
+
+
+def main() -> int:
+    rows = [free_field_peaks(corner) for corner in CORNERS]
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    with open(RESULTS / "input_calibration.csv", "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(["scale", "high_pass_hz", "pga_g", "pgd_cm", *(f"peak_{m}_cm" for m in MONITORS),
+                         *(f"peak_{m}_first_{RUN_WINDOW:g}s_cm" for m in MONITORS), "t_peak_A_s"])
+        for r in rows:
+            writer.writerow([r["scale"], r["high_pass_hz"], f"{r['pga_g']:.4f}", f"{r['pgd_cm']:.3f}",
+                             *(f"{r['peak_cm'][m]:.3f}" for m in MONITORS),
+                             *(f"{r['peak_run_cm'][m]:.3f}" for m in MONITORS), f"{r['t_peak_A']:.3f}"])
+    lines = ["# The high-pass corner calibrated on case 1's absolute lining displacement",
+             "",
+             "Generated by `workflows/input_calibration.py`: the free field (incident + reflected P and SV, the "
+             "half-space of workflows/scenes/case1_vertical_coarse.toml) at the lining monitors, the record scaled "
+             f"to 0.32 g before filtering (the paper's order), low-pass {LOW_PASS:g} Hz, window 0-20 s. The paper's "
+             f"case 1: {TARGET_CM} cm. Largest peak over A-D, whole record and its first {RUN_WINDOW:g} s; the input's "
+             "PGA and PGD at the reference point (z = 0, 360 m deep); when |u| peaks at A.",
+             "",
+             f"| high-pass (Hz) | PGA (g) | PGD (cm) | free field at A-D (cm) | first {RUN_WINDOW:g} s (cm) | "
+             "peak at A (s) |",
+             "|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        mark = " **chosen**" if r["high_pass_hz"] == CHOSEN else ""
+        lines.append(f"| {r['high_pass_hz']:g}{mark} | {r['pga_g']:.3f} | {r['pgd_cm']:.2f} | "
+                     f"{min(r['peak_cm'].values()):.2f}-{max(r['peak_cm'].values()):.2f} | "
+                     f"{min(r['peak_run_cm'].values()):.2f}-{max(r['peak_run_cm'].values()):.2f} | "
+                     f"{r['t_peak_A']:.2f} |")
+    lines += ["",
+              "The peak is not monotonic in the corner: below 0.25 Hz it comes at 2.8 s, from 0.25 to 0.42 Hz from the "
+              "long pulse at 4.2 s, which the higher corners remove, and from 0.48 Hz on from the pulse at 1.75 s. "
+              "The corner closest to "
+              f"{TARGET_CM} cm on the smooth branch above 0.47 Hz is the chosen one."]
+    (RESULTS / "input_calibration.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
