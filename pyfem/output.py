@@ -416,6 +416,7 @@ class RunWriter:
         from pyfem.deformation import DeformedSection
 
         self.deformation = DeformedSection(simulation.model, self._monitor_points, cell_regions(simulation.model))
+        self.contours = self._contours()
         self._summary: dict | None = None  # set by start()
         self.checkpoint_problem: str | None = None  # why the checkpoint of an interruption failed
         self._last_flush = -math.inf
@@ -581,6 +582,8 @@ class RunWriter:
         if write_fields:
             self._write_fields(t, u, v, a, pair_values)
         self.deformation.update(t, u)
+        if self.contours is not None:
+            self.contours.update(t, u)
         self.times.append(t)
         self.energy_samples.append(energy_row)
         self._histories["energy"].append(energy_row)
@@ -611,6 +614,8 @@ class RunWriter:
         read (pyfem.distributed.DistributedStepper)."""
         sim = self.simulation
         nodes = [np.asarray(self.deformation.nodes, dtype=np.int64).ravel()]
+        if self.contours is not None:
+            nodes.append(self.contours.nodes())
         if sim.monitor_nodes is not None:
             nodes.append(np.asarray(sim.monitor_nodes, dtype=np.int64).ravel())
         if sim.monitor_stress is not None:
@@ -749,6 +754,37 @@ class RunWriter:
             section = self._section_state(plot_dir / "section_end.png")
             if section is not None and self._summary is not None:
                 self._summary["section_end"] = section
+        if self.contours is not None:
+            try:
+                if self.nonlinear is not None:
+                    self.contours.set_end_stress(self._nonlinear_cell_stress())
+                contour = self.contours.plot(plot_dir / "contour.png", self.scene.get("title", ""))
+            except Exception as error:  # a picture must never fail a finished run
+                print(f"warning: plots/contour.png not drawn ({type(error).__name__}: {error})", file=sys.stderr)
+                contour = None
+            if contour is not None and self._summary is not None:
+                self._summary["contour"] = contour
+
+    def _contours(self):
+        """The openings' contours (pyfem.contour) of a run whose static stage excavated, else None."""
+        static = getattr(self.simulation, "static", None)
+        if static is None or not np.any(np.asarray(getattr(static, "excavation_load", ()))):
+            return None
+        from pyfem.contour import Contours
+
+        points = self._monitor_points
+        contours = Contours(self.simulation.model, static, self.scene,
+                            float(points[0][1]) if points is not None and len(points) else None)
+        return contours if contours.openings else None
+
+    def _nonlinear_cell_stress(self) -> dict:
+        """{cell: (3, 3) stress (Pa)} of the nonlinear regions' cells at the end (means of their points)."""
+        stress = {}
+        for region in self.nonlinear.cell_averages().values():
+            xx, yy, zz, xy, yz, xz = np.asarray(region["stress"]).T
+            tensors = np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], 1)
+            stress.update(zip((int(c) for c in region["cells"]), tensors))
+        return stress
 
     def _section_state(self, png_path):
         """plots/section_end.png: the nonlinear regions' plastic strain, damage, its type and the largest
