@@ -205,28 +205,31 @@ class Contours:
             return None
         rows = len(self.openings) + (1 if self.pillars else 0)
         fig, axes = plt.subplots(rows, 2, figsize=(11, 3.3 * rows), squeeze=False)
+        def closed(values):  # the contour is a loop: its first point again at theta + 360
+            return np.append(values, values[0])
+
         for row, opening in enumerate(self.openings):
-            theta = opening["theta"]
+            theta = np.append(opening["theta"], opening["theta"][0] + 360.0)
             name = f"opening {row + 1} (centre x = {opening['xz'][:, 0].mean():.4g} m, z = {opening['xz'][:, 1].mean():.4g} m)"
             ax = axes[row][0]
             if opening["band"] is not None:
-                ax.fill_between(theta, opening["band"][0] * 1e3, opening["band"][1] * 1e3, color="C0", alpha=0.2,
+                ax.fill_between(theta, closed(opening["band"][0]) * 1e3, closed(opening["band"][1]) * 1e3, color="C0", alpha=0.2,
                                 label="range over the run")
-            ax.plot(theta, opening["stage_displacement"] * 1e3, "k--", lw=1, label="after the stage")
-            ax.plot(theta, opening["end_displacement"] * 1e3, "C0", lw=1.4, label="at the end")
+            ax.plot(theta, closed(opening["stage_displacement"]) * 1e3, "k--", lw=1, label="after the stage")
+            ax.plot(theta, closed(opening["end_displacement"]) * 1e3, "C0", lw=1.4, label="at the end")
             ax.set_ylabel("convergence (mm)")
             ax.set_title(f"{name}: wall displacement inward", fontsize=9)
             ax = axes[row][1]
             band = opening["hoop_band"]
             if band is not None and np.isfinite(band[0]).any():
-                ax.fill_between(theta, band[0] * MPA, band[1] * MPA, color="C3", alpha=0.2,
+                ax.fill_between(theta, closed(band[0]) * MPA, closed(band[1]) * MPA, color="C3", alpha=0.2,
                                 label="range over the run (elastic cells)")
-            ax.plot(theta, opening["stage_hoop"] * MPA, "k--", lw=1, label="after the stage")
-            ax.plot(theta, opening["end_hoop"] * MPA, "C3", lw=1.4, label="at the end")
+            ax.plot(theta, closed(opening["stage_hoop"]) * MPA, "k--", lw=1, label="after the stage")
+            ax.plot(theta, closed(opening["end_hoop"]) * MPA, "C3", lw=1.4, label="at the end")
             ax.set_ylabel("hoop stress (MPa, tension +)")
             ax.set_title(f"opening {row + 1}: hoop stress at the wall cells", fontsize=9)
             for ax in axes[row]:
-                ax.set_xlim(0.0, 360.0)
+                ax.set_xlim(min(0.0, theta[0]), max(360.0, theta[-1]))
                 ax.set_xticks([0, 90, 180, 270, 360])
                 ax.set_xlabel("angle about the centre (deg; 0 at +x, 90 crown)")
                 ax.grid(alpha=0.3)

@@ -54,3 +54,59 @@ def test_contour_hoop_stress_and_convergence_follow_kirsch(meshes, tmp_path):
     contours.update(0.1, u)
     assert np.allclose(opening["end_displacement"], opening["stage_displacement"], atol=1e-12)
     assert np.allclose(opening["end_hoop"], opening["stage_hoop"], rtol=1e-9, atol=1e-3)
+
+
+TWO_HOLES = """
+import gmsh, math, sys
+gmsh.initialize(readConfigFiles=False)
+gmsh.option.setNumber("General.Terminal", 0)
+occ = gmsh.model.occ
+box = occ.addRectangle(0, 0, 0, 120, 80)
+holes = [occ.addDisk(45, 40, 0, 5, 5), occ.addDisk(75, 40, 0, 5, 5)]
+section, _ = occ.fragment([(2, box)], [(2, h) for h in holes])
+occ.rotate(section, 0, 0, 0, 1, 0, 0, math.pi / 2)
+occ.synchronize()
+volumes = occ.extrude(section, 0, 2.0, 0, numElements=[1], recombine=True)
+occ.synchronize()
+rock, excavation = [], []
+for dim, tag in volumes:
+    if dim == 3:
+        x0, _, z0, x1, _, z1 = gmsh.model.getBoundingBox(3, tag)
+        (excavation if x1 - x0 < 11 else rock).append(tag)
+gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, rock), "rock")
+gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, excavation), "excavation")
+gmsh.option.setNumber("Mesh.RecombineAll", 1)
+gmsh.option.setNumber("Mesh.MeshSizeMax", 4.0)
+gmsh.option.setNumber("Mesh.MeshSizeMin", 1.0)
+gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 12)
+gmsh.model.mesh.generate(3)
+gmsh.write(sys.argv[1])
+gmsh.finalize()
+"""
+
+
+def test_the_pillar_between_two_openings_widens_by_the_difference_of_its_walls(tmp_path):
+    import subprocess
+    import sys
+
+    path = tmp_path / "two_holes.msh"
+    subprocess.run([sys.executable, "-c", TWO_HOLES, str(path)], check=True, timeout=300)
+    p = 10.0e6
+    simulation = solver.prepare(tunnel_scene(path, stress=[-p, -p, -p, 0.0, 0.0, 0.0]))
+    contours = Contours(simulation.model, simulation.static, simulation.scene)
+    assert len(contours.openings) == 2 and len(contours.pillars) == 1
+    pillar = contours.pillars[0]
+    assert pillar["width"] == pytest.approx(20.0, rel=1e-6)   # the walls at x = 50 and x = 70, z = 40
+    u = simulation.static.displacement.reshape(-1, 3)
+    i, j = pillar["nodes"]
+    assert simulation.model.node_coords[i][[0, 2]] == pytest.approx([50.0, 40.0], abs=1e-6)
+    by_hand = u[j, 0] - u[i, 0]          # the pillar's width change along x
+    assert by_hand > 0                   # under all-round compression each wall moves into its opening
+    assert pillar["stage"] == pytest.approx(by_hand, rel=1e-12)
+    # A run's displacement adds its own difference across the pillar.
+    extra = np.zeros_like(simulation.static.displacement).reshape(-1, 3)
+    extra[j, 0] = 1e-3
+    contours.update(0.5, extra.ravel())
+    assert pillar["change"][-1] == pytest.approx(by_hand + 1e-3, rel=1e-12)
+    summary = contours.plot(tmp_path / "contour.png", "two openings")
+    assert summary["pillars"][0]["end_change"] == pytest.approx(by_hand + 1e-3, rel=1e-12)
