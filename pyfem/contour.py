@@ -31,15 +31,14 @@ class Contours:
     Args:
         model: pyfem.operators.Model.
         state: the static stage's state (excavation_load, displacement, cell_stress, installed_cells).
-        scene: the validated scene (materials, for the cells' elastic moduli).
+        strain: pyfem.output.CellStrain of the model (`cell_strain_operator`): the cells' elastic stress.
         y0: the section's y (m) before snapping, or None: the wall's middle.
     """
 
-    def __init__(self, model, state, scene, y0: float | None = None):
+    def __init__(self, model, state, strain, y0: float | None = None):
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
-        from pyfem.output import cell_strain_operator
         from pyfem.static_plots import excavation_wall
 
         self.openings = []
@@ -65,7 +64,6 @@ class Contours:
         cell_nodes = model.V.dofmap.list.array.reshape(-1, n_basis)[:model.n_cells]
         installed = np.zeros(len(cell_nodes), dtype=bool)
         installed[np.asarray(getattr(state, "installed_cells", ()), dtype=np.int64)] = True
-        strain = cell_strain_operator(scene, model)
         static_stress = np.asarray(state.cell_stress)
         static_u = np.asarray(state.displacement).reshape(-1, 3)
         for label in np.unique(piece[section]):

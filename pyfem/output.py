@@ -773,7 +773,7 @@ class RunWriter:
         from pyfem.contour import Contours
 
         points = self._monitor_points
-        contours = Contours(self.simulation.model, static, self.scene,
+        contours = Contours(self.simulation.model, static, cell_strain_operator(self.scene, self.simulation.model),
                             float(points[0][1]) if points is not None and len(points) else None)
         return contours if contours.openings else None
 
