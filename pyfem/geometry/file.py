@@ -170,7 +170,7 @@ def volume_problem(excavated: typing.Iterable[str] = ()) -> str | None:
             for inner, outer in ((a, b), (b, a)):
                 share = _share_inside(x, cells[inner], cells[outer], low, high)
                 if share > 0:
-                    return (f"{label(inner)} and {label(outer)} overlap ({100 * share:.2g} % of the cells of volume {inner} "
+                    return (f"{label(inner)} and {label(outer)} overlap ({_percent(share)} of the cells of volume {inner} "
                             f"in the volumes' common bounding box lie inside cells of volume {outer}): the volumes must not share space; fragment them "
                             "(gmsh: BooleanFragments{ Volume{...}; Delete; }{ Volume{...}; Delete; })")
 
@@ -230,6 +230,11 @@ def _size_cubed(corners: np.ndarray) -> float:
     """The cube of the largest extent of a set of points (a scale for volumes)."""
     points = corners.reshape(-1, 3)
     return float(np.max(points.max(axis=0) - points.min(axis=0))) ** 3
+
+
+def _percent(share: float) -> str:
+    """A share as whole per cent ("100 %", "3 %"), "< 1 %" below one."""
+    return f"{100 * share:.0f} %" if share >= 0.005 else "< 1 %"
 
 
 def _quoted(names) -> str:
