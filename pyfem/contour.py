@@ -31,7 +31,7 @@ class Contours:
     Args:
         model: pyfem.operators.Model.
         state: the static stage's state (excavation_load, displacement, cell_stress, installed_cells).
-        strain: pyfem.output.CellStrain of the model (`cell_strain_operator`): the cells' elastic stress.
+        strain: cells -> pyfem.output.CellStrain of those cells (`cell_strain_operator`): their elastic stress.
         y0: the section's y (m) before snapping, or None: the wall's middle.
     """
 
@@ -94,7 +94,7 @@ class Contours:
             opening = {
                 "nodes": nodes, "xz": xz, "theta": theta, "normal": normal3, "tangent": tangent3,
                 "cells": cells, "member": member,
-                "strain": _sliced(strain, cells), "static_stress": static_stress[cells],
+                "strain": strain(cells), "static_stress": static_stress[cells],
                 "stage_displacement": np.einsum("kc,kc->k", static_u[nodes], normal3),
             }
             opening["stage_hoop"] = self._hoop(opening, opening["static_stress"])
@@ -250,11 +250,3 @@ class Contours:
         plt.close(fig)
         return self.summary()
 
-
-def _sliced(strain, cells: np.ndarray):
-    """A CellStrain of the given cells only."""
-    import dataclasses
-
-    return dataclasses.replace(strain, nodes=strain.nodes[cells], gradients=strain.gradients[cells],
-                               lame_lambda=strain.lame_lambda[cells], shear_modulus=strain.shear_modulus[cells],
-                               static=strain.static[cells])

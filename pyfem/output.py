@@ -182,8 +182,9 @@ class CellStrain:
                 + 2.0 * self.shear_modulus[:, None, None] * strain + self.static)
 
 
-def cell_strain_operator(scene, model) -> CellStrain:
-    """The centroid gradients, materials and initial stress of every cell of the model.
+def cell_strain_operator(scene, model, cells: np.ndarray | None = None) -> CellStrain:
+    """The centroid gradients, materials and initial stress of every cell of the model (or of `cells`,
+    local cell indices: the rows follow them).
 
     Same mapping as `Model.point_gradient_weights`, vectorised over the cells: at the reference
     centroid X_c, J = sum_k x_k (x) dphi_k/dX (dx/dX) and dphi/dx = dphi/dX J^-1.
@@ -199,6 +200,9 @@ def cell_strain_operator(scene, model) -> CellStrain:
 
     element = model.V.element.basix_element
     nodes = model.V.dofmap.list.array.reshape(-1, element.dim).astype(np.int32)
+    every = len(nodes)
+    if cells is not None:
+        nodes = nodes[np.asarray(cells, dtype=np.int64)]
     centroid = basix.geometry(element.cell_type).mean(axis=0).reshape(1, 3)
     table = element.tabulate(1, centroid)[:, 0, :, 0]                            # (4, k): phi, dphi/dX
     reference_gradients = table[1:].T                                             # (k, 3)
@@ -206,14 +210,16 @@ def cell_strain_operator(scene, model) -> CellStrain:
     jacobian = np.einsum("cka,kb->cab", coords, reference_gradients)              # dx_a/dX_b
     gradients = np.einsum("kb,cbl->ckl", reference_gradients, np.linalg.inv(jacobian))
     n_cells = len(nodes)
-    lame_lambda, shear_modulus = np.full(n_cells, np.nan), np.full(n_cells, np.nan)
+    lame_lambda, shear_modulus = np.full(every, np.nan), np.full(every, np.nan)
     for region, tag in model.regions.items():
         material = scene["materials"].get(region)
         if material is None:
             continue
-        cells = model.cell_tags.indices[model.cell_tags.values == tag]
-        cells = cells[cells < n_cells]
-        lame_lambda[cells], shear_modulus[cells] = lame_parameters(material["E"], material["nu"])
+        in_region = model.cell_tags.indices[model.cell_tags.values == tag]
+        in_region = in_region[in_region < every]
+        lame_lambda[in_region], shear_modulus[in_region] = lame_parameters(material["E"], material["nu"])
+    if cells is not None:
+        lame_lambda, shear_modulus = lame_lambda[cells], shear_modulus[cells]
     field = stress_field_from_scene(scene)
     centroids = np.einsum("k,cka->ca", table[0], coords)
     static = np.zeros((n_cells, 3, 3)) if field is None else np.asarray(field(centroids), dtype=np.float64)
@@ -773,7 +779,8 @@ class RunWriter:
         from pyfem.contour import Contours
 
         points = self._monitor_points
-        contours = Contours(self.simulation.model, static, cell_strain_operator(self.scene, self.simulation.model),
+        model = self.simulation.model
+        contours = Contours(model, static, lambda cells: cell_strain_operator(self.scene, model, cells),
                             float(points[0][1]) if points is not None and len(points) else None)
         return contours if contours.openings else None
 

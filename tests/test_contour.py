@@ -21,7 +21,8 @@ from test_static import (CENTRE, RADIUS, STRESS_TOLERANCE, DISPLACEMENT_TOLERANC
 
 def test_contour_hoop_stress_and_convergence_follow_kirsch(meshes, tmp_path):
     simulation = solver.prepare(tunnel_scene(meshes["filled"]))
-    contours = Contours(simulation.model, simulation.static, cell_strain_operator(simulation.scene, simulation.model))
+    contours = Contours(simulation.model, simulation.static,
+                        lambda cells: cell_strain_operator(simulation.scene, simulation.model, cells))
     assert len(contours.openings) == 1 and not contours.pillars
     opening = contours.openings[0]
     assert np.allclose(opening["xz"].mean(axis=0), CENTRE[[0, 2]], atol=1e-6 * RADIUS)
@@ -94,7 +95,8 @@ def test_the_pillar_between_two_openings_widens_by_the_difference_of_its_walls(t
     subprocess.run([sys.executable, "-c", TWO_HOLES, str(path)], check=True, timeout=300)
     p = 10.0e6
     simulation = solver.prepare(tunnel_scene(path, stress=[-p, -p, -p, 0.0, 0.0, 0.0]))
-    contours = Contours(simulation.model, simulation.static, cell_strain_operator(simulation.scene, simulation.model))
+    contours = Contours(simulation.model, simulation.static,
+                        lambda cells: cell_strain_operator(simulation.scene, simulation.model, cells))
     assert len(contours.openings) == 2 and len(contours.pillars) == 1
     pillar = contours.pillars[0]
     assert pillar["width"] == pytest.approx(20.0, rel=1e-6)   # the walls at x = 50 and x = 70, z = 40
