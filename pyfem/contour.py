@@ -16,7 +16,9 @@ section through the first monitor (else the wall's middle), snapped to the wall 
 - with two openings or more: the width change across each pillar between two openings (the closest
   pair of their contour nodes, along the line joining them; positive: the pillar widens) over the run.
 
-The dynamic part costs one gather of the contour's nodes and of its cells' nodes per sample.
+The dynamic part costs one gather of the contour's nodes and of its cells' nodes per sample. The ranges
+and the pillar histories are not in checkpoints: a resumed run's cover the samples since the resume.
+Drawn by the single-process writer (pyfem.output.RunWriter) only, not yet by the distributed model.
 """
 from __future__ import annotations
 
