@@ -428,6 +428,16 @@ N* starts at the current N.
 
 Args:
     length: L (m), > 0.  velocity: V* (m/s), >= 0.)")
+      .def("set_release_time", &ContactPairs::set_release_time, py::arg("seconds"),
+           R"(Switches the gradual release of a broken bond on (time-weakening, Andrews 2004): a pair
+whose bond breaks at t_b keeps w = max(0, 1 - (t - t_b)/seconds) of its cohesion and tensile
+strength; in tension it holds -N <= t_s D A w or opens carrying t_s D A w along n, in compression
+it sticks while |T| <= mu_s N D + c D A w and slides with mu_d N D + c D A w. The work of the
+weakening force over the slip or opening is counted in friction_dissipation. Pairs already broken
+have nothing left. No stiffness, no dashpot: the stable time step is unchanged.
+
+Args:
+    seconds: the release time (s), finite and > 0.)")
       .def(
           "effective_normal",
           [](const ContactPairs& contact) { return array_copy(contact.effective_normal()); },

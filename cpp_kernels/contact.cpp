@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -193,6 +194,15 @@ void ContactPairs::set_normal_lag(double length, double velocity) {
   effective_normal_ = normal_force_;  // the current (static) state: no lag yet
 }
 
+void ContactPairs::set_release_time(double seconds) {
+  if (!(std::isfinite(seconds) && seconds > 0.0))
+    throw std::invalid_argument("release time = " + std::to_string(seconds) +
+                                " must be finite and > 0 (s)");
+  release_time_ = seconds;
+  // Pairs whose bond broke before (a stage's) break now: the release starts with the dynamic run.
+  break_time_.assign(n_pairs_, std::numeric_limits<double>::infinity());
+}
+
 void ContactPairs::check_nodes(std::int64_t n_nodes) const {
   for (std::int64_t p = 0; p < n_pairs_; ++p) {
     for (int side = 0; side < 2; ++side) {
@@ -223,7 +233,7 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
     const std::int64_t begin = colour_ptr_[colour], end = colour_ptr_[colour + 1];
 #pragma omp parallel for schedule(static) if (threaded)
     for (std::int64_t k = begin; k < end; ++k)
-      correct_pair(colour_pairs_[k], wear, operators, u, v, a);
+      correct_pair(colour_pairs_[k], wear, t, operators, u, v, a);
   }
   ContactStepResult result;
   for (std::int64_t p = 0; p < n_pairs_; ++p) result.friction_dissipation += dissipation_[p];
@@ -232,7 +242,7 @@ ContactStepResult ContactPairs::correct(double t, const ImplicitNodeOperators& o
   return result;
 }
 
-void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeOperators& operators,
+void ContactPairs::correct_pair(std::int64_t p, double wear, double t, const ImplicitNodeOperators& operators,
                                 const double* u, double* v, double* a) {
   const double dt = operators.dt;
   const double dt2 = dt * dt;
@@ -261,6 +271,19 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
 
   std::int8_t state = state_[p];
   bool bond = bond_intact_[p] != 0;
+  // The gradual release (set_release_time): the share w of the broken bond's strengths left; 0 with
+  // the release off (the bond's strengths gone at once), 1 at the step the bond breaks.
+  const bool release = release_time_ > 0.0;
+  double left = 0.0;
+  if (release && !bond && std::isfinite(break_time_[p]))
+    left = std::max(0.0, 1.0 - (t - break_time_[p]) / release_time_);
+  const auto break_bond = [&]() {  // (release on only)
+    bond = false;
+    break_time_[p] = t;
+    left = 1.0;
+  };
+  double cohesive_tension = 0.0;  // t_s D A w: the tensile force an opening pair still carries
+  bool cohesive_opening = false;
   double R[3];
   bool slipping = false;
   bool separated = false;
@@ -273,12 +296,21 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
   bool in_compression = false;     // else (tension, open) N* goes towards 0
 
   if (state == kSeparated) {
-    // Gap at n+2 if the pair keeps carrying nothing (R = -F0).
+    // Gap at n+2 if the pair keeps carrying nothing (R = -F0), or, while a broken bond releases,
+    // the tensile force t_s D A w along n (R = t_s D A w n - F0).
+    double carried[3];
+    if (left > 0.0) {
+      cohesive_tension = strength_.tensile_strength * D * area * left;
+      for (int c = 0; c < 3; ++c) carried[c] = F0[c] - cohesive_tension * n[c];
+    } else {
+      std::copy(F0, F0 + 3, carried);
+    }
     double W_inverse_F0[3];
-    multiply_3x3(W_inverse, F0, W_inverse_F0);
+    multiply_3x3(W_inverse, carried, W_inverse_F0);
     double open_gap = g0;
     for (int c = 0; c < 3; ++c) open_gap += n[c] * (delta_pred[c] + dt2 * W_inverse_F0[c]);
     separated = open_gap > 0.0;
+    cohesive_opening = separated && left > 0.0;
   }
 
   if (!separated) {
@@ -295,10 +327,21 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
     const double T_magnitude = std::sqrt(dot(T, T));
 
     if (N < 0.0) {
-      // Tension (Eq. 18, P_N = t_s D A): only an intact bond holds it.
+      // Tension (Eq. 18, P_N = t_s D A): only an intact bond holds it (or, with the release on,
+      // the share w a broken one has left).
       if (bond && -N <= strength_.tensile_strength * D * area) {
         std::copy(R_stick, R_stick + 3, R);
         state = kBonded;
+      } else if (release) {
+        if (bond) break_bond();
+        cohesive_tension = strength_.tensile_strength * D * area * left;
+        if (left > 0.0 && -N <= cohesive_tension) {
+          std::copy(R_stick, R_stick + 3, R);
+          state = kStick;
+        } else {
+          separated = true;
+          cohesive_opening = left > 0.0;
+        }
       } else {
         separated = true;
       }
@@ -311,17 +354,22 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
         N_friction = std::max(effective_normal, 0.0);
       }
       const double limit =
-          strength_.friction_static * N_friction * D + (bond ? strength_.cohesion * D * area : 0.0);
+          strength_.friction_static * N_friction * D +
+          (bond ? strength_.cohesion * D * area : left > 0.0 ? strength_.cohesion * D * area * left : 0.0);
       if (T_magnitude <= limit) {
         std::copy(R_stick, R_stick + 3, R);
         state = bond ? kBonded : kStick;
       } else {
         // Slip (Eq. 20): dynamic friction along the stick direction; never more than the
-        // force that stops the slip (mu_d > mu_s would otherwise reverse it).
+        // force that stops the slip (mu_d > mu_s would otherwise reverse it). With the release
+        // on, the cohesion a broken bond has left adds to it.
         slipping = true;
         state = kSliding;
+        if (bond && release) break_bond();
         bond = false;
-        const double slip_force = std::min(strength_.friction_dynamic * N_friction * D, T_magnitude);
+        const double friction = strength_.friction_dynamic * N_friction * D;
+        const double slip_force =
+            std::min(left > 0.0 ? friction + strength_.cohesion * D * area * left : friction, T_magnitude);
         double R_tangential[3], F0_tangential[3], W_inverse_R[3], W_inverse_n[3];
         tangential_part(n, F0, F0_tangential);
         for (int c = 0; c < 3; ++c)
@@ -340,10 +388,14 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
   }
 
   if (separated) {
-    // Open (Eq. 19): the total force vanishes, so the dynamic force cancels the static one.
+    // Open (Eq. 19): the total force vanishes, so the dynamic force cancels the static one; while
+    // a broken bond releases (cohesive_opening) the pair still carries t_s D A w along n.
     state = kSeparated;
     bond = false;
-    for (int c = 0; c < 3; ++c) R[c] = -F0[c];
+    if (cohesive_opening)
+      for (int c = 0; c < 3; ++c) R[c] = cohesive_tension * n[c] - F0[c];
+    else
+      for (int c = 0; c < 3; ++c) R[c] = -F0[c];
   }
 
   // Total force after the decision.
@@ -359,6 +411,13 @@ void ContactPairs::correct_pair(std::int64_t p, double wear, const ImplicitNodeO
     for (int c = 0; c < 3; ++c) delta_next[c] = delta_pred[c] - dt2 * W_inverse_R[c] - delta[c];
     tangential_part(n, delta_next, slip_increment);
     dissipation = dot(T, slip_increment);
+  } else if (cohesive_opening) {
+    // Work of the released tensile force over the opening it resists, n.(Delta_{n+2} - Delta_{n+1}).
+    double W_inverse_R[3];
+    multiply_3x3(W_inverse, R, W_inverse_R);
+    double opening = 0.0;
+    for (int c = 0; c < 3; ++c) opening += n[c] * (delta_pred[c] - dt2 * W_inverse_R[c] - delta[c]);
+    dissipation = cohesive_tension * opening;
   }
 
   // Apply R to i and -R to j: dv = dt/2 Atilde^-1 R, da = (R - (alpha M + C) dv)/M.
@@ -422,6 +481,7 @@ void ContactPairs::save_state(StateArchive& archive, const std::string& prefix) 
   archive.put(prefix + "static_force", static_force_);
   archive.put(prefix + "node_force", node_force_);
   if (lag_on_) archive.put(prefix + "effective_normal", effective_normal_);
+  if (release_time_ > 0.0) archive.put(prefix + "break_time", break_time_);
 }
 
 void ContactPairs::load_state(const StateArchive& archive, const std::string& prefix) {
@@ -441,6 +501,7 @@ void ContactPairs::load_state(const StateArchive& archive, const std::string& pr
   archive.get(prefix + "static_force", static_force_);
   archive.get(prefix + "node_force", node_force_);
   if (lag_on_) archive.get(prefix + "effective_normal", effective_normal_);
+  if (release_time_ > 0.0) archive.get(prefix + "break_time", break_time_);
 }
 
 void ContactPairs::observe_velocity(const double* v) {

@@ -122,6 +122,18 @@ class ContactPairs {
   /// follows N at once (docs/interface_slip_accuracy.md).
   void set_normal_lag(double length, double velocity);
 
+  /// Switches the gradual release of a broken bond on (time-weakening, Andrews 2004; absent: at
+  /// once): a pair whose bond breaks at t_b keeps a share w = 1 - (t - t_b)/seconds (>= 0) of its
+  /// cohesion and tensile strength, so its force falls from the strength to the bare friction (or
+  /// to nothing, open) over `seconds` instead of in one step, the step that rang the mesh. While
+  /// w > 0 a pair in tension holds -N <= t_s D A w (state stick) or opens carrying the tensile
+  /// force t_s D A w along n (state separated), and a pair in compression sticks while |T| <=
+  /// mu_s N D + c D A w and slides with mu_d N D + c D A w. The work of the weakening force over
+  /// the slip or the opening it drives is dissipated (counted in friction_dissipation); its work is
+  /// in the contact work as every contact force's. No stiffness and no dashpot: the stable time
+  /// step is unchanged. seconds finite and > 0; throws std::invalid_argument otherwise.
+  void set_release_time(double seconds);
+
   /// Throws std::invalid_argument for a pair node outside [0, n_nodes) or a pair with i == j.
   void check_nodes(std::int64_t n_nodes) const;
 
@@ -154,7 +166,7 @@ class ContactPairs {
   void add_last_forces(double* f) const;
 
   /// Writes every pair's state (bond, contact state, forces, D, slip rate, the rebased gap and
-  /// static force, N* with the normal lag on) under `prefix` (checkpoint, docs/checkpoint.md); load_state reads it back
+  /// static force, N* with the normal lag on, the break times with the release on) under `prefix` (checkpoint, docs/checkpoint.md); load_state reads it back
   /// into pairs built from the same interfaces. Throws std::invalid_argument for a missing block
   /// or one of another size.
   void save_state(StateArchive& archive, const std::string& prefix) const;
@@ -180,8 +192,8 @@ class ContactPairs {
 
  private:
   // One pair's correction (the body of correct()); writes only the pair's own state and its two
-  // nodes' v, a and node forces. wear: eta(t_{n+1}).
-  void correct_pair(std::int64_t p, double wear, const ImplicitNodeOperators& operators,
+  // nodes' v, a and node forces. wear: eta(t_{n+1}); t: t_{n+1} (the release clock).
+  void correct_pair(std::int64_t p, double wear, double t, const ImplicitNodeOperators& operators,
                     const double* u, double* v, double* a);
   // Fills colour_ptr_/colour_pairs_ (greedy colouring by shared nodes).
   void colour_pairs();
@@ -198,6 +210,8 @@ class ContactPairs {
   bool lag_on_ = false;
   double lag_length_ = 0.0, lag_velocity_ = 0.0;
   std::vector<double> effective_normal_;  // N* (N), with the normal lag on
+  double release_time_ = 0.0;             // > 0: the gradual release of a broken bond is on
+  std::vector<double> break_time_;        // t_b of each pair's bond break (release on; inf: intact)
 
   std::vector<std::int32_t> unique_nodes_;
   std::vector<std::int32_t> slot_;  // (n_pairs, 2): index of i and j in unique_nodes_

@@ -478,6 +478,8 @@ def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | Non
             stage.contact = None
         elif contact_arrays["deterioration"] is not None:  # the wear's clock starts with the record
             stage.contact.set_deterioration(*contact_arrays["deterioration"])
+        if stage.contact is not None and contact_arrays.get("release_time") is not None:
+            stage.contact.set_release_time(contact_arrays["release_time"])
     stress = monitors.stress
     if stress is not None and len(monitors.index):
         stress.static = monitor_static_stress(stress, stage.installed_regions, stage.u_total, stage.u_support,

@@ -23,6 +23,7 @@ from dolfinx.io import gmshio
 from mpi4py import MPI
 
 from pyfem.geometry import build_box, build_layered_box, build_layered_cavern, gmsh_session, load_msh
+from pyfem.geometry.file import volume_problem
 from pyfem.interface_split import incidence, split_topology
 from pyfem.errors import SceneError
 
@@ -77,11 +78,15 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
                 load_msh(mesh_settings["file"])
             else:
                 raise ValueError(f"mesh.builder = {builder!r}: allowed here are 'box', 'layered_cavern' and 'file'")
-            model_facts = (*_physical_groups_and_cell_types(), _height_range())
+            problem = volume_problem((scene.get("static") or {}).get("excavate") or []) if builder == "file" \
+                else None
+            model_facts = (*_physical_groups_and_cell_types(), _height_range(), problem)
         model_facts = comm.bcast(model_facts, root=model_rank)
-        regions, boundaries, cell_types, heights = model_facts
+        regions, boundaries, cell_types, heights, problem = model_facts
         source = ("mesh.file", mesh_settings["file"]) if builder == "file" else ("mesh.builder", builder)
         _check_cell_types(cell_types, *source)
+        if problem:
+            raise SceneError(*source, problem)
         check_surfaces_on_top(scene, *heights)
         excavated = _excavated_regions(scene, regions)
         if any(number == GMSH_TETRAHEDRON_4 for number, _ in cell_types):

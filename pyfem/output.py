@@ -182,8 +182,9 @@ class CellStrain:
                 + 2.0 * self.shear_modulus[:, None, None] * strain + self.static)
 
 
-def cell_strain_operator(scene, model) -> CellStrain:
-    """The centroid gradients, materials and initial stress of every cell of the model.
+def cell_strain_operator(scene, model, cells: np.ndarray | None = None) -> CellStrain:
+    """The centroid gradients, materials and initial stress of every cell of the model (or of `cells`,
+    local cell indices: the rows follow them).
 
     Same mapping as `Model.point_gradient_weights`, vectorised over the cells: at the reference
     centroid X_c, J = sum_k x_k (x) dphi_k/dX (dx/dX) and dphi/dx = dphi/dX J^-1.
@@ -199,6 +200,9 @@ def cell_strain_operator(scene, model) -> CellStrain:
 
     element = model.V.element.basix_element
     nodes = model.V.dofmap.list.array.reshape(-1, element.dim).astype(np.int32)
+    every = len(nodes)
+    if cells is not None:
+        nodes = nodes[np.asarray(cells, dtype=np.int64)]
     centroid = basix.geometry(element.cell_type).mean(axis=0).reshape(1, 3)
     table = element.tabulate(1, centroid)[:, 0, :, 0]                            # (4, k): phi, dphi/dX
     reference_gradients = table[1:].T                                             # (k, 3)
@@ -206,14 +210,16 @@ def cell_strain_operator(scene, model) -> CellStrain:
     jacobian = np.einsum("cka,kb->cab", coords, reference_gradients)              # dx_a/dX_b
     gradients = np.einsum("kb,cbl->ckl", reference_gradients, np.linalg.inv(jacobian))
     n_cells = len(nodes)
-    lame_lambda, shear_modulus = np.full(n_cells, np.nan), np.full(n_cells, np.nan)
+    lame_lambda, shear_modulus = np.full(every, np.nan), np.full(every, np.nan)
     for region, tag in model.regions.items():
         material = scene["materials"].get(region)
         if material is None:
             continue
-        cells = model.cell_tags.indices[model.cell_tags.values == tag]
-        cells = cells[cells < n_cells]
-        lame_lambda[cells], shear_modulus[cells] = lame_parameters(material["E"], material["nu"])
+        in_region = model.cell_tags.indices[model.cell_tags.values == tag]
+        in_region = in_region[in_region < every]
+        lame_lambda[in_region], shear_modulus[in_region] = lame_parameters(material["E"], material["nu"])
+    if cells is not None:
+        lame_lambda, shear_modulus = lame_lambda[cells], shear_modulus[cells]
     field = stress_field_from_scene(scene)
     centroids = np.einsum("k,cka->ca", table[0], coords)
     static = np.zeros((n_cells, 3, 3)) if field is None else np.asarray(field(centroids), dtype=np.float64)
@@ -416,6 +422,7 @@ class RunWriter:
         from pyfem.deformation import DeformedSection
 
         self.deformation = DeformedSection(simulation.model, self._monitor_points, cell_regions(simulation.model))
+        self.contours = self._contours()
         self._summary: dict | None = None  # set by start()
         self.checkpoint_problem: str | None = None  # why the checkpoint of an interruption failed
         self._last_flush = -math.inf
@@ -581,6 +588,8 @@ class RunWriter:
         if write_fields:
             self._write_fields(t, u, v, a, pair_values)
         self.deformation.update(t, u)
+        if self.contours is not None:
+            self.contours.update(t, u)
         self.times.append(t)
         self.energy_samples.append(energy_row)
         self._histories["energy"].append(energy_row)
@@ -611,6 +620,8 @@ class RunWriter:
         read (pyfem.distributed.DistributedStepper)."""
         sim = self.simulation
         nodes = [np.asarray(self.deformation.nodes, dtype=np.int64).ravel()]
+        if self.contours is not None:
+            nodes.append(self.contours.nodes())
         if sim.monitor_nodes is not None:
             nodes.append(np.asarray(sim.monitor_nodes, dtype=np.int64).ravel())
         if sim.monitor_stress is not None:
@@ -749,6 +760,38 @@ class RunWriter:
             section = self._section_state(plot_dir / "section_end.png")
             if section is not None and self._summary is not None:
                 self._summary["section_end"] = section
+        if self.contours is not None:
+            try:
+                if self.nonlinear is not None:
+                    self.contours.set_end_stress(self._nonlinear_cell_stress())
+                contour = self.contours.plot(plot_dir / "contour.png", self.scene.get("title", ""))
+            except Exception as error:  # a picture must never fail a finished run
+                print(f"warning: plots/contour.png not drawn ({type(error).__name__}: {error})", file=sys.stderr)
+                contour = None
+            if contour is not None and self._summary is not None:
+                self._summary["contour"] = contour
+
+    def _contours(self):
+        """The openings' contours (pyfem.contour) of a run whose static stage excavated, else None."""
+        static = getattr(self.simulation, "static", None)
+        if static is None or not np.any(np.asarray(getattr(static, "excavation_load", ()))):
+            return None
+        from pyfem.contour import Contours
+
+        points = self._monitor_points
+        model = self.simulation.model
+        contours = Contours(model, static, lambda cells: cell_strain_operator(self.scene, model, cells),
+                            float(points[0][1]) if points is not None and len(points) else None)
+        return contours if contours.openings else None
+
+    def _nonlinear_cell_stress(self) -> dict:
+        """{cell: (3, 3) stress (Pa)} of the nonlinear regions' cells at the end (means of their points)."""
+        stress = {}
+        for region in self.nonlinear.cell_averages().values():
+            xx, yy, zz, xy, yz, xz = np.asarray(region["stress"]).T
+            tensors = np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], 1)
+            stress.update(zip((int(c) for c in region["cells"]), tensors))
+        return stress
 
     def _section_state(self, png_path):
         """plots/section_end.png: the nonlinear regions' plastic strain, damage, its type and the largest

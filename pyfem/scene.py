@@ -670,6 +670,9 @@ SCHEMA = Table({
             "n": Number("velocity offset n (m/s)", POSITIVE, default=0.02),
             "p": Number("velocity exponent p", NON_NEGATIVE, default=0.032),
         }, "[contact.deterioration]", presence="optional"),
+        "release_time": Number("time over which a broken bond's cohesion and tensile strength fall to zero "
+                               "(s; time-weakening: the pair's force falls from its strength over this time "
+                               "instead of in one step)", POSITIVE, default=None),
         "normal_lag": Table({
             "length": Number("slip length L of the normal-stress lag (m)", POSITIVE),
             "velocity": Number("reference velocity V* of the normal-stress lag (m/s)", NON_NEGATIVE),

@@ -118,6 +118,8 @@ UNSET = {
                         "(out-of-balance force ratio)",
     "contact.dynamic_friction_angle": "= `contact.friction_angle`",
     "contact.tensile_strength": "= `contact.cohesion`",
+    "contact.release_time": "off: a broken bond's strength goes in one step (nothing to compute; "
+                            "docs/method.md section 9, \"Releasing a broken bond\")",
 }
 """What a key whose schema default is None means when the scene leaves it out."""
 

@@ -217,8 +217,8 @@ def contact_arguments(scene: Scene, model, processed=None) -> dict:
 
     Returns:
         dict with pairs, area, normal, static_force, cohesion, tensile_strength,
-        friction_static, friction_dynamic, deterioration (R0, lam, duration, m, n, p, start) or None and
-        normal_lag (length, velocity) or None.
+        friction_static, friction_dynamic, deterioration (R0, lam, duration, m, n, p, start) or None,
+        normal_lag (length, velocity) or None and release_time (s) or None.
     """
     from pyfem.initial_stress import pair_static_forces, stress_field_from_scene
 
@@ -242,6 +242,8 @@ def contact_arguments(scene: Scene, model, processed=None) -> dict:
                                       deterioration["m"], deterioration["n"], deterioration["p"], start)
     lag = contact.get("normal_lag")
     arguments["normal_lag"] = None if lag is None else (float(lag["length"]), float(lag["velocity"]))
+    release = contact.get("release_time")
+    arguments["release_time"] = None if release is None else float(release)
     return arguments
 
 
@@ -754,6 +756,8 @@ def make_contact_pairs(arrays: dict):
         contact.set_deterioration(*arrays["deterioration"])
     if arrays.get("normal_lag") is not None:
         contact.set_normal_lag(*arrays["normal_lag"])
+    if arrays.get("release_time") is not None:
+        contact.set_release_time(arrays["release_time"])
     return contact
 
 

@@ -794,11 +794,12 @@ def welded(scene: typing.Mapping) -> bool:
 
 def stage_pair_arrays(scene: typing.Mapping, contact_arrays: dict | None) -> dict | None:
     """The pairs' arrays as the relaxation stage runs them (every model): no deterioration (the wear's
-    clock starts with the record) and, with `contact.split = "after_static"`, welded (cohesion and
+    clock starts with the record), a broken bond released at once (`contact.release_time` is the
+    dynamic run's) and, with `contact.split = "after_static"`, welded (cohesion and
     tensile strength `WELDED_STRENGTH`, so no force breaks the bond)."""
     if contact_arrays is None:
         return None
-    arrays = dict(contact_arrays, deterioration=None)
+    arrays = dict(contact_arrays, deterioration=None, release_time=None)
     if welded(scene):
         arrays.update(cohesion=WELDED_STRENGTH, tensile_strength=WELDED_STRENGTH)
     return arrays
@@ -1115,6 +1116,8 @@ def hand_over(simulation, solve: bool = True) -> None:
         if state.contact is not None:  # the dynamic run continues the stage's pairs, now with D(t)
             if simulation.contact_arrays["deterioration"] is not None:
                 state.contact.set_deterioration(*simulation.contact_arrays["deterioration"])
+            if simulation.contact_arrays.get("release_time") is not None:
+                state.contact.set_release_time(simulation.contact_arrays["release_time"])
         else:
             warn_pairs_over_strength(simulation.scene, simulation.contact_arrays)
     simulation.static = state

@@ -51,9 +51,17 @@ def excavation_surface(state, model) -> np.ndarray:
     already in the mesh counts too), and the nodes an installed region shares with the rest. The
     excavation load itself is no guide: it also has the round-off of the volume terms and the
     mismatch of the pairs' static forces on the interfaces, large enough to put every pair on it."""
+    surface, _ = excavation_wall(state, model)
+    return model.node_coords[surface] if surface is not None else np.zeros((0, 3))
+
+
+def excavation_wall(state, model) -> tuple:
+    """(surface, facets) of `excavation_surface`: a (nodes,) bool mask of the wall's nodes and the
+    (f, 4 or 3) node indices of the wall's facets (an installed region's shared nodes are in the
+    mask, not in the facets); (None, None) without an excavation load."""
     load = np.asarray(state.excavation_load)
     if not len(load) or not np.any(load):
-        return np.zeros((0, 3))
+        return None, None
     n_vertices = 8 if model.mesh.topology.cell_type.name == "hexahedron" else 4
     n_basis = model.V.dofmap.dof_layout.num_dofs
     cell_nodes = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :n_vertices]
@@ -63,20 +71,22 @@ def excavation_surface(state, model) -> np.ndarray:
     facets = np.sort(np.concatenate([rock[:, list(local)] for local in _CELL_FACETS[n_vertices]]), axis=1)
     unique, counts = np.unique(facets, axis=0, return_counts=True)
     exterior = unique[counts == 1]
-    excluded = np.zeros(len(model.node_coords), dtype=bool)  # truncation faces and split interfaces
-    for face in model.faces:
-        excluded[face.nodes] = True
-    on_face = excluded[exterior].all(axis=1)
+    on_face = np.zeros(len(exterior), dtype=bool)  # all its nodes on one truncation face (not on two:
+    for face in model.faces:                        # a one-cell-thick slab's wall spans ymin to ymax)
+        on = np.zeros(len(model.node_coords), dtype=bool)
+        on[face.nodes] = True
+        on_face |= on[exterior].all(axis=1)
     on_interface = np.zeros_like(on_face)
     if model.pairs is not None and len(model.pairs):
         paired = np.zeros(len(model.node_coords), dtype=bool)
         paired[np.asarray(model.pairs.nodes).ravel()] = True
         on_interface = paired[exterior].all(axis=1)
     surface = np.zeros(len(model.node_coords), dtype=bool)
-    surface[exterior[~on_face & ~on_interface].ravel()] = True
+    wall = exterior[~on_face & ~on_interface]
+    surface[wall.ravel()] = True
     if installed.any():
         surface[np.intersect1d(cell_nodes[installed].ravel(), rock.ravel())] = True
-    return model.node_coords[surface]
+    return surface, wall
 
 
 def section_plane(vertices: np.ndarray, surface: np.ndarray) -> float:

@@ -497,3 +497,18 @@ def test_a_pair_monitor_far_from_every_interface_is_warned_about():
     prepare(far)
     warning = next(warning for warning in far.warnings if "pair_monitor 'upper'" in warning)
     assert "14.6 m from the nearest contact pair" in warning
+
+
+def test_release_time_reaches_the_dynamic_runs_pairs_only_and_a_bad_one_is_a_scene_error():
+    from pyfem.static import stage_pair_arrays
+
+    data = workflow_data()
+    data["contact"]["release_time"] = 0.02
+    simulation = prepare(parse_scene(data, source="test"))
+    assert simulation.contact_arrays["release_time"] == 0.02
+    assert stage_pair_arrays(simulation.scene, simulation.contact_arrays)["release_time"] is None
+    make_stepper(simulation)  # the kernel takes it
+    for bad in (0.0, -1.0):
+        data["contact"]["release_time"] = bad
+        with pytest.raises(SceneError, match="contact.release_time"):
+            parse_scene(data, source="test")

@@ -13,7 +13,9 @@ Tiny synthetic systems built here, each with an exact or independent answer:
 - (f) a 100:1 mass ratio and a chattering pair stay finite with bounded energy;
 - (g) bad arguments raise ValueError naming the parameter;
 - (h) the normal-stress lag (set_normal_lag): the friction follows the lagged N*, which obeys its
-  exact exponential while the pair sticks, and a lag too short to matter changes nothing.
+  exact exponential while the pair sticks, and a lag too short to matter changes nothing;
+- (i) the gradual release of a broken bond (set_release_time): the force falls from the strength
+  linearly over the release time (tension and shear), node 0 rings less, the account closes.
 External forces enter through SeismicInput with tau = 0, P = force direction, Q = 0.
 """
 import numpy as np
@@ -632,3 +634,82 @@ def test_normal_lag_is_saved_and_refused_when_bad():
     for length, velocity, match in ((0.0, 0.1, "length"), (float("nan"), 0.1, "length"), (0.01, -1.0, "velocity")):
         with pytest.raises(ValueError, match=match):
             one_pair(EZ, -EZ).set_normal_lag(length, velocity)
+
+
+# ---------------------------------------------------------------------------------------------
+# (i) the gradual release of a broken bond (set_release_time, time-weakening)
+
+
+def tension_break(release_time=None, n_steps=1500):
+    """The pair of the tension test pulled apart by a ramp; node 0 on its anchor spring (period 63 ms)
+    rings when the bond lets go. Returns (history, contact)."""
+    N0, area, tensile, dt = 100.0, 1.5, 20.0, 1e-3
+    stepper = anchored_pair_system(1.0, 1.0, 1e4, dt)
+    times = np.arange(0.0, 3.0, 1e-3)
+    F_max = 400.0
+    g, dg, ddg = np.minimum(times / 1.0, 1.0), np.where(times < 1.0, 1.0, 0.0), np.zeros_like(times)
+    stepper.add_seismic_input(force_input(times, g, dg, ddg, [(1, F_max * EZ)]))
+    contact = one_pair(EZ, -N0 * EZ, area, 1e3, tensile, 0.5, 0.4)
+    if release_time is not None:
+        contact.set_release_time(release_time)
+    stepper.add_contact(contact)
+    return step_history(stepper, contact, n_steps, 6), contact, tensile * area
+
+
+def test_a_broken_bond_released_over_a_time_carries_its_strength_times_the_share_left_and_rings_less():
+    tau = 0.2
+    at_once, _, strength = tension_break()
+    released, contact, _ = tension_break(tau)
+    state, N, t = released["state"], released["N"], released["t"]
+    first_open = np.flatnonzero(state == 3)[0]
+    # The bond broke where it does at once (the same tension), then the force fell linearly.
+    assert first_open == np.flatnonzero(at_once["state"] == 3)[0]
+    t_break = t[first_open]  # the correction at t_{n+1} = the chunk's end time
+    releasing = (state == 3) & (t < t_break + tau)
+    assert releasing.sum() > 150
+    share = 1.0 - (t[releasing] - t_break) / tau
+    assert np.max(np.abs(-N[releasing] - strength * share)) < ROUNDOFF * strength
+    after = (t > t_break + tau + 1e-9) & (state == 3)
+    assert after.sum() > 100 and np.all(N[after] == 0.0)
+    assert not contact.bond_intact()[0]
+    # Node 0 on its undamped anchor (period 63 ms) swings about u_z = N0/k once the pair carries
+    # nothing (R = -F0): the step release by the strength's 30 N leaves it swinging by ~30 N/k, the
+    # ramp over tau (3.2 periods) by about a quarter of that.
+    window = (t > t_break + tau + 1e-9) & (t < t_break + tau + 0.2)
+    ring_at_once = np.max(np.abs(at_once["u"][window, 2] - 100.0 / 1e4))
+    ring_released = np.max(np.abs(released["u"][window, 2] - 100.0 / 1e4))
+    assert ring_at_once > 0.5 * strength / 1e4
+    assert ring_released < 0.5 * ring_at_once, (ring_released, ring_at_once)  # measured 0.27
+    # The energy account closes with the release's work, which is dissipated.
+    report = released["energy"][-1]
+    assert abs(report["balance"]) < ROUNDOFF * energy_scale(report)
+    assert report["friction_dissipation"] > 0.0 and at_once["energy"][-1]["friction_dissipation"] == 0.0
+
+
+def test_a_bond_broken_in_shear_slides_with_the_cohesion_left_then_with_friction_only():
+    N0, area, cohesion, mu_s, mu_d, tau = 100.0, 2.0, 10.0, 0.5, 0.4, 0.3
+    dt, period = 1e-3, 2.0
+    stepper = anchored_pair_system(1.0, 1.0, 1e5, dt)
+    stepper.set_dashpots(np.array([0, 1], dtype=np.int32), np.array([300.0 * np.eye(3), 50.0 * np.eye(3)]))
+    times, g, dg, ddg = sin2_history(period, period)
+    stepper.add_seismic_input(force_input(times, g, dg, ddg, [(1, 75.0 * EX)]))
+    contact = one_pair(EZ, -N0 * EZ, area, cohesion, cohesion, mu_s, mu_d)
+    contact.set_release_time(tau)
+    stepper.add_contact(contact)
+    h = step_history(stepper, contact, int(period / dt), 6)
+    sliding = np.flatnonzero(h["state"] == 2)
+    assert len(sliding) > 50
+    t_break = h["t"][sliding[0]]
+    T = np.linalg.norm(h["T"], axis=1)
+    share = np.maximum(0.0, 1.0 - (h["t"][sliding] - t_break) / tau)
+    assert np.max(np.abs(T[sliding] - (mu_d * N0 + cohesion * area * share))) < ROUNDOFF * N0
+    assert share.min() < 1.0 and share.max() == 1.0
+    report = h["energy"][-1]
+    assert abs(report["balance"]) < ROUNDOFF * energy_scale(report) and report["friction_dissipation"] > 0
+
+
+def test_release_time_is_refused_when_not_positive_or_finite():
+    contact = one_pair(EZ, -100.0 * EZ)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="release time"):
+            contact.set_release_time(bad)
