@@ -188,14 +188,19 @@ KIRSCH_ORDER_SECTION = 480.0
 KIRSCH_ORDER_MESHES = ((1.2, 16.0), (0.6, 8.0), (0.3, 4.0))
 
 
-def kirsch_order_errors(folder, h_wall, h_far, young=ROCK["E"]):
-    """(wall u_r error, stress error) of the filled tunnel excavated on the 480 m slab (relative L2)."""
+def kirsch_order_mesh(folder, h_wall, h_far):
+    """The filled tunnel on the 480 m slab, meshed once per folder (Salencon's order uses it too)."""
     path = folder / f"filled_{h_wall:g}.msh"
     if not path.exists():
         subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(path), "--radius", str(RADIUS), "--size",
                         str(KIRSCH_ORDER_SECTION), "--filled", "--h-wall", str(h_wall), "--h-far", str(h_far)],
                        check=True, timeout=300)
-    scene = tunnel_scene(path)
+    return path
+
+
+def kirsch_order_errors(folder, h_wall, h_far, young=ROCK["E"]):
+    """(wall u_r error, stress error) of the filled tunnel excavated on the 480 m slab (relative L2)."""
+    scene = tunnel_scene(kirsch_order_mesh(folder, h_wall, h_far))
     scene["materials"]["rock"]["E"] = young
     simulation = solver.prepare(scene)
     state, model = simulation.static, simulation.model
