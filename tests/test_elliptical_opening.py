@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import observed_orders
 from pyfem.elliptical_opening import EllipticalOpening, wall_errors
 
 ROCK = {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}
@@ -136,3 +137,57 @@ def test_excavated_elliptical_opening_follows_the_closed_form(study, order):
     # the 3.9 p of a circle under this far field; the wall moved (3.1 cm at the sidewalls).
     assert errors["cells"] > 100 and errors["largest_hoop"] > 5.5 * P and errors["largest_displacement"] > 0.02
     assert errors["worst"] < 0.02 and errors["peak_cell"] < 0.02 and errors["displacement"] < 0.03
+
+
+# The order in h: the wall's and the far size scaled together, (h_wall, h_far) = (0.6, 16), (0.3, 8) m
+# (default tier; the second is the mesh above) and (0.15, 4) m (slow tier). Measured (Q1): the wall's
+# displacement error 3.07 / 1.14 / 0.57 %, orders 1.44 and 1.00; the worst wall cell's hoop stress
+# 1.47 / 1.19 / 0.53 % of the peak (orders 0.31, 1.15: not monotone, as the table of
+# docs/elliptical_opening.md shows, so it is held to its bound and not to an order). The rollers 24
+# half-heights out set a floor near 0.5 % of the wall's displacement, which bends the second order down.
+ELLIPSE_ORDER_MESHES = ((0.6, 16.0), (0.3, 8.0), (0.15, 4.0))
+
+
+def ellipse_order_errors(study, h_wall, h_far):
+    import subprocess
+
+    workflow, folder = study
+    path = folder / f"ellipse_order_h{h_wall:g}_far{h_far:g}.msh"
+    if not path.exists():
+        subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(path), "--radius", str(HALF_WIDTH),
+                        "--height", str(HALF_HEIGHT), "--size", str(SECTION), "--filled", "--h-wall", str(h_wall),
+                        "--h-far", str(h_far)], check=True, timeout=600)
+    simulation = workflow.excavate(path, 1)
+    opening = EllipticalOpening(HALF_WIDTH, HALF_HEIGHT, ROCK["E"], ROCK["nu"], centre=(SECTION / 2, SECTION / 2))
+    errors = wall_errors(simulation, opening, FAR)
+    assert errors["largest_displacement"] > 0.02  # the wall moved
+    return errors
+
+
+def test_elliptical_opening_converges_in_h(study):
+    """The wall's displacement at order 1.44 (bounds 1.15-1.75) over (0.6, 16) and (0.3, 8) m, the finer
+    mesh's within about twice the measured 1.14 %, its worst cell within 2 % (measured 1.19 %). Catches
+    an excavation load or a stiffness slightly off (the error stalls, the order falls below 1.15)."""
+    meshes = ELLIPSE_ORDER_MESHES[:2]
+    errors = [ellipse_order_errors(study, *mesh) for mesh in meshes]
+    displacement = [e["displacement"] for e in errors]
+    order = observed_orders([h for h, _ in meshes], displacement)[0]
+    print(f"ellipse Q1: wall displacement errors {displacement}, order {order:.3f}; worst cells "
+          f"{[e['worst'] for e in errors]}")
+    assert 1.15 < order < 1.75
+    assert displacement[1] < 0.023 and errors[1]["worst"] < 0.02
+
+
+@pytest.mark.slow
+def test_elliptical_opening_converges_in_h_on_three_meshes(study):
+    """The same on three meshes: the second order of the wall's displacement (measured 1.00, bounds
+    0.75-1.25; the truncation's floor bends it down from the first's 1.44), the finest mesh's within about
+    twice the measured 0.57 %, its worst cell within about twice 0.53 %. Catches an error that stalls
+    below the default tier's resolution."""
+    errors = [ellipse_order_errors(study, *mesh) for mesh in ELLIPSE_ORDER_MESHES]
+    displacement = [e["displacement"] for e in errors]
+    orders = observed_orders([h for h, _ in ELLIPSE_ORDER_MESHES], displacement)
+    print(f"ellipse Q1: wall displacement errors {displacement}, orders {orders}; worst cells "
+          f"{[e['worst'] for e in errors]}")
+    assert 1.15 < orders[0] < 1.75 and 0.75 < orders[1] < 1.25
+    assert displacement[2] < 0.0115 and errors[2]["worst"] < 0.011

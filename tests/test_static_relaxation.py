@@ -18,8 +18,10 @@ import pytest
 from pyfem import solver, static
 from pyfem.scene import parse_scene
 from salencon import compare_to_stage, salencon
-from test_static import (CENTRE, LINING, P, RADIUS, ROCK, centroids, in_plane, layered_box,
-                         meshes, polar, tunnel_scene)
+from conftest import observed_orders
+from test_static import (CENTRE, KIRSCH_ORDER_MESHES, KIRSCH_ORDER_SECTION, LINING, P, RADIUS, ROCK, THICKNESS,
+                         centroids, in_plane, kirsch_order_folder, kirsch_order_mesh, layered_box, meshes, polar,
+                         tunnel_scene)
 
 SHEAR_MODULUS, BULK_MODULUS = 2.8e9, 3.9e9
 P0 = 30.0e6
@@ -27,7 +29,7 @@ COHESION, FRICTION = 3.45e6, 30.0
 YOUNG = 9 * SHEAR_MODULUS * BULK_MODULUS / (3 * BULK_MODULUS + SHEAR_MODULUS)
 POISSON = (3 * BULK_MODULUS - 2 * SHEAR_MODULUS) / (2 * (3 * BULK_MODULUS + SHEAR_MODULUS))
 
-__all__ = ["meshes"]  # the module-scoped mesh fixture of test_static.py
+__all__ = ["meshes", "kirsch_order_folder"]  # the module-scoped mesh fixtures of test_static.py
 
 # Relaxed against the direct linear solve (Kirsch tunnel), about twice the measured 4.6e-5
 # (displacement, L2) and 6.7e-7 (stress, of the largest); the lined tunnel's lining stress 1.0e-6.
@@ -146,6 +148,68 @@ def salencon_comparison(simulation, dilation: float, label: str) -> dict:
               f"{reference / 1e6:.2f} ({hoop_errors[where]:+.2%})")
     return {"radius_error": radius_error, "wall_error": wall_error, "hoop_errors": hoop_errors, "result": result,
             "plastic": plastic}
+
+# Salencon's order in h (psi = 0): the filled tunnel on the 480 m slab of test_static.py's Kirsch order
+# (KIRSCH_ORDER_MESHES: (h_wall, h_far) = (1.2, 16), (0.6, 8) m; (0.3, 4) m in the slow tier). On the 240 m
+# slab of test_salencon_cavity the rollers (24 a out, 14 R0) leave -1.2 % in the wall's convergence.
+# Measured, the hoop stress at the centroids of the elastic cells 1.15 R0 < r < 2 R0 (relative L2):
+# 1.29 / 0.55 / 0.20 %, orders 1.23 and 1.47. The plastic zone has no order against the closed form: the
+# wall's convergence is -3.54 / -0.52 / +0.82 % off (it changes sign), the hoop stress within r < 1.3 a
+# 4.98 / 1.84 / 3.84 %. There the model's 3D law has sigma_z = sigma_theta (the wall ring's cells: 13.94
+# against 13.97 MPa, 12.76 against 12.91 MPa on the two finer meshes): the stress sits on the edge of the
+# Mohr-Coulomb pyramid and flows in the (z, r) plane too, which the closed form, taking sigma_z as the
+# intermediate stress, leaves out (Reed 1988). The finer meshes resolve that difference of the problems,
+# not a discretisation error. The plastic radius (+1.76 / +1.97 / +1.31 %) is read off rings of 0.05 a
+# (2.9 % of R0) and has no order to observe either; test_salencon_cavity holds it.
+SALENCON_ORDER_ELASTIC = (1.0, 1.45)
+
+
+def salencon_order_errors(folder, h_wall, h_far, cohesion=COHESION):
+    """(wall convergence error, hoop stress error in the elastic zone 1.15 R0 < r < 2 R0) of Salencon's
+    cavity (psi = 0) on the 480 m slab, after checking that the stage converged and the rock yielded near
+    the wall and not far out."""
+    scene = salencon_scene(kirsch_order_mesh(folder, h_wall, h_far), 0.0)
+    scene["materials"]["rock"]["plasticity"]["cohesion"] = cohesion
+    simulation = solver.prepare(scene)
+    assert all(stage.converged for stage in simulation.static.stages)
+    centre = np.array([KIRSCH_ORDER_SECTION / 2, THICKNESS / 2, KIRSCH_ORDER_SECTION / 2])
+    plastic = simulation.static.cell_state["plastic_strain"]
+    result = compare_to_stage(simulation, centre, RADIUS, cell_plastic_strain=plastic)
+    exact = salencon(np.array([RADIUS]), RADIUS, P0, SHEAR_MODULUS, BULK_MODULUS, COHESION, FRICTION, 0.0)
+    R0, r = float(exact["R0"]), result["cell_r"]
+    assert np.all(plastic[r < 0.9 * R0] > 0.0) and np.all(plastic[r > 1.15 * R0] == 0.0), "it yielded where it should"
+    elastic = (r > 1.15 * R0) & (r < 2 * R0)
+    assert np.count_nonzero(elastic) > 50
+    hoop = salencon(r[elastic], RADIUS, P0, SHEAR_MODULUS, BULK_MODULUS, COHESION, FRICTION, 0.0)["sigma_theta"]
+    return (result["wall_displacement"] / float(exact["u_r"][0]) - 1,
+            np.linalg.norm(result["cell_sigma_theta"][elastic] - hoop) / np.linalg.norm(hoop))
+
+
+def test_salencon_cavity_converges_in_h(kirsch_order_folder):
+    """Salencon's cavity (psi = 0) on two meshes: the hoop stress in the elastic zone at order 1.23 (bounds
+    1.0-1.45), the finer mesh's within about twice the measured 0.55 %, and the wall's convergence within
+    about twice its measured -0.52 % (no order: see above). Catches a yield surface off by 2 % (cohesion x
+    1.02 moves sigma(R0) and R0: the wall's error on the finer mesh goes past its bound) or a plastic zone
+    whose radius does not converge (the elastic zone's error stalls)."""
+    meshes_used = KIRSCH_ORDER_MESHES[:2]
+    errors = np.array([salencon_order_errors(kirsch_order_folder, *mesh) for mesh in meshes_used])
+    order = observed_orders([h_wall for h_wall, _ in meshes_used], errors[:, 1])[0]
+    print(f"Salencon psi 0: wall errors {errors[:, 0]}; elastic zone's hoop errors {errors[:, 1]}, order {order:.3f}")
+    assert SALENCON_ORDER_ELASTIC[0] < order < SALENCON_ORDER_ELASTIC[1]
+    assert errors[1, 1] < 0.011 and abs(errors[1, 0]) < 0.0105
+
+
+@pytest.mark.slow
+def test_salencon_cavity_converges_in_h_on_three_meshes(kirsch_order_folder):
+    """The same with (0.3, 4) m: the elastic zone's second order (measured 1.47, bounds 1.2-1.75), its
+    finest error within about twice the measured 0.20 %, the wall's within twice its +0.82 %. Catches an
+    error that stalls below the default tier's resolution."""
+    errors = np.array([salencon_order_errors(kirsch_order_folder, *mesh) for mesh in KIRSCH_ORDER_MESHES])
+    orders = observed_orders([h_wall for h_wall, _ in KIRSCH_ORDER_MESHES], errors[:, 1])
+    print(f"Salencon psi 0: wall errors {errors[:, 0]}; elastic zone's hoop errors {errors[:, 1]}, orders {orders}")
+    assert SALENCON_ORDER_ELASTIC[0] < orders[0] < SALENCON_ORDER_ELASTIC[1] and 1.2 < orders[1] < 1.75
+    assert errors[2, 1] < 0.004 and abs(errors[2, 0]) < 0.0165
+
 
 SALENCON_AS_WRITTEN = """\
 title = "Salencon's cavity, the rock written with its strengths only"

@@ -7,7 +7,9 @@ row-sum lumped) or quadratic (P2, HRZ-lumped) tetrahedra.
 - A box from a .geo under an oblique SV wave (30 deg): the monitors inside follow the free field
   within 2 % (P1) and 0.5 % (P2).
 - The tunnel of meshes/tunnel_in_box_tet.geo under a long SV wave: the wall's hoop stress follows
-  Kirsch (the cavity check of tests/test_cavity.py, its 10 %).
+  Kirsch (the cavity check of tests/test_cavity.py; 3.6 % for P1 at 2 a, 5.2 % for P2).
+- The static Kirsch excavation on P1 tetrahedra converges in h (the wall's u_r at order 1.45, the
+  stress at 0.74, on two meshes; three in the slow tier).
 - The static stage excavates on tetrahedra: a filled tunnel cut out of a slab follows Kirsch.
 - What tetrahedra cannot do yet (one point per cell with hourglass control, contact on quadratic
   tetrahedra) and mixed meshes are refused with one line naming the key.
@@ -18,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import observed_orders
 from pyfem import solver
 from pyfem.scene import SceneError, parse_scene
 from test_cavity import (ANGLES, RADII, free_field_shear, kirsch, monitor_points, polar_stress, read_monitor,
@@ -25,7 +28,10 @@ from test_cavity import (ANGLES, RADII, free_field_shear, kirsch, monitor_points
 
 REPO = Path(__file__).resolve().parents[1]
 TUNNEL_GEO = REPO / "meshes" / "tunnel_in_box_tet.geo"
-KIRSCH_TOLERANCE = 0.10  # not yet tightened to the measured (tests/test_cavity.py: 3.5 % peak, 4.5 % history)
+# The dynamic tunnel against Kirsch (peak and history), about twice the measured with 0.8 m at the wall:
+# P1 at 2 a 1.44-1.69 % (peak) and 1.60-1.78 % (history); P2 at both radii up to 2.53 % and 2.56 %
+# (10 % before). P1 at 1.05 a is not held: see SCALED_FILLED_TUNNEL_GEO below.
+KIRSCH_TOLERANCE = {1: 0.036, 2: 0.052}
 
 
 def box_geo(folder: Path, h: float) -> Path:
@@ -130,7 +136,8 @@ def test_tunnel_geo_wall_follows_kirsch_on_tetrahedra(tmp_path, order, wall_size
         print(f"P{order} tetrahedra, {wall_size} m at the wall, {name}: hoop peak / Kirsch {peak_ratio:.4f}, "
               f"history error {history_error:.2%}")
         if order == 2 or r >= 2.0:
-            assert abs(peak_ratio - 1.0) < KIRSCH_TOLERANCE and history_error < KIRSCH_TOLERANCE, name
+            # catches a hoop stress off by a few % (a stiffness, a wall that carries traction)
+            assert abs(peak_ratio - 1.0) < KIRSCH_TOLERANCE[order] and history_error < KIRSCH_TOLERANCE[order], name
             checks += 1
     assert checks == (len(RADII) * len(ANGLES) if order == 2 else len(ANGLES))
 
@@ -222,6 +229,76 @@ def test_kirsch_excavation_on_tetrahedra(tmp_path, order, wall_size):
             assert radial_error < kirsch_static.STRESS_TOLERANCE, (where, r_target)
             checks += 1
     assert checks == 4
+
+
+# ---------------------------------------------------------------- Kirsch's order on tetrahedra
+# The filled tunnel of FILLED_TUNNEL_GEO with every size scaled by s (0.8 s m at the wall, growing by
+# 0.12 s per metre): s = 2 and 1 in the default tier, 0.5 in the slow tier. Measured (P1): the wall's u_r
+# 7.37 / 2.70 / 1.17 % (relative L2 over the wall's nodes), orders 1.45 and 1.21 (the rollers 24 a out
+# leave a floor near 0.5 %); the polar stress of the cells within a < r < 2 a 14.3 / 8.5 / 4.4 % (relative
+# L2 of the hoop stress; one strain per cell), orders 0.74 and 0.94. The single cell nearest 1.05 a is not
+# a converging measure: at the sidewall, the crown and 45 deg it measured 4.9 / 16.1 / 8.6 %, 8.6 / 1.3 /
+# 7.5 % and 8.3 / 2.6 / 2.6 % on the three meshes, the cell's centroid sampling a steep gradient at a
+# distance from the point that changes from mesh to mesh. That sampling, not a wrong answer, is why
+# test_tunnel_geo_wall_follows_kirsch_on_tetrahedra does not hold P1 at r = 1.05 a.
+SCALED_FILLED_TUNNEL_GEO = FILLED_TUNNEL_GEO.replace(
+    '"min(16, WALL + 0.12 * abs(sqrt((x - 120)^2 + (z - 120)^2) - 5))"',
+    '"SCALE * min(16, 0.8 + 0.12 * abs(sqrt((x - 120)^2 + (z - 120)^2) - 5))"')
+
+
+def kirsch_errors_on_tetrahedra(folder: Path, scale: float, order: int = 1, young: float = None):
+    """(wall u_r error, stress error within 2 a) of the filled tunnel on tetrahedra, sizes scaled by `scale`."""
+    import test_static as kirsch_static
+
+    geo = folder / f"filled_tunnel_s{scale:g}.geo"
+    geo.write_text(SCALED_FILLED_TUNNEL_GEO.replace("SCALE", f"{scale:g}"))
+    scene = kirsch_static.tunnel_scene(geo, order)
+    if young is not None:
+        scene["materials"]["rock"]["E"] = young
+    simulation = solver.prepare(scene)
+    state, model = simulation.static, simulation.model
+    n_basis = model.V.element.basix_element.dim
+    points = model.node_coords[model.V.dofmap.list.array.reshape(-1, n_basis)[:, :4]].mean(axis=1)
+    r, theta = kirsch_static.in_plane(points)
+    cells = np.flatnonzero(r < 2.0)
+    found = np.array([kirsch_static.polar(state.cell_stress[c], theta[c]) for c in cells])
+    exact = np.array([kirsch_static.kirsch_stress(r[c], theta[c]) for c in cells])
+    r, theta = kirsch_static.in_plane(model.node_coords)
+    wall = np.flatnonzero(np.abs(r - 1.0) < 1e-6)
+    u = state.displacement.reshape(-1, 3)[wall]
+    u_r = u[:, 0] * np.cos(theta[wall]) + u[:, 2] * np.sin(theta[wall])
+    exact_u = np.array([kirsch_static.kirsch_radial_displacement(1.0, angle) for angle in theta[wall]])
+    assert model.mesh.topology.cell_type.name == "tetrahedron" and len(wall) > 50 and len(cells) > 100
+    return (np.linalg.norm(u_r - exact_u) / np.linalg.norm(exact_u),
+            np.linalg.norm(found - exact) / np.linalg.norm(exact[:, 1]))
+
+
+def test_kirsch_excavation_on_tetrahedra_converges_in_h(tmp_path):
+    """P1 tetrahedra, sizes scaled by 2 and 1: the wall's u_r at order 1.45 (bounds 1.2-1.75), the stress
+    at order 0.74 (bounds 0.55-0.95), the finer mesh's errors within about twice the measured (2.70 %,
+    8.5 %). Catches a tetrahedron's stiffness or load that does not converge to Kirsch (a stiffness 1 %
+    off stalls u_r's error near 1 %; a wrong strain-displacement matrix stops the stress converging)."""
+    scales = [2.0, 1.0]
+    errors = np.array([kirsch_errors_on_tetrahedra(tmp_path, scale) for scale in scales])
+    u_order, stress_order = (observed_orders(scales, errors[:, k])[0] for k in (0, 1))
+    print(f"P1 tetrahedra Kirsch: wall u_r errors {errors[:, 0]}, order {u_order:.3f}; stress errors "
+          f"{errors[:, 1]}, order {stress_order:.3f}")
+    assert 1.2 < u_order < 1.75 and 0.55 < stress_order < 0.95
+    assert errors[1, 0] < 0.054 and errors[1, 1] < 0.17
+
+
+@pytest.mark.slow
+def test_kirsch_excavation_on_tetrahedra_converges_in_h_on_three_meshes(tmp_path):
+    """The same with s = 0.5 too: the second orders (measured 1.21 and 0.94; bounds 0.95-1.5 and
+    0.75-1.15) and the finest errors within about twice the measured (1.17 %, 4.4 %). Catches an error
+    that stalls below the default tier's resolution."""
+    scales = [2.0, 1.0, 0.5]
+    errors = np.array([kirsch_errors_on_tetrahedra(tmp_path, scale) for scale in scales])
+    u_orders, stress_orders = (observed_orders(scales, errors[:, k]) for k in (0, 1))
+    print(f"P1 tetrahedra Kirsch: wall u_r errors {errors[:, 0]}, orders {u_orders}; stress errors "
+          f"{errors[:, 1]}, orders {stress_orders}")
+    assert 0.95 < u_orders[1] < 1.5 and 0.75 < stress_orders[1] < 1.15
+    assert errors[2, 0] < 0.024 and errors[2, 1] < 0.09
 
 
 @pytest.mark.parametrize("order", [1, 2])
