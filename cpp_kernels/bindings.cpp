@@ -204,7 +204,7 @@ StateArchive dict_archive(const py::dict& blocks) {
 }
 
 /// A stepper's save_state(points) / load_state(dict, points) (Stepper, LocalStepper): points false
-/// is a sample's state (StateArchive::per_point; the MPI ranks' light merge, pyfem/distributed.py).
+/// is a sample's state (StateArchive::per_point; the MPI ranks' light merge, pyfem/distributed_model.py).
 template <class T>
 auto sample_save_state() {
   return [](const T& stepper, bool points) {
@@ -882,7 +882,7 @@ t_e = t - start clamped at 0. The arguments are set_deterioration's, then the st
 
   py::class_<MpiNodeExchange, std::shared_ptr<MpiNodeExchange>>(
       m, "MpiNodeExchange",
-      "The ghost exchange of one MPI rank (cpp_kernels/mpi_exchange.hpp, pyfem/distributed.py).")
+      "The ghost exchange of one MPI rank (cpp_kernels/mpi_exchange.hpp, pyfem/distributed_model.py).")
       .def(py::init([](long fortran_comm, std::vector<int> neighbours,
                        std::vector<std::vector<std::int32_t>> send_nodes,
                        std::vector<std::vector<std::int32_t>> recv_nodes, std::int64_t n_nodes) {
@@ -967,7 +967,7 @@ and every internal-force component's state), a copy.
 
 points false: a sample's state, not a checkpoint's: without the per-point and per-node blocks
 (the element loop's points and initial stress, the nodal forces); the energy account, reactions
-and contact pairs as with true. Under mpirun the ranks' samples are merged so (pyfem/distributed.py).)",
+and contact pairs as with true. Under mpirun the ranks' samples are merged so (pyfem/distributed_model.py).)",
           py::arg("points") = true)
       .def(
           "load_state", sample_load_state<Stepper>(),
@@ -1032,7 +1032,7 @@ of cells another rank counts).)")
             stepper.set_partition(n_owned, std::move(exchange));
           },
           py::arg("n_owned"), py::arg("exchange"), py::keep_alive<1, 3>(),
-          R"(One MPI rank's share of a distributed model (pyfem/distributed.py): the first n_owned
+          R"(One MPI rank's share of a distributed model (pyfem/distributed_model.py): the first n_owned
 nodes are this rank's, the others ghosts; the energy account sums the owned nodes only and after
 every step `exchange` (an MpiNodeExchange, or None) overwrites the ghosts' v and a.)")
       .def(
@@ -1220,7 +1220,7 @@ Args:
                                                                                       exchanges.end()));
           },
           py::arg("n_owned"), py::arg("exchanges"), py::keep_alive<1, 3>(),
-          R"(One MPI rank's share of a distributed model under the row split (pyfem/distributed.py): the
+          R"(One MPI rank's share of a distributed model under the row split (pyfem/distributed_model.py): the
 first n_owned nodes are this rank's, the others ghosts; exchanges[k] (an MpiNodeExchange of the
 level-k ghosts, or None) gives them their owners' velocity before every level-k drift; the energy
 account sums the owned nodes and counted components only.)")

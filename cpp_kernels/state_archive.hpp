@@ -85,7 +85,7 @@ class StateArchive {
   /// per-point and per-node blocks (the element loop's points and initial stress, the stepper's
   /// nodal internal force) and keep the rest (energy account, reactions, contact pairs). Under
   /// mpirun the ranks merge this at every output sample and the whole state only where fields
-  /// or a checkpoint are written (pyfem/distributed.py).
+  /// or a checkpoint are written (pyfem/distributed_model.py).
   bool per_point() const { return per_point_; }
   void set_per_point(bool per_point) { per_point_ = per_point; }
 

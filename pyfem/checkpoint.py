@@ -362,8 +362,8 @@ def read_checkpoint(out_dir, state: bool = True) -> Checkpoint:
             if not state:
                 return Checkpoint(path=path, meta=meta, u=None, v=None, a=None)
             if meta.get("model") == "distributed":  # each rank's state is in its own file
-                refuse(f"{CHECKPOINT_NAME} was written by a run with parallel.model = \"distributed\"; resume it "
-                       "with parallel.model = \"distributed\" (on any rank count)")
+                refuse(f"{CHECKPOINT_NAME} was written under mpirun (each rank's state in its own file); resume it "
+                       "under mpirun, on any number of ranks above one")
             kernel = {name: bytes(data[f"kernel_{k}"]) for k, name in enumerate(meta["kernel_blocks"])}
             writer = {name: np.array(data[f"writer_{name}"]) for name in meta["writer_arrays"]}
             return Checkpoint(path=path, meta=meta, u=np.array(data["u"]), v=np.array(data["v"]),

@@ -135,18 +135,14 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     """Validate the scene and print the solver's plan for it."""
     scene = load_scene(scene_path, overrides)
     report_warnings(scene)
-    from pyfem.distributed import launched_rank
+    from pyfem.ranks import world
 
-    if (scene.get("parallel") or {}).get("model") == "distributed":  # every rank builds its part
+    if world().size > 1:  # under mpirun every rank builds its part
         from pyfem import distributed_model
 
         plan = distributed_model.check(scene)
         if plan:
             show_plan(scene, plan)
-        return 0
-    if launched_rank() > 0:  # under mpirun rank 0 alone builds and times the plan
-        import dolfinx  # noqa: F401  (MPI and PETSc start collectively: rank 0's import waits for ours)
-
         return 0
     from pyfem import solver  # heavy (dolfinx, kernels): only after validation
 
@@ -392,9 +388,9 @@ def _scene_error_text(error: SceneError, scene_path: Path | None = None) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``/usr/bin/python3 -m pyfem``; returns the exit status. Under ``mpirun -n N`` every
-    rank runs it and rank 0 speaks (pyfem/distributed.py): the others' lines are the same or
+    rank runs it and rank 0 speaks (pyfem/distributed_model.py): the others' lines are the same or
     nothing, except a failure of their own, whose traceback they print."""
-    from pyfem.distributed import launched_rank
+    from pyfem.ranks import launched_rank
 
     if launched_rank() > 0:
         import contextlib

@@ -158,12 +158,12 @@ def choose(part, loop, time_step, duration: float) -> tuple[RankLevels | None, s
 class LevelExchanges(list):
     """The kernel's MpiNodeExchange of each level (finest first), with the bytes a rank sends per
     fine step: each level's velocities at each of its drifts, 2^(L - k) per global step
-    (pyfem.distributed.level_bytes_per_fine_step; an exchange counts 48 bytes per node, v and a, as
+    (pyfem.ranks.level_bytes_per_fine_step; an exchange counts 48 bytes per node, v and a, as
     the global Stepper sends them)."""
 
     @property
     def bytes_sent_per_step(self) -> float:
-        from pyfem.distributed import level_bytes_per_fine_step
+        from pyfem.ranks import level_bytes_per_fine_step
 
         return level_bytes_per_fine_step([exchange.bytes_sent_per_step // 48 for exchange in self])
 
@@ -262,7 +262,7 @@ def check_stability_on_ranks(part, rank_levels: RankLevels, loop, **check) -> di
     STABILITY_AMPLITUDE times `start_vector` of the node coordinates (the same state for any rank
     count), the energy summed over the ranks; rank 0's report on every rank, with "ranks". `check`:
     check_stability's steps and chunk. A collective."""
-    from pyfem.distributed import RankSummed
+    from pyfem.ranks import RankSummed
     from pyfem.distributed_model import start_vector
     from pyfem.local_stepping import STABILITY_AMPLITUDE, check_stability
 

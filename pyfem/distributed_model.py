@@ -1,14 +1,13 @@
-"""The model built on the ranks (`[parallel] model = "distributed"`; docs/scaling.md "The
-distributed model"): under `mpirun -n N` each rank builds and steps only its part of dolfinx's
-distributed mesh, so the memory of a rank falls with the ranks, where `model = "whole"` has every
-rank build the whole model (pyfem/distributed.py) and step its share of it.
+"""The model under `mpirun -n N` (N > 1; docs/scaling.md "The distributed model"): each rank builds
+and steps only its part of dolfinx's distributed mesh, so the memory of a rank falls with the ranks.
+One rank (no mpirun) is the serial path, pyfem/solver.py.
 
 Each rank:
 1. meshes with `pyfem.mesh.create_mesh_with_interfaces(scene, COMM_WORLD)` (gmsh on rank 0,
    dolfinx's graph partitioner distributes the cells, GhostMode.shared_facet);
 2. assembles its lumped mass, its owned rows of the elastic stiffness (PETSc) and its truncation
    faces as `pyfem.operators.build_model` does on one rank;
-3. numbers its nodes as the kernel's share (pyfem/distributed.py `Share`): its owned nodes (the
+3. numbers its nodes as the kernel's share: its owned nodes (the
    function space's), the index map's ghosts, then the *extra ghosts*, nodes that an owned row
    reaches but the index map does not hold (with GhostMode.shared_facet, neighbours through an edge or a
    vertex only); their coordinates, masses and diagonal blocks come from their owners;
@@ -20,14 +19,14 @@ Each rank:
 
 The time step is `pyfem.solver.time_step_from` of the Gershgorin bound (the largest owned row over
 the ranks) and a power iteration on the ranks' owned rows from a start vector that is a function of
-the node coordinates, so the step does not depend on the rank count; it differs from the whole
-model's (a random start in the one-rank numbering) by the iteration's convergence error, so a run
-equal to the whole model's to round-off gives `time.dt`.
+the node coordinates, so the step does not depend on the rank count; it differs from the serial
+run's (a random start in the one-rank numbering) by the iteration's convergence error, so a run
+equal to the serial run's to round-off gives `time.dt`.
 
-Outputs (rank 0 writes, dolfinx writes the fields in parallel): monitors/NAME.csv with the whole
-model's columns (u, v, a; the free field with a wave; the stress; the law's damage and plastic
+Outputs (rank 0 writes, dolfinx writes the fields in parallel): monitors/NAME.csv with the serial
+run's columns (u, v, a; the free field with a wave; the stress; the law's damage and plastic
 strain), energy.csv (every rank's owned energies summed), reactions.csv with fixed or roller faces,
-fields.xdmf (`_Fields`: the whole model's fields, the tensors as 3 x 3 cell data) and run.json. Checkpoints: every rank its own file keyed by
+fields.xdmf (`_Fields`: the serial run's fields, the tensors as 3 x 3 cell data) and run.json. Checkpoints: every rank its own file keyed by
 position, rank 0's record written last (`DistributedRun.write_checkpoint`); a run resumes on any
 rank count (docs/checkpoint.md "The distributed model").
 
@@ -37,13 +36,14 @@ the kernel's numbering (owned nodes first) differs from the function space's, an
 numbers (fields, monitors, element arrays) is mapped through `RankModel.kernel_of_dolfinx`.
 
 The static stage (pyfem/distributed_stage.py): its dynamic relaxation on the ranks' parts, handed over
-to the run as the whole model's is.
+to the run as the serial stage's is.
 
-Local time stepping (pyfem/distributed_lts.py): the whole model's levels and row split on the ranks'
+Local time stepping (pyfem/distributed_lts.py): the serial run's levels and row split on the ranks'
 parts, one velocity exchange per level.
 
-Not built yet (each refused with the key and what is allowed): a linear static stage's solves, one
-point per cell, quadratic tetrahedra.
+Not built yet (each refused under mpirun with the key and what is allowed; one rank runs them): a
+linear static stage's solves, one point per cell, quadratic tetrahedra, more than 31 contact
+interfaces.
 """
 from __future__ import annotations
 
@@ -63,7 +63,6 @@ from mpi4py import MPI
 from pyfem.scene import Scene, SceneError
 from pyfem.clock import run_origin
 
-KEY = "parallel.model"
 # The histories go to disk (and run.json's time reached) when this much wall time (s) passed since the last time.
 FLUSH_SECONDS = 2.0
 
@@ -75,13 +74,13 @@ def check_supported(scene: Scene) -> None:
     build yet (every rank says the same: the scene is the same on every rank)."""
     from pyfem import distributed_stage
 
-    allowed = "\"whole\" here: the distributed model does not build {} yet (docs/scaling.md)"
     distributed_stage.check_supported(scene)
     for name, table in scene["materials"].items():
         for law in ("plasticity", "damage"):
             if (table.get(law) or {}).get("integration") == "reduced":
-                raise SceneError(KEY, "distributed", allowed.format(f"materials.{name}.{law}.integration = "
-                                                                    "\"reduced\""))
+                raise SceneError(f"materials.{name}.{law}.integration", "reduced",
+                                 "\"full\" under mpirun (the distributed model does not build one point per cell "
+                                 "yet; on one rank it runs, docs/scaling.md)")
 
 
 # --- numbering: owned nodes, the index map's ghosts, the extra ghosts ---------------------------
@@ -207,8 +206,8 @@ def stepping(comm: MPI.Comm, ownership):
 
 
 def local_stiffness(comm: MPI.Comm, ownership, rows: sp.bsr_matrix, n_local: int, local_nodes: np.ndarray):
-    """(indptr, indices, blocks) of the rank's matrix as pyfem.distributed.local_matrix gives it
-    from the whole one: the owned rows' blocks (`rows`, sorted), each ghost row's blocks to owned
+    """(indptr, indices, blocks) of the rank's matrix from
+    the owned rows' blocks (`rows`, sorted), each ghost row's blocks to owned
     nodes (the owned rows' transposed: K is symmetric) and the ghosts' diagonal blocks (from the
     ranks stepping them, `ownership`: an Ownership or dolfinx's index map). One copy of the owned
     blocks."""
@@ -263,7 +262,7 @@ def drop_zero_blocks(matrix: tuple) -> tuple:
 class GhostPlan:
     """Who sends what to whom after a step: per neighbour rank, the local nodes this rank sends
     (its owned nodes the neighbour ghosts) and the local nodes it receives (its ghosts owned there),
-    both in ascending global order (pyfem.distributed._ghost_exchanges)."""
+    both in ascending global order."""
 
     neighbours: list
     send: list
@@ -432,8 +431,8 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     mesh, cell_tags, facet_tags, regions, boundaries, interface_tags = create_mesh_with_interfaces(scene, comm)
     V = fem.VectorFunctionSpace(mesh, ("Lagrange", order))
     if uses_diagonal_scaling(V):  # HRZ lumping reads owned diagonals and per-rank totals (not built for ranks)
-        raise SceneError(KEY, "distributed", "\"whole\" for quadratic tetrahedra (mesh.order = 2 on a tetrahedral "
-                         "mesh: their HRZ-lumped mass is not built on the ranks yet, docs/scaling.md)")
+        raise SceneError("mesh.order", order, "1 on a tetrahedral mesh under mpirun (quadratic tetrahedra's "
+                         "HRZ-lumped mass is not built on the ranks yet; on one rank they run, docs/scaling.md)")
     materials = _cell_materials(mesh, cell_tags, regions, scene["materials"])
     quadrature = {"quadrature_degree": 2 * order}
     coords_d = V.tabulate_dof_coordinates().astype(np.float64, copy=True)  # the function space's numbering
@@ -503,8 +502,8 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     if pairs is not None:
         pair_index, pair_global, rank_pairs = _rank_pairs(comm, pairs, ownership, local_nodes, mass)
         if len(pairs.names) > 31:
-            raise SceneError(KEY, "distributed", f"\"whole\" for more than 31 contact interfaces (here "
-                             f"{len(pairs.names)}: a checkpoint keys a pair node by its roles, a bit each)")
+            raise SceneError("contact.interfaces", f"{len(pairs.names)} interfaces", "at most 31 under mpirun (a "
+                             "checkpoint keys a pair node by its roles, a bit each; on one rank any number runs)")
         pair_side = np.zeros(len(local_nodes), dtype=np.int64)  # a bit per role: side of an interface
         for side in (0, 1):
             here = np.isin(pairs.nodes[:, side], local_nodes)
@@ -848,7 +847,7 @@ def locate_pair_monitors(part: RankModel) -> RankPairMonitors:
 # --- the run --------------------------------------------------------------------------------------
 
 def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRegions | None, contact=None):
-    """The kernel's Stepper of the rank's share (pyfem.distributed.local_stepper's objects, built here):
+    """The kernel's Stepper of the rank's share:
     with the element loop its counted cells (their energy this rank's) and its halo cells (not);
     `contact`: the kernel's ContactPairs of the pairs it steps (None: none)."""
     from pyfem import _kernels
@@ -1040,7 +1039,7 @@ TRIAL_STEPS = 20
 
 def _ending_every_rank(work):
     """work() under mpirun: a scene error or a stop is every rank's (raised alike on each); any other
-    error ends every rank (pyfem.distributed.abort_all), where the others would wait for it."""
+    error ends every rank (pyfem.ranks.abort_all), where the others would wait for it."""
     from pyfem.scene import scene_error_from
 
     comm = MPI.COMM_WORLD
@@ -1052,7 +1051,7 @@ def _ending_every_rank(work):
         if isinstance(error, ValueError) and scene_error_from(error) is not None:
             raise  # a bad scene, found alike by every rank's builders (the command line's one line)
         if comm.size > 1:
-            from pyfem.distributed import abort_all
+            from pyfem.ranks import abort_all
 
             abort_all(error)
         raise
@@ -1123,8 +1122,7 @@ def work_imbalance(loop_cells: list, n_pairs: int) -> str | None:
         return None
     return (f"the element-loop cells per rank ({', '.join(map(str, loop_cells))}) reach {max(loop_cells) / mean:.2f}x "
             "their mean: the distributed model's parts are dolfinx's, balanced by cell count, not by the work of the "
-            f"element loop{' and the pairs' if n_pairs else ''}; the whole model's partition weighs it "
-            "(parallel.model = \"whole\", docs/scaling.md \"Weighted partitions\")")
+            f"element loop{' and the pairs' if n_pairs else ''} (docs/scaling.md)")
 
 
 def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:
@@ -1132,7 +1130,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     rank 0, {} on the others. resume: continue the interrupted run in out_dir from its checkpoint
     (on any rank count: its state is keyed by position). A scene error is every rank's (raised alike on each); a stop
     signal stops every rank at the same sample with a checkpoint (`pyfem.interrupts.StopSignals`); any
-    other error ends every rank (pyfem.distributed.abort_all), where the others would wait for it."""
+    other error ends every rank (pyfem.ranks.abort_all), where the others would wait for it."""
     from pyfem.interrupts import StopSignals
 
     check_supported(scene)
@@ -1158,14 +1156,14 @@ def rank_file(out: Path, identifier: int, rank: int) -> Path:
 
 def read_checkpoint(out_dir):
     """The distributed run's checkpoint (its JSON part, pyfem.checkpoint.Checkpoint without state),
-    or SceneError (key --resume) naming why not: none, finished, or the whole model's."""
+    or SceneError (key --resume) naming why not: none, finished, or a one-rank run's."""
     from pyfem import checkpoint as checkpoints
 
     saved = checkpoints.read_checkpoint(out_dir, state=False)
     if saved.meta.get("model") != "distributed":
-        raise SceneError("--resume", str(out_dir), "the checkpoint of a run of the distributed model",
-                         f"--resume {saved.path}: written by a run with parallel.model = \"whole\"; resume it "
-                         "with parallel.model = \"whole\"")
+        raise SceneError("--resume", str(out_dir), "the checkpoint of a run under mpirun",
+                         f"--resume {saved.path}: written by a run on one rank (its state in one file, "
+                         "numbered as one rank's model); resume it on one rank, without mpirun")
     return saved
 
 
@@ -1331,11 +1329,12 @@ class DistributedRun:
         return _stepper(self.part, self.time_step.dt, self.input_arrays, self.loop, self.contact)
 
     def _check_lts(self) -> None:
-        """The set-up check of the LTS map on the ranks (pyfem/distributed_lts.py), as the whole
-        model's (pyfem.solver._make_local_stepper)."""
+        """The set-up check of the LTS map on the ranks (pyfem/distributed_lts.py), as the serial
+        run's (pyfem.solver._make_local_stepper)."""
         from pyfem import local_stepping
         from pyfem.distributed_lts import check_stability_on_ranks
-        from pyfem.solver import lts_stability_line, whole_steps
+        from pyfem.clock import run_steps
+        from pyfem.solver import lts_stability_line
 
         report = self.lts.stability = check_stability_on_ranks(self.part, self.lts, self.loop)
         if self.comm.rank == 0:  # the whole model's console line (its plan is printed after the check)
@@ -1624,7 +1623,7 @@ class DistributedRun:
         u, v, a and internal force, its constraints' reactions, its counted cells' per-point state,
         and its share of the energy account (a sum over the ranks); with local time stepping the
         LocalStepper's own state instead of the Stepper's (pyfem.distributed_lts.lts_rank_state)."""
-        from pyfem.distributed import pair_blocks, state_rows
+        from pyfem.ranks import pair_blocks, state_rows
 
         part, n = self.part, self.part.n_owned
         kernel = stepper.save_state()
@@ -1675,7 +1674,7 @@ class DistributedRun:
         """The checkpoint's state for this rank's nodes and cells, from every rank file of checkpoint
         `identifier` (written by `ranks` ranks, any partition): returns (u, v, a); the kernel's state
         loaded (energy account on rank 0, summed; a region's scalars on its first counted component)."""
-        from pyfem.distributed import pair_blocks
+        from pyfem.ranks import pair_blocks
 
         part, comm = self.part, self.comm
         files = [dict(np.load(rank_file(self.out, identifier, q), allow_pickle=False)) for q in range(ranks)]

@@ -157,9 +157,9 @@ def pair_moves(pairs, ownership: Ownership) -> tuple[np.ndarray, np.ndarray]:
     """(moved nodes, their new rank) of the pairs whose nodes dolfinx gave to different ranks. A
     pair is stepped on the rank dolfinx gave its side-i node. Pairs that share a node (interfaces
     that meet in an L along the model's boundary) form a group, stepped whole on one rank as the
-    whole model's partition keeps it (pyfem.distributed.pair_groups): the rank of the side-i node of
+    serial run steps it (pyfem.ranks.pair_groups): the rank of the side-i node of
     the group's first pair (in `pairs`' order)."""
-    from pyfem.distributed import pair_groups
+    from pyfem.ranks import pair_groups
 
     nodes, group = pair_groups(pairs.nodes)
     pair_group = group[np.searchsorted(nodes, pairs.nodes[:, 0])]

@@ -55,9 +55,9 @@ def check_supported(scene) -> None:
 
     if "static" in scene and not uses_relaxation(scene):
         solver = scene["static"]["solver"]
-        raise SceneError(KEY, solver, "\"relaxation\" with parallel.model = \"distributed\" (its linear stage's "
-                         "PETSc solves are not built on the ranks yet; \"auto\" chooses relaxation only with a "
-                         "[plasticity] or [damage] table), or parallel.model = \"whole\" (docs/scaling.md)")
+        raise SceneError(KEY, solver, "\"relaxation\" under mpirun (the linear stage's PETSc solves are not "
+                         "built on the ranks yet; \"auto\" chooses relaxation only with a [plasticity] or [damage] "
+                         "table); on one rank every solver runs (docs/scaling.md)")
 
 
 # --- the rank's arrays in the kernel's numbering ----------------------------------------------------
@@ -74,7 +74,7 @@ def kernel_nodal(part, values) -> np.ndarray:
 
 def owned_force(part, nodal: np.ndarray) -> np.ndarray:
     """(3 n_local,) a nodal force in the kernel's numbering on the nodes this rank steps, zero on its
-    ghosts (pyfem.static.local_force's convention: each force acts once, where its node is stepped)."""
+    ghosts (each force acts once, where its node is stepped)."""
     force = np.array(nodal, dtype=np.float64).reshape(part.n_local, 3)
     force[part.n_owned:] = 0.0
     return force.reshape(-1)

@@ -102,7 +102,7 @@ class ElementArrays:
 
     def subset(self, rows: np.ndarray, node_numbers: np.ndarray | None = None) -> "ElementArrays":
         """The arrays of the cells at `rows` (indices into `cells`); node_numbers: the new number of
-        every node (an MPI rank's local numbering, pyfem/distributed.py), None: unchanged."""
+        every node (an MPI rank's local numbering, pyfem/distributed_model.py), None: unchanged."""
         cell_nodes = self.cell_nodes[rows]
         if node_numbers is not None:
             cell_nodes = node_numbers[cell_nodes]

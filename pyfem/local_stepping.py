@@ -289,7 +289,7 @@ def cell_levels(node_levels: np.ndarray, cell_nodes: np.ndarray) -> np.ndarray:
 def region_cell_levels(arrays, node_levels: np.ndarray, cell_cap: np.ndarray | None = None) -> np.ndarray:
     """int32 level of each cell of a region (`ElementArrays`): `cell_levels`, made finer where
     `cell_cap` (per model cell) says. The serial stepper's parts (`level_components`) and an MPI rank's
-    (pyfem/distributed.py) split a region so."""
+    (pyfem/distributed_lts.py) split a region so."""
     levels = cell_levels(node_levels, arrays.cell_nodes)
     if cell_cap is not None:
         levels = np.minimum(levels, cell_cap[arrays.cells]).astype(np.int32)
@@ -455,7 +455,7 @@ def load_component_parts(whole, parts: list) -> None:
     """Loads the state of `whole` (a component of a region's cells: the static stage's, rebased) into
     `parts` [(rows, component)] (`LevelComponents.parts`): each part's cells' per-point state and
     initial stress; the stored energy and dissipation go to the first part (the account is a sum)."""
-    from pyfem.distributed import state_rows
+    from pyfem.ranks import state_rows
 
     state = whole.save_state()
     n_cells = sum(len(rows) for rows, _ in parts)
@@ -473,7 +473,7 @@ def load_component_parts(whole, parts: list) -> None:
 def load_pair_parts(whole, parts: list, pair_nodes: np.ndarray) -> None:
     """Loads the state of `whole` (ContactPairs of all the model's pairs: the static stage's, rebased)
     into `parts` [(pair rows, ContactPairs)] (`LevelPairs.parts`); pair_nodes (n_pairs, 2)."""
-    from pyfem.distributed import pair_blocks, state_rows, unique_slots
+    from pyfem.ranks import pair_blocks, state_rows, unique_slots
 
     state = whole.save_state()
     n_pairs = len(pair_nodes)
@@ -702,7 +702,7 @@ def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chun
     factor per global step), "stable", "seconds"}; stable when growth < STABILITY_RATIO, which
     catches amplitude growth of ~0.2 % per global step and more with the defaults. `rows`: the
     kernel steps these dofs of the model's n_dofs only (an MPI rank's share, owned then ghosts,
-    pyfem.distributed.check_stability_on_ranks), from the same random state. `state`: the start
+    pyfem.distributed_lts.check_stability_on_ranks), from the same random state. `state`: the start
     displacement (STABILITY_AMPLITUDE times a pseudo-random vector, the kernel's dofs) instead of the
     seeded one (the distributed model's, a function of the node coordinates:
     pyfem.distributed_lts.check_stability_on_ranks)."""

@@ -395,12 +395,6 @@ class RunWriter:
         self.energy_samples: list[list[float]] = []
         self.contact_on = simulation.contact_arrays is not None
         self.nonlinear = simulation.nonlinear  # pyfem.elements.NonlinearRegions or None
-        # The monitors' law values (kernel points -> dict as NonlinearRegions.point_values); None:
-        # read from self.nonlinear. Under mpirun the ranks' own components (pyfem.distributed).
-        self.point_values = None
-        # Under mpirun, a run that failed between two whole merges: the points' state on rank 0 is
-        # that of the last field sample, so the summary leaves the material regions out.
-        self.points_stale = False
         self.energy_columns = energy_columns(self.contact_on, self.nonlinear is not None)
         self.pair_rows: list[np.ndarray] = []       # each (n_pair_monitors, len(PAIR_COLUMNS))
         self.state_count_samples: list[np.ndarray] = []  # each (4,)
@@ -613,23 +607,6 @@ class RunWriter:
         """Whether the next sample() writes fields (every xdmf interval)."""
         return bool(self.xdmf_every) and self._sample_count % self.xdmf_every == 0
 
-    def sampled_nodes(self) -> np.ndarray:
-        """The nodes whose u, v, a every sample() reads (the monitors' cells, the contact pairs, the
-        deformed section); fields, the run's summary and checkpoints read every node and point.
-        Under mpirun the ranks gather these at every sample and the whole state only where it is
-        read (pyfem.distributed.DistributedStepper)."""
-        sim = self.simulation
-        nodes = [np.asarray(self.deformation.nodes, dtype=np.int64).ravel()]
-        if self.contours is not None:
-            nodes.append(self.contours.nodes())
-        if sim.monitor_nodes is not None:
-            nodes.append(np.asarray(sim.monitor_nodes, dtype=np.int64).ravel())
-        if sim.monitor_stress is not None:
-            nodes.append(np.asarray(sim.monitor_stress.nodes, dtype=np.int64).ravel())
-        if sim.contact_arrays is not None:
-            nodes.append(np.asarray(sim.contact_arrays["pairs"], dtype=np.int64).ravel())
-        return np.unique(np.concatenate(nodes))
-
     def flush(self) -> None:
         """Writes the queued history rows to disk and the time reached to run.json."""
         self._last_flush = flush_run(self._histories, self._summary, self.times, self.out_dir)
@@ -652,7 +629,7 @@ class RunWriter:
         stress = sim.monitor_stress
         kernel = None
         if stress is not None and stress.kernel_points is not None:  # the law's values where the cell is nonlinear
-            kernel = (self.point_values or self.nonlinear.point_values)(stress.kernel_points)
+            kernel = self.nonlinear.point_values(stress.kernel_points)
         return monitor_rows(t, u, v, a, sim.monitor_nodes, sim.monitor_weights, sim.freefield, self._monitor_points,
                             stress, kernel)
 
@@ -687,14 +664,13 @@ class RunWriter:
         return pair_values(self.simulation.contact_pairs, self.simulation.contact_arrays["normal"], u)
 
     def finish(self, wall_seconds: float, loop_seconds: float, phases: dict | None = None,
-               checkpoints: dict | None = None, mpi: dict | None = None) -> dict:
+               checkpoints: dict | None = None) -> dict:
         """Closes histories and fields, draws the plots, writes the final run.json; returns the summary.
 
         phases: pyfem.solver.phase_split of the time loop (run.json "time_per_step": ms per step and
         share of the loop for the kernel's update, element_loop, input_forces, stiffness, contact,
         and output (writing the samples) and other). checkpoints: run.json "checkpoints" (written,
-        seconds, interval) of this sitting. mpi: run.json "mpi" under mpirun (pyfem.distributed.
-        DistributedStepper.describe). Times are over every sitting of a resumed run."""
+        seconds, interval) of this sitting. Times are over every sitting of a resumed run."""
         self._close_histories()
         self._close_fields()
         summary = self._summary
@@ -707,11 +683,8 @@ class RunWriter:
             summary["time_per_step"] = phases
         if checkpoints is not None:
             summary["checkpoints"] = checkpoints
-        if mpi:
-            summary["mpi"] = mpi
         # The process's peak resident memory so far: for `pyfem run`, the model build, static stage
         # and run of this sitting; a run called in-process after other work includes that work.
-        # Under mpirun rank 0's; every rank's in "mpi".
         summary["peak_memory_mib"] = round(peak_memory_mib(), 1)
         self._partial_summary()
         self._plots()
@@ -726,11 +699,7 @@ class RunWriter:
         times = np.array(self.times)
         summary["energy"] = self._energy_summary(np.array(self.energy_samples), self.energy_columns)
         summary["monitors"] = self._monitor_peaks(times)
-        if self.nonlinear is not None and self.points_stale:
-            summary.pop("nonlinear_regions", None)
-            summary["nonlinear_regions_note"] = ("not gathered: under mpirun the run failed between two merges of the "
-                                                 "whole state; fields.xdmf's last sample holds the material state")
-        elif self.nonlinear is not None:
+        if self.nonlinear is not None:
             # Damage and plastic strain never decrease: the final state holds the peaks.
             summary["nonlinear_regions"] = self.nonlinear.region_summary()
         if self.contact_on:

@@ -110,7 +110,7 @@ def mass_of_row_sums(row_sums: np.ndarray, frequency_factor: float = 1.0, safety
 
 class WholeModel:
     """relax's arithmetic on one process: its arrays hold every dof (the serial stage). Under mpirun
-    pyfem.distributed.DistributedStage offers the same calls on each rank's owned dofs, with sums
+    pyfem.distributed_stage.RankSpace offers the same calls on each rank's owned dofs, with sums
     over the ranks (allreduce) and rank 0's decisions (broadcast)."""
 
     def owned_rows(self, n_dofs: int):
@@ -136,8 +136,8 @@ class WholeModel:
 
 class RankSums:
     """relax's arithmetic when each MPI rank holds its owned dofs (`comm`: the ranks): dot products
-    and norms summed over the ranks, rank 0's decisions for every rank. The subclasses
-    (pyfem.distributed.DistributedStage, pyfem.distributed_stage.RankSpace) say which rows a rank
+    and norms summed over the ranks, rank 0's decisions for every rank. The subclass
+    pyfem.distributed_stage.RankSpace says which rows a rank
     holds (`owned_rows`) and what relax returns (`whole`)."""
 
     comm = None
@@ -164,7 +164,7 @@ class RankSums:
 
 
 def _default_space(stepper):
-    """relax's `space` when none is given: a DistributedStage is its own, a Stepper the whole model."""
+    """relax's `space` when none is given: a stepper with owned rows is its own, a Stepper the whole model."""
     return stepper if hasattr(stepper, "owned_rows") else WholeModel()
 
 
@@ -196,7 +196,7 @@ def probe_frequency(stepper, mass: np.ndarray, load: np.ndarray, max_steps: int,
     """
     space = space or _default_space(stepper)
     u, result = relax(stepper, mass, load, tolerance, max_steps, floor=floor, space=space)
-    rows = space.owned_rows(len(load))  # relax's result may be whole (a DistributedStage's) or the owned dofs
+    rows = space.owned_rows(len(load))  # the whole model (one rank) or the owned dofs
     internal = np.asarray(load)[rows] - result.out_of_balance[rows]
     omega = space.agreed(_rayleigh(u[rows], internal, np.repeat(mass, 3)[rows], space))
     return (omega if omega > 0.0 else 2.0 * SAFETY / PSEUDO_STEP), result.steps
@@ -217,7 +217,7 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
     Args:
         stepper: pyfem._kernels.Stepper with dt = PSEUDO_STEP and mass `mass`, its constraints,
             the constant load as a force provider, components and contact pairs attached (or, under
-            mpirun, a pyfem.distributed.DistributedStage: the ranks' shares of one).
+            mpirun, a rank's part of one: pyfem/distributed_stage.py).
         mass: (n_nodes,) the stepper's masses.
         load: (n_dofs,) the load the provider applies (N), for the ratio ||r|| / ||f||.
         tolerance: out-of-balance ratio to reach.
@@ -228,7 +228,7 @@ def relax(stepper, mass: np.ndarray, load: np.ndarray, tolerance: float, max_ste
             cancels (nothing excavated) is measured against the stress state's force scale.
         report: None, or called as report(steps, ratio, seconds) every REPORT_SECONDS of wall time.
         space: where relax's arrays live: the whole model in this process (`WholeModel`, the
-            default for a Stepper); or the DistributedStage (the default when it is the stepper):
+            default for a Stepper); or a rank's RankSpace (pyfem/distributed_stage.py):
             each rank steps and checks its owned dofs, the norms and Rayleigh quotients are sums
             over the ranks, the ratio and the damping rank 0's.
 

@@ -604,12 +604,10 @@ SCHEMA = Table({
                                       default=300.0),
     }, "[output]"),
     "parallel": Table({
-        "model": Choice("how the MPI ranks hold the model: \"whole\" (every rank builds the whole model and "
-                        "steps its share) or \"distributed\" (each rank builds and steps only its part of "
-                        "dolfinx's distributed mesh, with contact, a relaxation static stage and local time "
-                        "stepping; not for a linear static stage, one point per cell or quadratic tetrahedra: "
-                        "docs/scaling.md \"The distributed model\")", ("whole", "distributed"),
-                        default="whole"),
+        "model": Choice("how the MPI ranks of `mpirun -n N` (N > 1) hold the model: each rank builds and "
+                        "steps only its part of dolfinx's distributed mesh (docs/scaling.md \"The distributed "
+                        "model\"); \"whole\", every rank building the whole model, was removed: under mpirun "
+                        "every run is the distributed model", ("distributed",), default="distributed"),
     }, "[parallel]"),
     "damping": Table({
         "ratio": Number("damping ratio", "[0, 1)", default=None),

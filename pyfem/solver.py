@@ -526,8 +526,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
 
     from mpi4py import MPI
 
-    # Every rank builds the whole model (pyfem/distributed.py shares the stepping out).
-    model = build_model(scene, MPI.COMM_SELF)
+    model = build_model(scene, MPI.COMM_SELF)  # (under mpirun: pyfem/distributed_model.py)
     mass = np.array(model.mass, dtype=np.float64)
     check_input_faces(scene, model)
     warn_input_medium(scene, model)
@@ -549,9 +548,6 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         try:
             local_stepping.check_supported(scene, beta)
             rows = local_stepping.row_split(nonlinear, "contact" in scene.effects)
-            if MPI.COMM_WORLD.size > 1 and not rows:  # before anything is distributed: every rank says the same
-                raise SceneError("time.local_stepping", True, "false under mpirun with the column split (the ranks "
-                                 "step local time stepping by the row split only, docs/scaling.md)")
             if constraints is not None and "contact" in scene.effects:
                 held = np.intersect1d(constraints.nodes, model.pairs.nodes)
                 if len(held):
@@ -686,17 +682,8 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         return kernel
 
     if simulation.lts_stability is None and not simulation.lts_check_deferred:  # once per model
-        from pyfem.distributed import check_stability_on_ranks, world
-
-        comm = world()
-        # Under mpirun the map the ranks step, each stepping its share, one verdict for every rank: a
-        # collective, which rank 0 reaches in the plan's trial stepper (simulation_plan) and the other
-        # ranks in their make_stepper (the trial's arrays are the simulation's: the same partition).
-        if comm.size > 1:
-            simulation.lts_stability = check_stability_on_ranks(simulation, comm)
-        else:
-            simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
-                                                                      simulation.stiffness.shape[0])
+        simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
+                                                                  simulation.stiffness.shape[0])
     report = simulation.lts_stability
     if report is not None and not report["stable"]:
         if simulation.scene["time"].get("local_stepping") == "auto":
@@ -734,7 +721,7 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
 
 def seismic_input_kernel(arrays: dict):
     """The kernel's SeismicInput from `Simulation.input_arrays` (pyfem/seismic/forces.py), or from
-    an MPI rank's share of them (pyfem/distributed.py)."""
+    an MPI rank's part of them (pyfem/distributed_model.py)."""
     from pyfem import _kernels
 
     return _kernels.SeismicInput(arrays["table_t0"], arrays["table_dt"], arrays["g"], arrays["dg"], arrays["ddg"],
@@ -769,7 +756,7 @@ def kernel_threads() -> int:
 
     from pyfem import _kernels
 
-    from pyfem.distributed import threads_per_rank, world
+    from pyfem.ranks import threads_per_rank, world
 
     given = os.environ.get("OMP_NUM_THREADS", "")
     threads = int(given) if given.isdigit() and int(given) > 0 else len(os.sched_getaffinity(0))
@@ -780,17 +767,11 @@ def kernel_threads() -> int:
     return threads
 
 
-def make_stepper(simulation: Simulation, distribute: bool = True):
-    """The C++ stepper with the force providers the scene calls for, and nothing else. Under
-    `mpirun -n N` (N > 1, `distribute`): a pyfem.distributed.DistributedStepper around it."""
+def make_stepper(simulation: Simulation):
+    """The C++ stepper with the force providers the scene calls for, and nothing else (one rank;
+    under `mpirun -n N` each rank builds its part's: pyfem/distributed_model.py)."""
     from pyfem import _kernels
-    from pyfem.distributed import world
 
-    comm = world()
-    if distribute and comm.size > 1:  # (local time stepping too: each rank's share steps the row split)
-        from pyfem.distributed import DistributedStepper
-
-        return DistributedStepper(simulation, make_stepper(simulation, distribute=False), comm)
     kernel_threads()
     indptr, indices, blocks = bsr_arrays(simulation.stiffness)
     if simulation.node_levels is not None:  # [time] local_stepping (pyfem/local_stepping.py)
@@ -932,7 +913,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     nonlinear = simulation.nonlinear
     kept = None if nonlinear is None else nonlinear.components  # the trial's fresh ones must not replace them
     trial = dataclasses.replace(simulation, static=None, contact_pairs=None)
-    stepper = make_stepper(trial, distribute=False)  # rank 0 alone (the plan is printed there)
+    stepper = make_stepper(trial)
     simulation.lts_stability = trial.lts_stability  # checked once per model (local time stepping)
     if trial.node_levels is None and simulation.node_levels is not None:  # "auto" fell back
         fall_back_to_global_stepping(simulation, trial.lts_stability)
@@ -987,7 +968,6 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
                          + (f" and the record's {simulation.lead_in:.3g} s lead-in before it (t < 0)"
                             if simulation.lead_in > 0.0 else ""),
         **static_stage_estimate(scene, per_step),
-        **distributed_plan(simulation),
     }
 
 
@@ -1006,38 +986,6 @@ def static_stage_estimate(scene: Scene, per_step: float) -> dict:
                                      f"rest, several times that where the rock yields in the stage (a point on the "
                                      f"yield surface costs about 5x one at rest); a stage stops once its "
                                      f"out-of-balance ratio is reached (the coarse case study's after 1 000-2 000 steps)"}
-
-
-def distributed_plan(simulation: Simulation) -> dict:
-    """check's line under `mpirun -n N` (N > 1): how the ranks share the step (pyfem/distributed.py)."""
-    from pyfem import distributed
-
-    comm = distributed.world()
-    if comm.size == 1:
-        return {}
-    parts = distributed.partition(simulation, comm.size)
-    shares = [distributed.share(simulation, parts, rank) for rank in range(comm.size)]
-    owned = [mine.n_owned for mine in shares]
-    ghosts = [len(mine.nodes) - mine.n_owned for mine in shares]
-    stage_words = ""
-    if "static" in simulation.scene:
-        from pyfem.static import uses_relaxation
-
-        stage_words = (", the static stage's relaxation steps shared like the motion's" if uses_relaxation(simulation.scene)
-                       else ", the static stage's PETSc solves shared (a block of rows each)")
-    exchange_words = f"{48 * max(ghosts):,} bytes received per step by the busiest rank"
-    if simulation.node_levels is not None:  # one exchange of v per level and drift (docs/scaling.md section 7)
-        levels = np.asarray(simulation.node_levels)
-        top = int(levels.max())
-        per_fine = [distributed.level_bytes_per_fine_step(
-            [int(np.count_nonzero(levels[mine.nodes[mine.n_owned:]] == k)) for k in range(top + 1)]) for mine in shares]
-        exchange_words = (f"local time stepping on every rank: {int(round(max(per_fine))):,} bytes received per fine "
-                          f"step by the busiest rank, in {2 ** (top + 1) - 1} exchanges per global step")
-    return {"MPI ranks": f"{comm.size}: owned nodes {owned}, ghost nodes {ghosts} ({exchange_words}); "
-                         "every rank builds the whole model"
-                         + stage_words + "; the time estimates above are one rank's for the whole model: "
-                         f"shared by {comm.size} ranks, expect at best 1/{comm.size} of them (the coarse case 3 on "
-                         "2 ranks of one 2-core machine: its time loop 1.86x and its static stage 1.84x one rank's)"}
 
 
 def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
@@ -1096,8 +1044,8 @@ def lts_stability_line(report: dict) -> str:
 
 PHASES = ("update", "element_loop", "input_forces", "stiffness", "contact")
 """The kernel's phases of a step (Stepper.phase_seconds; cpp_kernels/stepper.hpp PhaseTimes)."""
-DISTRIBUTED_PHASES = ("exchange", "merge")
-"""Under mpirun: the ghost exchange of every step, and gathering the ranks' state at every sample."""
+DISTRIBUTED_PHASES = ("exchange",)
+"""Under mpirun: the ghost exchange of every step (pyfem/distributed_model.py)."""
 
 
 def phase_split(phase_seconds: dict, loop_seconds: float, output_seconds: float | None = None) -> dict:
@@ -1114,7 +1062,7 @@ def phase_split(phase_seconds: dict, loop_seconds: float, output_seconds: float 
     """
     steps = max(1, int(phase_seconds["steps"]))
     seconds = {name: float(phase_seconds[name]) for name in PHASES}
-    for name in DISTRIBUTED_PHASES:  # under mpirun (rank 0's times)
+    for name in DISTRIBUTED_PHASES:  # under mpirun
         if phase_seconds.get(name):
             seconds[name] = float(phase_seconds[name])
     if output_seconds is not None:
@@ -1186,25 +1134,23 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     Returns:
         The run summary (also written to run.json).
     """
-    if (scene.get("parallel") or {}).get("model") == "distributed":  # each rank builds its part only
+    from pyfem.ranks import world
+
+    if world().size > 1:  # under mpirun each rank builds and steps its part only
         from pyfem import distributed_model
 
         return distributed_model.run(scene, out_dir, on_plan=on_plan, progress=progress, resume=resume)
     from tqdm import tqdm
 
     from pyfem import checkpoint as checkpoints
-    from pyfem.distributed import SilentWriter, world
     from pyfem.interrupts import RunInterrupted, StopSignals
     from pyfem.output import RunWriter
 
-    comm = world()
-    root = comm.rank == 0  # under mpirun rank 0 writes everything (pyfem/distributed.py)
     wall_start = time.perf_counter()
     saved = checkpoints.read_checkpoint(out_dir) if resume else None  # refused before any work
     if saved is not None:
         saved.check_scene(scene)  # another scene is refused before the model is built
-    # Under mpirun a stop signal is acted on by every rank at the same sample (`stop_together`).
-    with StopSignals(always_defer=comm.size > 1) as signals:
+    with StopSignals() as signals:
         from pyfem import static_output
 
         # A resumed run takes the stage from static/hand_over.npz instead of solving it again.
@@ -1238,7 +1184,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                 # The same model and levels (the fingerprint): the LTS map's check is not run again
                 # (852 s on the paper-scale case 1); run.json keeps the first sitting's report.
                 simulation.lts_stability = saved.meta["lts_stability"]
-        if on_plan is not None and root:
+        if on_plan is not None:
             plan = simulation_plan(simulation)
             if saved is not None:  # the plan's estimates are a whole run's: say what this sitting does
                 stage_words = ("" if "static" not in scene else
@@ -1247,7 +1193,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                 plan = {"resuming": f"from the checkpoint at t = {saved.t:.6g} s of {scene['time']['duration']:g} s"
                                     f"{stage_words}", **plan}
             on_plan(plan)
-        writer = RunWriter(out_dir, simulation) if root else SilentWriter(out_dir)
+        writer = RunWriter(out_dir, simulation)
         # the set-up counts towards the first checkpoint (a long stage is not solved twice)
         clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"],
                                             elapsed=time.perf_counter() - wall_start)
@@ -1255,12 +1201,6 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         stepper = None
         try:
             stepper = make_stepper(simulation)
-            if comm.size > 1:  # the ranks gather at each sample what the writer reads then
-                stress = simulation.monitor_stress
-                stepper.set_samples(comm.bcast(writer.sampled_nodes() if root else None, root=0),
-                                    None if stress is None else stress.kernel_points)
-                if root:
-                    writer.point_values = stepper.monitor_point_values
             n = simulation.stiffness.shape[0]
             ts = simulation.time_step
             n_outputs = simulation.n_steps // ts.steps_per_output
@@ -1268,7 +1208,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             if saved is None:
                 with signals.deferred():
                     writer.start()
-                    if simulation.static is not None and root:  # static/ and the stage's stress in the fields
+                    if simulation.static is not None:  # static/ and the stage's stress in the fields
                         from pyfem.static_output import write_static_outputs
 
                         write_static_outputs(writer)
@@ -1282,7 +1222,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             else:
                 with signals.deferred():
                     writer.resume(saved.meta["writer"], saved.writer, saved.t)
-                    if simulation.static is not None and root:
+                    if simulation.static is not None:
                         static_output.static_stress_in_fields(writer)
                         if not isinstance(simulation.static, static_output.SavedStage):  # solved again:
                             static_output.write_hand_over(Path(out_dir) / "static", simulation)  # once
@@ -1305,8 +1245,6 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                         "phases": {key: previous["phases"].get(key, 0.0) + value for key, value in phases.items()}}
 
             def checkpoint_now() -> None:
-                if not root:  # rank 0 holds the merged state of every rank
-                    return
                 began = time.perf_counter()
                 writer_meta, writer_arrays = writer.checkpoint_state()
                 meta = {"fingerprint": checkpoints.model_fingerprint(simulation), "t": t, "outputs_done": done,
@@ -1329,22 +1267,14 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                         stepper.run(u, v, a, ts.steps_per_output, origin + done * ts.steps_per_output * ts.dt)
                         done += 1
                         t = origin + done * ts.steps_per_output * ts.dt
-                        if comm.size > 1 and comm.bcast(root and (done == n_outputs or writer.next_sample_writes_fields()),
-                                                        root=0):
-                            stepper.gather_whole(u, v, a)  # fields and the final summary read every point
                         reactions = stepper.reactions() if simulation.constraints is not None else None
                         if not np.isfinite(u).all():
                             raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
                         output_start = time.perf_counter()
                         writer.sample(t, u, v, a, stepper.energy(), reactions)
                         output_seconds += time.perf_counter() - output_start
-                        due = clock.due() if comm.size == 1 else comm.bcast(clock.due(), root=0)
-                        if due and done < n_outputs:
-                            if comm.size > 1:
-                                stepper.gather_whole(u, v, a)
+                        if clock.due() and done < n_outputs:
                             write_checkpoint()
-                        if comm.size > 1 and signals.stop_together(comm):
-                            stepper.gather_whole(u, v, a)  # the interrupted run's checkpoint and summary
                     bar.update()
                     if progress is not None:
                         progress(t)
@@ -1352,10 +1282,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
             phases = phase_split(total["phases"], total["loop_seconds"], total["output_seconds"])
             summary = writer.finish(wall_seconds=total["wall_seconds"], loop_seconds=total["loop_seconds"],
                                     phases=phases, checkpoints={"written": clock.count, "seconds": clock.seconds,
-                                                                "interval": clock.interval},
-                                    mpi=stepper.describe() if comm.size > 1 else None)
-            if root:
-                (Path(out_dir) / checkpoints.CHECKPOINT_NAME).unlink(missing_ok=True)  # finished: nothing to resume
+                                                                "interval": clock.interval})
+            (Path(out_dir) / checkpoints.CHECKPOINT_NAME).unlink(missing_ok=True)  # finished: nothing to resume
             return summary
         except KeyboardInterrupt as error:
             interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
@@ -1375,13 +1303,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         except BaseException as error:
             if writer.started:
                 with signals.deferred(reraise=False):
-                    if comm.size > 1 and stepper is not None and not stepper.whole:
-                        writer.points_stale = True  # no collective now: the ranks are being aborted
                     writer.fail(f"{type(error).__name__}: {error}")
                 reached = f"t = {writer.times[-1]:.6g} s" if writer.times else "no sample"
                 error.add_note(f"run failed; the results up to {reached} are kept in {writer.out_dir}")
-            if comm.size > 1:  # the other ranks wait in a message that will never come: end them all
-                from pyfem.distributed import abort_all
-
-                abort_all(error)
             raise

@@ -456,39 +456,26 @@ class LinearSolver:
 
     Direct (MUMPS Cholesky when PETSc has MUMPS, else PETSc's LU) up to DIRECT_SOLVER_LIMIT
     unknowns or when asked; above, CG with smoothed-aggregation AMG (GAMG) given the rigid-body
-    modes as near null space, to the relative residual `tolerance`.
-
-    Under `mpirun -n N` (`comm` of more than one rank) the ranks solve it together: each holds a
-    contiguous block of the matrix's rows (PETSc's MPIAIJ; the matrix, replicated, is cut here),
-    MUMPS factorises in parallel (PETSc's own LU is serial only: without MUMPS the ranks use CG +
-    GAMG), and every rank receives the whole solution.
+    modes as near null space, to the relative residual `tolerance`. One rank (under mpirun the
+    distributed model refuses a linear stage: pyfem/distributed_stage.py).
     """
 
     def __init__(self, matrix: sp.csr_matrix, tolerance: float, choice: str = "auto",
-                 near_null_space: np.ndarray | None = None, comm=None):
+                 near_null_space: np.ndarray | None = None):
         from petsc4py import PETSc
 
         n = matrix.shape[0]
         self.method = choice if choice != "auto" else ("direct" if n <= DIRECT_SOLVER_LIMIT else "iterative")
-        parallel = comm is not None and comm.size > 1
         has_mumps = PETSc.Sys.hasExternalPackage("mumps")
-        if parallel and self.method == "direct" and not has_mumps:
-            self.method = "iterative"
         self.tolerance = tolerance
         self.matrix = matrix
-        self.comm = comm if parallel else None
-        # This rank's rows [first, last): all of them on one rank.
-        rank, size = (comm.rank, comm.size) if parallel else (0, 1)
-        self.first, self.last = n * rank // size, n * (rank + 1) // size
-        petsc_comm = PETSc.COMM_WORLD if parallel else PETSc.COMM_SELF
+        petsc_comm = PETSc.COMM_SELF
         self._petsc_comm = petsc_comm
         matrix = matrix.tocsr()
         matrix.sort_indices()
-        rows = matrix[self.first:self.last]
-        local = self.last - self.first
-        csr = (rows.indptr.astype(PETSc.IntType), rows.indices.astype(PETSc.IntType),
-               np.ascontiguousarray(rows.data, dtype=np.float64))
-        self._A = PETSc.Mat().createAIJ(size=((local, n), (local, n)), csr=csr, comm=petsc_comm)
+        csr = (matrix.indptr.astype(PETSc.IntType), matrix.indices.astype(PETSc.IntType),
+               np.ascontiguousarray(matrix.data, dtype=np.float64))
+        self._A = PETSc.Mat().createAIJ(size=(n, n), csr=csr, comm=petsc_comm)
         self._A.assemble()
         ksp = PETSc.KSP().create(petsc_comm)
         ksp.setOperators(self._A)
@@ -513,19 +500,16 @@ class LinearSolver:
                 self._A.setNearNullSpace(self._null_space)
             ksp.setTolerances(rtol=tolerance, atol=0.0, max_it=max(1000, 10 * int(math.sqrt(n))))
             self.name = "iterative (CG + GAMG)"
-        if parallel:
-            self.name += f" on {size} MPI ranks"
         self._ksp = ksp
 
     def _vector(self, whole: np.ndarray):
-        """A PETSc vector of this rank's rows of `whole` (n,) (copied)."""
+        """A PETSc vector of `whole` (n,) (copied)."""
         from petsc4py import PETSc
 
-        part = np.array(whole[self.first:self.last], dtype=np.float64)
-        return PETSc.Vec().createWithArray(part, size=(len(part), len(whole)), comm=self._petsc_comm)
+        return PETSc.Vec().createWithArray(np.array(whole, dtype=np.float64), comm=self._petsc_comm)
 
     def solve(self, rhs: np.ndarray) -> tuple[np.ndarray, int, float]:
-        """(w, iterations, ||f - K w|| / ||f||); w whole on every rank.
+        """(w, iterations, ||f - K w|| / ||f||).
 
         Raises:
             RuntimeError: the factorisation failed (a singular stiffness: the model is not held)
@@ -545,8 +529,6 @@ class LinearSolver:
                                "singular when the held faces leave the model free to move as a rigid body; "
                                "hold more faces ([static.boundary])") from None
         w = x.getArray().copy()
-        if self.comm is not None:  # every rank's rows, in rank order: the whole solution everywhere
-            w = np.concatenate(self.comm.allgather(w))
         residual = float(np.linalg.norm(rhs - self.matrix @ w)) / norm
         iterations = max(1, self._ksp.getIterationNumber()) if self.method == "iterative" else 1
         # A direct solve is not iterated to the tolerance: a residual far above round-off there means
@@ -661,12 +643,10 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
     Returns:
         StaticState (stresses are added by `hand_over`).
     """
-    from pyfem.distributed import world
     from pyfem.elements import linear_stiffness
 
     start = time.perf_counter()
     check_linear(scene)
-    comm = world()  # under mpirun the ranks share each solve (LinearSolver)
     settings = scene["static"]
     setup = _stage_setup(scene, model)
     boundary, installed_regions, installed_cells, loads = (setup.boundary, setup.installed_regions,
@@ -705,7 +685,7 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
         if key not in solver_cache:
             reduced = (T.T @ (K @ T)).tocsr()
             solver_cache[key] = LinearSolver(reduced, stage_tolerance(scene), settings["solver"],
-                                             near_null_space=T.T @ rigid_body_modes(coordinates), comm=comm)
+                                             near_null_space=T.T @ rigid_body_modes(coordinates))
         solver = solver_cache[key]
         w, iterations, residual = solver.solve(T.T @ load)
         u = T @ w
@@ -748,7 +728,7 @@ def solve_static_stage(scene: typing.Mapping, model) -> StaticState:
                        out_of_balance=out_of_balance,
                        pair_forces=pair_forces, face_support_forces=face_support,
                        face_in_situ_tractions=face_traction, boundary=boundary,
-                       seconds=time.perf_counter() - start, settings=dict(settings, ranks=comm.size))
+                       seconds=time.perf_counter() - start, settings=dict(settings, ranks=1))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -869,7 +849,6 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     Returns:
         StaticState, with `components` and `contact` for the dynamic run.
     """
-    from pyfem.distributed import DistributedStage, partition, world
     from pyfem.elements import add_matrices, linear_stiffness, plastic_frequency_factor, scene_laws
     from pyfem.relaxation import probe_frequency, ramp_length, relax, scaled_mass
     from pyfem.solver import make_contact_pairs
@@ -918,17 +897,9 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     stage_pairs = stage_pair_arrays(scene, simulation.contact_arrays)
     contact = None if stage_pairs is None else make_contact_pairs(stage_pairs)
 
-    # Under mpirun each stage is stepped by the ranks, cut as the dynamic run will be (its partition).
-    comm = world()
-    parts = partition(simulation, comm.size) if comm.size > 1 else None
-
     def stage_stepper(stiffness, load, active, regions, stage_contact, ramp=0.0):
-        """The stage's kernel stepper: serial, or shared among the ranks (`DistributedStage`)."""
-        serial = _stage_stepper(stiffness, mass, constraints, load, active, stage_contact, ramp)
-        if parts is None:
-            return serial
-        return DistributedStage(simulation, parts, serial, stiffness, mass, constraints, load, ramp, regions,
-                                stage_pairs, comm)
+        """The stage's kernel stepper (one rank; under mpirun pyfem/distributed_stage.py)."""
+        return _stage_stepper(stiffness, mass, constraints, load, active, stage_contact, ramp)
 
     relaxation = settings["relaxation"]
     f_exc = loads.excavation.ravel()
@@ -950,8 +921,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         elastic = linear_stiffness(model, installed_cells) if len(installed_cells) else model.stiffness
         probe_contact = None if stage_pairs is None else make_contact_pairs(stage_pairs)
         probe = stage_stepper(elastic, probe_load, [], [], probe_contact)
-        omega, probe_steps = probe_frequency(probe, mass, probe_load, max_steps, floor=floor,
-                                             space=None if parts is None else probe)
+        omega, probe_steps = probe_frequency(probe, mass, probe_load, max_steps, floor=floor)
         ramp = ramp_length(omega)
     stages, increments, reactions = [], [], []
     carried = np.zeros(3 * n_nodes)
@@ -972,11 +942,9 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         active_regions = [region for region, component in zip(element_regions, components) if component is not None]
         stepper = stage_stepper(stiffness, load, active, active_regions, contact, ramp)
         u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor,
-                          space=None if parts is None else stepper, report=lambda steps, ratio, seconds, name=name: print(
+                          report=lambda steps, ratio, seconds, name=name: print(
                               f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), "
                               f"out-of-balance {ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True))
-        if parts is not None:  # the next stage, the summary and the hand-over read the serial stepper's state
-            stepper = stepper.gathered()
         for component in active:
             component.rebase()
         if contact is not None:
@@ -989,7 +957,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         magnitude = np.linalg.norm(u.reshape(-1, 3), axis=1)
         worst = int(np.argmax(magnitude))
         stage_regions = {} if nonlinear is None else nonlinear.region_summary(components)
-        solver_words = "dynamic relaxation" + ("" if parts is None else f" on {comm.size} MPI ranks")
+        solver_words = "dynamic relaxation"
         stage_seconds = time.perf_counter() - stage_start
         print(f"static stage '{name}': {'converged' if result.converged else 'NOT converged'} after {result.steps} "
               f"relaxation steps, out-of-balance {result.residual:.2e} (tolerance {tolerance:g}), "
@@ -1028,7 +996,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
                                                 for face in model.faces},
                         boundary=boundary, seconds=time.perf_counter() - start,
                         settings=dict(settings, tolerance=tolerance, load_ramp_steps=ramp,
-                                      probe_steps=probe_steps, ranks=comm.size),
+                                      probe_steps=probe_steps, ranks=1),
                         components=components, contact=contact)
     state.cell_state_first = cell_state_first
     state.cell_state = _cell_state(model, nonlinear, components)
@@ -1195,25 +1163,12 @@ def hand_over_force_provider(force: np.ndarray, ramp: float = 0.0):
     return _kernels.HeldForce(nodes, np.ascontiguousarray(nodal[nodes]), float(ramp))
 
 
-def add_hand_over_force(stepper, simulation, nodes=None, local_of=None, n_local: int = 0) -> None:
-    """Adds the stage's out-of-balance force to the stepper (nothing without a solved stage). An MPI
-    rank's share (pyfem/distributed.py): only at `nodes` (its owned nodes), renumbered by
-    `local_of`, in a force vector of its n_local nodes."""
+def add_hand_over_force(stepper, simulation) -> None:
+    """Adds the stage's out-of-balance force to the stepper (nothing without a solved stage)."""
     state = getattr(simulation, "static", None)
     if state is None or not np.any(state.hand_over_force):
         return
-    force = state.hand_over_force
-    if nodes is not None:
-        force = local_force(force, nodes, local_of, n_local)
-    stepper.add_provider(hand_over_force_provider(force))
-
-
-def local_force(force: np.ndarray, nodes: np.ndarray, local_of: np.ndarray, n_local: int) -> np.ndarray:
-    """(3 n_local,) the force (3n,) (N) at `nodes` only (an MPI rank's owned nodes), renumbered by
-    `local_of` into a vector of the rank's n_local nodes (zero elsewhere)."""
-    local = np.zeros((n_local, 3))
-    local[local_of[nodes]] = np.asarray(force, dtype=np.float64).reshape(-1, 3)[nodes]
-    return local.reshape(-1)
+    stepper.add_provider(hand_over_force_provider(state.hand_over_force))
 
 
 def plan_report(scene: typing.Mapping, model) -> dict:

@@ -9,8 +9,8 @@ import sys
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "pyfem"
 
 KNOWN_CYCLE = {
-    "pyfem.distributed", "pyfem.distributed_lts", "pyfem.distributed_model", "pyfem.distributed_pairs",
-    "pyfem.distributed_stage", "pyfem.local_stepping", "pyfem.solver", "pyfem.static", "pyfem.static_output",
+    "pyfem.distributed_lts", "pyfem.distributed_model", "pyfem.distributed_stage", "pyfem.solver", "pyfem.static",
+    "pyfem.static_output",
 }
 
 

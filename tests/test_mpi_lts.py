@@ -1,44 +1,36 @@
-"""Local time stepping on the MPI ranks (issue 13, docs/scaling.md "Local time stepping on the
-ranks"): `mpirun -n N python3 -m pyfem run SCENE` with `[time] local_stepping` steps each rank's
-share by the row split, the ghosts of each rate level taking their owners' velocity before each of
-that level's drifts (cpp_kernels/local_stepper.hpp LocalStepper.set_partition, pyfem/distributed.py).
+"""Local time stepping on the MPI ranks (docs/scaling.md "Local time stepping on the distributed
+model"): `mpirun -n N python3 -m pyfem run SCENE` with `[time] local_stepping` steps each rank's part
+of dolfinx's mesh by the row split, the ghosts of each rate level taking their owners' velocity before
+each of that level's drifts (cpp_kernels/local_stepper.hpp LocalStepper.set_partition,
+pyfem/distributed_lts.py: no rank holds the whole model).
 
-The user's models, with local stepping forced on (`time.local_stepping=true`):
+The user's models, with local stepping forced on (`time.local_stepping=true`), against the serial
+local stepping:
 - the tunnel of a user's gmsh script (tests/scenes/mpi_tunnel_tet.toml: tetrahedra, 0.4 m at the
   wall to 5 m in the far field, three rate levels; roller faces with reactions, viscoelastic
-  boundaries, a vertical SV wavelet): 2 and 3 ranks against the serial local stepping, every history
-  to test_mpi's tolerances (the cavity's net forces: NET_FORCE_TOLERANCE);
+  boundaries, a vertical SV wavelet) on 2 and 3 ranks: the serial levels and step, every history to
+  the tunnel's tolerances (its net forces: tests/test_distributed_model.py TOLERANCES);
 - the real case-3 scene on a small mesh (tests/test_case_study_stage.py SMALL_MODEL): the static
-  stage (shared by the ranks), then 0.3 s of the record's strong part at 0.05 g with three rate
+  stage (on the ranks' parts), then 0.3 s of the record's strong part at 0.05 g with three rate
   levels, the rock yielding at its levels, pairs sliding at theirs, the lining's concrete law; the
-  interfaces' wear off. 2 ranks against the serial run (3 take the tunnel's paths), to the stage test's tolerances
-  (test_mpi_stage STAGE_ROUNDOFF: the stage's state is summed in another order by the ranks).
-  With the wear on, the same window is not reproducible from one rank count to another, nor from
-  one run to a run whose record is scaled by 1 + 2e-12: the wear slips pairs held at their limit
-  and the slip cracks the lining, a softening that amplifies any difference about tenfold every
-  0.02 s (docs/scaling.md "What a rank count can change"); with either the wear or the lining's
-  cracking off, the ranks agree to round-off (tested here without the wear).
-- kill -9 of a 2-rank run after its first checkpoint and `--resume` on 2 ranks: the histories of
-  the uninterrupted 2-rank run (the checkpoint is the serial stepper's); a serial checkpoint resumed
-  on 2 ranks continues to the serial run's histories.
-
-The distributed model (`parallel.model = "distributed"`, pyfem/distributed_lts.py: no rank holds the
-whole model) against the same serial runs:
-- its levels node for node and its set-up check's verdicts (the graded mesh, 2 and 3 ranks);
-- the tunnel on 2 and 3 ranks and the small case 3 (stage, rock yielding, pairs sliding, lining) on 2,
-  to the tolerances above;
+  interfaces' wear off. 2 ranks, to the stage test's tolerances (test_mpi_stage STAGE_ROUNDOFF: the
+  stage's state is summed in another order by the ranks). With the wear on, the same window is not
+  reproducible from one rank count to another, nor from one run to a run whose record is scaled by
+  1 + 2e-12: the wear slips pairs held at their limit and the slip cracks the lining, a softening
+  that amplifies any difference about tenfold every 0.02 s (docs/scaling.md "What a rank count can
+  change"); with either the wear or the lining's cracking off, the ranks agree to round-off;
+- its levels node for node and its set-up check's verdicts (the graded mesh, 3 ranks; 2 slow);
 - the small case 3 killed (kill -9) on 2 ranks and resumed on 3 (its LocalStepper's state keyed by
   position): the uninterrupted 2-rank run's histories to the stage's round-off (the resume solves the
   stage again on 3 ranks);
-- `check` prints its levels, and "auto" decides as the whole model does.
+- `check` prints its levels, and "auto" decides as the serial run does.
 """
 import numpy as np
 import pytest
 
-from pyfem.compare import histories, largest_differences, relative_difference, scales
+from pyfem.compare import largest_differences
 from test_case_study_stage import NO_LEAD_IN, SMALL_MODEL
-from test_mpi import (MPIRUN, NET_FORCE_TOLERANCE, TOLERANCE, assert_equal_to_serial, killed_and_resumed, pyfem_run,
-                      summary)
+from test_mpi import MPIRUN, TOLERANCE, pyfem_run, summary
 from test_mpi_stage import STAGE_ROUNDOFF
 from test_distributed_model import TOLERANCES as DISTRIBUTED_TOLERANCES
 
@@ -46,7 +38,6 @@ from test_distributed_model import TOLERANCES as DISTRIBUTED_TOLERANCES
 pytestmark = pytest.mark.usefixtures("mpi_launcher")
 
 LOCAL = ("--set", "time.local_stepping=true")
-DISTRIBUTED = ("--set", "parallel.model=distributed")
 TUNNEL = "tests/scenes/mpi_tunnel_tet.toml"
 CASE3 = "workflows/scenes/case3_contact_coarse.toml"
 # The record's strong part (El Centro from 1.8 s) at 0.05 g after a 0.05 s lead-in, the wear off.
@@ -76,64 +67,38 @@ def assert_shared_parts(run: dict, serial: dict, ranks: int) -> None:
     assert checked["global_steps"] == alone["global_steps"]
 
 
-def assert_shared(run: dict, serial: dict, ranks: int) -> None:
-    mpi = run["mpi"]
-    assert mpi["ranks"] == ranks and sum(mpi["owned_nodes"]) == serial["nodes"]
-    assert all(n > 0 for n in mpi["ghost_nodes"]) and all(b > 0 for b in mpi["bytes_sent_per_step"])
-    # The set-up check of the LTS map ran on the ranks' shares and found the serial check's growth
-    # (the same map and random state; the energy summed in another order).
-    checked, alone = run["local_stepping_stability"], serial["local_stepping_stability"]
-    assert checked["ranks"] == ranks and "ranks" not in alone and checked["stable"]
-    assert checked["global_steps"] == alone["global_steps"]
-    assert checked["growth"] == pytest.approx(alone["growth"], rel=1e-9)
-
-
 @pytest.fixture(scope="module")
 def tunnel_runs(tmp_path_factory):
-    """{ranks or ("distributed", ranks): run directory} of the tunnel, each run when first read."""
+    """{ranks: run directory} of the tunnel (1: serial), each run when first read."""
     from conftest import RunsOnDemand
 
     base = tmp_path_factory.mktemp("mpi_lts_tunnel")
 
-    def make(key):
-        distributed = isinstance(key, tuple)
-        ranks = key[1] if distributed else key
-        out = base / (f"tunnel_distributed_{ranks}" if distributed else f"tunnel_{ranks}")
-        pyfem_run(ranks, TUNNEL, out, *LOCAL, *(DISTRIBUTED if distributed else ()))
+    def make(ranks):
+        out = base / f"tunnel_{ranks}"
+        pyfem_run(ranks, TUNNEL, out, *LOCAL)
         return out
 
     return RunsOnDemand(make)
 
 
-# (3 ranks of the whole model in the slow tier: the distributed model's tunnel runs on 3 below)
-@pytest.mark.parametrize("ranks", [2, pytest.param(3, marks=pytest.mark.slow)])
-def test_local_stepping_on_the_ranks_equals_the_serial_local_stepping(tunnel_runs, ranks):
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_local_stepping_on_the_distributed_model_equals_the_serial_local_stepping(tunnel_runs, ranks):
+    """The tunnel on the ranks (each builds and steps its part): the serial run's levels and step
+    (run.json's dt_reason names the nodes per level), every history to the tunnel's tolerances."""
     serial, run = summary(tunnel_runs[1]), summary(tunnel_runs[ranks])
-    assert levels_of(serial) == levels_of(run) >= 3, "the tunnel's mesh stepped at three rates or more"
+    assert run["model"] == "distributed" and levels_of(run) >= 3
+    assert run["dt_reason"] == serial["dt_reason"] and run["steps"] == serial["steps"]
     crown = serial["monitors"]["crown"]
     assert crown["displacement"] > 2e-4 and crown["s1_dynamic_max"] > 1e3, "the wave reached the wall"
     reactions = np.loadtxt(tunnel_runs[1] / "reactions.csv", delimiter=",", skiprows=1)
     assert np.abs(reactions[:, 1:]).max() > 0.0, "the rollers held"
-    assert_shared(run, serial, ranks)
-    worst = assert_equal_to_serial(tunnel_runs[ranks], tunnel_runs[1], NET_FORCE_TOLERANCE["cavity"])
-    assert run["energy"]["balance_error"] == pytest.approx(serial["energy"]["balance_error"], rel=1e-6)
-    print(f"tunnel, local stepping on {ranks} ranks: largest difference from serial {worst:.2e}; "
-          f"bytes per fine step {run['mpi']['bytes_sent_per_step']}, loop {run['loop_seconds']:.2f} s "
-          f"(serial {serial['loop_seconds']:.2f} s)")
-
-
-@pytest.mark.parametrize("ranks", [2, 3])
-def test_local_stepping_on_the_distributed_model_equals_the_serial_local_stepping(tunnel_runs, ranks):
-    """The tunnel on the distributed model (each rank builds and steps its part): the whole model's
-    levels and step (run.json's dt_reason names the nodes per level), every history to the whole
-    model's tolerances on the ranks."""
-    serial, run = summary(tunnel_runs[1]), summary(tunnel_runs["distributed", ranks])
-    assert run["model"] == "distributed" and levels_of(run) >= 3
-    assert run["dt_reason"] == serial["dt_reason"] and run["steps"] == serial["steps"]
-    assert serial["monitors"]["crown"]["s1_dynamic_max"] > 1e3, "the wave reached the wall"
     assert_shared_parts(run, serial, ranks)
     # (the distributed model's tunnel tolerances, its net forces: test_distributed_model.TOLERANCES)
-    worst = assert_equal_to_serial(tunnel_runs["distributed", ranks], tunnel_runs[1], DISTRIBUTED_TOLERANCES["tunnel"])
+    differences = largest_differences(tunnel_runs[ranks], tunnel_runs[1])
+    for kind, difference in differences.items():
+        assert difference < DISTRIBUTED_TOLERANCES["tunnel"].get(kind, TOLERANCE), (kind, difference)
+    worst = max(differences.values())
     assert run["energy"]["balance_error"] == pytest.approx(serial["energy"]["balance_error"], rel=1e-6)
     print(f"tunnel, local stepping on the distributed model, {ranks} ranks: largest difference from serial "
           f"{worst:.2e}; bytes per fine step {run['mpi']['bytes_sent_per_step']}, loop {run['loop_seconds']:.2f} s "
@@ -147,18 +112,13 @@ def case3_runs(tmp_path_factory):
     runs = {ranks: base / f"case3_{ranks}" for ranks in (1, 2)}
     for ranks, out in runs.items():
         pyfem_run(ranks, CASE3, out, *CASE3_WINDOW)
-    runs["distributed", 2] = base / "case3_distributed_2"
-    pyfem_run(2, CASE3, runs["distributed", 2], *CASE3_WINDOW, *DISTRIBUTED)
     return runs
 
 
-@pytest.mark.parametrize("ranks", [2, ("distributed", 2)])
-def test_the_case_study_scene_under_local_stepping_on_the_ranks_equals_the_serial_run(case3_runs, ranks):
+def test_the_case_study_scene_under_local_stepping_on_the_ranks_equals_the_serial_run(case3_runs):
+    ranks = 2
     serial, run = summary(case3_runs[1]), summary(case3_runs[ranks])
-    distributed = isinstance(ranks, tuple)
-    if distributed:
-        ranks = ranks[1]
-        assert run["model"] == "distributed" and run["dt_reason"] == serial["dt_reason"]
+    assert run["model"] == "distributed" and run["dt_reason"] == serial["dt_reason"]
     assert levels_of(serial) == levels_of(run) >= 3
     assert [stage["converged"] for stage in serial["static"]["stages"]] == [True, True]
     # Things happened in the dynamic run at their own rates: pairs slid, the rock yielded further.
@@ -166,17 +126,14 @@ def test_the_case_study_scene_under_local_stepping_on_the_ranks_equals_the_seria
     assert states["sliding"][0] == 0 and max(states["sliding"]) >= 10
     assert serial["energy"]["internal_dissipation"] > 0.0 and serial["energy"]["friction_dissipation"] > 0.0
     assert run["pair_states"]["sliding"][-1] == states["sliding"][-1]
-    if distributed:
-        assert_shared_parts(run, serial, ranks)
-        assert run["mpi"]["moved_pair_nodes"] > 0
-    else:
-        assert_shared(run, serial, ranks)
+    assert_shared_parts(run, serial, ranks)
+    assert run["mpi"]["moved_pair_nodes"] > 0
     assert sum(run["mpi"]["element_loop_cells"]) == sum(region["cells"] for region in
                                                         serial["nonlinear_regions"].values())
     differences = largest_differences(case3_runs[ranks], case3_runs[1])
     for kind, difference in differences.items():
         assert difference < STAGE_ROUNDOFF.get(kind, TOLERANCE), (kind, difference)
-    print(f"case 3 (small), local stepping on {ranks} ranks{' (distributed model)' if distributed else ''}: " +
+    print(f"case 3 (small), local stepping on {ranks} ranks: " +
           ", ".join(f"{kind} {value:.1e}" for kind, value in sorted(differences.items()) if value))
 
 
@@ -186,8 +143,7 @@ from pathlib import Path
 sys.path.insert(0, "tests")
 import numpy as np
 from mpi4py import MPI
-from pyfem import _kernels, distributed, distributed_lts, distributed_model, local_stepping, solver
-from pyfem.local_stepping import check_stability
+from pyfem import distributed_lts, distributed_model, local_stepping, solver
 from test_local_stepping import GRADED_GEO, graded_scene
 
 local_stepping.fit_levels_to_output = lambda levels, steps_per_output: levels  # (conftest's unfitted_levels)
@@ -197,91 +153,10 @@ geo = Path(sys.argv[1])
 if comm.rank == 0:
     geo.write_text(GRADED_GEO)
 comm.barrier()
-simulation = solver.prepare(graded_scene(geo, True))  # (every rank the whole model, alone)
+simulation = solver.prepare(graded_scene(geo, True))  # (the serial model, built on every rank alone)
 """
 """The graded mesh of tests/test_local_stepping.py under local stepping (its levels not capped), the
-whole model on every rank: the start of the scripts the ranks run below."""
-
-STABILITY_ON_RANKS = GRADED_ON_RANKS + """indptr, indices, blocks = solver.bsr_arrays(simulation.stiffness)
-as_set = simulation.node_levels.copy()
-found = {}
-# (one level coarser the energy overflows within the default 240 global steps: 60 keep it finite)
-for name, levels, steps in (("as set", as_set, 240), ("one coarser", as_set + 1, 60)):
-    simulation.node_levels = levels
-
-    def alone():
-        stepper = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass,
-                                        np.ascontiguousarray(levels, dtype=np.int32), simulation.time_step.dt, 0.0)
-        stepper.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
-                             np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
-        stepper.set_row_split(True)
-        return stepper
-
-    ranks = distributed.check_stability_on_ranks(simulation, comm, steps=steps)
-    found[name] = {"ranks": ranks, "serial": check_stability(alone, 3 * len(simulation.mass), steps=steps),
-                   "levels": int(levels.max()) + 1}
-if comm.rank == 0:
-    print("REPORT " + json.dumps(found))
-"""
-
-
-@pytest.mark.parametrize("ranks", [2, pytest.param(3, marks=pytest.mark.slow)])
-def test_the_stability_check_on_the_ranks_is_the_serial_check_of_the_map_they_step(tmp_path, ranks):
-    """check_stability_on_ranks (each rank steps its share of the LTS map from the same random
-    state, the energy summed over the ranks) against the serial check of the same row-split map,
-    on the graded mesh of tests/test_local_stepping.py: with its levels the map is stable and the
-    growth is the serial one to round-off; with every node one rate coarser both find the same
-    growth, above 1e3 (unstable), and every rank takes the verdict."""
-    import json
-    import subprocess
-
-    from test_mpi import ENV, PYTHON, REPO
-
-    result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), PYTHON, "-c",
-                             STABILITY_ON_RANKS, str(tmp_path / "graded.geo")],
-                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    found = json.loads(result.stdout.split("REPORT ", 1)[1])
-    good, coarse = found["as set"], found["one coarser"]
-    assert good["levels"] >= 3, "the graded mesh stepped at three rates or more"
-    assert good["ranks"]["ranks"] == ranks and good["ranks"]["stable"] and good["serial"]["stable"]
-    assert good["ranks"]["growth"] == pytest.approx(good["serial"]["growth"], rel=1e-9)
-    assert not coarse["ranks"]["stable"] and not coarse["serial"]["stable"] and coarse["ranks"]["growth"] > 1e3
-    assert coarse["ranks"]["growth"] == pytest.approx(coarse["serial"]["growth"], rel=1e-6)
-    print(f"{ranks} ranks: growth {good['ranks']['growth']:.6g} (serial {good['serial']['growth']:.6g}), one "
-          f"level coarser {coarse['ranks']['growth']:.4g} (serial {coarse['serial']['growth']:.4g}); "
-          f"{good['ranks']['seconds']:.2f} s on the ranks, {good['serial']['seconds']:.2f} s whole")
-
-
-@pytest.mark.slow  # (83 s; the default tier: the distributed model's kill on 2, resume on 3, below)
-def test_kill_9_of_two_ranks_under_local_stepping_then_resume_gives_the_uninterrupted_run(tmp_path):
-    out, reference, resumed = killed_and_resumed(tmp_path, ranks=2, resumed_on=2, window=1.0, name="cavity",
-                                                 extra=LOCAL)
-    assert levels_of(resumed) >= 3
-    assert histories(out) == histories(reference)
-    scale = scales(reference)
-    for name in histories(reference):
-        if name.name == "energy.csv":  # the account's partial sums are regrouped on resume
-            assert relative_difference(out / name, reference / name, scale) < 1e-13
-        else:
-            assert (out / name).read_bytes() == (reference / name).read_bytes(), name
-
-
-@pytest.mark.slow  # (70 s)
-def test_a_serial_checkpoint_under_local_stepping_resumes_on_two_ranks(tmp_path):
-    out, reference, resumed = killed_and_resumed(tmp_path, ranks=1, resumed_on=2, window=0.5, name="cavity",
-                                                 extra=LOCAL)
-    assert levels_of(resumed) >= 3
-    differences = largest_differences(out, reference)
-    # The cavity's net forces (NET_FORCE_TOLERANCE's reasoning) over this run's 3 s instead of the
-    # 0.6 s above: measured up to 2.0e-9 (accelerations) and 1.4e-9 (the rollers' reactions).
-    tolerances = dict(NET_FORCE_TOLERANCE["cavity"], acceleration=6.0e-9, reaction=6.0e-9)
-    for kind, difference in differences.items():
-        assert difference < tolerances.get(kind, TOLERANCE), (kind, difference)
-    print(f"largest difference from the uninterrupted serial run {max(differences.values()):.2e}")
-
-
-# --- the distributed model -------------------------------------------------------------------------
+serial model on every rank: the start of the script the ranks run below."""
 
 DISTRIBUTED_LEVELS = GRADED_ON_RANKS + """
 whole = simulation
@@ -303,10 +178,10 @@ if comm.rank == 0:
 
 
 @pytest.mark.parametrize("ranks", [pytest.param(2, marks=pytest.mark.slow), 3])
-def test_the_distributed_models_levels_and_set_up_check_are_the_whole_models(tmp_path, ranks):
+def test_the_distributed_models_levels_and_set_up_check_are_the_serial_runs(tmp_path, ranks):
     """pyfem.distributed_lts.node_levels (each rank its owned rows and cells, a node the finest of its
     cells over the ranks) on the graded mesh of tests/test_local_stepping.py: every local node, owned
-    or ghost, at the whole model's level; the set-up check on the ranks' parts finds the map stable
+    or ghost, at the serial run's level; the set-up check on the ranks' parts finds the map stable
     with these levels, and unstable (growth above 1e3) with every node one rate coarser."""
     import json
     import subprocess
@@ -323,7 +198,7 @@ def test_the_distributed_models_levels_and_set_up_check_are_the_whole_models(tmp
     good, coarse = found["as set"], found["one coarser"]
     assert good["ranks"] == ranks and good["stable"] and good["growth"] < 1.5
     assert not coarse["stable"] and coarse["growth"] > 1e3
-    print(f"{ranks} ranks: {found['nodes']} local nodes at the whole model's levels {found['counts']}; check growth "
+    print(f"{ranks} ranks: {found['nodes']} local nodes at the serial run's levels {found['counts']}; check growth "
           f"{good['growth']:.4g}, one level coarser {coarse['growth']:.4g}")
 
 
@@ -334,8 +209,8 @@ def test_the_distributed_case_study_scene_killed_on_two_ranks_resumes_on_three(t
     round-off (the resume solves the stage again, on 3 ranks) of the uninterrupted 2-rank run."""
     from test_distributed_model import kill_after_a_checkpoint_past, pyfem
 
-    reference = case3_runs["distributed", 2]
-    settings = (*CASE3_WINDOW, *DISTRIBUTED, "--set", "output.checkpoint_interval=1.0")
+    reference = case3_runs[2]
+    settings = (*CASE3_WINDOW, "--set", "output.checkpoint_interval=1.0")
     out = tmp_path / "killed"
     at = kill_after_a_checkpoint_past(2, CASE3, out, 0.1, settings)
     # Resumed with global stepping: refused in one line that names the key (a new user's trial).
@@ -355,9 +230,9 @@ def test_the_distributed_case_study_scene_killed_on_two_ranks_resumes_on_three(t
           ", ".join(f"{kind} {value:.1e}" for kind, value in sorted(differences.items()) if value))
 
 
-def test_check_of_the_distributed_model_shows_its_levels_and_auto_decides_as_the_whole_model(tmp_path):
+def test_check_of_the_distributed_model_shows_its_levels_and_auto_decides_as_the_serial_run(tmp_path):
     """`check` of the tunnel with local_stepping = "auto": the distributed model on 2 ranks prints the
-    whole model's decision (the same work sums and nodes per level, summed over the ranks) and, on,
+    serial run's decision (the same work sums and nodes per level, summed over the ranks) and, on,
     its levels; its trial steps whole global steps."""
     import subprocess
 
@@ -365,7 +240,7 @@ def test_check_of_the_distributed_model_shows_its_levels_and_auto_decides_as_the
 
     def check(*launch):
         result = subprocess.run([*launch, PYTHON, "-m", "pyfem", "check", TUNNEL, "--set", 'time.local_stepping="auto"',
-                                 "--set", "time.duration=20.0", *(DISTRIBUTED if launch else ())], cwd=REPO, env=ENV,
+                                 "--set", "time.duration=20.0"], cwd=REPO, env=ENV,
                                 capture_output=True, text=True, timeout=600)
         assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
         return {line.split(":")[0].strip(): line.split(":", 1)[1].strip() for line in result.stdout.splitlines()

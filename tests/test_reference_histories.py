@@ -1,6 +1,6 @@
 """Today's histories, recorded (workflows/reference_histories.py, records in
-workflows/results/reference_histories/): the net under the merge of the serial, the whole-model MPI
-and the distributed-model MPI paths into one (issue "One model, one time loop, one writer").
+workflows/results/reference_histories/): the net under the merge of the serial and the
+distributed-model MPI paths into one (issue "One model, one time loop, one writer").
 
 Each scene is rerun with the command line its record was made with and every column of every
 monitor, pair monitor and energy history must equal the recorded one within 1e-10 of the column's
@@ -10,9 +10,8 @@ and why: the workflow's docstring and `Entry.mpi`.
 - default tier: the records are complete and were made with today's scene settings, and the three
   cheap scenes (the free-field box, the contact layers, the yielding layer under cracking concrete)
   rerun serially (20 s in all, measured);
-- slow tier: the other three serially, and every scene on the whole model on 2 and 3 ranks and on
-  the distributed model on 1, 2 and 3 ranks (`mpirun`; a missing launcher fails): 33 tests, 12 min 48 s
-  on the 2 shared cores (the four case-3 MPI runs 56-69 s each).
+- slow tier: the other three serially, and every scene on the distributed model on 2 and 3 ranks
+  (`mpirun`; a missing launcher fails; the whole-model MPI path these records also covered is gone).
 """
 import json
 import sys

@@ -9,7 +9,7 @@ On a hexahedral box of n^3 Q1 cells distributed by dolfinx (`GhostMode` as given
    (`getValuesCSR`: owned rows, global columns);
 2. counts the columns that are not local nodes of the function space (owned or ghost in its index
    map): with GhostMode.shared_facet, from 3 ranks on, the neighbours through an edge or a vertex
-   only. They become extra ghosts: the kernel's local numbering (pyfem/distributed.py `Share`)
+   only. They become extra ghosts: the kernel's local numbering (pyfem/distributed_model.py)
    is owned nodes, the index map's ghosts, then these; their values come from their owners, found
    from the ranks' owned ranges (`fetch_owned`, what a kernel exchange would be built from);
 3. renumbers the columns into local nodes and forms y = K u on its owned rows from its local u (owned,
@@ -17,13 +17,13 @@ On a hexahedral box of n^3 Q1 cells distributed by dolfinx (`GhostMode` as given
    product A x;
 4. the strain energy 1/2 u.K u summed over the ranks against the same box assembled on one rank
    (another numbering: the energy does not depend on it), and the lumped mass's total;
-5. builds the kernel's Stepper of its share as pyfem.distributed.local_stepper would from the
+5. builds the kernel's Stepper of its share as pyfem/distributed_model.py does from the
    whole matrix (`local_stiffness`: owned rows, the ghosts' rows to owned nodes as the owned rows'
    transposes, the ghosts' diagonal blocks from their owners; the lumped mass; `ghost_exchange`
    over the index map's and the extra ghosts) and steps a Gaussian bump STEPS steps from rest,
    against the box assembled and stepped whole on one rank (nodes matched by coordinates);
 6. counts the halo the element loop would need (the other ranks' cells touching its owned nodes,
-   pyfem.distributed.Share.cells "halo") and how much of it dolfinx's ghost cells leave out;
+   pyfem.distributed_model.rank_regions "halo") and how much of it dolfinx's ghost cells leave out;
 7. reports its peak memory and the share of the model it holds.
 
     /usr/bin/python3 workflows/distributed_assembly.py [n] [ghost_mode]
@@ -77,7 +77,7 @@ def box_operators(comm: MPI.Comm, n: int, ghost_mode: str):
 
 def halo_cells(comm: MPI.Comm, V) -> tuple[int, int]:
     """(cells of other ranks touching this rank's owned nodes, how many of them are not on this rank
-    as dolfinx's ghost cells): the halo the element loop needs (pyfem.distributed.Share.cells
+    as dolfinx's ghost cells): the halo the element loop needs (pyfem.distributed_model.rank_regions
     "halo") and what of it the mesh's ghost mode leaves out."""
     domain = V.mesh
     node_map, cell_map = V.dofmap.index_map, domain.topology.index_map(3)

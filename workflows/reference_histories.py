@@ -3,9 +3,9 @@ time loop, one writer").
 
 What it is for
 --------------
-The project is about to merge its three execution paths (the serial solver, pyfem/solver.py; MPI with
-every rank holding the whole model, `[parallel] model = "whole"`, pyfem/distributed.py; MPI with each
-rank holding its part, `model = "distributed"`, pyfem/distributed_model.py and friends) into one. The
+The project is merging its execution paths (the serial solver, pyfem/solver.py; MPI with each rank
+holding its part, pyfem/distributed_model.py and friends; MPI with every rank holding the whole
+model was removed) into one. The
 refactored code must reproduce today's histories. This workflow runs a fixed set of small scenes with
 today's code and keeps, per scene, a compact record under workflows/results/reference_histories/NAME/:
 
@@ -26,7 +26,7 @@ How to use it
     /usr/bin/python3 workflows/reference_histories.py --record            # rewrite the records (~2 min)
     /usr/bin/python3 workflows/reference_histories.py --check             # rerun serially, compare
     /usr/bin/python3 workflows/reference_histories.py --check --ranks 2 --model distributed
-    /usr/bin/python3 workflows/reference_histories.py --check --only contact layers --ranks 3 --model whole
+    /usr/bin/python3 workflows/reference_histories.py --check --only contact layers --ranks 3
     /usr/bin/python3 workflows/reference_histories.py --table             # every path, the agreement table
 
 `--check` reruns each scene with the same command line on the path asked (`--ranks N` runs
@@ -49,7 +49,7 @@ How a rerun is compared
   the vector's largest; the energy terms to the largest energy; the monitors' and pairs' peaks with
   the same 1 % floor of their dimension), within 1e-10; `title`, `status`, `effects` and the local
   stepping check's verdict equal.
-- Exceptions, on the MPI paths only (the whole model on 2 and 3 ranks, the distributed model on 1, 2
+- Exceptions, on the MPI paths only (the distributed model on 2
   and 3), measured and explained at their entries (`Entry.mpi`): a dimension
   whose columns are measured against the dimension's largest value (tests/test_mpi.py's rule) to a
   larger tolerance, where the ranks' other order of the sums is amplified: the tetrahedral tunnel's
@@ -229,7 +229,9 @@ SCENES = {
 }
 
 # The paths a record is checked on: (model, ranks); model None: the serial `pyfem run` without MPI.
-PATHS = ((None, 1), ("whole", 2), ("whole", 3), ("distributed", 1), ("distributed", 2), ("distributed", 3))
+# (The whole-model MPI mode and the distributed model on one rank are gone: under mpirun every run is
+# the distributed model, on one rank the serial path.)
+PATHS = ((None, 1), ("distributed", 2), ("distributed", 3))
 # Keys of summary.json a path's run.json does not write today: not compared there.
 # The distributed model draws no deformed section, nor the static stage's section and interface pictures.
 ABSENT = {"distributed": ("deformed_section", "plots")}
@@ -601,7 +603,7 @@ def main(argv=None) -> int:
     action.add_argument("--table", action="store_true", help="every path: the table of the docstring")
     parser.add_argument("--only", nargs="+", choices=sorted(SCENES), default=list(SCENES))
     parser.add_argument("--ranks", type=int, default=1)
-    parser.add_argument("--model", choices=("whole", "distributed"), default=None)
+    parser.add_argument("--model", choices=("distributed",), default=None)
     parser.add_argument("--runs", type=Path, default=ROOT / "runs" / "reference_histories")
     parser.add_argument("--reuse", action="store_true", help="--table: compare finished runs in --runs, not rerun")
     args = parser.parse_args(argv)
@@ -614,9 +616,7 @@ def main(argv=None) -> int:
             print(f"{name}: {seconds:.0f} s, record {size / 1024:.0f} KiB", flush=True)
         return 0
     if args.check:
-        model = args.model if (args.model or args.ranks > 1) else None
-        if model is None and args.ranks > 1:
-            model = "whole"
+        model = "distributed" if args.ranks > 1 else None
         return check(args.only, args.ranks, model, args.runs)
     print(agreement_table(args.only, args.runs, args.reuse))
     return 0

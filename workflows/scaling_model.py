@@ -1,7 +1,7 @@
 """The MPI scaling model of docs/scaling.md: per rank and per step, the work of the explicit
 step against the bytes and messages of the ghost exchange, for a mesh partitioned into compact
-subdomains of N nodes each (issue 13): the model for 100+ ranks. The first implementation
-(pyfem/distributed.py) is measured on this machine's 2 cores by workflows/strong_scaling.py.
+subdomains of N nodes each: the model for 100+ ranks; workflows/strong_scaling.py measures
+this machine's 2 cores.
 
     work      t_work = 3 N c                      c: kernel seconds per dof and step on one core
     ghosts    G = s N^(2/3)                        s ~ 6 for a cube-like subdomain (6 faces)

@@ -2,7 +2,7 @@
 1 rank x 2 threads and 2 ranks x 1 thread (`mpirun -n 2`), one after the other in this run.
 
 Per configuration: the time loop's wall time per step (run.json loop_seconds / steps; the model
-build is left out: every rank builds the whole model, see pyfem/distributed.py) and its split, with
+build is left out; docs/scaling.md) and its split, with
 the ghost exchange and the per-sample merge on rank 0 (`exchange`, `merge`), and the bytes each rank
 sends per step; for a scene with a static stage solved by relaxation, the stage's wall time and its
 relaxation steps (the ranks share them since 2026-11-28, like the time loop's). The histories of the
