@@ -307,7 +307,7 @@ def test_hand_over_keeps_the_model_at_rest(meshes, tmp_path):
     for control in (False, True):
         stepper = solver.make_stepper(simulation)
         if control:
-            stepper.add_seismic_input(hand_over_force_provider(-simulation.static.support_force))
+            stepper.add_provider(hand_over_force_provider(-simulation.static.support_force))
         n = simulation.stiffness.shape[0]
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
         peak_v = peak_u = 0.0
