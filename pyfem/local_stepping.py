@@ -550,7 +550,7 @@ def speed_up_of(sums: np.ndarray, counts, time_step, phases_ms: dict, rows: bool
     the pair and interface rows stepped at their drift level and the kicks' own overhead: it over-predicts the
     measured speed-up by 7 % on the coarse case 1 and 23 % on the coarse case 3 (predicted / measured, the column
     split; docs/local_stepping.md "When it is on"), and by 27 % on the coarse case 3 in the row split (1.69x predicted from
-    `check`'s steps at rest, 1.33x measured with the rock yielding; "The case study under the row split")."""
+    `check`'s steps at rest, 1.33x measured with the rock yielding; "Speed")."""
     work = dict(zip(WORK_SUMS, np.asarray(sums, dtype=float)))
     counts = np.trim_zeros(np.asarray(counts, dtype=np.int64), "b")
     fine_step, top = local_time_step(time_step, None, "row" if rows else "column", counts=counts)

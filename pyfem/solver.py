@@ -674,7 +674,7 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         # Column split: rows stepped at their drift level: the pair nodes (add_contact), and the fine
         # side of every level boundary, so that a coarser neighbour's force reaches them at each of
         # their substeps instead of as kicks at the ends of the coarse step (docs/local_stepping.md
-        # "Interface rows").
+        # "The column split").
         rows = [local_stepping.interface_rows(levels, cell_nodes, cell_cap, loop_cells)]
         if simulation.contact_arrays is not None:
             rows.append(np.unique(simulation.contact_arrays["pairs"]))

@@ -7,7 +7,7 @@ stage, then `--duration` s of oblique El Centro with the rock yielding, the lini
 pairs sticking and slipping. Runs global stepping at safety 0.2 (the reference) and 0.8, and local
 stepping at 0.8 by the column split and by the row split (each forced through
 `pyfem.local_stepping.row_split`; the row split is the default since this comparison, docs/local_stepping.md
-"The contact work under local stepping"). Prints per run: the largest difference of u at the lining monitors A-D from the
+"The energy account"). Prints per run: the largest difference of u at the lining monitors A-D from the
 reference relative to its peak, the largest slip at the pair monitors, the yielded rock, the lining's damaged
 volume, the energy balance error and the wall time of the run (nan: a finished run directory read
 again, not run).
