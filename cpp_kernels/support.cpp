@@ -152,22 +152,36 @@ GroutedBolts::GroutedBolts(const BoltGeometry& geometry, const BoltParameters& p
   for (std::int64_t e = 0; e < n_segments; ++e) peak_axial_force_[e] = std::abs(axial_force_[e]);
 }
 
-void GroutedBolts::rock_axial(const double* u, std::vector<double>& ubar) const {
+double GroutedBolts::axial_at(std::int64_t k, const double* d, const double* field) const {
   const std::int64_t k_host = geometry_.n_host;
+  double x = 0.0, y = 0.0, z = 0.0;
+  for (std::int64_t a = 0; a < k_host; ++a) {
+    const double weight = geometry_.host_weights[k * k_host + a];
+    const double* fa = field + 3 * static_cast<std::int64_t>(geometry_.host_nodes[k * k_host + a]);
+    x += weight * fa[0];
+    y += weight * fa[1];
+    z += weight * fa[2];
+  }
+  return d[0] * x + d[1] * y + d[2] * z;
+}
+
+void GroutedBolts::spread(std::int64_t k, const double* d, double s, double* out_force) const {
+  const std::int64_t k_host = geometry_.n_host;
+  for (std::int64_t a = 0; a < k_host; ++a) {
+    const double g = geometry_.host_weights[k * k_host + a] * s;
+    double* f = out_force + 3 * static_cast<std::int64_t>(geometry_.host_nodes[k * k_host + a]);
+    f[0] += g * d[0];
+    f[1] += g * d[1];
+    f[2] += g * d[2];
+  }
+}
+
+void GroutedBolts::rock_axial(const double* u, std::vector<double>& ubar) const {
   ubar.resize(n_nodes_);
   for (std::int64_t j = 0; j < geometry_.n_bolts; ++j) {
     const double* d = geometry_.directions + 3 * j;
-    for (std::int64_t k = geometry_.bolt_offsets[j]; k < geometry_.bolt_offsets[j + 1]; ++k) {
-      double x = 0.0, y = 0.0, z = 0.0;
-      for (std::int64_t a = 0; a < k_host; ++a) {
-        const double weight = geometry_.host_weights[k * k_host + a];
-        const double* ua = u + 3 * static_cast<std::int64_t>(geometry_.host_nodes[k * k_host + a]);
-        x += weight * ua[0];
-        y += weight * ua[1];
-        z += weight * ua[2];
-      }
-      ubar[k] = ubar_reference_[k] + (d[0] * x + d[1] * y + d[2] * z);
-    }
+    for (std::int64_t k = geometry_.bolt_offsets[j]; k < geometry_.bolt_offsets[j + 1]; ++k)
+      ubar[k] = ubar_reference_[k] + axial_at(k, d, u);
   }
 }
 
@@ -348,7 +362,6 @@ InternalEnergy GroutedBolts::compute(const double* u, double* out_force) {
     stored += segment_length_[e] * N * N / (2.0 * p.axial_stiffness);
     dissipation += N * segment_length_[e] * (trial_plastic_strain_[e] - plastic_strain_[e]);
   }
-  const std::int64_t k_host = geometry_.n_host;
   for (std::int64_t j = 0; j < geometry_.n_bolts; ++j) {
     const double* d = geometry_.directions + 3 * j;
     for (std::int64_t k = geometry_.bolt_offsets[j]; k < geometry_.bolt_offsets[j + 1]; ++k) {
@@ -366,15 +379,7 @@ InternalEnergy GroutedBolts::compute(const double* u, double* out_force) {
       // Relative to a rebased reference: Psi - Psi_ref - f0.u.
       stored += bond_force_reference_[k] * (trial_ubar_[k] - ubar_reference_[k]);
       const double relative = T - bond_force_reference_[k];
-      if (relative == 0.0) continue;
-      for (std::int64_t a = 0; a < k_host; ++a) {
-        const double weight = geometry_.host_weights[k * k_host + a];
-        double* f = out_force + 3 * static_cast<std::int64_t>(geometry_.host_nodes[k * k_host + a]);
-        const double g = -weight * relative;  // f_int = dPsi/du = -sum_k N_a T_k d
-        f[0] += g * d[0];
-        f[1] += g * d[1];
-        f[2] += g * d[2];
-      }
+      if (relative != 0.0) spread(k, d, -relative, out_force);  // f_int = dPsi/du = -sum_k N_a T_k d
     }
   }
   trial_stored_ = stored - stored_reference_;
@@ -404,21 +409,11 @@ void GroutedBolts::add_stiffness_damping(const double* v, double beta, double* o
   // beta K0 v, K0 the condensed elastic stiffness: vbar_k the rock's axial velocity, z the
   // bolt's elastic response, the tie forces K_k (z_k - vbar_k) on the rock.
   const BoltParameters& p = parameters_;
-  const std::int64_t k_host = geometry_.n_host;
   std::vector<double> vbar(n_nodes_);
   for (std::int64_t j = 0; j < geometry_.n_bolts; ++j) {
     const double* d = geometry_.directions + 3 * j;
-    for (std::int64_t k = geometry_.bolt_offsets[j]; k < geometry_.bolt_offsets[j + 1]; ++k) {
-      double x = 0.0, y = 0.0, z = 0.0;
-      for (std::int64_t a = 0; a < k_host; ++a) {
-        const double weight = geometry_.host_weights[k * k_host + a];
-        const double* va = v + 3 * static_cast<std::int64_t>(geometry_.host_nodes[k * k_host + a]);
-        x += weight * va[0];
-        y += weight * va[1];
-        z += weight * va[2];
-      }
-      vbar[k] = d[0] * x + d[1] * y + d[2] * z;
-    }
+    for (std::int64_t k = geometry_.bolt_offsets[j]; k < geometry_.bolt_offsets[j + 1]; ++k)
+      vbar[k] = axial_at(k, d, v);
   }
   for (std::int64_t j = 0; j < geometry_.n_bolts; ++j) {
     const std::int64_t begin = geometry_.bolt_offsets[j], end = geometry_.bolt_offsets[j + 1];
@@ -446,14 +441,7 @@ void GroutedBolts::add_stiffness_damping(const double* v, double beta, double* o
     const double* d = geometry_.directions + 3 * j;
     for (std::int64_t k = 0; k < m; ++k) {
       const double g = beta * tie[k] * (vbar[begin + k] - rhs[k]);
-      if (g == 0.0) continue;
-      for (std::int64_t a = 0; a < k_host; ++a) {
-        const double weight = geometry_.host_weights[(begin + k) * k_host + a];
-        double* f = out_force + 3 * static_cast<std::int64_t>(geometry_.host_nodes[(begin + k) * k_host + a]);
-        f[0] += weight * g * d[0];
-        f[1] += weight * g * d[1];
-        f[2] += weight * g * d[2];
-      }
+      if (g != 0.0) spread(begin + k, d, g, out_force);
     }
   }
 }

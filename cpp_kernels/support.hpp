@@ -94,6 +94,10 @@ class GroutedBolts : public InternalForceComponent {
   int solve_bolt(std::int64_t j, const double* ubar, double* w, double* segment_force,
                  double* segment_plastic, double* bond_force, double* bond_plastic) const;
   void rock_axial(const double* u, std::vector<double>& ubar) const;
+  // d . sum_a N_a field_a: the axial component of a nodal field (3 n) at bolt node k.
+  double axial_at(std::int64_t k, const double* d, const double* field) const;
+  // Adds N_a s d to out_force at each host node a of bolt node k (a tie force s along d).
+  void spread(std::int64_t k, const double* d, double s, double* out_force) const;
 
   BoltGeometry geometry_;  // points into the owned copies below
   std::vector<std::int64_t> owned_offsets_;
