@@ -997,14 +997,6 @@ save_state(points=False), the per-point and per-node state left as it was.)")
           "Adds a force provider (SeismicInput, HeldForce; kept alive). ValueError names a node "
           "outside the model.")
       .def(
-          "add_seismic_input",
-          [](Stepper& stepper, std::shared_ptr<SeismicInput> input) {
-            stepper.add_provider(std::move(input));
-          },
-          py::arg("input"), py::keep_alive<1, 2>(),
-          "Adds a SeismicInput force provider (borrowed, kept alive). ValueError names a node "
-          "outside the model.")
-      .def(
           "add_contact",
           [](Stepper& stepper, std::shared_ptr<ContactPairs> contact) {
             stepper.set_contact(std::move(contact));
@@ -1198,12 +1190,6 @@ Args:
           },
           py::arg("provider"), py::keep_alive<1, 2>(),
           "Adds a force provider (SeismicInput, HeldForce) that lists its nodes.")
-      .def(
-          "add_seismic_input",
-          [](LocalStepper& stepper, std::shared_ptr<SeismicInput> input) {
-            stepper.add_provider(std::move(input));
-          },
-          py::arg("input"), py::keep_alive<1, 2>(), "Adds a SeismicInput force provider.")
       .def(
           "add_internal_force",
           [](LocalStepper& stepper, std::shared_ptr<HexahedronElementsBase> component, int level,

@@ -251,7 +251,7 @@ def rank_stepper(part, rank_levels: RankLevels, loop, input_arrays: dict | None 
         layout.pairs, layout.pair_prefixes = pairs, [_prefix(max_level, level, "contact", 0)
                                                      for _, level in kernel_parts]
     if not bare and input_arrays is not None and len(input_arrays["nodes"]):
-        kernel.add_seismic_input(seismic_input_kernel(input_arrays))
+        kernel.add_provider(seismic_input_kernel(input_arrays))
     exchanges = level_exchanges(part, levels, max_level)
     kernel.set_partition(part.n_owned, exchanges)
     return local_stepping.LocalSteppingAdapter(kernel, rank_levels.ratio), exchanges, layout

@@ -861,7 +861,7 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
         stepper.set_constraints(np.ascontiguousarray(part.constraints.nodes, dtype=np.int32),
                                 np.ascontiguousarray(part.constraints.projection, dtype=np.float64))
     if input_arrays is not None and len(input_arrays["nodes"]):
-        stepper.add_seismic_input(seismic_input_kernel(input_arrays))
+        stepper.add_provider(seismic_input_kernel(input_arrays))
     if loop is not None:
         for component in loop.counted.components:
             stepper.add_internal_force(component)

@@ -654,8 +654,8 @@ class LocalSteppingAdapter:
         self.kernel = kernel
         self.ratio = ratio
 
-    def add_seismic_input(self, provider) -> None:
-        self.kernel.add_seismic_input(provider)
+    def add_provider(self, provider) -> None:
+        self.kernel.add_provider(provider)
 
     def run(self, u, v, a, n_steps: int, t0: float) -> float:
         if n_steps % self.ratio:

@@ -711,7 +711,7 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
             kernel.add_contact(contact, level)
     stepper = local_stepping.LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
     if simulation.input_arrays is not None:
-        kernel.add_seismic_input(seismic_input_kernel(simulation.input_arrays))
+        kernel.add_provider(seismic_input_kernel(simulation.input_arrays))
     if simulation.static is not None:  # the stage's out-of-balance, held constant (pyfem/static.py)
         from pyfem.static import add_hand_over_force
 
@@ -788,7 +788,7 @@ def make_stepper(simulation: Simulation):
         stepper.set_constraints(np.ascontiguousarray(simulation.constraints.nodes, dtype=np.int32),
                                 np.ascontiguousarray(simulation.constraints.projection, dtype=np.float64))
     if simulation.input_arrays is not None:
-        stepper.add_seismic_input(seismic_input_kernel(simulation.input_arrays))
+        stepper.add_provider(seismic_input_kernel(simulation.input_arrays))
     handed_over = getattr(simulation.static, "components", None) is not None  # a relaxation stage ran
     if simulation.contact_arrays is not None:
         contact = getattr(simulation.static, "contact", None)  # the stage's pairs, rebased, go on

@@ -189,8 +189,8 @@ def test_bonded_pairs_reproduce_the_unsplit_system_to_roundoff(alpha, dashpot):
     # A force history on a split node (shared between its sides) and on a plain node.
     times, g, dg, ddg = sin2_history(1000 * dt, 60 * dt, table_dt=dt)
     P2, P7 = rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3)
-    merged.add_seismic_input(force_input(times, g, dg, ddg, [(2, P2), (7, P7)]))
-    split.add_seismic_input(force_input(times, g, dg, ddg, [(2, 0.4 * P2), (copy_of[2], 0.6 * P2),
+    merged.add_provider(force_input(times, g, dg, ddg, [(2, P2), (7, P7)]))
+    split.add_provider(force_input(times, g, dg, ddg, [(2, 0.4 * P2), (copy_of[2], 0.6 * P2),
                                                             (7, P7)]))
 
     # Pairs with random normals and static forces; strengths too high to ever fail.
@@ -241,7 +241,7 @@ def test_shear_slips_at_peak_strength_then_slides_at_dynamic_friction_without_co
                          np.array([300.0 * np.eye(3), 50.0 * np.eye(3)]))
     times, g, dg, ddg = sin2_history(2 * period, period)
     F_max = 75.0
-    stepper.add_seismic_input(force_input(times, g, dg, ddg, [(1, F_max * EX)]))
+    stepper.add_provider(force_input(times, g, dg, ddg, [(1, F_max * EX)]))
     contact = one_pair(EZ, -N0 * EZ, area, cohesion, cohesion, mu_s, mu_d)
     stepper.add_contact(contact)
     h = step_history(stepper, contact, int(2 * period / dt), 6)
@@ -286,7 +286,7 @@ def test_tension_separates_at_tensile_strength_and_recontacts_without_interpenet
     stepper.set_dashpots(np.array([0], dtype=np.int32), np.array([100.0 * np.eye(3)]))
     times, g, dg, ddg = sine_history(period, period)
     F_max = 200.0
-    stepper.add_seismic_input(force_input(times, g, dg, ddg, [(1, F_max * EZ)]))
+    stepper.add_provider(force_input(times, g, dg, ddg, [(1, F_max * EZ)]))
     contact = one_pair(EZ, -N0 * EZ, area, 1e3, tensile, 0.5, 0.4)
     stepper.add_contact(contact)
     h = step_history(stepper, contact, int(period / dt), 6)
@@ -334,7 +334,7 @@ def test_deterioration_equals_eqs_9_to_11_for_a_prescribed_slip_velocity():
     dt, V0, F, mass = 1e-3, 0.3, -0.5, 1.0
     K = sp.csr_matrix((6, 6))
     stepper = _kernels.Stepper(*bsr_arrays(K), np.array([2.0, mass]), dt)
-    stepper.add_seismic_input(force_input(*constant_history(), [(1, F * EX)]))
+    stepper.add_provider(force_input(*constant_history(), [(1, F * EX)]))
     contact = one_pair(EZ, np.zeros(3), 1.0, 0.0, 0.0, 0.5, 0.4)
     contact.set_deterioration(R0, LAM, DURATION, M_, N_, P_)
     assert np.all(contact.deterioration() == 1.0)  # before any step
@@ -382,7 +382,7 @@ def test_sliding_force_is_mu_d_N_D_with_the_measured_slip_rate():
     dt, N0, mu_d = 1e-3, 100.0, 0.4
     K = sp.csr_matrix((6, 6))
     stepper = _kernels.Stepper(*bsr_arrays(K), np.array([1.0, 3.0]), dt)
-    stepper.add_seismic_input(force_input(*constant_history(), [(1, 400.0 * EY)]))
+    stepper.add_provider(force_input(*constant_history(), [(1, 400.0 * EY)]))
     contact = one_pair(EZ, -N0 * EZ, 1.0, 5.0, 5.0, 0.5, mu_d)
     contact.set_deterioration(R0, LAM, DURATION, M_, N_, P_)
     stepper.add_contact(contact)
@@ -427,7 +427,7 @@ def test_energy_balance_with_sliding_and_separating_pairs_and_all_damping():
     stepper.set_dashpots(np.array([copy_of[4], 10], dtype=np.int32),
                          np.ascontiguousarray(D @ D.transpose(0, 2, 1)))
     times, g, dg, ddg = sine_history(3000 * dt, 150 * dt, table_dt=dt)
-    stepper.add_seismic_input(force_input(times, g, dg, ddg,
+    stepper.add_provider(force_input(times, g, dg, ddg,
                                           [(node, 10.0 * rng.uniform(-1, 1, 3)) for node in range(0, 30, 3)]))
     normals = rng.standard_normal((5, 3))
     normals /= np.linalg.norm(normals, axis=1)[:, None]
@@ -462,7 +462,7 @@ def chatter_run(mass_i, mass_j, n_cycles, steps_per_cycle=100):
     stepper = anchored_pair_system(mass_i, mass_j, 1e4 * mass_i, dt)
     times, g, dg, ddg = sine_history(n_cycles * steps_per_cycle * dt, steps_per_cycle * dt)
     pulled, away = (1, 1.0) if mass_j <= mass_i else (0, -1.0)
-    stepper.add_seismic_input(force_input(times, g, dg, ddg, [(pulled, away * 30.0 * EZ + 8.0 * EX)]))
+    stepper.add_provider(force_input(times, g, dg, ddg, [(pulled, away * 30.0 * EZ + 8.0 * EX)]))
     contact = one_pair(EZ, -10.0 * EZ, 1.0, 1.0, 1.0, 0.5, 0.4)
     stepper.add_contact(contact)
     u, v, a = np.zeros(6), np.zeros(6), np.zeros(6)
@@ -565,8 +565,8 @@ def pressed_and_sheared(lag=None, n_steps=None) -> tuple:
     dt, period = 1e-3, 2.0
     stepper = anchored_pair_system(1.0, 1.0, 1e5, dt)
     stepper.set_dashpots(np.array([0, 1], dtype=np.int32), np.array([300.0 * np.eye(3), 50.0 * np.eye(3)]))
-    stepper.add_seismic_input(force_input(*constant_history(), [(1, -100.0 * EZ)]))
-    stepper.add_seismic_input(force_input(*sin2_history(period, period), [(1, 150.0 * EX)]))
+    stepper.add_provider(force_input(*constant_history(), [(1, -100.0 * EZ)]))
+    stepper.add_provider(force_input(*sin2_history(period, period), [(1, 150.0 * EX)]))
     contact = one_pair(EZ, -100.0 * EZ, 1.0, 0.0, 0.0, 0.5, 0.4)
     if lag is not None:
         contact.set_normal_lag(*lag)
@@ -604,7 +604,7 @@ def test_normal_lag_follows_the_normal_force_as_its_exact_exponential():
     length, velocity, dt = 0.01, 0.2, 1e-3   # time constant 0.05 s: 50 steps
     stepper = anchored_pair_system(1.0, 1.0, 1e5, dt)
     stepper.set_dashpots(np.array([0, 1], dtype=np.int32), np.array([300.0 * np.eye(3), 50.0 * np.eye(3)]))
-    stepper.add_seismic_input(force_input(*constant_history(), [(1, -100.0 * EZ)]))
+    stepper.add_provider(force_input(*constant_history(), [(1, -100.0 * EZ)]))
     contact = one_pair(EZ, -100.0 * EZ, 1.0, 0.0, 0.0, 0.5, 0.4)
     contact.set_normal_lag(length, velocity)
     stepper.add_contact(contact)
@@ -648,7 +648,7 @@ def tension_break(release_time=None, n_steps=1500):
     times = np.arange(0.0, 3.0, 1e-3)
     F_max = 400.0
     g, dg, ddg = np.minimum(times / 1.0, 1.0), np.where(times < 1.0, 1.0, 0.0), np.zeros_like(times)
-    stepper.add_seismic_input(force_input(times, g, dg, ddg, [(1, F_max * EZ)]))
+    stepper.add_provider(force_input(times, g, dg, ddg, [(1, F_max * EZ)]))
     contact = one_pair(EZ, -N0 * EZ, area, 1e3, tensile, 0.5, 0.4)
     if release_time is not None:
         contact.set_release_time(release_time)
@@ -692,7 +692,7 @@ def test_a_bond_broken_in_shear_slides_with_the_cohesion_left_then_with_friction
     stepper = anchored_pair_system(1.0, 1.0, 1e5, dt)
     stepper.set_dashpots(np.array([0, 1], dtype=np.int32), np.array([300.0 * np.eye(3), 50.0 * np.eye(3)]))
     times, g, dg, ddg = sin2_history(period, period)
-    stepper.add_seismic_input(force_input(times, g, dg, ddg, [(1, 75.0 * EX)]))
+    stepper.add_provider(force_input(times, g, dg, ddg, [(1, 75.0 * EX)]))
     contact = one_pair(EZ, -N0 * EZ, area, cohesion, cohesion, mu_s, mu_d)
     contact.set_release_time(tau)
     stepper.add_contact(contact)

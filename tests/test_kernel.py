@@ -233,7 +233,7 @@ def make_stepper(K, mass, dt, alpha, beta, dashpots, input_spec, symmetric_stora
     if dashpots is not None:
         stepper.set_dashpots(*dashpots)
     if input_spec is not None:
-        stepper.add_seismic_input(input_spec.make())
+        stepper.add_provider(input_spec.make())
     return stepper
 
 
@@ -517,14 +517,14 @@ def test_constructors_reject_bad_matrix_and_input_arrays(small_stepper):
     with pytest.raises(ValueError, match=r"table\[0\] = 2"):
         _kernels.SeismicInput(*args[:7], bad_table, *args[8:])
     with pytest.raises(ValueError, match=r"is not a node of the Stepper"):
-        stepper.add_seismic_input(spec.make())  # input nodes up to 19, the stepper has 5
+        stepper.add_provider(spec.make())  # input nodes up to 19, the stepper has 5
 
 
 def test_borrowed_arrays_stay_alive():
     K, mass = random_spd_system(6, 2, 2)
     stepper = _kernels.Stepper(*bsr_arrays(K), mass.copy(), 1e-3)  # temporaries only
     spec = smooth_input(6, 3, np.random.default_rng(1))
-    stepper.add_seismic_input(_kernels.SeismicInput(*[np.copy(x) if isinstance(x, np.ndarray) else x
+    stepper.add_provider(_kernels.SeismicInput(*[np.copy(x) if isinstance(x, np.ndarray) else x
                                                       for x in spec.args]))
     import gc
     gc.collect()
