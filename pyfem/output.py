@@ -673,6 +673,11 @@ class RunWriter:
         seconds, interval) of this sitting. Times are over every sitting of a resumed run."""
         self._close_histories()
         self._close_fields()
+        if self.simulation.support:  # support.csv: every bolt segment at the end of the run
+            from pyfem.support import segment_rows, write_csv
+
+            write_csv(self.out_dir / "support.csv", [row for group in self.simulation.support
+                                                     for row in segment_rows(group.bolts, group.name)], peak=True)
         summary = self._summary
         summary["status"] = "finished"
         summary["time_reached"] = self.times[-1]
@@ -702,6 +707,10 @@ class RunWriter:
         if self.nonlinear is not None:
             # Damage and plastic strain never decrease: the final state holds the peaks.
             summary["nonlinear_regions"] = self.nonlinear.region_summary()
+        if self.simulation.support:  # rock bolts and cables (pyfem/support.py)
+            from pyfem.support import group_summary
+
+            summary["support"] = {group.name: group_summary(group) for group in self.simulation.support}
         if self.contact_on:
             summary["pairs"] = self._pair_peaks()
             summary.update(pair_state_summary(times, np.array(self.state_count_samples),

@@ -287,6 +287,29 @@ class TextList:
 
 
 @dataclass(frozen=True)
+class VectorList:
+    """A non-empty array of fixed-length arrays of real numbers (e.g. lines [x0, y0, z0, x1, y1, z1])."""
+
+    description: str
+    length: int
+    default: Any = REQUIRED
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.description} must be a non-empty array of arrays of {self.length} finite numbers"
+
+    def check(self, value: Any, key: str) -> list[list[float]]:
+        if not isinstance(value, list) or not value:
+            raise SceneError(key, value, self.allowed)
+        interval = Interval(ANY_REAL)
+        for index, item in enumerate(value):
+            if (not isinstance(item, list) or len(item) != self.length
+                    or not all(_is_number(x) and interval.contains(float(x)) for x in item)):
+                raise SceneError(f"{key}.{index}", item, self.allowed)
+        return [[float(x) for x in item] for item in value]
+
+
+@dataclass(frozen=True)
 class FreeTable:
     """A table passed through unchecked (checked by whoever reads it)."""
 
@@ -498,6 +521,29 @@ _MATERIAL = Table({
     **{key: _ROCK_DAMAGE_NOT_READ for key in ("damage_max", "damage_plastic_strain", "damage_plastic_displacement")},
 })
 
+SUPPORT_TYPES = ("bolt", "cable")
+"""`support.NAME.type`: "bolt" fully grouted (no plate, no pretension, no free length); "cable" with a head
+plate, a free (ungrouted) length at the head and a pretension."""
+
+# A group of rock bolts or anchor cables (docs/method.md "Rock bolts and cables", pyfem/support.py):
+# explicit lines, or a pattern normal to a named surface.
+_SUPPORT = Table({
+    "type": Choice("support type: \"bolt\" (fully grouted, no plate) or \"cable\" (head plate, free length, "
+                   "pretension)", SUPPORT_TYPES, default="bolt"),
+    "lines": VectorList("bolts as lines [x0, y0, z0, x1, y1, z1], head (rock face) to tip (m)", 6, default=None),
+    "surface": Text("named surface the pattern's bolts start on, normal to it, into the rock", default=None),
+    "spacing": Vector("pattern spacing [around the section, along the axis] (m)", 2, POSITIVE, default=None),
+    "length": Number("length of each bolt of the pattern (m)", POSITIVE, default=None),
+    "diameter": Number("steel diameter d (m; area pi d^2 / 4)", "(0, 0.5]"),
+    "E": Number("steel Young's modulus (Pa)", POSITIVE, default=2.0e11),
+    "yield_force": Number("axial capacity in tension and compression (N)", POSITIVE),
+    "bond_stiffness": Number("grout shear stiffness per metre of bolt (N/m^2: N/m per m)", POSITIVE),
+    "bond_strength": Number("grout shear strength per metre of bolt (N/m)", POSITIVE),
+    "pretension": Number("pretension of a cable's free length (N)", NON_NEGATIVE, default=0.0),
+    "free_length": Number("ungrouted length at a cable's head (m)", NON_NEGATIVE, default=0.0),
+    "segment": Number("element length along a bolt (m)", POSITIVE, default=None),
+}, "a support group")
+
 _WAVE_TYPE = Choice("wave type", ("P", "SV", "SH"))
 CONTACT_SPLITS = ("before_static", "after_static")
 """`contact.split`: the interfaces split before the static stage (their law acts in it) or after it."""
@@ -630,6 +676,8 @@ SCHEMA = Table({
         "relaxation": Number("fraction lambda of the excavation load released before install", "[0, 1]",
                              default=0.5),
         "install": TextList("regions activated stress-free after the first release", default=[]),
+        "support": TextList("support groups ([support.NAME]) installed with the install regions, after the "
+                            "first release", default=[]),
         "gravity": Flag("the materials' weight as a body force of the stage", default=False),
         "tolerance": Number("relative residual ||f - f_int|| / ||f|| the stage must reach (default 1e-8 for "
                             "the linear solve, 1e-5 for dynamic relaxation)", "(0, 0.1]", default=None),
@@ -646,6 +694,7 @@ SCHEMA = Table({
             }, "a face's boundary during the stage"), "[static.boundary.face.NAME]", default=None),
         }, "[static.boundary]"),
     }, "[static]", presence="optional"),
+    "support": TableMap(_SUPPORT, "[support.NAME]", default=None),
     "contact": Table({
         "interfaces": TextList("interface names: named surfaces (a box's layers: interface_1, ...) that neither "
                                "cross nor end on one another inside the model (they may reach the outer "
@@ -817,6 +866,7 @@ def _check_rules(settings: dict, base_dirs: Sequence[Path], warnings: list[str])
         _check_initial_stress(settings["initial_stress"], warnings)
     if "static" in settings:
         _check_static(settings)
+    _check_support(settings)
     _check_output(settings, warnings)
     _check_points_inside(settings)
     _resolve_files(settings, base_dirs)
@@ -1121,6 +1171,53 @@ def _check_static(settings: dict) -> None:
         index = static["install"].index(both[0])
         raise SceneError(f"static.install.{index}", both[0], "a region is excavated (static.excavate) or "
                          "installed (static.install), not both")
+
+
+def _check_support(settings: dict) -> None:
+    """[support.NAME]: lines or a pattern (surface, spacing, length), not both; a bolt has no plate,
+    pretension or free length; every line longer than the free length; static.support names groups."""
+    groups = settings.get("support") or {}
+    for name, group in groups.items():
+        key = f"support.{name}"
+        pattern = [part for part in ("surface", "spacing", "length") if group[part] is not None]
+        if group["lines"] is not None and pattern:
+            raise SceneError(f"{key}.{pattern[0]}", group[pattern[0]], f"a pattern key: give {key}.lines "
+                             "(explicit bolts) or surface, spacing and length (a pattern), not both")
+        if group["lines"] is None:
+            if not pattern:
+                raise _missing(f"{key}.lines", f"a support group needs its bolts: {key}.lines = [[x0, y0, z0, "
+                               "x1, y1, z1], ...] (m), or a pattern: surface, spacing and length")
+            missing = [part for part in ("surface", "spacing", "length") if group[part] is None]
+            if missing:
+                spec = _SUPPORT.fields[missing[0]]
+                raise _missing(f"{key}.{missing[0]}", f"{spec.allowed} (a pattern needs surface, spacing and length)")
+        if group["type"] == "bolt":
+            for part in ("pretension", "free_length"):
+                if group[part] != 0.0:
+                    raise SceneError(f"{key}.{part}", group[part], f"must be 0 for {key}.type = \"bolt\" (fully "
+                                     "grouted, no plate): a pretension or free length needs type = \"cable\"")
+        if group["pretension"] > group["yield_force"]:
+            raise SceneError(f"{key}.pretension", group["pretension"], f"must not exceed {key}.yield_force = "
+                             f"{group['yield_force']:g} N")
+        if group["pretension"] > 0.0 and group["free_length"] == 0.0:
+            raise SceneError(f"{key}.pretension", group["pretension"], f"needs a free length ({key}.free_length > 0): "
+                             "the pretension is locked off in the ungrouted length")
+        shortest = (min(math.dist(line[:3], line[3:]) for line in group["lines"]) if group["lines"] is not None
+                    else group["length"])
+        for index, line in enumerate(group["lines"] or []):
+            if math.dist(line[:3], line[3:]) == 0.0:
+                raise SceneError(f"{key}.lines.{index}", line, "a bolt needs a length: head and tip must differ")
+        if group["free_length"] >= shortest:
+            raise SceneError(f"{key}.free_length", group["free_length"], f"must be shorter than the shortest bolt "
+                             f"of the group ({shortest:.6g} m)")
+        if group["segment"] is not None and group["segment"] > shortest:
+            raise SceneError(f"{key}.segment", group["segment"], f"must not exceed the shortest bolt of the group "
+                             f"({shortest:.6g} m)")
+    static = settings.get("static")
+    for index, name in enumerate(static["support"] if static else []):
+        if name not in groups:
+            raise SceneError(f"static.support.{index}", name, "must name a [support.NAME] group: "
+                             + (", ".join(groups) or "the scene has none"))
 
 
 def _check_output(settings: dict, warnings: list[str]) -> None:

@@ -31,7 +31,7 @@ from typing import Any, Iterator
 
 from pyfem import scene as scene_module
 from pyfem.scene import (REQUIRED, SCHEMA, Choice, FilePath, Flag, FreeTable, Interval, Number,
-                         Scene, Table, TableList, TableMap, Text, TextList, Vector)
+                         Scene, Table, TableList, TableMap, Text, TextList, Vector, VectorList)
 
 DOCUMENT = Path("docs") / "scene-keys.md"
 """Where the reference lives, relative to the repository root."""
@@ -40,7 +40,7 @@ WRITE_COMMAND = "/usr/bin/python3 -m pyfem keys --write"
 """The command that regenerates `DOCUMENT` (run from the repository root)."""
 
 # A unit in a description: "(Pa)", "(m; ...)", "(Pa, compression negative)".
-_UNIT = re.compile(r"\((Pa|m|s|deg|Hz|kg/m\^3|N/m|m/s|1/s|g)[;,)]")
+_UNIT = re.compile(r"\((Pa|m|s|deg|Hz|kg/m\^3|N/m\^2|N/m|N|m/s|1/s|g)[;,:)]")
 
 DIMENSIONLESS = (
     "materials.NAME.nu",
@@ -118,6 +118,13 @@ UNSET = {
                         "(out-of-balance force ratio)",
     "contact.dynamic_friction_angle": "= `contact.friction_angle`",
     "contact.tensile_strength": "= `contact.cohesion`",
+    "support": "none: no rock support",
+    "support.NAME.lines": "none; give `support.NAME.lines` or the pattern `support.NAME.surface`, "
+                          "`support.NAME.spacing` and `support.NAME.length`",
+    "support.NAME.surface": "none; with `support.NAME.spacing` and `support.NAME.length`: a pattern",
+    "support.NAME.spacing": "none; required by a pattern",
+    "support.NAME.length": "none; required by a pattern",
+    "support.NAME.segment": "about the size of the cells the bolt crosses (their nodes' spacing along x, y, z)",
     "contact.release_time": "off: a broken bond's strength goes in one step (nothing to compute; "
                             "docs/method.md section 9, \"Releasing a broken bond\")",
 }
@@ -199,6 +206,9 @@ RULES = {
     ],
     "static": [
         "needs a load: an `initial_stress` table or `static.gravity` = true",
+        "`static.support` names groups of `support`, installed with `static.install`; a group not listed is "
+        "installed at the start of the dynamic run; a stage with support is solved by dynamic relaxation "
+        "(`static.solver` \"direct\" and \"iterative\" refuse it)",
         "a region is in `static.excavate` or in `static.install`, not both",
     ],
     "contact": [
@@ -207,6 +217,20 @@ RULES = {
     ],
     "monitor.0": [
         "`monitor.0.point` inside the box (builder \"box\")",
+    ],
+    "support.NAME": [
+        "either `support.NAME.lines` or the pattern `support.NAME.surface`, `support.NAME.spacing`, "
+        "`support.NAME.length`, not both",
+        "the pattern: rows every `support.NAME.spacing` [1] m along the surface's axis (the direction its "
+        "normals are perpendicular to), bolts every `support.NAME.spacing` [0] m of arc length around each row's "
+        "section, each normal to the surface into the rock (away from `static.install` regions)",
+        "type \"bolt\": `support.NAME.pretension` = 0 and `support.NAME.free_length` = 0; "
+        "a pretension needs a free length and at most `support.NAME.yield_force`",
+        "`support.NAME.free_length` and `support.NAME.segment` shorter than the shortest bolt",
+        "every bolt node lies in a cell of the model (not outside it, not in an excavated region); "
+        "checked once the mesh is built",
+        "`support.NAME.surface` names a surface of the mesh",
+        "refused under mpirun and with `time.local_stepping` = true (\"auto\" is off)",
     ],
     "pair_monitor.0": [
         "needs a `contact` table",
@@ -279,6 +303,8 @@ PURPOSE = {
                              "whether or not they shear (docs/method.md section 9; R0 = 1: no wear)",
     "contact.normal_lag": "the lag of the normal force the friction sees (regularises sliding between "
                           "dissimilar rocks)",
+    "support.NAME": "a group of rock bolts or anchor cables: axial bars tied to the rock by their grout "
+                    "(docs/method.md, \"Rock bolts and cables\")",
     "pair_monitor.0": "the contact pair nearest a point, its histories in pairs/NAME.csv",
 }
 """What each table is for (its description in the schema is only its name)."""
@@ -380,7 +406,7 @@ def key_specs() -> dict[str, Any]:
 def unit(path: str, spec: Any) -> str | None:
     """The unit of a number or vector key from its description, "-" for `DIMENSIONLESS`, "" for
     keys that are not numbers; None for a number with neither (a defect: tests fail)."""
-    if not isinstance(spec, (Number, Vector)):
+    if not isinstance(spec, (Number, Vector, VectorList)):
         return ""
     found = _UNIT.search(spec.description)
     if found:
@@ -438,6 +464,8 @@ def _type(spec: Any) -> str:
         return "number"
     if isinstance(spec, Vector):
         return f"{spec.length} numbers"
+    if isinstance(spec, VectorList):
+        return f"array of {spec.length}-number arrays"
     if isinstance(spec, Choice):
         if any(isinstance(o, bool) for o in spec.options):
             return "boolean or " + " or ".join(scene_module._show(o) for o in spec.options if not isinstance(o, bool))
@@ -470,6 +498,8 @@ def _allowed(spec: Any) -> str:
         return text + (", increasing" if spec.increasing else "")
     if isinstance(spec, Choice):
         return ", ".join(scene_module._show(o) for o in spec.options)
+    if isinstance(spec, VectorList):
+        return "non-empty; finite"
     if isinstance(spec, Text) and spec.filename_safe:
         return "letters, digits, _ . -"
     if isinstance(spec, Text):

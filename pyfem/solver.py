@@ -80,6 +80,7 @@ class Simulation:
     lts_global_step: TimeStep | None = None  # local stepping on: the scene's global step (fall_back_to_global_stepping)
     lts_check_deferred: bool = False       # `plan`: the LTS map's set-up check is left to the run
     static: object = None                # pyfem.static.StaticState when a [static] stage ran
+    support: list = field(default_factory=list)  # pyfem.support.SupportGroup of each [support.NAME]
 
 
 @dataclass
@@ -533,7 +534,15 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
     spring_nodes, springs, dashpot_nodes, dashpots, constraints = boundary_operators(scene, model)
     stiffness = add_block_diagonal(model.stiffness, spring_nodes, springs)
     alpha, beta = damping_coefficients(scene)
-    time_step = choose_time_step(scene, stiffness, mass, beta)
+    support = []
+    if scene.get("support"):  # rock bolts and cables (pyfem/support.py): their stiffness bound in the step
+        from pyfem.support import scene_groups, stiffness_bound
+
+        support = scene_groups(scene, model)
+        time_step = choose_time_step(scene, (stiffness + stiffness_bound(support, model.n_nodes)).tobsr(
+            blocksize=(3, 3)), mass, beta)
+    else:
+        time_step = choose_time_step(scene, stiffness, mass, beta)
     nonlinear = nonlinear_regions(scene, model, time_step)
     elastic_stiffness = stiffness  # of every cell: the rate levels of local stepping
     if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
@@ -586,7 +595,7 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
                             time_step=time_step, dashpot_nodes=dashpot_nodes, dashpot_matrices=dashpots,
                             constraints=constraints, n_steps=n_steps, nonlinear=nonlinear,
                             node_levels=node_levels, lts_preview=preview, lts_split=lts_split,
-                            lts_decision=lts_decision, lts_global_step=global_step)
+                            lts_decision=lts_decision, lts_global_step=global_step, support=support)
     if "seismic_input" in scene.effects:
         simulation.freefield, simulation.input_arrays = seismic_input_from_scene(scene, model, record)
     monitors = scene.get("monitor", [])
@@ -800,6 +809,8 @@ def make_stepper(simulation: Simulation):
         components = simulation.nonlinear.components if handed_over else simulation.nonlinear.new_components()
         for component in components:
             stepper.add_internal_force(component)
+    for group in simulation.support:  # rock bolts and cables: the stage's (rebased) or fresh at t = 0
+        stepper.add_internal_force(group.component)
     if simulation.static is not None:  # the stage's out-of-balance, held constant (pyfem/static.py)
         from pyfem.static import add_hand_over_force
 
@@ -908,11 +919,13 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     import dataclasses
 
     from pyfem.static import plan_report
+    from pyfem.support import support_plan
 
     scene = simulation.scene
     nonlinear = simulation.nonlinear
     kept = None if nonlinear is None else nonlinear.components  # the trial's fresh ones must not replace them
-    trial = dataclasses.replace(simulation, static=None, contact_pairs=None)
+    trial = dataclasses.replace(simulation, static=None, contact_pairs=None,
+                                support=[group.fresh() for group in simulation.support])
     stepper = make_stepper(trial)
     simulation.lts_stability = trial.lts_stability  # checked once per model (local time stepping)
     if trial.node_levels is None and simulation.node_levels is not None:  # "auto" fell back
@@ -957,6 +970,7 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         **lts_preview_plan(simulation, {name: entry["ms_per_step"] for name, entry in phases.items()}),
         **element_loop,
         **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
+        **({"support": support_plan(simulation)} if simulation.support else {}),
         **interface_slip_plan(scene, model),
         **resolution_plan(scene, model),
         "steps": simulation.n_steps,

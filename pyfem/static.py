@@ -159,6 +159,8 @@ class StaticState:
     cell_state: dict | None = None
     cell_state_first: dict | None = None
     pair_forces_in_situ: np.ndarray | None = None
+    support_rows: list | None = None
+    support_summary: dict | None = None
 
     def summary(self) -> dict:
         """run.json's "static": per stage its solver, iterations, residual, time and largest
@@ -169,7 +171,8 @@ class StaticState:
                                              initial=0.0)),
             "out_of_balance": self.out_of_balance,
             "seconds": self.seconds,
-            "outputs": "static/static.json, static/fields.xdmf",
+            "outputs": "static/static.json, static/fields.xdmf" + (", static/support.csv" if self.support_rows else ""),
+            **({"support": self.support_summary} if self.support_summary else {}),
         }
 
 
@@ -183,7 +186,7 @@ def uses_relaxation(scene: typing.Mapping) -> bool:
     solver = scene["static"]["solver"]
     if solver in ("direct", "iterative"):
         return False
-    return solver == "relaxation" or any(material.get(table) is not None for material in scene["materials"].values()
+    return solver == "relaxation" or bool(scene["static"].get("support")) or any(material.get(table) is not None for material in scene["materials"].values()
                                          for table in ("plasticity", "damage"))
 
 
@@ -203,6 +206,11 @@ def check_linear(scene: typing.Mapping) -> None:
     """
     if uses_relaxation(scene):
         return
+    if scene["static"].get("support"):
+        solver = scene["static"]["solver"]
+        raise SceneError("static.solver", solver, f"static.solver = \"{solver}\" solves linear elastic stages "
+                         "only: support groups (static.support) slip and yield, and need static.solver = "
+                         "\"relaxation\" (or \"auto\", which chooses it)")
     for name, material in scene["materials"].items():
         for table in ("plasticity", "damage"):
             if material.get(table) is not None:
@@ -885,7 +893,15 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     laws, _ = scene_laws(scene)
     factor = max([plastic_frequency_factor(p["poisson_ratio"], p["friction_angle"], p["dilation_angle"])
                   for p in laws.values() if p["law"] == "mohr_coulomb"], default=1.0)
-    mass = scaled_mass(model.stiffness, factor)
+    # Rock bolts and cables of static.support join in the support stage (pyfem/support.py); the mass
+    # bounds their condensed stiffness too.
+    support = [group for group in simulation.support if group.stage == "static"]
+    if support:
+        from pyfem.support import stiffness_bound
+
+        mass = scaled_mass(model.stiffness + stiffness_bound(support, n_nodes), factor)
+    else:
+        mass = scaled_mass(model.stiffness, factor)
 
     # Components: the rock's from the in-situ stress now, the installed regions' stress-free in stage 2.
     components = [None] * len(element_regions)
@@ -915,7 +931,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     floor = 1.0e-3 * float(np.linalg.norm(loads.in_situ_traction))
     # How slowly to load: the lowest frequency of the elastic stage-1 body (bonded pairs as they start).
     ramp, probe_steps = 0.0, 0
-    path_dependent = any(c is not None for c in components) or contact is not None
+    path_dependent = any(c is not None for c in components) or contact is not None or bool(support)
     probe_load = f_exc + loads.installed_weight.ravel()
     if path_dependent and np.any(probe_load):
         elastic = linear_stiffness(model, installed_cells) if len(installed_cells) else model.stiffness
@@ -940,12 +956,13 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         load = fraction * f_exc + carried + (loads.installed_weight.ravel() if index == 1 else 0.0)
         active = [component for component in components if component is not None]
         active_regions = [region for region, component in zip(element_regions, components) if component is not None]
-        stepper = stage_stepper(stiffness, load, active, active_regions, contact, ramp)
+        bolts = [group.component for group in support] if index == 1 else []
+        stepper = stage_stepper(stiffness, load, active + bolts, active_regions, contact, ramp)
         u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor,
                           report=lambda steps, ratio, seconds, name=name: print(
                               f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), "
                               f"out-of-balance {ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True))
-        for component in active:
+        for component in active + bolts:
             component.rebase()
         if contact is not None:
             contact.rebase(u)
@@ -1000,6 +1017,11 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
                         components=components, contact=contact)
     state.cell_state_first = cell_state_first
     state.cell_state = _cell_state(model, nonlinear, components)
+    if support:  # static/support.csv: the bolts as the stage leaves them
+        from pyfem.support import group_summary, segment_rows
+
+        state.support_rows = [row for group in support for row in segment_rows(group.bolts, group.name)]
+        state.support_summary = {group.name: group_summary(group) for group in support}
     return state
 
 

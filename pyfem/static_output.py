@@ -47,6 +47,11 @@ def write_static_outputs(writer) -> None:
     _write_json(folder / "static.json", report)
     write_static_fields(folder, simulation)
     write_hand_over(folder, simulation)
+    rows = getattr(simulation.static, "support_rows", None)
+    if rows:  # the bolts and cables of static.support as the stage leaves them
+        from pyfem.support import write_csv
+
+        write_csv(folder / "support.csv", rows, peak=False)
 
 
 def static_stress_in_fields(writer) -> None:

@@ -3,15 +3,19 @@
 A group of straight bolts given as lines head -> tip is cut into segments of about `segment` m;
 each bolt node is located in the rock mesh (the model's point_weights: host cell and the
 interpolation weights of its nodes, exact for every field of the space) and the group becomes one
-kernel GroutedBolts component. Not yet read from a scene: the scene keys, the static stage's
-installation and the outputs come next.
+kernel GroutedBolts component. `scene_groups` builds the scene's `[support.NAME]` groups (explicit
+lines, or a pattern normal to a named surface: `pattern_lines`), `stiffness_bound` the bound of their
+condensed stiffness that the stable step includes, `group_summary` and `segment_rows` what run.json,
+`support.csv` and `static/support.csv` report.
 """
 import dataclasses
 import math
 
 import numpy as np
+import scipy.sparse as sp
 
 from pyfem import _kernels
+from pyfem.errors import SceneError
 
 
 @dataclasses.dataclass
@@ -22,6 +26,14 @@ class BoltGroup:
     arc_length: np.ndarray     # (m,) s from the head (m)
     positions: np.ndarray      # (m, 3) coordinates of the bolt nodes (m)
     directions: np.ndarray     # (b, 3) unit axis head -> tip
+    host_nodes: np.ndarray = None    # (m, k) int32 rock nodes of each bolt node's host cell
+    host_weights: np.ndarray = None  # (m, k) their interpolation weights
+    parameters: dict = None          # GroutedBolts' keyword parameters
+
+    def fresh_component(self):
+        """A new kernel component of the group's bolts, unloaded (the same geometry and parameters)."""
+        return _kernels.GroutedBolts(self.bolt_offsets, self.arc_length, self.directions, self.host_nodes,
+                                     self.host_weights, **self.parameters)
 
 
 def discretise_lines(lines, segment: float, free_length: float = 0.0):
@@ -60,12 +72,318 @@ def bolt_group(model, lines, *, diameter: float, E: float, yield_force: float, b
     the parameters of a support group (SI units; steel area pi diameter^2 / 4)."""
     offsets, arcs, positions, directions = discretise_lines(lines, segment, free_length)
     host_nodes, host_weights = model.point_weights(positions)
-    component = _kernels.GroutedBolts(
-        offsets, arcs, directions, host_nodes, host_weights,
-        axial_stiffness=E * math.pi * diameter**2 / 4.0, yield_force=yield_force,
-        bond_stiffness=bond_stiffness, bond_strength=bond_strength, pretension=pretension,
-        free_length=free_length, head_stiffness=head_stiffness)
-    return BoltGroup(component, offsets, arcs, positions, directions)
+    parameters = dict(axial_stiffness=E * math.pi * diameter**2 / 4.0, yield_force=yield_force,
+                      bond_stiffness=bond_stiffness, bond_strength=bond_strength, pretension=pretension,
+                      free_length=free_length, head_stiffness=head_stiffness)
+    group = BoltGroup(None, offsets, arcs, positions, directions, host_nodes, host_weights, parameters)
+    group.component = group.fresh_component()
+    return group
+
+
+# ---------------------------------------------------------------------------------------------
+# The scene's groups ([support.NAME], docs/scene-keys.md)
+# ---------------------------------------------------------------------------------------------
+
+HEAD_PLATE_FACTOR = 100.0
+"""A cable's head plate: a spring of HEAD_PLATE_FACTOR x EA / segment (N/m) tying its head node to the
+rock, stiff against its first segment (a bolt, type "bolt", has none)."""
+
+
+@dataclasses.dataclass
+class SupportGroup:
+    """One `[support.NAME]` group of a scene placed in the model.
+
+    Attributes:
+        name: NAME.
+        settings: the scene's table.
+        lines: (b, 6) head and tip of each bolt (m).
+        segment: the element length used (m).
+        stage: "static": installed in the static stage with `static.install` (static.support);
+            "start": at the start of the dynamic run.
+        bolts: the placement and the kernel component the run steps.
+    """
+
+    name: str
+    settings: dict
+    lines: np.ndarray
+    segment: float
+    stage: str
+    bolts: BoltGroup
+
+    @property
+    def component(self):
+        return self.bolts.component
+
+    def fresh(self) -> "SupportGroup":
+        """The same group with a new, unloaded component (a trial stepper's)."""
+        return dataclasses.replace(self, bolts=dataclasses.replace(self.bolts, component=self.bolts.fresh_component()))
+
+    @property
+    def axial_stiffness(self) -> float:
+        return self.bolts.parameters["axial_stiffness"]
+
+    @property
+    def total_length(self) -> float:
+        return float(np.linalg.norm(self.lines[:, 3:] - self.lines[:, :3], axis=1).sum())
+
+
+def _line_key(name: str, settings: dict, bolt: int) -> tuple[str, object]:
+    """The scene key and value a bolt of a group stands for (its line, or the pattern's length)."""
+    if settings["lines"] is not None:
+        return f"support.{name}.lines.{bolt}", settings["lines"][bolt]
+    return f"support.{name}.length", settings["length"]
+
+
+def _default_segment(model, lines: np.ndarray, order: int) -> float:
+    """About the node spacing of the cells the bolts cross: the median, over points every tenth of
+    each bolt, of the host cell's largest extent along x, y, z divided by the element order."""
+    points = np.concatenate([line[:3] + np.linspace(0.0, 1.0, 11)[:, None] * (line[3:] - line[:3]) for line in lines])
+    nodes, _ = model.point_weights(points)
+    coordinates = model.node_coords[nodes]  # (m, k, 3)
+    extent = (coordinates.max(axis=1) - coordinates.min(axis=1)).max(axis=1)
+    return float(np.median(extent)) / order
+
+
+def scene_groups(scene, model) -> list[SupportGroup]:
+    """The scene's support groups placed in the model, in the scene's order.
+
+    Raises:
+        SceneError: a pattern's surface is not one of the mesh's, or has no axis; a bolt node lies
+            in no cell of the model (outside it, or in a cavity or excavated region).
+    """
+    from pyfem.operators import PointOutsideMesh
+
+    tables = scene.get("support") or {}
+    static_groups = set((scene.get("static") or {}).get("support") or [])
+    installed_regions = list((scene.get("static") or {}).get("install") or [])
+    groups = []
+    for name, settings in tables.items():
+        if settings["lines"] is not None:
+            lines = np.asarray(settings["lines"], dtype=np.float64).reshape(-1, 6)
+        else:
+            lines = pattern_lines(model, name, settings, installed_regions)
+        try:
+            segment = settings["segment"] or _default_segment(model, lines, scene["mesh"]["order"])
+        except PointOutsideMesh as error:
+            segment = None
+            bolt = error.index // 11
+        if segment is not None:
+            offsets, arcs, positions, _ = discretise_lines(lines, segment, settings["free_length"])
+            try:
+                model.point_weights(positions)
+            except PointOutsideMesh as error:
+                bolt = int(np.searchsorted(offsets, error.index, side="right") - 1)
+            else:
+                bolt = None
+        if bolt is not None:
+            key, value = _line_key(name, settings, bolt)
+            head, tip = lines[bolt, :3].tolist(), lines[bolt, 3:].tolist()
+            where = "" if settings["lines"] is not None else f" (bolt {bolt} of the pattern, from {head} to {tip})"
+            allowed = "every bolt node in a cell of the model"
+            raise SceneError(key, value, allowed, f"scene key '{key}' = {value}{where}: its point "
+                             f"{[round(x, 6) for x in error.point]} is {error.where}; allowed: {allowed}") from None
+        E, diameter = settings["E"], settings["diameter"]
+        head_stiffness = (HEAD_PLATE_FACTOR * E * math.pi * diameter**2 / 4.0 / segment
+                          if settings["type"] == "cable" else 0.0)
+        try:
+            bolts = bolt_group(model, lines, diameter=diameter, E=E, yield_force=settings["yield_force"],
+                               bond_stiffness=settings["bond_stiffness"], bond_strength=settings["bond_strength"],
+                               segment=segment, pretension=settings["pretension"],
+                               free_length=settings["free_length"], head_stiffness=head_stiffness)
+        except ValueError as error:  # the kernel's own checks (the scene's should have caught them)
+            raise SceneError(f"support.{name}", None, str(error), f"scene key 'support.{name}': {error}") from None
+        groups.append(SupportGroup(name, settings, lines, segment, "static" if name in static_groups else "start",
+                                   bolts))
+    return groups
+
+
+# ---------------------------------------------------------------------------------------------
+# A pattern normal to a named surface
+# ---------------------------------------------------------------------------------------------
+
+def _surface_triangles(model, name: str, key: str, installed_regions: list):
+    """(vertex ids (t, 3), vertex coordinates, unit normals (t, 3) pointing into the rock) of the
+    facets of the named surface, quadrilaterals cut in two."""
+    from dolfinx.cpp.mesh import entities_to_geometry
+
+    if name not in model.boundaries:
+        raise SceneError(key, name, "must name a surface of the mesh: " + ", ".join(sorted(model.boundaries)))
+    mesh = model.mesh
+    tdim = mesh.topology.dim
+    facets = model.facet_tags.find(model.boundaries[name])
+    if not len(facets):
+        raise SceneError(key, name, "must name a surface with facets in the model (this one has none left: "
+                         "excavated?)")
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    facet_cells = mesh.topology.connectivity(tdim - 1, tdim)
+    vertices = entities_to_geometry(mesh._mesh, tdim - 1,
+                                    np.asarray(facets, dtype=np.int32), False)
+    x = mesh.geometry.x
+    excluded = set()
+    for region in installed_regions:
+        if region in model.regions:
+            excluded.update(model.cell_tags.find(model.regions[region]).tolist())
+    triangles, normals = [], []
+    for facet, corners in zip(facets, vertices):
+        cells = [c for c in facet_cells.links(facet) if c not in excluded] or list(facet_cells.links(facet))
+        inside = model.cell_centroids(np.array(cells[:1], dtype=np.int32))[0]
+        # dolfinx orders a quadrilateral's vertices as a tensor product: (0, 1, 3) and (0, 3, 2) cover it.
+        pieces = [corners[[0, 1, 2]]] if len(corners) == 3 else [corners[[0, 1, 3]], corners[[0, 3, 2]]]
+        for piece in pieces:
+            normal = np.cross(x[piece[1]] - x[piece[0]], x[piece[2]] - x[piece[0]])
+            normal /= np.linalg.norm(normal)
+            if np.dot(normal, inside - x[piece].mean(axis=0)) < 0.0:
+                normal = -normal
+            triangles.append(piece)
+            normals.append(normal)
+    return np.array(triangles), x, np.array(normals)
+
+
+def _surface_axis(triangles: np.ndarray, x: np.ndarray, normals: np.ndarray, key: str, name: str) -> np.ndarray:
+    """The direction the surface's normals are perpendicular to (a tunnel's axis; for a plane the
+    in-plane direction nearest y, else x)."""
+    areas = 0.5 * np.linalg.norm(np.cross(x[triangles[:, 1]] - x[triangles[:, 0]],
+                                          x[triangles[:, 2]] - x[triangles[:, 0]]), axis=1)
+    tensor = (areas[:, None, None] * normals[:, :, None] * normals[:, None, :]).sum(axis=0)
+    values, vectors = np.linalg.eigh(tensor)
+    if values[0] > 1e-6 * values[2]:
+        raise SceneError(key, name, "a pattern needs a surface extruded along one direction (a tunnel's or "
+                         "cavern's wall, a plane): this one's normals point in every direction")
+    if values[1] <= 1e-6 * values[2]:  # a plane
+        normal = vectors[:, 2]
+        for axis in (np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])):
+            along = axis - np.dot(axis, normal) * normal
+            if np.linalg.norm(along) > 1e-6:
+                return along / np.linalg.norm(along)
+    axis = vectors[:, 0]
+    return axis if axis[np.argmax(np.abs(axis))] > 0.0 else -axis
+
+
+def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: float):
+    """The section of the surface by the plane axis . p = t: chains (each a list of (point, triangle)
+    from one end to the other; closed chains repeat their first point)."""
+    distance = x[triangles] @ axis - t  # (T, 3)
+    crossing = np.flatnonzero((distance.min(axis=1) < 0.0) & (distance.max(axis=1) > 0.0))
+    points, neighbours, edge_triangle = {}, {}, {}
+    for k in crossing:
+        keys = []
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            da, db = distance[k, a], distance[k, b]
+            if (da < 0.0) != (db < 0.0):
+                va, vb = int(triangles[k, a]), int(triangles[k, b])
+                edge = (min(va, vb), max(va, vb))
+                if edge not in points:
+                    d0 = distance[k, a] if va < vb else distance[k, b]
+                    d1 = distance[k, b] if va < vb else distance[k, a]
+                    points[edge] = x[edge[0]] + d0 / (d0 - d1) * (x[edge[1]] - x[edge[0]])
+                keys.append(edge)
+        if len(keys) == 2:
+            neighbours.setdefault(keys[0], []).append((keys[1], k))
+            neighbours.setdefault(keys[1], []).append((keys[0], k))
+    chains, seen = [], set()
+    starts = [key for key, links in neighbours.items() if len(links) == 1] + list(neighbours)
+    for start in starts:
+        if start in seen:
+            continue
+        chain, current, previous = [(points[start], None)], start, None
+        seen.add(start)
+        while True:
+            step = [(key, k) for key, k in neighbours[current] if key != previous or len(neighbours[current]) == 1]
+            step = [(key, k) for key, k in step if key not in seen or (key == start and len(chain) > 2)]
+            if not step:
+                break
+            key, k = step[0]
+            chain.append((points[key], k))
+            if key == start:
+                break
+            seen.add(key)
+            previous, current = current, key
+        if len(chain) > 1:
+            chains.append(chain)
+    return chains
+
+
+def pattern_lines(model, name: str, settings: dict, installed_regions: list) -> np.ndarray:
+    """(b, 6) the bolts of a pattern: rows every spacing[1] along the surface's axis (centred, at least
+    half a spacing from its ends), and in each row's section bolts every spacing[0] of arc length
+    (centred on an open section; a closed one gets the whole number nearest its length / spacing[0],
+    evenly), each of `length` along the surface's normal into the rock (away from `installed_regions`).
+    """
+    key = f"support.{name}.surface"
+    surface = settings["surface"]
+    around, along = settings["spacing"]
+    triangles, x, normals = _surface_triangles(model, surface, key, installed_regions)
+    axis = _surface_axis(triangles, x, normals, key, surface)
+    used = np.unique(triangles)
+    lo, hi = float((x[used] @ axis).min()), float((x[used] @ axis).max())
+    extent = hi - lo
+    n_rows = max(1, int(math.floor(extent / along + 1e-9)))
+    rows = lo + 0.5 * (extent - (n_rows - 1) * along) + along * np.arange(n_rows)
+    heights = x[used] @ axis
+    lines = []
+    for t in rows:
+        while np.min(np.abs(heights - t)) < 1e-9 * max(extent, 1.0):  # off the nodes: a clean section
+            t += 1e-6 * along
+        for chain in _section_chains(triangles, x, axis, t):
+            p = np.array([point for point, _ in chain])
+            owners = [k for _, k in chain[1:]]
+            arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+            total = arc[-1]
+            closed = np.allclose(p[0], p[-1])
+            if closed:
+                n = max(1, int(round(total / around)))
+                stations = total / n * np.arange(n)
+            else:
+                n = max(1, int(math.floor(total / around + 1e-9)))
+                stations = 0.5 * (total - (n - 1) * around) + around * np.arange(n)
+            for s in stations:
+                j = min(int(np.searchsorted(arc, s, side="right") - 1), len(owners) - 1)
+                w = (s - arc[j]) / max(arc[j + 1] - arc[j], 1e-300)
+                head = p[j] + w * (p[j + 1] - p[j])
+                direction = normals[owners[j]]
+                lines.append(np.concatenate([head, head + settings["length"] * direction]))
+    if not lines:
+        raise SceneError(key, surface, "the pattern found no section of this surface to place bolts on")
+    return np.array(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# What the stable step and the reports need
+# ---------------------------------------------------------------------------------------------
+
+def stiffness_bound(groups: list, n_nodes: int) -> sp.csr_matrix:
+    """(3n, 3n) P^T diag(k_b L_k) P: an upper bound (in the order of positive semi-definite matrices)
+    of the condensed stiffness the bolts add to the rock, P the map from the rock's displacements to
+    the axial displacement d . sum_a N_a u_a at the bolt nodes. The condensed stiffness
+    B - B (K_bar + B)^-1 B is below B = diag(k_b L_k) (the head plate's spring adds to B)."""
+    total = sp.csr_matrix((3 * n_nodes, 3 * n_nodes))
+    for group in groups:
+        bolts = group.bolts
+        m, k = bolts.host_nodes.shape
+        bolt_of_node = np.repeat(np.arange(len(bolts.bolt_offsets) - 1), np.diff(bolts.bolt_offsets))
+        d = bolts.directions[bolt_of_node]  # (m, 3)
+        rows = np.repeat(np.arange(m), 3 * k)
+        columns = (3 * bolts.host_nodes[:, :, None] + np.arange(3)).reshape(m, -1).ravel()
+        values = (bolts.host_weights[:, :, None] * d[:, None, :]).reshape(m, -1).ravel()
+        P = sp.csr_matrix((values, (rows, columns)), shape=(m, 3 * n_nodes))
+        spring = bolts.parameters["bond_stiffness"] * bolts.component.bond_length()
+        head = bolts.parameters["head_stiffness"]
+        if head > 0.0:
+            spring[bolts.bolt_offsets[:-1]] += head
+        total = total + (P.T @ sp.diags(spring) @ P).tocsr()
+    return total
+
+
+def group_summary(group: SupportGroup) -> dict:
+    """run.json's "support" entry of a group: bolts, total length, yielded segments, peak force."""
+    component = group.component
+    strain = np.asarray(component.plastic_strain())
+    return {"type": group.settings["type"], "installed": group.stage, "bolts": int(component.n_bolts),
+            "total_length": group.total_length, "segments": int(component.n_segments),
+            "yielded_segments": int(np.count_nonzero(strain != 0.0)),
+            "slipping_nodes": int(np.count_nonzero(np.asarray(component.plastic_slip()) != 0.0)),
+            "peak_axial_force": float(np.max(component.peak_axial_force(), initial=0.0)),
+            "yield_force": group.settings["yield_force"]}
 
 
 def segment_rows(group: BoltGroup, name: str) -> list[tuple]:
@@ -83,3 +401,69 @@ def segment_rows(group: BoltGroup, name: str) -> list[tuple]:
             rows.append((name, bolt, 0.5 * (group.arc_length[k] + group.arc_length[k + 1]), *middle.tolist(),
                          float(force[e]), 0.5 * float(slip[k] + slip[k + 1]), float(peak[e])))
     return rows
+
+
+CSV_COLUMNS = ("group", "bolt", "s", "x", "y", "z", "axial_force", "bond_slip")
+"""support.csv's and static/support.csv's columns (docs/outputs); the end-of-run file adds peak_axial_force."""
+
+
+def write_csv(path, rows: list, peak: bool) -> None:
+    """One row per segment (`segment_rows`): s from the head (m), its middle (m), axial force (N,
+    tension positive), bond slip (m); with `peak`, the largest |axial force| so far (N)."""
+    from pathlib import Path
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    columns = CSV_COLUMNS + (("peak_axial_force",) if peak else ())
+    with open(path, "w") as stream:
+        stream.write(",".join(columns) + "\n")
+        for row in rows:
+            values = row if peak else row[:8]
+            stream.write(",".join([values[0], str(values[1])] + [repr(float(v)) for v in values[2:]]) + "\n")
+
+
+def rock_modulus(model, points: np.ndarray) -> np.ndarray:
+    """Young's modulus (Pa) of the cells holding the points (from the model's Lame fields)."""
+    cells = model._containing_cells(np.asarray(points, dtype=np.float64))
+    materials = model._materials
+    dofs = materials.dof_of_cell[cells]
+    lam, G = materials.lame_lambda.x.array[dofs], materials.shear_modulus.x.array[dofs]
+    return G * (3.0 * lam + 2.0 * G) / (lam + G)
+
+
+def spacing_of(group: SupportGroup) -> tuple[float, str]:
+    """The side a of the rock each bolt supports (m), and how it was taken: sqrt(s_1 s_2) of a
+    pattern; else the median distance from a head to the nearest other head; one bolt: its length."""
+    if group.settings["lines"] is None:
+        around, along = group.settings["spacing"]
+        return math.sqrt(around * along), "the pattern's sqrt(s1 s2)"
+    heads = group.lines[:, :3]
+    if len(heads) == 1:
+        return float(np.linalg.norm(group.lines[0, 3:] - heads[0])), "one bolt: its length"
+    distance = np.linalg.norm(heads[:, None, :] - heads[None, :, :], axis=2)
+    np.fill_diagonal(distance, np.inf)
+    return float(np.median(distance.min(axis=1))), "the median distance between neighbouring heads"
+
+
+def support_plan(simulation) -> dict:
+    """`check`'s lines on the support groups: bolts, length, stiffness against the rock, time step."""
+    model = simulation.model
+    K = abs(sp.csr_matrix(simulation.stiffness)).sum(axis=1).A.ravel().reshape(-1, 3).max(axis=1)
+    lines = {}
+    for group in simulation.support:
+        bound = abs(stiffness_bound([group], model.n_nodes)).sum(axis=1).A.ravel().reshape(-1, 3).max(axis=1)
+        touched = bound > 0.0
+        added = float(np.max(bound[touched] / K[touched], initial=0.0))
+        middles = 0.5 * (group.lines[:, :3] + group.lines[:, 3:])
+        E_rock = float(np.median(rock_modulus(model, middles)))
+        a, how = spacing_of(group)
+        EA = group.axial_stiffness
+        stage = {"static": "in the static stage with static.install",
+                 "start": "at the start of the dynamic run"}[group.stage]
+        lines[group.name] = (
+            f"{group.component.n_bolts} {group.settings['type']}s installed {stage}, {group.total_length:.4g} m "
+            f"in all, segments of {group.segment:.3g} m; EA = {EA:.3g} N: a bolt's EA/L is {EA / (E_rock * a * a):.3g} "
+            f"of the rock's E a^2/L (E = {E_rock:.3g} Pa, a = {a:.3g} m, {how}); they do not set the time step: "
+            f"massless and condensed (no degrees of freedom of their own), they only stiffen their host nodes, by at "
+            f"most {100.0 * added:.3g} % of a node's stiffness (the bond's k_b L_k), which the step's estimate includes")
+    return lines
