@@ -395,7 +395,8 @@ class RunWriter:
         self.energy_samples: list[list[float]] = []
         self.contact_on = simulation.contact_arrays is not None
         self.nonlinear = simulation.nonlinear  # pyfem.elements.NonlinearRegions or None
-        self.energy_columns = energy_columns(self.contact_on, self.nonlinear is not None)
+        # The element loop's columns also carry the bolts' stored energy and dissipation (pyfem/support.py).
+        self.energy_columns = energy_columns(self.contact_on, self.nonlinear is not None or bool(simulation.support))
         self.pair_rows: list[np.ndarray] = []       # each (n_pair_monitors, len(PAIR_COLUMNS))
         self.state_count_samples: list[np.ndarray] = []  # each (4,)
         self.monitor_columns = self._monitor_columns()

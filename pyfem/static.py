@@ -895,11 +895,11 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
                   for p in laws.values() if p["law"] == "mohr_coulomb"], default=1.0)
     # Rock bolts and cables of static.support join in the support stage (pyfem/support.py); the mass
     # bounds their condensed stiffness too.
-    support = [group for group in simulation.support if group.stage == "static"]
-    if support:
+    support_groups = [group for group in simulation.support if group.stage == "static"]
+    if support_groups:
         from pyfem.support import stiffness_bound
 
-        mass = scaled_mass(model.stiffness + stiffness_bound(support, n_nodes), factor)
+        mass = scaled_mass(model.stiffness + stiffness_bound(support_groups, n_nodes), factor)
     else:
         mass = scaled_mass(model.stiffness, factor)
 
@@ -931,7 +931,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     floor = 1.0e-3 * float(np.linalg.norm(loads.in_situ_traction))
     # How slowly to load: the lowest frequency of the elastic stage-1 body (bonded pairs as they start).
     ramp, probe_steps = 0.0, 0
-    path_dependent = any(c is not None for c in components) or contact is not None or bool(support)
+    path_dependent = any(c is not None for c in components) or contact is not None or bool(support_groups)
     probe_load = f_exc + loads.installed_weight.ravel()
     if path_dependent and np.any(probe_load):
         elastic = linear_stiffness(model, installed_cells) if len(installed_cells) else model.stiffness
@@ -956,7 +956,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         load = fraction * f_exc + carried + (loads.installed_weight.ravel() if index == 1 else 0.0)
         active = [component for component in components if component is not None]
         active_regions = [region for region, component in zip(element_regions, components) if component is not None]
-        bolts = [group.component for group in support] if index == 1 else []
+        bolts = [group.component for group in support_groups] if index == 1 else []
         stepper = stage_stepper(stiffness, load, active + bolts, active_regions, contact, ramp)
         u, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor,
                           report=lambda steps, ratio, seconds, name=name: print(
@@ -1017,11 +1017,11 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
                         components=components, contact=contact)
     state.cell_state_first = cell_state_first
     state.cell_state = _cell_state(model, nonlinear, components)
-    if support:  # static/support.csv: the bolts as the stage leaves them
+    if support_groups:  # static/support.csv: the bolts as the stage leaves them
         from pyfem.support import group_summary, segment_rows
 
-        state.support_rows = [row for group in support for row in segment_rows(group.bolts, group.name)]
-        state.support_summary = {group.name: group_summary(group) for group in support}
+        state.support_rows = [row for group in support_groups for row in segment_rows(group.bolts, group.name)]
+        state.support_summary = {group.name: group_summary(group) for group in support_groups}
     return state
 
 

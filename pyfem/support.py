@@ -321,8 +321,11 @@ def pattern_lines(model, name: str, settings: dict, installed_regions: list) -> 
     rows = lo + 0.5 * (extent - (n_rows - 1) * along) + along * np.arange(n_rows)
     heights = x[used] @ axis
     lines = []
-    for t in rows:
-        while np.min(np.abs(heights - t)) < 1e-9 * max(extent, 1.0):  # off the nodes: a clean section
+    for row in rows:
+        # The section is cut a hair off the nodes (a clean one) and its heads moved back onto the row:
+        # the surface is extruded along the axis.
+        t = row
+        while np.min(np.abs(heights - t)) < 1e-9 * max(extent, 1.0):
             t += 1e-6 * along
         for chain in _section_chains(triangles, x, axis, t):
             p = np.array([point for point, _ in chain])
@@ -339,7 +342,7 @@ def pattern_lines(model, name: str, settings: dict, installed_regions: list) -> 
             for s in stations:
                 j = min(int(np.searchsorted(arc, s, side="right") - 1), len(owners) - 1)
                 w = (s - arc[j]) / max(arc[j + 1] - arc[j], 1e-300)
-                head = p[j] + w * (p[j + 1] - p[j])
+                head = p[j] + w * (p[j + 1] - p[j]) - (t - row) * axis
                 direction = normals[owners[j]]
                 lines.append(np.concatenate([head, head + settings["length"] * direction]))
     if not lines:
