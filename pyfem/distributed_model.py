@@ -76,9 +76,9 @@ def check_supported(scene: Scene) -> None:
 
     if scene.get("support"):
         name = next(iter(scene["support"]))
-        raise SceneError(f"support.{name}", scene["support"][name]["type"], "rock bolts and cables run on one rank "
-                         "only: the distributed model does not place them on the ranks' parts yet (run without "
-                         "mpirun, or leave out the [support.NAME] tables)")
+        raise SceneError(f"support.{name}", scene["support"][name]["type"], "not under mpirun: rock bolts and cables run "
+                         "on one rank only (the distributed model does not place them on the ranks' parts yet): run "
+                         "without mpirun, or leave out the [support.NAME] tables")
     distributed_stage.check_supported(scene)
     for name, table in scene["materials"].items():
         for law in ("plasticity", "damage"):

@@ -162,24 +162,25 @@ def scene_groups(scene, model) -> list[SupportGroup]:
             lines = np.asarray(settings["lines"], dtype=np.float64).reshape(-1, 6)
         else:
             lines = pattern_lines(model, name, settings, installed_regions)
+        outside, bolt = None, None
         try:
             segment = settings["segment"] or _default_segment(model, lines, scene["mesh"]["order"])
         except PointOutsideMesh as error:
-            segment = None
-            bolt = error.index // 11
-        if segment is not None:
+            outside, bolt = error, error.index // 11
+        if outside is None:
             offsets, arcs, positions, _ = discretise_lines(lines, segment, settings["free_length"])
             try:
                 model.point_weights(positions)
             except PointOutsideMesh as error:
-                bolt = int(np.searchsorted(offsets, error.index, side="right") - 1)
-            else:
-                bolt = None
-        if bolt is not None:
+                outside, bolt = error, int(np.searchsorted(offsets, error.index, side="right") - 1)
+        if outside is not None:
+            error = outside
             key, value = _line_key(name, settings, bolt)
             head, tip = lines[bolt, :3].tolist(), lines[bolt, 3:].tolist()
             where = "" if settings["lines"] is not None else f" (bolt {bolt} of the pattern, from {head} to {tip})"
-            allowed = "every bolt node in a cell of the model"
+            excavated = list((scene.get("static") or {}).get("excavate") or [])
+            allowed = "every bolt node in a cell of the model" + (
+                f" (the model has none in the excavated regions {', '.join(excavated)})" if excavated else "")
             raise SceneError(key, value, allowed, f"scene key '{key}' = {value}{where}: its point "
                              f"{[round(x, 6) for x in error.point]} is {error.where}; allowed: {allowed}") from None
         E, diameter = settings["E"], settings["diameter"]

@@ -15,8 +15,10 @@ and cables"), against independent answers:
 """
 import json
 import math
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +26,7 @@ import pytest
 from pyfem import solver
 from pyfem.scene import SceneError, parse_scene
 
+REPO = Path(__file__).resolve().parents[1]
 E_ROCK, NU_ROCK, P = 8.0e9, 0.24, 5.0e6
 M_ROCK = E_ROCK * (1.0 - NU_ROCK) / ((1.0 + NU_ROCK) * (1.0 - 2.0 * NU_ROCK))  # constrained modulus
 BOLT = {"diameter": 0.032, "yield_force": 3.2e5, "bond_stiffness": 1.0e9, "bond_strength": 4.0e5}
@@ -217,3 +220,106 @@ def test_a_pattern_on_a_box_face_and_on_a_tunnel_wall(tmp_path):
         gaps = np.diff(np.concatenate([angles, [angles[0] + 2.0 * np.pi]]))
         assert np.allclose(gaps, 2.0 * np.pi / 13.0, atol=1e-6)
     assert np.min(np.einsum("ij,ij->i", axes, radial)) > np.cos(np.radians(8.0))
+
+
+BOX = {"mesh": {"size": [4.0, 4.0, 10.0], "h": 1.0}, "materials": {"rock": {"E": E_ROCK, "nu": NU_ROCK, "rho": 2600.0}},
+       "time": {"duration": 0.01}}
+
+
+def with_group(**changes):
+    return dict(BOX, support={"a": dict(support_table(), **changes)})
+
+
+PARSE_ERRORS = [  # (the scene, the key its one line names, words of what is allowed)
+    (with_group(surface="zmax"), "support.a.surface", "not both"),
+    ({**BOX, "support": {"a": dict(BOLT)}}, "support.a.lines", "needs its bolts"),
+    ({**BOX, "support": {"a": dict(BOLT, surface="zmax", length=3.0)}}, "support.a.spacing", "a pattern needs"),
+    (with_group(pretension=1.0e4), "support.a.pretension", "type = \"cable\""),
+    (with_group(type="cable", pretension=4.0e5, free_length=1.0), "support.a.pretension", "yield_force"),
+    (with_group(type="cable", pretension=1.0e5), "support.a.pretension", "free_length > 0"),
+    (with_group(type="cable", free_length=5.0), "support.a.free_length", "shorter than the shortest bolt"),
+    (with_group(segment=6.0), "support.a.segment", "must not exceed the shortest bolt"),
+    (with_group(lines=[[1.0, 1.0, 1.0, 1.0, 1.0, 1.0]]), "support.a.lines.0", "head and tip must differ"),
+    (with_group(lines=[[1.0, 1.0, 1.0, 2.0, 2.0]]), "support.a.lines.0", "arrays of 6 finite numbers"),
+    (with_group(lines=[]), "support.a.lines", "non-empty"),
+    (with_group(diameter=32.0), "support.a.diameter", "in (0, 0.5]"),
+    (with_group(bond_strength=-1.0), "support.a.bond_strength", "> 0"),
+    (with_group(type="rockbolt"), "support.a.type", "\"bolt\", \"cable\""),
+    (with_group(bond_strenght=1.0), "support.a.bond_strenght", "did you mean 'support.a.bond_strength'"),
+    ({**with_group(), "initial_stress": {"stress": [0.0, 0.0, -P, 0.0, 0.0, 0.0]},
+      "static": {"support": ["b"]}}, "static.support.0", "must name a [support.NAME] group: a"),
+]
+
+
+@pytest.mark.parametrize("scene, key, allowed", PARSE_ERRORS, ids=[case[1] + ":" + case[2][:12] for case in PARSE_ERRORS])
+def test_bad_support_keys_are_one_line_naming_the_key(scene, key, allowed):
+    with pytest.raises(SceneError) as raised:
+        parse_scene(scene)
+    message = str(raised.value)
+    print(message)
+    assert raised.value.key == key and allowed in message and "\n" not in message
+
+
+MODEL_ERRORS = [  # found once the mesh is built
+    (with_group(lines=[[2.0, 2.0, 9.0, 2.0, 2.0, 12.0]]), "support.a.lines.0", "outside the mesh's bounding box"),
+    ({**BOX, "support": {"a": dict(BOLT, surface="tunnel", spacing=[1.0, 1.0], length=2.0)}}, "support.a.surface",
+     "must name a surface of the mesh"),
+    ({**excavated_box().to_json(), "support": {"bolt": support_table(lines=[[2.0, 2.0, 8.0, 2.0, 2.0, 3.0]])}},
+     "support.bolt.lines.0", "is outside the mesh's bounding box; allowed: every bolt node in a cell of the model "
+     "(the model has none in the excavated regions top)"),
+    ({**excavated_box().to_json(), "static": dict(excavated_box().to_json()["static"], solver="direct")},
+     "static.solver", "need static.solver = \"relaxation\""),
+    (dict(with_group(), time=dict(BOX["time"], local_stepping=True)), "time.local_stepping", "rock bolts or cables"),
+]
+
+
+@pytest.mark.parametrize("scene, key, allowed", MODEL_ERRORS, ids=[case[1] for case in MODEL_ERRORS])
+def test_bolts_off_the_model_and_what_does_not_run_them_are_one_line(scene, key, allowed):
+    with pytest.raises(SceneError) as raised:
+        solver.prepare(parse_scene(scene))
+    message = str(raised.value)
+    print(message)
+    assert raised.value.key == key and allowed in message and "\n" not in message
+
+
+SCENE_TOML = """
+title = "bolted box"
+[mesh]
+size = [4.0, 4.0, 10.0]
+h = 2.0
+[materials.rock]
+E = 8.0e9
+nu = 0.24
+rho = 2600.0
+[time]
+duration = 0.01
+[output]
+xdmf_interval = 0.0
+[support.a]
+lines = [[2.0, 2.0, 9.0, 2.0, 2.0, 3.0]]
+diameter = DIAMETER
+yield_force = 3.2e5
+bond_stiffness = 1.0e9
+bond_strength = 4.0e5
+"""
+
+
+def test_the_command_line_and_mpirun_refuse_in_one_line_with_exit_code_2(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SCENE_TOML.replace("DIAMETER", "32.0"))
+    done = subprocess.run(["/usr/bin/python3", "-m", "pyfem", "check", str(bad)], cwd=REPO, capture_output=True,
+                          text=True, timeout=300, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    print(done.stderr)
+    assert done.returncode == 2 and "support.a.diameter" in done.stderr and "(0, 0.5]" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    good = tmp_path / "good.toml"
+    good.write_text(SCENE_TOML.replace("DIAMETER", "0.032"))
+    env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1")
+    done = subprocess.run(["mpirun", "--allow-run-as-root", "--oversubscribe", "-n", "2", "/usr/bin/python3", "-m",
+                           "pyfem", "run", str(good), "--out", str(tmp_path / "out")], cwd=REPO, env=env,
+                          capture_output=True, text=True, timeout=300)
+    lines = [line for line in done.stderr.splitlines() if line.startswith("error:")]
+    print(done.stderr)
+    assert done.returncode == 2 and lines and all(line == lines[0] for line in lines)
+    assert "support.a" in lines[0] and "not under mpirun" in lines[0] and "Traceback" not in done.stderr
+    assert not (tmp_path / "out").exists()
