@@ -110,6 +110,10 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     print(f"run finished in {summary['wall_seconds']:.1f} s: {summary['steps']} steps of "
           f"{summary['dt']:.4g} s, {summary['dofs']} dofs; energy balance error "
           f"{energy['balance_error']:.2e}")
+    for name, group in summary.get("support", {}).items():
+        print(f"  support {name}: {group['bolts']} {group['type']}s, peak axial force {group['peak_axial_force']:.4g} N "
+              f"(yield {group['yield_force']:.4g} N), {group['yielded_segments']} of {group['segments']} segments "
+              f"yielded, {group['slipping_nodes']} nodes slipped; support.csv")
     for name, peak in summary["monitors"].items():
         line = f"  {name}: peak |u| {peak['displacement']:.4g} m, |a| {peak['acceleration']:.4g} m/s^2"
         if "freefield_error" in peak:
@@ -124,7 +128,7 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
               f"({motion['pga_g']:.3g} g), PGV {motion['pgv']:.4g} m/s, PGD {motion['pgd']:.4g} m; "
               f"plots/input.png")
     out = Path(out_dir)
-    written = [name for name in ("run.json", "monitors/", "pairs/", "energy.csv", "reactions.csv", "static/",
+    written = [name for name in ("run.json", "monitors/", "pairs/", "energy.csv", "reactions.csv", "support.csv", "static/",
                                  "plots/", "fields.xdmf") if (out / name.rstrip("/")).exists()]
     paraview = "; fields.xdmf opens in ParaView" if "fields.xdmf" in written else ""
     print(f"outputs: {out_dir}/ ({', '.join(written)}{paraview})")
