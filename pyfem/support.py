@@ -452,11 +452,12 @@ def spacing_of(group: SupportGroup) -> tuple[float, str]:
 def support_plan(simulation) -> dict:
     """`check`'s lines on the support groups: bolts, length, stiffness against the rock, time step."""
     model = simulation.model
-    K = abs(sp.csr_matrix(simulation.stiffness)).sum(axis=1).A.ravel().reshape(-1, 3).max(axis=1)
+    # The rock's elastic stiffness of every cell (simulation.stiffness lacks the element loop's cells).
+    K = abs(sp.csr_matrix(model.stiffness)).sum(axis=1).A.ravel().reshape(-1, 3).max(axis=1)
     lines = {}
     for group in simulation.support:
         bound = abs(stiffness_bound([group], model.n_nodes)).sum(axis=1).A.ravel().reshape(-1, 3).max(axis=1)
-        touched = bound > 0.0
+        touched = (bound > 0.0) & (K > 0.0)
         added = float(np.max(bound[touched] / K[touched], initial=0.0))
         middles = 0.5 * (group.lines[:, :3] + group.lines[:, 3:])
         E_rock = float(np.median(rock_modulus(model, middles)))

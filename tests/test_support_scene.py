@@ -333,3 +333,30 @@ def test_the_command_line_and_mpirun_refuse_in_one_line_with_exit_code_2(tmp_pat
     assert done.returncode == 2 and lines and all(line == lines[0] for line in lines)
     assert "support.a" in lines[0] and "not under mpirun" in lines[0] and "Traceback" not in done.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_bolts_installed_in_the_stage_resume_with_their_stage_state(tmp_path):
+    """The resumed run reads the stage from static/hand_over.npz (not solved again) and the bolts'
+    state, the stage's slip and yield and their rebased zero, from the checkpoint."""
+    from pyfem.interrupts import RunInterrupted
+
+    class StopAt:
+        def start(self, t0):
+            pass
+
+        def __call__(self, t):
+            if t >= 0.06 - 1e-12:
+                raise RunInterrupted(2)
+
+    settings = excavated_box(0.4, support_table(bond_strength=2.0e3, yield_force=1.5e3, segment=0.5)).to_json()
+    settings.update(wave=WAVE, time={"duration": 0.12}, output=dict(settings["output"], interval=0.01))
+    scene = parse_scene(settings)
+    reference = solver.run(scene, tmp_path / "reference")
+    stage = reference["static"]["support"]["bolt"]
+    assert stage["yielded_segments"] > 0 and stage["slipping_nodes"] > 0  # the stage's state to carry
+    out = tmp_path / "interrupted"
+    with pytest.raises(RunInterrupted):
+        solver.run(scene, out, progress=StopAt())
+    solver.run(scene, out, resume=True)
+    for name in ("support.csv", "energy.csv", "static/support.csv"):
+        assert (out / name).read_bytes() == (tmp_path / "reference" / name).read_bytes(), name
