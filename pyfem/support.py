@@ -265,7 +265,7 @@ def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: f
     from one end to the other; closed chains repeat their first point)."""
     distance = x[triangles] @ axis - t  # (T, 3)
     crossing = np.flatnonzero((distance.min(axis=1) < 0.0) & (distance.max(axis=1) > 0.0))
-    points, neighbours, edge_triangle = {}, {}, {}
+    points, neighbours = {}, {}
     for k in crossing:
         keys = []
         for a, b in ((0, 1), (1, 2), (2, 0)):
