@@ -21,11 +21,11 @@ run: setup
 
 test: setup
 	ctest --test-dir build --output-on-failure
-	$(PYTHON) -m pytest -q -n auto --dist loadfile --durations=25
+	$(PYTHON) -m pytest -q -rs -n auto --dist loadfile --durations=25
 
 test-slow:
 	@bash scripts/setup.sh --with-paraview
-	$(PYTHON) -m pytest -q -m slow
+	$(PYTHON) -m pytest -q -rs -m slow
 
 bench: setup
 	$(PYTHON) -m pyfem bench

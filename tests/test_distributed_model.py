@@ -280,7 +280,7 @@ def test_what_the_ranks_do_not_build_is_refused_in_one_line(tmp_path, scene, ext
     assert not (tmp_path / "run").exists()
 
 
-def test_check_builds_the_ranks_parts_and_times_them_once(tmp_path):
+def test_check_builds_the_ranks_parts_and_times_them_once(tmp_path, mpi_launcher):
     """`mpirun -n 2 pyfem check`: every rank builds its part (no rank the
     whole model), rank 0 prints one plan with the ranks' shares, the element loop's counted and halo
     cells and a measured time per step; nothing is written."""
@@ -447,7 +447,7 @@ def kill_after_a_checkpoint_past(ranks: int, scene: str, out: Path, t: float, ex
     return left
 
 
-def test_contact_killed_on_two_ranks_resumes_on_three(tmp_path):
+def test_contact_killed_on_two_ranks_resumes_on_three(tmp_path, mpi_launcher):
     """The contact scene killed (kill -9) on 2 ranks once its pairs have slid (a checkpoint past
     0.8 s: the bonds broke at 0.4 s, the pairs slid and stuck again), resumed on 3 ranks (another
     partition: every pair's state, bond, deterioration and forces found by its interface and position,

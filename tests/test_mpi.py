@@ -50,7 +50,7 @@ def summary(run_dir: Path) -> dict:
 @pytest.mark.parametrize("settings, key", [(("time.duration=-1",), "time.duration"),
                                            (("time.local_stepping=true", 'time.matrix_precision="single"'),
                                             "time.local_stepping")])
-def test_a_bad_key_under_mpirun_is_one_line_and_exit_2(settings, key):
+def test_a_bad_key_under_mpirun_is_one_line_and_exit_2(settings, key, mpi_launcher):
     sets = [arg for setting in settings for arg in ("--set", setting)]
     result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
                              "run", SCENES["free_field"][0], *sets], cwd=REPO, env=ENV,
@@ -74,7 +74,7 @@ def test_the_whole_model_mode_is_refused_in_one_line(tmp_path):
     assert not (tmp_path / "run").exists()
 
 
-def test_a_failure_on_one_rank_ends_every_rank(tmp_path):
+def test_a_failure_on_one_rank_ends_every_rank(tmp_path, mpi_launcher):
     """Rank 0 cannot start its run directory after the ranks have built their parts (a FileExistsError
     raised in rank 0's process only): it says so and MPI_Abort ends the job, instead of rank 1 waiting
     forever in its next collective."""

@@ -7,7 +7,9 @@ content (not a blank window) and that ParaView read the same peak magnitude, tim
 of points as h5py reads from the .h5 independently.
 
 Needs Debian's packages paraview, python3-paraview and xvfb (pvbatch aborts without an X
-server, hence xvfb-run); skipped with that reason when they are missing.
+server, hence xvfb-run), which `make test-slow` installs: an optional external tool (README
+"Verification"), so a bare `pytest -m slow` without them skips with that reason, the one skip in tests/
+(`make test` and `make test-slow` print skip reasons, -rs).
 """
 import json
 import pathlib
@@ -67,7 +69,8 @@ print("PVRESULT " + json.dumps({"times": times, "peak_time": peak_time, "peak": 
 def case3_run(tmp_path_factory):
     """A short run of the case-3 scene (static stage, contact, lining) with fields every 0.02 s."""
     if shutil.which("pvbatch") is None or shutil.which("xvfb-run") is None:
-        pytest.skip("pvbatch or xvfb-run not installed (Debian packages paraview, python3-paraview, xvfb)")
+        pytest.skip("pvbatch or xvfb-run not installed: this check needs Debian's paraview, python3-paraview and "
+                    "xvfb, which `make test-slow` installs (scripts/setup.sh --with-paraview)")
     from pyfem.scene import load_scene
     from pyfem.solver import run
 
