@@ -314,7 +314,7 @@ bond_strength = 4.0e5
 """
 
 
-def test_the_command_line_and_mpirun_refuse_in_one_line_with_exit_code_2(tmp_path):
+def test_the_command_line_and_mpirun_refuse_in_one_line_with_exit_code_2(tmp_path, mpi_launcher):
     bad = tmp_path / "bad.toml"
     bad.write_text(SCENE_TOML.replace("DIAMETER", "32.0"))
     done = subprocess.run(["/usr/bin/python3", "-m", "pyfem", "check", str(bad)], cwd=REPO, capture_output=True,
@@ -325,7 +325,7 @@ def test_the_command_line_and_mpirun_refuse_in_one_line_with_exit_code_2(tmp_pat
     good = tmp_path / "good.toml"
     good.write_text(SCENE_TOML.replace("DIAMETER", "0.032"))
     env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1")
-    done = subprocess.run(["mpirun", "--allow-run-as-root", "--oversubscribe", "-n", "2", "/usr/bin/python3", "-m",
+    done = subprocess.run([mpi_launcher, "--allow-run-as-root", "--oversubscribe", "-n", "2", "/usr/bin/python3", "-m",
                            "pyfem", "run", str(good), "--out", str(tmp_path / "out")], cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=300)
     lines = [line for line in done.stderr.splitlines() if line.startswith("error:")]
