@@ -1234,7 +1234,10 @@ def plan_report(scene: typing.Mapping, model) -> dict:
                                  + (f", {', '.join(installed)} not yet installed" if installed else "")
                                  + f"; {relaxation:g} of the excavation load released"),
         "stage 2 (support)": ((f"{', '.join(installed)} installed stress-free "
-                               f"({len(installed_cells)} cells); " if installed else "nothing installed; ")
+                               f"({len(installed_cells)} cells); " if installed else "")
+                              + (f"support groups {', '.join(settings['support'])} installed; "
+                                 if settings.get("support") else "")
+                              + ("nothing installed; " if not installed and not settings.get("support") else "")
                               + f"the remaining {1.0 - relaxation:g} released"),
         "boundary": ", ".join(f"{name} {kind}" for name, kind in boundary.items()),
         "solver": solver_words,

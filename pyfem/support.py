@@ -84,9 +84,10 @@ def bolt_group(model, lines, *, diameter: float, E: float, yield_force: float, b
 # The scene's groups ([support.NAME], docs/scene-keys.md)
 # ---------------------------------------------------------------------------------------------
 
-HEAD_PLATE_FACTOR = 100.0
-"""A cable's head plate: a spring of HEAD_PLATE_FACTOR x EA / segment (N/m) tying its head node to the
-rock, stiff against its first segment (a bolt, type "bolt", has none)."""
+HEAD_PLATE_FACTOR = 10.0
+"""A cable's head plate: a spring of HEAD_PLATE_FACTOR x EA / free length (N/m; the segment without a
+free length) tying its head node to the rock, stiff against the free length it locks off (a bolt, type
+"bolt", has none). Stiffer plates gain little and stiffen the head's host nodes, which the step sees."""
 
 
 @dataclasses.dataclass
@@ -184,7 +185,7 @@ def scene_groups(scene, model) -> list[SupportGroup]:
             raise SceneError(key, value, allowed, f"scene key '{key}' = {value}{where}: its point "
                              f"{[round(x, 6) for x in error.point]} is {error.where}; allowed: {allowed}") from None
         E, diameter = settings["E"], settings["diameter"]
-        head_stiffness = (HEAD_PLATE_FACTOR * E * math.pi * diameter**2 / 4.0 / segment
+        head_stiffness = (HEAD_PLATE_FACTOR * E * math.pi * diameter**2 / 4.0 / max(settings["free_length"], segment)
                           if settings["type"] == "cable" else 0.0)
         try:
             bolts = bolt_group(model, lines, diameter=diameter, E=E, yield_force=settings["yield_force"],
@@ -470,5 +471,5 @@ def support_plan(simulation) -> dict:
             f"in all, segments of {group.segment:.3g} m; EA = {EA:.3g} N: a bolt's EA/L is {EA / (E_rock * a * a):.3g} "
             f"of the rock's E a^2/L (E = {E_rock:.3g} Pa, a = {a:.3g} m, {how}); they do not set the time step: "
             f"massless and condensed (no degrees of freedom of their own), they only stiffen their host nodes, by at "
-            f"most {100.0 * added:.3g} % of a node's stiffness (the bond's k_b L_k), which the step's estimate includes")
+            f"most {100.0 * added:.3g} % of a node's stiffness (the bond's k_b L_k and a cable's head plate), which the step's estimate includes")
     return lines

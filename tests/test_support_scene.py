@@ -420,3 +420,16 @@ def test_radial_bolts_in_a_tunnel_follow_the_bar_equation_in_kirschs_field(tmp_p
           f"{max(errors):.2e} of the peak; the rock's wall displacement {wall_error:.2e} off Kirsch")
     assert np.max(N) > 1e4  # loaded, in tension
     assert wall_error < 0.05 and max(errors) < 0.04
+
+
+def test_a_cable_installed_after_the_whole_release_holds_its_pretension_in_the_free_length():
+    """Nothing left to release after installation (lambda = 1): the cable's free length carries its
+    pretension less the rock's elastic shortening between plate and anchor (no bond there: the same
+    force in every free segment), and the grouted anchor hands it to the rock."""
+    cable = support_table(type="cable", pretension=1.0e5, free_length=2.0, segment=0.5)
+    simulation = solver.prepare(excavated_box(1.0, cable))
+    N = simulation.support[0].component.axial_force()
+    free, anchor = N[:4], N[4:]
+    print(f"free length {free[0]:.6g} N (pretension 1e5 N), anchor {anchor[0]:.4g} .. {anchor[-1]:.4g} N")
+    assert np.max(np.abs(free - free[0])) < 1e-12 * free[0] and 0.97e5 < free[0] <= 1.0e5
+    assert np.all(np.diff(anchor) < 0.0) and anchor[-1] < 0.05 * free[0]
