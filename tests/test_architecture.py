@@ -91,6 +91,37 @@ def test_the_paths_import_one_way():
     assert "pyfem.effects" in graph["pyfem.static"] and "pyfem.distributed_parts" in graph["pyfem.distributed_stage"]
 
 
+def _code_strings(path: pathlib.Path) -> set[str]:
+    """The string constants of a module's code (its docstrings left out)."""
+    tree = ast.parse(path.read_text())
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                  and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+    return {node.value for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings}
+
+
+def test_the_program_reads_no_study_results():
+    """No module of the package builds a path into workflows/results (the studies' folder): the
+    tables the program needs are its own (pyfem/data/)."""
+    readers = []
+    for path in PACKAGE.rglob("*.py"):
+        strings = _code_strings(path)
+        if any("workflows/results" in s for s in strings) or {"workflows", "results"} <= strings:
+            readers.append(path.name)
+    assert not readers, readers
+
+
+def test_the_study_path_check_sees_a_path(tmp_path):
+    """A control: a module joining the two parts is caught."""
+    module = tmp_path / "reader.py"
+    module.write_text('"""A docstring naming workflows/results is fine."""\nfrom pathlib import Path\n'
+                      'TABLE = Path(__file__).parents[1] / "workflows" / "results" / "x.csv"\n')
+    assert {"workflows", "results"} <= _code_strings(module)
+    module.write_text('"""A docstring naming workflows/results is fine."""\n')
+    assert not _code_strings(module)
+
+
 def test_the_cycle_detector_finds_a_cycle():
     """A control: the detector sees a cycle made of function-local imports."""
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [{"a", "b", "c"}]

@@ -392,7 +392,7 @@ the same day's CI ran 2.6x longer than the day before).
   displacement difference across the opening carries the faces' reflections whole. For the racking
   a 1 % budget is met by Q2 at 0.24 a (13 s) or Q1 at 0.06 a (6.8 s).
 
-`pyfem check` prints, from workflows/results/wall_stress.csv, the largest wall size per order
+`pyfem check` prints, from pyfem/data/wall_stress.csv (this CSV's copy), the largest wall size per order
 whose peak error, and every finer size's, is within 5 % and 1 % at every wave studied
 (`pyfem.accuracy.wall_size_for`): today Q1 0.24 a / 0.06 a and Q2 0.24 a / 0.12 a. The
 layered-cavern builder's default puts lining_wall / lining_elements = 0.5 m at the wall, 0.04 of the
