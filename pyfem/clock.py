@@ -1,4 +1,6 @@
-"""The run's clock: its first time, its steps, and where a record's window starts.
+"""The run's clock: its time step (`TimeStep`, chosen by `time_step_from`), its first time, its
+steps, where a record's window starts, and a step's wall time split into the kernel's phases
+(`phase_split`). Every path (serial, static stage, distributed model) reads it; it imports none.
 
 Record time is run time: t = 0 is the start of the record's window in monitors, plots, run.json
 and `time.duration`; a zero-phase filter's lead-in (its quiet precursor, kept before the window)
@@ -8,12 +10,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from pyfem.errors import SceneError
-
-if TYPE_CHECKING:
-    from pyfem.scene import Scene
 
 
 def whole_steps(duration: float, time_step) -> int:
@@ -67,7 +65,7 @@ class TimeStep:
 POWER_ITERATIONS = 300
 
 
-def time_step_from(scene: Scene, omega2_bound: float, omega2_power: float | None, beta: float) -> TimeStep:
+def time_step_from(scene: dict, omega2_bound: float, omega2_power: float | None, beta: float) -> TimeStep:
     """The step of `choose_time_step` from its two estimates of omega_max^2: the Gershgorin bound
     and the power iteration's (None: not run); also the distributed model's (pyfem/distributed_model.py)."""
     how = "Gershgorin bound"
