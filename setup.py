@@ -2,27 +2,19 @@
 
 The metadata is in pyproject.toml; this file only teaches setuptools to build the kernel module
 pyfem/_kernels with the project's CMakeLists.txt (the same build as `make`, without the C++
-tests), into setuptools' build directory rather than the source tree, and to ship the accuracy
-study's results that `pyfem check` turns into mesh advice. Everything comes from Debian's
-packages (setuptools, cmake, g++, pybind11-dev): no network is needed.
+tests), into setuptools' build directory rather than the source tree (the accuracy studies' tables
+that `pyfem check` turns into mesh advice are package data, pyfem/data/, in pyproject.toml).
+Everything comes from Debian's packages (setuptools, cmake, g++, pybind11-dev): no network is needed.
 """
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
-from setuptools.command.build_py import build_py
 
 ROOT = Path(__file__).resolve().parent
-# The accuracy studies' results (workflows/accuracy_cost.py, wall_stress_accuracy.py, lining_stress_accuracy.py,
-# elliptical_opening.py, interface_slip_accuracy.py), read by pyfem.accuracy.
-ACCURACY_RESULTS = [ROOT / "workflows" / "results" / name for name in ("accuracy_cost.csv", "wall_stress.csv",
-                                                                        "lining_stress.csv",
-                                                                        "elliptical_opening.csv",
-                                                                        "interface_slip.csv")]
 
 
 class CMakeExtension(Extension):
@@ -52,21 +44,9 @@ class CMakeBuild(build_ext):
             raise RuntimeError(f"CMake built no {output.name} in {output.parent}")
 
 
-class BuildPyWithData(build_py):
-    """The package's Python files, plus the accuracy studies' results as pyfem/data/."""
-
-    def run(self):
-        super().run()
-        for results in ACCURACY_RESULTS:
-            if results.is_file():
-                target = Path(self.build_lib) / "pyfem" / "data" / results.name
-                target.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(results, target)
-
-
 setup(
     ext_modules=[CMakeExtension("pyfem._kernels", target="_kernels")],
-    cmdclass={"build_ext": CMakeBuild, "build_py": BuildPyWithData},
+    cmdclass={"build_ext": CMakeBuild},
     # setuptools' own build directory, apart from CMake's build/ of `make`.
     options={"build": {"build_base": "build/setuptools"}},
 )

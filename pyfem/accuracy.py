@@ -4,7 +4,8 @@ The study (workflows/accuracy_cost.py) runs a homogeneous box under an oblique S
 Ricker pulse over element order, elements per shortest wavelength, time-step safety
 and boundary type, and writes one row per run to workflows/results/accuracy_cost.csv:
 the relative L2 error of the monitors against the exact free field and the seconds
-the run took. This module turns that table into advice:
+the run took. This module turns that table (its copy in the package, pyfem/data/accuracy_cost.csv, as for every
+study below) into advice:
 
 * `recommend(error_budget)`: the cheapest measured settings whose error is within the
   budget;
@@ -39,17 +40,15 @@ import numpy as np
 
 from pyfem.material import Material
 
-DEFAULT_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "accuracy_cost.csv"
-WALL_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "wall_stress.csv"
-LINING_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "lining_stress.csv"
-ELLIPSE_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "elliptical_opening.csv"
-SLIP_RESULTS = Path(__file__).resolve().parents[1] / "workflows" / "results" / "interface_slip.csv"
-if not DEFAULT_RESULTS.is_file():  # an installed package (pip install .) carries a copy (setup.py)
-    DEFAULT_RESULTS = Path(__file__).resolve().parent / "data" / "accuracy_cost.csv"
-    WALL_RESULTS = Path(__file__).resolve().parent / "data" / "wall_stress.csv"
-    LINING_RESULTS = Path(__file__).resolve().parent / "data" / "lining_stress.csv"
-    ELLIPSE_RESULTS = Path(__file__).resolve().parent / "data" / "elliptical_opening.csv"
-    SLIP_RESULTS = Path(__file__).resolve().parent / "data" / "interface_slip.csv"
+# The studies' tables, copied into the package by the study that writes them (workflows/study_csv.py
+# `write_rows`: workflows/results/NAME.csv and pyfem/data/NAME.csv; tests/test_accuracy.py holds
+# the two equal): the program reads its own copy, never a study's folder.
+DATA = Path(__file__).resolve().parent / "data"
+DEFAULT_RESULTS = DATA / "accuracy_cost.csv"
+WALL_RESULTS = DATA / "wall_stress.csv"
+LINING_RESULTS = DATA / "lining_stress.csv"
+ELLIPSE_RESULTS = DATA / "elliptical_opening.csv"
+SLIP_RESULTS = DATA / "interface_slip.csv"
 # The highest frequency with energy in a Ricker wavelet, in units of its peak frequency f0:
 # the amplitude spectrum (f/f0)^2 exp(-(f/f0)^2) at 2.5 f0 is 3 % of its peak at f0.
 RICKER_MAX_FREQUENCY_FACTOR = 2.5

@@ -62,7 +62,7 @@ def kernel_seconds_per_step(stiffness, mass, dt: float, steps: int, threads: int
         single: the upper triangle's blocks as float32 (`time.matrix_precision = "single"`).
     """
     from pyfem import _kernels
-    from pyfem.solver import bsr_arrays
+    from pyfem.effects import bsr_arrays
 
     _kernels.set_num_threads(threads)
     indptr, indices, blocks = bsr_arrays(stiffness)
@@ -162,7 +162,7 @@ def element_loop_rows(target_dofs: int, steps: int, threads: int = 2) -> list[di
     """
     from pyfem import _kernels, solver
     from pyfem.elements import nonlinear_component
-    from pyfem.solver import bsr_arrays
+    from pyfem.effects import bsr_arrays
 
     _kernels.set_num_threads(threads)
     scene = _box_scene(target_dofs)
@@ -269,6 +269,7 @@ def case_study_rows(presets, steps: int, threads: int = 2, one_point: bool = Tru
 def _case_row(scene, preset: str, one_point: bool, steps: int, threads: int) -> dict:
     """One row of `case_study_rows`."""
     from pyfem import _kernels, solver
+    from pyfem.clock import phase_split
 
     simulation = solver.prepare(scene, solve_static=False)
     stepper = solver.make_stepper(simulation)
@@ -281,7 +282,7 @@ def _case_row(scene, preset: str, one_point: bool, steps: int, threads: int) -> 
     start = time.perf_counter()
     stepper.run(u, v, a, steps, 0.0)
     seconds = time.perf_counter() - start
-    split = solver.phase_split(stepper.phase_seconds(), seconds)
+    split = phase_split(stepper.phase_seconds(), seconds)
     rock = "one-point Mohr-Coulomb zone" if one_point else "Mohr-Coulomb zone"
     return {"case": f"case 3 {preset} (contact, {rock}, concrete lining, oblique input)",
             "dofs": n, "threads": threads, "ms": 1e3 * seconds / steps,
@@ -316,7 +317,7 @@ def main(argv=None) -> int:
         petsc_time, petsc_u = petsc_seconds_per_step(stiffness, mass, dt, args.steps, "baij")
         petsc_aij_time, _ = petsc_seconds_per_step(stiffness, mass, dt, args.steps, "aij")
         # Same loop in the kernel from the same start: the displacements must agree.
-        from pyfem.solver import bsr_arrays
+        from pyfem.effects import bsr_arrays
 
         indptr, indices, blocks = bsr_arrays(stiffness)
         check = _kernels.Stepper(indptr, indices, blocks, mass, dt, 0.0, 0.0)
@@ -376,7 +377,7 @@ def markdown_table(result: dict) -> str:
             lines.append(f"| {r['case']} | {r['dofs']} | {r['threads']} | {r['ms']:.3f} | {r['reference_ms']:.3f} | "
                          f"{r['ratio']:.2f} | {per_point} |")
     if result.get("case_study"):
-        from pyfem.solver import PHASES
+        from pyfem.clock import PHASES
 
         lines += ["", "The case study's step split into the kernel's phases (ms per step, at rest; same run):", "",
                   "| case | dofs | element-loop points | pairs | threads | ms/step | "

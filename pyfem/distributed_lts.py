@@ -13,7 +13,7 @@ row split (pyfem/local_stepping.py) on the ranks' parts, no rank holding the who
   rows, counted cells and pairs summed over the ranks.
 - The set-up check (`check_stability_on_ranks`): the whole model's check of the LTS map, stepped by
   the ranks' parts from a random state that is a function of the node coordinates
-  (`distributed_model.start_vector`), the energy summed over the ranks.
+  (`distributed_parts.start_vector`), the energy summed over the ranks.
 - Stepping (`rank_stepper`): the kernel's LocalStepper of the part by the row split, one velocity
   exchange per level (`level_exchanges`: the ghost plan's nodes of that level), each region's counted
   and halo cells split by level (the finest of its nodes), the pairs by their level; after a static
@@ -205,7 +205,7 @@ def rank_stepper(part, rank_levels: RankLevels, loop, input_arrays: dict | None 
     collective (the exchanges)."""
     from pyfem import _kernels
     from pyfem import local_stepping
-    from pyfem.solver import make_contact_pairs, seismic_input_kernel
+    from pyfem.effects import make_contact_pairs, seismic_input_kernel
 
     levels, max_level = rank_levels.levels, rank_levels.max_level
     kernel = _kernels.LocalStepper(*part.matrix, part.mass, levels, rank_levels.time_step.dt,
@@ -263,7 +263,7 @@ def check_stability_on_ranks(part, rank_levels: RankLevels, loop, **check) -> di
     count), the energy summed over the ranks; rank 0's report on every rank, with "ranks". `check`:
     check_stability's steps and chunk. A collective."""
     from pyfem.ranks import RankSummed
-    from pyfem.distributed_model import start_vector
+    from pyfem.distributed_parts import start_vector
     from pyfem.local_stepping import STABILITY_AMPLITUDE, check_stability
 
     comm = part.comm

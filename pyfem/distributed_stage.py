@@ -64,9 +64,9 @@ def check_supported(scene) -> None:
 
 def kernel_nodal(part, values) -> np.ndarray:
     """(n_local, k) per-node values of the function space's local nodes (owned and ghosts, dolfinx's
-    numbering, ghosts valid) in the kernel's numbering (pyfem.distributed_model.to_kernel_numbering).
+    numbering, ghosts valid) in the kernel's numbering (pyfem.distributed_parts.to_kernel_numbering).
     A collective."""
-    from pyfem.distributed_model import to_kernel_numbering
+    from pyfem.distributed_parts import to_kernel_numbering
 
     held = np.arange(len(part.model.node_coords)) if part.kernel_of_dolfinx is None else part.kernel_of_dolfinx
     return to_kernel_numbering(part.comm, part.model.V.dofmap.index_map, held, part.local_nodes, values)
@@ -85,7 +85,7 @@ def stage_matrix(part, removed_cells: np.ndarray) -> tuple:
     `removed_cells`, on the dynamic run's rows and numbering (no boundary springs; all-zero blocks
     dropped, as pyfem.elements.linear_stiffness drops them)."""
     from pyfem.assembly import elastic_stiffness_matrix
-    from pyfem.distributed_model import (_without_cells, drop_zero_blocks, local_stiffness, localize,
+    from pyfem.distributed_parts import (_without_cells, drop_zero_blocks, local_stiffness, localize,
                                          owned_rows_global)
     from pyfem.distributed_pairs import move_rows
 
@@ -233,11 +233,11 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     Args:
         part: pyfem.distributed_model.RankModel of the scene.
         loop: the rank's element loop (pyfem.distributed_model.RankRegions) or None.
-        contact_arrays: `pyfem.solver.contact_arguments` of the rank's pairs or None.
+        contact_arrays: `pyfem.effects.contact_arguments` of the rank's pairs or None.
     """
     from pyfem.elements import plastic_frequency_factor, scene_laws
     from pyfem.relaxation import probe_frequency, ramp_length, relax
-    from pyfem.solver import make_contact_pairs
+    from pyfem.effects import make_contact_pairs
     from pyfem.static import (_install_cells, _pair_force_vector, _stage_constraints, face_support_resultants,
                               stage_boundary, stage_loads, stage_pair_arrays, stage_tolerance, unconverged_warning)
 
@@ -255,7 +255,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     _, _, constraints = _stage_constraints(model, boundary)
 
     # The matrices: every cell (the scaled mass), all but the installed ones (the probe's), the stages'.
-    from pyfem.distributed_model import element_loop_cells
+    from pyfem.distributed_parts import element_loop_cells
 
     loop_cells = element_loop_cells(scene, model)
     element_cells = (np.concatenate([cells for cells, _ in loop_cells.values()]) if loop_cells
@@ -313,7 +313,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     regions_summary_first = None
     all_regions = sorted(model.regions)
     rock_regions = [name for name in all_regions if name not in installed_regions]
-    from pyfem.distributed_model import region_summary
+    from pyfem.distributed_parts import region_summary
 
     for index, (name, matrix, regions, fraction, words) in enumerate((
             ("excavation", K_excavation, rock_regions, relaxation,

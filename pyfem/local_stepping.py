@@ -413,7 +413,7 @@ class LevelPairs:
 
 def level_pairs(arrays: dict, node_levels: np.ndarray, cell_nodes: np.ndarray, cell_cap: np.ndarray | None,
                 loop_cells: np.ndarray | None, make_contact_pairs, rows: bool = False) -> tuple:
-    """The pairs of `arrays` (pyfem.solver.contact_arguments) split by the level their nodes drift at
+    """The pairs of `arrays` (pyfem.effects.contact_arguments) split by the level their nodes drift at
     (`drift_levels` with the cells' `pair_cell_cap`; equal for both nodes after
     `equalize_pair_drift`; in the row split, `rows`, a node drifts at its own level):
     (LevelPairs, [(ContactPairs, level)])."""
@@ -737,3 +737,11 @@ def check_stability(make_kernel, n_dofs: int, steps: int = STABILITY_STEPS, chun
     per_step = growth ** (1.0 / (2.0 * span)) if math.isfinite(growth) else math.inf
     return {"global_steps": int(chunk * len(energies)), "growth": growth, "growth_per_step": float(per_step),
             "stable": bool(growth < STABILITY_RATIO), "seconds": time.perf_counter() - start}
+
+
+def lts_stability_line(report: dict) -> str:
+    """check's line on the local time stepping map's stability check (pyfem/local_stepping.py)."""
+    return (f"{'stable' if report['stable'] else 'UNSTABLE'} on this model: a random state's energy changed "
+            f"{report['growth']:.3g}x over "
+            f"{report['global_steps']} global steps (amplitude factor {report['growth_per_step']:.6f} per "
+            f"step; unstable from 2x), {report['seconds']:.2f} s")

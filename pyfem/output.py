@@ -668,7 +668,7 @@ class RunWriter:
                checkpoints: dict | None = None) -> dict:
         """Closes histories and fields, draws the plots, writes the final run.json; returns the summary.
 
-        phases: pyfem.solver.phase_split of the time loop (run.json "time_per_step": ms per step and
+        phases: pyfem.clock.phase_split of the time loop (run.json "time_per_step": ms per step and
         share of the loop for the kernel's update, element_loop, input_forces, stiffness, contact,
         and output (writing the samples) and other). checkpoints: run.json "checkpoints" (written,
         seconds, interval) of this sitting. Times are over every sitting of a resumed run."""
@@ -1024,7 +1024,7 @@ def monitor_rows(t: float, u: np.ndarray, v: np.ndarray, a: np.ndarray, nodes: n
                  freefield, points: np.ndarray, stress, kernel: dict | None) -> np.ndarray:
     """(m, columns) rows of monitors/NAME.csv at time t (s) for m monitors: u, v, a interpolated from
     their cells' `nodes` with `weights`; the free field at their `points` (with a wave); with `stress`
-    (solver.MonitorStress) the total and dynamic stress, s1 of each; `kernel`: the law's values at
+    (effects.MonitorStress) the total and dynamic stress, s1 of each; `kernel`: the law's values at
     the monitors' kernel points (NonlinearRegions.point_values: its stress replaces the matrix cells'
     where found, then damage, damage type and plastic strain), None without the element loop. The
     whole model's writer and the distributed run (pyfem/distributed_model.py) both write these."""

@@ -363,7 +363,7 @@ def free_basis(n_nodes: int, held_nodes: np.ndarray, held_projection: np.ndarray
     Args:
         n_nodes: nodes of the model.
         held_nodes: (k,) nodes of the held faces; held_projection (k, 3, 3) their free projections
-            (pyfem.solver.boundary_constraints: 0 fixed, I - n n^T roller).
+            (pyfem.effects.boundary_constraints: 0 fixed, I - n n^T roller).
         pairs: (p, 2) contact pair nodes, bonded: both nodes of a pair move together; or None.
         inactive_nodes: nodes no active cell uses (held at zero unless bonded to an active node).
     """
@@ -556,7 +556,7 @@ class LinearSolver:
 
 def _stage_constraints(model, boundary: dict[str, str]):
     """(held nodes, free projections, BoundaryConstraints or None) of the stage's fixed and roller faces."""
-    from pyfem.solver import boundary_constraints
+    from pyfem.effects import boundary_constraints
 
     faces = [dataclasses.replace(face, kind=boundary[face.name]) for face in model.faces]
     constraints = boundary_constraints(faces)
@@ -797,7 +797,7 @@ def _stage_stepper(stiffness, mass: np.ndarray, constraints, load: np.ndarray, c
                    ramp: float = 0.0):
     """A kernel Stepper for one relaxation stage: the matrix cells, the scaled mass (dt = 1, no
     damping yet), the stage's held faces, the constant load, the components and the pairs."""
-    from pyfem.solver import bsr_arrays, kernel_threads
+    from pyfem.effects import bsr_arrays, kernel_threads
 
     kernel_threads()
     return stage_kernel(bsr_arrays(stiffness.tobsr(blocksize=(3, 3))), mass, constraints, load, components,
@@ -859,7 +859,7 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
     """
     from pyfem.elements import add_matrices, linear_stiffness, plastic_frequency_factor, scene_laws
     from pyfem.relaxation import probe_frequency, ramp_length, relax, scaled_mass
-    from pyfem.solver import make_contact_pairs
+    from pyfem.effects import make_contact_pairs
 
     start = time.perf_counter()
     model, nonlinear = simulation.model, simulation.nonlinear
@@ -1132,7 +1132,7 @@ def warn_pairs_over_strength(scene, contact_arrays: dict) -> None:
 
 def monitor_static_stress(monitors, installed_regions, u_total: np.ndarray, u_support: np.ndarray,
                           components: list | None) -> np.ndarray:
-    """(m, 3, 3) the stage's stress at the monitors (pyfem.solver.MonitorStress, its `static` still
+    """(m, 3, 3) the stage's stress at the monitors (pyfem.effects.MonitorStress, its `static` still
     the in-situ stress): sigma0 + C : eps(u_total) in the rock, C : eps(u_support) in the installed
     regions, and where the monitor's cell is in the element loop (a relaxed stage's `components`, in
     the monitors' kernel_points' order) the law's stress at its point. Both models' hand-over."""

@@ -31,6 +31,36 @@ RUNS = [
 ]
 
 
+def test_the_programs_tables_are_the_studies_results():
+    """pyfem.accuracy reads its own copies (pyfem/data/), each equal to the study's results CSV that
+    the study wrote with it (workflows/study_csv.py `publish`): a study run again must be published."""
+    tables = [accuracy.DEFAULT_RESULTS, accuracy.WALL_RESULTS, accuracy.LINING_RESULTS, accuracy.ELLIPSE_RESULTS,
+              accuracy.SLIP_RESULTS]
+    assert len({path.name for path in tables}) == 5
+    for table in tables:
+        assert table.parent == ROOT / "pyfem" / "data" and table.is_file(), table
+        assert table.read_bytes() == (ROOT / "workflows" / "results" / table.name).read_bytes(), table.name
+    assert len(accuracy.read_results()) > 10  # the copy is read: the study's rows
+
+
+def test_publish_copies_only_what_the_program_reads_from_the_results_folder(tmp_path, monkeypatch):
+    sys.path.insert(0, str(ROOT / "workflows"))
+    import study_csv
+
+    program, results = tmp_path / "program", tmp_path / "results"
+    program.mkdir()
+    (program / "wall_stress.csv").write_text("old\n")
+    monkeypatch.setattr(study_csv, "PROGRAM_TABLES", program)
+    monkeypatch.setattr(study_csv, "RESULTS", results)
+    study_csv.write_rows(tmp_path / "elsewhere" / "wall_stress.csv", [{"a": 1.5}], ["a"])  # a study's --out
+    assert (program / "wall_stress.csv").read_text() == "old\n"
+    study_csv.write_rows(results / "other.csv", [{"a": 1.5}], ["a"])  # not a table of the program's
+    assert not (program / "other.csv").exists()
+    study_csv.write_rows(results / "wall_stress.csv", [{"a": 1.5}], ["a"])
+    assert (program / "wall_stress.csv").read_text().split() == ["a", "1.5"]
+    assert (program / "wall_stress.csv").read_bytes() == (results / "wall_stress.csv").read_bytes()
+
+
 @pytest.fixture
 def results_csv(tmp_path):
     path = tmp_path / "accuracy_cost.csv"
@@ -113,7 +143,7 @@ def test_check_says_when_its_advice_is_the_coarsest_mesh_studied_and_gives_wall_
     assert "the coarsest mesh the study ran, so not a measured limit" in advice["text"]
     text = mesh_advice(box)
     assert "mesh advice" in text and "scene h = 10.0" in text and "wall stress advice" not in text
-    case = load_scene(accuracy.DEFAULT_RESULTS.parents[1] / "scenes" / "case3_contact_coarse.toml")
+    case = load_scene(ROOT / "workflows" / "scenes" / "case3_contact_coarse.toml")
     text = mesh_advice(case)
     assert "wall stress advice" in text and "scene h = set by the mesh builder" in text
 
@@ -281,7 +311,7 @@ def test_slip_advice_reads_the_interface_resolution_and_the_rocks_on_its_sides(t
     with pytest.raises(ValueError, match="bimaterial, lag"):
         accuracy.slip_error_at(20.0, True, path, lag=True)
 
-    scene_path = accuracy.DEFAULT_RESULTS.parents[1] / "scenes" / "contact_two_layer_sv.toml"
+    scene_path = ROOT / "workflows" / "scenes" / "contact_two_layer_sv.toml"
     scene = load_scene(scene_path)
     advice = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model)
     (names, text), = advice.items()

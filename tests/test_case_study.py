@@ -21,7 +21,7 @@ from pyfem.initial_stress import STANDARD_GRAVITY
 from pyfem.operators import build_model, lame_parameters
 from pyfem.output import MONITOR_COLUMNS, PAIR_COLUMNS, STRESS_COLUMNS, max_principal
 from pyfem.scene import load_scene, parse_scene
-from pyfem.solver import monitor_stress_operator
+from pyfem.effects import monitor_stress_operator
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 CASE3 = REPOSITORY / "workflows" / "scenes" / "case3_contact_coarse.toml"
@@ -163,7 +163,8 @@ def test_case3_wear_starts_with_the_record_window_not_the_lead_in():
     after the filter's tapered lead-in (wave.motion.record.lead_in), and t_s the window's 20 s; the
     kernel gets both (docs/method.md section 9). Before, the lead-in's second wore the interfaces
     by 5.5 % with nothing shaking them."""
-    from pyfem.solver import contact_arguments, earthquake_clock, wear_words
+    from pyfem.effects import contact_arguments, earthquake_clock
+    from pyfem.solver import wear_words
 
     scene = load_scene(REPOSITORY / "workflows" / "scenes" / "case3_contact_coarse.toml")
     start, duration = earthquake_clock(scene)

@@ -11,7 +11,7 @@ far-field shear tau = sigma_xz, Kirsch's solution (theta from +x towards +z) giv
     sigma_rth  =  tau (1 - 3 a^4/r^4 + 2 a^2/r^2) cos 2 theta,
 a hoop-stress concentration of 4 at the wall (1 if the cavity were "filled" by the free field,
 as when its wall was driven as an input boundary). The hoop stress is also held to the exact
-dynamic answer, Pao & Mow's series (pyfem/scattering.py), of which Kirsch is the long-wave limit.
+dynamic answer, Pao & Mow's series (pyfem/analytic/scattering.py), of which Kirsch is the long-wave limit.
 """
 import json
 import math
@@ -139,9 +139,9 @@ def free_field_shear(scene, times, point=CENTRE):
 
 
 def exact_hoop(scene, times, r_over_a, theta):
-    """Pao & Mow's sigma_thth(t) (Pa) at (r, theta) for the scene's incident wave (pyfem.scattering)."""
+    """Pao & Mow's sigma_thth(t) (Pa) at (r, theta) for the scene's incident wave (pyfem.analytic.scattering)."""
     from pyfem.operators import build_model
-    from pyfem.scattering import CavitySV
+    from pyfem.analytic.scattering import CavitySV
     from pyfem.seismic.setup import seismic_input_from_scene
 
     freefield, _ = seismic_input_from_scene(scene, build_model(scene))

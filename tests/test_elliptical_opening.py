@@ -1,5 +1,5 @@
 """A non-circular opening: the static stage's excavation of an elliptical opening against the exact answer
-(pyfem/elliptical_opening.py, docs/elliptical_opening.md).
+(pyfem/analytic/elliptical_opening.py, docs/elliptical_opening.md).
 
 The closed form (Muskhelishvili's potentials) is held to independent answers first: Inglis' hoop stress at
 the wall, the literature's concentrations 1 + 2 b / a, a free wall, the far field, Kirsch's solution when
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from conftest import observed_orders
-from pyfem.elliptical_opening import EllipticalOpening, wall_errors
+from pyfem.analytic.elliptical_opening import EllipticalOpening, wall_errors
 
 ROCK = {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}
 P = 10.0e6

@@ -6,7 +6,7 @@ from conftest import ROUNDOFF, rel_error
 from pyfem.initial_stress import STANDARD_GRAVITY, geostatic_stress, pair_static_forces
 from pyfem.operators import build_model
 from pyfem.scene import parse_scene
-from pyfem.solver import contact_arguments
+from pyfem.effects import contact_arguments
 
 RHO, SURFACE = 2600.0, 560.0
 

@@ -1,4 +1,4 @@
-"""The lined tunnel's closed form (pyfem/lined_tunnel.py, docs/lined_tunnel.md), checked against
+"""The lined tunnel's closed form (pyfem/analytic/lined_tunnel.py, docs/lined_tunnel.md), checked against
 independent answers before the static stage is held to it (tests/test_static.py):
 - each Airy term's displacement satisfies plane-strain Hooke's law with its stress (numerical
   derivatives), so bonding at r = b is imposed on true displacements;
@@ -16,14 +16,14 @@ import math
 import numpy as np
 import pytest
 
-from pyfem.lined_tunnel import LinedTunnel, _deviatoric_terms, _lame
-from pyfem.scattering import LinedCavitySV
+from pyfem.analytic.lined_tunnel import LinedTunnel, _deviatoric_terms, _lame
+from pyfem.analytic.scattering import LinedCavitySV
 
 P, K = 10.0e6, 0.5
 FAR = (-K * P, -P, 0.0)
 TUNNEL = LinedTunnel(5.0, 0.5, 28.0e9, 0.167, 8.0e9, 0.24)
 # The lined tunnel in place under a 2 Hz wave, two Q1 elements through the lining, against the exact
-# dynamic answer (pyfem.scattering.LinedCavitySV): measured +0.25 / +0.24 % in the peak and 0.38 / 0.41 %
+# dynamic answer (pyfem.analytic.scattering.LinedCavitySV): measured +0.25 / +0.24 % in the peak and 0.38 / 0.41 %
 # over the history (lining / rock), where the quasi-static closed form is 1.2 % and 1.6-1.8 % away.
 # Tighter than the quasi-static form's distance, so the series is what the test holds it to.
 EXACT_PEAK_TOLERANCE, EXACT_HISTORY_TOLERANCE = 0.006, 0.008

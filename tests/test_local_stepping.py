@@ -199,7 +199,7 @@ def test_kernel_local_stepper_takes_yielding_cells_at_their_level():
     with one level it is the global Stepper with the same component, and the rock yielded."""
     from pyfem import _kernels, bench
     from pyfem.elements import nonlinear_component
-    from pyfem.solver import bsr_arrays
+    from pyfem.effects import bsr_arrays
 
     simulation = solver.prepare(bench._box_scene(3000))
     law = {"law": "mohr_coulomb", "young_modulus": 8.0e9, "poisson_ratio": 0.24, "cohesion": 1.0e4,
@@ -696,7 +696,7 @@ def test_levels_fit_the_output_interval_where_a_deep_hierarchy_costs_more_than_i
     (8 dt_fine) need 88. The coarse case 3's levels are capped at 3, 7.7 % less work by the node
     count; an interval of 96 steps keeps all six, and capping never makes a node coarser."""
     from pyfem.local_stepping import fit_levels_to_output, local_time_step
-    from pyfem.solver import TimeStep
+    from pyfem.clock import TimeStep
 
     levels = np.repeat(np.arange(6), [19756, 8710, 8880, 17869, 3039, 98]).astype(np.int32)
     capped = fit_levels_to_output(levels, 85)

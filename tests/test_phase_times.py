@@ -9,7 +9,7 @@ import json
 import pytest
 
 from pyfem import solver
-from pyfem.solver import PHASES
+from pyfem.clock import PHASES
 from test_contact import block_scene
 from test_run_outputs import two_layer_scene
 

@@ -23,7 +23,7 @@ from pyfem import _kernels, solver
 from pyfem.elements import element_arrays, linear_stiffness, region_cells
 from pyfem.reduced_integration import element_matrices, hourglass_stiffness, one_point_arrays
 from pyfem.scene import SceneError, parse_scene
-from salencon import compare_to_stage, salencon
+from pyfem.analytic.salencon import compare_to_stage, salencon
 from test_materials_run import BALANCE, MPa, monitor, shear_cap, weak_layer_scene
 from test_static import CENTRE, meshes
 from test_static_relaxation import BULK_MODULUS, COHESION, FRICTION, P0, RADIUS, SHEAR_MODULUS, salencon_scene

@@ -1,4 +1,4 @@
-"""The Salencon (1969) closed form of tests/salencon.py against itself and the issue's reference numbers.
+"""The Salencon (1969) closed form of pyfem/analytic/salencon.py against itself and the issue's reference numbers.
 
 FLAC's verification data: P0 = 30 MPa, G = 2.8 GPa, K = 3.9 GPa, c = 3.45 MPa, phi = 30 deg, a = 1 m,
 unsupported wall: R0 = 1.735 a, sigma_theta(a) = 11.95 MPa, sigma_theta(R0) = 47.99 MPa, wall
@@ -7,7 +7,7 @@ convergence 12.17 mm (psi = 0) and 28.10 mm (psi = 30 deg). Compression positive
 import numpy as np
 import pytest
 
-from salencon import salencon
+from pyfem.analytic.salencon import salencon
 
 A = 1.0
 P0 = 30.0e6

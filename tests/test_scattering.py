@@ -1,16 +1,16 @@
-"""Pao & Mow's series for SV scattered by a circular cavity (pyfem/scattering.py): the wall is
+"""Pao & Mow's series for SV scattered by a circular cavity (pyfem/analytic/scattering.py): the wall is
 free, a long wave gives Kirsch's static concentration everywhere around the opening, and the
 time synthesis is causal and quasi-static for a long wavelet. The lined tunnel's series
 (LinedCavitySV): a lining of the rock's constants is the unlined cavity of the inner radius, a long
-wave gives the quasi-static closed form of pyfem/lined_tunnel.py, the bond is continuous and the
+wave gives the quasi-static closed form of pyfem/analytic/lined_tunnel.py, the bond is continuous and the
 inner face free at every frequency."""
 import math
 
 import numpy as np
 import pytest
 
-from pyfem.lined_tunnel import LinedTunnel
-from pyfem.scattering import CavitySV, LinedCavitySV
+from pyfem.analytic.lined_tunnel import LinedTunnel
+from pyfem.analytic.scattering import CavitySV, LinedCavitySV
 
 A, E, NU, RHO = 5.0, 8.0e9, 0.24, 2600.0
 THETAS = np.radians([0.0, 20.0, 45.0, 70.0, 90.0, 135.0, 200.0, 300.0])

@@ -366,10 +366,10 @@ def test_lining_stress_follows_relaxation(meshes):
 def test_lining_bends_as_the_closed_form_under_a_biaxial_far_field(meshes):
     """K = 0.5 and lambda = 0.5: the lining both shortens and bends (its hoop stress varies around the
     ring by more than 3x). Every lining cell's hoop stress at its centroid against the lined tunnel's
-    closed form there (pyfem/lined_tunnel.py, docs/lined_tunnel.md): measured 0.72 % of the peak with
+    closed form there (pyfem/analytic/lined_tunnel.py, docs/lined_tunnel.md): measured 0.72 % of the peak with
     two Q1 elements through the 0.5 m lining, the truncation's floor (workflows/lining_stress_accuracy.py)."""
     from pyfem.elements import region_cells
-    from pyfem.lined_tunnel import LinedTunnel
+    from pyfem.analytic.lined_tunnel import LinedTunnel
 
     relaxation = 0.5
     simulation = solver.prepare(tunnel_scene(
@@ -400,7 +400,7 @@ LINED_ORDER_MESHES = ((0.25, 16.0), (0.125, 8.0), (0.0625, 4.0))
 def lined_order_errors(folder, h_wall, h_far):
     """(lining error, rock error) of the lined tunnel on the 480 m slab, relative L2 of the polar stress."""
     from pyfem.elements import region_cells
-    from pyfem.lined_tunnel import LinedTunnel
+    from pyfem.analytic.lined_tunnel import LinedTunnel
 
     path = folder / f"lined_{h_wall:g}.msh"
     if not path.exists():

@@ -3,7 +3,7 @@ pyfem/static.py solve_relaxation_stage; docs/static.md "The nonlinear stage").
 
 - Linear materials relaxed equal the linear solve (Kirsch tunnel; lined tunnel with install).
 - Salencon's cavity (Mohr-Coulomb, hydrostatic P0): plastic radius, wall convergence (psi = 0 and
-  30 deg) and hoop stress against the closed form of tests/salencon.py. The issue's data (P0 =
+  30 deg) and hoop stress against the closed form of pyfem/analytic/salencon.py. The issue's data (P0 =
   30 MPa, G 2.8 GPa, K 3.9 GPa, c 3.45 MPa, phi 30 deg) on the test_static.py tunnel, a = 5 m
   (lengths scale with a: wall convergence 60.84 mm for psi = 0, 140.52 mm for psi = 30).
 - The hand-over: a dynamic run with no wave after a plastic stage stays at rest; the components
@@ -17,7 +17,7 @@ import pytest
 
 from pyfem import solver, static
 from pyfem.scene import parse_scene
-from salencon import compare_to_stage, salencon
+from pyfem.analytic.salencon import compare_to_stage, salencon
 from conftest import observed_orders
 from test_static import (CENTRE, KIRSCH_ORDER_MESHES, KIRSCH_ORDER_SECTION, LINING, P, RADIUS, ROCK, THICKNESS,
                          centroids, in_plane, kirsch_order_folder, kirsch_order_mesh, layered_box, meshes, polar,

@@ -346,7 +346,7 @@ def test_a_run_of_yielding_tetrahedra_stopped_and_resumed_is_the_uninterrupted_r
     assert_same_run(out, reference)
 
 
-# Salencon's cavity on tetrahedra against the closed form (tests/salencon.py), about twice the measured
+# Salencon's cavity on tetrahedra against the closed form (pyfem/analytic/salencon.py), about twice the measured
 # (the error's sign in parentheses). P2 with 0.8 m at the wall: plastic radius (+2.61 %), wall
 # convergence (-0.06 %: held to 1 %, where cohesion x 1.02 in the scene moves it to -1.74 %), hoop
 # stress at the cells nearest the wall, r = 1.03 a (-4.85 %: the centroid of a 0.8 m P2 cell where

@@ -28,7 +28,7 @@ scaled by the box's volume, since the box grows with h; the model setup, a fixed
 cost of a few seconds, is in wall_seconds and in the CSV too), measured in this session
 on this machine: compare ratios, not absolute values.
 
-Outputs: workflows/results/accuracy_cost.csv (one row per run), docs/accuracy_cost.md
+Outputs: workflows/results/accuracy_cost.csv (one row per run; copied to the program's pyfem/data/), docs/accuracy_cost.md
 (table, Pareto front, settings for 5 % and 1 % error budgets), docs/accuracy_cost.png
 (error against seconds, log-log, Pareto front marked). `pyfem.accuracy.recommend`
 reads the CSV.
@@ -56,6 +56,7 @@ sys.path.insert(0, str(ROOT))
 from pyfem import solver  # noqa: E402
 from pyfem.accuracy import COST_COLUMN, pareto_front  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
+from study_csv import publish  # noqa: E402  (this script's folder is on sys.path)
 
 # ----------------------------------------------------------------------------- parameters
 E, NU, RHO = 8.0e9, 0.24, 2600.0
@@ -170,6 +171,7 @@ def write_csv(rows, path):
         front = {id(r) for r in pareto_front(rows)}
         for row in rows:
             writer.writerow({**{key: row[key] for key in COLUMNS}, "pareto": int(id(row) in front)})
+    publish(path)  # the program's copy, pyfem/data/accuracy_cost.csv
 
 
 # ----------------------------------------------------------------------------- step 3: the report

@@ -44,7 +44,8 @@ from dolfinx import mesh as dmesh
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 
-from pyfem.distributed_model import fetch_owned, ghost_plan, local_stiffness, owned_rows_local
+from pyfem.distributed_model import ghost_plan
+from pyfem.distributed_parts import fetch_owned, local_stiffness, owned_rows_local
 
 YOUNG, POISSON, DENSITY = 2.0e10, 0.25, 2600.0
 

@@ -5,7 +5,7 @@ A tall elliptical opening (half-width 5 m, half-height 10 m: the crown's radius 
 the sidewalls' 20 m) and, for comparison, a circular one (a = 5 m), each in a plane-strain slab 480 x 480
 m, 2 m thick (meshes/tunnel_in_box.py --filled [--height 10]; 8 m elements far away), excavated by the
 static stage under sigma_xx = -15 MPa, sigma_zz = -10 MPa, sigma_xz = 2.5 MPa (rollers on every face).
-Each run is held to the closed form of pyfem/elliptical_opening.py (`wall_errors`): the hoop stress in
+Each run is held to the closed form of pyfem/analytic/elliptical_opening.py (`wall_errors`): the hoop stress in
 every cell with a face on the wall at its centroid, relative to the exact peak at the wall; the cell where
 the exact hoop stress is largest, relative to its own; the wall's displacement. The element size at the
 wall h is taken as 0.24, 0.12 and 0.06 times the smallest radius of curvature (rho for the ellipse, a for
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pyfem import solver  # noqa: E402
-from pyfem.elliptical_opening import EllipticalOpening, wall_errors  # noqa: E402
+from pyfem.analytic.elliptical_opening import EllipticalOpening, wall_errors  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
 from study_csv import run_study_main  # noqa: E402  (this script's folder is on sys.path)
 

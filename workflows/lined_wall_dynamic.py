@@ -9,10 +9,10 @@ meshes/tunnel_in_box.py --lining 0.5 --hollow), under a vertically incident SV R
 
 Measured: the hoop stress history at theta = 45 deg (where a vertical SV wave's shear concentrates)
 in the lining 1 cm from its free inner face, and in the rock 1 cm outside the bond. Held to:
-  * the exact dynamic answer: the lined tunnel's series (pyfem/scattering.py `LinedCavitySV`, plane
+  * the exact dynamic answer: the lined tunnel's series (pyfem/analytic/scattering.py `LinedCavitySV`, plane
     SV scattered by a bonded elastic ring, docs/lined_tunnel.md "The exact dynamic answer"), at every
     wave;
-  * the closed form of a lined tunnel loaded by a far-field shear tau(t) (pyfem/lined_tunnel.py
+  * the closed form of a lined tunnel loaded by a far-field shear tau(t) (pyfem/analytic/lined_tunnel.py
     `loaded_stresses`, Wang's no-slip lining), tau the free field's sigma_xz at the monitor. It is
     quasi-static: exact as the wave grows long against the tunnel. For the unlined tunnel the same
     quasi-static answer (Kirsch) is 0.5 % off the exact dynamic peak at f0 = 1 Hz (Pao & Mow,
@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pyfem import solver  # noqa: E402
-from pyfem.scattering import LinedCavitySV  # noqa: E402
+from pyfem.analytic.scattering import LinedCavitySV  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
 # The static lining study's tunnel (constants and closed form), the wall study's run reuse and
 # monitor reading (this script's folder is on sys.path when it runs).

@@ -5,7 +5,7 @@ A circular tunnel (excavation radius b = 5 m, axis y) with a 0.5 m concrete lini
 rock (8 GPa, 0.24), a plane-strain slab 240 x 240 m, far field sigma_zz = -10 MPa, sigma_xx = -5 MPa
 (K = 0.5: the lining bends); the stage releases lambda = 0.5 of the excavation load before the lining
 is installed, the rest after (meshes/tunnel_in_box.py --lining; docs/static.md). Every run is held to
-the closed form of pyfem/lined_tunnel.py at two places:
+the closed form of pyfem/analytic/lined_tunnel.py at two places:
 - at the lining cells' centroids (where the fields file reports each cell's stress): the largest
   error over the lining, relative to the largest hoop stress in it;
 - the peak an engineer reads off the fields (the largest compressive hoop stress over the lining's
@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 from pyfem import solver  # noqa: E402
 from pyfem.elements import region_cells  # noqa: E402
-from pyfem.lined_tunnel import LinedTunnel  # noqa: E402
+from pyfem.analytic.lined_tunnel import LinedTunnel  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
 from study_csv import run_study_main  # noqa: E402  (this script's folder is on sys.path)
 

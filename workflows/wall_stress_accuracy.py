@@ -6,7 +6,7 @@ and what it costs, on a problem with an exact answer: an unlined circular tunnel
 in a plane-strain slab (120 x 120 m, 2 m thick, rollers on the thin faces, viscoelastic x and z
 faces carrying the free field) under a vertically incident SV Ricker wavelet in a full space (no
 free surface). The exact answer is Pao & Mow's series for a plane SV wave scattered by a circular
-cavity (pyfem/scattering.py), synthesised over the incident wavelet's spectrum. For a wave much
+cavity (pyfem/analytic/scattering.py), synthesised over the incident wavelet's spectrum. For a wave much
 longer than the tunnel it tends to Kirsch's quasi-static solution for a far-field shear tau:
 hoop stress sigma_thth = -tau (1 + 3 a^4/r^4) sin 2 theta, a concentration of 4 at the wall;
 Kirsch's own error at each wave is reported beside the mesh's.
@@ -130,7 +130,7 @@ def racking_history(out: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def exact_racking(freefield, times: np.ndarray, centre: np.ndarray = CENTRE) -> np.ndarray:
     """Pao & Mow's u_x(crown) - u_x(invert) at r = 1.02 a (m) for the scene's incident wave."""
-    from pyfem.scattering import CavitySV
+    from pyfem.analytic.scattering import CavitySV
 
     return CavitySV(RADIUS, E, NU, RHO).racking_from_free_field(freefield, centre, times, RADIUS * R_OVER_A)
 
@@ -148,8 +148,8 @@ def free_field_shear(freefield, times: np.ndarray) -> np.ndarray:
 
 
 def exact_hoop(freefield, times: np.ndarray, centre: np.ndarray = CENTRE) -> np.ndarray:
-    """Pao & Mow's sigma_thth(t) at the monitor (Pa) for the scene's incident wave (pyfem.scattering)."""
-    from pyfem.scattering import CavitySV
+    """Pao & Mow's sigma_thth(t) at the monitor (Pa) for the scene's incident wave (pyfem.analytic.scattering)."""
+    from pyfem.analytic.scattering import CavitySV
 
     return CavitySV(RADIUS, E, NU, RHO).hoop_stress_from_free_field(freefield, centre, times, RADIUS * R_OVER_A,
                                                                     math.radians(THETA))
@@ -344,7 +344,7 @@ r = 1.02 a above and below the centre: what the case study reports as "relative 
 
 Pao & Mow's series for a plane SV wave scattered by a circular cavity (Y.-H. Pao, C.-C. Mow,
 Diffraction of Elastic Waves and Dynamic Stress Concentrations, 1973, ch. 4), in
-pyfem/scattering.py: incident and outgoing scattered potentials expanded in Bessel and Hankel
+pyfem/analytic/scattering.py: incident and outgoing scattered potentials expanded in Bessel and Hankel
 functions, one 2 x 2 system per order for the free wall, synthesised over the incident wavelet's
 spectrum (its displacement at the tunnel's centre, from the scene's own free field). Checked in
 tests/test_scattering.py, each against an independent answer:
@@ -392,7 +392,7 @@ the same day's CI ran 2.6x longer than the day before).
   displacement difference across the opening carries the faces' reflections whole. For the racking
   a 1 % budget is met by Q2 at 0.24 a (13 s) or Q1 at 0.06 a (6.8 s).
 
-`pyfem check` prints, from workflows/results/wall_stress.csv, the largest wall size per order
+`pyfem check` prints, from pyfem/data/wall_stress.csv (this CSV's copy), the largest wall size per order
 whose peak error, and every finer size's, is within 5 % and 1 % at every wave studied
 (`pyfem.accuracy.wall_size_for`): today Q1 0.24 a / 0.06 a and Q2 0.24 a / 0.12 a. The
 layered-cavern builder's default puts lining_wall / lining_elements = 0.5 m at the wall, 0.04 of the

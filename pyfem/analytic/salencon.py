@@ -1,4 +1,4 @@
-"""Salencon (1969): a circular cavity in a Mohr-Coulomb elastic-perfectly-plastic medium (helper, no tests).
+"""Salencon (1969): a circular cavity in a Mohr-Coulomb elastic-perfectly-plastic medium (checked in tests/test_salencon_closed_form.py).
 
 Plane strain, hydrostatic in-situ stress P0, cavity radius a, internal pressure p_i (0: unsupported
 wall), cohesion c, friction angle phi, dilation angle psi (non-associated flow), small strain.
