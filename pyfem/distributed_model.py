@@ -1364,6 +1364,8 @@ class DistributedRun:
         """Refuses (SceneError, key --resume, on every rank alike) a checkpoint of another model,
         rank count or partition."""
         theirs, ours = saved.meta["fingerprint"], self._fingerprint()
+        if "steps" in theirs and theirs["steps"] != ours["steps"]:
+            saved.check_input_follows(self.scene)
         saved.refuse_other_stepping(theirs.get("levels") is not None, ours["levels"] is not None)
         for key in ("dofs", "dt", "levels"):  # (not the steps: a resume may change time.duration)
             if theirs.get(key) != ours[key]:

@@ -578,3 +578,31 @@ def test_without_a_record_another_duration_is_another_wear_and_refused():
     saved.check_model(simulation(0.30))
     with pytest.raises(SceneError, match=r"wear time t_s .* is time\.duration"):
         saved.check_model(simulation(0.45))
+
+
+def test_a_layered_ricker_input_follows_the_duration_and_is_refused():
+    """With [[wave.layers]] and a Ricker wavelet the layered free field is an FFT over the run's time:
+    a run to 0.3 s extended to 0.6 s differed from the 0.6 s run by up to 0.75 % at its monitors
+    (workflows/scenes/layered_site_sv30.toml, measured). Another duration is refused in one line naming
+    time.duration; the same duration (an interrupted run resumed) continues; a record through the
+    same layers does not depend on the duration."""
+    from types import SimpleNamespace
+
+    from pyfem.scene import load_scene
+
+    def simulation(duration, steps):
+        scene = load_scene(REPO / "workflows/scenes/layered_site_sv30.toml", [f"time.duration={duration}"])
+        return SimpleNamespace(scene=scene, stiffness=np.zeros((6, 6)), time_step=SimpleNamespace(dt=1e-3),
+                               n_steps=steps, mass=np.ones(2), node_levels=None, contact_arrays=None)
+
+    assert checkpoint.input_follows_duration(simulation(0.3, 300).scene)
+    saved = checkpoint.Checkpoint(path=Path("run/checkpoint.npz"),
+                                  meta={"fingerprint": checkpoint.model_fingerprint(simulation(0.3, 300))},
+                                  u=None, v=None, a=None)
+    saved.check_model(simulation(0.3, 300))
+    with pytest.raises(SceneError, match=r"wave\.layers.* time\.duration = 0\.6 s is another input") as refused:
+        saved.check_model(simulation(0.6, 600))
+    assert refused.value.key == "time.duration" and "\n" not in str(refused.value)
+    recorded = simulation(0.3, 300).scene
+    recorded["wave"]["motion"] = {"record": {"file": "elcentro.txt"}}
+    assert not checkpoint.input_follows_duration(recorded)
