@@ -542,6 +542,7 @@ def without_wear(duration: float):
     return scene
 
 
+@pytest.mark.slow  # (three runs of the scene)
 def test_a_finished_run_with_every_state_extends_bit_for_bit(tmp_path):
     """In process, the stateful scene (plasticity, damage, sliding pairs, static stage) finished at
     0.30 s and extended to 0.45 s: histories byte for byte as the 0.45 s run from the start, after

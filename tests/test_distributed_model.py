@@ -386,6 +386,7 @@ def test_kill_9_of_two_ranks_then_resume_gives_the_uninterrupted_run(tmp_path, u
     print(f"killed at t > {resumed['resumed'][0]['t']:.3f} s of 3 s; resumed on {resumed_on} ranks")
 
 
+@pytest.mark.slow  # (three runs of the scene)
 def test_a_finished_two_rank_run_extends_to_a_later_duration(tmp_path, uninterrupted):
     """The layers scene (a yielding layer, cracking concrete) finished on 2 ranks at 1.5 s, then
     `--resume` with time.duration = 3 s on 2 ranks: the uninterrupted 3 s run's histories (byte for
