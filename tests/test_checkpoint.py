@@ -511,7 +511,8 @@ def test_a_finished_run_extends_to_a_later_duration(tmp_path, two_seconds):
     directory untouched. Catches a finished run that cannot be extended, and an extension that
     restarts, drops or rewrites the first second."""
     out = tmp_path / "extended"
-    pyfem_run(out, "--set", "time.duration=1.0")
+    finished = pyfem_run(out, "--set", "time.duration=1.0")
+    assert "checkpoint.npz extends the run: --resume with a longer time.duration" in finished.stdout
     first = json.loads((out / "run.json").read_text())
     assert first["status"] == "finished" and first["time_reached"] == 1.0
     before = history_files(out)
