@@ -131,6 +131,11 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
     written = [name for name in ("run.json", "monitors/", "pairs/", "energy.csv", "reactions.csv", "support.csv", "static/",
                                  "plots/", "fields.xdmf") if (out / name.rstrip("/")).exists()]
     paraview = "; fields.xdmf opens in ParaView" if "fields.xdmf" in written else ""
+    from pyfem.checkpoint import CHECKPOINT_NAME
+
+    if (out / CHECKPOINT_NAME).exists():  # the final state: what extends the run
+        written.append(CHECKPOINT_NAME)
+        paraview += f"; {CHECKPOINT_NAME} extends the run: --resume with a longer time.duration"
     print(f"outputs: {out_dir}/ ({', '.join(written)}{paraview})")
     return 0
 

@@ -1129,16 +1129,26 @@ class DistributedRun:
         return {"scene": scene_fingerprint(self.scene), "dofs": self.part.n_dofs_global, "dt": self.time_step.dt,
                 "steps": self.n_steps, "ranks": self.comm.size,
                 "time_origin": run_origin(self.lead_in, self.time_step),
-                "levels": None if self.lts is None else self.lts.counts.tolist()}
+                "levels": None if self.lts is None else self.lts.counts.tolist(),
+                **({"deterioration": [float(x) for x in self.contact_arrays["deterioration"]]}
+                   if self.contact_arrays is not None and self.contact_arrays.get("deterioration") is not None
+                   else {})}
 
     def _check_model(self, saved) -> None:
         """Refuses (SceneError, key --resume, on every rank alike) a checkpoint of another model,
         rank count or partition."""
         theirs, ours = saved.meta["fingerprint"], self._fingerprint()
+        if "steps" in theirs and theirs["steps"] != ours["steps"]:
+            saved.check_input_follows(self.scene)
         saved.refuse_other_stepping(theirs.get("levels") is not None, ours["levels"] is not None)
         for key in ("dofs", "dt", "levels"):  # (not the steps: a resume may change time.duration)
             if theirs.get(key) != ours[key]:
                 saved._refuse(f"the model's {key} differs from the checkpoint's (another mesh or build?)")
+        if "deterioration" in theirs and theirs["deterioration"] != ours.get("deterioration"):
+            from pyfem.checkpoint import _first_difference
+
+            saved._refuse_difference(_first_difference({"deterioration": theirs["deterioration"]},
+                                                       {"deterioration": ours.get("deterioration")}))
         if theirs.get("time_origin", 0.0) != ours["time_origin"]:
             saved._refuse("the checkpoint was written before record time became run time (its record's lead-in "
                           "ran from t = 0, now it runs at t < 0): start the run again")
@@ -1328,10 +1338,10 @@ class DistributedRun:
         return {"wall_seconds": self.previous_timing["wall_seconds"] + now - self.wall_start,
                 "loop_seconds": self.previous_timing["loop_seconds"] + now - loop_start}
 
-    def write_checkpoint(self, stepper, u, v, a, t: float, loop_start: float) -> None:
+    def write_checkpoint(self, stepper, u, v, a, t: float, loop_start: float, final: bool = False) -> None:
         """Every rank's state to its file, then rank 0's record (`checkpoint.npz`, written last and
         atomically, names the files): a crash at any moment leaves the last whole checkpoint. A
-        collective."""
+        collective. final: the finished run's state (kept: a longer time.duration extends the run)."""
         from pyfem.checkpoint import CHECKPOINT_NAME, FORMAT, write_atomically
 
         comm, out = self.comm, self.out
@@ -1344,7 +1354,8 @@ class DistributedRun:
                     "t": t, "outputs_done": self.done, "timing": self.timing(loop_start),
                     "history_sizes": sizes, "started": self.summary["started"],
                     "fields_files": self.fields_files, "fields_layout": getattr(self, "fields_layout", None),
-                    "resumed": self.summary.get("resumed", []), "written": time.time()}
+                    "resumed": self.summary.get("resumed", []), "written": time.time(),
+                    **({"final": True} if final else {})}
             writer = {"meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
                       "writer_times": np.array(self.times), "writer_energy": np.array(self.energy_rows)}
             if self.rows_kept:
@@ -1549,15 +1560,6 @@ class DistributedRun:
             state[name] = mine.tobytes()
         return state
 
-    def remove_checkpoint(self) -> None:
-        from pyfem.checkpoint import CHECKPOINT_NAME
-
-        self.comm.Barrier()
-        if self.root:  # (a resumed run's files may be of another rank count)
-            for path in self.out.glob("checkpoint.*.rank*.npz"):
-                path.unlink(missing_ok=True)
-            (self.out / CHECKPOINT_NAME).unlink(missing_ok=True)
-
     # -- the run --------------------------------------------------------------------------------------
     def go(self, on_plan, progress, signals) -> dict:
         """The time loop from the set-up to the summary (rank 0's; {} elsewhere); `signals`: the
@@ -1619,6 +1621,8 @@ class DistributedRun:
                         signals.stop_together(comm)
                 if progress is not None and root:
                     progress(t)
+            with signals.deferred():  # the final state, kept: a longer time.duration and --resume extend the run
+                self.write_checkpoint(stepper, u, v, a, self.times[-1] if root else 0.0, loop_start, final=True)
             status = "finished"
         except KeyboardInterrupt as error:
             status = "interrupted"
@@ -1659,7 +1663,6 @@ class DistributedRun:
         phases = comm.gather(dict(stepper.phase_seconds()), root=0)
         sitting = comm.allreduce(time.perf_counter() - loop_start, op=MPI.MAX)
         nonlinear = None if loop is None else region_summary(comm, loop.counted)
-        self.remove_checkpoint()
         if not root:
             return {}
         self.summary.update({

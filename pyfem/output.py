@@ -481,9 +481,10 @@ class RunWriter:
         return meta, arrays
 
     def resume(self, meta: dict, arrays: dict, resumed_at: float) -> None:
-        """Continues the run directory of an interrupted run from its checkpoint (instead of
-        `start`): the samples so far back in memory, every history file cut to its length at the
-        checkpoint and reopened, the fields file cut to the checkpoint's fields, run.json running.
+        """Continues the run directory of an interrupted or finished run from its checkpoint (instead
+        of `start`): the samples so far back in memory, every history file cut to its length at the
+        checkpoint and reopened, the fields file cut to the checkpoint's fields, run.json running
+        (its scene, steps and input motion this sitting's: time.duration may be longer).
 
         Args:
             meta, arrays: the writer's part of the checkpoint (`checkpoint_state`).
@@ -494,7 +495,17 @@ class RunWriter:
         self._summary.pop("reason", None)
         self._summary.setdefault("resumed", []).append(
             {"t": resumed_at, "at": time.strftime("%Y-%m-%dT%H:%M:%S")})
+        # What time.duration sets (a resume may extend the run): this sitting's scene and steps.
+        self._summary["scene"] = self.scene.to_json()
+        self._summary["steps"] = self.simulation.n_steps
         self.input_motion = input_motion(self.simulation)
+        if self.input_motion is not None:
+            self._summary["input_motion"] = {key: value for key, value in self.input_motion.items()
+                                             if not key.startswith("_")}
+            from pyfem import plots
+
+            plots.input_motion(self.out_dir / "plots" / "input.png", *self.input_motion["_series"],
+                               title=self._input_title())
         self.times = arrays["times"].tolist()
         self.energy_samples = arrays["energy_samples"].tolist()
         self.monitor_rows = list(arrays["monitor_rows"]) if "monitor_rows" in arrays else []

@@ -646,8 +646,8 @@ SCHEMA = Table({
                                 default=0.1),
         "fields": TextList("output fields", default=["displacement", "velocity"],
                            options=OUTPUT_FIELDS, unavailable=FIELDS_NOT_PRODUCED),
-        "checkpoint_interval": Number("wall time between checkpoints (s; 0: none)", NON_NEGATIVE,
-                                      default=300.0),
+        "checkpoint_interval": Number("wall time between periodic checkpoints (s; 0: none; a stop and the "
+                                      "run's end write one)", NON_NEGATIVE, default=300.0),
     }, "[output]"),
     "parallel": Table({
         "model": Choice("how the MPI ranks of `mpirun -n N` (N > 1) hold the model: each rank builds and "

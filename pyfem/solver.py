@@ -664,11 +664,13 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     the run directory is touched (the command line prints it). progress: None shows a tqdm bar
     on a terminal (stderr); else an object with start(t0) and __call__(t) (pyfem.progress.
     ProgressLines), told the simulated time reached after every output interval; no bar then.
-    resume: continue the interrupted run in out_dir from its checkpoint (pyfem/checkpoint.py)
-    instead of starting a new one; its histories then equal an uninterrupted run's.
+    resume: continue the interrupted or finished run in out_dir from its checkpoint (pyfem/checkpoint.py)
+    to the scene's time.duration instead of starting a new one; its histories then equal an
+    uninterrupted run's.
 
     The histories are written as the run goes; every `output.checkpoint_interval` seconds of
-    wall time the whole state goes to out_dir/checkpoint.npz (removed when the run finishes).
+    wall time the whole state goes to out_dir/checkpoint.npz, and at the end the final state (kept:
+    `resume` with a longer time.duration extends a finished run).
     Ctrl-C or SIGTERM stops the run between two samples: a checkpoint is written, run.json says
     "interrupted" with the time reached, every row so far is kept, and
     `pyfem.interrupts.RunInterrupted` (a KeyboardInterrupt) is raised. Any other error marks
@@ -787,15 +789,20 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                         "output_seconds": previous["output_seconds"] + output_seconds,
                         "phases": {key: previous["phases"].get(key, 0.0) + value for key, value in phases.items()}}
 
-            def checkpoint_now() -> None:
+            def checkpoint_now(final: bool = False) -> None:
+                """The state at the last sample to checkpoint.npz; final: the finished run's (kept, so
+                that a longer time.duration extends the run; not counted with the periodic ones)."""
                 began = time.perf_counter()
                 writer_meta, writer_arrays = writer.checkpoint_state()
                 meta = {"fingerprint": checkpoints.model_fingerprint(simulation), "t": t, "outputs_done": done,
                         "timing": timing(), "writer": writer_meta}
+                if final:
+                    meta["final"] = True
                 if simulation.lts_stability:
                     meta["lts_stability"] = simulation.lts_stability
                 checkpoints.write_checkpoint(out_dir, meta, u, v, a, stepper.save_state(), writer_arrays)
-                clock.written(time.perf_counter() - began)
+                if not final:
+                    clock.written(time.perf_counter() - began)
 
             write_checkpoint = checkpoint_now
             if progress is not None:
@@ -821,13 +828,13 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                     bar.update()
                     if progress is not None:
                         progress(t)
+            with signals.deferred():  # the final state, kept: a longer time.duration and --resume extend the run
+                write_checkpoint(final=True)
             total = timing()
             phases = phase_split(total["phases"], total["loop_seconds"], total["output_seconds"])
-            summary = writer.finish(wall_seconds=total["wall_seconds"], loop_seconds=total["loop_seconds"],
-                                    phases=phases, checkpoints={"written": clock.count, "seconds": clock.seconds,
-                                                                "interval": clock.interval})
-            (Path(out_dir) / checkpoints.CHECKPOINT_NAME).unlink(missing_ok=True)  # finished: nothing to resume
-            return summary
+            return writer.finish(wall_seconds=total["wall_seconds"], loop_seconds=total["loop_seconds"],
+                                 phases=phases, checkpoints={"written": clock.count, "seconds": clock.seconds,
+                                                             "interval": clock.interval})
         except KeyboardInterrupt as error:
             interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
             if writer.started:

@@ -10,8 +10,10 @@ its last checkpoint to the same histories, fields and run.json peaks, bit for bi
   beyond it, which the resumed run must drop and recompute; Ctrl-C writes its own checkpoint.
   Before comparing, the test asserts that the pairs slid, the rock yielded and the concrete
   damaged after the checkpoint, so the state restored is one that matters.
-- A checkpoint of another scene, a finished run and a directory without one are refused with one
-  line and exit status 2.
+- A checkpoint of another scene, a finished run resumed without a longer time.duration and a
+  directory without one are refused with one line and exit status 2.
+- A finished run keeps its final state: `--resume` with a longer time.duration extends it to the
+  histories of an uninterrupted run of that duration, byte for byte (issue 51, item 9).
 """
 import json
 import os
@@ -55,7 +57,8 @@ def assert_same_run(resumed: Path, reference: Path) -> None:
             return [{key: value for key, value in stage.items() if key != "seconds"} for stage in stages]
 
         assert solved(summary["static"]["stages"]) == solved(summary_expected["static"]["stages"])
-    assert not (resumed / checkpoint.CHECKPOINT_NAME).exists(), "a finished run keeps no checkpoint"
+    final = checkpoint.read_checkpoint(resumed, state=False)  # kept: a longer time.duration extends the run
+    assert final.final and final.t == pytest.approx(summary["time_reached"]), "a finished run keeps its final state"
     if (reference / "fields.xdmf").exists():
         import meshio
 
@@ -87,14 +90,21 @@ def pyfem_run(out_dir: Path, *extra: str, check: bool = True) -> subprocess.Comp
     return result
 
 
-def stop_after_first_checkpoint(out: Path) -> None:
-    """Starts a 60 s run of SCENE into `out`, stops it with SIGTERM once its first checkpoint is on
-    disk, and checks that it stopped as an interrupted run does (exit 128 + SIGTERM)."""
+def stop_after_first_checkpoint(out: Path, past: float = 0.0) -> None:
+    """Starts a 60 s run of SCENE into `out`, stops it with SIGTERM once a checkpoint (at a time after
+    `past` s) is on disk, and checks that it stopped as an interrupted run does (exit 128 + SIGTERM)."""
     process = subprocess.Popen([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out), *KILL_RUN,
                                 "--set", "time.duration=60"], cwd=REPO, env=ENV, stdout=subprocess.DEVNULL,
                                stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 300
-    while not (out / checkpoint.CHECKPOINT_NAME).exists():
+
+    def reached() -> float:
+        try:
+            return checkpoint.read_checkpoint(out, state=False).t
+        except SceneError:  # none yet
+            return -1.0
+
+    while not (out / checkpoint.CHECKPOINT_NAME).exists() or reached() <= past:
         assert process.poll() is None and time.monotonic() < deadline
         time.sleep(0.05)
     process.send_signal(signal.SIGTERM)
@@ -462,15 +472,25 @@ def test_a_checkpoint_from_before_the_integration_key_still_resumes(tmp_path):
         saved.check_scene(scene_with("reduced"))
 
 
-def test_an_interrupted_run_continues_to_a_later_duration(tmp_path):
+LONG_RUN = ("--set", "time.duration=2.0")
+
+
+@pytest.fixture(scope="module")
+def two_seconds(tmp_path_factory):
+    """The default scene run for 2 s from the start: what a run extended to 2 s must equal."""
+    out = tmp_path_factory.mktemp("two_seconds") / "reference"
+    pyfem_run(out, *LONG_RUN)
+    return out
+
+
+def test_an_interrupted_run_continues_to_a_later_duration(tmp_path, two_seconds):
     """A run stopped (SIGTERM) after its first checkpoint resumes with a longer time.duration and
     ends as a run of that duration from the start would (histories byte for byte); a duration that
     ends before the checkpoint's time is refused in one line. Catches the refusal a user met when
     extending a long record's run, and a continuation that restarts or drops the earlier part."""
-    long_run = ("--set", "time.duration=2.0")
-    pyfem_run(tmp_path / "reference", *long_run)
+    long_run = LONG_RUN
     out = tmp_path / "stopped"
-    stop_after_first_checkpoint(out)
+    stop_after_first_checkpoint(out, past=0.1)  # (half of it a whole number of output intervals earlier)
     reached = json.loads((out / "run.json").read_text())["time_reached"]
     assert 0.0 < reached < 2.0, reached  # stopped before the reference's end
     before = history_files(out)
@@ -480,4 +500,111 @@ def test_an_interrupted_run_continues_to_a_later_duration(tmp_path):
     assert history_files(out) == before  # a refused resume touches nothing
     resumed = pyfem_run(out, *long_run, "--resume")
     assert "run finished" in resumed.stdout
-    assert_same_run(out, tmp_path / "reference")
+    assert_same_run(out, two_seconds)
+
+
+def test_a_finished_run_extends_to_a_later_duration(tmp_path, two_seconds):
+    """A run that finished at 1 s keeps its final state; `--resume` with time.duration = 2 s
+    continues it to 2 s, appending to the monitors, energy.csv and the fields: every history byte
+    for byte, every field and run.json's peaks as the run of 2 s from the start, and its energy
+    balance within 1e-10. The same or a shorter duration is refused in one line (exit 2), the
+    directory untouched. Catches a finished run that cannot be extended, and an extension that
+    restarts, drops or rewrites the first second."""
+    out = tmp_path / "extended"
+    finished = pyfem_run(out, "--set", "time.duration=1.0")
+    assert "checkpoint.npz extends the run: --resume with a longer time.duration" in finished.stdout
+    first = json.loads((out / "run.json").read_text())
+    assert first["status"] == "finished" and first["time_reached"] == 1.0
+    before = history_files(out)
+    for duration, words in ((1.0, "adds nothing to it"), (0.5, "ends before it")):
+        refused = pyfem_run(out, "--set", f"time.duration={duration}", "--resume", check=False)
+        errors = [line for line in refused.stderr.splitlines() if not line.startswith("warning: ")]
+        assert refused.returncode == 2 and len(errors) == 1, refused.stderr
+        assert "time.duration" in errors[0] and "finished at t = 1 s" in errors[0] and words in errors[0], errors[0]
+        assert history_files(out) == before, "a refused extension touches nothing"
+    extended = pyfem_run(out, *LONG_RUN, "--resume")
+    assert "from the checkpoint at t = 1 s of 2 s" in extended.stdout and "run finished" in extended.stdout
+    files = history_files(out)
+    for name, content in before.items():  # the first second kept as written, the rest appended
+        assert files[name].startswith(content) and len(files[name]) > len(content), name
+    summary = json.loads((out / "run.json").read_text())
+    assert summary["resumed"][0]["t"] == 1.0 and summary["time_reached"] == 2.0
+    assert summary["scene"]["time"]["duration"] == 2.0 and summary["steps"] == json.loads(
+        (two_seconds / "run.json").read_text())["steps"]
+    assert 0.0 < summary["energy"]["balance_error"] < 1e-10, summary["energy"]
+    assert_same_run(out, two_seconds)
+
+
+def without_wear(duration: float):
+    """stateful_scene without the interfaces' deterioration: with a Ricker wavelet (no record) the
+    wear time t_s is time.duration, so that scene at another duration is another model."""
+    scene = stateful_scene(duration)
+    del scene["contact"]["deterioration"]
+    return scene
+
+
+@pytest.mark.slow  # (three runs of the scene)
+def test_a_finished_run_with_every_state_extends_bit_for_bit(tmp_path):
+    """In process, the stateful scene (plasticity, damage, sliding pairs, static stage) finished at
+    0.30 s and extended to 0.45 s: histories byte for byte as the 0.45 s run from the start, after
+    asserting that the pairs slide, the rock yields and the concrete dissipates after 0.30 s."""
+    reference = tmp_path / "reference"
+    solver.run(without_wear(0.45), reference)
+    out = tmp_path / "extended"
+    solver.run(without_wear(0.30), out)
+    assert checkpoint.read_checkpoint(out, state=False).final
+    summary = solver.run(without_wear(0.45), out, resume=True)
+    rows = np.loadtxt(reference / "energy.csv", delimiter=",", skiprows=1)
+    columns = (reference / "energy.csv").read_text().splitlines()[0].split(",")
+    at = int(np.argmin(np.abs(rows[:, 0] - 0.30)))
+    for name in ("internal_dissipation", "friction_dissipation"):
+        history = rows[:, columns.index(name)]
+        assert 0.0 < history[at] < history[-1], f"{name} grows after the extension's start"
+    assert summary["resumed"][0]["t"] == pytest.approx(0.30) and summary["energy"]["balance_error"] < 1e-10
+    assert_same_run(out, reference)
+
+
+def test_without_a_record_another_duration_is_another_wear_and_refused():
+    """With deterioration and no record t_s = time.duration: an extension would change the wear of the
+    part already run, so it is refused in one line naming time.duration."""
+    from types import SimpleNamespace
+
+    def simulation(t_s):
+        return SimpleNamespace(scene=stateful_scene(), stiffness=np.zeros((6, 6)), time_step=SimpleNamespace(dt=1e-3),
+                               n_steps=10, mass=np.ones(2), node_levels=None,
+                               contact_arrays={"deterioration": (0.75, 5.0, t_s, 0.883, 0.02, 0.032, 0.0)})
+
+    saved = checkpoint.Checkpoint(path=Path("run/checkpoint.npz"),
+                                  meta={"fingerprint": checkpoint.model_fingerprint(simulation(0.30))},
+                                  u=None, v=None, a=None)
+    saved.check_model(simulation(0.30))
+    with pytest.raises(SceneError, match=r"wear time t_s .* is time\.duration"):
+        saved.check_model(simulation(0.45))
+
+
+def test_a_layered_ricker_input_follows_the_duration_and_is_refused():
+    """With [[wave.layers]] and a Ricker wavelet the layered free field is an FFT over the run's time:
+    a run to 0.3 s extended to 0.6 s differed from the 0.6 s run by up to 0.75 % at its monitors
+    (workflows/scenes/layered_site_sv30.toml, measured). Another duration is refused in one line naming
+    time.duration; the same duration (an interrupted run resumed) continues; a record through the
+    same layers does not depend on the duration."""
+    from types import SimpleNamespace
+
+    from pyfem.scene import load_scene
+
+    def simulation(duration, steps):
+        scene = load_scene(REPO / "workflows/scenes/layered_site_sv30.toml", [f"time.duration={duration}"])
+        return SimpleNamespace(scene=scene, stiffness=np.zeros((6, 6)), time_step=SimpleNamespace(dt=1e-3),
+                               n_steps=steps, mass=np.ones(2), node_levels=None, contact_arrays=None)
+
+    assert checkpoint.input_follows_duration(simulation(0.3, 300).scene)
+    saved = checkpoint.Checkpoint(path=Path("run/checkpoint.npz"),
+                                  meta={"fingerprint": checkpoint.model_fingerprint(simulation(0.3, 300))},
+                                  u=None, v=None, a=None)
+    saved.check_model(simulation(0.3, 300))
+    with pytest.raises(SceneError, match=r"wave\.layers.* time\.duration = 0\.6 s is another input") as refused:
+        saved.check_model(simulation(0.6, 600))
+    assert refused.value.key == "time.duration" and "\n" not in str(refused.value)
+    recorded = simulation(0.3, 300).scene
+    recorded["wave"]["motion"] = {"record": {"file": "elcentro.txt"}}
+    assert not checkpoint.input_follows_duration(recorded)

@@ -357,7 +357,10 @@ def test_kill_9_of_two_ranks_then_resume_gives_the_uninterrupted_run(tmp_path, u
     resumed = summary(out)
     assert resumed["status"] == "finished" and 0.0 < resumed["resumed"][0]["t"] < 3.0
     assert resumed["mpi"]["ranks"] == resumed_on and resumed["nonlinear_regions"]["weak"]["yielded_volume"] > 0.0
-    assert not list(out.glob("checkpoint*")), "a finished run keeps no checkpoint"
+    final = json.loads(np.load(out / "checkpoint.npz")["meta"].tobytes())  # kept: a longer duration extends it
+    assert final["final"] and final["t"] == resumed["time_reached"], "a finished run keeps its final state"
+    assert sorted(p.name for p in out.glob("checkpoint.*.rank*.npz")) == [
+        f"checkpoint.{final['id']}.rank{rank}.npz" for rank in range(resumed_on)]
     # The histories: byte for byte when the resumed run has the uninterrupted run's split (dolfinx's
     # graph partitioner usually repeats it), else within round-off (the sums of another partition).
     split = resumed["mpi"]["owned_nodes"] == summary(uninterrupted)["mpi"]["owned_nodes"]
@@ -381,6 +384,36 @@ def test_kill_9_of_two_ranks_then_resume_gives_the_uninterrupted_run(tmp_path, u
     for part in parts:
         part.close()
     print(f"killed at t > {resumed['resumed'][0]['t']:.3f} s of 3 s; resumed on {resumed_on} ranks")
+
+
+@pytest.mark.slow  # (three runs of the scene)
+def test_a_finished_two_rank_run_extends_to_a_later_duration(tmp_path, uninterrupted):
+    """The layers scene (a yielding layer, cracking concrete) finished on 2 ranks at 1.5 s, then
+    `--resume` with time.duration = 3 s on 2 ranks: the uninterrupted 3 s run's histories (byte for
+    byte on the same split, energy.csv to 1e-13), fields and peaks, the energy balance within 1e-10;
+    the same duration again is refused in one line naming time.duration, exit 2."""
+    out = tmp_path / "extended"
+    first_half = (CHECKPOINTED[0], CHECKPOINTED[1], "--set", "time.duration=1.5")
+    result = pyfem(2, "run", SCENES["layers"], "--out", str(out), *first_half)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert summary(out)["time_reached"] == 1.5 and summary(out)["status"] == "finished"
+    before = {p.name: p.read_bytes() for p in out.rglob("*.csv")}
+    refused = pyfem(2, "run", SCENES["layers"], "--out", str(out), *first_half, "--resume")
+    errors = sorted(set(line for line in refused.stderr.splitlines() if line.startswith("error:")))
+    assert refused.returncode == 2 and len(errors) == 1 and "Traceback" not in refused.stderr, refused.stderr[-2000:]
+    assert "time.duration" in errors[0] and "finished at t = 1.5 s" in errors[0], errors[0]
+    result = pyfem(2, "run", SCENES["layers"], "--out", str(out), *CHECKPOINTED, "--resume")
+    assert result.returncode == 0, result.stderr[-3000:]
+    extended, expected = summary(out), summary(uninterrupted)
+    assert extended["resumed"][0]["t"] == 1.5 and extended["time_reached"] == expected["time_reached"] == 3.0
+    assert extended["steps"] == expected["steps"] and extended["scene"]["time"]["duration"] == 3.0
+    assert extended["nonlinear_regions"]["weak"]["yielded_volume"] > 0.0
+    for name, content in before.items():
+        assert next(out.rglob(name)).read_bytes().startswith(content), f"{name}: the first 1.5 s rewritten"
+    assert extended["energy"]["balance_error"] < 1e-10, extended["energy"]
+    split = extended["mpi"]["owned_nodes"] == expected["mpi"]["owned_nodes"]
+    same_files(out, uninterrupted, None if split and len(extended.get("fields_files", [1])) == 1 else 1e-10)
+    print(f"extended 1.5 -> 3 s on 2 ranks; the same split: {split}; balance {extended['energy']['balance_error']:.2e}")
 
 
 def test_sigterm_to_one_rank_stops_both_with_a_checkpoint_that_resumes(tmp_path):

@@ -104,3 +104,26 @@ def test_a_volume_that_does_not_cut_the_rock_is_one_line_and_exit_2(tmp_path, sc
     assert "mesh.file" in lines[0] and words in lines[0], lines[0]
     for name in names:
         assert name in lines[0], lines[0]
+
+
+def test_check_of_a_new_mesh_prints_no_gmsh_info_and_a_gmsh_error_in_one_line(tmp_path):
+    """gmsh talks ("Info    : Meshing 3D...", a line per step) unless told General.Terminal = 0: the
+    control, gmsh meshing the user's script with its defaults, prints such lines; `check` of a scene
+    that meshes the same script, and of the box builder's default scene, prints none. A script gmsh
+    cannot read is still one line naming mesh.file with gmsh's own words, exit 2."""
+    (tmp_path / "complex.geo").write_text(CORRECT)
+    control = subprocess.run(["/usr/bin/python3", "-c", "import sys, gmsh; gmsh.initialize(); gmsh.open(sys.argv[1]); "
+                              "gmsh.model.mesh.generate(3); gmsh.finalize()", str(tmp_path / "complex.geo")],
+                             capture_output=True, text=True, timeout=300)
+    assert (control.stdout + control.stderr).count("Info") > 5, "gmsh's defaults print Info lines"
+    result = check(tmp_path, CORRECT)
+    assert result.returncode == 0, result.stderr
+    assert "Info" not in result.stderr and "Info" not in result.stdout, result.stderr
+    box = subprocess.run(["/usr/bin/python3", "-m", "pyfem", "check", str(REPO / "workflows/scenes/default.toml")],
+                         capture_output=True, text=True, cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(REPO)),
+                         timeout=300)
+    assert box.returncode == 0 and "Info" not in box.stderr + box.stdout, box.stderr
+    broken = check(tmp_path, CORRECT.replace("Box(1) = {0, 0, 0, 120, 20, 100};", "Box(1) = {0, 0, 0, 120, 20, 100;"))
+    lines = broken.stderr.strip().splitlines()
+    assert broken.returncode == 2 and len(lines) == 1 and "Info" not in broken.stderr, broken.stderr
+    assert "mesh.file" in lines[0] and "gmsh could not mesh" in lines[0] and "syntax error" in lines[0], lines[0]

@@ -121,7 +121,7 @@ def command(variant: Variant, runs: pathlib.Path = RUNS) -> list[str]:
     line = [PYTHON, "-m", "pyfem", "run", str(SCENE), "--out", str(out), "--set", f"time.duration={DURATION}"]
     for override in variant.overrides:
         line += ["--set", override]
-    if (out / checkpoint.CHECKPOINT_NAME).exists():
+    if checkpoint.interrupted_run(out):
         line.append("--resume")
     if variant.ranks > 1:
         line = ["mpirun", "--allow-run-as-root", "-q", "--bind-to", "none", "-n", str(variant.ranks)] + line

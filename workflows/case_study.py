@@ -109,8 +109,8 @@ def run_dir(case: int, preset: str, runs: pathlib.Path = RUNS) -> pathlib.Path:
 
 
 def run_case(case: int, preset: str, overrides=(), runs: pathlib.Path = RUNS, resume: bool = True) -> dict:
-    """Runs one case's scene into RUNS/caseN_PRESET; returns run.json. A run stopped before (a
-    checkpoint.npz in the directory, docs/checkpoint.md) of the same scene and overrides is
+    """Runs one case's scene into RUNS/caseN_PRESET; returns run.json. A run stopped before its end (the
+    checkpoint.npz of an unfinished run, docs/checkpoint.md) of the same scene and overrides is
     continued. A checkpoint of other settings is refused (SceneError naming the first key that
     differs: hours of a long run are not started again by a typo); resume=False starts the run
     again, the stopped one moved aside to caseN_PRESET.previous."""
@@ -119,7 +119,7 @@ def run_case(case: int, preset: str, overrides=(), runs: pathlib.Path = RUNS, re
 
     scene = load_scene(scene_path(case, preset), overrides)
     out = run_dir(case, preset, runs)
-    if resume and (out / checkpoint.CHECKPOINT_NAME).exists():
+    if resume and checkpoint.interrupted_run(out):
         saved = checkpoint.read_checkpoint(out, state=False)  # t and the fingerprint; solver.run reads the state
         saved.check_scene(scene)  # before the model is built: another scene is refused at once
         print(f"resuming {scene_path(case, preset).name} in {out} from t = {saved.t:.4g} s", flush=True)
