@@ -679,6 +679,7 @@ class RunWriter:
 
             write_csv(self.out_dir / "support.csv", [row for group in self.simulation.support
                                                      for row in segment_rows(group.bolts, group.name)], peak=True)
+            self._support_outputs()
         summary = self._summary
         summary["status"] = "finished"
         summary["time_reached"] = self.times[-1]
@@ -696,6 +697,18 @@ class RunWriter:
         self._plots()
         _write_json(self.out_dir / "run.json", summary)
         return summary
+
+    def _support_outputs(self) -> None:
+        """support.xdmf (+ .h5) and plots/support.png of the bolts at the end (pyfem/support_output.py)."""
+        from pyfem.support_output import bolt_state, plot_section, section_y, write_xdmf
+
+        states = [bolt_state(group) for group in self.simulation.support]
+        write_xdmf(self.out_dir / "support.xdmf", states, self.times[-1] if self.times else 0.0)
+        y0, where = section_y(self.scene, self.simulation.model)
+        drawn = plot_section(self.out_dir / "plots" / "support.png", states, y0, where,
+                             f"end of the run, t = {self.times[-1] if self.times else 0.0:.4g} s")
+        if drawn:
+            self._summary["support_plot"] = drawn
 
     def _partial_summary(self) -> None:
         """Energy, peaks and pair states of the samples recorded so far, into the summary."""
