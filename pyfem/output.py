@@ -435,6 +435,8 @@ class RunWriter:
             (self.out_dir / "monitors").mkdir(exist_ok=True)
         if self.contact_on:
             (self.out_dir / "pairs").mkdir(exist_ok=True)
+        if self.simulation.bolt_monitors:
+            (self.out_dir / "bolts").mkdir(exist_ok=True)
         (self.out_dir / "plots").mkdir(exist_ok=True)
         self._summary = self._base_summary()
         self._summary["status"] = "running"
@@ -570,6 +572,7 @@ class RunWriter:
             resultants = (sim.constraints.face_resultants(reactions) if reactions is not None
                           else np.zeros((len(sim.constraints.face_names), 3)))
             reaction_row = [t] + list(resultants.ravel())
+        bolt_rows = [monitor.row(t, sim.support) for monitor in sim.bolt_monitors]
         write_fields = self.next_sample_writes_fields()
         contact = sim.contact_pairs
         pair_values = pair_rows = state_counts = None  # every pair's values, computed once when needed
@@ -600,6 +603,8 @@ class RunWriter:
             self.pair_rows.append(pair_rows)
             for name, row in zip(sim.pair_monitor_names, pair_rows):
                 self._histories[f"pairs/{name}"].append(row)
+        for monitor, row in zip(sim.bolt_monitors, bolt_rows):
+            self._histories[f"bolts/{monitor.name}"].append(row)
         self._sample_count += 1
         if time.monotonic() - self._last_flush > FLUSH_SECONDS:
             self.flush()
@@ -654,6 +659,12 @@ class RunWriter:
         if self.contact_on:
             for name in self.simulation.pair_monitor_names:
                 history(f"pairs/{name}", self.out_dir / "pairs" / f"{name}.csv", PAIR_COLUMNS, PAIR_FORMAT)
+        if self.simulation.bolt_monitors:
+            from pyfem.support_output import BOLT_MONITOR_COLUMNS
+
+            for monitor in self.simulation.bolt_monitors:
+                history(f"bolts/{monitor.name}", self.out_dir / "bolts" / f"{monitor.name}.csv", BOLT_MONITOR_COLUMNS,
+                        MONITOR_FORMAT)
         self._histories = histories
 
     def _close_histories(self) -> None:
@@ -709,6 +720,13 @@ class RunWriter:
                              f"end of the run, t = {self.times[-1] if self.times else 0.0:.4g} s")
         if drawn:
             self._summary["support_plot"] = drawn
+        monitors = {}
+        for monitor in self.simulation.bolt_monitors:  # their segment and its peak over the samples
+            rows = np.loadtxt(self.out_dir / "bolts" / f"{monitor.name}.csv", delimiter=",", skiprows=1, ndmin=2)
+            monitors[monitor.name] = dict(monitor.where(self.simulation.support),
+                                          peak_axial_force=float(np.max(np.abs(rows[:, 1]), initial=0.0)))
+        if monitors:
+            self._summary["bolt_monitors"] = monitors
 
     def _partial_summary(self) -> None:
         """Energy, peaks and pair states of the samples recorded so far, into the summary."""

@@ -14,6 +14,11 @@ in static/):
                          group), and at the end peak_axial_force (N)
 
 `bolt_state` takes a group's state at one moment (the static stage keeps the one it hands over).
+
+A `[[bolt_monitor]]` (`locate_bolt_monitors`) reports the segment whose middle is nearest its point:
+bolts/NAME.csv, one row per sample, t, axial_force (N, tension positive), bond_slip (m, the mean of
+the segment's two nodes'), plastic_strain (the segment's); run.json "bolt_monitors" says which
+segment and its peak |axial force| over the samples.
 """
 from __future__ import annotations
 
@@ -238,3 +243,74 @@ def write_outputs(folder, states: list[BoltState], scene: dict, model, time: flo
     write_xdmf(folder / "support.xdmf", states, time)
     y0, where = section_y(scene, model)
     return plot_section(folder / png_name, states, y0, where, title)
+
+
+# ---------------------------------------------------------------------------------------------
+# Bolt monitors ([[bolt_monitor]])
+# ---------------------------------------------------------------------------------------------
+
+BOLT_MONITOR_COLUMNS = ["t", "axial_force", "bond_slip", "plastic_strain"]
+
+
+@dataclasses.dataclass
+class BoltMonitor:
+    """The segment a [[bolt_monitor]] reports.
+
+    Attributes:
+        name: the monitor's name (bolts/NAME.csv).
+        group: index of its support group in Simulation.support.
+        bolt: the bolt in the group; segment: the segment in the group's per-segment arrays;
+        node: its first bolt node (the second is node + 1).
+        s: the segment middle's distance from the head (m); middle: its position (m).
+        distance: from the monitor's point to the middle (m).
+    """
+
+    name: str
+    group: int
+    bolt: int
+    segment: int
+    node: int
+    s: float
+    middle: list
+    distance: float
+
+    def row(self, t: float, groups: list) -> list:
+        """[t, axial force, bond slip, plastic strain] of the segment now."""
+        component = groups[self.group].component
+        slip = component.bond_slip()
+        return [t, float(component.axial_force()[self.segment]), 0.5 * float(slip[self.node] + slip[self.node + 1]),
+                float(component.plastic_strain()[self.segment])]
+
+    def where(self, groups: list) -> dict:
+        return {"group": groups[self.group].name, "bolt": self.bolt, "s": self.s, "segment_middle": self.middle,
+                "distance": self.distance}
+
+
+def locate_bolt_monitors(scene, groups: list) -> list[BoltMonitor]:
+    """The segment of each [[bolt_monitor]]: the one whose middle is nearest its point, among its group's
+    (or every group's) segments. Warns (scene.warn) when that is farther than the segment's length."""
+    monitors = []
+    for monitor in scene.get("bolt_monitor") or []:
+        point = np.asarray(monitor["point"], dtype=float)
+        best = None
+        for index, group in enumerate(groups):
+            if monitor["group"] is not None and group.name != monitor["group"]:
+                continue
+            bolts = group.bolts
+            for bolt in range(len(bolts.bolt_offsets) - 1):
+                nodes = np.arange(bolts.bolt_offsets[bolt], bolts.bolt_offsets[bolt + 1] - 1)
+                middles = 0.5 * (bolts.positions[nodes] + bolts.positions[nodes + 1])
+                distance = np.linalg.norm(middles - point, axis=1)
+                k = int(np.argmin(distance))
+                if best is None or distance[k] < best[0]:
+                    length = float(bolts.arc_length[nodes[k] + 1] - bolts.arc_length[nodes[k]])
+                    best = (float(distance[k]), index, bolt, int(nodes[k]), middles[k], length,
+                            0.5 * float(bolts.arc_length[nodes[k]] + bolts.arc_length[nodes[k] + 1]))
+        distance, index, bolt, node, middle, length, s = best
+        found = BoltMonitor(monitor["name"], index, bolt, node - bolt, node, s, middle.tolist(), distance)
+        if distance > length:
+            scene.warn(f"bolt_monitor '{monitor['name']}' at {list(monitor['point'])} is {distance:.3g} m from the "
+                       f"nearest bolt segment's middle (bolt {bolt} of group {groups[index].name!r}, at "
+                       f"{[round(x, 3) for x in middle.tolist()]}), which it reports")
+        monitors.append(found)
+    return monitors

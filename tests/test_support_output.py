@@ -78,6 +78,8 @@ def bolted_scene(monitor_y=None):
     }
     if monitor_y is not None:
         scene["monitor"] = [{"name": "A", "point": [2.0, monitor_y, 5.0]}]
+    scene["bolt_monitor"] = [{"name": "mid", "point": [1.6, 1.5, 4.2], "group": "stage"},
+                             {"name": "near_late", "point": [2.0, 1.2, 5.8]}]
     return parse_scene(scene)
 
 
@@ -132,6 +134,27 @@ def test_support_xdmf_and_plots_after_the_stage_and_at_the_end(tmp_path):
     on_disk = json.loads((tmp_path / "run.json").read_text())
     assert on_disk["support_plot"] == summary["support_plot"]
 
+    # Bolt monitors: "mid" the stage's bolt 0 (z 6 -> 1, 0.5 m segments), the segment whose middle
+    # (z = 4.25, s = 1.75) is nearest z = 4.2; the whole bolt slips, N = tau min(s, L - s) = 3500 N
+    # (tests/test_support_scene.py); "near_late" (no group) the late bolt's first segment.
+    rows = read_csv(tmp_path / "support.csv")
+    for name, group, s, exact in (("mid", "stage", 1.75, 2.0e3 * 1.75), ("near_late", "late", 0.25, None)):
+        history = read_csv(tmp_path / "bolts" / f"{name}.csv")
+        assert history.dtype.names == ("t", "axial_force", "bond_slip", "plastic_strain")
+        assert len(history) >= 2 and history["t"][0] == 0.0
+        where = on_disk["bolt_monitors"][name]
+        assert (where["group"], where["bolt"], where["s"]) == (group, 0, s)
+        row = rows[(rows["group"] == group) & (rows["bolt"] == 0) & np.isclose(rows["s"], s)]
+        assert len(row) == 1
+        assert np.isclose(history["axial_force"][-1], row["axial_force"][0], rtol=1e-9, atol=1e-9)
+        assert np.isclose(history["bond_slip"][-1], row["bond_slip"][0], rtol=1e-9, atol=1e-15)
+        assert where["peak_axial_force"] == np.max(np.abs(history["axial_force"]))
+        if exact is not None:  # loaded in the stage: its force from the first sample on
+            assert abs(history["axial_force"][0] - exact) < 1e-6 * exact
+            assert abs(history["axial_force"][-1] - exact) < 1e-3 * exact
+        else:  # installed at the start, in a model at rest (round-off motion): unloaded
+            assert history["axial_force"][0] == 0.0 and np.max(np.abs(history["axial_force"])) < 1e-6
+
 
 def test_the_section_is_the_first_monitors_y_or_the_models_middle():
     class Model:
@@ -140,3 +163,23 @@ def test_the_section_is_the_first_monitors_y_or_the_models_middle():
     assert section_y({"monitor": [{"name": "A", "point": [1.0, 2.5, 3.0]}, {"name": "B", "point": [0, 9, 0]}]},
                      Model()) == (2.5, "monitor A")
     assert section_y({}, Model()) == (1.0, "the model's middle")
+
+
+@pytest.mark.parametrize("change, key, allowed", [
+    ({"bolt_monitor": [{"name": "m", "point": [1.0, 1.0, 1.0], "group": "walls"}]}, "bolt_monitor.0.group",
+     "must name a [support.NAME] group: stage, late"),
+    ({"bolt_monitor": [{"name": "m", "point": [1.0, 1.0, 11.0]}]}, "bolt_monitor.0.point", "must lie inside the box"),
+    ({"support": None, "static": None, "bolt_monitor": [{"name": "m", "point": [1.0, 1.0, 1.0]}]}, "bolt_monitor.0",
+     "need a [support.NAME] group"),
+])
+def test_bad_bolt_monitors_are_one_line_naming_the_key(change, key, allowed):
+    from pyfem.scene import SceneError
+
+    settings = bolted_scene().to_json()
+    settings.update(change)
+    settings = {name: value for name, value in settings.items() if value is not None}
+    with pytest.raises(SceneError) as raised:
+        parse_scene(settings)
+    message = str(raised.value)
+    print(message)
+    assert raised.value.key == key and allowed in message and "\n" not in message
