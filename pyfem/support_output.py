@@ -103,14 +103,20 @@ def section_bolts(state: BoltState, y0: float, few: int = FEW_BOLTS,
                   tolerance: float = SECTION_TOLERANCE) -> np.ndarray:
     """Indices of the group's bolts in the monitoring section y = y0: all of a group of at most
     `few` bolts, else those whose distance from the plane (0 for a bolt crossing it, else its nearest
-    node's |y - y0|) is within `tolerance` of the smallest (a pattern's row nearest the plane)."""
+    node's |y - y0|) is within `tolerance` of the smallest (a pattern's row nearest the plane); of two
+    rows either side of the plane at that distance, the one on the -y side."""
     if state.n_bolts <= few:
         return np.arange(state.n_bolts)
-    distance = np.empty(state.n_bolts)
+    distance, side = np.empty(state.n_bolts), np.zeros(state.n_bolts)
     for bolt in range(state.n_bolts):
         y = state.positions[state.nodes(bolt), 1] - y0
-        distance[bolt] = 0.0 if y.min() <= 0.0 <= y.max() else float(np.abs(y).min())
-    return np.flatnonzero(distance <= distance.min() + tolerance)
+        crossing = y.min() <= 0.0 <= y.max()
+        distance[bolt] = 0.0 if crossing else float(np.abs(y).min())
+        side[bolt] = 0.0 if crossing else np.sign(y[0])
+    nearest = distance <= distance.min() + tolerance
+    if np.any(nearest & (side < 0.0)) and np.any(nearest & (side > 0.0)):
+        nearest &= side <= 0.0
+    return np.flatnonzero(nearest)
 
 
 def plot_section(png_path, states: list[BoltState], y0: float, where: str, title: str = "") -> dict:

@@ -35,6 +35,9 @@ def test_the_section_plot_shows_the_row_nearest_the_plane_or_a_small_group_whole
     # Section y = 2.0: the row at 2.25 (0.25 m off; the others 1.25 and 1.75 m), its 14 bolts.
     assert section_bolts(walls, 2.0).tolist() == list(range(around, 2 * around))
     assert section_bolts(walls, 0.0).tolist() == list(range(around))
+    # Midway between two rows (y = 1.5): the one on the -y side.
+    assert section_bolts(walls, 1.5).tolist() == list(range(around))
+    assert section_bolts(walls, 3.0).tolist() == list(range(around, 2 * around))
     # A bolt crossing the plane is in it (distance 0), ahead of every row that does not cross it.
     # (bolts along (-1, 0.1, 0): the rows rise 0.3 m; the bolt from y = 1.9 crosses y = 2.0)
     crossing = straight_bolts("walls", heads + [[0.0, 1.9, 0.0]], [-1.0, 0.1, 0.0])
