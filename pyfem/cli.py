@@ -128,8 +128,8 @@ def command_run(scene_path: Path, out_dir: Path | None, overrides: Sequence[str]
               f"({motion['pga_g']:.3g} g), PGV {motion['pgv']:.4g} m/s, PGD {motion['pgd']:.4g} m; "
               f"plots/input.png")
     out = Path(out_dir)
-    written = [name for name in ("run.json", "monitors/", "pairs/", "energy.csv", "reactions.csv", "support.csv", "static/",
-                                 "plots/", "fields.xdmf") if (out / name.rstrip("/")).exists()]
+    written = [name for name in ("run.json", "monitors/", "pairs/", "bolts/", "energy.csv", "reactions.csv", "support.csv",
+                                 "support.xdmf", "static/", "plots/", "fields.xdmf") if (out / name.rstrip("/")).exists()]
     paraview = "; fields.xdmf opens in ParaView" if "fields.xdmf" in written else ""
     from pyfem.checkpoint import CHECKPOINT_NAME
 

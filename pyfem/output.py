@@ -435,6 +435,8 @@ class RunWriter:
             (self.out_dir / "monitors").mkdir(exist_ok=True)
         if self.contact_on:
             (self.out_dir / "pairs").mkdir(exist_ok=True)
+        if self.simulation.bolt_monitors:
+            (self.out_dir / "bolts").mkdir(exist_ok=True)
         (self.out_dir / "plots").mkdir(exist_ok=True)
         self._summary = self._base_summary()
         self._summary["status"] = "running"
@@ -581,6 +583,7 @@ class RunWriter:
             resultants = (sim.constraints.face_resultants(reactions) if reactions is not None
                           else np.zeros((len(sim.constraints.face_names), 3)))
             reaction_row = [t] + list(resultants.ravel())
+        bolt_rows = [monitor.row(t, sim.support) for monitor in sim.bolt_monitors]
         write_fields = self.next_sample_writes_fields()
         contact = sim.contact_pairs
         pair_values = pair_rows = state_counts = None  # every pair's values, computed once when needed
@@ -611,6 +614,8 @@ class RunWriter:
             self.pair_rows.append(pair_rows)
             for name, row in zip(sim.pair_monitor_names, pair_rows):
                 self._histories[f"pairs/{name}"].append(row)
+        for monitor, row in zip(sim.bolt_monitors, bolt_rows):
+            self._histories[f"bolts/{monitor.name}"].append(row)
         self._sample_count += 1
         if time.monotonic() - self._last_flush > FLUSH_SECONDS:
             self.flush()
@@ -665,6 +670,12 @@ class RunWriter:
         if self.contact_on:
             for name in self.simulation.pair_monitor_names:
                 history(f"pairs/{name}", self.out_dir / "pairs" / f"{name}.csv", PAIR_COLUMNS, PAIR_FORMAT)
+        if self.simulation.bolt_monitors:
+            from pyfem.support_output import BOLT_MONITOR_COLUMNS
+
+            for monitor in self.simulation.bolt_monitors:
+                history(f"bolts/{monitor.name}", self.out_dir / "bolts" / f"{monitor.name}.csv", BOLT_MONITOR_COLUMNS,
+                        MONITOR_FORMAT)
         self._histories = histories
 
     def _close_histories(self) -> None:
@@ -690,6 +701,7 @@ class RunWriter:
 
             write_csv(self.out_dir / "support.csv", [row for group in self.simulation.support
                                                      for row in segment_rows(group.bolts, group.name)], peak=True)
+            self._support_outputs()
         summary = self._summary
         summary["status"] = "finished"
         summary["time_reached"] = self.times[-1]
@@ -707,6 +719,25 @@ class RunWriter:
         self._plots()
         _write_json(self.out_dir / "run.json", summary)
         return summary
+
+    def _support_outputs(self) -> None:
+        """support.xdmf (+ .h5) and plots/support.png of the bolts at the end (pyfem/support_output.py)."""
+        from pyfem.support_output import bolt_state, plot_section, section_y, write_xdmf
+
+        states = [bolt_state(group) for group in self.simulation.support]
+        write_xdmf(self.out_dir / "support.xdmf", states, self.times[-1] if self.times else 0.0)
+        y0, where = section_y(self.scene, self.simulation.model)
+        drawn = plot_section(self.out_dir / "plots" / "support.png", states, y0, where,
+                             f"end of the run, t = {self.times[-1] if self.times else 0.0:.4g} s")
+        if drawn:
+            self._summary["support_plot"] = drawn
+        monitors = {}
+        for monitor in self.simulation.bolt_monitors:  # their segment and its peak over the samples
+            rows = np.loadtxt(self.out_dir / "bolts" / f"{monitor.name}.csv", delimiter=",", skiprows=1, ndmin=2)
+            monitors[monitor.name] = dict(monitor.where(self.simulation.support),
+                                          peak_axial_force=float(np.max(np.abs(rows[:, 1]), initial=0.0)))
+        if monitors:
+            self._summary["bolt_monitors"] = monitors
 
     def _partial_summary(self) -> None:
         """Energy, peaks and pair states of the samples recorded so far, into the summary."""

@@ -729,6 +729,11 @@ SCHEMA = Table({
         "name": Text("pair monitor name", filename_safe=True),
         "point": Vector("pair monitor point (m)", 3),
     }, "a pair monitor"), "[[pair_monitor]]"),
+    "bolt_monitor": TableList(Table({
+        "name": Text("bolt monitor name", filename_safe=True),
+        "point": Vector("bolt monitor point (m)", 3),
+        "group": Text("support group ([support.NAME]) whose segments it looks in", default=None),
+    }, "a bolt monitor"), "[[bolt_monitor]]"),
 }, "the scene")
 """The whole scene vocabulary. Conditional rules live in `_check_rules`."""
 
@@ -1213,6 +1218,12 @@ def _check_support(settings: dict) -> None:
         if group["segment"] is not None and group["segment"] > shortest:
             raise SceneError(f"{key}.segment", group["segment"], f"must not exceed the shortest bolt of the group "
                              f"({shortest:.6g} m)")
+    for index, monitor in enumerate(settings.get("bolt_monitor") or []):
+        if not groups:
+            raise SceneError(f"bolt_monitor.{index}", monitor["name"], "bolt monitors need a [support.NAME] group")
+        if monitor["group"] is not None and monitor["group"] not in groups:
+            raise SceneError(f"bolt_monitor.{index}.group", monitor["group"], "must name a [support.NAME] group: "
+                             + ", ".join(groups))
     static = settings.get("static")
     for index, name in enumerate(static["support"] if static else []):
         if name not in groups:
@@ -1450,7 +1461,7 @@ def _check_points_inside(settings: dict) -> None:
     tolerance = 1e-9 * (hi - lo)
     inside = f"must lie inside the box [{', '.join(f'{x:g}' for x in lo)}] - " \
              f"[{', '.join(f'{x:g}' for x in hi)}]"
-    for table in ("monitor", "pair_monitor"):
+    for table in ("monitor", "pair_monitor", "bolt_monitor"):
         for index, entry in enumerate(settings[table]):
             point = np.asarray(entry["point"])
             if np.any(point < lo - tolerance) or np.any(point > hi + tolerance):

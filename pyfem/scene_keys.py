@@ -125,6 +125,7 @@ UNSET = {
     "support.NAME.spacing": "none; required by a pattern",
     "support.NAME.length": "none; required by a pattern",
     "support.NAME.segment": "about the size of the cells the bolt crosses (their nodes' spacing along x, y, z)",
+    "bolt_monitor.0.group": "none: the segments of every group",
     "contact.release_time": "off: a broken bond's strength goes in one step (nothing to compute; "
                             "docs/method.md section 9, \"Releasing a broken bond\")",
 }
@@ -236,6 +237,11 @@ RULES = {
         "needs a `contact` table",
         "`pair_monitor.0.point` inside the box (builder \"box\")",
     ],
+    "bolt_monitor.0": [
+        "needs a `support` table; `bolt_monitor.0.group` names one of its groups (none given: every group's "
+        "segments)",
+        "`bolt_monitor.0.point` inside the box (builder \"box\")",
+    ],
     "output": [
         "`output.fields` other than the default with `output.xdmf_interval` = 0 is a warning (no fields "
         "written); \"damage\" without a nonlinear material is a warning (zero everywhere)",
@@ -306,6 +312,7 @@ PURPOSE = {
     "support.NAME": "a group of rock bolts or anchor cables: axial bars tied to the rock by their grout "
                     "(docs/method.md, \"Rock bolts and cables\")",
     "pair_monitor.0": "the contact pair nearest a point, its histories in pairs/NAME.csv",
+    "bolt_monitor.0": "the bolt segment nearest a point, its axial force and bond slip histories in bolts/NAME.csv",
 }
 """What each table is for (its description in the schema is only its name)."""
 

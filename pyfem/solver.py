@@ -64,6 +64,7 @@ class Simulation:
     lts_check_deferred: bool = False       # `plan`: the LTS map's set-up check is left to the run
     static: object = None                # pyfem.static.StaticState when a [static] stage ran
     support: list = field(default_factory=list)  # pyfem.support.SupportGroup of each [support.NAME]
+    bolt_monitors: list = field(default_factory=list)  # pyfem.support_output.BoltMonitor of each [[bolt_monitor]]
 
 
 def nonlinear_regions(scene: Scene, model, time_step: TimeStep):
@@ -258,6 +259,10 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         area = np.asarray(simulation.contact_arrays["area"], dtype=float)
         for monitor, pair in zip(pair_monitors, simulation.pair_monitor_pairs):
             warn_far_pair_monitor(scene, monitor, model.pairs.coords[pair], float(area[pair]))
+    if scene.get("bolt_monitor"):  # the bolt segments they report (pyfem/support_output.py)
+        from pyfem.support_output import locate_bolt_monitors
+
+        simulation.bolt_monitors = locate_bolt_monitors(scene, simulation.support)
     if "static" in scene:  # the stage's stress and pair forces become the initial state (pyfem/static.py)
         from pyfem.static import hand_over
 

@@ -161,6 +161,7 @@ class StaticState:
     pair_forces_in_situ: np.ndarray | None = None
     support_rows: list | None = None
     support_summary: dict | None = None
+    support_states: list | None = None  # pyfem.support_output.BoltState of each group, for its plot and XDMF
 
     def summary(self) -> dict:
         """run.json's "static": per stage its solver, iterations, residual, time and largest
@@ -1021,6 +1022,9 @@ def solve_relaxation_stage(scene: typing.Mapping, simulation) -> StaticState:
         from pyfem.support import group_summary, segment_rows
 
         state.support_rows = [row for group in support_groups for row in segment_rows(group.bolts, group.name)]
+        from pyfem.support_output import bolt_state
+
+        state.support_states = [bolt_state(group, peak=False) for group in support_groups]
         state.support_summary = {group.name: group_summary(group) for group in support_groups}
     return state
 

@@ -11,6 +11,8 @@
     static/section_stress.png, static/interface_stress.png (with contact): pyfem/static_plots.py;
                          static.json "plots" holds their figures (section y, extreme principal
                          stresses, the interfaces' mean normal stress near the walls before/after)
+    static/support.png, static/support.xdmf (+ .h5) with static.support: the bolts after the stage
+                         (pyfem/support_output.py)
     static/hand_over.npz what `--resume` takes instead of solving the stage again (write_hand_over)
 
 run.json gets the summary under "static" (pyfem.static.StaticState.summary), and the dynamic
@@ -44,6 +46,14 @@ def write_static_outputs(writer) -> None:
 
     report = static_report(simulation)
     report["plots"] = write_static_plots(folder, simulation)
+    states = getattr(simulation.static, "support_states", None)
+    if states:  # static/support.png and static/support.xdmf: the bolts as the stage leaves them
+        from pyfem.support_output import write_outputs
+
+        drawn = write_outputs(folder, states, simulation.scene, simulation.model, 0.0, "support.png",
+                              "after the static stage")
+        if drawn:
+            report["plots"]["support"] = drawn
     _write_json(folder / "static.json", report)
     write_static_fields(folder, simulation)
     write_hand_over(folder, simulation)
