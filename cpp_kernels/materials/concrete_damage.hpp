@@ -335,7 +335,8 @@ inline ConcreteDamageStep concrete_damage_update(const ConcreteDamageMaterial& m
     }
   }
 
-  // Closed form where the spectrum is well separated, Jacobi otherwise (principal.hpp).
+  // Closed form where the spectrum is well separated, the pair form near a repeated pair, Jacobi
+  // for a zero deviator (principal.hpp).
   const SymmetricEigen eigen = symmetric_eigen_fast(strain_tensor, values_estimate);
   const detail::ConcreteMeasures measures = detail::concrete_measures(m, eigen.values);
   // "Tension first": above the tensile threshold the Mohr-Coulomb check is skipped.
