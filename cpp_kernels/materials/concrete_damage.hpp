@@ -213,6 +213,34 @@ inline ConcreteMeasures concrete_measures(const ConcreteDamageMaterial& m,
   return r;
 }
 
+// Upper bounds of concrete_measures' tension and shear measures from the strain's invariants
+// (no eigenvalues). With the trace T and the deviator's norm D of the strain (engineering shear
+// halved), every principal strain lies in T/3 +- sqrt(2/3) D and two differ by at most sqrt(2) D,
+// so the largest effective stress is at most S = lambda T + 2 mu (T/3 + sqrt(2/3) D), the tension
+// measure at most (1 + nu) sqrt(3) <S> / E and the shear measure at most
+// (2 sqrt(2) mu D + 2 S sin(phi)) / ((1 - sin(phi)) E); margin: 1e-6 of the strain size, the
+// round-off room of the comparison (tests/cpp/test_concrete_damage.cpp checks the bounds).
+struct ConcreteBounds {
+  double tension, shear, largest_stress, margin;
+};
+
+inline ConcreteBounds concrete_invariant_bounds(const ConcreteDamageMaterial& m,
+                                                const Voigt& strain) {
+  const double T = strain[0] + strain[1] + strain[2];
+  const double d0 = strain[0] - T / 3.0, d1 = strain[1] - T / 3.0, d2 = strain[2] - T / 3.0;
+  const double D = std::sqrt(d0 * d0 + d1 * d1 + d2 * d2 +
+                             0.5 * (strain[3] * strain[3] + strain[4] * strain[4] + strain[5] * strain[5]));
+  const double largest_strain = T / 3.0 + std::sqrt(2.0 / 3.0) * D;
+  const double S = m.lambda * T + 2.0 * m.shear_modulus * largest_strain;
+  ConcreteBounds r;
+  r.tension = (1.0 + m.poisson_ratio) * std::sqrt(3.0) * std::max(S, 0.0) / m.young_modulus;
+  r.shear = (2.0 * std::sqrt(2.0) * m.shear_modulus * D + 2.0 * S * m.sin_phi) /
+            ((1.0 - m.sin_phi) * m.young_modulus);
+  r.largest_stress = S;
+  r.margin = 1e-6 * (std::abs(T) / 3.0 + std::sqrt(2.0 / 3.0) * D);
+  return r;
+}
+
 // Energy terms of a step whose new stress and strain are set.
 inline ConcreteDamageStep& finish_concrete_step(const ConcreteDamageState& old,
                                                 ConcreteDamageStep& step) {
@@ -264,26 +292,14 @@ inline ConcreteDamageStep concrete_damage_update(const ConcreteDamageMaterial& m
   // principal directions. Margin 1e-6 of the strain size, far above the estimate's error.
   const double tensile_weight_old =
       (1.0 - old.damage_compression) * (1.0 - m.stiffness_recovery) * old.damage_tension;
-  // Invariant pre-screen, before any eigenvalue: with the trace T and the deviator's norm D of the
-  // strain, every principal strain lies in T/3 +- sqrt(2/3) D and two differ by at most sqrt(2) D,
-  // so the largest effective stress is at most S = lambda T + 2 mu (T/3 + sqrt(2/3) D), the tension
-  // measure at most (1 + nu) sqrt(3) <S> / E and the shear measure at most
-  // (2 sqrt(2) mu D + 2 S sin(phi)) / ((1 - sin(phi)) E). Below both thresholds, with no tensile part
-  // to split off (tensile_weight_old = 0), the point is elastic at its damage: the screen below
-  // would say the same from the estimate, which costs more (most of the lining at rest).
+  // Invariant pre-screen, before any eigenvalue (concrete_invariant_bounds): below both
+  // thresholds, with no tensile part to split off (tensile_weight_old = 0), the point is elastic
+  // at its damage: the screen below would say the same from the estimate, which costs more (most
+  // of the lining at rest).
   if (tensile_weight_old == 0.0) {
-    const double T = strain[0] + strain[1] + strain[2];
-    const double d0 = strain[0] - T / 3.0, d1 = strain[1] - T / 3.0, d2 = strain[2] - T / 3.0;
-    const double D = std::sqrt(d0 * d0 + d1 * d1 + d2 * d2 +
-                               0.5 * (strain[3] * strain[3] + strain[4] * strain[4] + strain[5] * strain[5]));
-    const double largest_strain = T / 3.0 + std::sqrt(2.0 / 3.0) * D;
-    const double S = m.lambda * T + 2.0 * m.shear_modulus * largest_strain;
-    const double tension_bound = (1.0 + nu) * std::sqrt(3.0) * std::max(S, 0.0) / m.young_modulus;
-    const double shear_bound = (2.0 * std::sqrt(2.0) * m.shear_modulus * D + 2.0 * S * m.sin_phi) /
-                               ((1.0 - m.sin_phi) * m.young_modulus);
-    const double margin = 1e-6 * (std::abs(T) / 3.0 + std::sqrt(2.0 / 3.0) * D);
-    if (tension_bound + margin < std::max(m.threshold_tension, old.kappa_tension) &&
-        shear_bound + margin < std::max(m.threshold_compression, old.kappa_compression)) {
+    const detail::ConcreteBounds bound = detail::concrete_invariant_bounds(m, strain);
+    if (bound.tension + bound.margin < std::max(m.threshold_tension, old.kappa_tension) &&
+        bound.shear + bound.margin < std::max(m.threshold_compression, old.kappa_compression)) {
       const double factor =
           (1.0 - old.damage_compression) * (1.0 - m.stiffness_recovery * old.damage_tension);
       for (int k = 0; k < 6; ++k) next.stress[k] = factor * elastic[k];
@@ -306,9 +322,21 @@ inline ConcreteDamageStep concrete_damage_update(const ConcreteDamageMaterial& m
       for (int k = 0; k < 6; ++k) next.stress[k] = factor * elastic[k];
       return detail::finish_concrete_step(old, step);
     }
+    // Every principal effective stress clearly tensile (a cracked point opened at rest): then
+    // C : e+ = sigma_e and the stress below is (1 - d_c)(1 - d_t) sigma_e without principal
+    // directions (the same to round-off as the split through them).
+    const double smallest_stress =
+        m.lambda * (values_estimate[0] + values_estimate[1] + values_estimate[2]) +
+        2.0 * m.shear_modulus * values_estimate[2];
+    if (no_growth && smallest_stress > margin * m.young_modulus) {
+      const double factor = (1.0 - old.damage_compression) * (1.0 - old.damage_tension);
+      for (int k = 0; k < 6; ++k) next.stress[k] = factor * elastic[k];
+      return detail::finish_concrete_step(old, step);
+    }
   }
 
-  // Closed form where the spectrum is well separated, Jacobi otherwise (principal.hpp).
+  // Closed form where the spectrum is well separated, the pair form near a repeated pair, Jacobi
+  // for a zero deviator (principal.hpp).
   const SymmetricEigen eigen = symmetric_eigen_fast(strain_tensor, values_estimate);
   const detail::ConcreteMeasures measures = detail::concrete_measures(m, eigen.values);
   // "Tension first": above the tensile threshold the Mohr-Coulomb check is skipped.

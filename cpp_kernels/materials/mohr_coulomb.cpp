@@ -303,12 +303,20 @@ MohrCoulombStep mohr_coulomb_update_screened(const MohrCoulombMaterial& m,
       symmetric_eigenvalues_estimate(tensor_from_stress_voigt(trial_tensor));
   double screen_scale = std::max({std::abs(estimate[0]), std::abs(estimate[2]), m.strength});
   if (std::isfinite(m.tensile_strength)) screen_scale = std::max(screen_scale, m.tensile_strength);
-  if (sorted_yield(m, estimate) < -1e-6 * screen_scale) {
+  // With both gaps of the estimate above kClosedFormGap of the deviatoric size, the estimate is
+  // within 1e-12 of the scale of the exact values (eigenvalues_estimate_separated), so the
+  // yield function within 3e-12 of it: a trial below -1e-9 of the scale is elastic by the exact
+  // test below too (the same decision and the same bits; the point sitting near the surface
+  // needs no eigenvectors).
+  const double estimate_yield = sorted_yield(m, estimate);
+  if (estimate_yield < -1e-6 * screen_scale ||
+      (estimate_yield < -1e-9 * screen_scale && eigenvalues_estimate_separated(estimate))) {
     next.effective_stress = trial_tensor;
     return finish_step(m, old, strain_increment, step);
   }
 
-  // Closed form where the spectrum is well separated, Jacobi near the edges (principal.hpp).
+  // Closed form where the spectrum is well separated, the pair form near the edges, Jacobi for a
+  // hydrostatic trial (principal.hpp).
   const SymmetricEigen eigen =
       symmetric_eigen_fast(tensor_from_stress_voigt(trial_tensor), estimate);
   const Vector3& trial = eigen.values;  // sorted: trial[0] >= trial[1] >= trial[2]

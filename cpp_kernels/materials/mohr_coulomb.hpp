@@ -167,8 +167,10 @@ inline bool elastic_by_invariants(const MohrCoulombMaterial& m, const Voigt& s) 
 
 /// One strain-driven step of the rock law (pure: the old state is only read).
 ///   trial:    sigma_tr = sigma_eff,n + C : d_eps (clearly elastic trials are recognised by
-///             elastic_by_invariants, then symmetric_eigenvalues_estimate, without the Jacobi
-///             decomposition)
+///             elastic_by_invariants, then symmetric_eigenvalues_estimate, without
+///             eigenvectors; a trial near the surface too when the estimate's spectrum is well
+///             separated; the others take symmetric_eigen_fast: closed form, the pair form at
+///             the edges)
 ///   return:   closed form in principal stresses, de Souza Neto, Peric & Owen (2008) Sec. 8.2 and
 ///             Box 8.5 (main plane, both edges, apex), extended by the Rankine planes
 ///             s_i <= t and their corners with the M-C plane. Each candidate set of active planes

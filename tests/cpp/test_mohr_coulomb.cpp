@@ -249,6 +249,9 @@ TEST(MaterialPrincipal, ClosedFormMatchesJacobiAcrossGaps) {
           // The closed form is taken above the threshold and refused below it (Jacobi then).
           EXPECT_EQ(symmetric_eigen_closed_form(A, estimate, closed), gap >= 1e-3)
               << gap << " " << magnitude << " " << mean_factor;
+          // Below it the pair form takes the nearly repeated pair (Jacobi only for a zero deviator).
+          SymmetricEigen pair;
+          if (gap < 1e-3) EXPECT_TRUE(symmetric_eigen_pair_form(A, estimate, pair)) << gap;
           const SymmetricEigen fast = symmetric_eigen_fast(A, estimate);
           const SymmetricEigen jacobi = symmetric_eigen(A);
           for (int k = 0; k < 3; ++k) {
@@ -274,6 +277,150 @@ TEST(MaterialPrincipal, ClosedFormMatchesJacobiAcrossGaps) {
           ++checks;
         }
   EXPECT_EQ(checks, 3 * 2 * 9 * 20);
+}
+
+TEST(MaterialPrincipal, PairFormMatchesJacobiAtRepeatedPairs) {
+  // The pair form on exactly and nearly repeated pairs (top and bottom), with pair gaps from 1e-2
+  // of the spread down to 0 and tensors whose pair lies along the axes (a geostatic
+  // sigma_xx = sigma_yy state) or rotated arbitrarily: the values within 1e-14 of the scale of
+  // Jacobi's (the pair's gap within 1e-14 too), each pair |A v - l v| within 1e-14, orthonormal
+  // and right-handed, and the distinct projection n n^T within 1e-14 |A| / gap of Jacobi's.
+  std::mt19937_64 generator(29);
+  std::uniform_real_distribution<double> angle(0.0, 2.0 * kPi);
+  std::uniform_real_distribution<double> value(-10.0, 10.0);
+  const double gaps[] = {1e-2, 1e-4, 1e-7, 1e-12, 0.0};
+  int checks = 0;
+  for (const double gap : gaps)
+    for (int sample = 0; sample < 200; ++sample) {
+      const double size = 1.0 + std::abs(value(generator));
+      const double base = (sample % 3 == 0 ? 1e3 : 1.0) * value(generator);
+      const bool top = sample % 2 == 0;
+      const std::array<double, 3> spectrum =
+          top ? std::array<double, 3>{base + gap * size, base, base - 3.0 * size}
+              : std::array<double, 3>{base + 3.0 * size, base + gap * size, base};
+      const Matrix3 R = sample % 5 == 0 ? rotation(0.0, 0.0, angle(generator))
+                                        : rotation(angle(generator), angle(generator), angle(generator));
+      const Matrix3 D{{{spectrum[0], 0.0, 0.0}, {0.0, spectrum[1], 0.0}, {0.0, 0.0, spectrum[2]}}};
+      const Matrix3 A = rotate_tensor(R, D);
+      const double scale = std::abs(base) + 3.0 * size;
+      SymmetricEigen pair;
+      ASSERT_TRUE(symmetric_eigen_pair_form(A, symmetric_eigenvalues_estimate(A), pair));
+      const SymmetricEigen jacobi = symmetric_eigen(A);
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(pair.values[k], jacobi.values[k], 1e-14 * scale) << gap << " " << k;
+        double residual = 0.0;
+        for (int i = 0; i < 3; ++i) {
+          double row = -pair.values[k] * pair.vectors[k][i];
+          for (int j = 0; j < 3; ++j) row += A[i][j] * pair.vectors[k][j];
+          residual += row * row;
+        }
+        EXPECT_LE(std::sqrt(residual), 1e-14 * scale) << gap;
+      }
+      const int pair_low = top ? 0 : 1, distinct = top ? 2 : 0;
+      EXPECT_NEAR(pair.values[pair_low] - pair.values[pair_low + 1], gap * size, 1e-14 * scale);
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+          EXPECT_NEAR(pair.vectors[distinct][i] * pair.vectors[distinct][j],
+                      jacobi.vectors[distinct][i] * jacobi.vectors[distinct][j],
+                      1e-14 * scale / size);  // both vectors' error: ~1e-16 |A| / gap
+      expect_orthonormal(pair.vectors, 1e-15 * 4.0);
+      const auto& e = pair.vectors;
+      EXPECT_NEAR(e[0][1] * e[1][2] - e[0][2] * e[1][1], e[2][0], 1e-15 * 4.0);
+      EXPECT_NEAR(e[0][2] * e[1][0] - e[0][0] * e[1][2], e[2][1], 1e-15 * 4.0);
+      EXPECT_NEAR(e[0][0] * e[1][1] - e[0][1] * e[1][0], e[2][2], 1e-15 * 4.0);
+      ++checks;
+    }
+  EXPECT_EQ(checks, 5 * 200);
+  // A hydrostatic tensor has no distinct value: refused (symmetric_eigen_fast then takes Jacobi).
+  SymmetricEigen out;
+  const Matrix3 hydrostatic{{{-3.0, 0.0, 0.0}, {0.0, -3.0, 0.0}, {0.0, 0.0, -3.0}}};
+  EXPECT_FALSE(symmetric_eigen_pair_form(hydrostatic, symmetric_eigenvalues_estimate(hydrostatic), out));
+}
+
+TEST(MaterialPrincipal, SeparatedEstimateIsWithinItsBound) {
+  // eigenvalues_estimate_separated: when both gaps of the estimate exceed kClosedFormGap of its
+  // deviatoric size, the estimate is within 1e-12 of max |value| (the Mohr-Coulomb screen of a
+  // trial near the surface takes 1e-9 as its margin). Gaps log-uniform from 1e-4 to 2 of the size,
+  // means 0, of the size and 1e3 times it, arbitrary rotations.
+  std::mt19937_64 generator(31);
+  std::uniform_real_distribution<double> angle(0.0, 2.0 * kPi);
+  std::uniform_real_distribution<double> value(-10.0, 10.0), exponent(-4.0, 0.3);
+  double worst = 0.0;
+  int separated = 0, near_threshold = 0, refused = 0;
+  for (int sample = 0; sample < 200000; ++sample) {
+    const double size = 1.0 + std::abs(value(generator));
+    const double base = (sample % 3 == 0 ? 1e3 : sample % 3 == 1 ? 1.0 : 0.0) * value(generator);
+    const double g1 = std::pow(10.0, exponent(generator)) * size;
+    const double g2 = std::pow(10.0, exponent(generator)) * size;
+    const Matrix3 D{{{base + g1 + g2, 0.0, 0.0}, {0.0, base + g2, 0.0}, {0.0, 0.0, base}}};
+    const Matrix3 A =
+        rotate_tensor(rotation(angle(generator), angle(generator), angle(generator)), D);
+    const auto estimate = symmetric_eigenvalues_estimate(A);
+    if (!eigenvalues_estimate_separated(estimate)) {
+      ++refused;
+      continue;
+    }
+    ++separated;
+    if (std::min(g1, g2) < 3e-3 * size) ++near_threshold;
+    const SymmetricEigen exact = symmetric_eigen(A);
+    const double scale = std::max(std::abs(exact.values[0]), std::abs(exact.values[2]));
+    for (int k = 0; k < 3; ++k) worst = std::max(worst, std::abs(estimate[k] - exact.values[k]) / scale);
+  }
+  EXPECT_GT(separated, 100000);
+  EXPECT_GT(near_threshold, 5000);  // the bound is tried where it is loosest
+  EXPECT_GT(refused, 5000);
+  EXPECT_LT(worst, 1e-12);
+  std::printf("[ info ] separated estimates: worst error %.2g of max |value|\n", worst);
+}
+
+TEST(MohrCoulomb, NearSurfaceTrialsKeepTheExactDecision) {
+  // Trials just inside and just outside the surface (yield function from -1e-5 to +1e-5 of the
+  // strength; the estimate screen's margin is 1e-6, the separated estimate's 1e-9), on the main
+  // plane's sector and near both edges (pairs 1e-2 to 1e-8 of the strength apart): elastic
+  // exactly when the yield function of Jacobi's values is <= 0 (the band within 1e-10 of 0
+  // excepted, where round-off decides), and an elastic step returns the trial's bits.
+  std::mt19937_64 generator(37);
+  std::uniform_real_distribution<double> angle(0.0, 2.0 * kPi);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  int elastic = 0, plastic = 0, close_band = 0, edges = 0;
+  for (const MohrCoulombMaterial& m :
+       {mohr_coulomb_material(issue_parameters()), mohr_coulomb_material(soft_rock())}) {
+    const double k = m.strength, sp = m.sin_phi;
+    for (int sample = 0; sample < 6000; ++sample) {
+      const double s3 = -12.0 * kMPa + 10.0 * kMPa * std::abs(unit(generator));
+      const double s1 = (k + s3 * (1.0 - sp)) / (1.0 + sp);  // on the main plane
+      const int kind = sample % 3;  // 0: sigma_2 inside the sector, 1: near s1, 2: near s3
+      const double pair = std::pow(10.0, -2.0 - 6.0 * std::abs(unit(generator))) * k;
+      const double s2 = kind == 0 ? s3 + (s1 - s3) * (0.1 + 0.8 * std::abs(unit(generator)))
+                        : kind == 1 ? s1 - pair
+                                    : s3 + pair;
+      edges += kind != 0;
+      const double shift = 1e-5 * k * unit(generator);  // moves the yield function by ~2 shift
+      const Matrix3 D{{{s1 + shift, 0.0, 0.0}, {0.0, s2, 0.0}, {0.0, 0.0, s3 - shift}}};
+      const Voigt trial = stress_voigt(
+          rotate_tensor(rotation(angle(generator), angle(generator), angle(generator)), D));
+      const double f = mohr_coulomb_yield(m, principal_stresses(trial).values);
+      if (std::abs(f) < 1e-10 * k) {
+        ++close_band;
+        continue;
+      }
+      MohrCoulombState old;
+      old.effective_stress = old.stress = trial;
+      const MohrCoulombStep step = mohr_coulomb_update(m, old, Voigt{});
+      if (f < 0.0) {
+        ++elastic;
+        ASSERT_EQ(step.region, ReturnRegion::elastic) << f / k;
+        for (int c = 0; c < 6; ++c) EXPECT_EQ(step.state.effective_stress[c], trial[c]);
+      } else {
+        ++plastic;
+        EXPECT_NE(step.region, ReturnRegion::elastic) << f / k;
+      }
+    }
+  }
+  EXPECT_GT(elastic, 4000);
+  EXPECT_GT(plastic, 4000);
+  EXPECT_GT(edges, 6000);
+  EXPECT_LT(close_band, 100);
 }
 
 TEST(MohrCoulomb, ElasticFastPathGivesTheUpdatesBits) {
