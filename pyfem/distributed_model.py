@@ -1680,6 +1680,9 @@ class DistributedRun:
         })
         from pyfem.clock import DISTRIBUTED_PHASES, PHASES, phase_split
 
+        from pyfem.output import report_lead_in
+
+        report_lead_in(self.summary, self.scene, self.lead_in, self.times, self.energy_rows, self.energy_columns)
         self.summary["time_per_step"] = phase_split(phases[0], sitting)
         self.summary["mpi"]["ms_per_step"] = {
             name: [round(1e3 * float(p.get(name, 0.0)) / max(1, int(p["steps"])), 4) for p in phases]

@@ -716,6 +716,8 @@ class RunWriter:
         # and run of this sitting; a run called in-process after other work includes that work.
         summary["peak_memory_mib"] = round(peak_memory_mib(), 1)
         self._partial_summary()
+        report_lead_in(summary, self.scene, self.simulation.lead_in, self.times, self.energy_samples,
+                       self.energy_columns)
         self._plots()
         _write_json(self.out_dir / "run.json", summary)
         return summary
@@ -1144,3 +1146,61 @@ def _face_report(model) -> list:
     from pyfem.operators import face_report
 
     return face_report(model)
+
+
+# Dissipation before t = 0 above this share of the run's is reported (run.json "lead_in", a warning).
+LEAD_IN_DISSIPATION_SHARE = 0.01
+
+
+def lead_in_activity(times: np.ndarray, energy: np.ndarray, columns: list, lead_in: float) -> tuple[dict, str] | None:
+    """What a record's filter lead-in (t < 0) did to the model, from the energy samples: the plastic
+    and damage dissipation (internal_dissipation) and the friction dissipation of the pairs
+    (friction_dissipation) reached at the last sample with t <= 0, against their values at the
+    end. The lead-in carries the zero-phase filter's precursor, long-period motion that is not quiet
+    for a model at its strength (pairs handed over near their friction limit, rock at yield).
+    Returns None without a lead-in or without dissipation in it, else (run.json "lead_in", the
+    warning's words)."""
+    times = np.asarray(times, dtype=float)
+    if lead_in <= 0.0 or times.size == 0 or times[0] >= 0.0:
+        return None
+    names = [name for name in ("internal_dissipation", "friction_dissipation") if name in columns]
+    if not names:
+        return None
+    before = int(np.searchsorted(times, 0.0, side="right")) - 1  # the last sample at t <= 0
+    if before < 0:
+        return None
+    energy = np.asarray(energy, dtype=float).reshape(times.size, len(columns))
+    record = {"seconds": float(lead_in)}
+    worst = 0.0
+    words = []
+    for name in names:
+        column = energy[:, columns.index(name)]
+        start, at_zero, end = float(column[0]), float(column[before]), float(column[-1])
+        during, whole = at_zero - start, end - start
+        share = during / whole if whole > 0.0 else (1.0 if during > 0.0 else 0.0)
+        record[name] = {"before_t0": during, "run": whole, "share": share}
+        if during > 0.0 and share > LEAD_IN_DISSIPATION_SHARE:
+            worst = max(worst, share)
+            kind = "plastically" if name == "internal_dissipation" else "by friction in the pairs"
+            words.append(f"{during:.3g} J {kind} ({100 * share:.0f} % of the run's)")
+    if not words:
+        return record, ""
+    reached = " (the run ended before t = 0)" if times[-1] <= 0.0 else ""
+    return record, (f"the record's {lead_in:.3g} s lead-in (t < 0) was not quiet: before t = 0{reached} it dissipated "
+                    f"{' and '.join(words)}; the filter's precursor carries long-period motion that a model at its "
+                    "strength answers; a shorter [wave.motion.record] lead_in cuts it (docs/method.md, 'Time axis')")
+
+
+def report_lead_in(summary: dict, scene, lead_in: float, times, energy, columns: list) -> None:
+    """run.json "lead_in" and, when the lead-in dissipated more than LEAD_IN_DISSIPATION_SHARE of a
+    run's plastic or friction dissipation, a warning (scene.warn prints it; run.json keeps it)."""
+    found = lead_in_activity(np.asarray(times), np.asarray(energy), list(columns), lead_in)
+    if found is None:
+        return
+    record, message = found
+    summary["lead_in"] = record
+    if message:
+        if scene is not None and hasattr(scene, "warn"):
+            scene.warn(message)
+        if message not in summary.setdefault("warnings", []):
+            summary["warnings"].append(message)

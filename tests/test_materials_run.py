@@ -14,13 +14,16 @@ loop, the scene tables [materials.NAME.plasticity] / [materials.NAME.damage] and
 """
 import json
 import math
+from pathlib import Path
 
 import meshio
 import numpy as np
 import pytest
 
-from pyfem import _kernels, solver
+from pyfem import _kernels, output, solver
 from pyfem.scene import parse_scene
+
+REPO = Path(__file__).resolve().parents[1]
 
 MPa = 1.0e6
 # Relative agreement with issue 9's seven-digit reference returns.
@@ -391,3 +394,42 @@ def test_plasticity_zone_takes_only_its_cells_into_the_element_loop():
         bad = weak_layer_scene(True)
         bad["materials"]["weak"]["plasticity"]["zone"] = [50.0, 0.0, 0.0, 40.0, 10.0, 60.0]
         parse_scene(dict(bad))
+
+
+def test_a_lead_in_that_yields_the_rock_is_reported(tmp_path):
+    """Catches a lead-in (t < 0) that dissipates energy without a word: a record's zero-phase
+    filter precursor is long-period motion, and a layer at its strength yields under it (a new
+    user's bedding pairs slipped 1.9 mm before t = 0, unreported). The weak layer under El Centro
+    at 10 g (window 1.5-2.5 s, high-pass 0.1 Hz: an 8.75 s lead-in) yields before t = 0; run.json's
+    "lead_in" must equal energy.csv's plastic dissipation at t = 0 and a warning must say so."""
+    settings = json.loads(json.dumps(dict(weak_layer_scene(True))))
+    settings["wave"]["motion"] = {"record": {"file": str(REPO / "data" / "elcentro_1940_ns.txt"), "units": "g",
+                                             "pga": 10.0, "window": [1.5, 2.5], "band": [0.1, 10.0]}}
+    settings["time"]["duration"] = 0.2
+    settings["output"]["xdmf_interval"] = 1.0
+    out = tmp_path / "run"
+    summary = solver.run(parse_scene(settings), out)
+    energy = np.genfromtxt(out / "energy.csv", delimiter=",", names=True)
+    at_zero = np.flatnonzero(energy["t"] <= 0.0)[-1]
+    before = energy["internal_dissipation"][at_zero] - energy["internal_dissipation"][0]
+    whole = energy["internal_dissipation"][-1] - energy["internal_dissipation"][0]
+    assert energy["t"][0] < -8.0 and before > 0.01 * whole > 0.0  # the layer yielded before t = 0
+    record = summary["lead_in"]["internal_dissipation"]
+    assert record["before_t0"] == pytest.approx(before, rel=1e-12)
+    assert record["share"] == pytest.approx(before / whole, rel=1e-12)
+    assert any("lead-in (t < 0) was not quiet" in w and "plastically" in w for w in summary["warnings"])
+    assert summary["lead_in"] == json.loads((out / "run.json").read_text())["lead_in"]
+
+
+def test_a_quiet_lead_in_is_not_reported():
+    """Catches a warning on every record: dissipation only after t = 0, or none, is not reported;
+    without a lead-in there is nothing to report."""
+    times = np.array([-2.0, -1.0, 0.0, 1.0, 2.0])
+    columns = ["t", "internal_dissipation", "friction_dissipation"]
+    energy = np.column_stack([times, [0.0, 0.0, 0.0, 5.0, 9.0], [1.0, 1.0, 1.0, 1.0, 1.0]])
+    record, message = output.lead_in_activity(times, energy, columns, 2.0)
+    assert message == "" and record["internal_dissipation"] == {"before_t0": 0.0, "run": 9.0, "share": 0.0}
+    energy[1, 1] = energy[2, 1] = 0.5  # 0.5 of 9 J before t = 0
+    record, message = output.lead_in_activity(times, energy, columns, 2.0)
+    assert record["internal_dissipation"]["share"] == pytest.approx(0.5 / 9.0) and "0.5 J plastically (6 %" in message
+    assert output.lead_in_activity(times[2:], energy[2:], columns, 0.0) is None
