@@ -1695,8 +1695,26 @@ class DistributedRun:
             self.summary.update(pair_state_summary(np.array(self.times), np.array(self.state_counts), part.n_pairs,
                                                    self.contact_arrays.get("deterioration")))
             self.summary["mpi"]["moved_pair_nodes"] = part.moved_nodes
+        self._history_plots()
         _write_json(self.out / "run.json", self.summary)
         return self.summary
+
+    def _history_plots(self) -> None:
+        """plots/ (rank 0): the energy account, each monitor's and pair monitor's history and the pair
+        states, drawn from the closed history files as a serial run draws them (pyfem/plots.py)."""
+        from pyfem import plots
+        from pyfem.output import PAIR_STATES
+
+        plot_dir = self.out / "plots"
+        plot_dir.mkdir(parents=True, exist_ok=True)
+        plots.energy(plot_dir / "energy.png", np.array(self.energy_rows), self.energy_columns)
+        for name in self.names:
+            plots.monitor(plot_dir / f"monitor_{name}.png", self.out / "monitors" / f"{name}.csv")
+        if self.contact_arrays is not None:
+            counts = np.array(self.state_counts).reshape(-1, len(PAIR_STATES))
+            plots.pair_states(plot_dir / "pair_states.png", np.array(self.times), counts, PAIR_STATES)
+            for name in self.pair_names:
+                plots.pair_monitor(plot_dir / f"pair_{name}.png", self.out / "pairs" / f"{name}.csv")
 
 
 @dataclass

@@ -156,6 +156,22 @@ def last_fields(run_dir: Path, distributed: bool) -> dict:
     return {name: values[points if len(values) == len(x) else centroids] for name, values in out.items()}
 
 
+HISTORY_PLOTS = ("energy.png", "monitor_", "pair_")  # what the distributed model draws (pair_states.png among pair_)
+
+
+@pytest.mark.parametrize("name", ["contact", "layers"])
+def test_the_ranks_draw_the_history_plots_of_the_serial_run(runs, name):
+    """Catches a distributed run without plots/ (a new user's mpirun had none): the energy, monitor,
+    pair monitor and pair state plots of the serial run are drawn by the ranks too, non-empty."""
+    serial = {p.name for p in (runs[name, 1] / "plots").glob("*.png") if p.name.startswith(HISTORY_PLOTS)}
+    assert "energy.png" in serial and any(n.startswith("monitor_") for n in serial)
+    if name == "contact":
+        assert "pair_states.png" in serial and any(n.startswith("pair_") and n != "pair_states.png" for n in serial)
+    for ranks in RANKS[name]:
+        plots = runs[name, ranks] / "plots"
+        assert {n for n in serial if (plots / n).is_file() and (plots / n).stat().st_size > 10_000} == serial, ranks
+
+
 @pytest.mark.parametrize("name, ranks", [(name, ranks) for name in SCENES for ranks in RANKS[name]])
 def test_the_ranks_equal_the_serial_run(runs, name, ranks):
     serial, ours = summary(runs[name, 1]), summary(runs[name, ranks])
