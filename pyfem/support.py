@@ -135,14 +135,21 @@ def _line_key(name: str, settings: dict, bolt: int) -> tuple[str, object]:
     return f"support.{name}.length", settings["length"]
 
 
+SEGMENTS_PER_BOLT = 4
+"""The default segment is at most the shortest bolt's length / SEGMENTS_PER_BOLT: a bolt's axial force
+falls to zero at both free ends, which one segment (a constant force) cannot show."""
+
+
 def _default_segment(model, lines: np.ndarray, order: int) -> float:
-    """About the node spacing of the cells the bolts cross: the median, over points every tenth of
-    each bolt, of the host cell's largest extent along x, y, z divided by the element order."""
+    """About the node spacing of the cells the bolts cross (the median, over points every tenth of
+    each bolt, of the host cell's largest extent along x, y, z divided by the element order), and at
+    most the shortest bolt's length / SEGMENTS_PER_BOLT."""
     points = np.concatenate([line[:3] + np.linspace(0.0, 1.0, 11)[:, None] * (line[3:] - line[:3]) for line in lines])
     nodes, _ = model.point_weights(points)
     coordinates = model.node_coords[nodes]  # (m, k, 3)
     extent = (coordinates.max(axis=1) - coordinates.min(axis=1)).max(axis=1)
-    return float(np.median(extent)) / order
+    shortest = float(np.min(np.linalg.norm(lines[:, 3:] - lines[:, :3], axis=1)))
+    return min(float(np.median(extent)) / order, shortest / SEGMENTS_PER_BOLT)
 
 
 def scene_groups(scene, model) -> list[SupportGroup]:
@@ -464,11 +471,13 @@ def support_plan(simulation) -> dict:
         E_rock = float(np.median(rock_modulus(model, middles)))
         a, how = spacing_of(group)
         EA = group.axial_stiffness
+        how_segment = (f" (support.{group.name}.segment)" if group.settings["segment"] else
+                       f" (the default: the host cells' node spacing, at most the shortest bolt / {SEGMENTS_PER_BOLT})")
         stage = {"static": "in the static stage with static.install",
                  "start": "at the start of the dynamic run"}[group.stage]
         lines[group.name] = (
             f"{group.component.n_bolts} {group.settings['type']}s installed {stage}, {group.total_length:.4g} m "
-            f"in all, segments of {group.segment:.3g} m; EA = {EA:.3g} N: a bolt's EA/L is {EA / (E_rock * a * a):.3g} "
+            f"in all, segments of {group.segment:.3g} m{how_segment}; EA = {EA:.3g} N: a bolt's EA/L is {EA / (E_rock * a * a):.3g} "
             f"of the rock's E a^2/L (E = {E_rock:.3g} Pa, a = {a:.3g} m, {how}); they do not set the time step: "
             f"massless and condensed (no degrees of freedom of their own), they only stiffen their host nodes, by at "
             f"most {100.0 * added:.3g} % of a node's stiffness (the bond's k_b L_k and a cable's head plate), which the step's estimate includes")
