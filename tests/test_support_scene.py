@@ -482,3 +482,75 @@ def test_default_segments_cut_a_bolt_in_coarse_cells_into_several(tmp_path):
         print(f"bolt {b}: forces {np.round(force, 3)} N, against the 4-element bar {error:.2e} of the peak")
         assert force[0] < 0.6 * np.max(force) and force[-1] < 0.6 * np.max(force)
         assert error < 1e-3
+
+
+TET_TUNNEL = """// a circular tunnel (radius 3 m, axis y) in a 30 x 30 m x-z section, extruded 4 m along y, tetrahedra
+lf = 6; lc = 0.75;
+Point(1) = {0, 0, 0, lf}; Point(2) = {30, 0, 0, lf}; Point(3) = {30, 0, 30, lf}; Point(4) = {0, 0, 30, lf};
+Point(5) = {15, 0, 15, lc}; Point(6) = {18, 0, 15, lc}; Point(7) = {15, 0, 18, lc};
+Point(8) = {12, 0, 15, lc}; Point(9) = {15, 0, 12, lc};
+Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 1};
+Circle(5) = {6, 5, 7}; Circle(6) = {7, 5, 8}; Circle(7) = {8, 5, 9}; Circle(8) = {9, 5, 6};
+Curve Loop(1) = {1, 2, 3, 4}; Curve Loop(2) = {5, 6, 7, 8};
+Plane Surface(1) = {1, 2}; Plane Surface(2) = {2};
+ex[] = Extrude {0, 4, 0} { Surface{1, 2}; };
+Physical Volume("rock") = {ex[1]};
+Physical Volume("excavation") = {ex[11]};
+"""
+
+
+def tet_tunnel(tmp_path, groups, surface, spacing=(1.5, 1.0)):
+    """A scene of a pattern on `surface` of TET_TUNNEL with the physical surfaces `groups`
+    (ex[8], ex[9] the upper half of the wall, ex[6], ex[7] the lower half)."""
+    geo = tmp_path / "tunnel.geo"
+    geo.write_text(TET_TUNNEL + groups)
+    return parse_scene({
+        "mesh": {"builder": "file", "file": str(geo)},
+        "materials": {"rock": {"E": E_ROCK, "nu": NU_ROCK, "rho": 2600.0}}, "time": {"duration": 0.01},
+        "initial_stress": {"stress": [-P, -P, -P, 0.0, 0.0, 0.0]},
+        "boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}},
+        "static": {"excavate": ["excavation"], "relaxation": 0.5, "support": ["radial"]},
+        "support": {"radial": dict(BOLT, surface=surface, spacing=list(spacing), length=4.0)}})
+
+
+@pytest.mark.parametrize("groups, closed", [
+    ('Physical Surface("tunnel_wall") = {ex[6], ex[7], ex[8], ex[9]};', True),
+    ('Physical Surface("tunnel_wall") = {ex[8], ex[9]};', False)])  # the arched crown (z >= 15)
+def test_a_pattern_on_a_curved_wall_meshed_with_tetrahedra(tmp_path, groups, closed):
+    """The wall's flat triangles tilt out of the plane normal to the tunnel's axis (measured 0.94 deg
+    rms; the pattern was refused, wanting none); the axis is found all the same, and the bolts are
+    normal to the wall (the radius) within a degree (measured 0.46 deg on the whole wall, 0.50 on the
+    crown; their facet's own normal was up to 5.9 deg off)."""
+    simulation = solver.prepare(tet_tunnel(tmp_path, groups, "tunnel_wall"), solve_static=False)
+    group = simulation.support[0]
+    heads, axes = group.lines[:, :3], (group.lines[:, 3:] - group.lines[:, :3]) / 4.0
+    radius = np.hypot(heads[:, 0] - 15.0, heads[:, 2] - 15.0)
+    radial = np.column_stack([heads[:, 0] - 15.0, np.zeros(len(heads)), heads[:, 2] - 15.0]) / radius[:, None]
+    # Rows at y = 0.5, 1.5, 2.5, 3.5; the closed wall (2 pi 3 m) takes 13 bolts a row evenly; the crown
+    # (pi 3 m) 6, 1.5 m apart centred on it.
+    per_row = 13 if closed else 6
+    assert len(heads) == 4 * per_row
+    assert np.allclose(np.sort(np.unique(np.round(heads[:, 1], 3))), [0.5, 1.5, 2.5, 3.5])  # axis: y within 1e-5
+    assert np.all(np.abs(radius - 3.0) < 0.03)  # on the wall's chords (0.75 m triangles sag 0.023 m)
+    angle = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", axes, radial), -1.0, 1.0)))
+    print(f"bolts off the radius: at most {angle.max():.3g} deg")
+    assert np.max(angle) < 1.0
+    for y in (0.5, 1.5, 2.5, 3.5):
+        row = np.abs(heads[:, 1] - y) < 1e-3
+        angles = np.sort(np.arctan2(heads[row, 2] - 15.0, heads[row, 0] - 15.0))
+        gaps = np.diff(np.concatenate([angles, [angles[0] + 2.0 * np.pi]]) if closed else angles)
+        # Arc length along the chords: the angle 1.5 m / 3 m (or 2 pi / 13) within the chords' 0.3 %.
+        assert np.allclose(gaps, 2.0 * np.pi / 13.0 if closed else 0.5, rtol=4e-3), gaps
+        if not closed:  # centred on the crown
+            assert abs(angles[0] + angles[-1] - np.pi) < 0.01
+
+
+def test_a_sphere_is_refused_naming_the_normals_tilt(tmp_path):
+    from pyfem.support import _surface_axis
+
+    # An octahedron's eight faces: their normals tilt 35 deg rms out of any plane.
+    x = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]])
+    triangles = np.array([[a, b, c] for a in (0, 1) for b in (2, 3) for c in (4, 5)])
+    normals = np.sign(x[triangles].sum(axis=1)) / math.sqrt(3.0)
+    with pytest.raises(SceneError, match=r"tilt 35.3 deg \(rms\).*at most 10 deg"):
+        _surface_axis(triangles, x, normals, "support.a.surface", "ball")
