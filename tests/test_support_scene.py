@@ -554,3 +554,28 @@ def test_a_sphere_is_refused_naming_the_normals_tilt(tmp_path):
     normals = np.sign(x[triangles].sum(axis=1)) / math.sqrt(3.0)
     with pytest.raises(SceneError, match=r"tilt 35.3 deg \(rms\).*at most 10 deg"):
         _surface_axis(triangles, x, normals, "support.a.surface", "ball")
+
+
+def test_a_surface_in_two_physical_groups_is_one_line_naming_both(tmp_path):
+    """The crown in "crown" and in "tunnel_wall": a facet carries one tag, and "crown" had none left
+    (it was "none left: excavated?"); now refused naming both, from the command line with exit code 2."""
+    groups = ('Physical Surface("tunnel_wall") = {ex[6], ex[7], ex[8], ex[9]};\n'
+              'Physical Surface("crown") = {ex[8], ex[9]};\n')
+    for surface, other in (("crown", "tunnel_wall"), ("tunnel_wall", "crown")):
+        with pytest.raises(SceneError) as error:
+            solver.prepare(tet_tunnel(tmp_path, groups, surface), solve_static=False)
+        assert error.value.key == "support.radial.surface" and error.value.value == surface
+        assert f'its facets are also in the mesh\'s physical surface "{other}"' in str(error.value)
+    (tmp_path / "tunnel.geo").write_text(TET_TUNNEL + groups)
+    (tmp_path / "scene.toml").write_text(
+        'title = "two groups"\n[mesh]\nbuilder = "file"\nfile = "tunnel.geo"\n'
+        '[materials.rock]\nE = 8e9\nnu = 0.24\nrho = 2600.0\n[time]\nduration = 0.01\n'
+        '[initial_stress]\nstress = [-5e6, -5e6, -5e6, 0.0, 0.0, 0.0]\n'
+        '[static]\nexcavate = ["excavation"]\nsupport = ["radial"]\n'
+        '[support.radial]\nsurface = "crown"\nspacing = [1.5, 1.0]\nlength = 4.0\ndiameter = 0.032\n'
+        'yield_force = 3.2e5\nbond_stiffness = 1.0e9\nbond_strength = 4.0e5\n')
+    result = subprocess.run([sys.executable, "-m", "pyfem", "check", str(tmp_path / "scene.toml")],
+                            capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    line = [x for x in result.stderr.splitlines() if x.startswith("error:")]
+    assert len(line) == 1 and "'support.radial.surface' = \"crown\"" in line[0] and '"tunnel_wall"' in line[0]
