@@ -251,8 +251,8 @@ def _surface_triangles(model, name: str, key: str, installed_regions: list):
 AXIS_TILT = 10.0
 """Degrees: a pattern's surface is extruded along one direction when its facets' normals tilt out of
 the plane normal to it by at most this (their area-weighted rms): the flat triangles of a curved
-wall meshed with tetrahedra tilt by about their size over the radius (measured 2.7 deg for 0.75 m
-triangles on a 3 m tunnel's wall); a sphere's tilt 35 deg."""
+wall meshed with tetrahedra tilt a little (measured 0.94 deg rms for 0.75 m triangles on a 3 m
+tunnel's wall, tests/test_support_scene.py); an octahedron's (a coarse sphere's) 35 deg."""
 
 
 def _surface_axis(triangles: np.ndarray, x: np.ndarray, normals: np.ndarray, key: str,
