@@ -80,9 +80,10 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
                 raise ValueError(f"mesh.builder = {builder!r}: allowed here are 'box', 'layered_cavern' and 'file'")
             problem = volume_problem((scene.get("static") or {}).get("excavate") or []) if builder == "file" \
                 else None
-            model_facts = (*_physical_groups_and_cell_types(), _height_range(), problem)
+            model_facts = (*_physical_groups_and_cell_types(), _height_range(), problem, _shared_surfaces())
         model_facts = comm.bcast(model_facts, root=model_rank)
-        regions, boundaries, cell_types, heights, problem = model_facts
+        regions, boundaries, cell_types, heights, problem, shared = model_facts
+        _check_support_surfaces_not_shared(scene, shared)
         source = ("mesh.file", mesh_settings["file"]) if builder == "file" else ("mesh.builder", builder)
         _check_cell_types(cell_types, *source)
         if problem:
@@ -343,6 +344,36 @@ def check_surfaces_on_top(scene: typing.Mapping, bottom: float, top: float) -> N
         if surface is not None and surface < top - 1e-9 * max(top - bottom, 1.0):
             raise SceneError(key, surface, f"the surface must not lie below the model's top z = {top:.6g} m "
                              f"({where}); give {key} >= {top:.6g}")
+
+
+def _shared_surfaces() -> dict[str, list[str]]:
+    """Physical surface name -> the other physical surfaces holding one of its geometric surfaces
+    (a facet carries one physical surface's tag in the model: the other group loses it)."""
+    holders = {}
+    for dim, tag in gmsh.model.getPhysicalGroups(2):
+        for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+            holders.setdefault(int(entity), []).append(_physical_name(dim, tag))
+    shared = {}
+    for names in holders.values():
+        for name in names:
+            shared.setdefault(name, set()).update(other for other in names if other != name)
+    return {name: sorted(others) for name, others in shared.items() if others}
+
+
+def _check_support_surfaces_not_shared(scene: typing.Mapping, shared: dict[str, list[str]]) -> None:
+    """A pattern's surface must own its facets.
+
+    Raises:
+        SceneError naming support.NAME.surface and the other physical surface that holds its facets.
+    """
+    for name, group in (scene.get("support") or {}).items():
+        surface = group.get("surface")
+        if surface in shared:
+            others = ", ".join(f'"{other}"' for other in shared[surface])
+            key, allowed = f"support.{name}.surface", "a surface in one physical group only"
+            raise SceneError(key, surface, allowed, f'scene key \'{key}\' = "{surface}": its facets are also in '
+                             f"the mesh's physical surface {others}, and a facet carries one physical surface's "
+                             f"tag in the model (the other group loses it); allowed: {allowed}")
 
 
 def _physical_name(dim: int, tag: int) -> str:

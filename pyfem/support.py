@@ -135,14 +135,21 @@ def _line_key(name: str, settings: dict, bolt: int) -> tuple[str, object]:
     return f"support.{name}.length", settings["length"]
 
 
+SEGMENTS_PER_BOLT = 4
+"""The default segment is at most the shortest bolt's length / SEGMENTS_PER_BOLT: a bolt's axial force
+falls to zero at both free ends, which one segment (a constant force) cannot show."""
+
+
 def _default_segment(model, lines: np.ndarray, order: int) -> float:
-    """About the node spacing of the cells the bolts cross: the median, over points every tenth of
-    each bolt, of the host cell's largest extent along x, y, z divided by the element order."""
+    """About the node spacing of the cells the bolts cross (the median, over points every tenth of
+    each bolt, of the host cell's largest extent along x, y, z divided by the element order), and at
+    most the shortest bolt's length / SEGMENTS_PER_BOLT."""
     points = np.concatenate([line[:3] + np.linspace(0.0, 1.0, 11)[:, None] * (line[3:] - line[:3]) for line in lines])
     nodes, _ = model.point_weights(points)
     coordinates = model.node_coords[nodes]  # (m, k, 3)
     extent = (coordinates.max(axis=1) - coordinates.min(axis=1)).max(axis=1)
-    return float(np.median(extent)) / order
+    shortest = float(np.min(np.linalg.norm(lines[:, 3:] - lines[:, :3], axis=1)))
+    return min(float(np.median(extent)) / order, shortest / SEGMENTS_PER_BOLT)
 
 
 def scene_groups(scene, model) -> list[SupportGroup]:
@@ -241,24 +248,37 @@ def _surface_triangles(model, name: str, key: str, installed_regions: list):
     return np.array(triangles), x, np.array(normals)
 
 
-def _surface_axis(triangles: np.ndarray, x: np.ndarray, normals: np.ndarray, key: str, name: str) -> np.ndarray:
-    """The direction the surface's normals are perpendicular to (a tunnel's axis; for a plane the
-    in-plane direction nearest y, else x)."""
+AXIS_TILT = 10.0
+"""Degrees: a pattern's surface is extruded along one direction when its facets' normals tilt out of
+the plane normal to it by at most this (their area-weighted rms): the flat triangles of a curved
+wall meshed with tetrahedra tilt a little (measured 0.94 deg rms for 0.75 m triangles on a 3 m
+tunnel's wall, tests/test_support_scene.py); an octahedron's (a coarse sphere's) 35 deg."""
+
+
+def _surface_axis(triangles: np.ndarray, x: np.ndarray, normals: np.ndarray, key: str,
+                  name: str) -> tuple[np.ndarray, bool]:
+    """The direction the surface's normals are (nearly) perpendicular to (a tunnel's axis; for a plane,
+    or a surface with no one such direction, the in-plane direction nearest y, else x), and whether
+    the surface is extruded along it (not a plane). The axis is the eigenvector of the smallest
+    eigenvalue of sum(area n n^T): that eigenvalue over the trace is the area-weighted mean of
+    (n . axis)^2, the square of the normals' rms tilt out of the plane normal to the axis."""
     areas = 0.5 * np.linalg.norm(np.cross(x[triangles[:, 1]] - x[triangles[:, 0]],
                                           x[triangles[:, 2]] - x[triangles[:, 0]]), axis=1)
     tensor = (areas[:, None, None] * normals[:, :, None] * normals[:, None, :]).sum(axis=0)
     values, vectors = np.linalg.eigh(tensor)
-    if values[0] > 1e-6 * values[2]:
-        raise SceneError(key, name, "a pattern needs a surface extruded along one direction (a tunnel's or "
-                         "cavern's wall, a plane): this one's normals point in every direction")
-    if values[1] <= 1e-6 * values[2]:  # a plane
+    tilt = math.degrees(math.asin(math.sqrt(min(max(values[0], 0.0) / values.sum(), 1.0))))
+    if tilt > AXIS_TILT:
+        raise SceneError(key, name, f"a pattern needs a surface extruded along one direction (a tunnel's or "
+                         f"cavern's wall, a plane): this one's normals tilt {tilt:.3g} deg (rms) out of the plane "
+                         f"normal to any one direction (allowed: at most {AXIS_TILT:g} deg)")
+    if values[1] <= 1e-6 * values[2] or values[0] > 0.25 * values[1]:  # a plane, or no one axis
         normal = vectors[:, 2]
         for axis in (np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])):
             along = axis - np.dot(axis, normal) * normal
             if np.linalg.norm(along) > 1e-6:
-                return along / np.linalg.norm(along)
+                return along / np.linalg.norm(along), False
     axis = vectors[:, 0]
-    return axis if axis[np.argmax(np.abs(axis))] > 0.0 else -axis
+    return (axis if axis[np.argmax(np.abs(axis))] > 0.0 else -axis), True
 
 
 def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: float):
@@ -305,6 +325,30 @@ def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: f
     return chains
 
 
+FEATURE_ANGLE = 30.0
+"""Degrees: a wall's normal at a point of a facet is interpolated from its corners' normals, each
+the area-weighted mean of the normals of the facets around the corner within this angle of the
+facet's own (a curved wall's flat facets tilt by about their size over its radius; a cavern's
+corner between a wall and its crown is no curve to smooth over)."""
+
+
+def _wall_normal(k: int, point: np.ndarray, triangles: np.ndarray, x: np.ndarray, normals: np.ndarray,
+                 around: dict) -> np.ndarray:
+    """The wall's unit normal at a point of triangle k (FEATURE_ANGLE)."""
+    corners = x[triangles[k]]
+    uv = np.linalg.lstsq(np.column_stack([corners[1] - corners[0], corners[2] - corners[0]]),
+                         point - corners[0], rcond=None)[0]
+    weights = np.clip([1.0 - uv.sum(), uv[0], uv[1]], 0.0, 1.0)
+    direction = np.zeros(3)
+    for weight, vertex in zip(weights, triangles[k]):
+        near = np.array(around[int(vertex)])
+        near = near[normals[near] @ normals[k] >= math.cos(math.radians(FEATURE_ANGLE))]
+        sides = np.cross(x[triangles[near, 1]] - x[triangles[near, 0]], x[triangles[near, 2]] - x[triangles[near, 0]])
+        mean = (np.linalg.norm(sides, axis=1)[:, None] * normals[near]).sum(axis=0)
+        direction += weight * mean / np.linalg.norm(mean)
+    return direction / np.linalg.norm(direction)
+
+
 def pattern_lines(model, name: str, settings: dict, installed_regions: list) -> np.ndarray:
     """(b, 6) the bolts of a pattern: rows every spacing[1] along the surface's axis (centred, at least
     half a spacing from its ends), and in each row's section bolts every spacing[0] of arc length
@@ -315,7 +359,14 @@ def pattern_lines(model, name: str, settings: dict, installed_regions: list) -> 
     surface = settings["surface"]
     around, along = settings["spacing"]
     triangles, x, normals = _surface_triangles(model, surface, key, installed_regions)
-    axis = _surface_axis(triangles, x, normals, key, surface)
+    axis, extruded = _surface_axis(triangles, x, normals, key, surface)
+    if extruded:  # a facet's normal without its tilt along the axis: the wall's normal
+        normals = normals - np.outer(normals @ axis, axis)
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+    by_vertex = {}  # vertex -> the triangles around it
+    for k, corners in enumerate(triangles):
+        for vertex in corners:
+            by_vertex.setdefault(int(vertex), []).append(k)
     used = np.unique(triangles)
     lo, hi = float((x[used] @ axis).min()), float((x[used] @ axis).max())
     extent = hi - lo
@@ -345,7 +396,7 @@ def pattern_lines(model, name: str, settings: dict, installed_regions: list) -> 
                 j = min(int(np.searchsorted(arc, s, side="right") - 1), len(owners) - 1)
                 w = (s - arc[j]) / max(arc[j + 1] - arc[j], 1e-300)
                 head = p[j] + w * (p[j + 1] - p[j]) - (t - row) * axis
-                direction = normals[owners[j]]
+                direction = _wall_normal(owners[j], head + (t - row) * axis, triangles, x, normals, by_vertex)
                 lines.append(np.concatenate([head, head + settings["length"] * direction]))
     if not lines:
         raise SceneError(key, surface, "the pattern found no section of this surface to place bolts on")
@@ -464,11 +515,13 @@ def support_plan(simulation) -> dict:
         E_rock = float(np.median(rock_modulus(model, middles)))
         a, how = spacing_of(group)
         EA = group.axial_stiffness
+        how_segment = (f" (support.{group.name}.segment)" if group.settings["segment"] else
+                       f" (the default: the host cells' node spacing, at most the shortest bolt / {SEGMENTS_PER_BOLT})")
         stage = {"static": "in the static stage with static.install",
                  "start": "at the start of the dynamic run"}[group.stage]
         lines[group.name] = (
             f"{group.component.n_bolts} {group.settings['type']}s installed {stage}, {group.total_length:.4g} m "
-            f"in all, segments of {group.segment:.3g} m; EA = {EA:.3g} N: a bolt's EA/L is {EA / (E_rock * a * a):.3g} "
+            f"in all, segments of {group.segment:.3g} m{how_segment}; EA = {EA:.3g} N: a bolt's EA/L is {EA / (E_rock * a * a):.3g} "
             f"of the rock's E a^2/L (E = {E_rock:.3g} Pa, a = {a:.3g} m, {how}); they do not set the time step: "
             f"massless and condensed (no degrees of freedom of their own), they only stiffen their host nodes, by at "
             f"most {100.0 * added:.3g} % of a node's stiffness (the bond's k_b L_k and a cable's head plate), which the step's estimate includes")
