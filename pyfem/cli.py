@@ -338,20 +338,25 @@ def describe_scene(scene: Scene) -> str:
     ])
 
 
-def format_plan(plan: dict, indent: int = 0) -> str:
+# Plan keys whose entries are keyed by the scene's own names (support groups): printed as written.
+NAMED_ENTRIES = ("support",)
+
+
+def format_plan(plan: dict, indent: int = 0, names: bool = False) -> str:
     """A plan or summary dict as aligned ``key: value`` lines (nested dicts indented).
 
     Keys ending in ``bytes`` are shown in KiB/MiB/GiB, keys ending in
-    ``seconds`` in s/min/h; floats with 4 significant digits.
+    ``seconds`` in s/min/h; floats with 4 significant digits. The program's keys are printed with
+    spaces for underscores; the scene's names (`names`, the entries of NAMED_ENTRIES) as written.
     """
     lines = []
     width = max((len(str(k)) for k in plan), default=0) + 1
     pad = " " * indent
     for key, value in plan.items():
-        label = f"{str(key).replace('_', ' ')}:"
+        label = f"{str(key) if names else str(key).replace('_', ' ')}:"
         if isinstance(value, dict):
             lines.append(f"{pad}{label}")
-            lines.append(format_plan(value, indent + 2))
+            lines.append(format_plan(value, indent + 2, names=not names and str(key) in NAMED_ENTRIES))
         else:
             lines.append(f"{pad}{label:<{width + 1}} {_format_value(str(key), value)}")
     return "\n".join(line for line in lines if line)

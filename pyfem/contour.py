@@ -3,7 +3,8 @@
 For a run whose static stage excavated (the wall of `pyfem.static_plots.excavation_wall`), in the
 section through the first monitor (else the wall's middle), snapped to the wall nodes' nearest y:
 
-- each opening's contour: the wall nodes of the section, one opening per connected piece of the wall,
+- each opening's contour: the wall nodes within a wall edge's length of the section, projected on it
+  (one node per x-z position, the nearest the plane), one opening per connected piece of the wall,
   ordered by the angle theta about the opening's centre in the x-z plane (0 at +x, 90 deg at the
   crown, anticlockwise with z up);
 - the wall displacement along the inward normal of the contour (convergence positive), after the stage
@@ -53,10 +54,17 @@ class Contours:
         target = 0.5 * (y.min() + y.max()) if y0 is None else float(y0)
         snapped = y[np.argmin(np.abs(y - target))]
         size = float(np.ptp(coords, axis=0).max()) or 1.0
-        section = wall_nodes[np.abs(y - snapped) <= 1e-6 * size]
+        # The section: the wall nodes within a typical wall edge's length of the plane (an unstructured
+        # mesh's nodes seldom lie on the plane: issue 51), projected on it: the wall of an opening
+        # prismatic along y projects onto its contour in the x-z plane. Of the nodes of one x-z
+        # position (a mesh extruded along y) the one nearest the plane is kept.
+        corners = wall.shape[1]
+        edges = np.concatenate([np.linalg.norm(coords[wall[:, k]] - coords[wall[:, (k + 1) % corners]], axis=1)
+                                for k in range(corners)])
+        band = float(np.median(edges))
+        section = wall_nodes[np.abs(y - snapped) <= band + 1e-6 * size]
         self.y = float(np.round(snapped, 6)) + 0.0  # 1e-14 of round-off is 0 m
         # Openings: the connected pieces of the wall (its facets' edges).
-        corners = wall.shape[1]
         rows = np.concatenate([wall[:, k] for k in range(corners)])
         cols = np.concatenate([wall[:, (k + 1) % corners] for k in range(corners)])
         graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(coords), len(coords)))
@@ -75,8 +83,16 @@ class Contours:
             xz = coords[nodes][:, [0, 2]]
             centre = xz.mean(axis=0)
             theta = np.degrees(np.arctan2(xz[:, 1] - centre[1], xz[:, 0] - centre[0])) % 360.0
-            order = np.argsort(theta)
+            theta[theta >= 360.0] = 0.0  # -1e-15 % 360 is 360
+            # One node per point of the contour (a band's nodes may share their x-z position): the
+            # nearest the plane.
+            nearest = np.argsort(np.abs(coords[nodes, 1] - snapped), kind="stable")
+            _, first = np.unique(np.round(xz[nearest] / (1e-6 * size)), axis=0, return_index=True)
+            keep = nearest[first]
+            order = keep[np.argsort(theta[keep], kind="stable")]
             nodes, xz, theta = nodes[order], xz[order], theta[order]
+            if len(nodes) < 4:
+                continue
             tangent = np.roll(xz, -1, axis=0) - np.roll(xz, 1, axis=0)
             tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
             normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
@@ -205,11 +221,11 @@ class Contours:
             return None
         rows = len(self.openings) + (1 if self.pillars else 0)
         fig, axes = plt.subplots(rows, 2, figsize=(11, 3.3 * rows), squeeze=False)
-        def closed(values):  # the contour is a loop: its first point again at theta + 360
-            return np.append(values, values[0])
+        def closed(values):  # the contour is a loop: its last point again before 0, its first after 360
+            return np.concatenate([values[-1:], values, values[:1]])
 
         for row, opening in enumerate(self.openings):
-            theta = np.append(opening["theta"], opening["theta"][0] + 360.0)
+            theta = closed(opening["theta"]) + np.r_[-360.0, np.zeros(len(opening["theta"])), 360.0]
             name = f"opening {row + 1} (centre x = {opening['xz'][:, 0].mean():.4g} m, z = {opening['xz'][:, 1].mean():.4g} m)"
             ax = axes[row][0]
             if opening["band"] is not None:
@@ -229,7 +245,7 @@ class Contours:
             ax.set_ylabel("hoop stress (MPa, tension +)")
             ax.set_title(f"opening {row + 1}: hoop stress at the wall cells", fontsize=9)
             for ax in axes[row]:
-                ax.set_xlim(min(0.0, theta[0]), max(360.0, theta[-1]))
+                ax.set_xlim(0.0, 360.0)
                 ax.set_xticks([0, 90, 180, 270, 360])
                 ax.set_xlabel("angle about the centre (deg; 0 at +x, 90 crown)")
                 ax.grid(alpha=0.3)

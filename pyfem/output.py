@@ -56,8 +56,26 @@ _VTK_HEXAHEDRON = ((0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0,
 def _write_json(path: Path, data: dict) -> None:
     """Writes JSON through a temporary file so a reader never sees half a file."""
     tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=_json_default))
+    tmp.write_text(json.dumps(_strict_json(data), indent=2, allow_nan=False))
     os.replace(tmp, path)
+
+
+def _strict_json(value):
+    """value with numpy's scalars and arrays as Python's and non-finite numbers as None (null: strict
+    JSON has no NaN or Infinity, issue 51)."""
+    if isinstance(value, dict):
+        return {key: _strict_json(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_strict_json(item) for item in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    if value is None or isinstance(value, str):
+        return value
+    return _json_default(value)
 
 
 def _json_default(value):

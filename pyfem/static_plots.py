@@ -172,7 +172,8 @@ def interface_stress(png_path, coords: np.ndarray, normal: np.ndarray, area: np.
 
     Returns:
         {"near_wall": near_wall, "pairs": count, "pairs_near_wall": count within near_wall,
-        "before_mean", "after_mean" (Pa): their mean normal stress before and after}.
+        "before_mean", "after_mean" (Pa): their mean normal stress before and after, None without
+        such pairs}.
     """
     from scipy.spatial import cKDTree
 
@@ -191,14 +192,24 @@ def interface_stress(png_path, coords: np.ndarray, normal: np.ndarray, area: np.
         ax.set_xlim(0.0, far)
     ax.grid(alpha=0.3)
     ax.legend(markerscale=4, fontsize=8)
-    ax.set_title(f"{title} interface normal stress".strip(), fontsize=10)
+    fit_title(ax, f"{title} interface normal stress".strip())
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
     plt.close(fig)
     near = distance <= near_wall
     return {"near_wall": near_wall, "pairs": int(len(distance)), "pairs_near_wall": int(near.sum()),
-            "before_mean": float(normal_before[near].mean()) if near.any() else float("nan"),
-            "after_mean": float(normal_after[near].mean()) if near.any() else float("nan")}
+            "before_mean": float(normal_before[near].mean()) if near.any() else None,
+            "after_mean": float(normal_after[near].mean()) if near.any() else None}
+
+
+def fit_title(ax, text: str, fontsize: float = 10.0) -> None:
+    """Sets the axes' title wrapped to lines that fit the figure's width (a long scene title was cut
+    off, issue 51)."""
+    import textwrap
+
+    width_pt = ax.figure.get_figwidth() * 72.0
+    chars = max(20, int(0.9 * width_pt / (0.6 * fontsize)))  # a character is about 0.6 em wide at most
+    ax.set_title(textwrap.fill(text, chars), fontsize=fontsize)
 
 
 def write_static_plots(folder: Path, simulation) -> dict:

@@ -153,3 +153,12 @@ def test_bench_case_rows_one_point_overrides_make_a_valid_scene():
                        ONE_POINT_ROCK)
     assert all(scene["materials"][name]["plasticity"]["integration"] == "reduced"
                for name in ("sandstone", "non_sandstone"))
+
+
+def test_format_plan_prints_the_scenes_names_as_written():
+    """Issue 51: a support group `ph_bolts` was printed "ph bolts"; the program's keys keep their spaces."""
+    text = cli.format_plan({"peak_memory_bytes": 1024, "support": {"ph_bolts": "12 bolts", "th_cables": "4 cables"}})
+    lines = text.splitlines()
+    assert lines[0].startswith("peak memory bytes:") and lines[1] == "support:"
+    assert lines[2].startswith("  ph_bolts:") and lines[2].endswith("12 bolts")
+    assert lines[3].startswith("  th_cables:") and "ph bolts" not in text

@@ -113,3 +113,54 @@ def test_the_pillar_between_two_openings_widens_by_the_difference_of_its_walls(t
     assert pillar["change"][-1] == pytest.approx(by_hand + 1e-3, rel=1e-12)
     summary = contours.plot(tmp_path / "contour.png", "two openings")
     assert summary["pillars"][0]["end_change"] == pytest.approx(by_hand + 1e-3, rel=1e-12)
+
+
+TWO_CAVERNS_GEO = """// two prismatic openings in a 10 m slab (built-in kernel, tetrahedra): an arched one and a box
+lf = 12; lc = 3;
+Point(1) = {0, 0, 0, lf}; Point(2) = {100, 0, 0, lf}; Point(3) = {100, 0, 80, lf}; Point(4) = {0, 0, 80, lf};
+Point(11) = {30, 0, 30, lc}; Point(12) = {40, 0, 30, lc}; Point(13) = {40, 0, 45, lc};
+Point(14) = {35, 0, 50, lc}; Point(15) = {30, 0, 45, lc}; Point(16) = {35, 0, 45, lc};
+Point(21) = {60, 0, 32, lc}; Point(22) = {68, 0, 32, lc}; Point(23) = {68, 0, 44, lc}; Point(24) = {60, 0, 44, lc};
+Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 1};
+Line(11) = {11, 12}; Line(12) = {12, 13}; Circle(13) = {13, 16, 14}; Circle(14) = {14, 16, 15}; Line(15) = {15, 11};
+Line(21) = {21, 22}; Line(22) = {22, 23}; Line(23) = {23, 24}; Line(24) = {24, 21};
+Curve Loop(1) = {1, 2, 3, 4}; Curve Loop(2) = {11, 12, 13, 14, 15}; Curve Loop(3) = {21, 22, 23, 24};
+Plane Surface(1) = {1, 2, 3}; Plane Surface(2) = {2}; Plane Surface(3) = {3};
+ex[] = Extrude {0, 10, 0} { Surface{1, 2, 3}; };
+Physical Volume("rock") = {ex[1]};
+Physical Volume("excavation") = {ex[16], ex[23]};
+"""
+
+
+def test_both_openings_of_a_tetrahedral_mesh_are_found_with_their_pillar(tmp_path):
+    """Issue 51: a section plane of an unstructured mesh holds few wall nodes or none; the section's band
+    finds both openings, their whole contours and the pillar between them (walls at x = 40 and x = 60)."""
+    path = tmp_path / "two_caverns.geo"
+    path.write_text(TWO_CAVERNS_GEO)
+    simulation = solver.prepare(tunnel_scene(path))
+    assert simulation.model.mesh.topology.cell_type.name == "tetrahedron"
+    coords = simulation.model.node_coords
+    contours = Contours(simulation.model, simulation.static,
+                        lambda cells: cell_strain_operator(simulation.scene, simulation.model, cells), y0=4.3)
+    assert len(contours.openings) == 2 and len(contours.pillars) == 1
+    arched, box = sorted(contours.openings, key=lambda o: o["xz"][:, 0].mean())
+    for opening, (x0, x1, z0, z1) in ((arched, (30, 40, 30, 50)), (box, (60, 68, 32, 44))):
+        xz = opening["xz"]
+        assert len(opening["nodes"]) >= 8
+        assert np.all((xz[:, 0] > x0 - 1e-6) & (xz[:, 0] < x1 + 1e-6) & (xz[:, 1] > z0 - 1e-6) & (xz[:, 1] < z1 + 1e-6))
+        assert np.all(np.abs(coords[opening["nodes"], 1] - contours.y) < 3.0)
+        theta = opening["theta"]
+        assert np.all((theta >= 0.0) & (theta < 360.0))
+        assert np.diff(np.r_[theta, theta[0] + 360.0]).max() < 90.0   # the whole contour, no gap
+    # The box's nodes lie on its four walls.
+    xz = box["xz"]
+    on_wall = np.isclose(xz[:, 0], 60) | np.isclose(xz[:, 0], 68) | np.isclose(xz[:, 1], 32) | np.isclose(xz[:, 1], 44)
+    assert on_wall.all()
+    # The arch's crown nodes lie on its circle (centre (35, 45), radius 5).
+    crown = arched["xz"][arched["xz"][:, 1] > 45.0 + 1e-6]
+    assert len(crown) >= 3 and np.allclose(np.hypot(crown[:, 0] - 35, crown[:, 1] - 45), 5.0, atol=1e-6)
+    pillar = contours.pillars[0]
+    assert 20.0 - 1e-6 < pillar["width"] < 20.5      # the walls at x = 40 and x = 60
+    summary = contours.plot(tmp_path / "contour.png", "two caverns")
+    assert (tmp_path / "contour.png").stat().st_size > 10_000
+    assert len(summary["openings"]) == 2 and len(summary["pillars"]) == 1
