@@ -67,6 +67,14 @@ class Contours:
         # Openings: the connected pieces of the wall (its facets' edges).
         rows = np.concatenate([wall[:, k] for k in range(corners)])
         cols = np.concatenate([wall[:, (k + 1) % corners] for k in range(corners)])
+        # The two nodes of a contact pair share a position: the wall of one opening that a split
+        # interface crosses is one piece, not one per side of the interface.
+        _, where = np.unique(np.round(coords[wall_nodes] / (1e-6 * size)), axis=0, return_inverse=True)
+        where = where.ravel()
+        first = np.full(where.max() + 1, -1, dtype=np.int64)
+        first[where[::-1]] = wall_nodes[::-1]
+        rows = np.concatenate([rows, wall_nodes])
+        cols = np.concatenate([cols, first[where]])
         graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(coords), len(coords)))
         _, piece = connected_components(graph, directed=False)
         n_vertices = 8 if model.mesh.topology.cell_type.name == "hexahedron" else 4

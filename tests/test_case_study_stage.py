@@ -107,6 +107,16 @@ def small_run(tmp_path_factory):
     return scene, out, solver.run(scene, out)
 
 
+def test_the_cavern_split_by_contact_interfaces_is_one_opening(small_run):
+    """Catches a cavern wall cut by split interfaces read as several openings (the two nodes of a
+    pair share a position, the wall's pieces touch): one opening around the whole section, no
+    pillar of zero width."""
+    _, _, summary = small_run
+    contour = summary["contour"]
+    assert len(contour["openings"]) == 1 and contour["pillars"] == []
+    assert contour["openings"][0]["nodes"] > 40 and contour["openings"][0]["stage_convergence_max"] > 0.0
+
+
 def test_small_case3_runs_all_physics_with_energy_balance(small_run):
     scene, out, summary = small_run
     assert summary["status"] == "finished"
