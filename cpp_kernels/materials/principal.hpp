@@ -196,6 +196,28 @@ inline double rayleigh(const Matrix3& a, const std::array<double, 3>& v) {
     sum += v[i] * (a[i][0] * v[0] + a[i][1] * v[1] + a[i][2] * v[2]);
   return sum;
 }
+/// A = mean I + size B: the deviator scaled to unit size (B's values sum to 0, their squares to
+/// 6) and the estimated values on B's scale (mu). False for a zero or non-finite deviator.
+struct ScaledDeviator {
+  double mean = 0.0, size = 0.0;
+  Matrix3 b{};
+  std::array<double, 3> mu{};
+};
+inline bool scaled_deviator(const Matrix3& a, const std::array<double, 3>& estimate, ScaledDeviator& s) {
+  const double mean = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
+  const double d0 = a[0][0] - mean, d1 = a[1][1] - mean, d2 = a[2][2] - mean;
+  const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+  const double size = std::sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0);
+  if (!(size > 0.0) || !std::isfinite(size) || !std::isfinite(mean)) return false;
+  const double inverse = 1.0 / size;
+  s.mean = mean;
+  s.size = size;
+  s.mu = {(estimate[0] - mean) * inverse, (estimate[1] - mean) * inverse, (estimate[2] - mean) * inverse};
+  s.b = Matrix3{{{d0 * inverse, a[0][1] * inverse, a[0][2] * inverse},
+                 {a[1][0] * inverse, d1 * inverse, a[1][2] * inverse},
+                 {a[2][0] * inverse, a[2][1] * inverse, d2 * inverse}}};
+  return true;
+}
 }  // namespace detail
 
 /// The closed form alone: true with `out` set when both gaps of the estimated spectrum exceed
@@ -203,18 +225,12 @@ inline double rayleigh(const Matrix3& a, const std::array<double, 3>& v) {
 /// then unspecified).
 inline bool symmetric_eigen_closed_form(const Matrix3& a, const std::array<double, 3>& estimate,
                                         SymmetricEigen& out) {
-  const double mean = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
-  const double d0 = a[0][0] - mean, d1 = a[1][1] - mean, d2 = a[2][2] - mean;
-  const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
-  const double size = std::sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0);
-  if (!(size > 0.0) || !std::isfinite(size) || !std::isfinite(mean)) return false;
-  const double inverse = 1.0 / size;
-  const double mu0 = (estimate[0] - mean) * inverse, mu1 = (estimate[1] - mean) * inverse,
-               mu2 = (estimate[2] - mean) * inverse;
+  detail::ScaledDeviator scaled;
+  if (!detail::scaled_deviator(a, estimate, scaled)) return false;
+  const double mean = scaled.mean, size = scaled.size;
+  const double mu0 = scaled.mu[0], mu1 = scaled.mu[1], mu2 = scaled.mu[2];
   if (!(mu0 - mu1 > kClosedFormGap) || !(mu1 - mu2 > kClosedFormGap)) return false;
-  const Matrix3 b{{{d0 * inverse, a[0][1] * inverse, a[0][2] * inverse},
-                   {a[1][0] * inverse, d1 * inverse, a[1][2] * inverse},
-                   {a[2][0] * inverse, a[2][1] * inverse, d2 * inverse}}};
+  const Matrix3& b = scaled.b;
   std::array<double, 3> v0, v2;
   if (!detail::null_vector(b, mu0, v0) || !detail::null_vector(b, mu2, v2)) return false;
   if (!detail::null_vector(b, detail::rayleigh(b, v0), v0) ||
@@ -250,21 +266,15 @@ inline bool symmetric_eigen_closed_form(const Matrix3& a, const std::array<doubl
 /// set, false for a zero, non-finite or unsound case (out then unspecified).
 inline bool symmetric_eigen_pair_form(const Matrix3& a, const std::array<double, 3>& estimate,
                                       SymmetricEigen& out) {
-  const double mean = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
-  const double d0 = a[0][0] - mean, d1 = a[1][1] - mean, d2 = a[2][2] - mean;
-  const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
-  const double size = std::sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0);
-  if (!(size > 0.0) || !std::isfinite(size) || !std::isfinite(mean)) return false;
-  const double inverse = 1.0 / size;
-  const double mu0 = (estimate[0] - mean) * inverse, mu1 = (estimate[1] - mean) * inverse,
-               mu2 = (estimate[2] - mean) * inverse;
+  detail::ScaledDeviator scaled;
+  if (!detail::scaled_deviator(a, estimate, scaled)) return false;
+  const double mean = scaled.mean, size = scaled.size;
+  const double mu0 = scaled.mu[0], mu1 = scaled.mu[1], mu2 = scaled.mu[2];
   // The pair is the closer two; the distinct value is the last (top pair) or the first.
   const bool top_pair = mu0 - mu1 <= mu1 - mu2;
   // Far from both (about 3 when the pair is close; never below 1.5 for the closer pair).
   if (!(std::min(mu0 - mu1, mu1 - mu2) < 0.5 && std::max(mu0 - mu1, mu1 - mu2) > 1.0)) return false;
-  const Matrix3 b{{{d0 * inverse, a[0][1] * inverse, a[0][2] * inverse},
-                   {a[1][0] * inverse, d1 * inverse, a[1][2] * inverse},
-                   {a[2][0] * inverse, a[2][1] * inverse, d2 * inverse}}};
+  const Matrix3& b = scaled.b;
   // The estimate of the distinct value is within round-off (at the double root of the estimate's
   // cubic its error is second order in the pair's), and a vector error e moves the pair's block
   // by e^2 only: no refinement.
