@@ -9,6 +9,7 @@ import pytest
 from pyfem import solver
 from pyfem.scene import parse_scene
 from pyfem.support_output import BoltState, FEW_BOLTS, plot_section, section_bolts, section_y
+from test_support_scene import column_settings
 
 
 def straight_bolts(name, heads, direction, length=3.0, nodes=4, yielded=()):
@@ -58,7 +59,7 @@ def test_the_section_plot_shows_the_row_nearest_the_plane_or_a_small_group_whole
     assert plot_section(tmp_path / "none.png", [], 0.0, "") == {} and not (tmp_path / "none.png").exists()
 
 
-E_ROCK, NU_ROCK, P = 8.0e9, 0.24, 5.0e6
+# the column of tests/test_support_scene.py (its rock and load), with a weak bond: the bolts slip
 BOLT = {"diameter": 0.032, "yield_force": 3.2e5, "bond_stiffness": 1.0e9, "bond_strength": 2.0e3, "segment": 0.5}
 
 
@@ -66,19 +67,8 @@ def bolted_scene(monitor_y=None):
     """tests/test_support_scene.py's column: a 4 x 4 x 10 m box whose top 4 m the stage removes under a
     vertical 5 MPa; group "stage" (two vertical bolts, a weak bond: they slip) installed in the stage,
     group "late" (one bolt) at the start of the run."""
-    scene = {
-        "title": "bolted column",
-        "mesh": {"size": [4.0, 4.0, 10.0], "h": 1.0,
-                 "layers": [{"material": "rock", "thickness": 6.0}, {"material": "top", "thickness": 4.0}]},
-        "materials": {"rock": {"E": E_ROCK, "nu": NU_ROCK, "rho": 2600.0},
-                      "top": {"E": E_ROCK, "nu": NU_ROCK, "rho": 2600.0}},
-        "time": {"duration": 0.002},
-        "initial_stress": {"stress": [0.0, 0.0, -P, 0.0, 0.0, 0.0]},
-        "static": {"excavate": ["top"], "relaxation": 0.4, "support": ["stage"], "tolerance": 1e-9},
-        "support": {"stage": dict(BOLT, lines=[[1.5, 1.5, 6.0, 1.5, 1.5, 1.0], [2.5, 2.5, 6.0, 2.5, 2.5, 2.0]]),
-                    "late": dict(BOLT, lines=[[2.0, 1.0, 6.0, 2.0, 1.0, 3.0]])},
-        "output": {"xdmf_interval": 0.0, "checkpoint_interval": 0.0},
-    }
+    scene = column_settings({"stage": dict(BOLT, lines=[[1.5, 1.5, 6.0, 1.5, 1.5, 1.0], [2.5, 2.5, 6.0, 2.5, 2.5, 2.0]]),
+                             "late": dict(BOLT, lines=[[2.0, 1.0, 6.0, 2.0, 1.0, 3.0]])}, static_support=("stage",))
     if monitor_y is not None:
         scene["monitor"] = [{"name": "A", "point": [2.0, monitor_y, 5.0]}]
     scene["bolt_monitor"] = [{"name": "mid", "point": [1.6, 1.5, 4.2], "group": "stage"},

@@ -38,9 +38,10 @@ def support_table(**changes):
     return table
 
 
-def excavated_box(relaxation=0.4, support=None, static_support=("bolt",), **static):
-    """A 4 x 4 x 10 m box, rock (6 m) under a top layer (4 m) that the stage removes; sigma_zz = -P."""
-    scene = {
+def column_settings(groups: dict, relaxation=0.4, static_support=("bolt",), **static) -> dict:
+    """A 4 x 4 x 10 m box, rock (6 m) under a top layer (4 m) that the stage removes; sigma_zz = -P;
+    the support groups `groups` ({name: table}), those in `static_support` installed in the stage."""
+    return {
         "title": "bolted column",
         "mesh": {"size": [4.0, 4.0, 10.0], "h": 1.0,
                  "layers": [{"material": "rock", "thickness": 6.0}, {"material": "top", "thickness": 4.0}]},
@@ -50,10 +51,14 @@ def excavated_box(relaxation=0.4, support=None, static_support=("bolt",), **stat
         "initial_stress": {"stress": [0.0, 0.0, -P, 0.0, 0.0, 0.0]},
         "static": {"excavate": ["top"], "relaxation": relaxation, "support": list(static_support),
                    "tolerance": 1e-9, **static},
-        "support": {"bolt": support or support_table()},
+        "support": groups,
         "output": {"xdmf_interval": 0.0, "checkpoint_interval": 0.0},
     }
-    return parse_scene(scene)
+
+
+def excavated_box(relaxation=0.4, support=None, static_support=("bolt",), **static):
+    """column_settings with one group "bolt" (`support` or support_table()), parsed."""
+    return parse_scene(column_settings({"bolt": support or support_table()}, relaxation, static_support, **static))
 
 
 def bar_equation_force(s, g, length, EA, k):
