@@ -144,9 +144,9 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     """Validate the scene and print the solver's plan for it."""
     scene = load_scene(scene_path, overrides)
     report_warnings(scene)
-    from pyfem.ranks import world
+    from pyfem.ranks import distributed
 
-    if world().size > 1:  # under mpirun every rank builds its part
+    if distributed():  # under mpirun every rank builds its part
         from pyfem import distributed_model
 
         plan = distributed_model.check(scene)

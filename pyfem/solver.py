@@ -684,9 +684,9 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     Returns:
         The run summary (also written to run.json).
     """
-    from pyfem.ranks import world
+    from pyfem.ranks import distributed
 
-    if world().size > 1:  # under mpirun each rank builds and steps its part only
+    if distributed():  # under mpirun each rank builds and steps its part only
         from pyfem import distributed_model
 
         return distributed_model.run(scene, out_dir, on_plan=on_plan, progress=progress, resume=resume)
