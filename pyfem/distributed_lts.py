@@ -252,6 +252,11 @@ def rank_stepper(part, rank_levels: RankLevels, loop, input_arrays: dict | None 
                                                      for _, level in kernel_parts]
     if not bare and input_arrays is not None and len(input_arrays["nodes"]):
         kernel.add_provider(seismic_input_kernel(input_arrays))
+    held_force = None if bare or stage is None else stage.hand_over_force
+    if held_force is not None and np.any(held_force):  # a linear stage's hand-over force, held constant
+        from pyfem.static import hand_over_force_provider
+
+        kernel.add_provider(hand_over_force_provider(held_force))
     exchanges = level_exchanges(part, levels, max_level)
     kernel.set_partition(part.n_owned, exchanges)
     return local_stepping.LocalSteppingAdapter(kernel, rank_levels.ratio), exchanges, layout

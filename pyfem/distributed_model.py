@@ -35,15 +35,15 @@ its side-j node, when owned elsewhere, is moved there with its stiffness rows an
 the kernel's numbering (owned nodes first) differs from the function space's, and what dolfinx
 numbers (fields, monitors, element arrays) is mapped through `RankModel.kernel_of_dolfinx`.
 
-The static stage (pyfem/distributed_stage.py): its dynamic relaxation on the ranks' parts, handed over
-to the run as the serial stage's is.
+The static stage (pyfem/distributed_stage.py): its dynamic relaxation on the ranks' parts, or a linear
+stage's solves by PETSc across the ranks (pyfem/distributed_linear.py), handed over to the run as the
+serial stage's is.
 
 Local time stepping (pyfem/distributed_lts.py): the serial run's levels and row split on the ranks'
 parts, one velocity exchange per level.
 
-Not built yet (each refused under mpirun with the key and what is allowed; one rank runs them): a
-linear static stage's solves, one point per cell, quadratic tetrahedra, more than 31 contact
-interfaces.
+Not built yet (each refused under mpirun with the key and what is allowed; one rank runs them): one
+point per cell, quadratic tetrahedra, more than 31 contact interfaces.
 """
 from __future__ import annotations
 
@@ -620,10 +620,12 @@ def locate_pair_monitors(part: RankModel) -> RankPairMonitors:
 
 # --- the run --------------------------------------------------------------------------------------
 
-def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRegions | None, contact=None):
+def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRegions | None, contact=None,
+             held_force: np.ndarray | None = None):
     """The kernel's Stepper of the rank's share:
     with the element loop its counted cells (their energy this rank's) and its halo cells (not);
-    `contact`: the kernel's ContactPairs of the pairs it steps (None: none)."""
+    `contact`: the kernel's ContactPairs of the pairs it steps (None: none); `held_force`: a linear
+    stage's hand-over force on the nodes it steps (pyfem/distributed_linear.py), held constant."""
     from pyfem import _kernels
     from pyfem.effects import seismic_input_kernel
 
@@ -643,6 +645,10 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
             stepper.add_internal_force(component, count_energy=False)
     if contact is not None:
         stepper.add_contact(contact)
+    if held_force is not None and np.any(held_force):
+        from pyfem.static import hand_over_force_provider
+
+        stepper.add_provider(hand_over_force_provider(held_force))
     exchange = part.plan.kernel_exchange(part.comm, part.n_local)
     stepper.set_partition(part.n_owned, exchange)
     return stepper, exchange
@@ -797,14 +803,23 @@ def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None =
                                        f"{time_step.dt * lts.ratio:.6g} s), the row split, one velocity exchange per "
                                        "level (pyfem/distributed_lts.py); the set-up check of its map runs when the "
                                        f"run starts ({STABILITY_STEPS} global steps)"} if lts is not None else {}),
-            **({"static stage": f"dynamic relaxation on the ranks' parts before the motion: 2 stages of at most "
-                                f"{int(part.scene['static']['max_steps'])} relaxation steps each and a frequency "
-                                "probe (pyfem/distributed_stage.py)"} if "static" in part.scene else {}),
+            **({"static stage": stage_words(part.scene)} if "static" in part.scene else {}),
             **({"contact pairs": f"{part.n_pairs} ({part.moved_nodes} pair nodes stepped on their pair's rank, not "
                                  "dolfinx's owner: pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
             **({"interface wear": wear_words(contact_arrays["deterioration"], n_steps * time_step.dt)["note"]}
                if contact_arrays is not None and contact_arrays["deterioration"] is not None else {}),
             "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
+
+
+def stage_words(scene: Scene) -> str:
+    """check's line on the static stage of the distributed model."""
+    from pyfem.static import uses_relaxation
+
+    if not uses_relaxation(scene):
+        return (f"linear: 2 solves of K u = f by PETSc across the ranks (static.solver = \"{scene['static']['solver']}\"; "
+                "pyfem/distributed_linear.py) before the motion")
+    return (f"dynamic relaxation on the ranks' parts before the motion: 2 stages of at most "
+            f"{int(scene['static']['max_steps'])} relaxation steps each and a frequency probe (pyfem/distributed_stage.py)")
 
 
 # Steps the `check` times on every rank (from rest, the element loop's points elastic).
@@ -1100,7 +1115,8 @@ class DistributedRun:
             from pyfem.effects import make_contact_pairs
 
             self.contact = make_contact_pairs(self.contact_arrays)
-        return _stepper(self.part, self.time_step.dt, self.input_arrays, self.loop, self.contact)
+        return _stepper(self.part, self.time_step.dt, self.input_arrays, self.loop, self.contact,
+                        None if self.stage is None else self.stage.hand_over_force)
 
     def _check_lts(self) -> None:
         """The set-up check of the LTS map on the ranks (pyfem/distributed_lts.py), as the serial
@@ -1546,12 +1562,10 @@ class DistributedRun:
         state["stepper/energy_started"] = files[0]["stepper/energy_started"].tobytes()
         total = np.sum([f["stepper/energy"].view(np.float64) for f in files], axis=0)
         state["stepper/energy"] = (total if comm.rank == 0 else np.zeros_like(total)).tobytes()
-        # The input's work and power: a rank has the seismic input as its one provider when it owns
-        # an input node, else none; the totals go to the lowest rank that has it now.
+        # The providers' work and power (the seismic input where a rank owns an input node, a linear
+        # stage's hand-over force where it steps one of its nodes): only their sum enters the energy
+        # account (external_work), so the totals go to the first provider of the lowest rank with one.
         counts = comm.allgather(len(np.frombuffer(state["stepper/provider_work"], dtype=np.float64)))
-        if max(counts + [len(f["stepper/provider_work"].view(np.float64)) for f in files]) > 1:
-            raise RuntimeError("checkpoint: more than one force provider on a rank (the distributed model has the "
-                               "seismic input only)")
         taker = next((q for q, count in enumerate(counts) if count), None)
         for name in ("stepper/provider_work", "stepper/provider_power"):
             mine = np.zeros(counts[comm.rank])

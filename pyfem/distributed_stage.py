@@ -29,10 +29,10 @@ pairs' total force their F0, with the deterioration now on); the monitors in mat
 fields' matrix cells get sigma0 + C : eps(u1 + u2) in the rock, C : eps(u2) in the installed
 regions. A relaxed stage's out-of-balance is its error and is not applied (as in the whole model).
 
-Not built here (each refused with the key and what is allowed): a linear stage's PETSc solves
-(static.solver "direct" or "iterative", or "auto" without a nonlinear material). A resumed run
-solves the stage again (the same arithmetic on the same rank count; on another, the same to
-round-off) and then loads the checkpoint's state over it.
+A linear stage (static.solver "direct" or "iterative", or "auto" without a nonlinear material) is
+solved by PETSc across the ranks instead (pyfem/distributed_linear.py) and handed over here. A
+resumed run solves the stage again (the same arithmetic on the same rank count; on another, the
+same to round-off) and then loads the checkpoint's state over it.
 """
 from __future__ import annotations
 
@@ -50,14 +50,12 @@ KEY = "static.solver"
 
 
 def check_supported(scene) -> None:
-    """Raises SceneError when the scene's stage is one the distributed model does not solve."""
-    from pyfem.static import uses_relaxation
+    """Raises SceneError when the scene's stage is one no model solves (pyfem.static.check_linear:
+    a linear solver asked for a nonlinear material), as the serial run does."""
+    from pyfem.static import check_linear
 
-    if "static" in scene and not uses_relaxation(scene):
-        solver = scene["static"]["solver"]
-        raise SceneError(KEY, solver, "\"relaxation\" under mpirun (the linear stage's PETSc solves are not "
-                         "built on the ranks yet; \"auto\" chooses relaxation only with a [plasticity] or [damage] "
-                         "table); on one rank every solver runs (docs/scaling.md)")
+    if "static" in scene:
+        check_linear(scene)
 
 
 # --- the rank's arrays in the kernel's numbering ----------------------------------------------------
@@ -175,6 +173,9 @@ class RankStage:
         installed_regions: the regions cast in stage 2.
         report: static/static.json's content (every rank; its "monitors" added by the run).
         cell_averages: per stage, the counted cells' NonlinearRegions.cell_averages at its end.
+        hand_over_force: (3 n_local,) a linear stage's out-of-balance on the nodes this rank steps,
+            the dynamic run's constant force (None: a relaxed stage's is not applied).
+        pair_forces: (p, 3) a linear stage's F0 of the rank's pairs (None: the relaxed stage's pairs).
     """
 
     counted: list
@@ -185,6 +186,8 @@ class RankStage:
     installed_regions: list
     report: dict = field(default_factory=dict)
     cell_averages: list = field(default_factory=list)
+    hand_over_force: np.ndarray | None = None
+    pair_forces: np.ndarray | None = None
 
 
 def _stage_stepper(part, matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray, counted: list,
@@ -239,8 +242,13 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     from pyfem.relaxation import probe_frequency, ramp_length, relax
     from pyfem.effects import make_contact_pairs
     from pyfem.static import (_install_cells, _pair_force_vector, _stage_constraints, face_support_resultants,
-                              stage_boundary, stage_loads, stage_pair_arrays, stage_tolerance, unconverged_warning)
+                              stage_boundary, stage_loads, stage_pair_arrays, stage_tolerance, unconverged_warning,
+                              uses_relaxation)
 
+    if not uses_relaxation(part.scene):  # the linear stage: PETSc's solves across the ranks
+        from pyfem.distributed_linear import solve_linear
+
+        return solve_linear(part, contact_arrays)
     start = time.perf_counter()
     scene, comm, model = part.scene, part.comm, part.model
     root = comm.rank == 0
@@ -472,6 +480,11 @@ def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | Non
             loop.halo.components = list(stage.halo)
             for name, component in zip(loop.halo.arrays, stage.halo):
                 loop.halo.initial_stress[name] = component.stress()
+    if contact_arrays is not None and stage.pair_forces is not None:  # a linear stage's F0 (pairs new, bonded)
+        from pyfem.static import warn_pairs_over_strength
+
+        contact_arrays["static_force"] = np.ascontiguousarray(stage.pair_forces, dtype=np.float64)
+        warn_pairs_over_strength(part.scene, contact_arrays, part.comm)
     if contact_arrays is not None and stage.contact is not None:
         contact_arrays["static_force"] = np.ascontiguousarray(stage.contact.static_force())
         if welded(part.scene):  # split after the stage: new bonded pairs with the real strengths and F0

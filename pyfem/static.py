@@ -460,38 +460,53 @@ def check_held(basis: FreeBasis, node_coords: np.ndarray, inactive_nodes: np.nda
                          "(static.boundary.type = \"roller\", the default)")
 
 
+def _orthonormal_columns(vectors: np.ndarray, comm) -> np.ndarray:
+    """The columns of `vectors` (this rank's rows of a matrix split by rows over `comm`) made
+    orthonormal over the ranks (the Gram matrix summed; its null directions dropped)."""
+    gram = comm.allreduce(vectors.T @ vectors)
+    values, directions = np.linalg.eigh(gram)
+    keep = values > 1e-12 * max(float(values.max(initial=0.0)), 1e-300)
+    return vectors @ (directions[:, keep] / np.sqrt(values[keep]))
+
+
 class LinearSolver:
     """K w = f for a symmetric positive definite reduced stiffness, with PETSc (petsc4py).
 
     Direct (MUMPS Cholesky when PETSc has MUMPS, else PETSc's LU) up to DIRECT_SOLVER_LIMIT
     unknowns or when asked; above, CG with smoothed-aggregation AMG (GAMG) given the rigid-body
-    modes as near null space, to the relative residual `tolerance`. One rank (under mpirun the
-    distributed model refuses a linear stage: pyfem/distributed_stage.py).
+    modes as near null space, to the relative residual `tolerance`. With `comm` of several ranks
+    (the distributed model's linear stage, pyfem/distributed_linear.py) `matrix` is this rank's
+    rows of the reduced system (global column numbers), the vectors its rows, and PETSc solves
+    across the ranks (MUMPS in parallel, or CG + GAMG); on one rank the arithmetic is the serial one.
     """
 
     def __init__(self, matrix: sp.csr_matrix, tolerance: float, choice: str = "auto",
-                 near_null_space: np.ndarray | None = None):
+                 near_null_space: np.ndarray | None = None, comm=None):
         from petsc4py import PETSc
 
-        n = matrix.shape[0]
+        self._comm = comm if comm is not None and comm.size > 1 else None
+        rows, n = matrix.shape[0], matrix.shape[1]
+        if self._comm is not None and near_null_space is not None:
+            near_null_space = _orthonormal_columns(near_null_space, self._comm)
         self.method = choice if choice != "auto" else ("direct" if n <= DIRECT_SOLVER_LIMIT else "iterative")
         has_mumps = PETSc.Sys.hasExternalPackage("mumps")
         self.tolerance = tolerance
         self.matrix = matrix
-        petsc_comm = PETSc.COMM_SELF
+        petsc_comm = PETSc.COMM_SELF if self._comm is None else self._comm
         self._petsc_comm = petsc_comm
+        self._size = (rows, n)
         matrix = matrix.tocsr()
         matrix.sort_indices()
         csr = (matrix.indptr.astype(PETSc.IntType), matrix.indices.astype(PETSc.IntType),
                np.ascontiguousarray(matrix.data, dtype=np.float64))
-        self._A = PETSc.Mat().createAIJ(size=(n, n), csr=csr, comm=petsc_comm)
+        self._A = PETSc.Mat().createAIJ(size=(self._size, self._size), csr=csr, comm=petsc_comm)
         self._A.assemble()
         ksp = PETSc.KSP().create(petsc_comm)
         ksp.setOperators(self._A)
         pc = ksp.getPC()
         if self.method == "direct":
             ksp.setType("preonly")
-            if has_mumps:
+            if has_mumps or self._comm is not None:  # (PETSc's own LU is serial)
                 pc.setType("cholesky")
                 pc.setFactorSolverType("mumps")
                 self.name = "direct (MUMPS Cholesky)"
@@ -503,7 +518,7 @@ class LinearSolver:
             ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)  # the tolerance is on ||f - K w|| / ||f||
             pc.setType("gamg")
             if near_null_space is not None and near_null_space.shape[1]:
-                basis, _ = np.linalg.qr(near_null_space)
+                basis = near_null_space if self._comm is not None else np.linalg.qr(near_null_space)[0]
                 vectors = [self._vector(column) for column in basis.T]
                 self._null_space = PETSc.NullSpace().create(vectors=vectors, comm=petsc_comm)
                 self._A.setNearNullSpace(self._null_space)
@@ -515,7 +530,13 @@ class LinearSolver:
         """A PETSc vector of `whole` (n,) (copied)."""
         from petsc4py import PETSc
 
-        return PETSc.Vec().createWithArray(np.array(whole, dtype=np.float64), comm=self._petsc_comm)
+        return PETSc.Vec().createWithArray(np.array(whole, dtype=np.float64), size=self._size,
+                                           comm=self._petsc_comm)
+
+    def _norm(self, x: np.ndarray) -> float:
+        if self._comm is None:
+            return float(np.linalg.norm(x))
+        return math.sqrt(self._comm.allreduce(float(x @ x)))
 
     def solve(self, rhs: np.ndarray) -> tuple[np.ndarray, int, float]:
         """(w, iterations, ||f - K w|| / ||f||).
@@ -526,7 +547,7 @@ class LinearSolver:
         """
         from petsc4py import PETSc
 
-        norm = float(np.linalg.norm(rhs))
+        norm = self._norm(rhs)
         if norm == 0.0:
             return np.zeros_like(rhs), 0, 0.0
         b = self._vector(rhs)
@@ -538,7 +559,17 @@ class LinearSolver:
                                "singular when the held faces leave the model free to move as a rigid body; "
                                "hold more faces ([static.boundary])") from None
         w = x.getArray().copy()
-        residual = float(np.linalg.norm(rhs - self.matrix @ w)) / norm
+        if self._comm is None:
+            residual = float(np.linalg.norm(rhs - self.matrix @ w)) / norm
+        else:  # (this rank's rows of K w: PETSc's product over the ranks)
+            product = b.duplicate()
+            self._A.mult(x, product)
+            residual = self._norm(rhs - product.getArray()) / norm
+        if self._comm is not None:  # (every rank raises alike below)
+            from mpi4py import MPI
+
+            if not self._comm.allreduce(bool(np.all(np.isfinite(w))), op=MPI.LAND):
+                w = np.full_like(w, np.nan)
         iterations = max(1, self._ksp.getIterationNumber()) if self.method == "iterative" else 1
         # A direct solve is not iterated to the tolerance: a residual far above round-off there means
         # a (nearly) singular stiffness.
@@ -1117,10 +1148,13 @@ def hand_over(simulation, solve: bool = True) -> None:
     simulation.static = state
 
 
-def warn_pairs_over_strength(scene, contact_arrays: dict) -> None:
+def warn_pairs_over_strength(scene, contact_arrays: dict, comm=None) -> None:
     """The warning of pairs the stage hands over beyond their strength at D = 1 (a linear stage keeps
-    them bonded; `contact.split = "after_static"` welds them)."""
+    them bonded; `contact.split = "after_static"` welds them); `comm`: the distributed model's ranks'
+    pairs counted together."""
     over = pairs_over_strength(contact_arrays)
+    if comm is not None:
+        over = {key: comm.allreduce(count) for key, count in over.items()}
     if not (over["opening"] or over["sliding"]):
         return
     beyond = (f"static: {over['opening']} contact pairs are in tension beyond their tensile strength and "
