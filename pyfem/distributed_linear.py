@@ -33,17 +33,6 @@ import scipy.sparse as sp
 from mpi4py import MPI
 
 
-def owned_rows(part, matrix: tuple) -> sp.csr_matrix:
-    """(3 n_owned, 3 n_local) CSR of a kernel matrix's (indptr, indices, blocks) owned rows."""
-    indptr, indices, blocks = matrix
-    n = part.n_owned
-    end = int(indptr[n])
-    rows = sp.bsr_matrix((blocks[:end], indices[:end], indptr[:n + 1]), shape=(3 * n, 3 * part.n_local))
-    csr = rows.tocsr()
-    csr.sort_indices()
-    return csr
-
-
 def rank_basis(part, basis) -> tuple[sp.csr_matrix, int, int]:
     """(T over the rank's local nodes with global columns (3 n_local, M), this rank's first column,
     M): `basis` (pyfem.static.FreeBasis of the owned nodes, columns local) shifted by the columns of
@@ -95,7 +84,7 @@ def solve_linear(part, contact_arrays: dict | None):
     """The linear stage on the ranks (module docstring); returns pyfem.distributed_stage.RankStage
     with the hand-over force and the pair forces F0."""
     from pyfem.distributed_stage import (RankStage, _largest_displacement, check_held_on_ranks, kernel_nodal,
-                                         owned_force, stage_matrix)
+                                         owned_force, owned_rows, stage_matrix)
     from pyfem.static import (LinearSolver, _install_cells, _stage_constraints, face_support_resultants,
                               free_basis, normal_and_shear, rigid_body_modes, stage_boundary, stage_loads,
                               stage_tolerance)

@@ -99,14 +99,25 @@ def stage_matrix(part, removed_cells: np.ndarray) -> tuple:
     return drop_zero_blocks(local_stiffness(part.comm, part.ownership, rows, part.n_local, part.local_nodes))
 
 
+def owned_rows(part, matrix: tuple):
+    """(3 n_owned, 3 n_local) scipy CSR of a kernel matrix's (indptr, indices, blocks) owned rows,
+    each row's entries in the order of the whole model's CSR on one rank (block columns ascending)."""
+    import scipy.sparse as sp
+
+    indptr, indices, blocks = matrix
+    n = part.n_owned
+    end = int(indptr[n])
+    csr = sp.bsr_matrix((blocks[:end], indices[:end], indptr[:n + 1]), shape=(3 * n, 3 * part.n_local)).tocsr()
+    csr.sort_indices()
+    return csr
+
+
 def row_sums(part, matrix: tuple) -> np.ndarray:
-    """(n_owned,) the largest of each owned node's three scalar rows' sums of |K_rc| (Gershgorin)."""
-    indptr, _, blocks = matrix
-    per_block = np.abs(blocks[:indptr[part.n_owned]]).sum(axis=2)  # (blocks, 3): each scalar row's share
-    row = np.repeat(np.arange(part.n_owned), np.diff(indptr[:part.n_owned + 1]))
-    sums = np.zeros((part.n_owned, 3))
-    np.add.at(sums, row, per_block)
-    return sums.max(axis=1)
+    """(n_owned,) the largest of each owned node's three scalar rows' sums of |K_rc| (Gershgorin),
+    summed as pyfem.relaxation.scaled_mass sums the whole model's rows (scipy's CSR row sums, the
+    entries in column order): on one rank the serial stage's masses to the bit."""
+    absolute = abs(owned_rows(part, matrix))
+    return np.asarray(absolute.sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
 
 
 def scaled_mass(part, matrix: tuple, frequency_factor: float) -> np.ndarray:
@@ -319,7 +330,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     stages, reactions, increments, averages = [], [], [], []
     carried = np.zeros(3 * part.n_local)
     regions_summary_first = None
-    all_regions = sorted(model.regions)
+    all_regions = list(model.regions)  # (the scene's order, as the serial stage lists them)
     rock_regions = [name for name in all_regions if name not in installed_regions]
     from pyfem.distributed_parts import region_summary
 
@@ -399,8 +410,8 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
               "seconds": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
               "max_displacement": {"value": largest, "point": point, "vector": vector}, "out_of_balance": out_of_balance,
               "hand_over": "the dynamic run starts from u = v = 0 with the stage's stress; the in-situ traction, "
-                           "body force, support forces and pair forces of the stage are held constant; a relaxed "
-                           "stage's out-of-balance above is its error and is not applied",
+                           "body force, support forces and pair forces of the stage are held constant; the "
+                           "out-of-balance above (a relaxed stage's error) is not applied",
               "load_ramp_steps": ramp, "support_forces": face_support,
               "in_situ_tractions": {face.name: comm.allreduce(traction.reshape(-1, 3)[face.nodes].sum(axis=0)).tolist()
                                     for face in model.faces},
