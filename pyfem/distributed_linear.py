@@ -207,6 +207,6 @@ def solve_linear(part, contact_arrays: dict | None):
                            "normal_stress_max": comm.allreduce(float(np.max(N / area, initial=-np.inf)), op=MPI.MAX),
                            "shear_stress_max": comm.allreduce(float(np.max(T / area, initial=-np.inf)), op=MPI.MAX),
                            "in_tension": comm.allreduce(int(np.count_nonzero(N < 0.0)))}
-    return RankStage(counted=[], halo=[], contact=None, u_total=u1 + u2, u_support=u2,
+    return RankStage(counted=[], halo=[], contact=None, u_total=u1 + u2, u_support=u2, u_first=u1,
                      installed_regions=list(installed_regions), report=report, cell_averages=[{}, {}],
                      hand_over_force=hand_over_force, pair_forces=pair_forces)

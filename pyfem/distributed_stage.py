@@ -180,7 +180,7 @@ class RankStage:
         counted, halo: the element-loop components (the rank's counted and halo cells, in the
             region order of pyfem.distributed_model.RankRegions), rebased: the dynamic run's.
         contact: the kernel's ContactPairs of the rank's pairs, rebased (None: none here).
-        u_total, u_support: (3 n_local,) u1 + u2 and u2 in the kernel's numbering (m).
+        u_total, u_support, u_first: (3 n_local,) u1 + u2, u2 and u1 in the kernel's numbering (m).
         installed_regions: the regions cast in stage 2.
         report: static/static.json's content (every rank; its "monitors" added by the run).
         cell_averages: per stage, the counted cells' NonlinearRegions.cell_averages at its end.
@@ -199,6 +199,7 @@ class RankStage:
     cell_averages: list = field(default_factory=list)
     hand_over_force: np.ndarray | None = None
     pair_forces: np.ndarray | None = None
+    u_first: np.ndarray | None = None
 
 
 def _stage_stepper(part, matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray, counted: list,
@@ -420,7 +421,8 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     if contact_arrays is not None:
         report["pairs"] = pair_report(comm, contact, contact_arrays)
     return RankStage(counted=[counted[name] for name in counted_names], halo=[halo[name] for name in halo_names],
-                     contact=contact, u_total=u1 + u2, u_support=u2, installed_regions=list(installed_regions),
+                     contact=contact, u_total=u1 + u2, u_support=u2, u_first=u1,
+                     installed_regions=list(installed_regions),
                      report=report, cell_averages=averages)
 
 
@@ -463,7 +465,7 @@ def monitor_report(stage: "RankStage", monitors, names: list, comm: MPI.Comm) ->
     mine = []
     for k, j in enumerate(monitors.index):
         nodes, weights = monitors.nodes[k], monitors.weights[k]
-        first = weights @ (stage.u_total - stage.u_support).reshape(-1, 3)[nodes]
+        first = weights @ stage.u_first.reshape(-1, 3)[nodes]
         total = weights @ stage.u_total.reshape(-1, 3)[nodes]
         entry = {"displacement_stage_1": first.tolist(), "displacement": total.tolist()}
         if monitors.stress is not None:
@@ -529,7 +531,7 @@ def cell_static_stress(stage: RankStage, part, strain, first: bool = False) -> n
         return strain.stress(strain.strain(part.dolfinx_order(u))) - sigma0
 
     if first:
-        stress = elastic(stage.u_total - stage.u_support) + sigma0
+        stress = elastic(stage.u_first) + sigma0
         stress[installed] = 0.0
         return stress
     final = static_stress(elastic, installed, stage.u_total, stage.u_support)
@@ -561,7 +563,7 @@ def write_fields(path, stage: RankStage, part) -> np.ndarray:
     installed = np.zeros(len(strain.nodes), dtype=bool)
     for name in stage.installed_regions:
         installed[region_cells(model, name)] = True
-    u1 = stage.u_total - stage.u_support
+    u1 = stage.u_first
     final = cell_static_stress(stage, part, strain)
     stages = ((1.0, u1, u1, cell_static_stress(stage, part, strain, first=True), (~installed).astype(float)),
               (2.0, stage.u_total, stage.u_support, final, np.ones(len(installed))))

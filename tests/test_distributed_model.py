@@ -278,10 +278,9 @@ def test_the_ranks_equal_the_serial_run(runs, name, ranks):
           f"(extra {mpi['extra_ghost_nodes']}), peak MiB {mpi['peak_memory_mib']}")
 
 
-# What the ranks do not build yet (one rank, the serial path, runs each): a linear static stage, one
-# point per cell, quadratic tetrahedra.
+# What the ranks do not build yet (one rank, the serial path, runs each): one point per cell,
+# quadratic tetrahedra. (The linear static stage runs on the ranks: tests/test_mpi_linear_stage.py.)
 @pytest.mark.parametrize("scene, extra, key", [
-    ("workflows/scenes/case1_vertical_coarse.toml", ("--set", 'static.solver="direct"'), "static.solver"),
     ("tests/scenes/mpi_weak_layer.toml", ("--set", 'materials.weak.plasticity.integration="reduced"'),
      "materials.weak.plasticity.integration"),
     ("tests/scenes/mpi_tunnel_tet.toml", ("--set", "mesh.order=2"), "mesh.order"),

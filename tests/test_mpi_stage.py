@@ -1,7 +1,7 @@
 """The static stage under `mpirun -n N` equals the serial stage (docs/scaling.md "The static stage
 on the distributed model"): its dynamic relaxation stepped on the ranks' parts of dolfinx's mesh
-(pyfem/distributed_stage.py; no rank holds the whole model). A linear stage (PETSc solves) is refused
-under mpirun (tests/test_distributed_model.py).
+(pyfem/distributed_stage.py; no rank holds the whole model). A linear stage (PETSc's solves across the
+ranks): tests/test_mpi_linear_stage.py.
 
 The user's model: workflows/scenes/case3_contact_coarse.toml as it is (excavation with the whole load
 released, the lining cast stress-free, Mohr-Coulomb rock around the cavern, concrete lining damage,
