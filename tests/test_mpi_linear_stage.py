@@ -156,6 +156,23 @@ def test_the_iterative_linear_stage_on_two_ranks_equals_the_serial_one_to_its_to
         assert difference < SOLVER_TOLERANCE, (kind, difference)
 
 
+@pytest.mark.slow
+def test_a_run_with_a_linear_stage_resumed_on_another_rank_count_goes_on_as_the_uninterrupted_run(runs, tmp_path):
+    """0.05 s on 2 ranks, then --resume to 0.1 s on 3 (which solve the stage again and load the
+    checkpoint's state, the hand-over force's work summed onto one provider): the histories equal the
+    uninterrupted 2-rank run's to EXACT (measured 1.9e-15 of the accelerations)."""
+    out = tmp_path / "resumed"
+    pyfem_run(2, SCENE, out, "--set", "time.duration=0.05")
+    pyfem_run(3, SCENE, out, "--resume")
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "finished" and run["mpi"]["ranks"] == 3
+    assert run["resumed"][0]["t"] == pytest.approx(0.05) and run["time_reached"] == pytest.approx(0.1)
+    assert_the_stage_did_something(out, 3)
+    differences = largest_differences(out, runs[2, "direct"])
+    for kind, difference in differences.items():
+        assert difference < EXACT, (kind, difference)
+
+
 def test_a_linear_solver_for_a_nonlinear_material_is_refused_under_mpirun_as_serially(tmp_path):
     """static.solver = "direct" with a [plasticity] table: the serial refusal (pyfem.static.check_linear)
     on every rank alike, before any model is built; exit 2, no run written."""

@@ -79,7 +79,8 @@ def test_the_static_stage_on_the_distributed_model_equals_the_serial_stage(stage
     handed-over stress to EXACT (measured on 2 / 3 ranks: 1.6e-14 / 1.3e-14, 1.4e-15 / 1.0e-15,
     1.9e-14 / 4.0e-14), and the dynamic histories to STAGE_ROUNDOFF (measured in two sittings on 2 / 3 ranks:
     acceleration 1.8e-8 / 1.6e-8-2.0e-8, velocity 1.9e-10 / 1.9e-10, length 2.9e-11-3.0e-11 /
-    2.9e-11-4.4e-11, energy 1.1e-9-2.3e-9 / 1.6e-9-2.2e-9)."""
+    2.9e-11-4.4e-11, energy 1.1e-9-2.3e-9 / 1.6e-9-2.2e-9; on 2 ranks with the scaled mass's CSR row
+    sums, 2026-12-08: acceleration 3.0e-9, velocity 3.4e-11, length 3.0e-11, energy 5.0e-10)."""
     serial, shared = stage_report(stage_runs[1]), stage_report(stage_runs[ranks])
     run = json.loads((stage_runs[ranks] / "run.json").read_text())
     assert run["model"] == "distributed" and run["mpi"]["ranks"] == ranks
