@@ -1594,8 +1594,14 @@ class DistributedRun:
         kernel_threads()
         if "static" in self.scene:  # (a resumed run solves it again; the checkpoint's state is loaded over it)
             from pyfem import distributed_stage
+            from pyfem.static import uses_relaxation
 
-            self.stage = distributed_stage.solve(part, self.loop, self.contact_arrays)
+            if uses_relaxation(self.scene):
+                self.stage = distributed_stage.solve(part, self.loop, self.contact_arrays)
+            else:  # the linear stage: PETSc's solves across the ranks
+                from pyfem.distributed_linear import solve_linear
+
+                self.stage = solve_linear(part, self.contact_arrays)
             distributed_stage.hand_over(self.stage, part, self.loop, self.monitors, self.contact_arrays)
             self.stage.report["monitors"] = distributed_stage.monitor_report(self.stage, self.monitors, self.names,
                                                                              comm)

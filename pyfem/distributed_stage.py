@@ -254,13 +254,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     from pyfem.relaxation import probe_frequency, ramp_length, relax
     from pyfem.effects import make_contact_pairs
     from pyfem.static import (_install_cells, _pair_force_vector, _stage_constraints, face_support_resultants,
-                              stage_boundary, stage_loads, stage_pair_arrays, stage_tolerance, unconverged_warning,
-                              uses_relaxation)
-
-    if not uses_relaxation(part.scene):  # the linear stage: PETSc's solves across the ranks
-        from pyfem.distributed_linear import solve_linear
-
-        return solve_linear(part, contact_arrays)
+                              stage_boundary, stage_loads, stage_pair_arrays, stage_tolerance, unconverged_warning)
     start = time.perf_counter()
     scene, comm, model = part.scene, part.comm, part.model
     root = comm.rank == 0
