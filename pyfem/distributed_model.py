@@ -255,7 +255,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     """This rank's part of the scene's model (module docstring, steps 1-4)."""
     from dolfinx import fem
 
-    from pyfem.assembly import elastic_stiffness_matrix, lumped_mass, uses_diagonal_scaling
+    from pyfem.assembly import elastic_stiffness_matrix, lumped_mass
     from pyfem.distributed_pairs import Ownership, global_pairs, move_rows, pair_moves, positions, route_faces
     from pyfem.mesh import create_mesh_with_interfaces
     from pyfem.operators import Model, _cell_materials, boundary_face, face_kinds, truncation_faces
@@ -266,9 +266,6 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     order = scene["mesh"].get("order", 1)
     mesh, cell_tags, facet_tags, regions, boundaries, interface_tags = create_mesh_with_interfaces(scene, comm)
     V = fem.VectorFunctionSpace(mesh, ("Lagrange", order))
-    if uses_diagonal_scaling(V):  # HRZ lumping reads owned diagonals and per-rank totals (not built for ranks)
-        raise SceneError("mesh.order", order, "1 on a tetrahedral mesh under mpirun (quadratic tetrahedra's "
-                         "HRZ-lumped mass is not built on the ranks yet; on one rank they run, docs/scaling.md)")
     materials = _cell_materials(mesh, cell_tags, regions, scene["materials"])
     quadrature = {"quadrature_degree": 2 * order}
     coords_d = V.tabulate_dof_coordinates().astype(np.float64, copy=True)  # the function space's numbering
