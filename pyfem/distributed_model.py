@@ -66,6 +66,9 @@ from pyfem.distributed_parts import (_without_cells, add_to_diagonal, drop_zero_
                                      local_numbering, local_stiffness, localize, owned_row_sums, owned_rows_global,
                                      region_summary, start_vector, stepping, to_kernel_numbering)
 
+# Bits of a pair node's roles per int64 word of its checkpoint key (RankModel.pair_side): up to 31
+# interfaces one word, as many more as more interfaces need.
+ROLE_BITS = 62
 # The histories go to disk (and run.json's time reached) when this much wall time (s) passed since the last time.
 FLUSH_SECONDS = 2.0
 
@@ -198,7 +201,7 @@ class RankModel:
     n_pairs: int = 0                 # the whole model's
     moved_nodes: int = 0             # pair nodes stepped on another rank than dolfinx's owner (every rank's)
     n_extra: int = 0                 # extra ghosts: ghosts the function space's index map does not hold
-    pair_side: np.ndarray | None = None    # per local node: its roles, bit side + 2 interface of each pair it is in
+    pair_side: np.ndarray | None = None    # (n_local, words): its roles, bit side + 2 interface of each pair it is in
     row_sums: np.ndarray | None = None     # per owned node: its largest absolute row sum of every cell's matrix
 
     def node_keys(self, nodes: np.ndarray) -> np.ndarray:
@@ -334,14 +337,14 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     rank_pairs = pair_index = pair_global = pair_side = None
     if pairs is not None:
         pair_index, pair_global, rank_pairs = _rank_pairs(comm, pairs, ownership, local_nodes, mass)
-        if len(pairs.names) > 31:
-            raise SceneError("contact.interfaces", f"{len(pairs.names)} interfaces", "at most 31 under mpirun (a "
-                             "checkpoint keys a pair node by its roles, a bit each; on one rank any number runs)")
-        pair_side = np.zeros(len(local_nodes), dtype=np.int64)  # a bit per role: side of an interface
+        # A bit per role (side + 2 interface), ROLE_BITS to an int64 word, as many words as the interfaces need.
+        words = -(-2 * len(pairs.names) // ROLE_BITS)
+        pair_side = np.zeros((len(local_nodes), words), dtype=np.int64)
         for side in (0, 1):
             here = np.isin(pairs.nodes[:, side], local_nodes)
-            np.bitwise_or.at(pair_side, positions(local_nodes, pairs.nodes[here, side], "pairs"),
-                             np.left_shift(1, side + 2 * pairs.interface[here].astype(np.int64)))
+            role = side + 2 * pairs.interface[here].astype(np.int64)
+            np.bitwise_or.at(pair_side, (positions(local_nodes, pairs.nodes[here, side], "pairs"), role // ROLE_BITS),
+                             np.left_shift(1, role % ROLE_BITS))
     return RankModel(comm=comm, scene=scene, model=model, n_owned=n_owned, local_nodes=local_nodes, coords=coords,
                      mass=mass, matrix=kernel_matrix, plan=plan, estimates=estimates,
                      loop_cells={name: owned for name, (_, owned) in loop_cells.items()},
