@@ -41,9 +41,14 @@ to the run as the serial stage's is.
 Local time stepping (pyfem/distributed_lts.py): the serial run's levels and row split on the ranks'
 parts, one velocity exchange per level.
 
-Not built yet (each refused under mpirun with the key and what is allowed; one rank runs them): a
-linear static stage's solves, one point per cell, quadratic tetrahedra, more than 31 contact
-interfaces.
+One point per cell (integration = "reduced"): each rank adds its owned one-point cells' hourglass
+stiffness to the PETSc matrix (`pyfem.distributed_parts.add_hourglass`) and steps their one-point
+arrays, sent to the other ranks' halo with their mean initial stress. Quadratic tetrahedra: their
+HRZ-lumped masses with the ghosts' diagonals from their owners (pyfem.assembly.hrz_lumped_vector).
+Any number of contact interfaces: a pair node's checkpoint key holds its roles in ROLE_BITS-bit words.
+
+Not built yet (refused under mpirun with the key and what is allowed; one rank runs it): a linear
+static stage's solves.
 """
 from __future__ import annotations
 

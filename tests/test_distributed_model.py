@@ -278,13 +278,10 @@ def test_the_ranks_equal_the_serial_run(runs, name, ranks):
           f"(extra {mpi['extra_ghost_nodes']}), peak MiB {mpi['peak_memory_mib']}")
 
 
-# What the ranks do not build yet (one rank, the serial path, runs each): a linear static stage, one
-# point per cell, quadratic tetrahedra.
+# What the ranks do not build yet (one rank, the serial path, runs it): a linear static stage. (One
+# point per cell, quadratic tetrahedra and more than 31 interfaces run: tests/test_distributed_ported.py.)
 @pytest.mark.parametrize("scene, extra, key", [
     ("workflows/scenes/case1_vertical_coarse.toml", ("--set", 'static.solver="direct"'), "static.solver"),
-    ("tests/scenes/mpi_weak_layer.toml", ("--set", 'materials.weak.plasticity.integration="reduced"'),
-     "materials.weak.plasticity.integration"),
-    ("tests/scenes/mpi_tunnel_tet.toml", ("--set", "mesh.order=2"), "mesh.order"),
 ])
 def test_what_the_ranks_do_not_build_is_refused_in_one_line(tmp_path, scene, extra, key):
     result = pyfem(2, "run", scene, "--out", str(tmp_path / "run"), *extra)
