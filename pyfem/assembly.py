@@ -63,16 +63,24 @@ def hrz_lumped_vector(coefficient, V: fem.FunctionSpace, measure: ufl.Measure, s
     trial, test = ufl.TrialFunction(V), ufl.TestFunction(V)
     matrix = fem_petsc.assemble_matrix(fem.form(coefficient * ufl.inner(trial, test) * measure))
     matrix.assemble()
-    diagonal = matrix.getDiagonal()
+    diagonal = matrix.getDiagonal()  # the owned rows'
     matrix.destroy()
-    values = diagonal.array.copy().reshape(-1, SPACE_DIMENSION)[:, 0]
+    held = fem.Function(V)  # the ghosts' diagonals from their owners (a distributed mesh)
+    n_owned = V.dofmap.index_map.size_local
+    held.x.array[:SPACE_DIMENSION * n_owned] = diagonal.array
     diagonal.destroy()
+    held.x.scatter_forward()
+    values = held.x.array.copy().reshape(-1, SPACE_DIMENSION)[:, 0]
     if not scale:
         return values
     ones = fem.Constant(V.mesh, np.ones(SPACE_DIMENSION, dtype=PETSc.ScalarType))
-    # The row sums' total is int c exactly (the basis is a partition of unity).
-    total = assemble_nodal_vector(coefficient * ufl.inner(ones, test) * measure, V)[:, 0].sum()
-    trace = values.sum()
+    # The row sums' total is int c exactly (the basis is a partition of unity); totals of the owned
+    # nodes, summed over the ranks.
+    comm = V.mesh.comm
+    total = assemble_nodal_vector(coefficient * ufl.inner(ones, test) * measure, V)[:n_owned, 0].sum()
+    trace = values[:n_owned].sum()
+    if comm.size > 1:
+        total, trace = comm.allreduce(float(total)), comm.allreduce(float(trace))
     return values * (total / trace) if trace != 0.0 else values
 
 

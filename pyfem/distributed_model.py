@@ -42,8 +42,13 @@ serial stage's is.
 Local time stepping (pyfem/distributed_lts.py): the serial run's levels and row split on the ranks'
 parts, one velocity exchange per level.
 
-Not built yet (each refused under mpirun with the key and what is allowed; one rank runs them): one
-point per cell, quadratic tetrahedra, more than 31 contact interfaces.
+One point per cell (integration = "reduced"): each rank adds its owned one-point cells' hourglass
+stiffness to the PETSc matrix (`pyfem.distributed_parts.add_hourglass`) and steps their one-point
+arrays, sent to the other ranks' halo with their mean initial stress. Quadratic tetrahedra: their
+HRZ-lumped masses with the ghosts' diagonals from their owners (pyfem.assembly.hrz_lumped_vector).
+Any number of contact interfaces: a pair node's checkpoint key holds its roles in ROLE_BITS-bit words.
+
+The linear static stage: pyfem/distributed_linear.py (PETSc on the ranks' rows).
 """
 from __future__ import annotations
 
@@ -62,10 +67,14 @@ from mpi4py import MPI
 
 from pyfem.scene import Scene, SceneError
 from pyfem.clock import run_origin
-from pyfem.distributed_parts import (_without_cells, add_to_diagonal, drop_zero_blocks, element_loop_cells,
-                                     local_numbering, local_stiffness, localize, owned_row_sums, owned_rows_global,
-                                     region_summary, start_vector, stepping, to_kernel_numbering)
+from pyfem.distributed_parts import (_without_cells, add_hourglass, add_to_diagonal, drop_zero_blocks,
+                                     element_loop_cells, local_numbering, local_stiffness, localize,
+                                     one_point_regions, owned_row_sums, owned_rows_global, region_summary,
+                                     start_vector, stepping, to_kernel_numbering)
 
+# Bits of a pair node's roles per int64 word of its checkpoint key (RankModel.pair_side): up to 31
+# interfaces one word, as many more as more interfaces need.
+ROLE_BITS = 62
 # The histories go to disk (and run.json's time reached) when this much wall time (s) passed since the last time.
 FLUSH_SECONDS = 2.0
 
@@ -83,12 +92,6 @@ def check_supported(scene: Scene) -> None:
                          "on one rank only (the distributed model does not place them on the ranks' parts yet): run "
                          "without mpirun, or leave out the [support.NAME] tables")
     distributed_stage.check_supported(scene)
-    for name, table in scene["materials"].items():
-        for law in ("plasticity", "damage"):
-            if (table.get(law) or {}).get("integration") == "reduced":
-                raise SceneError(f"materials.{name}.{law}.integration", "reduced",
-                                 "\"full\" under mpirun (the distributed model does not build one point per cell "
-                                 "yet; on one rank it runs, docs/scaling.md)")
 
 
 # --- the ghost exchange (the numbering: pyfem/distributed_parts.py) ------------------------------
@@ -198,7 +201,7 @@ class RankModel:
     n_pairs: int = 0                 # the whole model's
     moved_nodes: int = 0             # pair nodes stepped on another rank than dolfinx's owner (every rank's)
     n_extra: int = 0                 # extra ghosts: ghosts the function space's index map does not hold
-    pair_side: np.ndarray | None = None    # per local node: its roles, bit side + 2 interface of each pair it is in
+    pair_side: np.ndarray | None = None    # (n_local, words): its roles, bit side + 2 interface of each pair it is in
     row_sums: np.ndarray | None = None     # per owned node: its largest absolute row sum of every cell's matrix
 
     def node_keys(self, nodes: np.ndarray) -> np.ndarray:
@@ -255,7 +258,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     """This rank's part of the scene's model (module docstring, steps 1-4)."""
     from dolfinx import fem
 
-    from pyfem.assembly import elastic_stiffness_matrix, lumped_mass, uses_diagonal_scaling
+    from pyfem.assembly import elastic_stiffness_matrix, lumped_mass
     from pyfem.distributed_pairs import Ownership, global_pairs, move_rows, pair_moves, positions, route_faces
     from pyfem.mesh import create_mesh_with_interfaces
     from pyfem.operators import Model, _cell_materials, boundary_face, face_kinds, truncation_faces
@@ -266,9 +269,6 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     order = scene["mesh"].get("order", 1)
     mesh, cell_tags, facet_tags, regions, boundaries, interface_tags = create_mesh_with_interfaces(scene, comm)
     V = fem.VectorFunctionSpace(mesh, ("Lagrange", order))
-    if uses_diagonal_scaling(V):  # HRZ lumping reads owned diagonals and per-rank totals (not built for ranks)
-        raise SceneError("mesh.order", order, "1 on a tetrahedral mesh under mpirun (quadratic tetrahedra's "
-                         "HRZ-lumped mass is not built on the ranks yet; on one rank they run, docs/scaling.md)")
     materials = _cell_materials(mesh, cell_tags, regions, scene["materials"])
     quadrature = {"quadrature_degree": 2 * order}
     coords_d = V.tabulate_dof_coordinates().astype(np.float64, copy=True)  # the function space's numbering
@@ -326,6 +326,8 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
         del kernel_matrix
         removed = np.concatenate([cells for cells, _ in loop_cells.values()])
         matrix = elastic_stiffness_matrix(V, *_without_cells(materials, removed), quadrature)
+        if one_point_regions(scene):  # their cells' hourglass stiffness stays in the matrix
+            add_hourglass(matrix, scene, model, loop_cells)
         _, global_rows = move_rows(comm, ownership, first, owned_rows_global(matrix, last - first, release=True))
         rows = localize(global_rows, local_nodes)
         del global_rows
@@ -337,14 +339,14 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     rank_pairs = pair_index = pair_global = pair_side = None
     if pairs is not None:
         pair_index, pair_global, rank_pairs = _rank_pairs(comm, pairs, ownership, local_nodes, mass)
-        if len(pairs.names) > 31:
-            raise SceneError("contact.interfaces", f"{len(pairs.names)} interfaces", "at most 31 under mpirun (a "
-                             "checkpoint keys a pair node by its roles, a bit each; on one rank any number runs)")
-        pair_side = np.zeros(len(local_nodes), dtype=np.int64)  # a bit per role: side of an interface
+        # A bit per role (side + 2 interface), ROLE_BITS to an int64 word, as many words as the interfaces need.
+        words = -(-2 * len(pairs.names) // ROLE_BITS)
+        pair_side = np.zeros((len(local_nodes), words), dtype=np.int64)
         for side in (0, 1):
             here = np.isin(pairs.nodes[:, side], local_nodes)
-            np.bitwise_or.at(pair_side, positions(local_nodes, pairs.nodes[here, side], "pairs"),
-                             np.left_shift(1, side + 2 * pairs.interface[here].astype(np.int64)))
+            role = side + 2 * pairs.interface[here].astype(np.int64)
+            np.bitwise_or.at(pair_side, (positions(local_nodes, pairs.nodes[here, side], "pairs"), role // ROLE_BITS),
+                             np.left_shift(1, role % ROLE_BITS))
     return RankModel(comm=comm, scene=scene, model=model, n_owned=n_owned, local_nodes=local_nodes, coords=coords,
                      mass=mass, matrix=kernel_matrix, plan=plan, estimates=estimates,
                      loop_cells={name: owned for name, (_, owned) in loop_cells.items()},
@@ -410,17 +412,20 @@ def rank_regions(part: RankModel) -> RankRegions | None:
     """This rank's element loop (`RankRegions`), None without element-loop materials."""
     from pyfem.elements import ElementArrays, NonlinearRegions, element_arrays, quadrature_initial_stress
     from pyfem.initial_stress import stress_field_from_scene
+    from pyfem.reduced_integration import one_point_arrays
 
     if not part.loop_cells:
         return None
     comm, model = part.comm, part.model
     laws, options, zones, integration = _region_tables(part.scene)
     field = stress_field_from_scene(part.scene)
+    one_point = one_point_regions(part.scene)
 
-    def regions(arrays: dict):
-        stresses = {name: None if field is None else quadrature_initial_stress(a.points, field)
-                    for name, a in arrays.items()}
-        # One point per cell (P1 tetrahedra): its strain is the cell's mean, no B-bar (as the serial model)
+    def regions(arrays: dict, given_stresses: dict):
+        stresses = {name: given_stresses.get(name) if name in one_point or field is None
+                    else quadrature_initial_stress(a.points, field) for name, a in arrays.items()}
+        # One point per cell (P1 tetrahedra, integration = "reduced"): its strain is the cell's mean,
+        # no B-bar (as the serial model)
         cell_options = {name: dict(options[name], mean_dilatation=options[name]["mean_dilatation"]
                                    and a.weights.shape[1] > 1) for name, a in arrays.items()}
         found = NonlinearRegions(stiffness=None, components=[], arrays=arrays,
@@ -429,7 +434,16 @@ def rank_regions(part: RankModel) -> RankRegions | None:
         found.new_components()
         return found
 
-    counted_arrays = {name: element_arrays(model.V, cells) for name, cells in part.loop_cells.items()}
+    counted_arrays, counted_stresses = {}, {}
+    for name, cells in part.loop_cells.items():
+        counted_arrays[name] = element_arrays(model.V, cells)
+        if name in one_point:  # one point per cell at its mean strain (pyfem.elements.nonlinear_component)
+            full = counted_arrays[name]
+            counted_arrays[name] = one_point_arrays(full)
+            if field is not None:  # the cell's mean initial stress, sum_q w_q sigma0_q / V
+                counted_stresses[name] = np.ascontiguousarray(
+                    np.einsum("cq,cqk->ck", full.weights, quadrature_initial_stress(full.points, field))[:, None, :]
+                    / counted_arrays[name].weights[:, :, None])
     # Each owned cell goes to every rank stepping one of its nodes (its halo there).
     index_map = model.V.dofmap.index_map
     mapped = np.concatenate([np.arange(*index_map.local_range), index_map.ghosts]).astype(np.int64)
@@ -442,13 +456,15 @@ def rank_regions(part: RankModel) -> RankRegions | None:
                 continue
             rows = np.flatnonzero((node_rank == q).any(axis=1))
             outgoing[q].append((name, global_nodes[rows], arrays.inverse_jacobians[rows],
-                                arrays.weights[rows], arrays.points[rows]))
+                                arrays.weights[rows], arrays.points[rows],
+                                None if arrays.uniform_gradients is None else arrays.uniform_gradients[rows],
+                                counted_stresses[name][rows] if name in counted_stresses else None))
         if part.kernel_of_dolfinx is not None:  # the kernel's numbering
             arrays.cell_nodes = np.ascontiguousarray(part.kernel_nodes(arrays.cell_nodes), dtype=np.int32)
     incoming = comm.alltoall(outgoing)
     order = np.argsort(part.local_nodes)
     template = element_arrays(model.V, np.zeros(0, dtype=np.int32))  # the reference tables, the same for every cell
-    halo_arrays = {}
+    halo_arrays, halo_stresses = {}, {}
     for name in laws:
         pieces = [piece for from_rank in incoming for piece in from_rank if piece[0] == name]
         if not pieces:
@@ -460,12 +476,19 @@ def rank_regions(part: RankModel) -> RankRegions | None:
         halo_arrays[name] = ElementArrays(
             cells=np.full(len(global_nodes), -1, dtype=np.int32),
             cell_nodes=np.ascontiguousarray(order[position], dtype=np.int32),
-            reference_gradients=template.reference_gradients,
+            reference_gradients=(template.reference_gradients if name not in one_point else
+                                 np.ascontiguousarray(template.reference_gradients.mean(axis=0, keepdims=True))),
             inverse_jacobians=np.ascontiguousarray(np.concatenate([piece[2] for piece in pieces])),
             weights=np.ascontiguousarray(np.concatenate([piece[3] for piece in pieces])),
-            points=np.ascontiguousarray(np.concatenate([piece[4] for piece in pieces])), tensor=template.tensor)
-    counted = regions({name: arrays for name, arrays in counted_arrays.items() if len(arrays.cells)})
-    return RankRegions(counted=counted, halo=regions(halo_arrays) if halo_arrays else None)
+            points=np.ascontiguousarray(np.concatenate([piece[4] for piece in pieces])),
+            tensor=None if name in one_point else template.tensor,
+            uniform_gradients=(np.ascontiguousarray(np.concatenate([piece[5] for piece in pieces]))
+                               if name in one_point else None))
+        if name in one_point and field is not None:
+            halo_stresses[name] = np.ascontiguousarray(np.concatenate([piece[6] for piece in pieces]))
+    counted = regions({name: arrays for name, arrays in counted_arrays.items() if len(arrays.cells)},
+                      counted_stresses)
+    return RankRegions(counted=counted, halo=regions(halo_arrays, halo_stresses) if halo_arrays else None)
 
 
 # --- the time step ------------------------------------------------------------------------------

@@ -207,6 +207,50 @@ def element_loop_cells(scene: Scene, model) -> dict:
     return out
 
 
+def one_point_regions(scene: Scene) -> dict:
+    """Element-loop region -> (lambda, G (Pa): its law's initial moduli, B-bar) of the regions with
+    integration = "reduced" (one point per cell, pyfem/reduced_integration.py), in the scene's order
+    (pyfem.elements.nonlinear_component's)."""
+    from pyfem.elements import scene_laws, split_law_parameters
+    from pyfem.reduced_integration import lame_moduli
+
+    laws, mean_dilatation = scene_laws(scene)
+    out = {}
+    for name, given in laws.items():
+        _, _, integration, parameters = split_law_parameters(given)
+        if integration == "reduced":
+            out[name] = (*lame_moduli(parameters["young_modulus"], parameters["poisson_ratio"]),
+                         bool(mean_dilatation.get(name, False)))
+    return out
+
+
+def add_hourglass(matrix, scene: Scene, model, loop_cells: dict, leave_out=()) -> None:
+    """Adds to the PETSc `matrix` (pyfem.assembly.elastic_stiffness_matrix's) the hourglass stiffness
+    K_hg of the owned cells of the one-point regions but `leave_out` (`loop_cells`: element_loop_cells'),
+    region by region as pyfem.elements.nonlinear_component adds them, and assembles it: each cell's
+    K_hg is added once, by the rank owning it, and PETSc sends the rows of other ranks' nodes to them.
+    A collective: every rank calls it when the scene has a one-point region."""
+    from petsc4py import PETSc
+
+    from pyfem.elements import element_arrays
+    from pyfem.reduced_integration import hourglass_stiffness, one_point_arrays
+
+    index_map = model.V.dofmap.index_map
+    mapped = np.concatenate([np.arange(*index_map.local_range), index_map.ghosts]).astype(np.int64)
+    global_dofs = (3 * np.repeat(mapped, 3) + np.tile(np.arange(3), len(mapped))).astype(PETSc.IntType)
+    for name, (lame_lambda, shear_modulus, b_bar) in one_point_regions(scene).items():
+        if name in leave_out or name not in loop_cells:
+            continue
+        full = element_arrays(model.V, loop_cells[name][1])
+        local = hourglass_stiffness(full, one_point_arrays(full), lame_lambda, shear_modulus, b_bar,
+                                    len(mapped)).tocsr()
+        for row in np.flatnonzero(np.diff(local.indptr)):
+            span = slice(local.indptr[row], local.indptr[row + 1])
+            matrix.setValues(global_dofs[row:row + 1], global_dofs[local.indices[span]], local.data[span],
+                             addv=PETSc.InsertMode.ADD_VALUES)
+        matrix.assemble()
+
+
 def _without_cells(materials, removed: np.ndarray) -> tuple:
     """(lambda, G) fields of `materials` zero on the `removed` local cells (pyfem.elements.linear_stiffness)."""
     from dolfinx import fem

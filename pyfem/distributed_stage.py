@@ -78,13 +78,14 @@ def owned_force(part, nodal: np.ndarray) -> np.ndarray:
     return force.reshape(-1)
 
 
-def stage_matrix(part, removed_cells: np.ndarray) -> tuple:
+def stage_matrix(part, removed_cells: np.ndarray, hourglass_but=None) -> tuple:
     """The kernel's (indptr, indices, blocks) of the elastic stiffness of every cell but the local
     `removed_cells`, on the dynamic run's rows and numbering (no boundary springs; all-zero blocks
-    dropped, as pyfem.elements.linear_stiffness drops them)."""
+    dropped, as pyfem.elements.linear_stiffness drops them); with `hourglass_but` (region names, not
+    None) plus the hourglass stiffness of the one-point regions but those (pyfem/reduced_integration.py)."""
     from pyfem.assembly import elastic_stiffness_matrix
-    from pyfem.distributed_parts import (_without_cells, drop_zero_blocks, local_stiffness, localize,
-                                         owned_rows_global)
+    from pyfem.distributed_parts import (_without_cells, add_hourglass, drop_zero_blocks, element_loop_cells,
+                                         local_stiffness, localize, one_point_regions, owned_rows_global)
     from pyfem.distributed_pairs import move_rows
 
     model = part.model
@@ -93,6 +94,8 @@ def stage_matrix(part, removed_cells: np.ndarray) -> tuple:
     first, last = V.dofmap.index_map.local_range
     # (dolfinx's Functions and forms are collectives: every rank makes them, with or without removed cells)
     matrix = elastic_stiffness_matrix(V, *_without_cells(materials, removed_cells), quadrature)
+    if hourglass_but is not None and one_point_regions(part.scene):
+        add_hourglass(matrix, part.scene, model, element_loop_cells(part.scene, model), hourglass_but)
     _, global_rows = move_rows(part.comm, part.ownership, first, owned_rows_global(matrix, last - first,
                                                                                     release=True))
     rows = localize(global_rows, part.local_nodes)
@@ -282,8 +285,9 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     installs = comm.allreduce(len(installed_cells)) > 0  # (a rank may hold none of the installed cells)
     elastic = stage_matrix(part, installed_cells) if installs else everything
     del everything
-    K_support = stage_matrix(part, element_cells)
-    K_excavation = stage_matrix(part, np.union1d(element_cells, installed_cells)) if installs else K_support
+    K_support = stage_matrix(part, element_cells, hourglass_but=())
+    K_excavation = (stage_matrix(part, np.union1d(element_cells, installed_cells), hourglass_but=installed_regions)
+                    if installs else K_support)
     # A node of no active cell in stage 1 (only the installed regions use it) does not count as free.
     active = np.zeros(part.n_owned, dtype=bool)
     indptr = elastic[0]

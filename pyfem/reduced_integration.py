@@ -103,6 +103,16 @@ def hourglass_stiffness(full, one_point, lame_lambda: float, shear_modulus: floa
     """
     n_dofs = 3 * n_nodes
     total = scipy.sparse.csr_matrix((n_dofs, n_dofs))
+    for dofs, blocks in hourglass_blocks(full, one_point, lame_lambda, shear_modulus, mean_dilatation):
+        total = total + scipy.sparse.csr_matrix(
+            (blocks.ravel(), (np.repeat(dofs, 24, axis=1).ravel(), np.tile(dofs, (1, 24)).ravel())),
+            shape=(n_dofs, n_dofs))
+    return total.tobsr(blocksize=(3, 3))
+
+
+def hourglass_blocks(full, one_point, lame_lambda: float, shear_modulus: float, mean_dilatation: bool):
+    """The cells' K_hg element matrices, CHUNK_CELLS at a time: (dofs (c, 24) 3 node + component of
+    `full.cell_nodes`' numbering, matrices (c, 24, 24) (N/m)) (`hourglass_stiffness`'s arguments)."""
     for start in range(0, len(full.cells), CHUNK_CELLS):
         rows = np.arange(start, min(start + CHUNK_CELLS, len(full.cells)))
         gradients = np.einsum("qkm,cqml->cqkl", full.reference_gradients, full.inverse_jacobians[rows])
@@ -110,12 +120,8 @@ def hourglass_stiffness(full, one_point, lame_lambda: float, shear_modulus: floa
         whole = element_matrices(gradients, weights, lame_lambda, shear_modulus, mean_dilatation)
         single = element_matrices(one_point.gradients[rows], one_point.weights[rows], lame_lambda, shear_modulus,
                                   False)
-        blocks = (whole - single).reshape(len(rows), 24, 24)
         dofs = (3 * full.cell_nodes[rows][:, :, None] + np.arange(3)).reshape(len(rows), 24)
-        total = total + scipy.sparse.csr_matrix(
-            (blocks.ravel(), (np.repeat(dofs, 24, axis=1).ravel(), np.tile(dofs, (1, 24)).ravel())),
-            shape=(n_dofs, n_dofs))
-    return total.tobsr(blocksize=(3, 3))
+        yield dofs, (whole - single).reshape(len(rows), 24, 24)
 
 
 def lame_moduli(young_modulus: float, poisson_ratio: float) -> tuple[float, float]:

@@ -278,21 +278,9 @@ def test_the_ranks_equal_the_serial_run(runs, name, ranks):
           f"(extra {mpi['extra_ghost_nodes']}), peak MiB {mpi['peak_memory_mib']}")
 
 
-# What the ranks do not build yet (one rank, the serial path, runs each): one point per cell,
-# quadratic tetrahedra. (The linear static stage runs on the ranks: tests/test_mpi_linear_stage.py.)
-@pytest.mark.parametrize("scene, extra, key", [
-    ("tests/scenes/mpi_weak_layer.toml", ("--set", 'materials.weak.plasticity.integration="reduced"'),
-     "materials.weak.plasticity.integration"),
-    ("tests/scenes/mpi_tunnel_tet.toml", ("--set", "mesh.order=2"), "mesh.order"),
-])
-def test_what_the_ranks_do_not_build_is_refused_in_one_line(tmp_path, scene, extra, key):
-    result = pyfem(2, "run", scene, "--out", str(tmp_path / "run"), *extra)
-    assert result.returncode == 2, result.stderr[-2000:]
-    lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]
-    assert lines and all(line == lines[0] for line in lines), result.stderr
-    assert key in lines[0] and "under mpirun" in lines[0] and "one rank" in lines[0], lines[0]
-    assert "Traceback" not in result.stderr
-    assert not (tmp_path / "run").exists()
+# The ranks build everything the serial path builds but rock bolts (tests/test_support*.py test their
+# refusal): the linear stage (tests/test_mpi_linear_stage.py), one point per cell, quadratic tetrahedra
+# and more than 31 interfaces (tests/test_distributed_ported.py).
 
 
 def test_check_builds_the_ranks_parts_and_times_them_once(tmp_path, mpi_launcher):
