@@ -13,6 +13,7 @@ import pytest
 
 from conftest import ENERGY_BALANCE, ROUNDOFF, observed_orders, rel_error
 from pyfem import solver
+from pyfem.fields_file import read_fields
 from pyfem.scene import SceneError, parse_scene
 
 E, NU, RHO = 8.0e9, 0.24, 2600.0
@@ -192,8 +193,6 @@ def test_energy_balance_with_input_absorption_and_damping(tmp_path):
 
 
 def test_run_directory_contents(tmp_path):
-    import meshio
-
     scene = column_scene("SV", h=SHORTEST_WAVELENGTH / 8, duration=0.3)
     scene = parse_scene({**scene, "output": {"interval": 0.01, "xdmf_interval": 0.05}})
     out = tmp_path / "run"
@@ -208,14 +207,10 @@ def test_run_directory_contents(tmp_path):
     assert header[:10] == ["t", "ux", "uy", "uz", "vx", "vy", "vz", "ax", "ay", "az"]
     assert (out / "plots" / "monitor_z100.png").stat().st_size > 1000
     assert (out / "plots" / "energy.png").stat().st_size > 1000
-    # A reader this project did not write opens the fields.
-    with meshio.xdmf.TimeSeriesReader(str(out / "fields.xdmf")) as reader:
-        points, cells = reader.read_points_cells()
-        times = []
-        for k in range(reader.num_steps):
-            t, point_data, _ = reader.read_data(k)
-            times.append(t)
-            assert point_data["displacement"].shape == (len(points), 3)
+    fields = read_fields(out / "fields.xdmf")
+    times = fields.times
+    for _, point_data, _ in fields.steps:
+        assert point_data["displacement"].shape == (len(fields.points), 3)
     assert len(times) == 7 and times[0] == 0.0
     assert np.isclose(times[-1], 0.3)
     # Sample times are products of the step, not sums: the energy history's last row is 0.3 as
@@ -338,8 +333,6 @@ def test_stress_strain_and_acceleration_fields(tmp_path):
     A monitor at a cell centroid has the same gradient operator as that cell, so the cell's
     total stress equals the monitor's stress columns at every field time (to the CSV's 11 digits).
     """
-    import meshio
-
     extra = {"initial_stress": {"surface": 250.0, "rho": RHO, "k": [1.4, 1.2, 1.15]}}
     scene = column_scene("SV", h=10.0, duration=0.4, interval=0.01, extra=extra)
     scene = parse_scene({**scene, "monitor": [{"name": "c", "point": [45.0, 45.0, 105.0]}],
@@ -350,22 +343,21 @@ def test_stress_strain_and_acceleration_fields(tmp_path):
     monitor = np.genfromtxt(out / "monitors" / "c.csv", delimiter=",", names=True)
     components = ("sxx", "sxy", "sxz", "syy", "syz", "szz")
     checks = 0
-    with meshio.xdmf.TimeSeriesReader(str(out / "fields.xdmf")) as reader:
-        points, cells = reader.read_points_cells()
-        centroids = points[cells[0].data].mean(axis=1)
-        cell = int(np.argmin(np.linalg.norm(centroids - [45.0, 45.0, 105.0], axis=1)))
-        assert np.allclose(centroids[cell], [45.0, 45.0, 105.0])
-        for k in range(reader.num_steps):
-            t, point_data, cell_data = reader.read_data(k)
-            assert set(point_data) == {"displacement", "acceleration"}
-            assert set(cell_data) == {"stress", "strain", "region"}
-            assert point_data["acceleration"].shape == (len(points), 3)
-            stress, strain = cell_data["stress"][0], cell_data["strain"][0]
-            assert stress.shape == strain.shape == (len(centroids), 6)
-            row = int(np.argmin(np.abs(monitor["t"] - t)))
-            expected = np.array([monitor[name][row] for name in components])
-            assert np.allclose(stress[cell], expected, rtol=0, atol=1e-9 * np.max(np.abs(expected)))
-            checks += 1
+    fields = read_fields(out / "fields.xdmf")
+    points = fields.points
+    centroids = points[fields.cells].mean(axis=1)
+    cell = int(np.argmin(np.linalg.norm(centroids - [45.0, 45.0, 105.0], axis=1)))
+    assert np.allclose(centroids[cell], [45.0, 45.0, 105.0])
+    for t, point_data, cell_data in fields.steps:
+        assert set(point_data) == {"displacement", "acceleration"}
+        assert set(cell_data) == {"stress", "strain", "region"}
+        assert point_data["acceleration"].shape == (len(points), 3)
+        stress, strain = cell_data["stress"], cell_data["strain"]
+        assert stress.shape == strain.shape == (len(centroids), 6)
+        row = int(np.argmin(np.abs(monitor["t"] - t)))
+        expected = np.array([monitor[name][row] for name in components])
+        assert np.allclose(stress[cell], expected, rtol=0, atol=1e-9 * np.max(np.abs(expected)))
+        checks += 1
     assert checks == 5
     assert np.max(np.abs(strain)) > 1e-6  # the wave is in the box at the last field time
 
