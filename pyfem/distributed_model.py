@@ -1211,9 +1211,20 @@ class DistributedRun:
                 **({"local_stepping_stability": stability} if stability else {}),
                 "status": "running"}
 
+    def _input_motion(self) -> dict | None:
+        """run.json "input_motion" (rank 0): the input's peaks and spectrum, as output.input_motion
+        computes them for the whole model (it reads the same scene, free field tables, lead-in and step)."""
+        from pyfem.output import input_motion
+
+        self.input_motion = input_motion(self) if self.freefield is not None else None
+        if self.input_motion is not None:
+            self.summary["input_motion"] = {key: value for key, value in self.input_motion.items()
+                                            if not key.startswith("_")}
+        return self.input_motion
+
     def _open(self, stepper) -> tuple:
         """Starts the run directory, or continues the interrupted one; returns (u, v, a)."""
-        from pyfem.output import ENERGY_FORMAT, MONITOR_FORMAT, CsvHistory, _write_json, previous_run_dir
+        from pyfem.output import ENERGY_FORMAT, MONITOR_FORMAT, CsvHistory, RunWriter, _write_json, previous_run_dir
 
         out, part, saved = self.out, self.part, self.saved
         summary = self._summary()  # (collective)
@@ -1245,7 +1256,13 @@ class DistributedRun:
                 sizes = meta["history_sizes"]
         self.summary = summary
         if self.root:
+            motion = self._input_motion()
             _write_json(out / "run.json", summary)
+            if motion is not None:  # at once: the input can be checked while the run goes (as RunWriter)
+                from pyfem import plots
+
+                (out / "plots").mkdir(exist_ok=True)
+                plots.input_motion(out / "plots" / "input.png", *motion["_series"], title=RunWriter._input_title(self))
             if self.stage is not None:  # (a resumed run's stage, solved again, writes it again)
                 (out / "static").mkdir(exist_ok=True)
                 _write_json(out / "static" / "static.json", self.stage.report)
