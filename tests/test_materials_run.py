@@ -16,11 +16,11 @@ import json
 import math
 from pathlib import Path
 
-import meshio
 import numpy as np
 import pytest
 
 from pyfem import _kernels, output, solver
+from pyfem.fields_file import read_fields
 from pyfem.scene import parse_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -201,17 +201,17 @@ def test_the_section_after_the_earthquake_is_drawn_without_paraview(weak_layer_r
 
 def test_weak_layer_fields_and_plan(weak_layer_runs):
     plastic, plastic_dir = weak_layer_runs[True]
-    with meshio.xdmf.TimeSeriesReader(str(plastic_dir / "fields.xdmf")) as reader:
-        points, cells = reader.read_points_cells()
-        _, _, cell_data = reader.read_data(reader.num_steps - 1)
-    plastic_strain = cell_data["plastic_strain"][0]
+    fields = read_fields(plastic_dir / "fields.xdmf")
+    points, cells = fields.points, fields.cells
+    _, _, cell_data = fields.steps[-1]
+    plastic_strain = cell_data["plastic_strain"]
     assert set(cell_data) >= {"stress", "damage", "damage_type", "plastic_strain"}
-    centroid_z = points[cells[0].data][:, :, 2].mean(axis=1)
+    centroid_z = points[cells][:, :, 2].mean(axis=1)
     in_layer = (25.0 < centroid_z) & (centroid_z < 35.0)
     assert np.count_nonzero(in_layer) == 30 * 2 * 2  # 30 x 2 cells, two high
     assert np.count_nonzero(plastic_strain[in_layer] > 0) > 0.5 * np.count_nonzero(in_layer)
-    assert np.all(plastic_strain[~in_layer] == 0.0) and np.all(cell_data["damage_type"][0][~in_layer] == 0)
-    assert set(np.unique(cell_data["damage_type"][0][in_layer])) <= {0, 2}
+    assert np.all(plastic_strain[~in_layer] == 0.0) and np.all(cell_data["damage_type"][~in_layer] == 0)
+    assert set(np.unique(cell_data["damage_type"][in_layer])) <= {0, 2}
     plan = solver.plan(weak_layer_scene(True))
     assert "weak" in plan["nonlinear regions"] and "mohr_coulomb, 120 cells, 960 points" in plan["nonlinear regions"]["weak"]
     assert "mean dilatation" in plan["nonlinear regions"]["weak"]
@@ -301,17 +301,14 @@ def test_concrete_tension_damage_starts_at_f_t_and_never_decreases(tmp_path):
     energy = runs[True]["energy"]
     assert energy["balance_error"] < BALANCE and energy["internal_dissipation"] > 0.0
     # Every cell's damage over the whole run, from the XDMF: non-decreasing, in [0, 1).
-    with meshio.xdmf.TimeSeriesReader(str(tmp_path / "damage_True" / "fields.xdmf")) as reader:
-        reader.read_points_cells()
-        damage = np.array([reader.read_data(k)[2]["damage"][0] for k in range(reader.num_steps)])
+    fields = read_fields(tmp_path / "damage_True" / "fields.xdmf")
+    points, cells, samples = fields.points, fields.cells, fields.steps
+    damage = np.array([cell_data["damage"] for _, _, cell_data in samples])
     assert damage.shape[0] > 20 and damage[-1].max() > 0.0
     assert np.all(np.diff(damage, axis=0) >= 0.0) and np.all((damage >= 0.0) & (damage < 1.0))
     # The crack band's opening (docs/materials.md "Crack opening"): where and only where the cells
     # cracked, never closing in the record (its largest so far), and run.json's peak is the field's.
-    with meshio.xdmf.TimeSeriesReader(str(tmp_path / "damage_True" / "fields.xdmf")) as reader:
-        points, cells = reader.read_points_cells()
-        samples = [reader.read_data(k) for k in range(reader.num_steps)]
-    opening = np.array([cell_data["crack_opening"][0] for _, _, cell_data in samples])
+    opening = np.array([cell_data["crack_opening"] for _, _, cell_data in samples])
     assert np.all(np.diff(opening, axis=0) >= 0.0)
     assert np.all((opening[-1] > 0.0) == (damage[-1] > 0.0))
     assert summary["peak_crack_opening"] == pytest.approx(opening[-1].max(), rel=1e-12)
@@ -321,12 +318,12 @@ def test_concrete_tension_damage_starts_at_f_t_and_never_decreases(tmp_path):
     cracked_through = np.flatnonzero(damage[-1] > 0.99)
     assert len(cracked_through) >= 4
     for cell in cracked_through:
-        nodes = cells[0].data[cell]
+        nodes = cells[cell]
         above = nodes[points[nodes, 2] > points[nodes, 2].mean()]
         below = nodes[points[nodes, 2] < points[nodes, 2].mean()]
         h = points[above, 2].mean() - points[below, 2].mean()
         jump = max(u["displacement"][above, 2].mean() - u["displacement"][below, 2].mean()
-                   - h * c["stress"][0][cell, 5] / CONCRETE["E"] for _, u, c in samples)
+                   - h * c["stress"][cell, 5] / CONCRETE["E"] for _, u, c in samples)
         print(f"cell {cell}: opening {1e3 * opening[-1, cell]:.3f} mm, displacement jump {1e3 * jump:.3f} mm")
         assert 0.9 * opening[-1, cell] < jump <= opening[-1, cell] * (1.0 + 1e-3)
     by_opening = list(summary["cracked_volume_by_opening"].values())
