@@ -358,23 +358,19 @@ def figure_principal_stress(runs: dict, path: pathlib.Path) -> None:
 
 
 def read_last_fields(directory: pathlib.Path) -> dict | None:
-    """The last time of a run's fields.xdmf: points (m), hexahedra, point and cell data, or None
+    """The last time of a run's fields.xdmf: points (m), cells, point and cell data, or None
     without fields (or without the damage fields the lining maps need)."""
-    import meshio
+    from pyfem.fields_file import read_fields
 
     path = directory / "fields.xdmf"
     if not path.exists():
         return None
-    with meshio.xdmf.TimeSeriesReader(str(path)) as reader:
-        points, cells = reader.read_points_cells()
-        last = None
-        for k in range(reader.num_steps):
-            last = reader.read_data(k)
+    fields = read_fields(path)
+    last = fields.steps[-1] if fields.steps else None
     if last is None or "damage" not in last[2]:
         return None
     t, point_data, cell_data = last
-    return {"t": t, "points": points, "cells": cells[0].data, "point_data": point_data,
-            "cell_data": {name: values[0] for name, values in cell_data.items()}}
+    return {"t": t, "points": fields.points, "cells": fields.cells, "point_data": point_data, "cell_data": cell_data}
 
 
 def lining_cells(fields: dict, summary: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -28,21 +28,20 @@ THRESHOLDS_MM = (0.1, 0.3, 1.0)
 def lining_samples(directory: pathlib.Path) -> dict:
     """Every field sample's lining crack opening (mm) with the cells' position around the section
     (deg, case_study.section_angle) and along the cavern (y, m)."""
-    import meshio
+    from pyfem.fields_file import read_fields
 
     summary = json.loads((directory / "run.json").read_text())
-    with meshio.xdmf.TimeSeriesReader(str(directory / "fields.xdmf")) as reader:
-        points, cells = reader.read_points_cells()
-        samples = [reader.read_data(k) for k in range(reader.num_steps)]
+    fields = read_fields(directory / "fields.xdmf")
+    points, cells, samples = fields.points, fields.cells, fields.steps
     # A run resumed across 2026-11-28 has the field from its resumed sitting on: read those samples.
     samples = [sample for sample in samples if "crack_opening" in sample[2]]
     if not samples:
         raise SystemExit(f"{directory}: its fields have no crack_opening (a run from before 2026-11-28)")
-    lining, centroids = lining_cells({"points": points, "cells": cells[0].data,
-                                      "cell_data": {"region": samples[0][2]["region"][0]}}, summary)
+    lining, centroids = lining_cells({"points": points, "cells": cells,
+                                      "cell_data": {"region": samples[0][2]["region"]}}, summary)
     return {"title": summary["scene"]["title"], "t": np.array([t for t, _, _ in samples]),
-            "opening_mm": np.array([1e3 * c["crack_opening"][0][lining] for _, _, c in samples]),
-            "damage": np.array([c["damage"][0][lining] for _, _, c in samples]),
+            "opening_mm": np.array([1e3 * c["crack_opening"][lining] for _, _, c in samples]),
+            "damage": np.array([c["damage"][lining] for _, _, c in samples]),
             "angle": section_angle(centroids, centre_z=0.5 * centroids[:, 2].max()), "y": centroids[:, 1]}
 
 
