@@ -1737,6 +1737,7 @@ class DistributedRun:
                 ("owned_nodes", "ghost_nodes", "extra_ghost_nodes", "bytes_sent_per_step", "element_loop_cells",
                  "halo_cells", "peak_memory_mib"))}},
             **({"nonlinear_regions": nonlinear} if nonlinear is not None else {}),
+            "peak_memory_mib": max(row[-1] for row in per_rank),  # the largest rank's (the process's on one)
         })
         from pyfem.clock import DISTRIBUTED_PHASES, PHASES, phase_split
 

@@ -120,31 +120,13 @@ def pair_groups_in(scene: str) -> int:
     return int(np.count_nonzero(counts > 1))
 
 
-# The serial writer's Tensor6 (xx xy xz yy yz zz) in dolfinx's 3 x 3 tensor (row by row).
-TENSOR6 = [0, 1, 2, 4, 5, 8]
+def last_fields(run_dir: Path) -> dict:
+    """{name: values at the last field time, nodes or cells sorted by position} (either writer's layout)."""
+    from pyfem.fields_file import read_fields
 
-
-def last_fields(run_dir: Path, distributed: bool) -> dict:
-    """{name: values at the last field time, nodes or cells sorted by position}."""
-    out = {}
-    with h5py.File(run_dir / "fields.h5") as f:
-        if distributed:  # dolfinx's XDMFFile
-            x, cells = np.asarray(f["Mesh/mesh/geometry"]), np.asarray(f["Mesh/mesh/topology"])
-            for name in f["Function"]:
-                times = sorted(f[f"Function/{name}"], key=lambda key: float(key.replace("_", ".")))
-                values = np.asarray(f[f"Function/{name}"][times[-1]])
-                if values.shape[-1] == 9:
-                    values = values[:, TENSOR6]
-                out[name] = values.reshape(len(values), -1)
-        else:  # RunWriter: data0 the points, data1 the cells, then each time's attributes
-            import re
-
-            x, cells = np.asarray(f["data0"]), np.asarray(f["data1"])
-            last = (run_dir / "fields.xdmf").read_text().split("<Time ")[-1]
-            for name, dataset in re.findall(r'Attribute Name="([A-Za-z_]+)"[^<]*<DataItem[^>]*>fields.h5:(/data\d+)',
-                                            last):
-                values = np.asarray(f[dataset])
-                out[name] = values.reshape(len(values), -1)
+    fields = read_fields(run_dir / "fields.xdmf")
+    x, cells = fields.points, fields.cells
+    out = {name: values.reshape(len(values), -1) for data in fields.steps[-1][1:] for name, values in data.items()}
     # Nodes by position, then by the centre of their cells: the two nodes of a contact pair share
     # their position, their cells lie on either side of the interface.
     centres = x[cells].mean(axis=1)
@@ -258,7 +240,7 @@ def test_the_ranks_equal_the_serial_run(runs, name, ranks):
     for kind, difference in differences.items():
         assert difference < TOLERANCES.get(name, {}).get(kind, TOLERANCE), (kind, difference)
     if (runs[name, 1] / "fields.h5").exists():  # the last fields, nodes and cells matched by position
-        expected, got = last_fields(runs[name, 1], False), last_fields(runs[name, ranks], True)
+        expected, got = last_fields(runs[name, 1]), last_fields(runs[name, ranks])
         written = set(expected) - {"region"}
         assert written <= set(got) and "displacement" in written
         if name.startswith("contact"):  # the interface fields on both nodes of every pair
