@@ -293,36 +293,47 @@ def test_an_error_in_the_loop_marks_the_run_failed_with_the_reason(tmp_path, mon
 def test_streamed_histories_equal_the_files_written_at_the_end(tmp_path, monkeypatch):
     """Rows written one sample at a time are byte for byte what np.savetxt wrote from the whole history
     (free field evaluated at all times at once, geostatic stress on), the earlier all-at-end output."""
+    from pyfem import distributed_model
     from pyfem.output import (ENERGY_FORMAT, FREEFIELD_COLUMNS, MONITOR_COLUMNS, MONITOR_FORMAT,
                               STRESS_COLUMNS, RunWriter)
 
-    writers = []
-    original_finish = RunWriter.finish
-    monkeypatch.setattr(RunWriter, "finish",
-                        lambda self, **kw: writers.append(self) or original_finish(self, **kw))
+    kept = []  # (times, monitor rows (nt, m, columns), energy rows, energy columns, free field, monitor names)
+    original_finish, original_go = RunWriter.finish, distributed_model.DistributedRun.go
+
+    def finish(self, **kw):
+        sim = self.simulation
+        kept.append((self.times, self.monitor_rows, self.energy_samples, self.energy_columns, sim.freefield,
+                     sim.monitor_names))
+        return original_finish(self, **kw)
+
+    def go(self, *args):  # the distributed model's rows, as rank 0 keeps them for run.json
+        summary = original_go(self, *args)
+        kept.append((self.times, self.rows_kept, self.energy_rows, self.energy_columns, self.freefield, self.names))
+        return summary
+
+    monkeypatch.setattr(RunWriter, "finish", finish)
+    monkeypatch.setattr(distributed_model.DistributedRun, "go", go)
     extra = {"initial_stress": {"surface": 250.0, "rho": RHO, "k": [1.4, 1.2, 1.15]}}
     scene = column_scene("SV", h=SHORTEST_WAVELENGTH / 8, duration=0.3, extra=extra)
     out = tmp_path / "run"
     solver.run(scene, out)
-    writer, = writers
-    simulation = writer.simulation
-    times = np.array(writer.times)
+    (times, rows, energy, energy_columns, freefield, names), = kept
+    times = np.array(times)
     assert len(times) == 61 and np.allclose(np.diff(times), 0.005)
-    rows = np.array(writer.monitor_rows)
+    rows = np.array(rows)
     points = np.array([m["point"] for m in scene["monitor"]])
-    freefield = np.concatenate([simulation.freefield.displacement(points, times),
-                                simulation.freefield.velocity(points, times)], axis=2)
+    freefield = np.concatenate([freefield.displacement(points, times), freefield.velocity(points, times)], axis=2)
     header = ",".join(MONITOR_COLUMNS + FREEFIELD_COLUMNS + STRESS_COLUMNS)
     checks = 0
-    for j, name in enumerate(simulation.monitor_names):
+    for j, name in enumerate(names):
         expected = np.hstack([times[:, None], rows[:, j, 1:10], freefield[:, j, :], rows[:, j, 16:]])
         reference = tmp_path / f"{name}_at_end.csv"
         np.savetxt(reference, expected, delimiter=",", header=header, comments="", fmt=MONITOR_FORMAT)
         assert (out / "monitors" / f"{name}.csv").read_bytes() == reference.read_bytes(), name
         checks += 1
     reference = tmp_path / "energy_at_end.csv"
-    np.savetxt(reference, np.array(writer.energy_samples), delimiter=",",
-               header=",".join(writer.energy_columns), comments="", fmt=ENERGY_FORMAT)
+    np.savetxt(reference, np.array(energy), delimiter=",",
+               header=",".join(energy_columns), comments="", fmt=ENERGY_FORMAT)
     assert (out / "energy.csv").read_bytes() == reference.read_bytes()
     assert checks == 3
 
