@@ -65,18 +65,68 @@ def discretise_lines(lines, segment: float, free_length: float = 0.0):
             np.array(directions))
 
 
+def locate(model, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(host nodes (m, k), weights (m, k), the host nodes' coordinates (m, k, 3)) of each point: the
+    model's point_weights in its preferred cell (`Model.preferred_cell`). On a distributed mesh (more
+    than one rank) the whole model's preferred cell among every rank's owned cells, the host nodes
+    numbered globally (dolfinx's global node numbers) and the answer the same on every rank (a
+    collective); on one rank the function space's local nodes (the serial numbering).
+
+    Raises:
+        PointOutsideMesh: the first point in no cell of the model (on every rank alike).
+    """
+    from pyfem.operators import PointOutsideMesh
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    comm = model.mesh.comm
+    if comm.size == 1:
+        nodes, weights = model.point_weights(points)
+        return nodes, weights, np.asarray(model.node_coords)[nodes]
+    owned_cells = model.n_cells
+    best = []
+    for found in model.cells_holding(points):
+        found = found[found < owned_cells]
+        best.append((None, None) if not len(found) else model.preferred_cell(found))
+    offers = comm.allgather([None if centroid is None else tuple(centroid) for _, centroid in best])
+    mine = []
+    for j in range(len(points)):
+        held = [(offer[j], q) for q, offer in enumerate(offers) if offer[j] is not None]
+        if not held:
+            raise PointOutsideMesh(j, points[j], *model.bounds)
+        if min(held)[1] == comm.rank:
+            mine.append(j)
+    mine = np.array(mine, dtype=np.int64)
+    index_map = model.V.dofmap.index_map
+    mapped = np.concatenate([np.arange(*index_map.local_range), index_map.ghosts]).astype(np.int64)
+    if len(mine):
+        cells = np.array([best[j][0] for j in mine], dtype=np.int32)
+        nodes, weights = model.point_weights(points[mine], cells)
+        found = (mine, mapped[nodes], weights, np.asarray(model.node_coords)[nodes])
+    else:
+        found = None
+    pieces = [piece for piece in comm.allgather(found) if piece is not None]
+    k = pieces[0][1].shape[1]
+    nodes, weights, coords = np.empty((len(points), k), np.int64), np.empty((len(points), k)), np.empty((len(points), k, 3))
+    for index, piece_nodes, piece_weights, piece_coords in pieces:
+        nodes[index], weights[index], coords[index] = piece_nodes, piece_weights, piece_coords
+    return nodes, weights, coords
+
+
 def bolt_group(model, lines, *, diameter: float, E: float, yield_force: float, bond_stiffness: float,
                bond_strength: float, segment: float, pretension: float = 0.0, free_length: float = 0.0,
                head_stiffness: float = 0.0) -> BoltGroup:
     """The bolts along `lines` in `model` (pyfem.operators.Model; every node inside its mesh) with
-    the parameters of a support group (SI units; steel area pi diameter^2 / 4)."""
+    the parameters of a support group (SI units; steel area pi diameter^2 / 4). On a distributed mesh
+    the host nodes are global and the group has no kernel component (each rank makes its own:
+    pyfem/distributed_support.py)."""
     offsets, arcs, positions, directions = discretise_lines(lines, segment, free_length)
-    host_nodes, host_weights = model.point_weights(positions)
+    host_nodes, host_weights, _ = locate(model, positions)
     parameters = dict(axial_stiffness=E * math.pi * diameter**2 / 4.0, yield_force=yield_force,
                       bond_stiffness=bond_stiffness, bond_strength=bond_strength, pretension=pretension,
                       free_length=free_length, head_stiffness=head_stiffness)
     group = BoltGroup(None, offsets, arcs, positions, directions, host_nodes, host_weights, parameters)
-    group.component = group.fresh_component()
+    if model.mesh.comm.size == 1:
+        group.component = group.fresh_component()
     return group
 
 
@@ -145,8 +195,7 @@ def _default_segment(model, lines: np.ndarray, order: int) -> float:
     each bolt, of the host cell's largest extent along x, y, z divided by the element order), and at
     most the shortest bolt's length / SEGMENTS_PER_BOLT."""
     points = np.concatenate([line[:3] + np.linspace(0.0, 1.0, 11)[:, None] * (line[3:] - line[:3]) for line in lines])
-    nodes, _ = model.point_weights(points)
-    coordinates = model.node_coords[nodes]  # (m, k, 3)
+    _, _, coordinates = locate(model, points)  # (m, k, 3)
     extent = (coordinates.max(axis=1) - coordinates.min(axis=1)).max(axis=1)
     shortest = float(np.min(np.linalg.norm(lines[:, 3:] - lines[:, :3], axis=1)))
     return min(float(np.median(extent)) / order, shortest / SEGMENTS_PER_BOLT)
@@ -178,7 +227,7 @@ def scene_groups(scene, model) -> list[SupportGroup]:
         if outside is None:
             offsets, arcs, positions, _ = discretise_lines(lines, segment, settings["free_length"])
             try:
-                model.point_weights(positions)
+                locate(model, positions)
             except PointOutsideMesh as error:
                 outside, bolt = error, int(np.searchsorted(offsets, error.index, side="right") - 1)
         if outside is not None:
@@ -220,7 +269,10 @@ def _surface_triangles(model, name: str, key: str, installed_regions: list):
     mesh = model.mesh
     tdim = mesh.topology.dim
     facets = model.facet_tags.find(model.boundaries[name])
-    if not len(facets):
+    comm = mesh.comm
+    if comm.size > 1:  # each rank its owned facets (gathered below)
+        facets = facets[facets < mesh.topology.index_map(mesh.topology.dim - 1).size_local]
+    if not comm.allreduce(len(facets)):
         raise SceneError(key, name, "must name a surface with facets in the model (this one has none left: "
                          "excavated?)")
     mesh.topology.create_connectivity(tdim - 1, tdim)
@@ -245,7 +297,17 @@ def _surface_triangles(model, name: str, key: str, installed_regions: list):
                 normal = -normal
             triangles.append(piece)
             normals.append(normal)
-    return np.array(triangles), x, np.array(normals)
+    if comm.size == 1:
+        return np.array(triangles), x, np.array(normals)
+    # The whole surface on every rank: its triangles in the order of their centroids (x, y, z), the
+    # vertices numbered by their coordinates, so that the pattern is the same on any rank count.
+    corners = np.concatenate(comm.allgather(x[np.array(triangles, dtype=np.int64).reshape(-1, 3)].reshape(-1, 3, 3)))
+    normals = np.concatenate(comm.allgather(np.array(normals).reshape(-1, 3)))
+    centroids = corners.mean(axis=1)
+    order = np.lexsort((centroids[:, 2], centroids[:, 1], centroids[:, 0]))
+    corners, normals = corners[order], normals[order]
+    vertices, inverse = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
+    return inverse.reshape(-1, 3), vertices, normals
 
 
 AXIS_TILT = 10.0
