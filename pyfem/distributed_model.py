@@ -332,8 +332,8 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
         support = rank_groups(support, ownership, comm.rank, local_nodes)
         estimated = add_rows(kernel_matrix, n_owned, bound_rows(support, n_owned, len(local_nodes)))
     estimates = omega2_estimates(scene, comm, plan, estimated, mass, coords, n_owned)
+    row_sums = owned_row_sums(estimated, n_owned)  # every cell's (and the bolts' bound): local stepping's levels
     del estimated
-    row_sums = owned_row_sums(kernel_matrix, n_owned)  # every cell's: local stepping's levels
     loop_cells = element_loop_cells(scene, model)
     if loop_cells:  # the matrix of the other cells (the whole model's NonlinearRegions.stiffness)
         del kernel_matrix
@@ -655,11 +655,14 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
             stepper.add_internal_force(component)
         for component in ([] if loop.halo is None else loop.halo.components):
             stepper.add_internal_force(component, count_energy=False)
+    k = 0 if loop is None else len(loop.counted.components) + (0 if loop.halo is None else len(loop.halo.components))
     for rank_group in part.support:  # the stage's (rebased) or fresh at t = 0
-        if not rank_group.components:
+        if not rank_group.parts:
             rank_group.fresh()
-        for component, counted in rank_group.kernel_components():
-            stepper.add_internal_force(component, count_energy=counted)
+        for bolts in rank_group.kernel_components():
+            stepper.add_internal_force(bolts.component, count_energy=bolts.kind == "counted")
+            bolts.prefix = f"component/{k}/"  # (its state in the stepper's save_state)
+            k += 1
     if contact is not None:
         stepper.add_contact(contact)
     exchange = part.plan.kernel_exchange(part.comm, part.n_local)
@@ -1441,21 +1444,6 @@ class DistributedRun:
         return [(name, kind, arrays, [(np.arange(len(arrays.cells)), f"component/{k}/")])
                 for k, (name, kind, arrays) in enumerate(found)]
 
-    def _bolt_prefixes(self) -> dict:
-        """(group index, "counted" or "halo") -> the archive prefix of the stepper's GroutedBolts of
-        those bolts (after the element loop's components, `_stepper`'s order)."""
-        from pyfem.distributed_support import KINDS
-
-        loop = self.loop
-        k = 0 if loop is None else len(loop.counted.components) + (0 if loop.halo is None else len(loop.halo.components))
-        prefixes = {}
-        for rank_group in self.part.support:
-            for kind in KINDS:
-                if rank_group.components.get(kind) is not None:
-                    prefixes[(rank_group.index, kind)] = f"component/{k}/"
-                    k += 1
-        return prefixes
-
     def _pair_parts(self) -> list:
         """[(the rank's pair rows, archive prefix)] of the stepper's ContactPairs: one, or with local
         time stepping one per level."""
@@ -1512,7 +1500,7 @@ class DistributedRun:
         if part.support:  # the counted bolts' state, keyed by their nodes' positions (pyfem/distributed_support.py)
             from pyfem.distributed_support import rank_state as bolt_state
 
-            out.update(bolt_state(part.support, kernel, self._bolt_prefixes()))
+            out.update(bolt_state(part.support))
         return out
 
     def _pair_keys(self) -> np.ndarray:
@@ -1580,6 +1568,10 @@ class DistributedRun:
                     data = np.concatenate([f[f"pairs/{name}"] for f in having])
                     state[prefix + name] = np.ascontiguousarray(data[found][pair_rows]).tobytes()
                 parts[prefix] = contact
+        if part.support:  # the bolts' parts, keyed by position (pyfem/distributed_support.py)
+            from pyfem.distributed_support import load_state as load_bolts
+
+            parts.update(load_bolts(part.support, state, files, comm))
         if self.lts is not None:
             stepper.load_state(state)
             if not started:  # an unstarted LocalStepper loads none of its parts' states: each loads its own
@@ -1587,10 +1579,6 @@ class DistributedRun:
                     own = component.save_state()
                     component.load_state({name: state.get(prefix + name, block) for name, block in own.items()})
         else:
-            if part.support:
-                from pyfem.distributed_support import load_state as load_bolts
-
-                load_bolts(part.support, state, files, self._bolt_prefixes(), comm)
             stepper.load_state(state)
         return u, v, a
 
@@ -1786,6 +1774,10 @@ class DistributedRun:
         write_csv(self.out / "support.csv", [row for group in groups for row in segment_rows(group.bolts, group.name)],
                   peak=True)
         self.summary["support"] = {group.name: group_summary(group) for group in groups}
+        for group in groups:  # local time stepping: the group's bolts per rate level (each its host nodes' finest)
+            if group.bolt_levels.min(initial=0) >= 0 and len(group.bolt_levels):
+                levels, counts = np.unique(group.bolt_levels, return_counts=True)
+                self.summary["support"][group.name]["bolts_per_level"] = {int(k): int(c) for k, c in zip(levels, counts)}
         states = [bolt_state(group) for group in groups]
         end = self.times[-1] if self.times else 0.0
         write_xdmf(self.out / "support.xdmf", states, end)

@@ -343,8 +343,8 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
         if index == 1:  # the bolts installed in the stage, after the element loop's components
             for rank_group in bolts:
                 rank_group.fresh()
-                active_counted += [c for c, counts in rank_group.kernel_components() if counts]
-                active_halo += [c for c, counts in rank_group.kernel_components() if not counts]
+                active_counted += [bolts.component for bolts in rank_group.parts if bolts.kind == "counted"]
+                active_halo += [bolts.component for bolts in rank_group.parts if bolts.kind == "halo"]
         stepper = _stage_stepper(part, matrix, mass, constraints, load, active_counted, active_halo, contact, ramp)
 
         def report(steps, ratio, seconds, name=name):

@@ -28,6 +28,19 @@ KINDS = ("counted", "halo")
 
 
 @dataclasses.dataclass
+class BoltPart:
+    """One kernel component of a group's bolts on a rank: counted or halo, at one rate level (local
+    time stepping; None: global stepping), the bolts (group numbering) and the archive prefix of its
+    state in the stepper's save_state (set with the stepper)."""
+
+    kind: str
+    level: int | None
+    bolts: np.ndarray
+    component: object
+    prefix: str = ""
+
+
+@dataclasses.dataclass
 class RankGroup:
     """One support group on a rank.
 
@@ -39,7 +52,8 @@ class RankGroup:
         halo: the others.
         host_local: (m, k) the kernel's local numbers of the host nodes of the touched bolts' nodes
             (-1 at other bolts' nodes).
-        components: "counted" / "halo" -> the kernel's GroutedBolts of those bolts (None: none).
+        parts: the kernel's GroutedBolts of those bolts (`BoltPart`: one per kind, or with local time
+            stepping one per kind and level).
     """
 
     group: object
@@ -48,7 +62,7 @@ class RankGroup:
     counted: np.ndarray
     halo: np.ndarray
     host_local: np.ndarray
-    components: dict = dataclasses.field(default_factory=dict)
+    parts: list = dataclasses.field(default_factory=list)
 
     @property
     def name(self) -> str:
@@ -61,14 +75,55 @@ class RankGroup:
     def bolts_of(self, kind: str) -> np.ndarray:
         return self.counted if kind == "counted" else self.halo
 
-    def fresh(self) -> None:
-        """New, unloaded kernel components of the counted and halo bolts."""
-        self.components = {kind: (make_component(self, self.bolts_of(kind)) if len(self.bolts_of(kind)) else None)
-                           for kind in KINDS}
+    def fresh(self, levels: np.ndarray | None = None) -> None:
+        """New, unloaded kernel components of the counted and halo bolts (with local time stepping's
+        `levels` per local node: one per level, each bolt at the finest level of its host nodes)."""
+        self.parts = [BoltPart(kind, level, bolts, make_component(self, bolts))
+                      for kind in KINDS for level, bolts in self.by_level(self.bolts_of(kind), levels)]
+
+    def by_level(self, bolts: np.ndarray, levels: np.ndarray | None) -> list:
+        """[(level, its bolts)] of `bolts` (level None without `levels`; none for no bolts)."""
+        if not len(bolts):
+            return []
+        if levels is None:
+            return [(None, bolts)]
+        bolt_level = self.bolt_levels(levels)[bolts]
+        return [(int(level), bolts[bolt_level == level]) for level in np.unique(bolt_level)]
+
+    def bolt_levels(self, levels: np.ndarray) -> np.ndarray:
+        """int per bolt of the group: the finest level (smallest) of its host nodes' (touched bolts only;
+        the others -1), as a contact pair steps at the finer of its nodes' levels."""
+        offsets = self.group.bolts.bolt_offsets
+        found = np.full(len(offsets) - 1, -1, dtype=np.int64)
+        for j in self.touched:
+            found[j] = int(levels[self.host_local[offsets[j]:offsets[j + 1]]].min())
+        return found
+
+    def split_by_level(self, levels: np.ndarray) -> None:
+        """The parts (global stepping's: the stage's, rebased) cut into one per level, their state
+        carried over bolt by bolt (a group's scalars on the first part of each kind)."""
+        old, self.parts = self.parts, []
+        offsets = self.group.bolts.bolt_offsets
+        for part in old:
+            state = part.component.save_state()
+            nodes_of = {j: np.arange(offsets[j], offsets[j + 1]) for j in part.bolts}
+            node_rows = np.concatenate([np.full(len(nodes_of[j]), j) for j in part.bolts])
+            segment_rows = np.concatenate([np.full(len(nodes_of[j]) - 1, j) for j in part.bolts])
+            for index, (level, bolts) in enumerate(self.by_level(part.bolts, levels)):
+                component = make_component(self, bolts)
+                out = dict(component.save_state())
+                for names, rows in ((PER_NODE, node_rows), (PER_SEGMENT, segment_rows)):
+                    keep = np.isin(rows, bolts)
+                    for name in names:
+                        out[name] = np.ascontiguousarray(np.frombuffer(state[name], dtype=np.float64)[keep]).tobytes()
+                for name in SCALARS:
+                    out[name] = state[name] if index == 0 else np.zeros(1).tobytes()
+                component.load_state(out)
+                self.parts.append(BoltPart(part.kind, level, bolts, component))
 
     def kernel_components(self) -> list:
-        """[(component, count_energy)] in the stepper's order: counted, then halo."""
-        return [(self.components[kind], kind == "counted") for kind in KINDS if self.components.get(kind) is not None]
+        """The parts in the stepper's order: counted, then halo (by level within each)."""
+        return list(self.parts)
 
 
 def bolt_nodes(offsets: np.ndarray, bolts: np.ndarray) -> np.ndarray:
@@ -212,13 +267,16 @@ SEGMENT_ARRAYS = ("axial_force", "peak_axial_force", "plastic_strain")
 
 
 def counted_arrays(rank_group: RankGroup) -> dict:
-    """The counted component's per-node and per-segment arrays and where they go in the group."""
+    """The counted parts' per-node and per-segment arrays and where they go in the group."""
     whole = rank_group.group.bolts
-    component = rank_group.components.get("counted")
-    out = {"nodes": bolt_nodes(whole.bolt_offsets, rank_group.counted),
-           "segments": bolt_segments(whole.bolt_offsets, rank_group.counted)}
+    counted = [part for part in rank_group.parts if part.kind == "counted"]
+    bolts = np.concatenate([part.bolts for part in counted] or [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+    out = {"nodes": bolt_nodes(whole.bolt_offsets, bolts), "segments": bolt_segments(whole.bolt_offsets, bolts),
+           "bolts": bolts, "levels": np.concatenate([np.full(len(part.bolts), -1 if part.level is None else part.level)
+                                                      for part in counted] or [np.zeros(0, dtype=np.int64)])}
     for name in NODE_ARRAYS + SEGMENT_ARRAYS:
-        out[name] = np.zeros(0) if component is None else np.array(getattr(component, name)(), dtype=float)
+        out[name] = np.concatenate([np.array(getattr(part.component, name)(), dtype=float) for part in counted]
+                                   or [np.zeros(0)])
     return out
 
 
@@ -236,7 +294,11 @@ def whole_view(rank_group: RankGroup, pieces: list):
         for name in SEGMENT_ARRAYS:
             arrays[name][piece["segments"]] = piece[name]
     bolts = dataclasses.replace(whole, component=WholeBolts(whole.bolt_offsets, arrays))
-    return dataclasses.replace(rank_group.group, bolts=bolts)
+    view = dataclasses.replace(rank_group.group, bolts=bolts)
+    view.bolt_levels = np.full(len(whole.bolt_offsets) - 1, -1, dtype=np.int64)  # local time stepping's (-1: none)
+    for piece in pieces:
+        view.bolt_levels[piece["bolts"]] = piece["levels"]
+    return view
 
 
 def gather_groups(comm, rank_groups_: list, root: int = 0) -> list | None:
@@ -285,39 +347,43 @@ def segment_first_nodes(offsets: np.ndarray, bolts: np.ndarray) -> np.ndarray:
     return np.concatenate([np.arange(offsets[j], offsets[j + 1] - 1) for j in bolts]).astype(np.int64)
 
 
-def rank_state(rank_groups_: list, kernel: dict, prefixes: dict) -> dict:
-    """This rank's counted bolts' state for a checkpoint (`prefixes`: (group index, kind) -> the
-    component's archive prefix in the stepper's `kernel` state): per node and per segment, keyed."""
+def rank_state(rank_groups_: list) -> dict:
+    """This rank's counted bolts' state for a checkpoint (each counted part's committed state): per
+    node and per segment, keyed by position; the group's scalars summed over its counted parts."""
     out = {}
     for rank_group in rank_groups_:
         g = rank_group.index
-        if rank_group.components.get("counted") is None:
+        counted = [part for part in rank_group.parts if part.kind == "counted"]
+        if not counted:
             continue
-        prefix = prefixes[(g, "counted")]
         offsets = rank_group.group.bolts.bolt_offsets
-        nodes = bolt_nodes(offsets, rank_group.counted)
-        out[f"bolts/{g}/node_keys"] = node_keys(rank_group, nodes)
-        out[f"bolts/{g}/segment_keys"] = node_keys(rank_group, segment_first_nodes(offsets, rank_group.counted))
+        bolts = np.concatenate([part.bolts for part in counted]).astype(np.int64)
+        out[f"bolts/{g}/node_keys"] = node_keys(rank_group, bolt_nodes(offsets, bolts))
+        out[f"bolts/{g}/segment_keys"] = node_keys(rank_group, segment_first_nodes(offsets, bolts))
+        states = [part.component.save_state() for part in counted]
         for name in PER_NODE + PER_SEGMENT:
-            out[f"bolts/{g}/{name}"] = np.frombuffer(kernel[prefix + name], dtype=np.float64)
+            out[f"bolts/{g}/{name}"] = np.concatenate([np.frombuffer(state[name], dtype=np.float64) for state in states])
         for name in SCALARS:
-            out[f"bolts/{g}/{name}"] = np.frombuffer(kernel[prefix + name], dtype=np.float64)
+            out[f"bolts/{g}/{name}"] = np.array([sum(float(np.frombuffer(state[name], dtype=np.float64).sum())
+                                                     for state in states)])
     return out
 
 
-def load_state(rank_groups_: list, state: dict, files: list, prefixes: dict, comm) -> None:
-    """The checkpoint's bolt state (every rank file of it, `files`) into `state` (the stepper's, by the
-    components' `prefixes`): each component's nodes and segments by their keys; a group's scalars
-    (stored energy, dissipation, the rebased zero: sums over its bolts) on the lowest rank counting
-    its bolts, zero elsewhere (the energy account is a sum over the ranks)."""
+def load_state(rank_groups_: list, state: dict, files: list, comm) -> dict:
+    """The checkpoint's bolt state (every rank file of it, `files`) into `state` (the stepper's, at the
+    parts' prefixes): each part's nodes and segments by their keys; a group's scalars (stored energy,
+    dissipation, the rebased zero: sums over its bolts) on the first counted part of the lowest rank
+    counting its bolts, zero elsewhere (the energy account is a sum over the ranks). Returns {prefix:
+    component} of the parts (a local stepper not started yet loads them one by one)."""
     from pyfem.distributed_model import rows_of
 
     counting = comm.allgather([rank_group.index for rank_group in rank_groups_
-                               if rank_group.components.get("counted") is not None])
+                               if any(part.kind == "counted" for part in rank_group.parts)])
+    loaded = {}
     for rank_group in rank_groups_:
         g = rank_group.index
         having = [f for f in files if f"bolts/{g}/node_keys" in f]
-        if not having:
+        if not having or not rank_group.parts:
             continue
         node_data = {name: np.concatenate([f[f"bolts/{g}/{name}"] for f in having]) for name in PER_NODE}
         segment_data = {name: np.concatenate([f[f"bolts/{g}/{name}"] for f in having]) for name in PER_SEGMENT}
@@ -326,18 +392,18 @@ def load_state(rank_groups_: list, state: dict, files: list, prefixes: dict, com
         totals = {name: sum(float(f[f"bolts/{g}/{name}"].sum()) for f in having) for name in SCALARS}
         first = min(q for q, groups in enumerate(counting) if g in groups)
         offsets = rank_group.group.bolts.bolt_offsets
-        for kind in KINDS:
-            if rank_group.components.get(kind) is None:
-                continue
-            prefix = prefixes[(g, kind)]
-            bolts = rank_group.bolts_of(kind)
-            rows = rows_of(all_nodes, node_keys(rank_group, bolt_nodes(offsets, bolts)), f"bolt nodes of group {g}")
+        taken = False
+        for part in rank_group.parts:
+            rows = rows_of(all_nodes, node_keys(rank_group, bolt_nodes(offsets, part.bolts)), f"bolt nodes of group {g}")
             for name in PER_NODE:
-                state[prefix + name] = np.ascontiguousarray(node_data[name][rows]).tobytes()
-            rows = rows_of(all_segments, node_keys(rank_group, segment_first_nodes(offsets, bolts)),
+                state[part.prefix + name] = np.ascontiguousarray(node_data[name][rows]).tobytes()
+            rows = rows_of(all_segments, node_keys(rank_group, segment_first_nodes(offsets, part.bolts)),
                            f"bolt segments of group {g}")
             for name in PER_SEGMENT:
-                state[prefix + name] = np.ascontiguousarray(segment_data[name][rows]).tobytes()
-            takes = kind == "counted" and comm.rank == first
+                state[part.prefix + name] = np.ascontiguousarray(segment_data[name][rows]).tobytes()
+            takes = part.kind == "counted" and comm.rank == first and not taken
+            taken = taken or takes
             for name in SCALARS:
-                state[prefix + name] = np.array([totals[name] if takes else 0.0]).tobytes()
+                state[part.prefix + name] = np.array([totals[name] if takes else 0.0]).tobytes()
+            loaded[part.prefix] = part.component
+    return loaded

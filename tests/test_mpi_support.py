@@ -86,7 +86,7 @@ def assert_the_bolts_worked(out: Path) -> dict:
     forces = table(out / "support.csv")["axial_force"]
     assert np.count_nonzero(np.abs(forces) > 100.0) > 40
     for name in ("middle", "cable"):
-        assert np.abs(table(out / "bolts" / f"{name}.csv")["axial_force"]).max() > 1e3
+        assert np.abs(table(out / "bolts" / f"{name}.csv")["axial_force"]).max() > 100.0
     return summary
 
 
@@ -98,8 +98,8 @@ def compare(out: Path, reference: Path) -> dict:
         assert (got["group"] == expected["group"]).all() and (got["bolt"] == expected["bolt"]).all()
         assert relative(np.column_stack([got[c] for c in "xyz"]), np.column_stack([expected[c] for c in "xyz"])) == 0.0
         found[f"{name} axial_force"] = relative(got["axial_force"], expected["axial_force"])
-        grouted = expected["group"] == "grouted"
-        found[f"{name} grouted bond_slip"] = relative(got["bond_slip"][grouted], expected["bond_slip"][grouted])
+        grouted = expected["group"] != "cables"  # (a yielded free length's displacement is not unique)
+        found[f"{name} bolts' bond_slip"] = relative(got["bond_slip"][grouted], expected["bond_slip"][grouted])
     for name in ("bolts/middle.csv", "bolts/cable.csv", "monitors/floor.csv"):
         got, expected = table(out / name), table(reference / name)
         for column in expected.dtype.names[1:]:
@@ -123,6 +123,59 @@ def test_bolts_and_cables_on_the_ranks_equal_the_serial_run(runs, ranks):
     print(f"{ranks} ranks against serial: largest {worst} {differences[worst]:.2e}")
     for name, difference in differences.items():
         assert difference < ROUNDOFF, (name, difference)
+
+
+# Local time stepping: an 8 x 8 m column on a stiff base (E 120 GPa, 2 m) meshes three rate levels (the
+# interior rock above the base at level 2), and a group "short" of three bolts installed at the start,
+# two inside the level-2 rock and one reaching down into level-0 nodes.
+LTS = ["time.local_stepping=true", "mesh.size=[8.0,8.0,10.0]",
+       'mesh.layers=[{material="hard",thickness=2.0},{material="rock",thickness=4.0},{material="top",thickness=4.0}]',
+       "materials.hard={E=1.2e11,nu=0.24,rho=2600.0}", "time.dt=2e-5",
+       "support.grouted.lines=[[3.0,3.0,5.5,3.0,3.0,1.0],[5.0,5.0,5.5,5.0,5.0,1.0],[4.0,4.0,5.5,4.0,4.0,0.5]]",
+       "support.cables.lines=[[3.0,5.0,5.5,3.0,5.0,0.5],[5.0,3.0,5.5,5.0,3.0,0.5]]",
+       "monitor.0.point=[4.0,4.0,5.9]", "bolt_monitor.0.point=[4.0,4.0,3.0]", "bolt_monitor.1.point=[3.0,5.0,2.0]",
+       "support.short={lines=[[4.0,4.0,5.8,4.0,4.0,4.2],[3.5,4.5,5.8,3.5,4.5,4.2],[4.5,3.5,5.8,4.5,3.5,2.5]],"
+       "diameter=0.032,yield_force=3.2e5,bond_stiffness=1.0e9,bond_strength=4.0e5,segment=0.3}"]
+
+
+@pytest.mark.slow
+def test_bolts_under_local_time_stepping_at_their_host_nodes_finest_level_on_one_two_and_three_ranks(
+        tmp_path, mpi_launcher):
+    """Each bolt steps at the finest level of its host nodes (as a contact pair at the finer of its
+    two nodes'); the levels bound the bolts' stiffness too. Before comparing: three levels, the short
+    group's bolts at two of them, the bolts loaded and slipping as in global stepping. Then 2 and 3
+    ranks against one rank (PYFEM_ONE_MODEL=1) to ROUNDOFF, and one rank against its global stepping
+    within local stepping's own error (measured: axial forces 5.7e-4 of their peak)."""
+    extra = [word for setting in LTS for word in ("--set", setting)]
+    runs = {1: run(1, tmp_path / "1", *extra, one_model=True)}
+    for ranks in (2, 3):
+        runs[ranks] = run(ranks, tmp_path / str(ranks), *extra, mpirun=mpi_launcher)
+    glob = run(1, tmp_path / "global", *extra, "--set", "time.local_stepping=false", one_model=True)
+    for ranks, summary in runs.items():
+        assert_the_bolts_worked(tmp_path / str(ranks))
+        assert "3 rate levels" in summary["dt_reason"], summary["dt_reason"]
+        assert summary["support"]["short"]["bolts_per_level"] == {"0": 1, "2": 2}
+        assert summary["support"]["short"]["peak_axial_force"] > 1e3
+    assert max(runs[3]["mpi"]["extra_ghost_nodes"]) > 0
+    for ranks in (2, 3):
+        differences = compare(tmp_path / str(ranks), tmp_path / "1")
+        worst = max(differences, key=differences.get)
+        print(f"local stepping, {ranks} ranks against one: largest {worst} {differences[worst]:.2e}")
+        for name, difference in differences.items():
+            assert difference < ROUNDOFF, (name, difference)
+    # Its checkpoint keyed by position: 0.05 s on 2 ranks extended by --resume on 3 ranks.
+    run(2, tmp_path / "extended", *extra, "--set", "time.duration=0.05", mpirun=mpi_launcher)
+    extended = run(3, tmp_path / "extended", *extra, "--resume", mpirun=mpi_launcher)
+    assert extended["mpi"]["ranks"] == 3 and extended["resumed"][0]["t"] == pytest.approx(0.05)
+    differences = compare(tmp_path / "extended", tmp_path / "2")
+    worst = max(differences, key=differences.get)
+    print(f"local stepping, 2 ranks resumed on 3 against 2 ranks: largest {worst} {differences[worst]:.2e}")
+    for name, difference in differences.items():
+        assert difference < ROUNDOFF, (name, difference)
+    got, expected = table(tmp_path / "1" / "support.csv"), table(tmp_path / "global" / "support.csv")
+    error = relative(got["axial_force"], expected["axial_force"])
+    print(f"local against global stepping: axial forces {error:.2e} of their peak")
+    assert 0.0 < error < 1e-2
 
 
 @pytest.mark.slow
