@@ -129,7 +129,7 @@ def choose(part, loop, time_step, duration: float) -> tuple[RankLevels | None, s
     if not setting:
         return None, None
     try:
-        local_stepping.check_supported(part.scene, part.beta, support=True)
+        local_stepping.check_supported(part.scene, part.beta)
         held = None
         if part.constraints is not None and part.pairs is not None:
             on_pair = np.intersect1d(np.asarray(part.constraints.nodes), np.asarray(part.pairs.nodes).ravel())

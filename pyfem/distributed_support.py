@@ -126,6 +126,54 @@ class RankGroup:
         return list(self.parts)
 
 
+def serial_group(group, index: int, handed_over: bool) -> RankGroup:
+    """A group of the serial model (pyfem.solver: one rank, host nodes local) as a `RankGroup` of all its
+    bolts counted, for local time stepping's parts by level: with `handed_over` (a relaxation stage
+    ran) and the group installed there, its one part is the stage's component (rebased), else none."""
+    bolts = np.arange(len(group.bolts.bolt_offsets) - 1)
+    found = RankGroup(group, index, bolts, bolts, np.zeros(0, dtype=np.int64),
+                      np.ascontiguousarray(group.bolts.host_nodes, dtype=np.int32))
+    if handed_over and group.stage == "static":
+        found.parts = [BoltPart("counted", None, bolts, group.component)]
+    return found
+
+
+class LevelBolts:
+    """A group's bolts stepped as several kernel components (local time stepping's levels) read as
+    the one component pyfem.support and pyfem.support_output read (`WholeBolts`' calls, now)."""
+
+    def __init__(self, rank_group: RankGroup) -> None:
+        self.rank_group = rank_group
+        offsets = rank_group.group.bolts.bolt_offsets
+        self.n_bolts = len(offsets) - 1
+        self.n_segments = int(offsets[-1]) - self.n_bolts
+
+    def bolts_per_level(self) -> dict:
+        """Local time stepping's level -> the group's bolts stepped there."""
+        counts = {}
+        for part in self.rank_group.parts:
+            counts[int(part.level)] = counts.get(int(part.level), 0) + len(part.bolts)
+        return dict(sorted(counts.items()))
+
+    def _now(self) -> WholeBolts:
+        return whole_view(self.rank_group, [counted_arrays(self.rank_group)]).bolts.component
+
+    def axial_force(self):
+        return self._now().axial_force()
+
+    def peak_axial_force(self):
+        return self._now().peak_axial_force()
+
+    def bond_slip(self):
+        return self._now().bond_slip()
+
+    def plastic_slip(self):
+        return self._now().plastic_slip()
+
+    def plastic_strain(self):
+        return self._now().plastic_strain()
+
+
 def bolt_nodes(offsets: np.ndarray, bolts: np.ndarray) -> np.ndarray:
     """The bolt nodes of `bolts` (group numbering), bolt by bolt."""
     if not len(bolts):

@@ -63,18 +63,14 @@ these fixed figures, not by timing this machine, so that a scene makes the same 
 machine and when a run resumes."""
 
 
-def check_supported(scene, beta: float, support: bool = False) -> None:
+def check_supported(scene, beta: float) -> None:
     """Raises SceneError naming time.local_stepping when the scene asks for what the local stepper
-    does not do yet (`support`: rock bolts are built, on the distributed model)."""
+    does not do yet."""
     allowed = ("false for scenes with {}: local time stepping covers the stiffness, mass-proportional "
                "damping, viscoelastic, viscous, fixed and roller faces, seismic input, element-loop materials, "
-               "contact and a static stage (docs/local_stepping.md)")
+               "contact, rock bolts and a static stage (docs/local_stepping.md)")
     if beta != 0.0:
         raise SceneError(KEY, True, allowed.format("stiffness-proportional Rayleigh damping (beta > 0)"))
-    if scene.get("support") and not support:
-        raise SceneError(KEY, True, allowed.format("rock bolts or cables on the serial path ([support.NAME]: "
-                                                   "the distributed model steps them locally, PYFEM_ONE_MODEL=1 on one "
-                                                   "rank or under mpirun)"))
     if scene["time"].get("matrix_precision", "double") != "double":
         raise SceneError(KEY, True, allowed.format('time.matrix_precision = "single" (the local stepper '
                                                     "stores double blocks)"))

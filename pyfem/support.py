@@ -496,7 +496,9 @@ def group_summary(group: SupportGroup) -> dict:
     """run.json's "support" entry of a group: bolts, total length, yielded segments, peak force."""
     component = group.component
     strain = np.asarray(component.plastic_strain())
-    return {"type": group.settings["type"], "installed": group.stage, "bolts": int(component.n_bolts),
+    per_level = getattr(component, "bolts_per_level", None)  # local time stepping (pyfem/distributed_support.py)
+    return {**({"bolts_per_level": per_level()} if per_level is not None else {}),
+            "type": group.settings["type"], "installed": group.stage, "bolts": int(component.n_bolts),
             "total_length": group.total_length, "segments": int(component.n_segments),
             "yielded_segments": int(np.count_nonzero(strain != 0.0)),
             "slipping_nodes": int(np.count_nonzero(np.asarray(component.plastic_slip()) != 0.0)),

@@ -143,21 +143,23 @@ def test_bolts_under_local_time_stepping_at_their_host_nodes_finest_level_on_one
         tmp_path, mpi_launcher):
     """Each bolt steps at the finest level of its host nodes (as a contact pair at the finer of its
     two nodes'); the levels bound the bolts' stiffness too. Before comparing: three levels, the short
-    group's bolts at two of them, the bolts loaded and slipping as in global stepping. Then 2 and 3
-    ranks against one rank (PYFEM_ONE_MODEL=1) to ROUNDOFF, and one rank against its global stepping
+    group's bolts at two of them, the bolts loaded and slipping as in global stepping. Then the serial
+    path's LocalStepper and 2 and 3 ranks against one rank (PYFEM_ONE_MODEL=1) to ROUNDOFF, and one rank against its global stepping
     within local stepping's own error (measured: axial forces 5.7e-4 of their peak)."""
     extra = [word for setting in LTS for word in ("--set", setting)]
     runs = {1: run(1, tmp_path / "1", *extra, one_model=True)}
     for ranks in (2, 3):
         runs[ranks] = run(ranks, tmp_path / str(ranks), *extra, mpirun=mpi_launcher)
-    glob = run(1, tmp_path / "global", *extra, "--set", "time.local_stepping=false", one_model=True)
+    run(1, tmp_path / "global", *extra, "--set", "time.local_stepping=false", one_model=True)
+    serial = run(1, tmp_path / "serial", *extra)  # the serial path's LocalStepper (pyfem/solver.py)
+    assert serial.get("model") != "distributed" and serial["support"]["short"]["bolts_per_level"] == {"0": 1, "2": 2}
     for ranks, summary in runs.items():
         assert_the_bolts_worked(tmp_path / str(ranks))
         assert "3 rate levels" in summary["dt_reason"], summary["dt_reason"]
         assert summary["support"]["short"]["bolts_per_level"] == {"0": 1, "2": 2}
         assert summary["support"]["short"]["peak_axial_force"] > 1e3
     assert max(runs[3]["mpi"]["extra_ghost_nodes"]) > 0
-    for ranks in (2, 3):
+    for ranks in ("serial", 2, 3):
         differences = compare(tmp_path / str(ranks), tmp_path / "1")
         worst = max(differences, key=differences.get)
         print(f"local stepping, {ranks} ranks against one: largest {worst} {differences[worst]:.2e}")

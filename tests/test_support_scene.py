@@ -284,7 +284,6 @@ MODEL_ERRORS = [  # found once the mesh is built
      "(the model has none in the excavated regions top)"),
     ({**excavated_box().to_json(), "static": dict(excavated_box().to_json()["static"], solver="direct")},
      "static.solver", "need static.solver = \"relaxation\""),
-    (dict(with_group(), time=dict(BOX["time"], local_stepping=True)), "time.local_stepping", "rock bolts or cables"),
 ]
 
 
