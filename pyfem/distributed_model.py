@@ -889,6 +889,11 @@ def _check(scene: Scene) -> dict:
         sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
         0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
     shares = comm.gather((*cells, int(exchange.bytes_sent_per_step), round(peak_memory_mib())), root=0)
+    support = None
+    if part.support:  # rock bolts and cables (pyfem/distributed_support.py)
+        from pyfem.distributed_support import plan_lines
+
+        support = plan_lines(comm, part.support)
     shown = plan(part, ts, run.n_steps, run.contact_arrays, run.lts, run.lts_decision)
     if comm.rank != 0:
         return {}
@@ -905,6 +910,8 @@ def _check(scene: Scene) -> dict:
     imbalance = work_imbalance([c + h for c, h, _, _ in shares], part.n_pairs)
     if imbalance is not None:
         shown["balance"] = imbalance
+    if support:
+        shown["support"] = support
     return shown
 
 

@@ -174,6 +174,26 @@ class LevelBolts:
         return self._now().plastic_strain()
 
 
+def plan_lines(comm, rank_groups_: list) -> dict:
+    """`check`'s line of each group on the distributed model (rank 0's; {} elsewhere): its bolts, length,
+    segments, when installed and how the ranks share them. A collective."""
+    shares = comm.gather([(len(rank_group.counted), len(rank_group.halo)) for rank_group in rank_groups_], root=0)
+    if comm.rank != 0:
+        return {}
+    lines = {}
+    for g, rank_group in enumerate(rank_groups_):
+        group = rank_group.group
+        stage = {"static": "in the static stage with static.install", "start": "at the start of the dynamic run"}[
+            group.stage]
+        per_rank = ", ".join(f"{counted} / {halo}" for counted, halo in (rank_shares[g] for rank_shares in shares))
+        lines[group.name] = (
+            f"{len(group.lines)} {group.settings['type']}s installed {stage}, {group.total_length:.4g} m in all, "
+            f"segments of {group.segment:.3g} m; each stepped whole by every rank stepping one of its host nodes, "
+            f"counted on one (counted / halo bolts per rank: {per_rank}); massless and condensed, they do not set "
+            "the time step, whose estimate bounds the stiffness they add to their host nodes")
+    return lines
+
+
 def bolt_nodes(offsets: np.ndarray, bolts: np.ndarray) -> np.ndarray:
     """The bolt nodes of `bolts` (group numbering), bolt by bolt."""
     if not len(bolts):
