@@ -297,10 +297,9 @@ def _surface_triangles(model, name: str, key: str, installed_regions: list):
                 normal = -normal
             triangles.append(piece)
             normals.append(normal)
-    if comm.size == 1:
-        return np.array(triangles), x, np.array(normals)
     # The whole surface on every rank: its triangles in the order of their centroids (x, y, z), the
-    # vertices numbered by their coordinates, so that the pattern is the same on any rank count.
+    # vertices numbered by their coordinates, so that the pattern (its bolts' order, and where a
+    # closed section's first bolt goes) is the same for any numbering and rank count.
     corners = np.concatenate(comm.allgather(x[np.array(triangles, dtype=np.int64).reshape(-1, 3)].reshape(-1, 3, 3)))
     normals = np.concatenate(comm.allgather(np.array(normals).reshape(-1, 3)))
     centroids = corners.mean(axis=1)

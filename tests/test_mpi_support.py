@@ -192,3 +192,50 @@ def test_a_run_on_two_ranks_extended_on_three_equals_the_uninterrupted_run(runs,
     print(f"2 ranks, resumed on 3, against 2 ranks: largest {worst} {differences[worst]:.2e}")
     for name, difference in differences.items():
         assert difference < ROUNDOFF, (name, difference)
+
+
+PLACE = """
+import sys, json
+import numpy as np
+sys.path.insert(0, {tests!r})
+from mpi4py import MPI
+from pyfem.scene import parse_scene
+from test_support_scene import tet_tunnel
+from pathlib import Path
+scene = tet_tunnel(Path({tmp!r}), 'Physical Surface("tunnel_wall") = {{ex[6], ex[7], ex[8], ex[9]}};', "tunnel_wall")
+if MPI.COMM_WORLD.size == 1 and {serial}:
+    from pyfem import solver
+    groups = solver.prepare(scene, solve_static=False).support
+else:
+    from pyfem import distributed_model
+    groups = [rank_group.group for rank_group in distributed_model.build(scene, MPI.COMM_WORLD).support]
+if MPI.COMM_WORLD.rank == 0:
+    np.savez({out!r}, **{{g.name: g.lines for g in groups}},
+             **{{g.name + "_positions": g.bolts.positions for g in groups}},
+             **{{g.name + "_weights": g.bolts.host_weights for g in groups}})
+"""
+
+
+@pytest.mark.slow
+def test_a_pattern_is_placed_alike_on_any_rank_count(tmp_path, mpi_launcher):
+    """A closed pattern (a tetrahedral tunnel's wall, 13 bolts a row, where the first bolt of a row
+    follows from the order the surface's triangles are read in) placed by the serial model and by 2
+    and 3 ranks (each its part of the surface, gathered and ordered by position): the same bolts in
+    the same order, their nodes' host weights the same (the whole model's preferred cell)."""
+    found = {}
+    for key, ranks in (("serial", 1), (2, 2), (3, 3)):
+        out = tmp_path / f"lines_{key}.npz"
+        code = PLACE.format(tests=str(REPO / "tests"), tmp=str(tmp_path), serial=key == "serial", out=str(out))
+        command = [PYTHON, "-c", code]
+        if ranks > 1:
+            command = [mpi_launcher, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)] + command
+        done = subprocess.run(command, cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1"),
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-3000:]
+        found[key] = dict(np.load(out))
+    assert len(found["serial"]["radial"]) == 52
+    for key in (2, 3):
+        for name in ("radial",):
+            assert np.abs(found[key][name] - found["serial"][name]).max() < 1e-12, (key, name)
+            assert np.abs(found[key][name + "_positions"] - found["serial"][name + "_positions"]).max() < 1e-12
+            assert np.abs(found[key][name + "_weights"] - found["serial"][name + "_weights"]).max() < 1e-12
