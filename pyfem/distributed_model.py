@@ -41,6 +41,9 @@ to the run as the serial stage's is.
 Local time stepping (pyfem/distributed_lts.py): the serial run's levels and row split on the ranks'
 parts, one velocity exchange per level.
 
+Rock bolts and cables (pyfem/distributed_support.py): placed alike on every rank; each bolt stepped
+whole by every rank stepping one of its host nodes (its other host nodes extra ghosts), counted on one.
+
 Not built yet (each refused under mpirun with the key and what is allowed; one rank runs them): a
 linear static stage's solves, one point per cell, quadratic tetrahedra, more than 31 contact
 interfaces.
