@@ -342,6 +342,18 @@ def _surface_axis(triangles: np.ndarray, x: np.ndarray, normals: np.ndarray, key
     return (axis if axis[np.argmax(np.abs(axis))] > 0.0 else -axis), True
 
 
+def _closed_start(chain: list, keys: list, x: np.ndarray, axis: np.ndarray) -> int:
+    """Where a closed section's chain begins (its first bolt): of its points on the mesh edges most
+    nearly along the axis (an extruded wall's lines along its length, not a quadrilateral's diagonal),
+    the lowest in x, then y, then z: the same point whatever order the facets are read in."""
+    points = np.array([point for point, _ in chain[:-1]])
+    edges = np.array([x[b] - x[a] for a, b in keys[:-1]])
+    along = np.abs(edges @ axis) / np.linalg.norm(edges, axis=1)
+    best = np.flatnonzero(along >= along.max() - 1e-9)
+    order = np.lexsort((points[best, 2], points[best, 1], points[best, 0]))
+    return int(best[order[0]])
+
+
 def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: float):
     """The section of the surface by the plane axis . p = t: chains (each a list of (point, triangle)
     from one end to the other; closed chains repeat their first point)."""
@@ -368,7 +380,7 @@ def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: f
     for start in starts:
         if start in seen:
             continue
-        chain, current, previous = [(points[start], None)], start, None
+        chain, current, previous, keys = [(points[start], None)], start, None, [start]
         seen.add(start)
         while True:
             step = [(key, k) for key, k in neighbours[current] if key != previous or len(neighbours[current]) == 1]
@@ -377,10 +389,14 @@ def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: f
                 break
             key, k = step[0]
             chain.append((points[key], k))
+            keys.append(key)
             if key == start:
                 break
             seen.add(key)
             previous, current = current, key
+        if len(chain) > 2 and keys[-1] == start:  # closed: begin at a canonical point (`_closed_start`)
+            first = _closed_start(chain, keys, x, axis)
+            chain = [(chain[first][0], None)] + chain[first + 1:] + chain[1:first + 1]
         if len(chain) > 1:
             chains.append(chain)
     return chains
