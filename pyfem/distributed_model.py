@@ -48,6 +48,9 @@ arrays, sent to the other ranks' halo with their mean initial stress. Quadratic 
 HRZ-lumped masses with the ghosts' diagonals from their owners (pyfem.assembly.hrz_lumped_vector).
 Any number of contact interfaces: a pair node's checkpoint key holds its roles in ROLE_BITS-bit words.
 
+Rock bolts and cables (pyfem/distributed_support.py): placed alike on every rank; each bolt stepped
+whole by every rank stepping one of its host nodes (its other host nodes extra ghosts), counted on one.
+
 The linear static stage: pyfem/distributed_linear.py (PETSc on the ranks' rows).
 """
 from __future__ import annotations
@@ -86,11 +89,6 @@ def check_supported(scene: Scene) -> None:
     build yet (every rank says the same: the scene is the same on every rank)."""
     from pyfem import distributed_stage
 
-    if scene.get("support"):
-        name = next(iter(scene["support"]))
-        raise SceneError(f"support.{name}", scene["support"][name]["type"], "not under mpirun: rock bolts and cables run "
-                         "on one rank only (the distributed model does not place them on the ranks' parts yet): run "
-                         "without mpirun, or leave out the [support.NAME] tables")
     distributed_stage.check_supported(scene)
 
 
@@ -203,6 +201,7 @@ class RankModel:
     n_extra: int = 0                 # extra ghosts: ghosts the function space's index map does not hold
     pair_side: np.ndarray | None = None    # (n_local, words): its roles, bit side + 2 interface of each pair it is in
     row_sums: np.ndarray | None = None     # per owned node: its largest absolute row sum of every cell's matrix
+    support: list = field(default_factory=list)  # pyfem.distributed_support.RankGroup of each [support.NAME]
 
     def node_keys(self, nodes: np.ndarray) -> np.ndarray:
         """Checkpoint keys of local `nodes`: their positions, and with contact their roles (`pair_side`:
@@ -284,7 +283,17 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
     n_dofs_global = matrix.getSize()[0]
     owned, global_rows = move_rows(comm, ownership, first, owned_rows_global(matrix, last - first, release=True))
-    local_nodes, extra = local_numbering(owned, mapped, global_rows[1])
+    support, bolt_hosts = [], np.zeros(0, dtype=np.int64)
+    if scene.get("support"):  # rock bolts and cables: every bolt's host nodes among the nodes of the ranks stepping it
+        from pyfem.distributed_support import needed_nodes
+        from pyfem.support import scene_groups
+
+        placing = Model(mesh=mesh, V=V, cell_tags=cell_tags, facet_tags=facet_tags, regions=regions,
+                        boundaries=boundaries, node_coords=coords_d, mass=mass_d, stiffness=None, faces=[],
+                        interface_tags=interface_tags, _materials=materials)
+        support = scene_groups(scene, placing)
+        bolt_hosts = needed_nodes(support, ownership, comm.rank)
+    local_nodes, extra = local_numbering(owned, mapped, np.concatenate([global_rows[1], bolt_hosts]))
     rows = localize(global_rows, local_nodes)  # every cell's: the time step's
     del global_rows
     n_owned = len(owned)
@@ -319,8 +328,15 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     del rows  # (the kernel's matrix holds the owned rows)
     plan = ghost_plan(comm, ownership, local_nodes, n_owned)
     mass = np.ascontiguousarray(mass)
-    estimates = omega2_estimates(scene, comm, plan, kernel_matrix, mass, coords, n_owned)
-    row_sums = owned_row_sums(kernel_matrix, n_owned)  # every cell's: local stepping's levels
+    estimated = kernel_matrix
+    if support:  # the time step bounds the bolts' condensed stiffness too (as pyfem.solver.prepare)
+        from pyfem.distributed_support import add_rows, bound_rows, rank_groups
+
+        support = rank_groups(support, ownership, comm.rank, local_nodes)
+        estimated = add_rows(kernel_matrix, n_owned, bound_rows(support, n_owned, len(local_nodes)))
+    estimates = omega2_estimates(scene, comm, plan, estimated, mass, coords, n_owned)
+    row_sums = owned_row_sums(estimated, n_owned)  # every cell's (and the bolts' bound): local stepping's levels
+    del estimated
     loop_cells = element_loop_cells(scene, model)
     if loop_cells:  # the matrix of the other cells (the whole model's NonlinearRegions.stiffness)
         del kernel_matrix
@@ -357,7 +373,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
                      kernel_of_dolfinx=None if identity else kernel_of_dolfinx, pairs=rank_pairs,
                      pair_index=pair_index, pair_global=pair_global, pair_side=pair_side,
                      n_pairs=0 if pairs is None else len(pairs),
-                     moved_nodes=len(ownership.moved), n_extra=len(extra), row_sums=row_sums,
+                     moved_nodes=len(ownership.moved), n_extra=len(extra), row_sums=row_sums, support=support,
                      setup_seconds=time.perf_counter() - began)
 
 
@@ -647,6 +663,7 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
              held_force: np.ndarray | None = None):
     """The kernel's Stepper of the rank's share:
     with the element loop its counted cells (their energy this rank's) and its halo cells (not);
+    the bolts it steps (counted and halo, pyfem/distributed_support.py);
     `contact`: the kernel's ContactPairs of the pairs it steps (None: none); `held_force`: a linear
     stage's hand-over force on the nodes it steps (pyfem/distributed_linear.py), held constant."""
     from pyfem import _kernels
@@ -666,6 +683,14 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
             stepper.add_internal_force(component)
         for component in ([] if loop.halo is None else loop.halo.components):
             stepper.add_internal_force(component, count_energy=False)
+    k = 0 if loop is None else len(loop.counted.components) + (0 if loop.halo is None else len(loop.halo.components))
+    for rank_group in part.support:  # the stage's (rebased) or fresh at t = 0
+        if not rank_group.parts:
+            rank_group.fresh()
+        for bolts in rank_group.kernel_components():
+            stepper.add_internal_force(bolts.component, count_energy=bolts.kind == "counted")
+            bolts.prefix = f"component/{k}/"  # (its state in the stepper's save_state)
+            k += 1
     if contact is not None:
         stepper.add_contact(contact)
     if held_force is not None and np.any(held_force):
@@ -905,6 +930,11 @@ def _check(scene: Scene) -> dict:
         sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
         0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
     shares = comm.gather((*cells, int(exchange.bytes_sent_per_step), round(peak_memory_mib())), root=0)
+    support = None
+    if part.support:  # rock bolts and cables (pyfem/distributed_support.py)
+        from pyfem.distributed_support import plan_lines
+
+        support = plan_lines(comm, part.support)
     shown = plan(part, ts, run.n_steps, run.contact_arrays, run.lts, run.lts_decision)
     if comm.rank != 0:
         return {}
@@ -921,6 +951,8 @@ def _check(scene: Scene) -> dict:
     imbalance = work_imbalance([c + h for c, h, _, _ in shares], part.n_pairs)
     if imbalance is not None:
         shown["balance"] = imbalance
+    if support:
+        shown["support"] = support
     return shown
 
 
@@ -1062,7 +1094,8 @@ class DistributedRun:
         if self.lts is not None:
             self.time_step = self.lts.time_step
             self.n_steps = run_steps(scene["time"]["duration"], self.lead_in, self.time_step)
-        self.energy_columns = energy_columns(part.pairs is not None, loop is not None)
+        # The element loop's columns also carry the bolts' stored energy and dissipation (pyfem/support.py).
+        self.energy_columns = energy_columns(part.pairs is not None, loop is not None or bool(part.support))
         self.freefield = input_arrays = None
         if "seismic_input" in scene.effects:
             model = part.model
@@ -1073,6 +1106,11 @@ class DistributedRun:
                 points = np.concatenate(comm.allgather(part.coords[owned.astype(np.int64)]))
             self.freefield, input_arrays = seismic_input_from_scene(scene, view, record, points)
         self.monitors = locate_monitors(part, loop)
+        self.bolt_monitors = []  # pyfem.support_output.BoltMonitor of each [[bolt_monitor]] (every rank)
+        if scene.get("bolt_monitor"):
+            from pyfem.support_output import locate_bolt_monitors
+
+            self.bolt_monitors = locate_bolt_monitors(scene, [rank_group.group for rank_group in part.support])
         self.input_arrays = input_arrays
         self.contact_arrays, self.pair_monitors = None, RankPairMonitors.none()
         self.pair_names = []
@@ -1248,6 +1286,10 @@ class DistributedRun:
             _write_json(out / "run.json", summary)
             if self.stage is not None:  # (a resumed run's stage, solved again, writes it again)
                 (out / "static").mkdir(exist_ok=True)
+                if self.stage.support_groups:  # static/support.csv, .png, .xdmf (before static.json: its plot)
+                    from pyfem.distributed_stage import write_support
+
+                    write_support(out / "static", self.stage, self.scene)
                 _write_json(out / "static" / "static.json", self.stage.report)
             at = (lambda name: None) if sizes is None else sizes.get
             self.histories["energy"] = CsvHistory(out / "energy.csv", self.energy_columns, ENERGY_FORMAT,
@@ -1268,6 +1310,14 @@ class DistributedRun:
                 face_columns = ["t"] + [f"{f}_F{axis}" for f in part.constraints.face_names for axis in "xyz"]
                 self.histories["reactions"] = CsvHistory(out / "reactions.csv", face_columns, ENERGY_FORMAT,
                                                          at("reactions"))
+            if self.bolt_monitors:
+                from pyfem.support_output import BOLT_MONITOR_COLUMNS
+
+                (out / "bolts").mkdir(exist_ok=True)
+                for monitor in self.bolt_monitors:
+                    self.histories[f"bolts/{monitor.name}"] = CsvHistory(
+                        out / "bolts" / f"{monitor.name}.csv", BOLT_MONITOR_COLUMNS, MONITOR_FORMAT,
+                        at(f"bolts/{monitor.name}"))
         stage_stress = None  # the stage's cell stress, the static part of the run's fields
         if self.stage is not None:
             from pyfem.distributed_stage import write_fields
@@ -1339,6 +1389,11 @@ class DistributedRun:
         if self.part.constraints is not None:
             reactions = comm.reduce(self.part.constraints.face_resultants(stepper.reactions()), root=0)
         gathered = comm.gather(mine, root=0)
+        bolt_rows = None
+        if self.bolt_monitors:  # from the rank counting each monitor's bolt
+            from pyfem.distributed_support import monitor_rows as bolt_monitor_rows
+
+            bolt_rows = comm.gather(bolt_monitor_rows(t, self.bolt_monitors, self.part.support), root=0)
         if self.fields is not None and k % self.fields.every == 0:
             self.fields.write(t, u, v, a, pairs)
         if not self.root:
@@ -1355,6 +1410,10 @@ class DistributedRun:
                 self.histories[name].append(row)
         if reactions is not None:
             self.histories["reactions"].append([t] + list(reactions.ravel()))
+        if bolt_rows is not None:
+            by_bolt_monitor = dict(pair for rank_rows in bolt_rows for pair in rank_rows)
+            for j, monitor in enumerate(self.bolt_monitors):
+                self.histories[f"bolts/{monitor.name}"].append(by_bolt_monitor[j])
         if counts is not None:
             self.state_counts.append(counts)
             if self.pair_names:
@@ -1487,6 +1546,10 @@ class DistributedRun:
             for block in ("stored_energy", "dissipation"):
                 out[f"cells/{name}/{block}"] = np.sum([np.frombuffer(kernel[prefix + block], dtype=np.float64)
                                                        for _, prefix in parts], axis=0)
+        if part.support:  # the counted bolts' state, keyed by their nodes' positions (pyfem/distributed_support.py)
+            from pyfem.distributed_support import rank_state as bolt_state
+
+            out.update(bolt_state(part.support))
         return out
 
     def _pair_keys(self) -> np.ndarray:
@@ -1554,6 +1617,10 @@ class DistributedRun:
                     data = np.concatenate([f[f"pairs/{name}"] for f in having])
                     state[prefix + name] = np.ascontiguousarray(data[found][pair_rows]).tobytes()
                 parts[prefix] = contact
+        if part.support:  # the bolts' parts, keyed by position (pyfem/distributed_support.py)
+            from pyfem.distributed_support import load_state as load_bolts
+
+            parts.update(load_bolts(part.support, state, files, comm))
         if self.lts is not None:
             stepper.load_state(state)
             if not started:  # an unstarted LocalStepper loads none of its parts' states: each loads its own
@@ -1706,6 +1773,11 @@ class DistributedRun:
         phases = comm.gather(dict(stepper.phase_seconds()), root=0)
         sitting = comm.allreduce(time.perf_counter() - loop_start, op=MPI.MAX)
         nonlinear = None if loop is None else region_summary(comm, loop.counted)
+        bolts = bounds = None
+        if part.support:  # every group's bolts on rank 0 (pyfem/distributed_support.py)
+            from pyfem.distributed_support import gather_groups
+
+            bolts, bounds = gather_groups(comm, part.support), part.model.bounds
         if not root:
             return {}
         self.summary.update({
@@ -1739,8 +1811,40 @@ class DistributedRun:
                                                    self.contact_arrays.get("deterioration")))
             self.summary["mpi"]["moved_pair_nodes"] = part.moved_nodes
         self._history_plots()
+        if bolts is not None:
+            self._support_outputs(bolts, bounds)
         _write_json(self.out / "run.json", self.summary)
         return self.summary
+
+    def _support_outputs(self, groups: list, bounds: tuple) -> None:
+        """support.csv, support.xdmf (+ .h5), plots/support.png and run.json's "support" and
+        "bolt_monitors" at the end of the run (rank 0; the whole model's RunWriter writes the same)."""
+        from types import SimpleNamespace
+
+        from pyfem.support import group_summary, segment_rows, write_csv
+        from pyfem.support_output import bolt_state, plot_section, section_y, write_xdmf
+
+        write_csv(self.out / "support.csv", [row for group in groups for row in segment_rows(group.bolts, group.name)],
+                  peak=True)
+        self.summary["support"] = {group.name: group_summary(group) for group in groups}
+        for group in groups:  # local time stepping: the group's bolts per rate level (each its host nodes' finest)
+            if group.bolt_levels.min(initial=0) >= 0 and len(group.bolt_levels):
+                levels, counts = np.unique(group.bolt_levels, return_counts=True)
+                self.summary["support"][group.name]["bolts_per_level"] = {int(k): int(c) for k, c in zip(levels, counts)}
+        states = [bolt_state(group) for group in groups]
+        end = self.times[-1] if self.times else 0.0
+        write_xdmf(self.out / "support.xdmf", states, end)
+        y0, where = section_y(self.scene, SimpleNamespace(node_coords=np.array(bounds)))
+        drawn = plot_section(self.out / "plots" / "support.png", states, y0, where, f"end of the run, t = {end:.4g} s")
+        if drawn:
+            self.summary["support_plot"] = drawn
+        monitors = {}
+        for monitor in self.bolt_monitors:  # their segment and its peak over the samples
+            rows = np.loadtxt(self.out / "bolts" / f"{monitor.name}.csv", delimiter=",", skiprows=1, ndmin=2)
+            monitors[monitor.name] = dict(monitor.where(groups), peak_axial_force=float(np.max(np.abs(rows[:, 1]),
+                                                                                                  initial=0.0)))
+        if monitors:
+            self.summary["bolt_monitors"] = monitors
 
     def _history_plots(self) -> None:
         """plots/ (rank 0): the energy account, each monitor's and pair monitor's history and the pair
