@@ -267,14 +267,16 @@ def whole_pairs(part, contact_arrays: dict | None, forces: dict) -> dict | None:
     if part.comm.rank != 0:
         return None
     index = np.concatenate([piece["index"] for piece in pieces])
+    tails = {"nodes": (2,), "area": ()}  # the others (p, 3); a rank may hold no pair
     out = {}
     for key in mine:
         if key == "index":
             continue
-        values = np.concatenate([piece[key].reshape(len(piece["index"]), -1) for piece in pieces])
-        whole = np.zeros((part.n_pairs,) + values.shape[1:], dtype=values.dtype)
+        tail = tails.get(key, (3,))
+        values = np.concatenate([piece[key].reshape((len(piece["index"]),) + tail) for piece in pieces])
+        whole = np.zeros((part.n_pairs,) + tail, dtype=values.dtype)
         whole[index] = values
-        out[key] = whole.reshape((part.n_pairs,) + mine[key].shape[1:])
+        out[key] = whole
     return out
 
 

@@ -244,6 +244,15 @@ def write_static_plots(folder: Path, simulation) -> dict:
     return figures
 
 
+def drawn_damage_type(damage: np.ndarray, kind: np.ndarray) -> np.ndarray:
+    """The damage type section_end.png draws per cell: 0 (none) where the cell is not damaged. A
+    yielded cell without damage has the type of its largest plastic strain (NonlinearRegions.
+    cell_averages: 2, shear), which was drawn as "shear" damage where the damage is 0 (issue 51).
+    NaN (no nonlinear region) stays NaN."""
+    damage = np.asarray(damage, dtype=float)
+    return np.where(np.isfinite(damage) & (damage <= 0.0), 0.0, np.asarray(kind, dtype=float))
+
+
 def section_state(png_path, vertices: np.ndarray, cell_values: dict, y0: float, title: str = "") -> dict:
     """The nonlinear regions' state at the end of a run in the section y = y0: the largest principal
     stress, plastic strain, damage and the damage's type (1 tension, 2 shear; 0 where the cell is not
@@ -265,9 +274,7 @@ def section_state(png_path, vertices: np.ndarray, cell_values: dict, y0: float, 
     cells = np.flatnonzero(section_cells(vertices[..., 1], y0))
     polygons = [convex_hull(vertices[c][:, [0, 2]]) for c in cells]
     damage = cell_values["damage"][cells]
-    # A yielded cell without damage has the type of its largest plastic strain (NonlinearRegions.
-    # cell_averages): no damage is type 0 here (issue 51: "shear" was drawn where the damage is 0).
-    kind = np.where(np.isfinite(damage) & (damage <= 0.0), 0.0, cell_values["damage_type"][cells])
+    kind = drawn_damage_type(damage, cell_values["damage_type"][cells])
     panels = [("max principal stress (MPa)", cell_values["s1"][cells] * MPA, "RdBu_r", True),
               ("plastic strain (-)", cell_values["plastic_strain"][cells], "magma_r", False),
               ("damage (-)", damage, "inferno_r", False),
