@@ -60,7 +60,6 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 from mpi4py import MPI
 
 from pyfem.scene import Scene, SceneError

@@ -160,3 +160,33 @@ def test_no_damage_is_drawn_as_no_damage_type():
 
     drawn = drawn_damage_type(np.array([0.0, 0.4, np.nan]), np.array([2, 1, np.nan]))
     assert drawn[:2].tolist() == [0.0, 1.0] and np.isnan(drawn[2])
+
+
+@pytest.mark.slow  # (the small case 3 built three times, about 1.5 min)
+def test_the_wear_line_of_check_is_the_serial_plans_on_the_ranks():
+    """Issue 51: under mpirun `check` put the interfaces' wear at the run's end counted from the
+    lead-in's start (t = 1.2 s for a 0.2 s run after El Centro's 1 s lead-in; serially 0.2 s). Now the
+    end in record time on every path."""
+    import sys
+
+    sys.path.insert(0, str(REPO / "workflows"))
+    import reference_histories as rh
+
+    settings = [arg for setting in (*rh.SMALL_CASE3, "time.duration=0.2") for arg in ("--set", setting)]
+    lines = {}
+    for label, ranks, one in (("serial", 1, False), ("one rank", 1, True), ("two ranks", 2, True)):
+        env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1")
+        env.pop("PYFEM_ONE_MODEL", None)
+        if one:
+            env["PYFEM_ONE_MODEL"] = "1"
+        command = [PYTHON, "-m", "pyfem", "check", "workflows/scenes/case3_contact_coarse.toml", *settings]
+        if ranks > 1:
+            command = [shutil.which("mpirun"), "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)] + command
+        result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
+        assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+        found = [line.split(":", 1)[1].strip() for line in result.stdout.splitlines()
+                 if line.startswith("interface wear:")]
+        assert len(found) == 1, result.stdout[-3000:]
+        lines[label] = found[0]
+    assert lines["serial"].endswith("0.988 at t = 0.2 s")
+    assert lines["one rank"] == lines["serial"] == lines["two ranks"]
