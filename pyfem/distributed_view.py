@@ -1,5 +1,5 @@
 """The whole mesh on rank 0 for the distributed model's pictures (pyfem/distributed_model.py): the
-serial run's plots (pyfem/deformation.py, pyfem/static_plots.py) read the whole model's nodes and
+serial run's plots (pyfem/deformation.py, pyfem/static_plots.py, pyfem/contour.py) read the whole model's nodes and
 cells; under mpirun each rank holds its part. `WholeMesh` gathers, once, every rank's owned nodes
 (coordinates) and owned cells (their nodes, their region) to rank 0, numbered by dolfinx's global
 node index (on one rank: the serial model's numbering, so the pictures and their numbers are the
@@ -97,8 +97,10 @@ class NodeValues:
 
 class Pictures:
     """The serial writer's pictures of the run (pyfem.output.RunWriter._plots) on the distributed
-    model: plots/deformed_section.png (pyfem/deformation.py) from the whole mesh on rank 0, the
-    section's displacements gathered there per sample. A collective (`update` too)."""
+    model, drawn on rank 0 from the whole mesh: plots/deformed_section.png (pyfem/deformation.py),
+    plots/section_end.png with an element loop (`end_state`), plots/contour.png after a stage that
+    excavated (`add_contours`; the stage's own pictures: `stage_pictures`). Per sample the section's
+    and the contours' nodes are gathered to rank 0. A collective (`update` and `end_state` too)."""
 
     def __init__(self, part, monitor_points) -> None:
         from pyfem.deformation import DeformedSection
@@ -109,8 +111,8 @@ class Pictures:
             self.deformed = DeformedSection(self.mesh.node_coords, self.mesh.vertices, monitor_points,
                                             self.mesh.cell_regions)
         self.values = NodeValues(part, self.mesh, self.deformed.nodes if self.mesh.root else None)
-
         self.monitor_points = monitor_points
+        self.stage_view = None  # (WholeModel, the stage's state) of `stage_pictures`, rank 0
         self.part = part
         self.contours = None  # pyfem.contour.Contours after a stage that excavated (`add_contours`, rank 0)
         self.end_stress = {}
@@ -127,7 +129,7 @@ class Pictures:
         mesh = self.mesh
         static_u = NodeValues(part, mesh, np.arange(len(mesh.node_coords)) if mesh.root else None)(stage.u_total)
         contours = None
-        if mesh.root and getattr(self, "stage_view", None) is not None:
+        if mesh.root and self.stage_view is not None:
             whole, state = self.stage_view
             state.displacement = static_u.copy()
             element = part.model.V.element.basix_element
