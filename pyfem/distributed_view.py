@@ -1,10 +1,11 @@
 """The whole mesh on rank 0 for the distributed model's pictures (pyfem/distributed_model.py): the
-serial run's plots (pyfem/deformation.py, pyfem/static_plots.py, pyfem/contour.py) read the whole model's nodes and
-cells; under mpirun each rank holds its part. `WholeMesh` gathers, once, every rank's owned nodes
-(coordinates) and owned cells (their nodes, their region) to rank 0, numbered by dolfinx's global
-node index (on one rank: the serial model's numbering, so the pictures and their numbers are the
-serial run's to the bit); `NodeValues` brings, per sample, the values of a few of those nodes (a
-section's) to rank 0. Memory on rank 0: the whole mesh's coordinates and connectivity (no matrix).
+serial run's plots (pyfem/deformation.py, pyfem/static_plots.py, pyfem/contour.py) read the whole
+model's nodes and cells; under mpirun each rank holds its part. `WholeMesh` gathers, once, every
+rank's owned nodes (coordinates) and owned cells (their nodes, their region) to rank 0, numbered by
+dolfinx's global node index (on one rank: the serial model's numbering, so the pictures and their
+numbers are the serial run's to the bit); `NodeValues` brings, per sample, the values of a few of
+those nodes (a section's, the contours') to rank 0. Memory on rank 0: the whole mesh's coordinates
+and connectivity (no matrix).
 """
 from __future__ import annotations
 
