@@ -1705,6 +1705,8 @@ class DistributedRun:
             "loop_seconds": loop_seconds, "setup_seconds": part.setup_seconds,
             "seconds_per_step": loop_seconds / max(1, self.n_steps),
             "checkpoints": {"written": clock.count, "seconds": clock.seconds, "interval": clock.interval},
+            # (the serial run's key: the process's peak resident memory; here the largest rank's, each in "mpi")
+            "peak_memory_mib": max(row[-1] for row in per_rank),
             "energy": RunWriter._energy_summary(np.array(self.energy_rows), self.energy_columns),
             "monitors": (monitor_peaks(np.array(self.rows_kept), self.columns, self.names, np.array(self.times),
                                        self.monitor_regions) if self.names else {}),

@@ -90,10 +90,14 @@ def excavation_wall(state, model) -> tuple:
 
 
 def section_plane(vertices: np.ndarray, surface: np.ndarray) -> float:
-    """y of the section (m): the middle of the excavation surface, else the middle of the model."""
+    """y of the section (m): the middle of the excavation surface, else the middle of the model, to
+    1e-9 m (the coordinates' round-off, which differs with the rank count, made 0 m 5e-15 m on one
+    rank and -4e-15 m on two)."""
     if len(surface):
-        return float(0.5 * (surface[:, 1].min() + surface[:, 1].max()))
-    return float(0.5 * (vertices[..., 1].min() + vertices[..., 1].max()))
+        middle = 0.5 * (surface[:, 1].min() + surface[:, 1].max())
+    else:
+        middle = 0.5 * (vertices[..., 1].min() + vertices[..., 1].max())
+    return float(np.round(middle, 9)) + 0.0  # (+ 0.0: no -0.0)
 
 
 def section_cells(vertex_y: np.ndarray, y0: float) -> np.ndarray:

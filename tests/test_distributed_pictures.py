@@ -76,9 +76,8 @@ xdmf_interval = 0.0
 # What a run writes besides its pictures and numbers: the distributed model keeps its final state as
 # per-rank checkpoint files (a longer time.duration and --resume extend the run).
 NOT_COMPARED = ("checkpoint",)
-# run.json keys only one path writes: the distributed model's rank count, shares and set-up time; the
-# serial run's process memory.
-OWN_KEYS = {"model", "ranks", "mpi", "setup_seconds", "peak_memory_mib"}
+# run.json keys only the distributed model writes: its rank count, shares and set-up time.
+OWN_KEYS = {"model", "ranks", "mpi", "setup_seconds"}
 
 
 def run(scene: Path, out: Path, ranks: int, one_model: bool) -> dict:
