@@ -110,22 +110,27 @@ def add_block_diagonal(matrix: sp.bsr_matrix, nodes: np.ndarray, blocks: np.ndar
     return total
 
 
-def choose_time_step(scene: Scene, stiffness: sp.bsr_matrix, mass: np.ndarray, beta: float) -> TimeStep:
+def choose_time_step(scene: Scene, stiffness: sp.bsr_matrix, mass: np.ndarray, beta: float,
+                     coords: np.ndarray) -> TimeStep:
     """Stable step of central differences for M^-1 K, with stiffness-proportional damping.
 
     omega_max^2 is bounded above by Gershgorin row sums of M^-1 K (guaranteed); power
     iteration sharpens it (an estimate from below, so it is raised by 5 % before use and
     never exceeds the bound). With damping ratio xi = beta omega/2 at omega_max the limit is
     dt_crit = (2/omega)(sqrt(1 + xi^2) - xi). Mass-proportional damping and dashpots are
-    implicit and do not restrict the step.
+    implicit and do not restrict the step. The power iteration starts from a function of the node
+    coordinates (`coords`, (n, 3) m; pyfem.distributed_parts.power_iteration), as the distributed
+    model's does: the same estimate for any numbering and rank count.
     """
     from pyfem import _kernels
+    from pyfem.distributed_parts import power_iteration
 
     indptr, indices, blocks = bsr_arrays(stiffness)
     omega2_bound = _kernels.gershgorin_bound(indptr, indices, blocks, mass)
     omega2_power = None
     if scene["time"].get("power_iteration", True):
-        omega2_power = _kernels.power_iteration(indptr, indices, blocks, mass, POWER_ITERATIONS, 1)
+        omega2_power = power_iteration((indptr, indices, blocks), mass, np.asarray(coords, dtype=np.float64),
+                                       len(mass), POWER_ITERATIONS)
     return time_step_from(scene, omega2_bound, omega2_power, beta)
 
 
@@ -180,10 +185,10 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
 
         support = scene_groups(scene, model)
         bounded = (stiffness + stiffness_bound(support, model.n_nodes)).tobsr(blocksize=(3, 3))
-        time_step = choose_time_step(scene, bounded, mass, beta)
+        time_step = choose_time_step(scene, bounded, mass, beta, model.node_coords)
     else:
         bounded = stiffness
-        time_step = choose_time_step(scene, stiffness, mass, beta)
+        time_step = choose_time_step(scene, stiffness, mass, beta, model.node_coords)
     nonlinear = nonlinear_regions(scene, model, time_step)
     elastic_stiffness = bounded  # of every cell (and the bolts' bound): the rate levels of local stepping
     if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
@@ -348,8 +353,13 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         return kernel
 
     if simulation.lts_stability is None and not simulation.lts_check_deferred:  # once per model
+        # From STABILITY_AMPLITUDE times a function of the node coordinates: the distributed model's
+        # state (pyfem.distributed_lts.check_stability_on_ranks), the same for any numbering.
+        from pyfem.distributed_parts import start_vector
+
+        state = local_stepping.STABILITY_AMPLITUDE * start_vector(simulation.model.node_coords).reshape(-1)
         simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
-                                                                  simulation.stiffness.shape[0])
+                                                                  simulation.stiffness.shape[0], state=state)
     report = simulation.lts_stability
     if report is not None and not report["stable"]:
         if simulation.scene["time"].get("local_stepping") == "auto":
