@@ -401,7 +401,7 @@ SCALARS = ("stored_energy", "dissipation", "stored_reference")
 
 def node_keys(rank_group: RankGroup, nodes: np.ndarray) -> np.ndarray:
     """(len(nodes), 7) int64 keys of bolt nodes: the group, the position (1 um), the bolt's axis (1e-6)."""
-    from pyfem.distributed_model import point_keys
+    from pyfem.ranks import point_keys
 
     whole = rank_group.group.bolts
     bolt_of_node = np.repeat(np.arange(len(whole.bolt_offsets) - 1), np.diff(whole.bolt_offsets))[nodes]
@@ -443,7 +443,7 @@ def load_state(rank_groups_: list, state: dict, files: list, comm) -> dict:
     dissipation, the rebased zero: sums over its bolts) on the first counted part of the lowest rank
     counting its bolts, zero elsewhere (the energy account is a sum over the ranks). Returns {prefix:
     component} of the parts (a local stepper not started yet loads them one by one)."""
-    from pyfem.distributed_model import rows_of
+    from pyfem.ranks import rows_of
 
     counting = comm.allgather([rank_group.index for rank_group in rank_groups_
                                if any(part.kind == "counted" for part in rank_group.parts)])
