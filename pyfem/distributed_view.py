@@ -308,7 +308,8 @@ def stage_pictures(pictures: "Pictures", part, stage, cell_stress: np.ndarray, i
     stress = mesh.owned_cells(comm, stress)
     state = {key: mesh.owned_cells(comm, values) for key, values in state.items()}
     faces = whole_faces(part)
-    after = np.zeros((0, 3)) if stage.contact is None else np.asarray(stage.contact.static_force())
+    after = (np.asarray(stage.contact.static_force()) if stage.contact is not None else  # relaxed pairs
+             np.asarray(stage.pair_forces) if stage.pair_forces is not None else np.zeros((0, 3)))  # a linear F0
     pairs = whole_pairs(part, contact_arrays, {"before": in_situ_forces, "after": after})
     if not mesh.root:
         return None
