@@ -81,8 +81,8 @@ def test_the_mpi_paths_reproduce_the_serial_record(name, model, ranks, tmp_path,
 
 # The one-model port (issue 47): the distributed model on one rank (PYFEM_ONE_MODEL=1) reproduces the
 # serial records to the serial rule, every summary key included (its pictures' numbers, dt_critical,
-# the local stepping check); case3_small's stage is summed in another order (`Entry.mpi`).
-ONE_MODEL = [pytest.param(name, marks=pytest.mark.slow) for name in rh.SCENES if name != "case3_small"]
+# the local stepping check, case3_small's stage and its static.json); the cheap scenes in the default tier.
+ONE_MODEL = [pytest.param(name, marks=() if entry.cheap else pytest.mark.slow) for name, entry in rh.SCENES.items()]
 
 
 @pytest.mark.parametrize("name", ONE_MODEL)

@@ -177,7 +177,7 @@ class Entry:
     scene: str  # relative to the repository root
     settings: tuple  # the --set overrides, exactly as given to `pyfem run`
     effects: str  # what the scene exercises
-    cheap: bool  # in the default test tier (serial only)
+    cheap: bool  # in the default test tier (serially and on one rank of the distributed model)
     # On the MPI paths, where TOLERANCE does not hold (measured and explained at the entry): {dimension:
     # tolerance}, its columns measured against the dimension's largest value (tests/test_mpi.py's rule),
     # and the reports' numbers of that dimension (`number_kind`) to the same tolerance.
