@@ -1192,10 +1192,11 @@ Args:
           "Adds a force provider (SeismicInput, HeldForce) that lists its nodes.")
       .def(
           "add_internal_force",
-          [](LocalStepper& stepper, std::shared_ptr<HexahedronElementsBase> component, int level,
+          [](LocalStepper& stepper, std::shared_ptr<InternalForceComponent> component, int level,
              bool count_energy) { stepper.add_internal_force(std::move(component), level, count_energy); },
           py::arg("component"), py::arg("level"), py::arg("count_energy") = true, py::keep_alive<1, 2>(),
-          "Adds a HexahedronElements whose cells step at dt_fine 2^level (their nodes then drift at that "
+          "Adds an internal-force component (HexahedronElements, GroutedBolts) whose cells or bolts step at "
+          "dt_fine 2^level (their nodes then drift at that "
           "level or a finer one): its force is computed and committed in the level's end kicks. "
           "count_energy=False: its energy stays out of this account (an MPI rank's halo cells).")
       .def(

@@ -69,6 +69,9 @@ class InternalForceComponent {
   /// Dissipation accumulated over all commits since construction (J), >= 0 for a sound law.
   virtual double dissipation() const = 0;
 
+  /// Distinct nodes the component loads, sorted (the local stepper's rows of its level).
+  virtual const std::vector<std::int32_t>& nodes() const = 0;
+
   /// Throws std::invalid_argument naming a node outside [0, n_nodes).
   virtual void check_nodes(std::int64_t n_nodes) const = 0;
 
@@ -138,7 +141,7 @@ class HexahedronElementsBase : public InternalForceComponent {
   /// formula for tetrahedra: the cube root of the tetrahedron's volume).
   const std::vector<double>& characteristic_length() const { return characteristic_length_; }
   /// Distinct nodes of the cells, sorted.
-  const std::vector<std::int32_t>& nodes() const { return unique_nodes_; }
+  const std::vector<std::int32_t>& nodes() const override { return unique_nodes_; }
 
   /// Committed total stress (c, q, 6) into out (Pa, order of material_law.hpp).
   virtual void stress(double* out) const = 0;

@@ -237,7 +237,7 @@ void LocalStepper::check_level(const char* what, int level) const {
                                 std::to_string(max_level_) + "]");
 }
 
-void LocalStepper::add_internal_force(std::shared_ptr<HexahedronElementsBase> component,
+void LocalStepper::add_internal_force(std::shared_ptr<InternalForceComponent> component,
                                       int level, bool count_energy) {
   check_level("component", level);
   component->check_nodes(n_nodes());

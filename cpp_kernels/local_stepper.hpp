@@ -80,7 +80,7 @@ class LocalStepper : public SteppingBase {
   /// around contact pairs). Throws std::invalid_argument for a level outside [0, max_level()].
   /// count_energy = false: its forces act, its stored energy and dissipation are left out of the
   /// account (an MPI rank's copy of cells another rank counts, set_partition).
-  void add_internal_force(std::shared_ptr<HexahedronElementsBase> component, int level,
+  void add_internal_force(std::shared_ptr<InternalForceComponent> component, int level,
                           bool count_energy = true);
 
   /// Adds contact pairs whose nodes step and drift at rate level `level` (the drift level: the
@@ -219,7 +219,7 @@ class LocalStepper : public SteppingBase {
     std::vector<std::int32_t> provider_rows;  // rows (indices into rows) that providers load
     double step = 0.0;                   // h of this level
     std::vector<double> implicit_inverse;  // (own rows with a dashpot, 9), keyed by dashpot_slot
-    std::vector<std::shared_ptr<HexahedronElementsBase>> components;  // cells at this level
+    std::vector<std::shared_ptr<InternalForceComponent>> components;  // cells (or bolts) at this level
     std::vector<char> component_counted;  // per component: its energy is in this account
     std::vector<std::uint8_t> component_row;  // (rows) a component of this level loads the row
     std::vector<std::shared_ptr<ContactPairs>> contacts;  // pairs drifting at this level

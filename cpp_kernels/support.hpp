@@ -66,6 +66,8 @@ class GroutedBolts : public InternalForceComponent {
   double dissipation() const override { return dissipation_; }
   void check_nodes(std::int64_t n_nodes) const override;
   std::string name() const override { return "GroutedBolts"; }
+  /// The host nodes of every bolt node, sorted.
+  const std::vector<std::int32_t>& nodes() const override { return unique_nodes_; }
 
   std::int64_t n_bolts() const { return geometry_.n_bolts; }
   std::int64_t n_bolt_nodes() const { return n_nodes_; }

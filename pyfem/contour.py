@@ -19,7 +19,8 @@ section through the first monitor (else the wall's middle), snapped to the wall 
 
 The dynamic part costs one gather of the contour's nodes and of its cells' nodes per sample. The ranges
 and the pillar histories are not in checkpoints: a resumed run's cover the samples since the resume.
-Drawn by the single-process writer (pyfem.output.RunWriter) only, not yet by the distributed model.
+Drawn by the serial writer (pyfem.output.RunWriter) and by the distributed model from its whole mesh on
+rank 0 (pyfem/distributed_view.py `Pictures.add_contours`).
 """
 from __future__ import annotations
 
@@ -52,15 +53,22 @@ class Contours:
         wall_nodes = np.unique(wall)
         y = coords[wall_nodes, 1]
         target = 0.5 * (y.min() + y.max()) if y0 is None else float(y0)
-        snapped = y[np.argmin(np.abs(y - target))]
         size = float(np.ptp(coords, axis=0).max()) or 1.0
+        # The nearest wall node's y; of two as near (above and below), the lower: not the first by
+        # node number, which differs with the rank count (so below, of two nodes as near the plane).
+        distance = np.abs(y - target)
+        snapped = float(y[distance <= distance.min() + 1e-9 * size].min())
         # The section: the wall nodes within a typical wall edge's length of the plane (an unstructured
         # mesh's nodes seldom lie on the plane: issue 51), projected on it: the wall of an opening
         # prismatic along y projects onto its contour in the x-z plane. Of the nodes of one x-z
         # position (a mesh extruded along y) the one nearest the plane is kept.
         corners = wall.shape[1]
-        edges = np.concatenate([np.linalg.norm(coords[wall[:, k]] - coords[wall[:, (k + 1) % corners]], axis=1)
-                                for k in range(corners)])
+        # A facet's sides: its `corners` shortest corner-to-corner distances (a quadrilateral's sides,
+        # not its diagonals), whatever the order of its corners (`excavation_wall` sorts them by node
+        # number, which differs with the rank count: consecutive corners were sides or diagonals by it).
+        lengths = np.stack([np.linalg.norm(coords[wall[:, a]] - coords[wall[:, b]], axis=1)
+                            for a in range(corners) for b in range(a + 1, corners)], axis=1)
+        edges = np.sort(lengths, axis=1)[:, :corners].ravel()
         band = float(np.median(edges))
         section = wall_nodes[np.abs(y - snapped) <= band + 1e-6 * size]
         self.y = float(np.round(snapped, 6)) + 0.0  # 1e-14 of round-off is 0 m
@@ -94,7 +102,8 @@ class Contours:
             theta[theta >= 360.0] = 0.0  # -1e-15 % 360 is 360
             # One node per point of the contour (a band's nodes may share their x-z position): the
             # nearest the plane.
-            nearest = np.argsort(np.abs(coords[nodes, 1] - snapped), kind="stable")
+            offset = np.abs(coords[nodes, 1] - snapped)
+            nearest = np.lexsort((coords[nodes, 1], np.round(offset / (1e-9 * size))))
             _, first = np.unique(np.round(xz[nearest] / (1e-6 * size)), axis=0, return_index=True)
             keep = nearest[first]
             order = keep[np.argsort(theta[keep], kind="stable")]

@@ -13,27 +13,36 @@ import numpy as np
 from dolfinx.cpp.mesh import cell_num_entities
 
 
+def vertex_nodes(model) -> np.ndarray:
+    """(cells, 8 or 4) the vertex nodes of every cell of the model's dofmap (its first dofs)."""
+    n_basis = model.V.dofmap.dof_layout.num_dofs
+    n_vertices = cell_num_entities(model.mesh.topology.cell_type, 0)  # 8 hexahedron, 4 tetrahedron
+    return model.V.dofmap.list.array.reshape(-1, n_basis)[:, :n_vertices]
+
+
 class DeformedSection:
     """Tracks the most deformed sample of one section of the model.
 
     Args:
-        model: pyfem.operators.Model.
+        node_coords: (nodes, 3) the model's node coordinates (m).
+        vertices: (cells, 8 or 4) each cell's vertex nodes (`vertex_nodes`; the distributed model's
+            whole mesh gathered on rank 0, pyfem.distributed_view.WholeMesh).
         monitor_points: (m, 3) monitor points (m) or None.
         region_ids: (cells,) region id of every cell (pyfem.output.cell_regions).
     """
 
-    def __init__(self, model, monitor_points, region_ids: np.ndarray):
-        n_basis = model.V.dofmap.dof_layout.num_dofs
-        n_vertices = cell_num_entities(model.mesh.topology.cell_type, 0)  # 8 hexahedron, 4 tetrahedron
-        vertices = model.V.dofmap.list.array.reshape(-1, n_basis)[:, :n_vertices]
-        y = model.node_coords[vertices][..., 1]
+    def __init__(self, node_coords: np.ndarray, vertices: np.ndarray, monitor_points, region_ids: np.ndarray):
+        n_vertices = vertices.shape[1]
+        y = node_coords[vertices][..., 1]
         self.y = (float(np.median(monitor_points[:, 1])) if monitor_points is not None and len(monitor_points)
                   else float(0.5 * (y.min() + y.max())))
-        cut = (y.min(axis=1) <= self.y) & (y.max(axis=1) >= self.y)
+        from pyfem.static_plots import section_cells
+
+        cut = section_cells(y, self.y)  # one layer of cells where the plane runs through nodes
         self.nodes, compact = np.unique(vertices[cut], return_inverse=True)
         self.cell_nodes = compact.reshape(-1, n_vertices)
         self.regions = region_ids[cut]
-        self.coords = model.node_coords[self.nodes]
+        self.coords = node_coords[self.nodes]
         self.largest = -1.0
         self.t = None
         self.displacement = None

@@ -241,6 +241,26 @@ def rank_stepper(part, rank_levels: RankLevels, loop, input_arrays: dict | None 
             layout.components.append((name, kind, region, prefixes))
         if not bare:
             regions.components = split
+    # Rock bolts and cables (pyfem/distributed_support.py): each bolt at the finest level of its host
+    # nodes, as a pair at the finer of its two nodes' (the stage's components cut by level).
+    for rank_group in part.support:
+        if bare:  # (fresh, elastic: the set-up check's tiny state; the run's parts untouched)
+            from pyfem.distributed_support import make_component
+
+            parts = [(kind, level, make_component(rank_group, bolts)) for kind in ("counted", "halo")
+                     for level, bolts in rank_group.by_level(rank_group.bolts_of(kind), levels)]
+        else:
+            if rank_group.parts:
+                rank_group.split_by_level(levels)
+            else:
+                rank_group.fresh(levels)
+            parts = [(bolts.kind, bolts.level, bolts.component) for bolts in rank_group.parts]
+        for index, (kind, level, component) in enumerate(parts):
+            kernel.add_internal_force(component, int(level), kind == "counted")
+            k = per_level.get(int(level), 0)
+            per_level[int(level)] = k + 1
+            if not bare:
+                rank_group.parts[index].prefix = _prefix(max_level, level, "component", k)
     if not bare and contact_arrays is not None and part.pairs is not None and len(part.pairs.nodes):
         pairs, kernel_parts = local_stepping.level_pairs(contact_arrays, levels, None, None, None, make_contact_pairs,
                                                          rows=True)

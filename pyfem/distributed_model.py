@@ -19,14 +19,17 @@ Each rank:
 
 The time step is `pyfem.clock.time_step_from` of the Gershgorin bound (the largest owned row over
 the ranks) and a power iteration on the ranks' owned rows from a start vector that is a function of
-the node coordinates, so the step does not depend on the rank count; it differs from the serial
-run's (a random start in the one-rank numbering) by the iteration's convergence error, so a run
-equal to the serial run's to round-off gives `time.dt`.
+the node coordinates (pyfem.distributed_parts.power_iteration, the serial run's too), so the step
+does not depend on the rank count: on one rank it is the serial run's to the bit, on N to the
+round-off of the sums (measured 2.4e-13 of dt_critical on 3 ranks of the contact scene).
 
 Outputs (rank 0 writes, dolfinx writes the fields in parallel): monitors/NAME.csv with the serial
 run's columns (u, v, a; the free field with a wave; the stress; the law's damage and plastic
 strain), energy.csv (every rank's owned energies summed), reactions.csv with fixed or roller faces,
-fields.xdmf (`_Fields`: the serial run's fields, the tensors as 3 x 3 cell data) and run.json. Checkpoints: every rank its own file keyed by
+fields.xdmf (`_Fields`: the serial run's fields, the tensors as 3 x 3 cell data), run.json, and the
+serial run's pictures (plots/input.png, deformed_section.png, section_end.png, contour.png,
+static/section_stress.png, interface_stress.png and their run.json / static.json numbers) from the
+whole mesh gathered on rank 0 (pyfem/distributed_view.py). Checkpoints: every rank its own file keyed by
 position, rank 0's record written last (`DistributedRun.write_checkpoint`); a run resumes on any
 rank count (docs/checkpoint.md "The distributed model").
 
@@ -48,6 +51,9 @@ arrays, sent to the other ranks' halo with their mean initial stress. Quadratic 
 HRZ-lumped masses with the ghosts' diagonals from their owners (pyfem.assembly.hrz_lumped_vector).
 Any number of contact interfaces: a pair node's checkpoint key holds its roles in ROLE_BITS-bit words.
 
+Rock bolts and cables (pyfem/distributed_support.py): placed alike on every rank; each bolt stepped
+whole by every rank stepping one of its host nodes (its other host nodes extra ghosts), counted on one.
+
 The linear static stage: pyfem/distributed_linear.py (PETSc on the ranks' rows).
 """
 from __future__ import annotations
@@ -62,15 +68,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 from mpi4py import MPI
 
 from pyfem.scene import Scene, SceneError
 from pyfem.clock import run_origin
+from pyfem.ranks import KEY_RESOLUTION, point_keys, rows_of  # noqa: F401 (the checkpoint's position keys)
 from pyfem.distributed_parts import (_without_cells, add_hourglass, add_to_diagonal, drop_zero_blocks,
                                      element_loop_cells, local_numbering, local_stiffness, localize,
                                      one_point_regions, owned_row_sums, owned_rows_global, region_summary,
-                                     start_vector, stepping, to_kernel_numbering)
+                                     stepping, to_kernel_numbering)
 
 # Bits of a pair node's roles per int64 word of its checkpoint key (RankModel.pair_side): up to 31
 # interfaces one word, as many more as more interfaces need.
@@ -86,11 +92,6 @@ def check_supported(scene: Scene) -> None:
     build yet (every rank says the same: the scene is the same on every rank)."""
     from pyfem import distributed_stage
 
-    if scene.get("support"):
-        name = next(iter(scene["support"]))
-        raise SceneError(f"support.{name}", scene["support"][name]["type"], "not under mpirun: rock bolts and cables run "
-                         "on one rank only (the distributed model does not place them on the ranks' parts yet): run "
-                         "without mpirun, or leave out the [support.NAME] tables")
     distributed_stage.check_supported(scene)
 
 
@@ -203,6 +204,7 @@ class RankModel:
     n_extra: int = 0                 # extra ghosts: ghosts the function space's index map does not hold
     pair_side: np.ndarray | None = None    # (n_local, words): its roles, bit side + 2 interface of each pair it is in
     row_sums: np.ndarray | None = None     # per owned node: its largest absolute row sum of every cell's matrix
+    support: list = field(default_factory=list)  # pyfem.distributed_support.RankGroup of each [support.NAME]
 
     def node_keys(self, nodes: np.ndarray) -> np.ndarray:
         """Checkpoint keys of local `nodes`: their positions, and with contact their roles (`pair_side`:
@@ -284,7 +286,17 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     matrix = elastic_stiffness_matrix(V, materials.lame_lambda, materials.shear_modulus, quadrature)
     n_dofs_global = matrix.getSize()[0]
     owned, global_rows = move_rows(comm, ownership, first, owned_rows_global(matrix, last - first, release=True))
-    local_nodes, extra = local_numbering(owned, mapped, global_rows[1])
+    support, bolt_hosts = [], np.zeros(0, dtype=np.int64)
+    if scene.get("support"):  # rock bolts and cables: every bolt's host nodes among the nodes of the ranks stepping it
+        from pyfem.distributed_support import needed_nodes
+        from pyfem.support import scene_groups
+
+        placing = Model(mesh=mesh, V=V, cell_tags=cell_tags, facet_tags=facet_tags, regions=regions,
+                        boundaries=boundaries, node_coords=coords_d, mass=mass_d, stiffness=None, faces=[],
+                        interface_tags=interface_tags, _materials=materials)
+        support = scene_groups(scene, placing)
+        bolt_hosts = needed_nodes(support, ownership, comm.rank)
+    local_nodes, extra = local_numbering(owned, mapped, np.concatenate([global_rows[1], bolt_hosts]))
     rows = localize(global_rows, local_nodes)  # every cell's: the time step's
     del global_rows
     n_owned = len(owned)
@@ -319,8 +331,15 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
     del rows  # (the kernel's matrix holds the owned rows)
     plan = ghost_plan(comm, ownership, local_nodes, n_owned)
     mass = np.ascontiguousarray(mass)
-    estimates = omega2_estimates(scene, comm, plan, kernel_matrix, mass, coords, n_owned)
-    row_sums = owned_row_sums(kernel_matrix, n_owned)  # every cell's: local stepping's levels
+    estimated = kernel_matrix
+    if support:  # the time step bounds the bolts' condensed stiffness too (as pyfem.solver.prepare)
+        from pyfem.distributed_support import add_rows, bound_rows, rank_groups
+
+        support = rank_groups(support, ownership, comm.rank, local_nodes)
+        estimated = add_rows(kernel_matrix, n_owned, bound_rows(support, n_owned, len(local_nodes)))
+    estimates = omega2_estimates(scene, comm, plan, estimated, mass, coords, n_owned)
+    row_sums = owned_row_sums(estimated, n_owned)  # every cell's (and the bolts' bound): local stepping's levels
+    del estimated
     loop_cells = element_loop_cells(scene, model)
     if loop_cells:  # the matrix of the other cells (the whole model's NonlinearRegions.stiffness)
         del kernel_matrix
@@ -357,7 +376,7 @@ def build(scene: Scene, comm: MPI.Comm) -> RankModel:
                      kernel_of_dolfinx=None if identity else kernel_of_dolfinx, pairs=rank_pairs,
                      pair_index=pair_index, pair_global=pair_global, pair_side=pair_side,
                      n_pairs=0 if pairs is None else len(pairs),
-                     moved_nodes=len(ownership.moved), n_extra=len(extra), row_sums=row_sums,
+                     moved_nodes=len(ownership.moved), n_extra=len(extra), row_sums=row_sums, support=support,
                      setup_seconds=time.perf_counter() - began)
 
 
@@ -496,27 +515,11 @@ def rank_regions(part: RankModel) -> RankRegions | None:
 
 def power_iteration(comm: MPI.Comm, plan: GhostPlan, matrix: tuple, mass: np.ndarray, coords: np.ndarray,
                     n_owned: int, iterations: int) -> float:
-    """The largest eigenvalue of M^-1/2 K M^-1/2 as the kernel's power_iteration estimates it, on
-    the ranks' owned rows of the kernel's `matrix` with a ghost exchange per product."""
-    indptr, indices, blocks = matrix
-    n_local = len(indptr) - 1
-    # The owned rows only (a ghost's row holds its blocks to owned nodes only).
-    owned = sp.bsr_matrix((blocks[:indptr[n_owned]], indices[:indptr[n_owned]], indptr[:n_owned + 1]),
-                          shape=(3 * n_owned, 3 * n_local))
-    inverse_sqrt_mass = 1.0 / np.sqrt(mass)
-    x = start_vector(coords)
-    x /= math.sqrt(comm.allreduce(float(np.sum(x[:n_owned] ** 2))))
-    estimate = 0.0
-    for _ in range(iterations):
-        plan.update(comm, x)
-        y = (owned @ (inverse_sqrt_mass[:, None] * x).reshape(-1)).reshape(-1, 3)
-        y *= inverse_sqrt_mass[:n_owned, None]
-        rayleigh, y_norm2 = comm.allreduce(np.array([float(np.sum(x[:n_owned] * y)), float(np.sum(y * y))]))
-        estimate = float(rayleigh)
-        if y_norm2 == 0.0:
-            break
-        x[:n_owned] = y / math.sqrt(y_norm2)
-    return estimate
+    """The largest eigenvalue of M^-1/2 K M^-1/2 (pyfem.distributed_parts.power_iteration, the serial
+    run's) on the ranks' owned rows of the kernel's `matrix` with a ghost exchange per product."""
+    from pyfem.distributed_parts import power_iteration as iterate
+
+    return iterate(matrix, mass, coords, n_owned, iterations, comm, lambda x: plan.update(comm, x))
 
 
 def omega2_estimates(scene: Scene, comm: MPI.Comm, plan: GhostPlan, matrix: tuple, mass: np.ndarray,
@@ -647,6 +650,7 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
              held_force: np.ndarray | None = None):
     """The kernel's Stepper of the rank's share:
     with the element loop its counted cells (their energy this rank's) and its halo cells (not);
+    the bolts it steps (counted and halo, pyfem/distributed_support.py);
     `contact`: the kernel's ContactPairs of the pairs it steps (None: none); `held_force`: a linear
     stage's hand-over force on the nodes it steps (pyfem/distributed_linear.py), held constant."""
     from pyfem import _kernels
@@ -666,6 +670,14 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
             stepper.add_internal_force(component)
         for component in ([] if loop.halo is None else loop.halo.components):
             stepper.add_internal_force(component, count_energy=False)
+    k = 0 if loop is None else len(loop.counted.components) + (0 if loop.halo is None else len(loop.halo.components))
+    for rank_group in part.support:  # the stage's (rebased) or fresh at t = 0
+        if not rank_group.parts:
+            rank_group.fresh()
+        for bolts in rank_group.kernel_components():
+            stepper.add_internal_force(bolts.component, count_energy=bolts.kind == "counted")
+            bolts.prefix = f"component/{k}/"  # (its state in the stepper's save_state)
+            k += 1
     if contact is not None:
         stepper.add_contact(contact)
     if held_force is not None and np.any(held_force):
@@ -804,9 +816,10 @@ class _Fields:
 
 
 def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None = None, lts=None,
-         lts_decision: str | None = None) -> dict:
+         lts_decision: str | None = None, lead_in: float = 0.0) -> dict:
     """What `run` prints before it steps (rank 0); with deteriorating pairs (`contact_arrays`) the
-    whole model's "interface wear" line; with local time stepping (`lts`: distributed_lts.RankLevels,
+    whole model's "interface wear" line at the run's end in record time (a record's `lead_in` runs at
+    t < 0, as the serial plan's); with local time stepping (`lts`: distributed_lts.RankLevels,
     `lts_decision`: "auto"'s reason) its levels."""
     from pyfem.interfaces import wear_words
     from pyfem.local_stepping import STABILITY_STEPS
@@ -829,7 +842,8 @@ def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None =
             **({"static stage": stage_words(part.scene)} if "static" in part.scene else {}),
             **({"contact pairs": f"{part.n_pairs} ({part.moved_nodes} pair nodes stepped on their pair's rank, not "
                                  "dolfinx's owner: pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
-            **({"interface wear": wear_words(contact_arrays["deterioration"], n_steps * time_step.dt)["note"]}
+            **({"interface wear": wear_words(contact_arrays["deterioration"],
+                                             run_origin(lead_in, time_step) + n_steps * time_step.dt)["note"]}
                if contact_arrays is not None and contact_arrays["deterioration"] is not None else {}),
             "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
 
@@ -905,7 +919,12 @@ def _check(scene: Scene) -> dict:
         sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
         0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
     shares = comm.gather((*cells, int(exchange.bytes_sent_per_step), round(peak_memory_mib())), root=0)
-    shown = plan(part, ts, run.n_steps, run.contact_arrays, run.lts, run.lts_decision)
+    support = None
+    if part.support:  # rock bolts and cables (pyfem/distributed_support.py)
+        from pyfem.distributed_support import plan_lines
+
+        support = plan_lines(comm, part.support)
+    shown = plan(part, ts, run.n_steps, run.contact_arrays, run.lts, run.lts_decision, run.lead_in)
     if comm.rank != 0:
         return {}
     seconds = per_step * run.n_steps
@@ -921,6 +940,8 @@ def _check(scene: Scene) -> dict:
     imbalance = work_imbalance([c + h for c, h, _, _ in shares], part.n_pairs)
     if imbalance is not None:
         shown["balance"] = imbalance
+    if support:
+        shown["support"] = support
     return shown
 
 
@@ -977,29 +998,6 @@ def read_checkpoint(out_dir):
                          f"--resume {saved.path}: written by a run on one rank (its state in one file, "
                          "numbered as one rank's model); resume it on one rank, without mpirun")
     return saved
-
-
-# Coordinates (m) are matched at this resolution (1 um): a node by its position, a cell by its
-# quadrature points' mean, so that a checkpoint does not depend on the partition or the rank count.
-KEY_RESOLUTION = 1.0e-6
-
-
-def point_keys(points: np.ndarray) -> np.ndarray:
-    """(n, 3) int64 keys of positions (m)."""
-    return np.round(np.asarray(points, dtype=np.float64).reshape(-1, 3) / KEY_RESOLUTION).astype(np.int64)
-
-
-def rows_of(have: np.ndarray, want: np.ndarray, what: str) -> np.ndarray:
-    """The row of `have` (n, k keys) holding each key of `want` (m, k); RuntimeError naming `what`
-    when one is missing."""
-    _, inverse = np.unique(np.concatenate([have, want]), axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    row_of_group = np.full(int(inverse.max(initial=-1)) + 1, -1, dtype=np.int64)
-    row_of_group[inverse[:len(have)]] = np.arange(len(have))
-    rows = row_of_group[inverse[len(have):]]
-    if np.any(rows < 0):
-        raise RuntimeError(f"checkpoint: {int(np.count_nonzero(rows < 0))} {what} of this model are not in it")
-    return rows
 
 
 def cut_fields(path: Path, after: float) -> None:
@@ -1062,7 +1060,8 @@ class DistributedRun:
         if self.lts is not None:
             self.time_step = self.lts.time_step
             self.n_steps = run_steps(scene["time"]["duration"], self.lead_in, self.time_step)
-        self.energy_columns = energy_columns(part.pairs is not None, loop is not None)
+        # The element loop's columns also carry the bolts' stored energy and dissipation (pyfem/support.py).
+        self.energy_columns = energy_columns(part.pairs is not None, loop is not None or bool(part.support))
         self.freefield = input_arrays = None
         if "seismic_input" in scene.effects:
             model = part.model
@@ -1073,6 +1072,11 @@ class DistributedRun:
                 points = np.concatenate(comm.allgather(part.coords[owned.astype(np.int64)]))
             self.freefield, input_arrays = seismic_input_from_scene(scene, view, record, points)
         self.monitors = locate_monitors(part, loop)
+        self.bolt_monitors = []  # pyfem.support_output.BoltMonitor of each [[bolt_monitor]] (every rank)
+        if scene.get("bolt_monitor"):
+            from pyfem.support_output import locate_bolt_monitors
+
+            self.bolt_monitors = locate_bolt_monitors(scene, [rank_group.group for rank_group in part.support])
         self.input_arrays = input_arrays
         self.contact_arrays, self.pair_monitors = None, RankPairMonitors.none()
         self.pair_names = []
@@ -1110,6 +1114,8 @@ class DistributedRun:
                                     + np.ascontiguousarray(geometry.dofmap.array).tobytes()).hexdigest()[:16]
             self.fields_layout = comm.allgather(digest)
         self.rows_kept, self.energy_rows, self.times = [], [], []
+        self.in_situ_forces = None  # the pairs' static forces before the stage (this rank's), with a stage
+        self.pictures = None  # pyfem.distributed_view.Pictures: what the serial writer draws (set by go)
         self.summary: dict = {}
         self.checkpoint_id = 0
         self.done = 0
@@ -1211,20 +1217,9 @@ class DistributedRun:
                 **({"local_stepping_stability": stability} if stability else {}),
                 "status": "running"}
 
-    def _input_motion(self) -> dict | None:
-        """run.json "input_motion" (rank 0): the input's peaks and spectrum, as output.input_motion
-        computes them for the whole model (it reads the same scene, free field tables, lead-in and step)."""
-        from pyfem.output import input_motion
-
-        self.input_motion = input_motion(self) if self.freefield is not None else None
-        if self.input_motion is not None:
-            self.summary["input_motion"] = {key: value for key, value in self.input_motion.items()
-                                            if not key.startswith("_")}
-        return self.input_motion
-
     def _open(self, stepper) -> tuple:
         """Starts the run directory, or continues the interrupted one; returns (u, v, a)."""
-        from pyfem.output import ENERGY_FORMAT, MONITOR_FORMAT, CsvHistory, RunWriter, _write_json, previous_run_dir
+        from pyfem.output import ENERGY_FORMAT, MONITOR_FORMAT, CsvHistory, _write_json, previous_run_dir
 
         out, part, saved = self.out, self.part, self.saved
         summary = self._summary()  # (collective)
@@ -1251,20 +1246,31 @@ class DistributedRun:
                     self.rows_kept = list(data["writer_rows"]) if "writer_rows" in data else []
                     self.pair_rows_kept = list(data["writer_pair_rows"]) if "writer_pair_rows" in data else []
                     self.state_counts = list(data["writer_state_counts"]) if "writer_state_counts" in data else []
+                    if "writer_deformation" in data and self.pictures is not None:
+                        deformed = self.pictures.deformed
+                        deformed.largest, deformed.t = (float(x) for x in data["writer_deformation"])
+                        deformed.displacement = np.array(data["writer_deformation_displacement"])
                 summary = dict(summary, started=meta["started"], warnings=summary["warnings"],
                                resumed=meta.get("resumed", []) + [{"t": saved.t, "at": time.strftime("%Y-%m-%dT%H:%M:%S")}])
                 sizes = meta["history_sizes"]
         self.summary = summary
         if self.root:
             motion = self._input_motion()
+            if motion is not None:
+                summary["input_motion"] = {key: value for key, value in motion.items() if not key.startswith("_")}
             _write_json(out / "run.json", summary)
-            if motion is not None:  # at once: the input can be checked while the run goes (as RunWriter)
+            if motion is not None:  # at once, as the serial writer's (pyfem.output.RunWriter.start)
                 from pyfem import plots
+                from pyfem.output import input_title
 
                 (out / "plots").mkdir(exist_ok=True)
-                plots.input_motion(out / "plots" / "input.png", *motion["_series"], title=RunWriter._input_title(self))
+                plots.input_motion(out / "plots" / "input.png", *motion["_series"], title=input_title(motion))
             if self.stage is not None:  # (a resumed run's stage, solved again, writes it again)
                 (out / "static").mkdir(exist_ok=True)
+                if self.stage.support_groups:  # static/support.csv, .png, .xdmf (before static.json: its plot)
+                    from pyfem.distributed_stage import write_support
+
+                    write_support(out / "static", self.stage, self.scene)
                 _write_json(out / "static" / "static.json", self.stage.report)
             at = (lambda name: None) if sizes is None else sizes.get
             self.histories["energy"] = CsvHistory(out / "energy.csv", self.energy_columns, ENERGY_FORMAT,
@@ -1285,12 +1291,29 @@ class DistributedRun:
                 face_columns = ["t"] + [f"{f}_F{axis}" for f in part.constraints.face_names for axis in "xyz"]
                 self.histories["reactions"] = CsvHistory(out / "reactions.csv", face_columns, ENERGY_FORMAT,
                                                          at("reactions"))
+            if self.bolt_monitors:
+                from pyfem.support_output import BOLT_MONITOR_COLUMNS
+
+                (out / "bolts").mkdir(exist_ok=True)
+                for monitor in self.bolt_monitors:
+                    self.histories[f"bolts/{monitor.name}"] = CsvHistory(
+                        out / "bolts" / f"{monitor.name}.csv", BOLT_MONITOR_COLUMNS, MONITOR_FORMAT,
+                        at(f"bolts/{monitor.name}"))
         stage_stress = None  # the stage's cell stress, the static part of the run's fields
         if self.stage is not None:
             from pyfem.distributed_stage import write_fields
 
             self.comm.Barrier()  # (static/ made by rank 0)
             stage_stress = write_fields(out / "static" / "fields.xdmf", self.stage, part)
+            if self.pictures is not None:  # the serial stage's pictures and their static.json "plots"
+                from pyfem.distributed_view import stage_pictures
+
+                figures = stage_pictures(self.pictures, part, self.stage, stage_stress, self.in_situ_forces,
+                                         self.contact_arrays, out / "static", self.scene.get("title", ""))
+                if self.root:
+                    self.stage.report["plots"] = figures
+                    _write_json(out / "static" / "static.json", self.stage.report)
+                self.pictures.add_contours(part, self.stage, self.scene)
         if self.scene["output"]["xdmf_interval"]:
             append = False
             if saved is not None:
@@ -1320,6 +1343,15 @@ class DistributedRun:
             if stage_stress is not None and getattr(self.fields, "strain", None) is not None:  # the matrix cells'
                 self.fields.strain.static = stage_stress
         return u, v, a
+
+    def _input_motion(self) -> dict | None:
+        """pyfem.output.input_motion of this run (None without a [wave])."""
+        from types import SimpleNamespace
+
+        from pyfem.output import input_motion
+
+        return input_motion(SimpleNamespace(freefield=self.freefield, scene=self.scene, lead_in=self.lead_in,
+                                            time_step=self.time_step, n_steps=self.n_steps))
 
     # -- the samples ------------------------------------------------------------------------------------
     def sample(self, t: float, k: int, stepper, u, v, a) -> None:
@@ -1356,8 +1388,15 @@ class DistributedRun:
         if self.part.constraints is not None:
             reactions = comm.reduce(self.part.constraints.face_resultants(stepper.reactions()), root=0)
         gathered = comm.gather(mine, root=0)
+        bolt_rows = None
+        if self.bolt_monitors:  # from the rank counting each monitor's bolt
+            from pyfem.distributed_support import monitor_rows as bolt_monitor_rows
+
+            bolt_rows = comm.gather(bolt_monitor_rows(t, self.bolt_monitors, self.part.support), root=0)
         if self.fields is not None and k % self.fields.every == 0:
             self.fields.write(t, u, v, a, pairs)
+        if self.pictures is not None:
+            self.pictures.update(t, u)
         if not self.root:
             return
         by_monitor = dict(pair for rank_rows in gathered for pair in rank_rows)
@@ -1372,6 +1411,10 @@ class DistributedRun:
                 self.histories[name].append(row)
         if reactions is not None:
             self.histories["reactions"].append([t] + list(reactions.ravel()))
+        if bolt_rows is not None:
+            by_bolt_monitor = dict(pair for rank_rows in bolt_rows for pair in rank_rows)
+            for j, monitor in enumerate(self.bolt_monitors):
+                self.histories[f"bolts/{monitor.name}"].append(by_bolt_monitor[j])
         if counts is not None:
             self.state_counts.append(counts)
             if self.pair_names:
@@ -1420,6 +1463,10 @@ class DistributedRun:
                 writer["writer_pair_rows"] = np.array(self.pair_rows_kept)
             if self.state_counts:
                 writer["writer_state_counts"] = np.array(self.state_counts)
+            if self.pictures is not None and self.pictures.deformed.displacement is not None:
+                deformed = self.pictures.deformed  # its most deformed sample so far (as the serial writer's)
+                writer["writer_deformation"] = np.array([deformed.largest, deformed.t])
+                writer["writer_deformation_displacement"] = np.asarray(deformed.displacement)
             if self.fields is not None:
                 self.fields.file.close()  # flushed to disk with the checkpoint (reopened below)
             write_atomically(out / CHECKPOINT_NAME, writer)
@@ -1504,6 +1551,10 @@ class DistributedRun:
             for block in ("stored_energy", "dissipation"):
                 out[f"cells/{name}/{block}"] = np.sum([np.frombuffer(kernel[prefix + block], dtype=np.float64)
                                                        for _, prefix in parts], axis=0)
+        if part.support:  # the counted bolts' state, keyed by their nodes' positions (pyfem/distributed_support.py)
+            from pyfem.distributed_support import rank_state as bolt_state
+
+            out.update(bolt_state(part.support))
         return out
 
     def _pair_keys(self) -> np.ndarray:
@@ -1571,6 +1622,10 @@ class DistributedRun:
                     data = np.concatenate([f[f"pairs/{name}"] for f in having])
                     state[prefix + name] = np.ascontiguousarray(data[found][pair_rows]).tobytes()
                 parts[prefix] = contact
+        if part.support:  # the bolts' parts, keyed by position (pyfem/distributed_support.py)
+            from pyfem.distributed_support import load_state as load_bolts
+
+            parts.update(load_bolts(part.support, state, files, comm))
         if self.lts is not None:
             stepper.load_state(state)
             if not started:  # an unstarted LocalStepper loads none of its parts' states: each loads its own
@@ -1625,7 +1680,7 @@ class DistributedRun:
 
         comm, root, part, ts = self.comm, self.root, self.part, self.time_step
         if on_plan is not None:
-            shown = plan(part, ts, self.n_steps, self.contact_arrays, self.lts, self.lts_decision)
+            shown = plan(part, ts, self.n_steps, self.contact_arrays, self.lts, self.lts_decision, self.lead_in)
             if root:
                 if self.saved is not None:
                     shown = {"resuming": f"from the checkpoint at t = {self.saved.t:.6g} s of "
@@ -1642,10 +1697,16 @@ class DistributedRun:
                 from pyfem.distributed_linear import solve_linear
 
                 self.stage = solve_linear(part, self.contact_arrays)
+            # The pairs' in-situ forces, before the hand-over makes the stage's their F0 (static/interface_stress.png)
+            self.in_situ_forces = (None if self.contact_arrays is None else
+                                   np.array(self.contact_arrays["static_force"], dtype=np.float64))
             distributed_stage.hand_over(self.stage, part, self.loop, self.monitors, self.contact_arrays)
             self.stage.report["monitors"] = distributed_stage.monitor_report(self.stage, self.monitors, self.names,
                                                                              comm)
         stepper, exchange = self.stepper()
+        from pyfem.distributed_view import Pictures
+
+        self.pictures = Pictures(part, self.points if self.names else None)
         ts = self.time_step  # (global stepping's when local stepping's set-up check sent "auto" back to it)
         n_outputs = self.n_steps // ts.steps_per_output
         origin = run_origin(self.lead_in, ts)  # record time: a record's lead-in at t < 0
@@ -1723,6 +1784,13 @@ class DistributedRun:
         phases = comm.gather(dict(stepper.phase_seconds()), root=0)
         sitting = comm.allreduce(time.perf_counter() - loop_start, op=MPI.MAX)
         nonlinear = None if loop is None else region_summary(comm, loop.counted)
+        if loop is not None and self.pictures is not None:
+            self.pictures.end_state(comm, loop.counted)
+        bolts = bounds = None
+        if part.support:  # every group's bolts on rank 0 (pyfem/distributed_support.py)
+            from pyfem.distributed_support import gather_groups
+
+            bolts, bounds = gather_groups(comm, part.support), part.model.bounds
         if not root:
             return {}
         self.summary.update({
@@ -1730,6 +1798,8 @@ class DistributedRun:
             "loop_seconds": loop_seconds, "setup_seconds": part.setup_seconds,
             "seconds_per_step": loop_seconds / max(1, self.n_steps),
             "checkpoints": {"written": clock.count, "seconds": clock.seconds, "interval": clock.interval},
+            # (the serial run's key: the process's peak resident memory; here the largest rank's, each in "mpi")
+            "peak_memory_mib": max(row[-1] for row in per_rank),
             "energy": RunWriter._energy_summary(np.array(self.energy_rows), self.energy_columns),
             "monitors": (monitor_peaks(np.array(self.rows_kept), self.columns, self.names, np.array(self.times),
                                        self.monitor_regions) if self.names else {}),
@@ -1737,7 +1807,6 @@ class DistributedRun:
                 ("owned_nodes", "ghost_nodes", "extra_ghost_nodes", "bytes_sent_per_step", "element_loop_cells",
                  "halo_cells", "peak_memory_mib"))}},
             **({"nonlinear_regions": nonlinear} if nonlinear is not None else {}),
-            "peak_memory_mib": max(row[-1] for row in per_rank),  # the largest rank's (the process's on one)
         })
         from pyfem.clock import DISTRIBUTED_PHASES, PHASES, phase_split
 
@@ -1757,8 +1826,40 @@ class DistributedRun:
                                                    self.contact_arrays.get("deterioration")))
             self.summary["mpi"]["moved_pair_nodes"] = part.moved_nodes
         self._history_plots()
+        if bolts is not None:
+            self._support_outputs(bolts, bounds)
         _write_json(self.out / "run.json", self.summary)
         return self.summary
+
+    def _support_outputs(self, groups: list, bounds: tuple) -> None:
+        """support.csv, support.xdmf (+ .h5), plots/support.png and run.json's "support" and
+        "bolt_monitors" at the end of the run (rank 0; the whole model's RunWriter writes the same)."""
+        from types import SimpleNamespace
+
+        from pyfem.support import group_summary, segment_rows, write_csv
+        from pyfem.support_output import bolt_state, plot_section, section_y, write_xdmf
+
+        write_csv(self.out / "support.csv", [row for group in groups for row in segment_rows(group.bolts, group.name)],
+                  peak=True)
+        self.summary["support"] = {group.name: group_summary(group) for group in groups}
+        for group in groups:  # local time stepping: the group's bolts per rate level (each its host nodes' finest)
+            if group.bolt_levels.min(initial=0) >= 0 and len(group.bolt_levels):
+                levels, counts = np.unique(group.bolt_levels, return_counts=True)
+                self.summary["support"][group.name]["bolts_per_level"] = {int(k): int(c) for k, c in zip(levels, counts)}
+        states = [bolt_state(group) for group in groups]
+        end = self.times[-1] if self.times else 0.0
+        write_xdmf(self.out / "support.xdmf", states, end)
+        y0, where = section_y(self.scene, SimpleNamespace(node_coords=np.array(bounds)))
+        drawn = plot_section(self.out / "plots" / "support.png", states, y0, where, f"end of the run, t = {end:.4g} s")
+        if drawn:
+            self.summary["support_plot"] = drawn
+        monitors = {}
+        for monitor in self.bolt_monitors:  # their segment and its peak over the samples
+            rows = np.loadtxt(self.out / "bolts" / f"{monitor.name}.csv", delimiter=",", skiprows=1, ndmin=2)
+            monitors[monitor.name] = dict(monitor.where(groups), peak_axial_force=float(np.max(np.abs(rows[:, 1]),
+                                                                                                  initial=0.0)))
+        if monitors:
+            self.summary["bolt_monitors"] = monitors
 
     def _history_plots(self) -> None:
         """plots/ (rank 0): the energy account, each monitor's and pair monitor's history and the pair
@@ -1768,6 +1869,8 @@ class DistributedRun:
 
         plot_dir = self.out / "plots"
         plot_dir.mkdir(parents=True, exist_ok=True)
+        if self.pictures is not None:
+            self.summary.update(self.pictures.plot(plot_dir, self.part.model.regions, self.scene.get("title", "")))
         plots.energy(plot_dir / "energy.png", np.array(self.energy_rows), self.energy_columns)
         for name in self.names:
             plots.monitor(plot_dir / f"monitor_{name}.png", self.out / "monitors" / f"{name}.csv")

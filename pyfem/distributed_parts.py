@@ -298,3 +298,40 @@ def start_vector(coords: np.ndarray) -> np.ndarray:
     any rank count and numbering): the power iteration's start."""
     phase = coords @ np.array([12.9898, 78.233, 37.719])  # of the node's own coordinates only
     return np.stack([np.sin(phase * (k + 1.0) + 0.5 * k) * 43758.5453 % 1.0 - 0.5 for k in range(3)], axis=1)
+
+
+def power_iteration(matrix: tuple, mass: np.ndarray, coords: np.ndarray, n_owned: int, iterations: int,
+                    comm=None, update=None) -> float:
+    """The largest eigenvalue of M^-1/2 K M^-1/2 by power iteration from `start_vector` of the node
+    coordinates, on the owned rows of `matrix` (the kernel's (indptr, indices, blocks) in local
+    numbering, owned nodes first), the dot products summed over `comm` (None: one process) and
+    `update(x)` bringing the ghosts' rows of x (n_local, 3) from their owners before each product.
+    The serial run's and the distributed model's estimate (pyfem.solver.choose_time_step,
+    pyfem.distributed_model.omega2_estimates): the start depends on the positions only, so the
+    estimate is the same for any rank count and numbering but for the round-off of the sums."""
+    import math
+
+    indptr, indices, blocks = matrix
+    n_local = len(indptr) - 1
+    # The owned rows only (a ghost's row holds its blocks to owned nodes only).
+    owned = sp.bsr_matrix((blocks[:indptr[n_owned]], indices[:indptr[n_owned]], indptr[:n_owned + 1]),
+                          shape=(3 * n_owned, 3 * n_local))
+    inverse_sqrt_mass = 1.0 / np.sqrt(mass)
+    x = start_vector(coords)
+
+    def total(values):
+        return values if comm is None else comm.allreduce(values)
+
+    x /= math.sqrt(total(float(np.sum(x[:n_owned] ** 2))))
+    estimate = 0.0
+    for _ in range(iterations):
+        if update is not None:
+            update(x)
+        y = (owned @ (inverse_sqrt_mass[:, None] * x).reshape(-1)).reshape(-1, 3)
+        y *= inverse_sqrt_mass[:n_owned, None]
+        rayleigh, y_norm2 = total(np.array([float(np.sum(x[:n_owned] * y)), float(np.sum(y * y))]))
+        estimate = float(rayleigh)
+        if y_norm2 == 0.0:
+            break
+        x[:n_owned] = y / math.sqrt(y_norm2)
+    return estimate

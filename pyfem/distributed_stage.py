@@ -203,6 +203,8 @@ class RankStage:
     hand_over_force: np.ndarray | None = None
     pair_forces: np.ndarray | None = None
     u_first: np.ndarray | None = None
+    support_groups: list | None = None   # rank 0: the whole groups installed in the stage, as it leaves them
+    bounds: tuple | None = None          # the whole mesh's box (the support plot's section)
 
 
 def _stage_stepper(part, matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray, counted: list,
@@ -281,7 +283,16 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
     factor = max([plastic_frequency_factor(p["poisson_ratio"], p["friction_angle"], p["dilation_angle"])
                   for p in laws.values() if p["law"] == "mohr_coulomb"], default=1.0)
     everything = stage_matrix(part, np.zeros(0, dtype=np.int32))
-    mass = scaled_mass(part, everything, factor)
+    # Rock bolts and cables of static.support join in the support stage (pyfem/distributed_support.py);
+    # the mass bounds their condensed stiffness too (as the whole model's stage).
+    bolts = [rank_group for rank_group in part.support if rank_group.stage == "static"]
+    if bolts:
+        from pyfem.distributed_support import add_rows, bound_rows
+
+        mass = scaled_mass(part, add_rows(everything, part.n_owned, bound_rows(bolts, part.n_owned, part.n_local)),
+                           factor)
+    else:
+        mass = scaled_mass(part, everything, factor)
     installs = comm.allreduce(len(installed_cells)) > 0  # (a rank may hold none of the installed cells)
     elastic = stage_matrix(part, installed_cells) if installs else everything
     del everything
@@ -316,7 +327,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
 
     floor = 1.0e-3 * global_norm(traction)
     ramp, probe_steps = 0.0, 0
-    path_dependent = comm.allreduce(bool(loop is not None or has_pairs), op=MPI.LOR)
+    path_dependent = comm.allreduce(bool(loop is not None or has_pairs or bolts), op=MPI.LOR)
     probe_load = f_exc + weight
     if path_dependent and comm.allreduce(bool(np.any(probe_load)), op=MPI.LOR):
         probe_contact = make_contact_pairs(stage_pairs) if has_pairs else None
@@ -347,6 +358,11 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
         load = fraction * f_exc + carried + (weight if index == 1 else 0.0)
         active_counted = [c for c in counted.values() if c is not None]
         active_halo = [c for c in halo.values() if c is not None]
+        if index == 1:  # the bolts installed in the stage, after the element loop's components
+            for rank_group in bolts:
+                rank_group.fresh()
+                active_counted += [bolts.component for bolts in rank_group.parts if bolts.kind == "counted"]
+                active_halo += [bolts.component for bolts in rank_group.parts if bolts.kind == "halo"]
         stepper = _stage_stepper(part, matrix, mass, constraints, load, active_counted, active_halo, contact, ramp)
 
         def report(steps, ratio, seconds, name=name):
@@ -356,7 +372,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
 
         u_owned, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor, report=report,
                                 space=stepper)
-        for component in active_counted + active_halo:
+        for component in active_counted + active_halo:  # (the bolts' too: the run's zero of their energy)
             component.rebase()
         if contact is not None:
             contact.rebase(stepper.u)
@@ -418,7 +434,16 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
                  if loop_cells else {})}
     if contact_arrays is not None:
         report["pairs"] = pair_report(comm, contact, contact_arrays)
-    return RankStage(counted=[counted[name] for name in counted_names], halo=[halo[name] for name in halo_names],
+    support_groups = None
+    if bolts:  # the bolts as the stage leaves them, on rank 0 (static/support.csv, run.json "static")
+        from pyfem.distributed_support import gather_groups
+        from pyfem.support import group_summary
+
+        support_groups = gather_groups(comm, bolts)
+        if root:
+            report["support"] = {group.name: group_summary(group) for group in support_groups}
+    return RankStage(support_groups=support_groups, bounds=model.bounds if bolts else None,
+                     counted=[counted[name] for name in counted_names], halo=[halo[name] for name in halo_names],
                      contact=contact, u_total=u1 + u2, u_support=u2, u_first=u1,
                      installed_regions=list(installed_regions),
                      report=report, cell_averages=averages)
@@ -452,7 +477,27 @@ def brief(report: dict) -> dict:
 
     return {"stages": [{key: stage[key] for key in SUMMARY_KEYS} for stage in report["stages"]],
             "max_displacement": report["max_displacement"]["value"], "out_of_balance": report["out_of_balance"],
-            "seconds": report["seconds"], "outputs": "static/static.json, static/fields.xdmf"}
+            "seconds": report["seconds"],
+            "outputs": "static/static.json, static/fields.xdmf" + (", static/support.csv" if "support" in report else ""),
+            **({"support": report["support"]} if "support" in report else {})}
+
+
+def write_support(folder, stage: RankStage, scene) -> None:
+    """static/support.csv, static/support.png and static/support.xdmf (+ .h5): the bolts installed in
+    the stage as it leaves them (rank 0; pyfem/static_output.py writes the same for the whole model)."""
+    from types import SimpleNamespace
+
+    from pyfem.support import segment_rows, write_csv
+    from pyfem.support_output import bolt_state, write_outputs
+
+    groups = stage.support_groups
+    states = [bolt_state(group, peak=False) for group in groups]
+    drawn = write_outputs(folder, states, scene, SimpleNamespace(node_coords=np.array(stage.bounds)), 0.0,
+                          "support.png", "after the static stage")
+    if drawn:
+        stage.report.setdefault("plots", {})["support"] = drawn
+    write_csv(folder / "support.csv", [row for group in groups for row in segment_rows(group.bolts, group.name)],
+              peak=False)
 
 
 def monitor_report(stage: "RankStage", monitors, names: list, comm: MPI.Comm) -> dict:

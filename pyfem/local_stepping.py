@@ -68,12 +68,9 @@ def check_supported(scene, beta: float) -> None:
     does not do yet."""
     allowed = ("false for scenes with {}: local time stepping covers the stiffness, mass-proportional "
                "damping, viscoelastic, viscous, fixed and roller faces, seismic input, element-loop materials, "
-               "contact and a static stage (docs/local_stepping.md)")
+               "contact, rock bolts and a static stage (docs/local_stepping.md)")
     if beta != 0.0:
         raise SceneError(KEY, True, allowed.format("stiffness-proportional Rayleigh damping (beta > 0)"))
-    if scene.get("support"):
-        raise SceneError(KEY, True, allowed.format("rock bolts or cables ([support.NAME]: a bolt's host nodes "
-                                                   "step at different rates, and one component has one rate)"))
     if scene["time"].get("matrix_precision", "double") != "double":
         raise SceneError(KEY, True, allowed.format('time.matrix_precision = "single" (the local stepper '
                                                     "stores double blocks)"))

@@ -211,33 +211,43 @@ def cell_strain_operator(scene, model, cells: np.ndarray | None = None) -> CellS
         scene: validated scene ([materials], optional [initial_stress]).
         model: pyfem.operators.Model.
     """
+    element = model.V.element.basix_element
+    nodes = model.V.dofmap.list.array.reshape(-1, element.dim).astype(np.int32)
+    every = len(nodes)
+    region_ids = np.full(every, -1, dtype=np.int64)
+    for region, tag in model.regions.items():
+        in_region = model.cell_tags.indices[model.cell_tags.values == tag]
+        region_ids[in_region[in_region < every]] = tag
+    if cells is not None:
+        nodes, region_ids = nodes[np.asarray(cells, dtype=np.int64)], region_ids[np.asarray(cells, dtype=np.int64)]
+    return cell_strain_of(scene, element, nodes, model.node_coords, region_ids, model.regions)
+
+
+def cell_strain_of(scene, element, nodes: np.ndarray, node_coords: np.ndarray, region_ids: np.ndarray,
+                   regions: dict) -> CellStrain:
+    """`cell_strain_operator` of the cells with dofmap rows `nodes` (c, k) of the basix `element`, in
+    regions `region_ids` (c,) (ids of `regions`: name -> id; a cell of another id gets NaN moduli):
+    the distributed model's whole mesh on rank 0 (pyfem/distributed_view.py) as the serial model's."""
     import basix
 
     from pyfem.initial_stress import stress_field_from_scene
     from pyfem.operators import lame_parameters
 
-    element = model.V.element.basix_element
-    nodes = model.V.dofmap.list.array.reshape(-1, element.dim).astype(np.int32)
-    every = len(nodes)
-    if cells is not None:
-        nodes = nodes[np.asarray(cells, dtype=np.int64)]
+    nodes = np.asarray(nodes).astype(np.int32)
     centroid = basix.geometry(element.cell_type).mean(axis=0).reshape(1, 3)
     table = element.tabulate(1, centroid)[:, 0, :, 0]                            # (4, k): phi, dphi/dX
     reference_gradients = table[1:].T                                             # (k, 3)
-    coords = model.node_coords[nodes]                                             # (c, k, 3)
+    coords = node_coords[nodes]                                                   # (c, k, 3)
     jacobian = np.einsum("cka,kb->cab", coords, reference_gradients)              # dx_a/dX_b
     gradients = np.einsum("kb,cbl->ckl", reference_gradients, np.linalg.inv(jacobian))
     n_cells = len(nodes)
-    lame_lambda, shear_modulus = np.full(every, np.nan), np.full(every, np.nan)
-    for region, tag in model.regions.items():
+    lame_lambda, shear_modulus = np.full(n_cells, np.nan), np.full(n_cells, np.nan)
+    for region, tag in regions.items():
         material = scene["materials"].get(region)
         if material is None:
             continue
-        in_region = model.cell_tags.indices[model.cell_tags.values == tag]
-        in_region = in_region[in_region < every]
+        in_region = region_ids == tag
         lame_lambda[in_region], shear_modulus[in_region] = lame_parameters(material["E"], material["nu"])
-    if cells is not None:
-        lame_lambda, shear_modulus = lame_lambda[cells], shear_modulus[cells]
     field = stress_field_from_scene(scene)
     centroids = np.einsum("k,cka->ca", table[0], coords)
     static = np.zeros((n_cells, 3, 3)) if field is None else np.asarray(field(centroids), dtype=np.float64)
@@ -389,6 +399,14 @@ def input_motion(simulation) -> dict | None:
     return summary
 
 
+def input_title(motion: dict) -> str:
+    """plots/input.png's title of an `input_motion`."""
+    source = Path(motion["source"]).name if motion["kind"] == "record" else "Ricker wavelet"
+    scale = "" if motion["scale"] == 1.0 else f" x wave.scale {motion['scale']:g}"
+    return (f"input motion: {source}{scale}: PGA {motion['pga_g']:.3g} g, "
+            f"PGV {100 * motion['pgv']:.3g} cm/s, PGD {100 * motion['pgd']:.3g} cm")
+
+
 def tensor6(tensors: np.ndarray) -> np.ndarray:
     """(n, 6) components xx, xy, xz, yy, yz, zz (XDMF "Tensor6") of symmetric (n, 3, 3) tensors."""
     return np.stack([tensors[:, i, j] for i, j in TENSOR6_COMPONENTS], axis=1)
@@ -432,9 +450,11 @@ class RunWriter:
         self.cell_strain = (cell_strain_operator(self.scene, simulation.model)
                             if self.xdmf_every and ("stress" in fields or "strain" in fields) else None)
         self._histories: dict[str, CsvHistory] = {}
-        from pyfem.deformation import DeformedSection
+        from pyfem.deformation import DeformedSection, vertex_nodes
 
-        self.deformation = DeformedSection(simulation.model, self._monitor_points, cell_regions(simulation.model))
+        model = simulation.model
+        self.deformation = DeformedSection(model.node_coords, vertex_nodes(model), self._monitor_points,
+                                           cell_regions(model))
         self.contours = self._contours()
         self._summary: dict | None = None  # set by start()
         self.checkpoint_problem: str | None = None  # why the checkpoint of an interruption failed
@@ -551,11 +571,7 @@ class RunWriter:
         os.replace(temporary, self.out_dir / "fields.xdmf")
 
     def _input_title(self) -> str:
-        motion = self.input_motion
-        source = Path(motion["source"]).name if motion["kind"] == "record" else "Ricker wavelet"
-        scale = "" if motion["scale"] == 1.0 else f" x wave.scale {motion['scale']:g}"
-        return (f"input motion: {source}{scale}: PGA {motion['pga_g']:.3g} g, "
-                f"PGV {100 * motion['pgv']:.3g} cm/s, PGD {100 * motion['pgd']:.3g} cm")
+        return input_title(self.input_motion)
 
     @property
     def started(self) -> bool:
@@ -838,7 +854,7 @@ class RunWriter:
         """plots/section_end.png: the nonlinear regions' plastic strain, damage, its type and the largest
         principal stress at the end of the run, in the section through the first monitor (else the
         model's middle), without ParaView."""
-        from pyfem.static_plots import principal_stresses, section_state
+        from pyfem.static_plots import cell_vertices, principal_stresses, section_state
 
         model = self.simulation.model
         n_cells = model.n_cells
@@ -857,7 +873,7 @@ class RunWriter:
         y0 = float(points[0][1]) if points is not None and len(points) else \
             float(0.5 * (model.node_coords[:, 1].min() + model.node_coords[:, 1].max()))
         try:
-            return section_state(png_path, model, values, y0, self.scene.get("title", ""))
+            return section_state(png_path, cell_vertices(model)[:n_cells], values, y0, self.scene.get("title", ""))
         except Exception as error:  # a picture must never fail a finished run
             print(f"warning: plots/section_end.png not drawn ({type(error).__name__}: {error})", file=sys.stderr)
             return None

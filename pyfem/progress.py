@@ -35,7 +35,9 @@ class ProgressLines:
         clock: wall clock (s), for tests.
 
     Call `start(t0)` when the time loop starts and the object itself with the simulated time
-    reached after each chunk of steps; the last call (t >= duration) always prints.
+    reached after each chunk of steps; the last call (t >= duration) always prints. A record's
+    lead-in runs at t < 0 (record time): a loop that starts there counts its percentage over the
+    lead-in and the duration, so that a long lead-in is not silent (issue 51).
     """
 
     def __init__(self, duration: float, stream: TextIO | None = None, step: float = 0.05,
@@ -45,6 +47,7 @@ class ProgressLines:
         self.step = float(step)
         self.clock = clock
         self._t0 = 0.0
+        self._origin = 0.0  # where the percentage counts from: min(t0, 0)
         self._wall0 = None
         self._next = 1  # number of the next step to report
         self.lines = 0
@@ -52,13 +55,15 @@ class ProgressLines:
     def start(self, t0: float = 0.0) -> None:
         """The time loop starts at simulated time t0 (s) now."""
         self._t0 = float(t0)
+        self._origin = min(self._t0, 0.0)
         self._wall0 = self.clock()
 
     def __call__(self, t: float) -> None:
         """The run reached simulated time t (s)."""
         if self._wall0 is None:
             self.start(0.0)
-        fraction = t / self.duration if self.duration > 0 else 1.0
+        span = self.duration - self._origin
+        fraction = (t - self._origin) / span if span > 0 else 1.0
         # 1e-9: t is a sum of steps, a hair below the exact multiple of the duration (or its 5 %).
         fraction = 1.0 if fraction > 1.0 - 1e-9 else fraction
         reached = math.floor(fraction / self.step + 1e-9)
@@ -74,6 +79,7 @@ class ProgressLines:
             finish = time.strftime("%H:%M:%S", time.localtime(time.time() + remaining))
             end = f"estimated end in {format_seconds(remaining)} (at {finish})"
         stream = self.stream if self.stream is not None else sys.stdout
-        print(f"progress: {100 * fraction:3.0f} %  t = {t:.6g} s of {self.duration:g} s, "
+        lead_in = " (the record's lead-in)" if t < 0.0 else ""
+        print(f"progress: {100 * fraction:3.0f} %  t = {t:.6g} s{lead_in} of {self.duration:g} s, "
               f"wall {format_seconds(wall)}, {end}", file=stream, flush=True)
         self.lines += 1

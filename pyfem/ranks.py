@@ -119,3 +119,26 @@ def unique_slots(pair_nodes: np.ndarray, selected: np.ndarray) -> np.ndarray:
     """Rows of the pairs' unique nodes that the selected pairs use (ascending)."""
     unique = np.unique(pair_nodes)
     return np.searchsorted(unique, np.unique(pair_nodes[selected]))
+
+
+# Coordinates (m) are matched at this resolution (1 um): a node by its position, a cell by its
+# quadrature points' mean, so that a checkpoint does not depend on the partition or the rank count.
+KEY_RESOLUTION = 1.0e-6
+
+
+def point_keys(points: np.ndarray) -> np.ndarray:
+    """(n, 3) int64 keys of positions (m)."""
+    return np.round(np.asarray(points, dtype=np.float64).reshape(-1, 3) / KEY_RESOLUTION).astype(np.int64)
+
+
+def rows_of(have: np.ndarray, want: np.ndarray, what: str) -> np.ndarray:
+    """The row of `have` (n, k keys) holding each key of `want` (m, k); RuntimeError naming `what`
+    when one is missing."""
+    _, inverse = np.unique(np.concatenate([have, want]), axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    row_of_group = np.full(int(inverse.max(initial=-1)) + 1, -1, dtype=np.int64)
+    row_of_group[inverse[:len(have)]] = np.arange(len(have))
+    rows = row_of_group[inverse[len(have):]]
+    if np.any(rows < 0):
+        raise RuntimeError(f"checkpoint: {int(np.count_nonzero(rows < 0))} {what} of this model are not in it")
+    return rows

@@ -6,6 +6,8 @@ Python owns orchestration and I/O; nothing in Python runs once per time step.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -108,22 +110,27 @@ def add_block_diagonal(matrix: sp.bsr_matrix, nodes: np.ndarray, blocks: np.ndar
     return total
 
 
-def choose_time_step(scene: Scene, stiffness: sp.bsr_matrix, mass: np.ndarray, beta: float) -> TimeStep:
+def choose_time_step(scene: Scene, stiffness: sp.bsr_matrix, mass: np.ndarray, beta: float,
+                     coords: np.ndarray) -> TimeStep:
     """Stable step of central differences for M^-1 K, with stiffness-proportional damping.
 
     omega_max^2 is bounded above by Gershgorin row sums of M^-1 K (guaranteed); power
     iteration sharpens it (an estimate from below, so it is raised by 5 % before use and
     never exceeds the bound). With damping ratio xi = beta omega/2 at omega_max the limit is
     dt_crit = (2/omega)(sqrt(1 + xi^2) - xi). Mass-proportional damping and dashpots are
-    implicit and do not restrict the step.
+    implicit and do not restrict the step. The power iteration starts from a function of the node
+    coordinates (`coords`, (n, 3) m; pyfem.distributed_parts.power_iteration), as the distributed
+    model's does: the same estimate for any numbering and rank count.
     """
     from pyfem import _kernels
+    from pyfem.distributed_parts import power_iteration
 
     indptr, indices, blocks = bsr_arrays(stiffness)
     omega2_bound = _kernels.gershgorin_bound(indptr, indices, blocks, mass)
     omega2_power = None
     if scene["time"].get("power_iteration", True):
-        omega2_power = _kernels.power_iteration(indptr, indices, blocks, mass, POWER_ITERATIONS, 1)
+        omega2_power = power_iteration((indptr, indices, blocks), mass, np.asarray(coords, dtype=np.float64),
+                                       len(mass), POWER_ITERATIONS)
     return time_step_from(scene, omega2_bound, omega2_power, beta)
 
 
@@ -177,12 +184,13 @@ def prepare(scene: Scene, solve_static: bool = True, preview_levels: bool = Fals
         from pyfem.support import scene_groups, stiffness_bound
 
         support = scene_groups(scene, model)
-        time_step = choose_time_step(scene, (stiffness + stiffness_bound(support, model.n_nodes)).tobsr(
-            blocksize=(3, 3)), mass, beta)
+        bounded = (stiffness + stiffness_bound(support, model.n_nodes)).tobsr(blocksize=(3, 3))
+        time_step = choose_time_step(scene, bounded, mass, beta, model.node_coords)
     else:
-        time_step = choose_time_step(scene, stiffness, mass, beta)
+        bounded = stiffness
+        time_step = choose_time_step(scene, stiffness, mass, beta, model.node_coords)
     nonlinear = nonlinear_regions(scene, model, time_step)
-    elastic_stiffness = stiffness  # of every cell: the rate levels of local stepping
+    elastic_stiffness = bounded  # of every cell (and the bolts' bound): the rate levels of local stepping
     if nonlinear is not None:  # its cells leave K; dt stays that of the full elastic stiffness
         stiffness = add_block_diagonal(nonlinear.stiffness, spring_nodes, springs)
     node_levels = preview = lts_split = global_step = None
@@ -289,6 +297,12 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         cell_cap = local_stepping.pair_cell_cap(levels, cell_nodes, simulation.contact_arrays["pairs"], loop_cells)
 
     built = {}  # the regions' LevelComponents of the last kernel built
+    bolt_groups = []  # rock bolts and cables: each group's parts by level (pyfem/distributed_support.py)
+    if simulation.support:
+        from pyfem.distributed_support import serial_group
+
+        handed_over = getattr(simulation.static, "components", None) is not None  # a relaxation stage ran
+        bolt_groups = [serial_group(group, index, handed_over) for index, group in enumerate(simulation.support)]
 
     def bare_kernel(alpha, initial_stress="scene"):
         # With element-loop regions: fresh components of their cells, each at its level (the run's
@@ -309,6 +323,22 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
                 for component, level in parts:
                     kernel.add_internal_force(component, level)
             built["regions"] = [region for region, _ in regions]
+        # Rock bolts and cables: each bolt at the finest level of its host nodes (pyfem/distributed_support.py;
+        # the run's parts continue the stage's components, cut by level; the check's are fresh).
+        for rank_group in bolt_groups:
+            if initial_stress is None:
+                from pyfem.distributed_support import make_component
+
+                parts = [(level, make_component(rank_group, bolts)) for level, bolts in
+                         rank_group.by_level(rank_group.counted, levels)]
+            else:
+                if rank_group.parts:
+                    rank_group.split_by_level(levels)
+                else:
+                    rank_group.fresh(levels)
+                parts = [(part.level, part.component) for part in rank_group.parts]
+            for level, component in parts:
+                kernel.add_internal_force(component, int(level))
         if row_split:
             kernel.set_row_split(True)  # every row at its own level: no caps
             return kernel
@@ -323,8 +353,13 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
         return kernel
 
     if simulation.lts_stability is None and not simulation.lts_check_deferred:  # once per model
+        # From STABILITY_AMPLITUDE times a function of the node coordinates: the distributed model's
+        # state (pyfem.distributed_lts.check_stability_on_ranks), the same for any numbering.
+        from pyfem.distributed_parts import start_vector
+
+        state = local_stepping.STABILITY_AMPLITUDE * start_vector(simulation.model.node_coords).reshape(-1)
         simulation.lts_stability = local_stepping.check_stability(lambda: bare_kernel(0.0, None),
-                                                                  simulation.stiffness.shape[0])
+                                                                  simulation.stiffness.shape[0], state=state)
     report = simulation.lts_stability
     if report is not None and not report["stable"]:
         if simulation.scene["time"].get("local_stepping") == "auto":
@@ -350,6 +385,10 @@ def _make_local_stepper(simulation: Simulation, indptr, indices, blocks):
                                            simulation.contact_arrays["pairs"])
         for contact, level in parts:
             kernel.add_contact(contact, level)
+    for group, rank_group in zip(simulation.support, bolt_groups):  # the outputs read the parts as one group
+        from pyfem.distributed_support import LevelBolts
+
+        group.bolts = dataclasses.replace(group.bolts, component=LevelBolts(rank_group))
     stepper = local_stepping.LocalSteppingAdapter(kernel, 2 ** int(levels.max()))
     if simulation.input_arrays is not None:
         kernel.add_provider(seismic_input_kernel(simulation.input_arrays))

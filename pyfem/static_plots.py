@@ -90,10 +90,30 @@ def excavation_wall(state, model) -> tuple:
 
 
 def section_plane(vertices: np.ndarray, surface: np.ndarray) -> float:
-    """y of the section (m): the middle of the excavation surface, else the middle of the model."""
+    """y of the section (m): the middle of the excavation surface, else the middle of the model, to
+    1e-9 m (the coordinates' round-off, which differs with the rank count, made 0 m 5e-15 m on one
+    rank and -4e-15 m on two)."""
     if len(surface):
-        return float(0.5 * (surface[:, 1].min() + surface[:, 1].max()))
-    return float(0.5 * (vertices[..., 1].min() + vertices[..., 1].max()))
+        middle = 0.5 * (surface[:, 1].min() + surface[:, 1].max())
+    else:
+        middle = 0.5 * (vertices[..., 1].min() + vertices[..., 1].max())
+    return float(np.round(middle, 9)) + 0.0  # (+ 0.0: no -0.0)
+
+
+def section_cells(vertex_y: np.ndarray, y0: float) -> np.ndarray:
+    """(cells,) bool: the cells that the section y = y0 cuts, of the cells' vertices' y (cells, k).
+
+    A plane through a layer of nodes (a monitor at a node's y, the middle of a regular mesh) touches
+    the cells on both sides of it, and which of them "cut" by y.min <= y0 <= y.max was decided by the
+    round-off of the node coordinates, which differs with the partition (dolfinx tabulates them per
+    rank): the plane is taken 1e-9 of the model's height above y0 (below at the model's top), so that
+    one layer of cells is cut for any rank count (pyfem/distributed_view.py draws the same cells)."""
+    low, high = vertex_y.min(axis=1), vertex_y.max(axis=1)
+    if not len(low):
+        return np.zeros(0, dtype=bool)
+    shift = 1e-9 * max(float(high.max() - low.min()), 1e-300)
+    plane = y0 + shift if y0 + shift < high.max() else y0 - shift
+    return (low <= plane) & (high >= plane)
 
 
 def principal_stresses(stress: np.ndarray) -> np.ndarray:
@@ -117,9 +137,7 @@ def section_stress(png_path, vertices: np.ndarray, stress: np.ndarray, surface: 
         {"y": section y (m), "cells": cells drawn, "s1_max", "s3_min" (Pa) over the drawn cells}.
     """
     y0 = section_plane(vertices, surface)
-    y = vertices[..., 1]
-    cut = (y.min(axis=1) <= y0) & (y.max(axis=1) >= y0)
-    cells = np.flatnonzero(cut)
+    cells = np.flatnonzero(section_cells(vertices[..., 1], y0))
     polygons = [convex_hull(vertices[c][:, [0, 2]]) for c in cells]
     principal = principal_stresses(stress[cells])
     panels = [("max principal stress (MPa)", principal[:, 2] * MPA, "RdBu_r", True),
@@ -230,14 +248,25 @@ def write_static_plots(folder: Path, simulation) -> dict:
     return figures
 
 
-def section_state(png_path, model, cell_values: dict, y0: float, title: str = "") -> dict:
+def drawn_damage_type(damage: np.ndarray, kind: np.ndarray) -> np.ndarray:
+    """The damage type section_end.png draws per cell: 0 (none) where the cell is not damaged. A
+    yielded cell without damage has the type of its largest plastic strain (NonlinearRegions.
+    cell_averages: 2, shear), which was drawn as "shear" damage where the damage is 0 (issue 51).
+    NaN (no nonlinear region) stays NaN."""
+    damage = np.asarray(damage, dtype=float)
+    return np.where(np.isfinite(damage) & (damage <= 0.0), 0.0, np.asarray(kind, dtype=float))
+
+
+def section_state(png_path, vertices: np.ndarray, cell_values: dict, y0: float, title: str = "") -> dict:
     """The nonlinear regions' state at the end of a run in the section y = y0: the largest principal
-    stress, plastic strain, damage and the damage's type (1 tension, 2 shear), per cell (cell means of
-    the points; cells outside the nonlinear regions grey).
+    stress, plastic strain, damage and the damage's type (1 tension, 2 shear; 0 where the cell is not
+    damaged, even if it yielded), per cell (cell means of the points; cells outside the nonlinear
+    regions grey).
 
     Args:
         png_path: output image.
-        model: pyfem.operators.Model.
+        vertices: (cells, 8 or 4, 3) each cell's vertex coordinates (m): `cell_vertices(model)`, or the
+            distributed model's whole mesh on rank 0 (pyfem/distributed_view.py).
         cell_values: {"s1" (Pa), "plastic_strain", "damage", "damage_type"}: (n_cells,) arrays, NaN
             outside the nonlinear regions.
         y0: section plane (m).
@@ -246,14 +275,14 @@ def section_state(png_path, model, cell_values: dict, y0: float, title: str = ""
     Returns:
         {"y", "cells", "peak_damage", "peak_plastic_strain"} over the drawn cells.
     """
-    vertices = cell_vertices(model)[:model.n_cells]
-    y = vertices[..., 1]
-    cells = np.flatnonzero((y.min(axis=1) <= y0) & (y.max(axis=1) >= y0))
+    cells = np.flatnonzero(section_cells(vertices[..., 1], y0))
     polygons = [convex_hull(vertices[c][:, [0, 2]]) for c in cells]
+    damage = cell_values["damage"][cells]
+    kind = drawn_damage_type(damage, cell_values["damage_type"][cells])
     panels = [("max principal stress (MPa)", cell_values["s1"][cells] * MPA, "RdBu_r", True),
               ("plastic strain (-)", cell_values["plastic_strain"][cells], "magma_r", False),
-              ("damage (-)", cell_values["damage"][cells], "inferno_r", False),
-              ("damage type (0 none, 1 tension, 2 shear)", cell_values["damage_type"][cells], "viridis", False)]
+              ("damage (-)", damage, "inferno_r", False),
+              ("damage type (0 none, 1 tension, 2 shear)", kind, "viridis", False)]
     inside = [polygon for polygon, value in zip(polygons, cell_values["plastic_strain"][cells]) if np.isfinite(value)]
     zoom = None
     if inside:

@@ -65,18 +65,68 @@ def discretise_lines(lines, segment: float, free_length: float = 0.0):
             np.array(directions))
 
 
+def locate(model, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(host nodes (m, k), weights (m, k), the host nodes' coordinates (m, k, 3)) of each point: the
+    model's point_weights in its preferred cell (`Model.preferred_cell`). On a distributed mesh (more
+    than one rank) the whole model's preferred cell among every rank's owned cells, the host nodes
+    numbered globally (dolfinx's global node numbers) and the answer the same on every rank (a
+    collective); on one rank the function space's local nodes (the serial numbering).
+
+    Raises:
+        PointOutsideMesh: the first point in no cell of the model (on every rank alike).
+    """
+    from pyfem.operators import PointOutsideMesh
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    comm = model.mesh.comm
+    if comm.size == 1:
+        nodes, weights = model.point_weights(points)
+        return nodes, weights, np.asarray(model.node_coords)[nodes]
+    owned_cells = model.n_cells
+    best = []
+    for found in model.cells_holding(points):
+        found = found[found < owned_cells]
+        best.append((None, None) if not len(found) else model.preferred_cell(found))
+    offers = comm.allgather([None if centroid is None else tuple(centroid) for _, centroid in best])
+    mine = []
+    for j in range(len(points)):
+        held = [(offer[j], q) for q, offer in enumerate(offers) if offer[j] is not None]
+        if not held:
+            raise PointOutsideMesh(j, points[j], *model.bounds)
+        if min(held)[1] == comm.rank:
+            mine.append(j)
+    mine = np.array(mine, dtype=np.int64)
+    index_map = model.V.dofmap.index_map
+    mapped = np.concatenate([np.arange(*index_map.local_range), index_map.ghosts]).astype(np.int64)
+    if len(mine):
+        cells = np.array([best[j][0] for j in mine], dtype=np.int32)
+        nodes, weights = model.point_weights(points[mine], cells)
+        found = (mine, mapped[nodes], weights, np.asarray(model.node_coords)[nodes])
+    else:
+        found = None
+    pieces = [piece for piece in comm.allgather(found) if piece is not None]
+    k = pieces[0][1].shape[1]
+    nodes, weights, coords = np.empty((len(points), k), np.int64), np.empty((len(points), k)), np.empty((len(points), k, 3))
+    for index, piece_nodes, piece_weights, piece_coords in pieces:
+        nodes[index], weights[index], coords[index] = piece_nodes, piece_weights, piece_coords
+    return nodes, weights, coords
+
+
 def bolt_group(model, lines, *, diameter: float, E: float, yield_force: float, bond_stiffness: float,
                bond_strength: float, segment: float, pretension: float = 0.0, free_length: float = 0.0,
                head_stiffness: float = 0.0) -> BoltGroup:
     """The bolts along `lines` in `model` (pyfem.operators.Model; every node inside its mesh) with
-    the parameters of a support group (SI units; steel area pi diameter^2 / 4)."""
+    the parameters of a support group (SI units; steel area pi diameter^2 / 4). On a distributed mesh
+    the host nodes are global and the group has no kernel component (each rank makes its own:
+    pyfem/distributed_support.py)."""
     offsets, arcs, positions, directions = discretise_lines(lines, segment, free_length)
-    host_nodes, host_weights = model.point_weights(positions)
+    host_nodes, host_weights, _ = locate(model, positions)
     parameters = dict(axial_stiffness=E * math.pi * diameter**2 / 4.0, yield_force=yield_force,
                       bond_stiffness=bond_stiffness, bond_strength=bond_strength, pretension=pretension,
                       free_length=free_length, head_stiffness=head_stiffness)
     group = BoltGroup(None, offsets, arcs, positions, directions, host_nodes, host_weights, parameters)
-    group.component = group.fresh_component()
+    if model.mesh.comm.size == 1:
+        group.component = group.fresh_component()
     return group
 
 
@@ -145,8 +195,7 @@ def _default_segment(model, lines: np.ndarray, order: int) -> float:
     each bolt, of the host cell's largest extent along x, y, z divided by the element order), and at
     most the shortest bolt's length / SEGMENTS_PER_BOLT."""
     points = np.concatenate([line[:3] + np.linspace(0.0, 1.0, 11)[:, None] * (line[3:] - line[:3]) for line in lines])
-    nodes, _ = model.point_weights(points)
-    coordinates = model.node_coords[nodes]  # (m, k, 3)
+    _, _, coordinates = locate(model, points)  # (m, k, 3)
     extent = (coordinates.max(axis=1) - coordinates.min(axis=1)).max(axis=1)
     shortest = float(np.min(np.linalg.norm(lines[:, 3:] - lines[:, :3], axis=1)))
     return min(float(np.median(extent)) / order, shortest / SEGMENTS_PER_BOLT)
@@ -178,7 +227,7 @@ def scene_groups(scene, model) -> list[SupportGroup]:
         if outside is None:
             offsets, arcs, positions, _ = discretise_lines(lines, segment, settings["free_length"])
             try:
-                model.point_weights(positions)
+                locate(model, positions)
             except PointOutsideMesh as error:
                 outside, bolt = error, int(np.searchsorted(offsets, error.index, side="right") - 1)
         if outside is not None:
@@ -220,7 +269,10 @@ def _surface_triangles(model, name: str, key: str, installed_regions: list):
     mesh = model.mesh
     tdim = mesh.topology.dim
     facets = model.facet_tags.find(model.boundaries[name])
-    if not len(facets):
+    comm = mesh.comm
+    if comm.size > 1:  # each rank its owned facets (gathered below)
+        facets = facets[facets < mesh.topology.index_map(mesh.topology.dim - 1).size_local]
+    if not comm.allreduce(len(facets)):
         raise SceneError(key, name, "must name a surface with facets in the model (this one has none left: "
                          "excavated?)")
     mesh.topology.create_connectivity(tdim - 1, tdim)
@@ -245,7 +297,16 @@ def _surface_triangles(model, name: str, key: str, installed_regions: list):
                 normal = -normal
             triangles.append(piece)
             normals.append(normal)
-    return np.array(triangles), x, np.array(normals)
+    # The whole surface on every rank: its triangles in the order of their centroids (x, y, z), the
+    # vertices numbered by their coordinates, so that the pattern (its bolts' order, and where a
+    # closed section's first bolt goes) is the same for any numbering and rank count.
+    corners = np.concatenate(comm.allgather(x[np.array(triangles, dtype=np.int64).reshape(-1, 3)].reshape(-1, 3, 3)))
+    normals = np.concatenate(comm.allgather(np.array(normals).reshape(-1, 3)))
+    centroids = corners.mean(axis=1)
+    order = np.lexsort((centroids[:, 2], centroids[:, 1], centroids[:, 0]))
+    corners, normals = corners[order], normals[order]
+    vertices, inverse = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
+    return inverse.reshape(-1, 3), vertices, normals
 
 
 AXIS_TILT = 10.0
@@ -281,6 +342,18 @@ def _surface_axis(triangles: np.ndarray, x: np.ndarray, normals: np.ndarray, key
     return (axis if axis[np.argmax(np.abs(axis))] > 0.0 else -axis), True
 
 
+def _closed_start(chain: list, keys: list, x: np.ndarray, axis: np.ndarray) -> int:
+    """Where a closed section's chain begins (its first bolt): of its points on the mesh edges most
+    nearly along the axis (an extruded wall's lines along its length, not a quadrilateral's diagonal),
+    the lowest in x, then y, then z: the same point whatever order the facets are read in."""
+    points = np.array([point for point, _ in chain[:-1]])
+    edges = np.array([x[b] - x[a] for a, b in keys[:-1]])
+    along = np.abs(edges @ axis) / np.linalg.norm(edges, axis=1)
+    best = np.flatnonzero(along >= along.max() - 1e-9)
+    order = np.lexsort((points[best, 2], points[best, 1], points[best, 0]))
+    return int(best[order[0]])
+
+
 def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: float):
     """The section of the surface by the plane axis . p = t: chains (each a list of (point, triangle)
     from one end to the other; closed chains repeat their first point)."""
@@ -307,7 +380,7 @@ def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: f
     for start in starts:
         if start in seen:
             continue
-        chain, current, previous = [(points[start], None)], start, None
+        chain, current, previous, keys = [(points[start], None)], start, None, [start]
         seen.add(start)
         while True:
             step = [(key, k) for key, k in neighbours[current] if key != previous or len(neighbours[current]) == 1]
@@ -316,10 +389,14 @@ def _section_chains(triangles: np.ndarray, x: np.ndarray, axis: np.ndarray, t: f
                 break
             key, k = step[0]
             chain.append((points[key], k))
+            keys.append(key)
             if key == start:
                 break
             seen.add(key)
             previous, current = current, key
+        if len(chain) > 2 and keys[-1] == start:  # closed: begin at a canonical point (`_closed_start`)
+            first = _closed_start(chain, keys, x, axis)
+            chain = [(chain[first][0], None)] + chain[first + 1:] + chain[1:first + 1]
         if len(chain) > 1:
             chains.append(chain)
     return chains
@@ -434,7 +511,9 @@ def group_summary(group: SupportGroup) -> dict:
     """run.json's "support" entry of a group: bolts, total length, yielded segments, peak force."""
     component = group.component
     strain = np.asarray(component.plastic_strain())
-    return {"type": group.settings["type"], "installed": group.stage, "bolts": int(component.n_bolts),
+    per_level = getattr(component, "bolts_per_level", None)  # local time stepping (pyfem/distributed_support.py)
+    return {**({"bolts_per_level": per_level()} if per_level is not None else {}),
+            "type": group.settings["type"], "installed": group.stage, "bolts": int(component.n_bolts),
             "total_length": group.total_length, "segments": int(component.n_segments),
             "yielded_segments": int(np.count_nonzero(strain != 0.0)),
             "slipping_nodes": int(np.count_nonzero(np.asarray(component.plastic_slip()) != 0.0)),

@@ -100,8 +100,10 @@ def test_bonded_pairs_reproduce_the_unsplit_mesh_to_roundoff(order):
     assert checks == len(split_sim.monitor_names) == 3
     # Bonded pairs constrain the split system to the unsplit one (u_i = u_j), so by the Rayleigh
     # quotient omega_max(split) >= omega_max(unsplit): the split step is safe for bonded pairs.
-    # (Equal here up to the power iteration's convergence: the top mode does not open the interface.)
-    assert split_sim.time_step.critical <= whole_sim.time_step.critical * (1.0 + 1e-4)
+    # (Equal here up to the power iteration's convergence: the top mode does not open the interface.
+    # 300 iterations from the node coordinates' start vector leave the two estimates 3.9e-4 apart at
+    # Q2, measured; 1e-4 held for the kernel's former seeded start, by chance of its two vectors.)
+    assert split_sim.time_step.critical <= whole_sim.time_step.critical * (1.0 + 1e-3)
 
 
 # --------------------------------------------------------------------------- block on a rigid base

@@ -77,3 +77,18 @@ def test_the_mpi_paths_reproduce_the_serial_record(name, model, ranks, tmp_path,
     out = tmp_path / name
     rh.run(name, out, ranks, model)
     assert_reproduces(name, out, model, ranks)
+
+
+# The one-model port (issue 47): the distributed model on one rank (PYFEM_ONE_MODEL=1) reproduces the
+# serial records to the serial rule, every summary key included (its pictures' numbers, dt_critical,
+# the local stepping check, case3_small's stage and its static.json); the cheap scenes in the default tier.
+ONE_MODEL = [pytest.param(name, marks=() if entry.cheap else pytest.mark.slow) for name, entry in rh.SCENES.items()]
+
+
+@pytest.mark.parametrize("name", ONE_MODEL)
+def test_the_distributed_model_on_one_rank_reproduces_the_serial_record(name, tmp_path, monkeypatch):
+    monkeypatch.setenv("PYFEM_ONE_MODEL", "1")
+    out = tmp_path / name
+    rh.run(name, out)
+    assert json.loads((out / "run.json").read_text())["model"] == "distributed"  # the path it is meant to test
+    assert_reproduces(name, out, None, 1)

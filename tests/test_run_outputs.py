@@ -118,6 +118,24 @@ def test_progress_lines_with_coarse_samples_and_a_fake_clock():
     assert text[-1] == "progress: 100 %  t = 1 s of 1 s, wall 20 s, done"
 
 
+def test_progress_lines_count_a_records_lead_in():
+    """A loop that starts in a record's lead-in (t < 0, record time) reports it (issue 51: the lines
+    were silent until t = 0): the percentage runs over the lead-in and the duration."""
+    lines = []
+    clock = iter(np.arange(0.0, 100.0, 1.0))
+    progress = ProgressLines(1.0, stream=type("S", (), {"write": lambda self, text: lines.append(text),
+                                                        "flush": lambda self: None})(),
+                             step=0.25, clock=lambda: float(next(clock)))
+    progress.start(-3.0)
+    for t in (-2.5, -2.0, -1.0, 0.0, 0.5, 1.0):
+        progress(t)
+    text = "".join(lines).splitlines()
+    assert len(text) == 4 == progress.lines
+    assert text[0].startswith("progress:  25 %  t = -2 s (the record's lead-in) of 1 s")
+    assert text[2].startswith("progress:  75 %  t = 0 s of 1 s")
+    assert text[-1].startswith("progress: 100 %  t = 1 s of 1 s")
+
+
 def two_layer_scene(order: int) -> dict:
     """Two regions (a below z = 10, b above) under El Centro at half its 0.32 g PGA (wave.scale)."""
     return parse_scene({
@@ -252,8 +270,7 @@ def test_no_input_motion_without_a_wave(tmp_path):
 def test_deformed_section_keeps_the_most_deformed_sample(two_layer_run):
     """plots/deformed_section.png shows the sample where the section through the monitors is most
     deformed relative to its mean: a rigid translation counts nothing, the larger of two shears wins."""
-    from pyfem.deformation import DeformedSection
-
+    from pyfem.deformation import DeformedSection, vertex_nodes
     from pyfem.output import cell_regions
 
     out, scene = two_layer_run
@@ -264,9 +281,9 @@ def test_deformed_section_keeps_the_most_deformed_sample(two_layer_run):
     assert (out / "plots" / "deformed_section.png").stat().st_size > 20000
 
     model = solver.prepare(scene, solve_static=False).model
-    section = DeformedSection(model, None, cell_regions(model))
+    section = DeformedSection(model.node_coords, vertex_nodes(model), None, cell_regions(model))
     assert set(np.unique(section.regions)) == set(summary["regions"].values())  # both layers cut
-    tracker = DeformedSection(model, None, np.zeros(model.n_cells, dtype=np.int32))
+    tracker = DeformedSection(model.node_coords, vertex_nodes(model), None, np.zeros(model.n_cells, dtype=np.int32))
     x = model.node_coords
     translation = np.tile([0.3, -0.2, 0.1], len(x))
     shear = np.zeros((len(x), 3))
