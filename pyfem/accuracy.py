@@ -476,10 +476,11 @@ def lining_elements_for(error_budget: float, results_csv=LINING_RESULTS) -> dict
 
 
 
-def region_cell_sizes(model) -> dict:
+def region_cell_sizes(model, comm=None) -> dict:
     """{region: (n_cells, smallest, largest) element size h (m)} of a model's cells, h being a cell's
     largest vertex distance (a tetrahedron's longest edge; a hexahedron's diagonal over sqrt 3, its
-    edge when it is a cube), as the accuracy study's h (the edge of its cubes)."""
+    edge when it is a cube), as the accuracy study's h (the edge of its cubes). comm: the
+    distributed model's (a collective): the whole model's, each rank's owned cells merged."""
     from pyfem.operators import cell_regions
 
     mesh = model.mesh
@@ -497,12 +498,20 @@ def region_cell_sizes(model) -> dict:
     h = largest if corners == 4 else largest / np.sqrt(3.0)
     regions = cell_regions(model)[:n_cells]
     names = {tag: name for name, tag in model.regions.items()}
-    return {names.get(int(tag), f"tag {int(tag)}"): (int(np.count_nonzero(regions == tag)),
-                                                    float(h[regions == tag].min()), float(h[regions == tag].max()))
-            for tag in np.unique(regions)}
+    sizes = {int(tag): (int(np.count_nonzero(regions == tag)), float(h[regions == tag].min()),
+                        float(h[regions == tag].max())) for tag in np.unique(regions)}
+    if comm is not None:  # each rank's owned cells, merged in the order of the tags
+        whole = {}
+        for share in comm.allgather(sizes):
+            for tag, (count, smallest, largest) in share.items():
+                kept = whole.get(tag, (0, np.inf, 0.0))
+                whole[tag] = (kept[0] + count, min(kept[1], smallest), max(kept[2], largest))
+        sizes = {tag: whole[tag] for tag in sorted(whole)}
+    return {names.get(tag, f"tag {tag}"): row for tag, row in sizes.items()}
 
 
-def resolution_report(scene, model, error_budget: float = 0.05, results_csv=DEFAULT_RESULTS) -> tuple[dict, list]:
+def resolution_report(scene, model, error_budget: float = 0.05, results_csv=DEFAULT_RESULTS,
+                      comm=None) -> tuple[dict, list]:
     """Each region's measured element sizes against the study's advice for its own shear speed.
 
     Returns:
@@ -515,7 +524,7 @@ def resolution_report(scene, model, error_budget: float = 0.05, results_csv=DEFA
     tetrahedra = model.mesh.topology.cell_type.name == "tetrahedron"
     family = ("P" if tetrahedra else "Q") + str(scene["mesh"]["order"])
     lines, warnings = {}, []
-    for name, (count, smallest, largest) in region_cell_sizes(model).items():
+    for name, (count, smallest, largest) in region_cell_sizes(model, comm).items():
         table = scene["materials"].get(name)
         if table is None or any(table.get(key) is None for key in ("E", "nu", "rho")):
             continue
