@@ -803,7 +803,8 @@ class _Fields:
         self.file.close()
 
 
-def plan(run: "DistributedRun", per_step: float, trial: int, phase_seconds: dict, bytes_sent: int) -> dict:
+def plan(run: "DistributedRun", per_step: float, trial: int, phase_seconds: dict, bytes_sent: int,
+         lts_preview: bool = False) -> dict:
     """What `check` prints and `run` prints before it steps (rank 0's; {} on the others; a collective):
     every line of the serial plan (pyfem.solver.simulation_plan, from the builders of pyfem/plan.py)
     with the whole model's numbers, summed over the ranks where each rank holds its part (cells,
@@ -811,13 +812,14 @@ def plan(run: "DistributedRun", per_step: float, trial: int, phase_seconds: dict
     rank's share (its owned and ghost nodes, element-loop cells, bytes sent, memory) and the balance
     of the element loop's work. per_step: the slowest rank's seconds per step of `trial` steps from
     rest; phase_seconds: this rank's stepper's phase times of those steps (rank 0's are shown, as
-    run.json's "time_per_step"); bytes_sent: this rank's per step."""
+    run.json's "time_per_step"); bytes_sent: this rank's per step; lts_preview: with local stepping
+    off, the speed-up it would give (`check`'s line, as the serial `check`'s)."""
     from pyfem.clock import phase_split
     from pyfem.effects import free_field_words
     from pyfem.interfaces import wear_words
     from pyfem.output import peak_memory_mib
-    from pyfem.plan import (deferred_check_line, element_loop_plan, element_name, face_lines, model_lines,
-                            resolution_plan, time_lines)
+    from pyfem.plan import (deferred_check_line, element_loop_plan, element_name, face_lines, interface_slip_plan,
+                            lts_preview_lines, model_lines, resolution_plan, time_lines)
     from pyfem.static import plan_report, uses_relaxation
 
     part, scene, time_step, loop, comm = run.part, run.scene, run.time_step, run.loop, run.comm
@@ -831,7 +833,24 @@ def plan(run: "DistributedRun", per_step: float, trial: int, phase_seconds: dict
         stage = plan_report(scene, part.model, comm)
         if not uses_relaxation(scene):
             stage["solver"] = stage_words(scene)
+    slip = {}
+    if part.pairs is not None:
+        node_index = None
+        if part.kernel_of_dolfinx is not None:  # a kernel node's function-space node (-1: none here)
+            node_index = np.full(part.n_local, -1, dtype=np.int64)
+            node_index[part.kernel_of_dolfinx] = np.arange(len(part.kernel_of_dolfinx))
+        slip = interface_slip_plan(scene, part.model, comm, part.pairs, node_index)
     resolution = resolution_plan(scene, part.model, comm)
+    preview = {}
+    if lts_preview and lts is None:
+        from pyfem import distributed_lts
+        from pyfem.local_stepping import speed_up_of
+
+        found = distributed_lts.preview(part, loop, time_step)
+        if found is not None:
+            p = speed_up_of(*found, time_step, {name: entry["ms_per_step"] for name, entry in phases.items()})
+            preview = lts_preview_lines(p, scene, lts_decision, bool(element_loop.get("nonlinear regions")),
+                                        part.pairs is not None, True)
     cells = (0, 0) if loop is None else (
         sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
         0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
@@ -857,8 +876,10 @@ def plan(run: "DistributedRun", per_step: float, trial: int, phase_seconds: dict
                               "(pyfem/distributed_lts.py); "
                               + deferred_check_line(int(math.log2(ratio)), per_step)}
            if lts is not None else {}),
+        **preview,
         **element_loop,
         **({"static stage": stage} if stage is not None else {}),
+        **slip,
         **resolution,
         "steps": n_steps,
         "memory": f"{sum(s[6] for s in shares) / 2**20:.1f} MiB" + (" (the ranks' sum)" if comm.size > 1 else ""),
@@ -1203,7 +1224,7 @@ class DistributedRun:
             for r, components in kept[0]:
                 r.components = components
             self.contact, self.lts_layout = kept[1], kept[2]
-        return plan(self, per_step, trial, phase_seconds, bytes_sent)
+        return plan(self, per_step, trial, phase_seconds, bytes_sent, lts_preview=not fresh)
 
     def _check_lts(self) -> None:
         """The set-up check of the LTS map on the ranks (pyfem/distributed_lts.py), as the serial

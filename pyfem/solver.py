@@ -22,8 +22,8 @@ from pyfem.effects import (BoundaryConstraints, MonitorStress, attach_kernel_poi
 from pyfem.local_stepping import lts_stability_line
 from pyfem.interfaces import wear_words  # noqa: F401  (also pyfem.solver.wear_words)
 from pyfem.operators import face_report  # noqa: F401  (also pyfem.solver.face_report)
-from pyfem.plan import (deferred_check_line, element_loop_plan, element_name, face_lines,  # noqa: F401  (also pyfem.solver.*)
-                        interface_slip_plan, model_lines, resolution_plan, static_stage_estimate, time_lines)
+from pyfem.plan import (deferred_check_line, element_loop_plan, element_name, face_lines, interface_slip_plan,
+                        lts_preview_lines, model_lines, resolution_plan, time_lines)
 from pyfem.scene import Scene, SceneError
 
 # Memory traffic assumed by the time estimate before a measurement exists (bytes/s).
@@ -525,28 +525,8 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
     rows = local_stepping.row_split(simulation.nonlinear, pairs is not None)
     p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
                                           simulation.stiffness, pairs, simulation.time_step, phases_ms, rows)
-    auto_declined = (simulation.scene["time"].get("local_stepping") == "auto"
-                     and str(simulation.lts_decision or "").startswith('"auto": off: predicted'))
-    if p["speed_up"] < local_stepping.AUTO_PAYS:
-        verdict = "not worth it on this model"
-    elif auto_declined:  # per step it pays, over this run not (line above): say which
-        verdict = ("it would pay per simulated second on a longer run; over this run's duration the set-up check "
-                   "costs more than it saves (\"auto\" above)")
-    elif rows:
-        verdict = ("it would pay (time.local_stepping = true; the row split: stresses where levels meet as global "
-                   "stepping's, docs/local_stepping.md \"The scheme: the row split\")")
-    else:
-        verdict = ("it would pay (time.local_stepping = true), but it would step by the column split, whose stresses "
-                   "where a finer level meets a coarser one are less accurate (a cavity test: 8.7 % off the exact "
-                   "history at safety 0.8, global stepping 0.5 %; docs/local_stepping.md \"The column split\")")
-    return {"local stepping (off)": (
-        f"predicted {p['speed_up']:.2f}x the speed of global stepping per simulated second ({len(p['levels'])} "
-        f"rate level{'s' if len(p['levels']) != 1 else ''}, nodes per level {p['levels']}; work against global "
-        "stepping: "
-        + (f"element loop {p['element_loop']:.2f}, " if simulation.nonlinear is not None else "")
-        + f"matrix {p['matrix']:.2f}"
-        + (f", contact {p['contact']:.2f}" if pairs is not None else "")
-        + f"); {verdict}")}
+    return lts_preview_lines(p, simulation.scene, simulation.lts_decision, simulation.nonlinear is not None,
+                             pairs is not None, rows)
 
 
 def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:
