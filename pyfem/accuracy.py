@@ -372,7 +372,8 @@ def slip_error_at(per_wavelength: float, dissimilar: bool, results_csv=SLIP_RESU
             "contrast": contrast}
 
 
-def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
+def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS, comm=None, pairs=None,
+                          node_index: np.ndarray | None = None) -> dict:
     """Per contact interface of a prepared model: the rocks on its two sides, its element size (the
     median over its pairs of sqrt(nearest x third-nearest neighbour distance), times the order), the
     elements per shortest shear wavelength of
@@ -381,9 +382,13 @@ def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
 
     Returns:
         interface names (comma-separated where their lines are the same) -> one line for ``pyfem check``.
+
+    The distributed model's (comm, a collective): `pairs` are the pairs this rank steps (each pair on
+    one rank), node_index their nodes' function-space node (-1: none on this rank); the sides' regions
+    are voted over every rank's pairs and the spacing measured on every rank's pair positions.
     """
-    pairs = getattr(model, "pairs", None)
-    if pairs is None or len(pairs) == 0 or scene.get("wave") is None:
+    pairs = getattr(model, "pairs", None) if pairs is None else pairs
+    if pairs is None or (comm is None and len(pairs) == 0) or scene.get("wave") is None:
         return {}
     frequency = highest_frequency(scene)
     from pyfem.operators import cell_regions
@@ -395,12 +400,26 @@ def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
     node_region[cells.ravel()] = np.repeat(cell_regions(model).astype(np.int64), n_basis)
     order = int(scene["mesh"]["order"])
     advice = {}
+    n_bins = max(model.regions.values(), default=0) + 2
+
+    def regions_of(nodes):
+        index = np.asarray(nodes, dtype=np.int64) if node_index is None else node_index[nodes]
+        found = np.full(len(index), -1, dtype=np.int64)
+        known = (index >= 0) & (index < len(node_region))
+        found[known] = node_region[index[known]]
+        return found
+
     for name in pairs.names:
         chosen = pairs.of_interface(name)
-        if len(chosen) < 2:   # no spacing to measure
+        votes = [np.bincount(regions_of(pairs.nodes[chosen, k]) + 1, minlength=n_bins) for k in (0, 1)]
+        coords = pairs.coords[chosen]
+        if comm is not None:  # every rank's pairs (a node without a cell on its pair's rank does not vote)
+            votes = [comm.allreduce(vote[:n_bins]) for vote in votes]
+            votes = [np.concatenate([[0], vote[1:]]) if vote[1:].any() else vote for vote in votes]
+            coords = np.concatenate(comm.allgather(coords))
+        if len(coords) < 2:   # no spacing to measure
             continue
-        sides = [names.get(int(tag)) for tag in (np.bincount(node_region[pairs.nodes[chosen, k]] + 1).argmax() - 1
-                                                 for k in (0, 1))]
+        sides = [names.get(int(vote.argmax()) - 1) for vote in votes]
         tables = [scene["materials"].get(side) or {} for side in sides]
         constants = [tuple(table.get(key) for key in ("E", "nu", "rho")) for table in tables]
         if any(value is None for values in constants for value in values):
@@ -411,7 +430,7 @@ def interface_slip_advice(scene, model, results_csv=SLIP_RESULTS) -> dict:
         # nearest and third-nearest neighbours of the same interface (the two edges of a stretched
         # face: sqrt of the face's area), its median over the pairs (h for Q1, h / 2 for Q2).
         from scipy.spatial import cKDTree
-        distances = cKDTree(pairs.coords[chosen]).query(pairs.coords[chosen], k=min(4, len(chosen)))[0]
+        distances = cKDTree(coords).query(coords, k=min(4, len(coords)))[0]
         spacing = np.sqrt(distances[:, 1] * distances[:, -1 if distances.shape[1] < 4 else 3])
         h, coarse = float(np.median(spacing)) * order, float(np.percentile(spacing, 90)) * order
         per_wavelength = speed / frequency / h
@@ -476,10 +495,11 @@ def lining_elements_for(error_budget: float, results_csv=LINING_RESULTS) -> dict
 
 
 
-def region_cell_sizes(model) -> dict:
+def region_cell_sizes(model, comm=None) -> dict:
     """{region: (n_cells, smallest, largest) element size h (m)} of a model's cells, h being a cell's
     largest vertex distance (a tetrahedron's longest edge; a hexahedron's diagonal over sqrt 3, its
-    edge when it is a cube), as the accuracy study's h (the edge of its cubes)."""
+    edge when it is a cube), as the accuracy study's h (the edge of its cubes). comm: the
+    distributed model's (a collective): the whole model's, each rank's owned cells merged."""
     from pyfem.operators import cell_regions
 
     mesh = model.mesh
@@ -497,12 +517,20 @@ def region_cell_sizes(model) -> dict:
     h = largest if corners == 4 else largest / np.sqrt(3.0)
     regions = cell_regions(model)[:n_cells]
     names = {tag: name for name, tag in model.regions.items()}
-    return {names.get(int(tag), f"tag {int(tag)}"): (int(np.count_nonzero(regions == tag)),
-                                                    float(h[regions == tag].min()), float(h[regions == tag].max()))
-            for tag in np.unique(regions)}
+    sizes = {int(tag): (int(np.count_nonzero(regions == tag)), float(h[regions == tag].min()),
+                        float(h[regions == tag].max())) for tag in np.unique(regions)}
+    if comm is not None:  # each rank's owned cells, merged in the order of the tags
+        whole = {}
+        for share in comm.allgather(sizes):
+            for tag, (count, smallest, largest) in share.items():
+                kept = whole.get(tag, (0, np.inf, 0.0))
+                whole[tag] = (kept[0] + count, min(kept[1], smallest), max(kept[2], largest))
+        sizes = {tag: whole[tag] for tag in sorted(whole)}
+    return {names.get(tag, f"tag {tag}"): row for tag, row in sizes.items()}
 
 
-def resolution_report(scene, model, error_budget: float = 0.05, results_csv=DEFAULT_RESULTS) -> tuple[dict, list]:
+def resolution_report(scene, model, error_budget: float = 0.05, results_csv=DEFAULT_RESULTS,
+                      comm=None) -> tuple[dict, list]:
     """Each region's measured element sizes against the study's advice for its own shear speed.
 
     Returns:
@@ -515,7 +543,7 @@ def resolution_report(scene, model, error_budget: float = 0.05, results_csv=DEFA
     tetrahedra = model.mesh.topology.cell_type.name == "tetrahedron"
     family = ("P" if tetrahedra else "Q") + str(scene["mesh"]["order"])
     lines, warnings = {}, []
-    for name, (count, smallest, largest) in region_cell_sizes(model).items():
+    for name, (count, smallest, largest) in region_cell_sizes(model, comm).items():
         table = scene["materials"].get(name)
         if table is None or any(table.get(key) is None for key in ("E", "nu", "rho")):
             continue

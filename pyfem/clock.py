@@ -105,7 +105,8 @@ PHASES = ("update", "element_loop", "input_forces", "stiffness", "contact")
 
 
 DISTRIBUTED_PHASES = ("exchange",)
-"""Under mpirun: the ghost exchange of every step (pyfem/distributed_model.py)."""
+"""The distributed model's ghost exchange of every step (pyfem/distributed_model.py); a phase of
+every run's split (run.json "time_per_step"), 0 on one rank and on the serial path."""
 
 
 def phase_split(phase_seconds: dict, loop_seconds: float, output_seconds: float | None = None) -> dict:
@@ -117,14 +118,14 @@ def phase_split(phase_seconds: dict, loop_seconds: float, output_seconds: float 
         output_seconds: of that, the time spent writing samples (s), None if not measured.
 
     Returns:
-        {phase: {"ms_per_step", "share"}} for PHASES, "output" (when given) and "other" (the loop's
+        {phase: {"ms_per_step", "share"}} for PHASES, DISTRIBUTED_PHASES (0 where the stepper has
+        no ghosts: one rank, the serial path), "output" (when given) and "other" (the loop's
         remainder: Python between the kernel's calls, progress lines).
     """
     steps = max(1, int(phase_seconds["steps"]))
     seconds = {name: float(phase_seconds[name]) for name in PHASES}
-    for name in DISTRIBUTED_PHASES:  # under mpirun
-        if phase_seconds.get(name):
-            seconds[name] = float(phase_seconds[name])
+    for name in DISTRIBUTED_PHASES:  # the distributed model's (0 on one rank and on the serial path)
+        seconds[name] = float(phase_seconds.get(name, 0.0))
     if output_seconds is not None:
         seconds["output"] = float(output_seconds)
     seconds["other"] = max(0.0, loop_seconds - sum(seconds.values()))

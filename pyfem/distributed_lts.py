@@ -119,6 +119,42 @@ def work_sums_on_ranks(part, loop, levels: np.ndarray) -> np.ndarray:
     return part.comm.allreduce(mine)
 
 
+def _supported(part) -> None:
+    """SceneError where local stepping cannot step this model (a collective)."""
+    from pyfem import local_stepping
+
+    local_stepping.check_supported(part.scene, part.beta)
+    held = None
+    if part.constraints is not None and part.pairs is not None:
+        on_pair = np.intersect1d(np.asarray(part.constraints.nodes), np.asarray(part.pairs.nodes).ravel())
+        held = part.coords[on_pair[0]].round(3).tolist() if len(on_pair) else None
+    held = next((where for where in part.comm.allgather(held) if where is not None), None)
+    if held is not None:
+        raise local_stepping.held_pair_error(f"the node at {held}")
+
+
+def _fitted_levels(part, time_step) -> tuple[np.ndarray, np.ndarray]:
+    """(each local node's rate level, fitted to the output interval; the whole model's nodes per level)."""
+    from pyfem import local_stepping
+
+    levels = node_levels(part)
+    top = local_stepping.fitted_top(level_counts(part.comm, levels, part.n_owned), time_step.steps_per_output)
+    levels = np.minimum(levels, top).astype(np.int32)
+    return levels, level_counts(part.comm, levels, part.n_owned)
+
+
+def preview(part, loop, time_step) -> tuple[np.ndarray, np.ndarray] | None:
+    """With local stepping off: (the whole model's work sums, nodes per level) of the levels it would
+    use (`check`'s prediction, pyfem/plan.py lts_preview_lines), None where it cannot step the model.
+    A collective."""
+    try:
+        _supported(part)
+    except SceneError:
+        return None
+    levels, counts = _fitted_levels(part, time_step)
+    return work_sums_on_ranks(part, loop, levels), counts
+
+
 def choose(part, loop, time_step, duration: float) -> tuple[RankLevels | None, str | None]:
     """Whether the run steps locally (`time.local_stepping`: true, or "auto" where it pays, as the
     whole model decides) and at which levels: (RankLevels or None, "auto"'s reason or None). Refuses
@@ -129,22 +165,12 @@ def choose(part, loop, time_step, duration: float) -> tuple[RankLevels | None, s
     if not setting:
         return None, None
     try:
-        local_stepping.check_supported(part.scene, part.beta)
-        held = None
-        if part.constraints is not None and part.pairs is not None:
-            on_pair = np.intersect1d(np.asarray(part.constraints.nodes), np.asarray(part.pairs.nodes).ravel())
-            held = part.coords[on_pair[0]].round(3).tolist() if len(on_pair) else None
-        held = next((where for where in part.comm.allgather(held) if where is not None), None)
-        if held is not None:
-            raise local_stepping.held_pair_error(f"the node at {held}")
+        _supported(part)
     except SceneError as error:
         if setting is True:
             raise
         return None, "\"auto\": off: not available " + error.allowed.removeprefix("false ")
-    levels = node_levels(part)
-    top = local_stepping.fitted_top(level_counts(part.comm, levels, part.n_owned), time_step.steps_per_output)
-    levels = np.minimum(levels, top).astype(np.int32)
-    counts = level_counts(part.comm, levels, part.n_owned)
+    levels, counts = _fitted_levels(part, time_step)
     on, decision = True, None
     if setting == "auto":
         on, decision = local_stepping.decision_of(

@@ -815,37 +815,128 @@ class _Fields:
         self.file.close()
 
 
-def plan(part: RankModel, time_step, n_steps: int, contact_arrays: dict | None = None, lts=None,
-         lts_decision: str | None = None, lead_in: float = 0.0) -> dict:
-    """What `run` prints before it steps (rank 0); with deteriorating pairs (`contact_arrays`) the
-    whole model's "interface wear" line at the run's end in record time (a record's `lead_in` runs at
-    t < 0, as the serial plan's); with local time stepping (`lts`: distributed_lts.RankLevels,
-    `lts_decision`: "auto"'s reason) its levels."""
-    from pyfem.interfaces import wear_words
-    from pyfem.local_stepping import STABILITY_STEPS
+def plan(run: "DistributedRun", per_step: float, trial: int, phase_seconds: dict, bytes_sent: int,
+         lts_preview: bool = False) -> dict:
+    """What `check` prints and `run` prints before it steps (rank 0's; {} on the others; a collective):
+    every line of the serial plan (pyfem.solver.simulation_plan, from the builders of pyfem/plan.py)
+    with the whole model's numbers, summed over the ranks where each rank holds its part (cells,
+    nodes, faces' nodes and areas, element-loop cells, memory), then on more than one rank each
+    rank's share (its owned and ghost nodes, element-loop cells, bytes sent, memory) and the balance
+    of the element loop's work. per_step: the slowest rank's seconds per step of `trial` steps from
+    rest; phase_seconds: this rank's stepper's phase times of those steps (rank 0's are shown, as
+    run.json's "time_per_step"); bytes_sent: this rank's per step; lts_preview: with local stepping
+    off, the speed-up it would give (`check`'s line, as the serial `check`'s)."""
+    from pyfem.clock import phase_split
     from pyfem.effects import free_field_words
+    from pyfem.interfaces import wear_words
+    from pyfem.output import peak_memory_mib
+    from pyfem.plan import (deferred_check_line, element_loop_plan, element_name, face_lines, interface_slip_plan,
+                            lts_preview_lines, model_lines, resolution_plan, time_lines)
+    from pyfem.static import plan_report, uses_relaxation
 
-    counts = part.comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts), root=0)
-    if part.comm.rank != 0:
+    part, scene, time_step, loop, comm = run.part, run.scene, run.time_step, run.loop, run.comm
+    n_steps, contact_arrays, lts, lts_decision = run.n_steps, run.contact_arrays, run.lts, run.lts_decision
+    n_cells = comm.allreduce(int(part.model.n_cells))
+    phases = phase_split(phase_seconds, per_step * trial)
+    element_loop = element_loop_plan(None if loop is None else loop.counted, per_step, time_step,
+                                     phases["element_loop"]["ms_per_step"] * 1e-3, comm)
+    stage = None
+    if "static" in scene:
+        stage = plan_report(scene, part.model, comm)
+        if not uses_relaxation(scene):
+            stage["solver"] = stage_words(scene)
+    slip = {}
+    if part.pairs is not None:
+        node_index = None
+        if part.kernel_of_dolfinx is not None:  # a kernel node's function-space node (-1: none here)
+            node_index = np.full(part.n_local, -1, dtype=np.int64)
+            node_index[part.kernel_of_dolfinx] = np.arange(len(part.kernel_of_dolfinx))
+        slip = interface_slip_plan(scene, part.model, comm, part.pairs, node_index)
+    resolution = resolution_plan(scene, part.model, comm)
+    preview = {}
+    if lts_preview and lts is None:
+        from pyfem import distributed_lts
+        from pyfem.local_stepping import speed_up_of
+
+        found = distributed_lts.preview(part, loop, time_step)
+        if found is not None:
+            p = speed_up_of(*found, time_step, {name: entry["ms_per_step"] for name, entry in phases.items()})
+            preview = lts_preview_lines(p, scene, lts_decision, bool(element_loop.get("nonlinear regions")),
+                                        part.pairs is not None, True)
+    cells = (0, 0) if loop is None else (
+        sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
+        0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
+    support = None
+    if part.support:  # rock bolts and cables (pyfem/distributed_support.py; a collective)
+        from pyfem.distributed_support import plan_lines
+
+        support = plan_lines(comm, part.support)
+    shares = comm.gather((part.n_owned, part.n_local - part.n_owned, part.extra_ghosts, *cells, int(bytes_sent),
+                          rank_memory_bytes(run), round(peak_memory_mib())), root=0)
+    if comm.rank != 0:
         return {}
-    return {"model": "distributed: each rank builds and steps its part (docs/scaling.md \"The distributed model\")",
-            "ranks": part.comm.size, "dofs": part.n_dofs_global,
-            "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e in counts],
-            "time step": f"{time_step.dt:.6g} s ({time_step.reason})", "steps": n_steps,
-            **({"free field": free_field_words(part.scene)} if "seismic_input" in part.scene.effects else {}),
-            **({"local stepping (auto)": lts_decision} if lts_decision else {}),
-            **({"local time stepping": f"{len(lts.counts)} rate levels on the ranks' parts (nodes per level, finest "
-                                       f"first: {', '.join(str(int(c)) for c in lts.counts)}; global step "
-                                       f"{time_step.dt * lts.ratio:.6g} s), the row split, one velocity exchange per "
-                                       "level (pyfem/distributed_lts.py); the set-up check of its map runs when the "
-                                       f"run starts ({STABILITY_STEPS} global steps)"} if lts is not None else {}),
-            **({"static stage": stage_words(part.scene)} if "static" in part.scene else {}),
-            **({"contact pairs": f"{part.n_pairs} ({part.moved_nodes} pair nodes stepped on their pair's rank, not "
-                                 "dolfinx's owner: pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
-            **({"interface wear": wear_words(contact_arrays["deterioration"],
-                                             run_origin(lead_in, time_step) + n_steps * time_step.dt)["note"]}
-               if contact_arrays is not None and contact_arrays["deterioration"] is not None else {}),
-            "setup seconds (slowest rank)": round(part.setup_seconds, 2)}
+    ratio = 1 if lts is None else lts.ratio
+    shown = {
+        **model_lines(scene, element_name(part.model, scene["mesh"]["order"]), n_cells, part.n_dofs_global // 3),
+        "model": "distributed: each rank builds and steps its part (docs/scaling.md \"The distributed model\")",
+        "ranks": comm.size,
+        **({"free field": free_field_words(scene)} if "seismic_input" in scene.effects else {}),
+        **({"contact pairs": part.n_pairs} if part.pairs is not None else {}),
+        **({"interface wear": wear_words(contact_arrays["deterioration"],
+                                             run_origin(run.lead_in, time_step) + n_steps * time_step.dt)["note"]}
+           if contact_arrays is not None and contact_arrays["deterioration"] is not None else {}),
+        **face_lines(part.faces_report, part.model.free_surfaces),
+        "dt": f"{time_step.dt:.6g} s ({time_step.reason})",
+        **({"local stepping (auto)": lts_decision} if lts_decision else {}),
+        **({"local stepping": f"{len(lts.counts)} rate levels on the ranks' parts (nodes per level, finest first: "
+                              f"{', '.join(str(int(c)) for c in lts.counts)}; global step "
+                              f"{time_step.dt * lts.ratio:.6g} s), the row split, one velocity exchange per level "
+                              "(pyfem/distributed_lts.py); "
+                              + deferred_check_line(int(math.log2(ratio)), per_step)}
+           if lts is not None else {}),
+        **preview,
+        **element_loop,
+        **({"static stage": stage} if stage is not None else {}),
+        **({"support": support} if support else {}),
+        **slip,
+        **resolution,
+        "steps": n_steps,
+        "memory": f"{sum(s[6] for s in shares) / 2**20:.1f} MiB" + (" (the ranks' sum)" if comm.size > 1 else ""),
+        **time_lines(scene, per_step, trial, phases, n_steps, run.lead_in,
+                     how=f", {'fine steps, ' if ratio > 1 else ''}the slowest of {comm.size} ranks"
+                     if comm.size > 1 else (", fine steps" if ratio > 1 else "")),
+    }
+    if comm.size > 1:  # each rank's share: on one rank these repeat the whole model's lines above
+        shown.update({
+            "owned / ghost (of which extra) nodes per rank": [f"{o} / {g} ({e})" for o, g, e, *_ in shares],
+            "element loop cells / halo cells per rank": [f"{s[3]} / {s[4]}" for s in shares] if loop else "none",
+            **({"pair nodes stepped on their pair's rank": f"{part.moved_nodes} (not dolfinx's owner: "
+                                                           "pyfem/distributed_pairs.py)"} if part.pairs is not None else {}),
+            "bytes sent per step per rank": [s[5] for s in shares],
+            "memory per rank (MiB)": [round(s[6] / 2**20, 1) for s in shares],
+            "peak memory per rank (MiB, the set-up and the trial)": [s[7] for s in shares],
+            "setup seconds (slowest rank)": round(part.setup_seconds, 2)})
+        imbalance = work_imbalance([s[3] + s[4] for s in shares], part.n_pairs)
+        if imbalance is not None:
+            shown["balance"] = imbalance
+    return shown
+
+
+def rank_memory_bytes(run: "DistributedRun") -> int:
+    """Bytes this rank holds during the run, pyfem.solver.memory_estimate's items of its part: the
+    kernel's matrix, state and scratch vectors, mass, input tables, dashpots, contact pairs and the
+    element loop (its counted and halo cells)."""
+    part = run.part
+    total = sum(np.asarray(x).nbytes for x in part.matrix) + 6 * 8 * 3 * part.n_local + part.mass.nbytes
+    if run.input_arrays is not None:
+        total += sum(v.nbytes for v in run.input_arrays.values() if isinstance(v, np.ndarray))
+    total += 2 * part.dashpot_matrices.nbytes
+    if run.contact_arrays is not None:
+        total += sum(v.nbytes for v in run.contact_arrays.values() if isinstance(v, np.ndarray))
+        total += len(run.contact_arrays["area"]) * (3 * 3 * 8 + 8)  # kernel state per pair (an estimate)
+    if run.loop is not None:
+        total += run.loop.counted.memory_bytes + (0 if run.loop.halo is None else run.loop.halo.memory_bytes)
+    return int(total)
 
 
 def stage_words(scene: Scene) -> str:
@@ -893,56 +984,17 @@ def check(scene: Scene) -> dict:
 
 
 def _check(scene: Scene) -> dict:
-    from pyfem.output import peak_memory_mib
     from pyfem.effects import kernel_threads
 
     comm = MPI.COMM_WORLD
     run = DistributedRun(scene, Path("."), comm)
-    part, ts, loop = run.part, run.time_step, run.loop
     if "static" in scene:  # the stage's keys (its faces, its regions), as the run reads them
         from pyfem.static import _install_cells, stage_boundary
 
-        stage_boundary(scene, part.model)
-        _install_cells(scene, part.model)
+        stage_boundary(scene, run.part.model)
+        _install_cells(scene, run.part.model)
     kernel_threads()
-    stepper, exchange = run.stepper(check_stability=False)  # (local stepping's check runs with the run)
-    n = 3 * part.n_local
-    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    stepper.reset_energy(u, v, a, 0.0)
-    ratio = 1 if run.lts is None else run.lts.ratio
-    trial = ratio * math.ceil(TRIAL_STEPS / ratio)  # (local stepping: whole global steps)
-    comm.Barrier()
-    began = time.perf_counter()
-    stepper.run(u, v, a, trial, 0.0)
-    per_step = comm.allreduce(time.perf_counter() - began, op=MPI.MAX) / trial
-    cells = (0, 0) if loop is None else (
-        sum(len(arrays.cells) for arrays in loop.counted.arrays.values()),
-        0 if loop.halo is None else sum(len(arrays.cells) for arrays in loop.halo.arrays.values()))
-    shares = comm.gather((*cells, int(exchange.bytes_sent_per_step), round(peak_memory_mib())), root=0)
-    support = None
-    if part.support:  # rock bolts and cables (pyfem/distributed_support.py)
-        from pyfem.distributed_support import plan_lines
-
-        support = plan_lines(comm, part.support)
-    shown = plan(part, ts, run.n_steps, run.contact_arrays, run.lts, run.lts_decision, run.lead_in)
-    if comm.rank != 0:
-        return {}
-    seconds = per_step * run.n_steps
-    shown.update({
-        "effects": ", ".join(scene.effects) or "none",
-        "element loop cells / halo cells per rank": [f"{c} / {h}" for c, h, _, _ in shares] if loop else "none",
-        "bytes sent per step per rank": [b for _, _, b, _ in shares],
-        "time per step": f"{1e3 * per_step:.3g} ms (the slowest rank, {trial} {'fine ' if ratio > 1 else ''}steps "
-                         "from rest timed here)",
-        "time loop estimate": f"{seconds:.0f} s ({seconds / 3600:.2f} h) for {run.n_steps} steps; with the element "
-                              "loop yielding or cracking a step costs up to several times this",
-        "peak memory per rank (MiB, the set-up and the trial)": [m for *_, m in shares]})
-    imbalance = work_imbalance([c + h for c, h, _, _ in shares], part.n_pairs)
-    if imbalance is not None:
-        shown["balance"] = imbalance
-    if support:
-        shown["support"] = support
-    return shown
+    return run.measured_plan(fresh=False)
 
 
 def work_imbalance(loop_cells: list, n_pairs: int) -> str | None:
@@ -1146,6 +1198,37 @@ class DistributedRun:
             self.contact = make_contact_pairs(self.contact_arrays)
         return _stepper(self.part, self.time_step.dt, self.input_arrays, self.loop, self.contact,
                         None if self.stage is None else self.stage.hand_over_force)
+
+    def measured_plan(self, fresh: bool) -> dict:
+        """`plan` (rank 0's; a collective) with the time per step measured on a stepper of its own, run
+        TRIAL_STEPS steps from rest (local stepping: whole global steps; its set-up check is left to the
+        run) and then dropped. fresh: the run goes on with this model (`run`'s plan), so the trial steps
+        fresh element-loop components and pairs and the run's are put back, never touched (as
+        pyfem.solver.simulation_plan's trial); `check` (False) drops the model after."""
+        comm, loop = self.comm, self.loop
+        regions = [] if loop is None else [r for r in (loop.counted, loop.halo) if r is not None]
+        kept = [(r, r.components) for r in regions], self.contact, self.lts_layout
+        if fresh:
+            for r in regions:
+                r.new_components()
+        stepper, exchange = self.stepper(check_stability=False)
+        n = 3 * self.part.n_local
+        u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+        stepper.reset_energy(u, v, a, 0.0)
+        ratio = 1 if self.lts is None else self.lts.ratio
+        trial = ratio * math.ceil(TRIAL_STEPS / ratio)
+        comm.Barrier()
+        began = time.perf_counter()
+        stepper.run(u, v, a, trial, 0.0)
+        per_step = comm.allreduce(time.perf_counter() - began, op=MPI.MAX) / trial
+        phase_seconds = dict(stepper.phase_seconds())
+        bytes_sent = int(exchange.bytes_sent_per_step)
+        del stepper
+        if fresh:
+            for r, components in kept[0]:
+                r.components = components
+            self.contact, self.lts_layout = kept[1], kept[2]
+        return plan(self, per_step, trial, phase_seconds, bytes_sent, lts_preview=not fresh)
 
     def _check_lts(self) -> None:
         """The set-up check of the LTS map on the ranks (pyfem/distributed_lts.py), as the serial
@@ -1679,14 +1762,14 @@ class DistributedRun:
         from pyfem.effects import kernel_threads
 
         comm, root, part, ts = self.comm, self.root, self.part, self.time_step
+        kernel_threads()
         if on_plan is not None:
-            shown = plan(part, ts, self.n_steps, self.contact_arrays, self.lts, self.lts_decision, self.lead_in)
+            shown = self.measured_plan(fresh=True)
             if root:
                 if self.saved is not None:
                     shown = {"resuming": f"from the checkpoint at t = {self.saved.t:.6g} s of "
                                          f"{self.scene['time']['duration']:g} s", **shown}
                 on_plan(shown)
-        kernel_threads()
         if "static" in self.scene:  # (a resumed run solves it again; the checkpoint's state is loaded over it)
             from pyfem import distributed_stage
             from pyfem.static import uses_relaxation
@@ -1714,6 +1797,7 @@ class DistributedRun:
                                             elapsed=time.perf_counter() - self.wall_start)
         status, started, reason = "failed", False, "ended by another rank's failure"
         loop_start = time.perf_counter()
+        output_seconds = 0.0  # the samples' writing, this sitting's (run.json "time_per_step" "output")
         u = v = a = None
         try:
             with signals.deferred():
@@ -1733,7 +1817,9 @@ class DistributedRun:
                     t = origin + self.done * ts.steps_per_output * ts.dt
                     if not comm.allreduce(bool(np.isfinite(u[:3 * part.n_owned]).all()), op=MPI.LAND):
                         raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
+                    output_start = time.perf_counter()
                     self.sample(t, self.done, stepper, u, v, a)
+                    output_seconds += time.perf_counter() - output_start
                     if comm.bcast(clock.due(), root=0) and self.done < n_outputs:
                         began = time.perf_counter()
                         self.write_checkpoint(stepper, u, v, a, t, loop_start)
@@ -1782,7 +1868,7 @@ class DistributedRun:
         # The time per step split into the kernel's phases (this sitting's steps): rank 0's as the whole
         # model's run.json "time_per_step", and every rank's ms per step of each phase.
         phases = comm.gather(dict(stepper.phase_seconds()), root=0)
-        sitting = comm.allreduce(time.perf_counter() - loop_start, op=MPI.MAX)
+        sitting = comm.allreduce(timing["loop_seconds"] - self.previous_timing["loop_seconds"], op=MPI.MAX)
         nonlinear = None if loop is None else region_summary(comm, loop.counted)
         if loop is not None and self.pictures is not None:
             self.pictures.end_state(comm, loop.counted)
@@ -1813,7 +1899,7 @@ class DistributedRun:
         from pyfem.output import report_lead_in
 
         report_lead_in(self.summary, self.scene, self.lead_in, self.times, self.energy_rows, self.energy_columns)
-        self.summary["time_per_step"] = phase_split(phases[0], sitting)
+        self.summary["time_per_step"] = phase_split(phases[0], sitting, output_seconds)
         self.summary["mpi"]["ms_per_step"] = {
             name: [round(1e3 * float(p.get(name, 0.0)) / max(1, int(p["steps"])), 4) for p in phases]
             for name in PHASES + DISTRIBUTED_PHASES if any(p.get(name) for p in phases)}

@@ -24,6 +24,8 @@ from pyfem.effects import (BoundaryConstraints, MonitorStress, attach_kernel_poi
 from pyfem.local_stepping import lts_stability_line
 from pyfem.interfaces import wear_words  # noqa: F401  (also pyfem.solver.wear_words)
 from pyfem.operators import face_report  # noqa: F401  (also pyfem.solver.face_report)
+from pyfem.plan import (deferred_check_line, element_loop_plan, element_name, face_lines, interface_slip_plan,
+                        lts_preview_lines, model_lines, resolution_plan, time_lines)
 from pyfem.scene import Scene, SceneError
 
 # Memory traffic assumed by the time estimate before a measurement exists (bytes/s).
@@ -448,14 +450,6 @@ def upper_triangle_blocks(stiffness: sp.bsr_matrix) -> int:
     return int(np.count_nonzero(stiffness.indices > rows)) + n_block_rows
 
 
-def element_name(model, order: int) -> str:
-    """Q1/Q2 on hexahedra, P1/P2 on tetrahedra (a gmsh file of the user's)."""
-    from dolfinx import mesh as dolfinx_mesh
-
-    tetrahedra = model.mesh.topology.cell_type == dolfinx_mesh.CellType.tetrahedron
-    return f"{'P' if tetrahedra else 'Q'}{order}{' tetrahedra' if tetrahedra else ''}"
-
-
 def memory_estimate(simulation: Simulation) -> int:
     """Bytes held during the run: stiffness (BSR, and the kernel's upper-triangle copy), state and
     scratch vectors, input tables, contact pairs."""
@@ -483,40 +477,15 @@ def plan(scene: Scene) -> dict:
     described, not solved; with local stepping on, the set-up check of its map is estimated, not run
     (it runs when the run starts: 35 s on the coarse case 3, 400-1 060 s on the paper-scale cases).
     """
+    from pyfem.ranks import distributed
+
+    if distributed():  # the distributed model's plan (rank 0's; {} on the others), the same lines
+        from pyfem import distributed_model
+
+        return distributed_model.check(scene)
     simulation = prepare(scene, solve_static=False, preview_levels=True)
     simulation.lts_check_deferred = True
     return simulation_plan(simulation)
-
-
-def resolution_plan(scene: Scene, model) -> dict:
-    """{"mesh resolution": {region: its element sizes against the accuracy study's advice}} of a scene
-    with a wave (pyfem.accuracy.resolution_report); a mesh file's too-coarse regions are warned of
-    (the box and layered_cavern builders are checked from their scene keys)."""
-    from pyfem.accuracy import resolution_report
-
-    if "seismic_input" not in scene.effects:
-        return {}
-    try:
-        lines, warnings = resolution_report(scene, model)
-    except Exception as error:  # advice only: it must never stop a run
-        return {"mesh resolution": f"no advice ({type(error).__name__}: {error})"}
-    if scene["mesh"]["builder"] == "file":
-        for warning in warnings:
-            if warning not in scene.warnings:
-                scene.warn(warning)
-    return {"mesh resolution": lines} if lines else {}
-
-
-def interface_slip_plan(scene: Scene, model) -> dict:
-    """{"interface slip": {name: what the slip study says at its resolution}} of a contact scene with
-    a wave (pyfem.accuracy.interface_slip_advice), else {}."""
-    from pyfem.accuracy import interface_slip_advice
-
-    try:
-        advice = interface_slip_advice(scene, model)
-    except Exception as error:  # advice only: it must never stop a run
-        return {"interface slip": f"no advice ({type(error).__name__}: {error})"}
-    return {"interface slip": advice} if advice else {}
 
 
 def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
@@ -558,25 +527,17 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
     element_loop = element_loop_plan(simulation.nonlinear, per_step, simulation.time_step,
                                      phases.get("element_loop", {}).get("ms_per_step", 0.0) * 1e-3)
     return {
-        "title": scene["title"],
-        "effects on": ", ".join(scene.effects) or "none (free vibration)",
-        "mesh": f"{scene['mesh']['builder']}, {element_name(model, scene['mesh']['order'])}, {model.n_cells} cells",
-        "nodes": len(simulation.mass),
-        "dofs": n,
+        **model_lines(scene, element_name(model, scene["mesh"]["order"]), model.n_cells, len(simulation.mass)),
         **({"free field": free_field_words(scene)} if "seismic_input" in scene.effects else {}),
         **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
         **({"interface wear": wear_words(simulation.contact_arrays["deterioration"],
                                          run_origin(simulation.lead_in, ts) + simulation.n_steps * ts.dt)["note"]}
            if simulation.contact_arrays and simulation.contact_arrays["deterioration"] is not None else {}),
-        "truncation faces": {face["name"]: f"{face['type']}, {face['nodes']} nodes, {face['area']:.4g} m^2"
-                             + (", input" if face["input"] else "") + f" ({face['source']})"
-                             for face in face_report(model)},
-        "traction-free surfaces": ", ".join(f"{name} ({count} facets)" for name, count in
-                                            model.free_surfaces.items()) or "none",
+        **face_lines(face_report(model), model.free_surfaces),
         "dt": f"{ts.dt:.6g} s ({ts.reason})",
         **({"local stepping (auto)": simulation.lts_decision} if simulation.lts_decision else {}),
         **({"local stepping": lts_stability_line(simulation.lts_stability)} if simulation.lts_stability else {}),
-        **({"local stepping": deferred_check_line(simulation, per_step)}
+        **({"local stepping": deferred_check_line(int(simulation.node_levels.max()), per_step)}
            if simulation.lts_stability is None and simulation.node_levels is not None else {}),
         **lts_preview_plan(simulation, {name: entry["ms_per_step"] for name, entry in phases.items()}),
         **element_loop,
@@ -586,31 +547,8 @@ def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
         **resolution_plan(scene, model),
         "steps": simulation.n_steps,
         "memory": f"{memory_estimate(simulation) / 2**20:.1f} MiB",
-        "time per step": f"{per_step * 1e3:.3f} ms (measured over {trial_steps} steps, from rest): "
-                         + ", ".join(f"{name} {entry['ms_per_step']:.3f} ms" for name, entry in phases.items()
-                                     if name != "other" or entry["ms_per_step"] > 0.0),
-        "time estimate": f"{per_step * simulation.n_steps:.1f} s for {scene['time']['duration']:g} s of motion"
-                         + (f" and the record's {simulation.lead_in:.3g} s lead-in before it (t < 0)"
-                            if simulation.lead_in > 0.0 else ""),
-        **static_stage_estimate(scene, per_step),
+        **time_lines(scene, per_step, trial_steps, phases, simulation.n_steps, simulation.lead_in),
     }
-
-
-def static_stage_estimate(scene: Scene, per_step: float) -> dict:
-    """check's line on the static stage's time before the motion: its two relaxation stages of at
-    most static.max_steps steps each at the dynamic step's cost from rest (the same kernel on the
-    same cells), which a yielding rock raises several times (README "The element loop on the yield
-    surface"); not a bound."""
-    from pyfem.static import uses_relaxation
-
-    if "static" not in scene or not uses_relaxation(scene):
-        return {}
-    max_steps = int(scene["static"]["max_steps"])
-    return {"static stage estimate": f"2 stages of at most {max_steps} relaxation steps each (and a frequency probe) "
-                                     f"before the motion: {2 * max_steps * per_step:.0f} s at this step's cost from "
-                                     f"rest, several times that where the rock yields in the stage (a point on the "
-                                     f"yield surface costs about 5x one at rest); a stage stops once its "
-                                     f"out-of-balance ratio is reached (the coarse case study's after 1 000-2 000 steps)"}
 
 
 def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
@@ -626,79 +564,8 @@ def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
     rows = local_stepping.row_split(simulation.nonlinear, pairs is not None)
     p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
                                           simulation.stiffness, pairs, simulation.time_step, phases_ms, rows)
-    auto_declined = (simulation.scene["time"].get("local_stepping") == "auto"
-                     and str(simulation.lts_decision or "").startswith('"auto": off: predicted'))
-    if p["speed_up"] < local_stepping.AUTO_PAYS:
-        verdict = "not worth it on this model"
-    elif auto_declined:  # per step it pays, over this run not (line above): say which
-        verdict = ("it would pay per simulated second on a longer run; over this run's duration the set-up check "
-                   "costs more than it saves (\"auto\" above)")
-    elif rows:
-        verdict = ("it would pay (time.local_stepping = true; the row split: stresses where levels meet as global "
-                   "stepping's, docs/local_stepping.md \"The scheme: the row split\")")
-    else:
-        verdict = ("it would pay (time.local_stepping = true), but it would step by the column split, whose stresses "
-                   "where a finer level meets a coarser one are less accurate (a cavity test: 8.7 % off the exact "
-                   "history at safety 0.8, global stepping 0.5 %; docs/local_stepping.md \"The column split\")")
-    return {"local stepping (off)": (
-        f"predicted {p['speed_up']:.2f}x the speed of global stepping per simulated second ({len(p['levels'])} "
-        f"rate level{'s' if len(p['levels']) != 1 else ''}, nodes per level {p['levels']}; work against global "
-        "stepping: "
-        + (f"element loop {p['element_loop']:.2f}, " if simulation.nonlinear is not None else "")
-        + f"matrix {p['matrix']:.2f}"
-        + (f", contact {p['contact']:.2f}" if pairs is not None else "")
-        + f"); {verdict}")}
-
-
-def deferred_check_line(simulation: Simulation, per_step: float) -> str:
-    """`check`'s line on the LTS map's set-up check, which it leaves to the run."""
-    from pyfem.local_stepping import STABILITY_STEPS
-
-    fine_steps = STABILITY_STEPS * 2 ** int(simulation.node_levels.max())
-    return (f"the set-up check of its map runs when the run starts ({STABILITY_STEPS} global steps, "
-            f"{fine_steps} fine steps: at most about {fine_steps * per_step:.3g} s at this plan's step time)")
-
-
-def element_loop_plan(nonlinear, per_step: float, time_step: TimeStep, loop: float) -> dict:
-    """The plan's lines on the element loop: its regions, points, state bytes and measured time,
-    and why the elastic stable step holds. loop: the element loop's seconds per step in the same
-    trial steps as per_step (the kernel's phase times), so that its share and the per-step
-    breakdown are one measurement."""
-    from pyfem.elements import plastic_frequency_factor
-
-    if nonlinear is None:
-        return {"element loop": "none (no [plasticity] or [damage] table: every cell in the stiffness "
-                                "matrix)"}
-    regions, stiffening = {}, 1.0
-    for component, (name, (law, parameters)) in zip(nonlinear.components, nonlinear.laws.items()):
-        one_point = nonlinear.integration.get(name) == "reduced"
-        regions[name] = (f"{law}, {component.n_cells} cells, {component.n_cells * component.n_points} points"
-                         + (", one point per cell (its hourglass stiffness in the matrix)" if one_point else "")
-                         + (", mean dilatation" if component.mean_dilatation else "")
-                         + f", {component.owned_bytes / 2**20:.1f} MiB of state and buffers")
-        u_ref = parameters.get("damage_plastic_displacement", 0.0) if law == "mohr_coulomb" else 0.0
-        if u_ref > 0.0 and component.n_cells:  # the rock's crack band: kappa_ref per cell (docs/materials.md)
-            h = np.asarray(component.characteristic_length())
-            regions[name] += (f", crack band u_ref = {u_ref:g} m: kappa_ref {u_ref / h.max():.3g}-{u_ref / h.min():.3g} "
-                              f"in its cells (h {h.min():.3g}-{h.max():.3g} m, the cube root of a cell's volume)")
-        if law == "mohr_coulomb":
-            stiffening = max(stiffening, plastic_frequency_factor(parameters["poisson_ratio"],
-                                                                  parameters["friction_angle"],
-                                                                  parameters.get("dilation_angle", 0.0)))
-    margin = time_step.critical / time_step.dt
-    return {
-        "nonlinear regions": regions,
-        "element loop": (f"{loop * 1e3:.3f} ms per step ({loop / max(1, nonlinear.n_points) * 1e9:.0f} ns per "
-                         f"point, {100 * loop / max(per_step, 1e-300):.0f} % of the step, in the trial steps of "
-                         "'time per step'), measured at rest; a yielding "
-                         "Mohr-Coulomb point costs about 6x, a damaging concrete point 3x (README)"),
-        "element loop dt": ("from the full elastic stiffness: damage and mean dilatation only soften the cells"
-                            + ("" if stiffening == 1.0 else
-                               "; non-associated plastic flow (psi < phi) can raise a frequency by up to "
-                               f"{100 * (stiffening - 1):.0f} %, "
-                               f"{'inside' if stiffening < margin else 'BEYOND'} the step's margin "
-                               f"{100 * (margin - 1):.0f} % to the stable limit")),
-    }
+    return lts_preview_lines(p, simulation.scene, simulation.lts_decision, simulation.nonlinear is not None,
+                             pairs is not None, rows)
 
 
 def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:

@@ -1231,9 +1231,10 @@ def add_hand_over_force(stepper, simulation) -> None:
     stepper.add_provider(hand_over_force_provider(state.hand_over_force))
 
 
-def plan_report(scene: typing.Mapping, model) -> dict:
+def plan_report(scene: typing.Mapping, model, comm=None) -> dict:
     """The `check` lines on the static stage: what each stage removes, installs and loads, the
-    boundary and the solver it will use (nothing is solved)."""
+    boundary and the solver it will use (nothing is solved). comm: the distributed model's (a
+    collective): the whole model's unknowns and installed cells, each rank's owned ones summed."""
     settings = scene["static"]
     boundary = stage_boundary(scene, model)
     installed, installed_cells = _install_cells(scene, model)
@@ -1247,7 +1248,10 @@ def plan_report(scene: typing.Mapping, model) -> dict:
     else:
         source = (f"geostatic, surface {initial['surface']:g} m, rho {initial['rho']:g} kg/m^3, "
                   f"k {initial['k']}")
-    n_dofs = model.n_dofs
+    n_dofs, n_installed = model.n_dofs, len(installed_cells)
+    if comm is not None:
+        n_dofs = comm.allreduce(3 * model.V.dofmap.index_map.size_local)
+        n_installed = comm.allreduce(int(np.count_nonzero(installed_cells < model.n_cells)))
     if uses_relaxation(scene):
         solver_words = (f"dynamic relaxation with the kernel (mass scaling, adaptive critical damping), out-of-balance "
                         f"ratio {stage_tolerance(scene):g}, at most {int(settings['max_steps'])} steps per stage")
@@ -1272,7 +1276,7 @@ def plan_report(scene: typing.Mapping, model) -> dict:
                                  + (f", {', '.join(installed)} not yet installed" if installed else "")
                                  + f"; {relaxation:g} of the excavation load released"),
         "stage 2 (support)": ((f"{', '.join(installed)} installed stress-free "
-                               f"({len(installed_cells)} cells); " if installed else "")
+                               f"({n_installed} cells); " if installed else "")
                               + (f"support groups {', '.join(settings['support'])} installed; "
                                  if settings.get("support") else "")
                               + ("nothing installed; " if not installed and not settings.get("support") else "")

@@ -120,7 +120,9 @@ def unfitted_levels(monkeypatch):
     accuracy and stability with several levels. The cap has its own test."""
     from pyfem import local_stepping
 
-    monkeypatch.setattr(local_stepping, "fit_levels_to_output", lambda levels, steps_per_output: levels)
+    # (the top level kept: fit_levels_to_output's and the distributed model's cap, both fitted_top's)
+    monkeypatch.setattr(local_stepping, "fitted_top",
+                        lambda counts, steps_per_output: len(np.trim_zeros(np.asarray(counts), "b")) - 1)
 
 
 class RunsOnDemand(dict):

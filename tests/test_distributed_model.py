@@ -266,7 +266,8 @@ def test_the_ranks_equal_the_serial_run(runs, name, ranks):
 def test_check_builds_the_ranks_parts_and_times_them_once(tmp_path, mpi_launcher):
     """`mpirun -n 2 pyfem check`: every rank builds its part (no rank the
     whole model), rank 0 prints one plan with the ranks' shares, the element loop's counted and halo
-    cells and a measured time per step; nothing is written."""
+    cells and a measured time per step; nothing is written. Its whole-model lines are the one-rank
+    plan's (`solver.plan`)."""
     result = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", PYTHON, "-m", "pyfem",
                              "check", str(REPO / SCENES["layers"])], cwd=tmp_path, env=ENV,
                             capture_output=True,
@@ -279,6 +280,21 @@ def test_check_builds_the_ranks_parts_and_times_them_once(tmp_path, mpi_launcher
     per_step = float(lines["time per step"].split()[3])
     assert per_step > 0.0
     assert not any(tmp_path.iterdir()), "check wrote something"
+    # Every line of the one-rank plan, with the whole model's numbers: the model's size, each face's
+    # nodes and area and each element-loop region's cells and points are those of one rank (summed
+    # over the ranks, each node and cell counted once), the rank lines only on more than one rank.
+    from pyfem import solver
+    from pyfem.scene import load_scene
+
+    one = solver.plan(load_scene(REPO / SCENES["layers"]))
+    assert one["nonlinear regions"] and one["truncation faces"]  # (the comparison below compares something)
+    assert set(one) <= set(lines), set(one) - set(lines)
+    for key in ("title", "effects on", "mesh", "nodes", "dofs", "traction-free surfaces", "steps"):
+        assert lines[key].split(":", 1)[1].strip() == str(one[key]), key
+    for nested in ("truncation faces", "nonlinear regions"):
+        for name, text in one[nested].items():
+            assert f"{name}:" in result.stdout and text in result.stdout, (nested, name)
+    assert "owned / ghost (of which extra) nodes per rank" not in one  # one rank (serial or distributed): none
 
 
 def test_a_monitor_outside_the_mesh_is_named_on_every_rank_count(tmp_path):
