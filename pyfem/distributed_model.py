@@ -1203,14 +1203,17 @@ class DistributedRun:
         """`plan` (rank 0's; a collective) with the time per step measured on a stepper of its own, run
         TRIAL_STEPS steps from rest (local stepping: whole global steps; its set-up check is left to the
         run) and then dropped. fresh: the run goes on with this model (`run`'s plan), so the trial steps
-        fresh element-loop components and pairs and the run's are put back, never touched (as
+        fresh element-loop components, pairs and bolts and the run's are put back, never touched (as
         pyfem.solver.simulation_plan's trial); `check` (False) drops the model after."""
         comm, loop = self.comm, self.loop
         regions = [] if loop is None else [r for r in (loop.counted, loop.halo) if r is not None]
         kept = [(r, r.components) for r in regions], self.contact, self.lts_layout
+        bolts = [(group, group.parts) for group in self.part.support]
         if fresh:
             for r in regions:
                 r.new_components()
+            for group, _ in bolts:  # (the stepper makes fresh, unloaded ones)
+                group.parts = []
         stepper, exchange = self.stepper(check_stability=False)
         n = 3 * self.part.n_local
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -1228,6 +1231,8 @@ class DistributedRun:
             for r, components in kept[0]:
                 r.components = components
             self.contact, self.lts_layout = kept[1], kept[2]
+            for group, parts in bolts:
+                group.parts = parts
         return plan(self, per_step, trial, phase_seconds, bytes_sent, lts_preview=not fresh)
 
     def _check_lts(self) -> None:
