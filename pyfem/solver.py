@@ -697,7 +697,14 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     from pyfem.output import RunWriter
 
     wall_start = time.perf_counter()
-    saved = checkpoints.read_checkpoint(out_dir) if resume else None  # refused before any work
+    saved = checkpoints.read_checkpoint(out_dir, state=False) if resume else None  # refused before any work
+    if saved is not None and saved.meta.get("model") == "distributed":
+        raise SceneError("--resume", str(out_dir), "the checkpoint of a run of the serial path",
+                         f"--resume {saved.path}: written by the distributed model (each rank's state in its own "
+                         "file, keyed by position); resume it under mpirun on any number of ranks, or on one rank "
+                         "with PYFEM_ONE_MODEL=1")
+    if saved is not None:
+        saved = checkpoints.read_checkpoint(out_dir)
     if saved is not None:
         saved.check_scene(scene)  # another scene is refused before the model is built
     with StopSignals() as signals:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyfem import checkpoint, solver, static, static_output
+from pyfem import checkpoint, distributed_stage, solver, static, static_output
 from pyfem.interrupts import RunInterrupted
 from pyfem.scene import SceneError, parse_scene
 
@@ -244,6 +244,17 @@ def test_the_stateful_scene_slides_yields_and_damages(reference_run):
     assert summary["energy"]["balance_error"] < 1e-6
 
 
+def solve_again(*args, **kwargs):
+    raise AssertionError("a resumed run solved the static stage again")
+
+
+def never_solve_the_stage(patched) -> None:
+    """A relaxation stage solved from here on fails the test: the serial path's solver and the
+    distributed model's (PYFEM_ONE_MODEL=1: a one-rank run is the distributed model's)."""
+    patched.setattr(static, "solve_relaxation_stage", solve_again)
+    patched.setattr(distributed_stage, "solve", solve_again)
+
+
 def crash_after_a_periodic_checkpoint(monkeypatch, scene, out: Path, every: int, crash_at: float):
     """Runs `scene` into `out` writing a checkpoint at every `every`-th sample only, and crashes it (a
     RuntimeError) at the first sample at or after `crash_at`; returns the checkpoint read back."""
@@ -270,13 +281,9 @@ def test_crash_after_a_periodic_checkpoint_then_resume_gives_the_uninterrupted_r
     assert json.loads((out / "run.json").read_text())["status"] == "failed"
     assert (out / "energy.csv").read_text().count("\n") == 1 + 34, "rows past the checkpoint are on disk"
     assert (out / "static" / static_output.HAND_OVER_NAME).exists()
-
-    def solve_again(*args, **kwargs):
-        raise AssertionError("a resumed run solved the static stage again")
-
     plans = []
     with monkeypatch.context() as patched:
-        patched.setattr(static, "solve_relaxation_stage", solve_again)
+        never_solve_the_stage(patched)
         summary = solver.run(stateful_scene(), out, resume=True, on_plan=plans.append)
     assert summary["resumed"][0]["t"] == pytest.approx(CHECKPOINT_T)
     # The plan printed says what this sitting does, not only the whole run's estimates.
@@ -304,27 +311,25 @@ def test_a_set_up_longer_than_the_interval_checkpoints_at_the_first_sample(refer
     into its stepping must not solve them again. The set-up counts towards the first interval: a
     stage that takes longer than `checkpoint_interval` gives a checkpoint at the first sample."""
     interval, stage_seconds = 2.0, 2.5
-    solve = static.solve_relaxation_stage
 
-    def slow_stage(*args, **kwargs):
-        time.sleep(stage_seconds)  # the stage of a big model
-        return solve(*args, **kwargs)
+    def slow(solve):
+        def slow_stage(*args, **kwargs):
+            time.sleep(stage_seconds)  # the stage of a big model
+            return solve(*args, **kwargs)
+        return slow_stage
 
     scene = stateful_scene()
     scene["output"]["checkpoint_interval"] = interval
     out = tmp_path / "crashed"
     with monkeypatch.context() as patched:
-        patched.setattr(static, "solve_relaxation_stage", slow_stage)
+        patched.setattr(static, "solve_relaxation_stage", slow(static.solve_relaxation_stage))
+        patched.setattr(distributed_stage, "solve", slow(distributed_stage.solve))  # (PYFEM_ONE_MODEL=1)
         with pytest.raises(RuntimeError, match="simulated crash"):  # 2 samples in, well within an interval
             solver.run(scene, out, progress=StopAt(0.02, RuntimeError("simulated crash")))
     saved = checkpoint.read_checkpoint(out)
     assert saved.t == pytest.approx(0.01) and saved.outputs_done == 1  # the first sample after t = 0
-
-    def solve_again(*args, **kwargs):
-        raise AssertionError("a resumed run solved the static stage again")
-
     with monkeypatch.context() as patched:
-        patched.setattr(static, "solve_relaxation_stage", solve_again)
+        never_solve_the_stage(patched)
         solver.run(scene, out, resume=True)
     assert_same_run(out, reference_run[0])
 

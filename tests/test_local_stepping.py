@@ -632,9 +632,8 @@ def test_local_stepping_after_a_static_stage_resumes_without_solving_it_again(tm
     after a periodic checkpoint, then --resume: the stage comes from static/hand_over.npz (its
     solver is never called), the components and pairs are rebuilt at their rate levels and take the
     checkpoint's state, and the histories are the uninterrupted run's bit for bit."""
-    from pyfem import static
     from pyfem.scene import parse_scene
-    from test_checkpoint import assert_same_run, crash_after_a_periodic_checkpoint
+    from test_checkpoint import assert_same_run, crash_after_a_periodic_checkpoint, never_solve_the_stage
 
     MPa = 1.0e6
     data = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
@@ -658,10 +657,7 @@ def test_local_stepping_after_a_static_stage_resumes_without_solving_it_again(tm
     saved = crash_after_a_periodic_checkpoint(monkeypatch, scene, out, 10, checkpoint_t + 0.012)
     assert saved.t == pytest.approx(checkpoint_t)
 
-    def solve_again(*args, **kwargs):
-        raise AssertionError("a resumed run solved the static stage again")
-
-    monkeypatch.setattr(static, "solve_relaxation_stage", solve_again)
+    never_solve_the_stage(monkeypatch)
     solver.run(scene, out, resume=True)
     assert_same_run(out, reference)
 
@@ -773,8 +769,8 @@ def test_auto_steps_globally_when_the_check_finds_the_map_unstable_also_after_a_
     bit, with run.json and a warning saying why: when the check runs in the plan `run` prints
     first (simulation_plan) too. `check` leaves the check to the run. A crash and --resume steps
     globally again without checking again and without solving the static stage again."""
-    from pyfem import static
-    from test_checkpoint import assert_same_run, crash_after_a_periodic_checkpoint, history_files, stateful_scene
+    from test_checkpoint import (assert_same_run, crash_after_a_periodic_checkpoint, history_files,
+                                 never_solve_the_stage, stateful_scene)
 
     def scene_with(local):
         scene = stateful_scene(duration=0.3)
@@ -807,10 +803,7 @@ def test_auto_steps_globally_when_the_check_finds_the_map_unstable_also_after_a_
     assert 0.0 < saved.t < 0.15 and not saved.meta["lts_stability"]["stable"]
     checks.clear()
 
-    def solve_again(*args, **kwargs):
-        raise AssertionError("a resumed run solved the static stage again")
-
-    monkeypatch.setattr(static, "solve_relaxation_stage", solve_again)
+    never_solve_the_stage(monkeypatch)
     resumed = solver.run(scene_with("auto"), out, resume=True)
     assert not checks  # the first sitting's report
     assert resumed["resumed"][0]["t"] == pytest.approx(saved.t)
