@@ -82,9 +82,9 @@ KILL_RUN = ("--set", "time.duration=1.5", "--set", "output.xdmf_interval=0.1",
             "--set", "output.checkpoint_interval=0.3")
 
 
-def pyfem_run(out_dir: Path, *extra: str, check: bool = True) -> subprocess.CompletedProcess:
+def pyfem_run(out_dir: Path, *extra: str, check: bool = True, env: dict | None = None) -> subprocess.CompletedProcess:
     result = subprocess.run([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out_dir), *KILL_RUN, *extra],
-                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
+                            cwd=REPO, env=env or ENV, capture_output=True, text=True, timeout=600)
     if check:
         assert result.returncode == 0, result.stderr
     return result
@@ -154,6 +154,24 @@ def test_resume_refuses_another_scene_a_finished_run_and_no_checkpoint(tmp_path)
     # Besides the scene's warning that 0.05 s stops before the Ricker wavelet's peak: one error line.
     errors = [line for line in finished.stderr.splitlines() if not line.startswith("warning: ")]
     assert finished.returncode == 2 and len(errors) == 1 and "finished" in errors[0], finished.stderr
+
+
+def test_each_execution_path_refuses_the_other_s_checkpoint_in_one_line(tmp_path):
+    """Until the serial path goes (issue 47): a finished one-rank run of each path, extended with
+    --resume by the other (PYFEM_ONE_MODEL=1 sends a one-rank run to the distributed model), is refused
+    in one line naming --resume and the way that resumes it, exit 2, its files untouched."""
+    one_model = dict(ENV, PYFEM_ONE_MODEL="1")
+    serial = {key: value for key, value in ENV.items() if key != "PYFEM_ONE_MODEL"}
+    for written, resumed, words in ((serial, one_model, "without PYFEM_ONE_MODEL=1"),
+                                    (one_model, serial, "on one rank with PYFEM_ONE_MODEL=1")):
+        out = tmp_path / ("serial" if written is serial else "one_model")
+        pyfem_run(out, "--set", "time.duration=0.02", env=written)
+        before = history_files(out)
+        refused = pyfem_run(out, "--set", "time.duration=0.04", "--resume", check=False, env=resumed)
+        errors = [line for line in refused.stderr.splitlines() if line.startswith("error: ")]
+        assert refused.returncode == 2 and len(errors) == 1, refused.stderr
+        assert "--resume" in errors[0] and words in errors[0] and "Traceback" not in refused.stderr, errors[0]
+        assert history_files(out) == before
 
 
 def test_a_refused_resume_names_every_changed_key_with_both_values_or_another_scene():
