@@ -401,8 +401,7 @@ def read_checkpoint(out_dir, state: bool = True) -> Checkpoint:
             if not state:
                 return Checkpoint(path=path, meta=meta, u=None, v=None, a=None)
             if meta.get("model") == "distributed":  # each rank's state is in its own file
-                refuse(f"{CHECKPOINT_NAME} was written under mpirun (each rank's state in its own file); resume it "
-                       "under mpirun, on any number of ranks above one")
+                return _joined_rank_states(path, meta, data)
             kernel = {name: bytes(data[f"kernel_{k}"]) for k, name in enumerate(meta["kernel_blocks"])}
             writer = {name: np.array(data[f"writer_{name}"]) for name in meta["writer_arrays"]}
             return Checkpoint(path=path, meta=meta, u=np.array(data["u"]), v=np.array(data["v"]),
@@ -411,6 +410,30 @@ def read_checkpoint(out_dir, state: bool = True) -> Checkpoint:
         raise
     except (OSError, ValueError, KeyError) as error:
         refuse(f"{CHECKPOINT_NAME} cannot be read ({type(error).__name__}: {error})")
+
+
+def rank_file_name(identifier: int, rank: int) -> str:
+    """The file of one rank's state in a distributed run's checkpoint `identifier`
+    (pyfem/distributed_model.py; `checkpoint.npz` names the identifier and the rank count)."""
+    return f"checkpoint.{identifier}.rank{rank}.npz"
+
+
+def _joined_rank_states(path: Path, meta: dict, data) -> Checkpoint:
+    """A distributed run's checkpoint read whole (any rank count, one included): u, v, a of every
+    rank's owned nodes in rank order, `kernel` each other block of the rank files joined in rank order
+    (its bytes: the pairs' and cells' states keyed by position, "pairs/effective_normal", ...), `writer`
+    the run's samples (`checkpoint.npz`'s writer_ arrays without the prefix)."""
+    files = [path.with_name(rank_file_name(int(meta["id"]), rank)) for rank in range(int(meta["fingerprint"]["ranks"]))]
+    blocks: dict = {}
+    for name in files:
+        with np.load(name, allow_pickle=False) as rank:
+            for key in rank.files:
+                blocks.setdefault(key, []).append(np.array(rank[key]))
+    joined = {key: np.concatenate([np.atleast_1d(x) for x in parts]) for key, parts in blocks.items()}
+    writer = {key.removeprefix("writer_"): np.array(data[key]) for key in data.files if key.startswith("writer_")}
+    u, v, a = (joined.pop(x) for x in "uva")
+    kernel = {key: np.ascontiguousarray(value).tobytes() for key, value in joined.items()}
+    return Checkpoint(path=path, meta=meta, u=u, v=v, a=a, kernel=kernel, writer=writer)
 
 
 def interrupted_run(out_dir) -> bool:

@@ -1016,7 +1016,7 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     (on any rank count: its state is keyed by position). A scene error is every rank's (raised alike on each); a stop
     signal stops every rank at the same sample with a checkpoint (`pyfem.interrupts.StopSignals`); any
     other error ends every rank (pyfem.ranks.abort_all), where the others would wait for it."""
-    from pyfem.interrupts import StopSignals
+    from pyfem.interrupts import RunInterrupted, StopSignals
 
     check_supported(scene)
     comm = MPI.COMM_WORLD
@@ -1027,28 +1027,50 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     def work():
         # Under mpirun a stop signal during the set-up waits for the first sample (every rank stops
         # there together, with a checkpoint); on one rank it ends the set-up, nothing written.
+        began = time.perf_counter()
         with StopSignals(always_defer=comm.size > 1) as signals:
-            return DistributedRun(scene, Path(out_dir), comm, saved).go(on_plan, progress, signals)
+            try:
+                distributed_run = DistributedRun(scene, Path(out_dir), comm, saved)
+            except RunInterrupted as error:
+                raise set_up_lost(error, began, "mesh, matrices")
+            return distributed_run.go(on_plan, progress, signals)
 
     return _ending_every_rank(work)
+
+
+def stage_rank_file(rank: int) -> str:
+    """One rank's part of a relaxed stage's hand-over (static/hand_over.npz names the rank count)."""
+    return f"hand_over.rank{rank}.npz"
+
+
+def set_up_lost(error, began: float, words: str):
+    """A stop (pyfem.interrupts.RunInterrupted) in the set-up, before the run directory is touched:
+    `error` with what was lost (its seconds since `began`, the words of what is done again), which
+    the command line's one line says (pyfem.cli.interruption_text), as the whole model's run."""
+    error.setup_seconds = time.perf_counter() - began
+    error.setup_words = words
+    return error
 
 
 # --- checkpoints: each rank its own state, rank 0 the run's (docs/checkpoint.md "Distributed model") ---
 
 def rank_file(out: Path, identifier: int, rank: int) -> Path:
-    return out / f"checkpoint.{identifier}.rank{rank}.npz"
+    from pyfem.checkpoint import rank_file_name
+
+    return out / rank_file_name(identifier, rank)
 
 
 def read_checkpoint(out_dir):
     """The distributed run's checkpoint (its JSON part, pyfem.checkpoint.Checkpoint without state),
-    or SceneError (key --resume) naming why not: none, finished, or a one-rank run's."""
+    or SceneError (key --resume) naming why not: none, finished, or the serial path's."""
     from pyfem import checkpoint as checkpoints
 
     saved = checkpoints.read_checkpoint(out_dir, state=False)
     if saved.meta.get("model") != "distributed":
-        raise SceneError("--resume", str(out_dir), "the checkpoint of a run under mpirun",
-                         f"--resume {saved.path}: written by a run on one rank (its state in one file, "
-                         "numbered as one rank's model); resume it on one rank, without mpirun")
+        raise SceneError("--resume", str(out_dir), "the checkpoint of a run of the distributed model",
+                         f"--resume {saved.path}: written by the serial path (one rank without PYFEM_ONE_MODEL=1: "
+                         "its state in one file, numbered as that model's); resume it on one rank, without mpirun "
+                         "and without PYFEM_ONE_MODEL=1")
     return saved
 
 
@@ -1112,6 +1134,12 @@ class DistributedRun:
         if self.lts is not None:
             self.time_step = self.lts.time_step
             self.n_steps = run_steps(scene["time"]["duration"], self.lead_in, self.time_step)
+        report = saved.meta.get("lts_stability") if saved is not None else None
+        if report and self.lts is not None:  # the first sitting's check of this map (the fingerprint's levels)
+            if report["stable"]:  # is not run again (852 s on the paper-scale case 1)
+                self.lts.stability = report
+            elif scene["time"].get("local_stepping") == "auto":  # it sent "auto" back to global stepping
+                self._step_globally(report)
         # The element loop's columns also carry the bolts' stored energy and dissipation (pyfem/support.py).
         self.energy_columns = energy_columns(part.pairs is not None, loop is not None or bool(part.support))
         self.freefield = input_arrays = None
@@ -1142,6 +1170,7 @@ class DistributedRun:
             self.pair_names = [m["name"] for m in scene.get("pair_monitor", [])]
         self.pair_rows_kept, self.state_counts = [], []
         self.stage = None  # pyfem.distributed_stage.RankStage once the [static] stage ran (go)
+        self.stage_read = False  # whether it was read from static/hand_over.npz (a resume), not solved
         self.contact = None  # the kernel's ContactPairs of this rank's pairs (set with the stepper)
         self.names = [m["name"] for m in scene.get("monitor", [])]
         self.points = np.array([m["point"] for m in scene.get("monitor", [])], dtype=float).reshape(-1, 3)
@@ -1240,7 +1269,6 @@ class DistributedRun:
         run's (pyfem.solver._make_local_stepper)."""
         from pyfem import local_stepping
         from pyfem.distributed_lts import check_stability_on_ranks
-        from pyfem.clock import run_steps
         from pyfem.local_stepping import lts_stability_line
 
         report = self.lts.stability = check_stability_on_ranks(self.part, self.lts, self.loop)
@@ -1248,9 +1276,16 @@ class DistributedRun:
             print(f"{'local stepping:':<48}{lts_stability_line(report)}", flush=True)
         if report["stable"]:
             return
-        refusal, decision, warning = local_stepping.unstable_words(report)
         if self.scene["time"].get("local_stepping") != "auto":
-            raise refusal
+            raise local_stepping.unstable_words(report)[0]
+        self._step_globally(report)
+
+    def _step_globally(self, report: dict) -> None:
+        """`"auto"` back to global stepping after the check found the map unstable (`report`)."""
+        from pyfem import local_stepping
+        from pyfem.clock import run_steps
+
+        _, decision, warning = local_stepping.unstable_words(report)
         self.time_step, self.lts = self.lts.global_step, None
         self.n_steps = run_steps(self.scene["time"]["duration"], self.lead_in, self.time_step)
         self.lts_stability, self.lts_decision = report, decision
@@ -1389,19 +1424,27 @@ class DistributedRun:
                         at(f"bolts/{monitor.name}"))
         stage_stress = None  # the stage's cell stress, the static part of the run's fields
         if self.stage is not None:
-            from pyfem.distributed_stage import write_fields
+            from pyfem.distributed_stage import cell_static_stress, write_fields
 
             self.comm.Barrier()  # (static/ made by rank 0)
-            stage_stress = write_fields(out / "static" / "fields.xdmf", self.stage, part)
-            if self.pictures is not None:  # the serial stage's pictures and their static.json "plots"
-                from pyfem.distributed_view import stage_pictures
+            if self.stage_read:  # static/ holds the stage's fields, pictures and hand-over already
+                from pyfem.output import cell_strain_operator
 
-                figures = stage_pictures(self.pictures, part, self.stage, stage_stress, self.in_situ_forces,
-                                         self.contact_arrays, out / "static", self.scene.get("title", ""))
-                if self.root:
-                    self.stage.report["plots"] = figures
-                    _write_json(out / "static" / "static.json", self.stage.report)
+                stage_stress = cell_static_stress(self.stage, part, cell_strain_operator(self.scene, part.model))
+            else:
+                stage_stress = write_fields(out / "static" / "fields.xdmf", self.stage, part)
+            if self.pictures is not None:
+                if not self.stage_read:  # the serial stage's pictures and their static.json "plots"
+                    from pyfem.distributed_view import stage_pictures
+
+                    figures = stage_pictures(self.pictures, part, self.stage, stage_stress, self.in_situ_forces,
+                                             self.contact_arrays, out / "static", self.scene.get("title", ""))
+                    if self.root:
+                        self.stage.report["plots"] = figures
+                        _write_json(out / "static" / "static.json", self.stage.report)
                 self.pictures.add_contours(part, self.stage, self.scene)
+            if not self.stage_read:
+                self._write_stage()  # (after the pictures: its report holds their "plots")
         if self.scene["output"]["xdmf_interval"]:
             append = False
             if saved is not None:
@@ -1542,6 +1585,7 @@ class DistributedRun:
                     "history_sizes": sizes, "started": self.summary["started"],
                     "fields_files": self.fields_files, "fields_layout": getattr(self, "fields_layout", None),
                     "resumed": self.summary.get("resumed", []), "written": time.time(),
+                    "lts_stability": self.lts.stability if self.lts is not None else self.lts_stability,
                     **({"final": True} if final else {})}
             writer = {"meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
                       "writer_times": np.array(self.times), "writer_energy": np.array(self.energy_rows)}
@@ -1757,25 +1801,99 @@ class DistributedRun:
             state[name] = mine.tobytes()
         return state
 
-    # -- the run --------------------------------------------------------------------------------------
-    def go(self, on_plan, progress, signals) -> dict:
-        """The time loop from the set-up to the summary (rank 0's; {} elsewhere); `signals`: the
-        run's pyfem.interrupts.StopSignals."""
-        from pyfem import checkpoint as checkpoints
-        from pyfem.interrupts import RunInterrupted
-        from pyfem.output import RunWriter, _write_json, monitor_peaks, peak_memory_mib
-        from pyfem.effects import kernel_threads
+    # -- the stage's hand-over, kept for a resume (static/hand_over.npz) ----------------------------------
+    def _stage_file(self) -> dict | None:
+        """The meta of this run directory's static/hand_over.npz when a resume takes the relaxation stage
+        from it (written by the distributed model, of this model), else None (the stage is solved again).
+        Read alike on every rank."""
+        from pyfem.static import uses_relaxation
+        from pyfem.static_output import HAND_OVER_NAME
 
-        comm, root, part, ts = self.comm, self.root, self.part, self.time_step
-        kernel_threads()
-        if on_plan is not None:
-            shown = self.measured_plan(fresh=True)
-            if root:
-                if self.saved is not None:
-                    shown = {"resuming": f"from the checkpoint at t = {self.saved.t:.6g} s of "
-                                         f"{self.scene['time']['duration']:g} s", **shown}
-                on_plan(shown)
-        if "static" in self.scene:  # (a resumed run solves it again; the checkpoint's state is loaded over it)
+        if self.saved is None or "static" not in self.scene or not uses_relaxation(self.scene):
+            return None
+        try:
+            with np.load(self.out / "static" / HAND_OVER_NAME, allow_pickle=False) as data:
+                meta = json.loads(bytes(data["meta"]).decode())
+        except (OSError, ValueError, KeyError):
+            return None
+        if meta.get("model") != "distributed" or not all(
+                (self.out / "static" / stage_rank_file(q)).exists() for q in range(int(meta["ranks"]))):
+            return None
+        ours = {key: value for key, value in self._fingerprint().items() if key not in ("ranks", "steps")}
+        from pyfem.checkpoint import _first_difference
+
+        return meta if _first_difference(meta["fingerprint"], ours) is None else None
+
+    def _write_stage(self) -> None:
+        """static/hand_over.npz of a relaxed stage (a collective): each rank's stage displacements by node
+        position and its pairs' static forces in static/hand_over.rankQ.npz, then rank 0's record (the
+        report, the installed regions, the monitors' static stress, the fingerprint), written last. The
+        components and pairs are not in it: a resume builds them fresh and loads the checkpoint's state."""
+        from pyfem.checkpoint import write_atomically
+        from pyfem.static import uses_relaxation
+        from pyfem.static_output import HAND_OVER_NAME
+
+        if self.stage is None or not uses_relaxation(self.scene):
+            return
+        part, stage, n = self.part, self.stage, self.part.n_owned
+        mine = {"node_keys": part.node_keys(np.arange(n)), "u_total": stage.u_total[:3 * n],
+                "u_support": stage.u_support[:3 * n], "u_first": stage.u_first[:3 * n]}
+        if self.contact_arrays is not None and self.contact_arrays.get("static_force") is not None and len(part.pairs):
+            mine["pair_keys"] = self._pair_keys()
+            mine["static_force"] = np.asarray(self.contact_arrays["static_force"], dtype=np.float64)
+        write_atomically(self.out / "static" / stage_rank_file(self.comm.rank), mine)
+        stress = self.monitors.stress
+        static = self.comm.gather([(int(j), stress.static[k]) for k, j in enumerate(self.monitors.index)]
+                                  if stress is not None else [], root=0)
+        self.comm.Barrier()
+        if self.root:
+            monitor_stress = np.full((len(self.names), 3, 3), np.nan)
+            for j, sigma in (item for items in static for item in items):
+                monitor_stress[j] = sigma
+            fingerprint = {key: value for key, value in self._fingerprint().items() if key not in ("ranks", "steps")}
+            meta = {"model": "distributed", "ranks": self.comm.size, "fingerprint": fingerprint,
+                    "report": stage.report, "installed_regions": list(stage.installed_regions)}
+            write_atomically(self.out / "static" / HAND_OVER_NAME,
+                             {"meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
+                              "monitor_stress": monitor_stress})
+        self.comm.Barrier()
+
+    def _read_stage(self, meta: dict):
+        """The stage of `_stage_file` as the dynamic run takes it (pyfem.distributed_stage.RankStage
+        without components or pairs: they are built fresh and take the checkpoint's state), with the
+        monitors' static stress and the pairs' static forces set as its hand-over leaves them."""
+        from pyfem.distributed_stage import RankStage
+        from pyfem.static_output import HAND_OVER_NAME
+
+        part, folder = self.part, self.out / "static"
+        files = [dict(np.load(folder / stage_rank_file(q), allow_pickle=False)) for q in range(int(meta["ranks"]))]
+        rows = rows_of(np.concatenate([f["node_keys"] for f in files]), part.node_keys(np.arange(part.n_local)),
+                       "nodes")
+        u_total, u_support, u_first = (
+            np.ascontiguousarray(np.concatenate([f[x].reshape(-1, 3) for f in files])[rows].reshape(-1))
+            for x in ("u_total", "u_support", "u_first"))
+        if self.contact_arrays is not None and len(part.pairs):
+            having = [f for f in files if "pair_keys" in f]
+            found = rows_of(np.concatenate([f["pair_keys"] for f in having]), self._pair_keys(), "contact pairs")
+            self.contact_arrays["static_force"] = np.ascontiguousarray(
+                np.concatenate([f["static_force"].reshape(-1, 3) for f in having])[found])
+        stress = self.monitors.stress
+        if stress is not None and len(self.monitors.index):
+            with np.load(folder / HAND_OVER_NAME, allow_pickle=False) as data:
+                stress.static = np.ascontiguousarray(np.asarray(data["monitor_stress"])[self.monitors.index])
+        return RankStage(counted=[], halo=[], contact=None, u_total=u_total, u_support=u_support,
+                         installed_regions=list(meta["installed_regions"]), report=meta["report"], u_first=u_first)
+
+    # -- the run --------------------------------------------------------------------------------------
+    def _set_up_stage(self, stage_file: dict | None = None) -> tuple:
+        """The [static] stage, solved and handed over, or on a resume read from static/hand_over.npz
+        (`stage_file`: `_stage_file`'s meta; the checkpoint's state is loaded over it), then
+        `stepper()`: (stepper, exchange)."""
+        part, comm = self.part, self.comm
+        self.stage_read = stage_file is not None
+        if stage_file is not None:
+            self.stage = self._read_stage(stage_file)
+        elif "static" in self.scene:
             from pyfem import distributed_stage
             from pyfem.static import uses_relaxation
 
@@ -1791,7 +1909,36 @@ class DistributedRun:
             distributed_stage.hand_over(self.stage, part, self.loop, self.monitors, self.contact_arrays)
             self.stage.report["monitors"] = distributed_stage.monitor_report(self.stage, self.monitors, self.names,
                                                                              comm)
-        stepper, exchange = self.stepper()
+        return self.stepper()
+
+    def go(self, on_plan, progress, signals) -> dict:
+        """The time loop from the set-up to the summary (rank 0's; {} elsewhere); `signals`: the
+        run's pyfem.interrupts.StopSignals."""
+        from pyfem import checkpoint as checkpoints
+        from pyfem.interrupts import RunInterrupted
+        from pyfem.output import RunWriter, _write_json, monitor_peaks, peak_memory_mib
+        from pyfem.effects import kernel_threads
+
+        comm, root, part, ts = self.comm, self.root, self.part, self.time_step
+        stage_file = self._stage_file()
+        kernel_threads()
+        if on_plan is not None:
+            shown = self.measured_plan(fresh=True)
+            if root:
+                if self.saved is not None:  # the plan's estimates are a whole run's: say what this sitting does
+                    words = ("" if "static" not in self.scene else
+                             "; the static stage read from static/hand_over.npz, not solved again" if stage_file
+                             else "; the static stage solved again (no hand-over file of this model)")
+                    shown = {"resuming": f"from the checkpoint at t = {self.saved.t:.6g} s of "
+                                         f"{self.scene['time']['duration']:g} s{words}", **shown}
+                    if stage_file:  # not solved in this sitting: no estimate of its time
+                        shown.pop("static stage estimate", None)
+                on_plan(shown)
+        try:
+            stepper, exchange = self._set_up_stage(stage_file)
+        except RunInterrupted as error:  # (one rank: under mpirun a stop waits for the first sample)
+            raise set_up_lost(error, self.wall_start, "mesh, matrices" + (" and the static stage"
+                                                                          if "static" in self.scene else ""))
         from pyfem.distributed_view import Pictures
 
         self.pictures = Pictures(part, self.points if self.names else None)
@@ -1844,11 +1991,13 @@ class DistributedRun:
                     self.write_checkpoint(stepper, u, v, a, self.times[-1] if root else 0.0, loop_start)
             interrupted.time_reached = comm.bcast(self.times[-1] if root and self.times else None, root=0)
             interrupted.out_dir = self.out
-            reason = f"interrupted ({interrupted}); resume with --resume" if str(interrupted) else \
-                "interrupted; resume with --resume"
+            reason = f"interrupted by {interrupted.signal_name}"  # (as the whole model's run.json says)
             raise interrupted from error
         except BaseException as error:  # this rank's failure (another rank's ends this one by MPI_Abort)
             reason = f"{type(error).__name__}: {error}"
+            if started and root:
+                reached = f"t = {self.times[-1]:.6g} s" if self.times else "no sample"
+                error.add_note(f"run failed; the results up to {reached} are kept in {self.out}")
             raise
         finally:
             for history in self.histories.values():
@@ -1861,6 +2010,9 @@ class DistributedRun:
                 self.summary["status"] = status
                 self.summary["time_reached"] = self.times[-1] if self.times else None
                 self.summary["reason"] = reason  # (as the whole model's RunWriter.fail)
+                if self.names and self.rows_kept:  # the peaks of what was computed
+                    self.summary["monitors"] = monitor_peaks(np.array(self.rows_kept), self.columns, self.names,
+                                                             np.array(self.times), self.monitor_regions)
                 _write_json(self.out / "run.json", self.summary)
         timing = self.timing(loop_start)
         loop_seconds = comm.allreduce(timing["loop_seconds"], op=MPI.MAX)

@@ -603,7 +603,14 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     from pyfem.output import RunWriter
 
     wall_start = time.perf_counter()
-    saved = checkpoints.read_checkpoint(out_dir) if resume else None  # refused before any work
+    saved = checkpoints.read_checkpoint(out_dir, state=False) if resume else None  # refused before any work
+    if saved is not None and saved.meta.get("model") == "distributed":
+        raise SceneError("--resume", str(out_dir), "the checkpoint of a run of the serial path",
+                         f"--resume {saved.path}: written by the distributed model (each rank's state in its own "
+                         "file, keyed by position); resume it under mpirun on any number of ranks, or on one rank "
+                         "with PYFEM_ONE_MODEL=1")
+    if saved is not None:
+        saved = checkpoints.read_checkpoint(out_dir)
     if saved is not None:
         saved.check_scene(scene)  # another scene is refused before the model is built
     with StopSignals() as signals:
@@ -648,6 +655,8 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
                                else "; the static stage solved again (no hand-over file of this model)")
                 plan = {"resuming": f"from the checkpoint at t = {saved.t:.6g} s of {scene['time']['duration']:g} s"
                                     f"{stage_words}", **plan}
+                if restored:  # not solved in this sitting: no estimate of its time (issue 51)
+                    plan.pop("static stage estimate", None)
             on_plan(plan)
         writer = RunWriter(out_dir, simulation)
         # the set-up counts towards the first checkpoint (a long stage is not solved twice)

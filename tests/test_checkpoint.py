@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyfem import checkpoint, solver, static, static_output
+from pyfem import checkpoint, distributed_stage, solver, static, static_output
 from pyfem.interrupts import RunInterrupted
 from pyfem.scene import SceneError, parse_scene
 
@@ -82,9 +82,9 @@ KILL_RUN = ("--set", "time.duration=1.5", "--set", "output.xdmf_interval=0.1",
             "--set", "output.checkpoint_interval=0.3")
 
 
-def pyfem_run(out_dir: Path, *extra: str, check: bool = True) -> subprocess.CompletedProcess:
+def pyfem_run(out_dir: Path, *extra: str, check: bool = True, env: dict | None = None) -> subprocess.CompletedProcess:
     result = subprocess.run([PYTHON, "-m", "pyfem", "run", SCENE, "--out", str(out_dir), *KILL_RUN, *extra],
-                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
+                            cwd=REPO, env=env or ENV, capture_output=True, text=True, timeout=600)
     if check:
         assert result.returncode == 0, result.stderr
     return result
@@ -154,6 +154,24 @@ def test_resume_refuses_another_scene_a_finished_run_and_no_checkpoint(tmp_path)
     # Besides the scene's warning that 0.05 s stops before the Ricker wavelet's peak: one error line.
     errors = [line for line in finished.stderr.splitlines() if not line.startswith("warning: ")]
     assert finished.returncode == 2 and len(errors) == 1 and "finished" in errors[0], finished.stderr
+
+
+def test_each_execution_path_refuses_the_other_s_checkpoint_in_one_line(tmp_path):
+    """Until the serial path goes (issue 47): a finished one-rank run of each path, extended with
+    --resume by the other (PYFEM_ONE_MODEL=1 sends a one-rank run to the distributed model), is refused
+    in one line naming --resume and the way that resumes it, exit 2, its files untouched."""
+    one_model = dict(ENV, PYFEM_ONE_MODEL="1")
+    serial = {key: value for key, value in ENV.items() if key != "PYFEM_ONE_MODEL"}
+    for written, resumed, words in ((serial, one_model, "without PYFEM_ONE_MODEL=1"),
+                                    (one_model, serial, "on one rank with PYFEM_ONE_MODEL=1")):
+        out = tmp_path / ("serial" if written is serial else "one_model")
+        pyfem_run(out, "--set", "time.duration=0.02", env=written)
+        before = history_files(out)
+        refused = pyfem_run(out, "--set", "time.duration=0.04", "--resume", check=False, env=resumed)
+        errors = [line for line in refused.stderr.splitlines() if line.startswith("error: ")]
+        assert refused.returncode == 2 and len(errors) == 1, refused.stderr
+        assert "--resume" in errors[0] and words in errors[0] and "Traceback" not in refused.stderr, errors[0]
+        assert history_files(out) == before
 
 
 def test_a_refused_resume_names_every_changed_key_with_both_values_or_another_scene():
@@ -244,6 +262,17 @@ def test_the_stateful_scene_slides_yields_and_damages(reference_run):
     assert summary["energy"]["balance_error"] < 1e-6
 
 
+def solve_again(*args, **kwargs):
+    raise AssertionError("a resumed run solved the static stage again")
+
+
+def never_solve_the_stage(patched) -> None:
+    """A relaxation stage solved from here on fails the test: the serial path's solver and the
+    distributed model's (PYFEM_ONE_MODEL=1: a one-rank run is the distributed model's)."""
+    patched.setattr(static, "solve_relaxation_stage", solve_again)
+    patched.setattr(distributed_stage, "solve", solve_again)
+
+
 def crash_after_a_periodic_checkpoint(monkeypatch, scene, out: Path, every: int, crash_at: float):
     """Runs `scene` into `out` writing a checkpoint at every `every`-th sample only, and crashes it (a
     RuntimeError) at the first sample at or after `crash_at`; returns the checkpoint read back."""
@@ -270,13 +299,9 @@ def test_crash_after_a_periodic_checkpoint_then_resume_gives_the_uninterrupted_r
     assert json.loads((out / "run.json").read_text())["status"] == "failed"
     assert (out / "energy.csv").read_text().count("\n") == 1 + 34, "rows past the checkpoint are on disk"
     assert (out / "static" / static_output.HAND_OVER_NAME).exists()
-
-    def solve_again(*args, **kwargs):
-        raise AssertionError("a resumed run solved the static stage again")
-
     plans = []
     with monkeypatch.context() as patched:
-        patched.setattr(static, "solve_relaxation_stage", solve_again)
+        never_solve_the_stage(patched)
         summary = solver.run(stateful_scene(), out, resume=True, on_plan=plans.append)
     assert summary["resumed"][0]["t"] == pytest.approx(CHECKPOINT_T)
     # The plan printed says what this sitting does, not only the whole run's estimates.
@@ -304,27 +329,25 @@ def test_a_set_up_longer_than_the_interval_checkpoints_at_the_first_sample(refer
     into its stepping must not solve them again. The set-up counts towards the first interval: a
     stage that takes longer than `checkpoint_interval` gives a checkpoint at the first sample."""
     interval, stage_seconds = 2.0, 2.5
-    solve = static.solve_relaxation_stage
 
-    def slow_stage(*args, **kwargs):
-        time.sleep(stage_seconds)  # the stage of a big model
-        return solve(*args, **kwargs)
+    def slow(solve):
+        def slow_stage(*args, **kwargs):
+            time.sleep(stage_seconds)  # the stage of a big model
+            return solve(*args, **kwargs)
+        return slow_stage
 
     scene = stateful_scene()
     scene["output"]["checkpoint_interval"] = interval
     out = tmp_path / "crashed"
     with monkeypatch.context() as patched:
-        patched.setattr(static, "solve_relaxation_stage", slow_stage)
+        patched.setattr(static, "solve_relaxation_stage", slow(static.solve_relaxation_stage))
+        patched.setattr(distributed_stage, "solve", slow(distributed_stage.solve))  # (PYFEM_ONE_MODEL=1)
         with pytest.raises(RuntimeError, match="simulated crash"):  # 2 samples in, well within an interval
             solver.run(scene, out, progress=StopAt(0.02, RuntimeError("simulated crash")))
     saved = checkpoint.read_checkpoint(out)
     assert saved.t == pytest.approx(0.01) and saved.outputs_done == 1  # the first sample after t = 0
-
-    def solve_again(*args, **kwargs):
-        raise AssertionError("a resumed run solved the static stage again")
-
     with monkeypatch.context() as patched:
-        patched.setattr(static, "solve_relaxation_stage", solve_again)
+        never_solve_the_stage(patched)
         solver.run(scene, out, resume=True)
     assert_same_run(out, reference_run[0])
 

@@ -115,13 +115,14 @@ def test_a_directory_of_the_users_files_is_refused_under_mpirun_too(tmp_path):
 CHECKPOINTED_RUN = ("--set", "output.checkpoint_interval=0.5", "--set", "time.duration=3.0")
 
 
-def kill_after_first_checkpoint(ranks: int, scene: str, out: Path, window: float, extra: tuple = ()) -> None:
+def kill_after_first_checkpoint(ranks: int, scene: str, out: Path, window: float, extra: tuple = (),
+                                env: dict | None = None) -> None:
     """Starts `pyfem run` on `ranks` ranks and kills it (kill -9: mpirun and every rank) at a random
-    time within `window` s after its first checkpoint."""
+    time within `window` s after its first checkpoint; env: the run's environment (ENV)."""
     command = [PYTHON, "-m", "pyfem", "run", scene, "--out", str(out), *CHECKPOINTED_RUN, *extra]
     if ranks > 1:
         command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)] + command
-    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    process = subprocess.Popen(command, cwd=REPO, env=env or ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                start_new_session=True)
     deadline = time.monotonic() + 300
     while not (out / checkpoint.CHECKPOINT_NAME).exists():

@@ -137,15 +137,18 @@ def test_the_static_stage_on_the_distributed_model_equals_the_serial_stage(stage
 
 def test_a_distributed_run_with_a_stage_killed_on_two_ranks_resumes_on_three(tmp_path, stage_runs):
     """kill -9 of the small case 3 on the distributed model (2 ranks) once its dynamic run has written a
-    checkpoint; resumed on 3 ranks, which solve the stage again on their parts and load the
-    checkpoint's state (element loop, pairs, kinematics) over it: the histories equal the
-    uninterrupted 2-rank run's to the stage's round-off (measured in two sittings: acceleration
+    checkpoint; resumed on 3 ranks, which read the stage the 2 ranks kept (static/hand_over.npz and
+    its rank files, keyed by position: the stage is not solved again) and load the checkpoint's
+    state (element loop, pairs, kinematics): the histories equal the uninterrupted 2-rank run's to
+    round-off (when the 3 ranks solved the stage again, measured in two sittings: acceleration
     2.1e-9-1.0e-8, length 4.6e-12-8.6e-12 of their largest values)."""
     out = tmp_path / "killed"
     extra = [word for setting in [*SETTINGS, "output.xdmf_interval=0.0"]
              for word in ("--set", setting)]
     kill_after_first_checkpoint(2, SCENE, out, 1.0, tuple(extra))
-    pyfem_run(3, SCENE, out, *CHECKPOINTED_RUN, *extra, "--resume")
+    assert (out / "static" / "hand_over.rank1.npz").exists()
+    resumed = pyfem_run(3, SCENE, out, *CHECKPOINTED_RUN, *extra, "--resume")
+    assert "the static stage read from static/hand_over.npz, not solved again" in resumed.stdout, resumed.stdout
     run = json.loads((out / "run.json").read_text())
     assert run["status"] == "finished" and run["mpi"]["ranks"] == 3 and run["resumed"][0]["t"] > 0.0
     assert [stage["converged"] for stage in stage_report(out)["stages"]] == [True, True]

@@ -240,33 +240,32 @@ def test_user_dt_above_stable_is_an_error_naming_both(tmp_path):
     assert not (tmp_path / "run").exists()
 
 
-def _raise_at_sample(monkeypatch, n, error):
-    """Makes the n-th RunWriter.sample raise `error` before recording anything; returns the call count."""
-    from pyfem.output import RunWriter
+class _StopAt:
+    """solver.run's `progress`, told the time after every sample (both execution paths): raises
+    `error` once t reaches `t_stop`, after that sample is recorded."""
 
-    original = RunWriter.sample
-    calls = {"n": 0}
+    def __init__(self, t_stop: float, error: BaseException):
+        self.t_stop, self.error, self.raised = t_stop, error, False
 
-    def sample_then_raise(self, *args, **kwargs):
-        calls["n"] += 1
-        if calls["n"] == n:
-            raise error
-        return original(self, *args, **kwargs)
+    def start(self, t0):
+        pass
 
-    monkeypatch.setattr(RunWriter, "sample", sample_then_raise)
-    return calls
+    def __call__(self, t):
+        if t >= self.t_stop - 1e-12:
+            self.raised = True
+            raise self.error
 
 
-def test_keyboard_interrupt_marks_the_run_interrupted_and_keeps_its_rows(tmp_path, monkeypatch):
+def test_keyboard_interrupt_marks_the_run_interrupted_and_keeps_its_rows(tmp_path):
     """A KeyboardInterrupt inside the time loop: "interrupted", the time reached, every earlier row.
 
     (tests/test_interrupt.py sends real signals to a child process.)"""
-    calls = _raise_at_sample(monkeypatch, 4, KeyboardInterrupt())
+    stop = _StopAt(2 * 0.005, KeyboardInterrupt())  # after samples 0, 1, 2
     scene = column_scene("SV", h=SHORTEST_WAVELENGTH / 8, duration=0.1)
     with pytest.raises(KeyboardInterrupt) as raised:
-        solver.run(scene, tmp_path / "run")
+        solver.run(scene, tmp_path / "run", progress=stop)
     run_json = json.loads((tmp_path / "run" / "run.json").read_text())
-    assert calls["n"] == 4
+    assert stop.raised
     assert run_json["status"] == "interrupted" and run_json["reason"] == "interrupted by SIGINT"
     assert run_json["time_reached"] == pytest.approx(2 * 0.005)  # samples 0, 1, 2 written
     assert raised.value.time_reached == run_json["time_reached"] and raised.value.out_dir == tmp_path / "run"
@@ -277,12 +276,13 @@ def test_keyboard_interrupt_marks_the_run_interrupted_and_keeps_its_rows(tmp_pat
     assert "z100" in run_json["monitors"]  # peaks of what was computed
 
 
-def test_an_error_in_the_loop_marks_the_run_failed_with_the_reason(tmp_path, monkeypatch):
-    _raise_at_sample(monkeypatch, 3, RuntimeError("disk on fire"))
+def test_an_error_in_the_loop_marks_the_run_failed_with_the_reason(tmp_path):
+    stop = _StopAt(0.005, RuntimeError("disk on fire"))  # after samples 0 and 1
     scene = column_scene("SV", h=SHORTEST_WAVELENGTH / 8, duration=0.1)
     with pytest.raises(RuntimeError) as raised:
-        solver.run(scene, tmp_path / "run")
+        solver.run(scene, tmp_path / "run", progress=stop)
     run_json = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert stop.raised
     assert run_json["status"] == "failed"
     assert run_json["reason"] == "RuntimeError: disk on fire"
     assert run_json["time_reached"] == pytest.approx(0.005)
@@ -292,48 +292,41 @@ def test_an_error_in_the_loop_marks_the_run_failed_with_the_reason(tmp_path, mon
 
 def test_streamed_histories_equal_the_files_written_at_the_end(tmp_path, monkeypatch):
     """Rows written one sample at a time are byte for byte what np.savetxt wrote from the whole history
-    (free field evaluated at all times at once, geostatic stress on), the earlier all-at-end output."""
-    from pyfem import distributed_model
-    from pyfem.output import (ENERGY_FORMAT, FREEFIELD_COLUMNS, MONITOR_COLUMNS, MONITOR_FORMAT,
-                              STRESS_COLUMNS, RunWriter)
+    (free field evaluated at all times at once, geostatic stress on), the earlier all-at-end output:
+    the free field's columns are the run's free field (caught as the run builds it, on either execution
+    path) evaluated at every sample time at once; the other columns and energy.csv, read back and
+    written again in their formats, are the same bytes (whole rows, the formats' digits)."""
+    from pyfem.output import ENERGY_FORMAT, FREEFIELD_COLUMNS, MONITOR_COLUMNS, MONITOR_FORMAT, STRESS_COLUMNS
+    from pyfem.seismic import setup
 
-    kept = []  # (times, monitor rows (nt, m, columns), energy rows, energy columns, free field, monitor names)
-    original_finish, original_go = RunWriter.finish, distributed_model.DistributedRun.go
-
-    def finish(self, **kw):
-        sim = self.simulation
-        kept.append((self.times, self.monitor_rows, self.energy_samples, self.energy_columns, sim.freefield,
-                     sim.monitor_names))
-        return original_finish(self, **kw)
-
-    def go(self, *args):  # the distributed model's rows, as rank 0 keeps them for run.json
-        summary = original_go(self, *args)
-        kept.append((self.times, self.rows_kept, self.energy_rows, self.energy_columns, self.freefield, self.names))
-        return summary
-
-    monkeypatch.setattr(RunWriter, "finish", finish)
-    monkeypatch.setattr(distributed_model.DistributedRun, "go", go)
+    built = []
+    original = setup.seismic_input_from_scene
+    monkeypatch.setattr(setup, "seismic_input_from_scene", lambda *a, **k: built.append(original(*a, **k)) or built[-1])
     extra = {"initial_stress": {"surface": 250.0, "rho": RHO, "k": [1.4, 1.2, 1.15]}}
     scene = column_scene("SV", h=SHORTEST_WAVELENGTH / 8, duration=0.3, extra=extra)
     out = tmp_path / "run"
-    solver.run(scene, out)
-    (times, rows, energy, energy_columns, freefield, names), = kept
-    times = np.array(times)
-    assert len(times) == 61 and np.allclose(np.diff(times), 0.005)
-    rows = np.array(rows)
+    summary = solver.run(scene, out)
+    (freefield, _), = built
+    dt = summary["dt"]
+    per_output = round(0.005 / dt)
+    times = np.arange(61) * per_output * dt  # the samples' times as the run computes them (no lead-in)
     points = np.array([m["point"] for m in scene["monitor"]])
-    freefield = np.concatenate([freefield.displacement(points, times), freefield.velocity(points, times)], axis=2)
+    at_once = np.concatenate([freefield.displacement(points, times), freefield.velocity(points, times)], axis=2)
+    assert np.abs(at_once).max() > 0.0, "the free field reaches the monitors"
     header = ",".join(MONITOR_COLUMNS + FREEFIELD_COLUMNS + STRESS_COLUMNS)
     checks = 0
-    for j, name in enumerate(names):
-        expected = np.hstack([times[:, None], rows[:, j, 1:10], freefield[:, j, :], rows[:, j, 16:]])
+    for j, name in enumerate(m["name"] for m in scene["monitor"]):
+        written = np.loadtxt(out / "monitors" / f"{name}.csv", delimiter=",", skiprows=1)
+        assert len(written) == 61 and np.allclose(written[:, 0], times, rtol=0, atol=1e-12)
+        expected = np.hstack([times[:, None], written[:, 1:10], at_once[:, j, :], written[:, 16:]])
         reference = tmp_path / f"{name}_at_end.csv"
         np.savetxt(reference, expected, delimiter=",", header=header, comments="", fmt=MONITOR_FORMAT)
         assert (out / "monitors" / f"{name}.csv").read_bytes() == reference.read_bytes(), name
         checks += 1
     reference = tmp_path / "energy_at_end.csv"
-    np.savetxt(reference, np.array(energy), delimiter=",",
-               header=",".join(energy_columns), comments="", fmt=ENERGY_FORMAT)
+    energy_header = (out / "energy.csv").read_text().splitlines()[0]
+    np.savetxt(reference, np.loadtxt(out / "energy.csv", delimiter=",", skiprows=1), delimiter=",",
+               header=energy_header, comments="", fmt=ENERGY_FORMAT)
     assert (out / "energy.csv").read_bytes() == reference.read_bytes()
     assert checks == 3
 
