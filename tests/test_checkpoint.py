@@ -307,6 +307,7 @@ def test_crash_after_a_periodic_checkpoint_then_resume_gives_the_uninterrupted_r
     # The plan printed says what this sitting does, not only the whole run's estimates.
     assert plans[0]["resuming"] == (f"from the checkpoint at t = {CHECKPOINT_T:.6g} s of 0.45 s; the static stage "
                                     "read from static/hand_over.npz, not solved again")
+    assert "static stage estimate" not in plans[0], "no estimate of a stage this sitting does not solve"
     assert_same_run(out, reference_run[0])
 
 
@@ -320,6 +321,7 @@ def test_a_run_without_its_saved_stage_solves_it_again_and_saves_it(reference_ru
     plans = []
     solver.run(stateful_scene(), out, resume=True, on_plan=plans.append)
     assert plans[0]["resuming"].endswith("; the static stage solved again (no hand-over file of this model)")
+    assert plans[0]["static stage estimate"].startswith("2 stages of at most")  # solved again: estimated
     assert saved_stage.exists()
     assert_same_run(out, reference_run[0])
 
