@@ -108,6 +108,19 @@ def test_every_node_of_a_second_order_model_is_in_the_fields_file(files, path):
     n_nodes = 5 * 3 * 5 if kind == "box" else len(serial.points)
     assert len(fields.points) == n_nodes == len(np.unique(np.round(fields.points, 6), axis=0))
     assert np.unique(fields.cells).size == n_nodes
+    # VTK's node order (ParaView's): edge midpoints, then (Q2) face centres and the cell centre.
+    x = fields.points[fields.cells]
+    if kind == "box":
+        edges = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
+        faces = [(0, 3, 7, 4), (1, 2, 6, 5), (0, 1, 5, 4), (3, 2, 6, 7), (0, 1, 2, 3), (4, 5, 6, 7)]
+        for k, face in enumerate(faces):
+            np.testing.assert_allclose(x[:, 20 + k], x[:, list(face)].mean(axis=1), atol=1e-9)
+        np.testing.assert_allclose(x[:, 26], x[:, :8].mean(axis=1), atol=1e-9)
+    else:
+        edges = [(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)]
+    first = 8 if kind == "box" else 4
+    for k, (a, b) in enumerate(edges):
+        np.testing.assert_allclose(x[:, first + k], 0.5 * (x[:, a] + x[:, b]), atol=1e-9)
     mine, theirs = by_position(fields.points), by_position(serial.points)
     assert np.array_equal(np.round(fields.points[mine], 9), np.round(serial.points[theirs], 9))
     assert fields.times == serial.times and len(fields.times) >= 3
