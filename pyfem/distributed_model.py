@@ -808,9 +808,9 @@ class _Fields:
             function.x.array[:len(self.pair_node)] = nodal[self.pair_node, k]
             function.x.scatter_forward()
             if self.nodes is not None:
-                nodal = np.zeros(len(self.part.model.node_coords))
-                nodal[self.pair_parent] = function.x.array
-                self.nodes.set_nodal(self.pair_output[name], nodal)
+                at_nodes = np.zeros(len(self.part.model.node_coords))
+                at_nodes[self.pair_parent] = function.x.array
+                self.nodes.set_nodal(self.pair_output[name], at_nodes)
             self.file.write_function(self.pair_output[name], t)
 
     def reopen(self) -> None:

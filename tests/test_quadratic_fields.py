@@ -156,3 +156,32 @@ def test_the_file_is_an_hdf5_xdmf_time_series(files):
             for grid in collection.findall("Grid"):
                 item = grid.find("Attribute/DataItem")
                 assert data[item.text.split(":", 1)[1]].shape[0] == int(item.get("Dimensions").split()[0])
+
+
+def test_the_pair_fields_of_a_q2_contact_model_at_every_node(tmp_path):
+    """A Q2 model with split interfaces in contact (tests/scenes/mpi_hard_contact.toml, coarser and
+    shorter) on 2 ranks: displacement and the pair fields at every node (the two nodes of a pair
+    apart), the serial file's (the pairs slid: pair_slip > 0)."""
+    from test_distributed_model import last_fields
+
+    scene = REPO / "tests" / "scenes" / "mpi_hard_contact.toml"
+    overrides = ["mesh.order=2", "mesh.h=8.0", "time.duration=0.3", "output.xdmf_interval=0.1"]
+    fields = {}
+    for label, ranks, one in (("serial", 1, False), ("two", 2, True)):
+        env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1")
+        env.pop("PYFEM_ONE_MODEL", None)
+        if one:
+            env["PYFEM_ONE_MODEL"] = "1"
+        command = [PYTHON, "-m", "pyfem", "run", str(scene), "--out", str(tmp_path / label)]
+        command += [item for key in overrides for item in ("--set", key)]
+        if ranks > 1:
+            command = [shutil.which("mpirun"), "--allow-run-as-root", "--oversubscribe", "-n", "2"] + command
+        result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+        assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+        fields[label] = last_fields(tmp_path / label)
+    serial, two = fields["serial"], fields["two"]
+    assert len(read_fields(tmp_path / "two" / "fields.xdmf").points) == len(serial["displacement"])
+    assert np.abs(serial["pair_slip"]).max() > 1e-5 and np.abs(serial["displacement"]).max() > 1e-3
+    for name in ("displacement", "pair_slip", "pair_D", "pair_state"):
+        assert two[name].shape == serial[name].shape
+        np.testing.assert_allclose(two[name], serial[name], rtol=0, atol=1e-12 * max(1.0, np.abs(serial[name]).max()))
