@@ -19,7 +19,6 @@ class NodeMesh:
     """A second-order geometry mesh of the model's owned cells (collective: every rank builds its)."""
 
     def __init__(self, model) -> None:
-        import basix.ufl_wrapper  # noqa: F401  (dolfinx's own)
         import ufl
         from dolfinx import cpp, fem
         from dolfinx import mesh as dolfinx_mesh
