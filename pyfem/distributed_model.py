@@ -691,7 +691,7 @@ def _stepper(part: RankModel, dt: float, input_arrays: dict | None, loop: RankRe
 
 class _Fields:
     """fields.xdmf written by dolfinx on every rank: displacement, velocity and acceleration (point
-    data; a Q2 field interpolated into Q1 on the mesh's geometry); strain and stress (cell data at
+    data; a second-order model's on its node mesh, pyfem.quadratic_fields: every node); strain and stress (cell data at
     the cell centroids, 3 x 3 tensors, tension positive, initial + dynamic; in an element-loop cell
     the law's stress averaged over its points), damage (cell data damage, damage_type,
     plastic_strain, crack_opening; 0 outside the element loop), as RunWriter writes them for the
@@ -712,35 +712,41 @@ class _Fields:
         self.point = [name for name in self.POINT if name in wanted]
         self.functions = {name: fem.Function(V, name=name) for name in self.point}
         self.output = self.functions
+        self.nodes = None  # a second-order model's fields go on its node mesh: every node in the file
         if model.order > 1:
-            V1 = fem.VectorFunctionSpace(model.mesh, ("Lagrange", 1))
-            self.output = {name: fem.Function(V1, name=name) for name in self.point}
+            from pyfem.quadratic_fields import NodeMesh
+
+            self.nodes = NodeMesh(model)
+            self.output = {name: self.nodes.vector(name) for name in self.point}
         self.tensors = [name for name in ("strain", "stress") if name in wanted]
         self.scalars = list(self.DAMAGE) if "damage" in wanted else []
         self.cells = {}
         if self.tensors or self.scalars:
             self.n_cells = model.n_cells  # owned: a ghost cell's value comes from its owner
             self.strain = cell_strain_operator(part.scene, model) if self.tensors else None
-            T = fem.TensorFunctionSpace(model.mesh, ("DG", 0))
-            Q = fem.FunctionSpace(model.mesh, ("DG", 0))
+            T = fem.TensorFunctionSpace(model.mesh, ("DG", 0)) if self.nodes is None else self.nodes.T
+            Q = fem.FunctionSpace(model.mesh, ("DG", 0)) if self.nodes is None else self.nodes.Q
             self.cells.update({name: fem.Function(T, name=name) for name in self.tensors})
             self.cells.update({name: fem.Function(Q, name=name) for name in self.scalars})
-            self.tensor_dofs = T.dofmap.list.array.reshape(-1, 1)[:self.n_cells, 0]  # blocks of 9
-            self.scalar_dofs = Q.dofmap.list.array.reshape(-1, 1)[:self.n_cells, 0]
+            if self.nodes is None:
+                self.tensor_dofs = T.dofmap.list.array.reshape(-1, 1)[:self.n_cells, 0]  # blocks of 9
+                self.scalar_dofs = Q.dofmap.list.array.reshape(-1, 1)[:self.n_cells, 0]
+            else:
+                self.tensor_dofs, self.scalar_dofs = self.nodes.tensor_dofs, self.nodes.scalar_dofs
         self.comm, self.path, self.part = part.comm, path, part
         self.pair_functions = {}
         if part.pairs is not None:  # the interface fields on both nodes of every pair, 0 elsewhere (as RunWriter)
             S, parent = V.sub(0).collapse()
-            self.pair_node = np.asarray(parent, dtype=np.int64)[:S.dofmap.index_map.size_local] // 3
+            self.pair_parent = np.asarray(parent, dtype=np.int64) // 3  # V's node of each of S's
+            self.pair_node = self.pair_parent[:S.dofmap.index_map.size_local]
             self.pair_functions = {name: fem.Function(S, name=name) for name, _ in self.PAIR}
             self.pair_output = self.pair_functions
-            if model.order > 1:
-                S1 = fem.FunctionSpace(model.mesh, ("Lagrange", 1))
-                self.pair_output = {name: fem.Function(S1, name=name) for name, _ in self.PAIR}
+            if self.nodes is not None:
+                self.pair_output = {name: self.nodes.scalar(name) for name, _ in self.PAIR}
         self.file = io.XDMFFile(part.comm, str(path), "a" if append else "w")
         if not append:  # (a resumed run's file has them)
-            self.file.write_mesh(model.mesh)
-            tags = model.cell_tags
+            self.file.write_mesh(model.mesh if self.nodes is None else self.nodes.mesh)
+            tags = model.cell_tags if self.nodes is None else self.nodes.region_tags(model.cell_tags)
             tags.name = "region"  # the cell tags, as the whole model's fields.xdmf has them (run.json "regions")
             self.file.write_meshtags(tags)
         output = part.scene["output"]
@@ -755,8 +761,8 @@ class _Fields:
             if name not in self.functions:
                 continue
             self.functions[name].x.array[:] = values
-            if self.output is not self.functions:
-                self.output[name].interpolate(self.functions[name])
+            if self.nodes is not None:
+                self.nodes.set_nodal(self.output[name], values)
             self.file.write_function(self.output[name], t)
         if self.pair_functions:
             self._write_pairs(t, pairs)
@@ -801,8 +807,10 @@ class _Fields:
             function = self.pair_functions[name]
             function.x.array[:len(self.pair_node)] = nodal[self.pair_node, k]
             function.x.scatter_forward()
-            if self.pair_output is not self.pair_functions:
-                self.pair_output[name].interpolate(function)
+            if self.nodes is not None:
+                at_nodes = np.zeros(len(self.part.model.node_coords))
+                at_nodes[self.pair_parent] = function.x.array
+                self.nodes.set_nodal(self.pair_output[name], at_nodes)
             self.file.write_function(self.pair_output[name], t)
 
     def reopen(self) -> None:

@@ -598,11 +598,16 @@ def write_fields(path, stage: RankStage, part) -> np.ndarray:
     mesh, V = model.mesh, model.V
     n_cells = model.n_cells
     strain = cell_strain_operator(part.scene, model)
-    T = fem.TensorFunctionSpace(mesh, ("DG", 0))
-    Q = fem.FunctionSpace(mesh, ("DG", 0))
-    tensor_dofs = T.dofmap.list.array.reshape(-1, 1)[:n_cells, 0]
-    scalar_dofs = Q.dofmap.list.array.reshape(-1, 1)[:n_cells, 0]
-    V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1)) if model.order > 1 else None
+    nodes = None
+    if model.order > 1:  # every node of a second-order model in the file (pyfem.quadratic_fields)
+        from pyfem.quadratic_fields import NodeMesh
+
+        nodes = NodeMesh(model)
+        mesh = nodes.mesh
+    T = fem.TensorFunctionSpace(mesh, ("DG", 0)) if nodes is None else nodes.T
+    Q = fem.FunctionSpace(mesh, ("DG", 0)) if nodes is None else nodes.Q
+    tensor_dofs = T.dofmap.list.array.reshape(-1, 1)[:n_cells, 0] if nodes is None else nodes.tensor_dofs
+    scalar_dofs = Q.dofmap.list.array.reshape(-1, 1)[:n_cells, 0] if nodes is None else nodes.scalar_dofs
     installed = np.zeros(len(strain.nodes), dtype=bool)
     for name in stage.installed_regions:
         installed[region_cells(model, name)] = True
@@ -614,12 +619,12 @@ def write_fields(path, stage: RankStage, part) -> np.ndarray:
         file.write_mesh(mesh)
         for (t, total, increment, stress, active), averages in zip(stages, stage.cell_averages):
             for name, values in (("displacement", total), ("stage_displacement", increment)):
-                function = fem.Function(V, name=name)
-                function.x.array[:] = part.dolfinx_order(values)
-                if V1 is not None:
-                    corner = fem.Function(V1, name=name)
-                    corner.interpolate(function)
-                    function = corner
+                if nodes is None:
+                    function = fem.Function(V, name=name)
+                    function.x.array[:] = part.dolfinx_order(values)
+                else:
+                    function = nodes.vector(name)
+                    nodes.set_nodal(function, part.dolfinx_order(values))
                 file.write_function(function, t)
             cells = {"stress": stress[:n_cells].copy(), "active": active[:n_cells]}
             for key in ("plastic_strain", "damage", "damage_type"):

@@ -2,8 +2,9 @@
 
 Two layouts are read. dolfinx's XDMFFile (the distributed model's, on any number of ranks, the one
 writer of the one model): the mesh once, the cell tags once as the grid "region", then one temporal
-collection per field; a second-order mesh's point fields interpolated at its vertices (Q1); the
-tensors as 3 x 3 cell data. meshio's (the serial RunWriter's): every field of a time in one grid,
+collection per field; a second-order model's cells as 27-node hexahedra or 10-node tetrahedra
+(pyfem.quadratic_fields: every node of the function space, VTK's node order); the tensors as
+3 x 3 cell data. meshio's (the serial RunWriter's): every field of a time in one grid,
 a Q2 cell split into 8 hexahedra so that every node is a point, the tensors as XDMF Tensor6.
 
 `read_fields` gives both the same way: tensors as 6 components xx, xy, xz, yy, yz, zz (Tensor6),
@@ -24,7 +25,8 @@ TENSOR6 = [0, 1, 2, 4, 5, 8]
 
 @dataclass
 class Fields:
-    """points (n, 3) m; cells (c, k) indices into points (VTK hexahedra or tetrahedra); steps: one
+    """points (n, 3) m; cells (c, k) indices into points (VTK hexahedra or tetrahedra, linear or, in
+    dolfinx's layout of a second-order model, quadratic: corners first); steps: one
     (t, point_data, cell_data) per field time, in time order, each data a {name: array}."""
 
     points: np.ndarray

@@ -73,7 +73,8 @@ SETTINGS = {"zone": ("--set", "materials.weak.plasticity.zone=[0.0, 0.0, 0.0, 40
                               "tensile_strength=1.0e5, damage_max=0.9, damage_plastic_strain=0.005}", "--set", "output.xdmf_interval=0.1",
                               "--set", 'output.fields=["displacement", "stress", "damage"]'),
             "contact_lag": ("--set", "contact.normal_lag.length=0.01", "--set", "contact.normal_lag.velocity=0.1"),
-            # (the serial writer splits a Q2 cell into 8 hexahedra, the distributed one interpolates to Q1)
+            # (the serial writer splits a Q2 cell into 8 hexahedra, the distributed one writes 27-node
+            # hexahedra: the cell data differ in count; every node's values: tests/test_quadratic_fields.py)
             "q2": ("--set", "output.xdmf_interval=0.0")}
 RANKS = {"box": (2, 3), "tunnel": (2, 3), "layers": (2, 3), "layers_tet": (2,), "zone": (2,), "contact": (2, 3),
          "contact_yield": (3,), "contact_l": (3,), "contact_lag": (2,), "q2": (2, 3)}

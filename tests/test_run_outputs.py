@@ -187,20 +187,17 @@ def grid(spacing: float) -> np.ndarray:
 
 def test_fields_hold_every_node_and_clean_times(two_layer_run):
     """Every vertex of the mesh, at its coordinates, each once; cells of positive, equal volumes that
-    fill the box. Q1 (h = 5): the 5 x 3 x 5 nodes. Q2 (h = 10): the 3 x 2 x 3 vertices; the
-    distributed model's dolfinx writer gives a Q2 field at its vertices, the serial writer also the
-    mid-nodes (each cell's 8 sub-hexahedra: the 5 m grid). (The values at the nodes: the monitors'
-    in tests/test_run.py, the serial run's in tests/test_distributed_model.py.)"""
+    fill the box. Q1 (h = 5): the 5 x 3 x 5 nodes. Q2 (h = 10): also the 5 x 3 x 5 nodes, every node
+    (the serial writer: each cell's 8 sub-hexahedra; the distributed model: 27-node hexahedra). (The
+    values at the nodes: the monitors' in tests/test_run.py, the serial run's in
+    tests/test_distributed_model.py and tests/test_quadratic_fields.py.)"""
     out, scene = two_layer_run
     order = scene["mesh"]["order"]
     fields = read_fields(out / "fields.xdmf")
     points, cells = fields.points, fields.cells
     rounded = np.round(points, 9) + 0.0  # (the mesh generator's coordinates carry round-off; + 0.0: no -0.0)
     written = rounded[np.lexsort(rounded.T)]
-    if order == 1 or len(points) == len(grid(5.0)):
-        assert np.array_equal(written, grid(5.0))
-    else:
-        assert np.array_equal(written, grid(10.0))
+    assert np.array_equal(written, grid(5.0))
     displacement = fields.steps[-1][1]["displacement"]
     assert displacement.shape == (len(points), 3) and 0.0 < np.max(np.abs(displacement)) < 1.0
     # Positive, equal volumes (VTK order) filling the 4000 m^3 box.
