@@ -308,8 +308,10 @@ def stage_pictures(pictures: "Pictures", part, stage, cell_stress: np.ndarray, i
     stress = mesh.owned_cells(comm, stress)
     state = {key: mesh.owned_cells(comm, values) for key, values in state.items()}
     faces = whole_faces(part)
-    after = (np.asarray(stage.contact.static_force()) if stage.contact is not None else  # relaxed pairs
-             np.asarray(stage.pair_forces) if stage.pair_forces is not None else np.zeros((0, 3)))  # a linear F0
+    # The pairs' forces as the stage hands them over: the relaxed pairs', else the hand-over's F0 (a linear
+    # stage's, or the welded stage's of contact.split = "after_static"), set in contact_arrays.
+    after = (np.asarray(stage.contact.static_force()) if stage.contact is not None else
+             np.asarray(contact_arrays["static_force"]) if contact_arrays is not None else np.zeros((0, 3)))
     pairs = whole_pairs(part, contact_arrays, {"before": in_situ_forces, "after": after})
     if not mesh.root:
         return None
