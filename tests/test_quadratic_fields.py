@@ -18,13 +18,8 @@ from pyfem.fields_file import read_fields
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = "/usr/bin/python3"
 
-BOX = """
-title = "Q2 box fields"
-[mesh]
-builder = "box"
-size = [20.0, 10.0, 20.0]
-h = 10.0
-order = 2
+# The rock, the wave and the outputs both meshes share (an SV pulse through a 20 m cube).
+COMMON = """
 [materials.rock]
 preset = "sandstone"
 [time]
@@ -41,27 +36,22 @@ xdmf_interval = 0.01
 fields = ["displacement", "velocity", "stress"]
 """
 
+BOX = """
+title = "Q2 box fields"
+[mesh]
+builder = "box"
+size = [20.0, 10.0, 20.0]
+h = 10.0
+order = 2
+""" + COMMON
+
 TET = """
 title = "P2 tetrahedra fields"
 [mesh]
 builder = "file"
 file = "box.geo"
 order = 2
-[materials.rock]
-preset = "sandstone"
-[time]
-duration = 0.03
-[wave]
-type = "SV"
-angle = 20.0
-surface = 20.0
-medium = "rock"
-motion = {ricker = {f0 = 40.0, amplitude = 0.001}}
-[output]
-interval = 0.005
-xdmf_interval = 0.01
-fields = ["displacement", "velocity", "stress"]
-"""
+""" + COMMON
 
 GEO = ('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 20, 10, 20};\nPhysical Volume("rock") = {1};\n'
        "Mesh.MeshSizeMax = 10;\nMesh.MeshSizeMin = 10;\n")
