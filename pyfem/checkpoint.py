@@ -1,18 +1,18 @@
-"""Checkpoint and resume of a run (docs/checkpoint.md).
+"""Checkpoint and resume of a run (docs/checkpoint.md): what every rank count shares.
 
-A checkpoint is the complete state of a run at one sample: u, v, a and t, the kernel's state
-(`Stepper.save_state`: energy account, last internal force, contact pairs, every material point),
-the samples recorded so far (for run.json's peaks), the length of every history file and the
-fields file's index at that sample. It is written atomically (a temporary file, fsync, rename)
-to `checkpoint.npz` in the run directory every `[output] checkpoint_interval` seconds of wall
-time, when the run is interrupted (Ctrl-C, SIGTERM) and at the end: a finished run keeps its
-final state (meta "final"), so that it can be extended to a longer time.duration.
+A checkpoint is the complete state of a run at one sample, written by the model
+(pyfem/distributed_model.py `DistributedRun.write_checkpoint`): each rank's u, v, a and kernel state
+(`save_state`: energy account, last internal force, contact pairs, every material point) keyed by
+position in `checkpoint.ID.rankR.npz`, and rank 0's record `checkpoint.npz` (the fingerprint, t, the
+samples so far, the history files' lengths), written last and atomically (`write_atomically`: a
+temporary file, fsync, rename) every `[output] checkpoint_interval` seconds of wall time, when the
+run is interrupted (Ctrl-C, SIGTERM) and at the end: a finished run keeps its final state (meta
+"final"), so that it can be extended to a longer time.duration.
 
-`/usr/bin/python3 -m pyfem run SCENE --out DIR --resume` rebuilds the model from the scene (the static
-stage is solved again: it is deterministic), checks that it is the model of the checkpoint
-(scene, dofs, dt, steps, nodal masses), truncates the histories and fields to the checkpoint's
-sample and continues: the histories of a resumed run equal those of an uninterrupted one bit for
-bit (tests/test_checkpoint.py).
+`/usr/bin/python3 -m pyfem run SCENE --out DIR --resume` (on any rank count) rebuilds the model from the
+scene, checks that it is the model of the checkpoint (`Checkpoint.check_scene`, then the model's
+dofs, dt and levels), truncates the histories and fields to the checkpoint's sample and continues:
+the histories of a resumed run equal those of an uninterrupted one bit for bit (tests/test_checkpoint.py).
 """
 from __future__ import annotations
 
@@ -25,8 +25,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
-from pyfem.clock import run_origin
 
 from pyfem.errors import SceneError
 
@@ -117,30 +115,6 @@ def _files_by_content(scene_json: dict) -> dict:
         if isinstance(value, str) and not value.startswith("sha256:"):
             holder[keys[-1]] = _file_content(value)
     return scene_json
-
-
-def model_fingerprint(simulation) -> dict:
-    """What must be equal for a checkpoint to continue on this prepared simulation: the scene
-    (`scene_fingerprint`), dofs, dt, steps and a hash of the nodal masses (the mesh and the
-    materials); with local time stepping also a hash of the nodes' rate levels; with the interfaces'
-    deterioration its parameters as the kernel gets them (R0, lambda, t_s, m, n, p and the wear
-    clock's start, which the scene does not hold: it is the record's lead-in)."""
-    contact = getattr(simulation, "contact_arrays", None) or {}
-    deterioration = contact.get("deterioration")
-    return {
-        "format": FORMAT,
-        "scene": scene_fingerprint(simulation.scene),
-        "dofs": int(simulation.stiffness.shape[0]),
-        "dt": float(simulation.time_step.dt),
-        "steps": int(simulation.n_steps),
-        # Record time is run time: a record's lead-in runs from this origin (absent: t starts at 0).
-        **({"time_origin": float(run_origin(simulation.lead_in, simulation.time_step))}
-           if getattr(simulation, "lead_in", 0.0) > 0.0 else {}),
-        "mass_sha256": hashlib.sha256(np.ascontiguousarray(simulation.mass).tobytes()).hexdigest(),
-        **({"levels_sha256": hashlib.sha256(np.ascontiguousarray(simulation.node_levels, dtype=np.int32).tobytes())
-            .hexdigest()} if getattr(simulation, "node_levels", None) is not None else {}),
-        **({"deterioration": [float(x) for x in deterioration]} if deterioration is not None else {}),
-    }
 
 
 def input_follows_duration(scene) -> bool:
@@ -236,30 +210,25 @@ class Checkpoint:
         the model is built (and a static stage solved), so another scene is refused at once."""
         self._refuse(_scene_difference_text(self.saved_fingerprint()["scene"], scene_fingerprint(scene)))
 
-    def check_model(self, simulation) -> None:
-        """Raises SceneError (key --resume) when this checkpoint is not of the simulation's model."""
-        saved = self.saved_fingerprint()
-        current = model_fingerprint(simulation)
-        if "steps" in saved and saved["steps"] != current["steps"]:
-            self.check_input_follows(simulation.scene)
-        # The steps follow time.duration, which a resume may change: the run continues to the new end,
-        # as long as the checkpoint has not passed it.
-        saved.pop("steps", None)
-        current.pop("steps", None)
-        where = _first_difference(saved, current)
-        if where == "time_origin":
+    def check_model(self, ours: dict, scene, end: float) -> None:
+        """Refuses (SceneError, key --resume, on every rank alike) a checkpoint of another model: `ours`
+        is this model's fingerprint (pyfem.distributed_model.DistributedRun._fingerprint: dofs, dt,
+        steps, levels, time_origin, deterioration), `end` the time its run ends at. The steps are not
+        compared (a resume may change time.duration) unless the input follows the duration."""
+        theirs = self.meta["fingerprint"]
+        if "steps" in theirs and theirs["steps"] != ours["steps"]:
+            self.check_input_follows(scene)
+        self.refuse_other_stepping(theirs.get("levels") is not None, ours.get("levels") is not None)
+        for key in ("dofs", "dt", "levels"):
+            if theirs.get(key) != ours.get(key):
+                self._refuse(f"the model's {key} differs from the checkpoint's (another mesh or build?)")
+        if theirs.get("deterioration") != ours.get("deterioration"):
+            self._refuse_difference(_first_difference({"deterioration": theirs.get("deterioration")},
+                                                      {"deterioration": ours.get("deterioration")}))
+        if theirs.get("time_origin", 0.0) != ours["time_origin"]:
             self._refuse("the checkpoint was written before record time became run time (its record's lead-in "
                          "ran from t = 0, now it runs at t < 0): start the run again")
-        if where in ("dt", "steps", "levels_sha256"):
-            self.refuse_other_stepping("levels_sha256" in saved, getattr(simulation, "node_levels", None) is not None)
-        self._refuse_difference(where)
-        contact = getattr(simulation, "contact_arrays", None)
-        saved_pairs = self.kernel.get("contact/pairs")
-        if contact is not None and saved_pairs is not None and \
-                saved_pairs != np.ascontiguousarray(contact["pairs"], dtype=np.int32).tobytes():
-            self._refuse("the checkpoint lists the contact pairs in another order than this version (a checkpoint "
-                         "with contact written before 2026-11-29 lists them in the mesh's numbering; they are now "
-                         "sorted by interface and position)")
+        self.check_end(end, scene["time"]["duration"])
 
     @property
     def final(self) -> bool:
@@ -322,28 +291,6 @@ class Checkpoint:
                          f"overrides of the interrupted run, or start a new run without --resume")
 
 
-def write_checkpoint(out_dir, meta: dict, u: np.ndarray, v: np.ndarray, a: np.ndarray,
-                     kernel: dict, writer: dict) -> Path:
-    """Writes `checkpoint.npz` atomically (temporary file, fsync, rename); returns its path.
-
-    Args:
-        out_dir: the run directory.
-        meta: JSON-serialisable part (fingerprint, t, outputs_done, timing, writer state).
-        u, v, a: (3 n_nodes,) state (m, m/s, m/s^2).
-        kernel: `Stepper.save_state()` (name -> bytes).
-        writer: name -> array of the writer's samples (`RunWriter.checkpoint_state`).
-    """
-    out_dir = Path(out_dir)
-    path = out_dir / CHECKPOINT_NAME
-    names = sorted(kernel)
-    arrays = {"u": u, "v": v, "a": a}
-    arrays.update({f"kernel_{k}": np.frombuffer(kernel[name], dtype=np.uint8) for k, name in enumerate(names)})
-    arrays.update({f"writer_{name}": value for name, value in writer.items()})
-    meta = dict(meta, format=FORMAT, kernel_blocks=names, writer_arrays=sorted(writer), written=time.time())
-    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    return write_atomically(path, arrays)
-
-
 def write_atomically(path: Path, arrays: dict) -> Path:
     """np.savez of `arrays` to `path` through a temporary file, synced, then renamed: a crash
     leaves the old file or the new one, never a part."""
@@ -400,12 +347,10 @@ def read_checkpoint(out_dir, state: bool = True) -> Checkpoint:
                 refuse(f"{CHECKPOINT_NAME} has format {meta.get('format')}, this pyfem reads {FORMAT}")
             if not state:
                 return Checkpoint(path=path, meta=meta, u=None, v=None, a=None)
-            if meta.get("model") == "distributed":  # each rank's state is in its own file
-                return _joined_rank_states(path, meta, data)
-            kernel = {name: bytes(data[f"kernel_{k}"]) for k, name in enumerate(meta["kernel_blocks"])}
-            writer = {name: np.array(data[f"writer_{name}"]) for name in meta["writer_arrays"]}
-            return Checkpoint(path=path, meta=meta, u=np.array(data["u"]), v=np.array(data["v"]),
-                              a=np.array(data["a"]), kernel=kernel, writer=writer)
+            if meta.get("model") != "distributed":  # the serial path's layout of an earlier version
+                refuse(f"{CHECKPOINT_NAME} was written by the serial path of an earlier version (its state in one "
+                       "file), which this version no longer has; run the scene again")
+            return _joined_rank_states(path, meta, data)  # each rank's state is in its own file
     except SceneError:
         raise
     except (OSError, ValueError, KeyError) as error:

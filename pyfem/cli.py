@@ -144,18 +144,11 @@ def command_check(scene_path: Path, overrides: Sequence[str]) -> int:
     """Validate the scene and print the solver's plan for it."""
     scene = load_scene(scene_path, overrides)
     report_warnings(scene)
-    from pyfem.ranks import distributed
+    from pyfem import distributed_model  # heavy (dolfinx, kernels): only after validation
 
-    if distributed():  # under mpirun every rank builds its part
-        from pyfem import distributed_model
-
-        plan = distributed_model.check(scene)
-        if plan:
-            show_plan(scene, plan)
-        return 0
-    from pyfem import solver  # heavy (dolfinx, kernels): only after validation
-
-    show_plan(scene, solver.plan(scene))
+    plan = distributed_model.check(scene)  # every rank builds its part; rank 0 prints
+    if plan:
+        show_plan(scene, plan)
     return 0
 
 

@@ -1,6 +1,6 @@
-"""The model under `mpirun -n N` (N > 1; docs/scaling.md "The distributed model"): each rank builds
-and steps only its part of dolfinx's distributed mesh, so the memory of a rank falls with the ranks.
-One rank (no mpirun) is the serial path, pyfem/solver.py.
+"""The model (docs/scaling.md "The distributed model"): on N ranks (`mpirun -n N`) each rank builds
+and steps only its part of dolfinx's distributed mesh, so the memory of a rank falls with the ranks;
+a run without mpirun is its one-rank case, which holds the whole model.
 
 Each rank:
 1. meshes with `pyfem.mesh.create_mesh_with_interfaces(scene, COMM_WORLD)` (gmsh on rank 0,
@@ -1076,9 +1076,9 @@ def read_checkpoint(out_dir):
     saved = checkpoints.read_checkpoint(out_dir, state=False)
     if saved.meta.get("model") != "distributed":
         raise SceneError("--resume", str(out_dir), "the checkpoint of a run of the distributed model",
-                         f"--resume {saved.path}: written by the serial path (one rank without PYFEM_ONE_MODEL=1: "
-                         "its state in one file, numbered as that model's); resume it on one rank, without mpirun "
-                         "and without PYFEM_ONE_MODEL=1")
+                         f"--resume {saved.path}: written by the serial path of an earlier version (its state in "
+                         "one file, numbered as that model's), which this version no longer has; run the scene "
+                         "again")
     return saved
 
 
@@ -1312,23 +1312,9 @@ class DistributedRun:
 
     def _check_model(self, saved) -> None:
         """Refuses (SceneError, key --resume, on every rank alike) a checkpoint of another model,
-        rank count or partition."""
-        theirs, ours = saved.meta["fingerprint"], self._fingerprint()
-        if "steps" in theirs and theirs["steps"] != ours["steps"]:
-            saved.check_input_follows(self.scene)
-        saved.refuse_other_stepping(theirs.get("levels") is not None, ours["levels"] is not None)
-        for key in ("dofs", "dt", "levels"):  # (not the steps: a resume may change time.duration)
-            if theirs.get(key) != ours[key]:
-                saved._refuse(f"the model's {key} differs from the checkpoint's (another mesh or build?)")
-        if "deterioration" in theirs and theirs["deterioration"] != ours.get("deterioration"):
-            from pyfem.checkpoint import _first_difference
-
-            saved._refuse_difference(_first_difference({"deterioration": theirs["deterioration"]},
-                                                       {"deterioration": ours.get("deterioration")}))
-        if theirs.get("time_origin", 0.0) != ours["time_origin"]:
-            saved._refuse("the checkpoint was written before record time became run time (its record's lead-in "
-                          "ran from t = 0, now it runs at t < 0): start the run again")
-        saved.check_end(ours["time_origin"] + self.n_steps * self.time_step.dt, self.scene["time"]["duration"])
+        rank count or partition (pyfem.checkpoint.Checkpoint.check_model)."""
+        ours = self._fingerprint()
+        saved.check_model(ours, self.scene, ours["time_origin"] + self.n_steps * self.time_step.dt)
 
     def _summary(self) -> dict:
         from pyfem import distributed_stage
@@ -1924,7 +1910,7 @@ class DistributedRun:
         run's pyfem.interrupts.StopSignals."""
         from pyfem import checkpoint as checkpoints
         from pyfem.interrupts import RunInterrupted
-        from pyfem.output import RunWriter, _write_json, monitor_peaks, peak_memory_mib
+        from pyfem.output import _write_json, energy_summary, monitor_peaks, peak_memory_mib
         from pyfem.effects import kernel_threads
 
         comm, root, part, ts = self.comm, self.root, self.part, self.time_step
@@ -2051,7 +2037,7 @@ class DistributedRun:
             "checkpoints": {"written": clock.count, "seconds": clock.seconds, "interval": clock.interval},
             # (the serial run's key: the process's peak resident memory; here the largest rank's, each in "mpi")
             "peak_memory_mib": max(row[-1] for row in per_rank),
-            "energy": RunWriter._energy_summary(np.array(self.energy_rows), self.energy_columns),
+            "energy": energy_summary(np.array(self.energy_rows), self.energy_columns),
             "monitors": (monitor_peaks(np.array(self.rows_kept), self.columns, self.names, np.array(self.times),
                                        self.monitor_regions) if self.names else {}),
             "mpi": {"ranks": comm.size, **{name: [row[k] for row in per_rank] for k, name in enumerate(

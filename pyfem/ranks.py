@@ -19,13 +19,6 @@ def world():
     return MPI.COMM_WORLD
 
 
-def distributed() -> bool:
-    """Whether this run goes to the distributed model (pyfem/distributed_model.py): under mpirun on
-    N > 1 ranks, or on one rank when PYFEM_ONE_MODEL=1 (the one-model port: the serial path's
-    features move to the distributed model, which then runs every rank count; issue 47)."""
-    return world().size > 1 or os.environ.get("PYFEM_ONE_MODEL", "") == "1"
-
-
 # Set by the launchers for each rank: Open MPI, PMIx (Open MPI 4+, srun --mpi=pmix), MPICH/Hydra, Slurm.
 RANK_VARIABLES = ("OMPI_COMM_WORLD_RANK", "PMIX_RANK", "PMI_RANK", "SLURM_PROCID")
 

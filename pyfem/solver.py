@@ -7,30 +7,18 @@ Python owns orchestration and I/O; nothing in Python runs once per time step.
 from __future__ import annotations
 
 import dataclasses
-
-import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from pyfem.clock import POWER_ITERATIONS, TimeStep, phase_split, time_step_from
-from pyfem.clock import record_lead_in, run_origin, run_steps, whole_steps  # noqa: F401  (also pyfem.solver.*)
+from pyfem.clock import POWER_ITERATIONS, TimeStep, time_step_from
+from pyfem.clock import record_lead_in, run_steps
 from pyfem.effects import (BoundaryConstraints, MonitorStress, attach_kernel_points, boundary_constraints, bsr_arrays,
                            check_input_faces, contact_arguments, damping_coefficients, flow_warnings,
-                           free_field_words, kernel_threads, make_contact_pairs, monitor_stress_operator,
+                           kernel_threads, make_contact_pairs, monitor_stress_operator,
                            seismic_input_kernel, warn_far_pair_monitor, warn_input_medium)
-from pyfem.local_stepping import lts_stability_line
-from pyfem.interfaces import wear_words  # noqa: F401  (also pyfem.solver.wear_words)
-from pyfem.operators import face_report  # noqa: F401  (also pyfem.solver.face_report)
-from pyfem.plan import (deferred_check_line, element_loop_plan, element_name, face_lines, interface_slip_plan,
-                        lts_preview_lines, model_lines, resolution_plan, time_lines)
 from pyfem.scene import Scene, SceneError
-
-# Memory traffic assumed by the time estimate before a measurement exists (bytes/s).
-_ASSUMED_BANDWIDTH = 5.0e9
-
 
 @dataclass
 class Simulation:
@@ -450,26 +438,6 @@ def upper_triangle_blocks(stiffness: sp.bsr_matrix) -> int:
     return int(np.count_nonzero(stiffness.indices > rows)) + n_block_rows
 
 
-def memory_estimate(simulation: Simulation) -> int:
-    """Bytes held during the run: stiffness (BSR, and the kernel's upper-triangle copy), state and
-    scratch vectors, input tables, contact pairs."""
-    k = simulation.stiffness
-    n_dofs = k.shape[0]
-    total = k.data.nbytes + k.indices.nbytes + k.indptr.nbytes + 6 * 8 * n_dofs + simulation.mass.nbytes
-    block_bytes = 36 if simulation.scene["time"].get("matrix_precision") == "single" else 72
-    total += upper_triangle_blocks(k) * (block_bytes + 4) + 8 * (n_dofs // 3 + 1)
-    if simulation.input_arrays is not None:
-        total += sum(v.nbytes for v in simulation.input_arrays.values() if isinstance(v, np.ndarray))
-    total += simulation.dashpot_matrices.nbytes * 2
-    if simulation.contact_arrays is not None:
-        n_pairs = len(simulation.contact_arrays["area"])
-        total += sum(v.nbytes for v in simulation.contact_arrays.values() if isinstance(v, np.ndarray))
-        total += n_pairs * (3 * 3 * 8 + 8)  # kernel state per pair: forces, D, state (estimate)
-    if simulation.nonlinear is not None:
-        total += simulation.nonlinear.memory_bytes  # element arrays, per-point state, buffers
-    return int(total)
-
-
 def plan(scene: Scene) -> dict:
     """What a run of the scene would do, without running it: effects, sizes, dt, memory and time.
 
@@ -477,95 +445,9 @@ def plan(scene: Scene) -> dict:
     described, not solved; with local stepping on, the set-up check of its map is estimated, not run
     (it runs when the run starts: 35 s on the coarse case 3, 400-1 060 s on the paper-scale cases).
     """
-    from pyfem.ranks import distributed
+    from pyfem import distributed_model  # rank 0's plan ({} on the others)
 
-    if distributed():  # the distributed model's plan (rank 0's; {} on the others), the same lines
-        from pyfem import distributed_model
-
-        return distributed_model.check(scene)
-    simulation = prepare(scene, solve_static=False, preview_levels=True)
-    simulation.lts_check_deferred = True
-    return simulation_plan(simulation)
-
-
-def simulation_plan(simulation: Simulation, trial_steps: int = 20) -> dict:
-    """The plan of a prepared simulation (`plan`; `run` prints it before the time loop).
-
-    The time per step is measured on a stepper of its own, run `trial_steps` steps from rest and
-    then dropped. It is made from a copy of the simulation without the static stage's state
-    (static=None: fresh element-loop components and contact pairs), so the state a solved stage
-    hands to the run's stepper is never touched.
-    """
-    import dataclasses
-
-    from pyfem.static import plan_report
-    from pyfem.support import support_plan
-
-    scene = simulation.scene
-    nonlinear = simulation.nonlinear
-    kept = None if nonlinear is None else nonlinear.components  # the trial's fresh ones must not replace them
-    trial = dataclasses.replace(simulation, static=None, contact_pairs=None,
-                                support=[group.fresh() for group in simulation.support])
-    stepper = make_stepper(trial)
-    simulation.lts_stability = trial.lts_stability  # checked once per model (local time stepping)
-    if trial.node_levels is None and simulation.node_levels is not None:  # "auto" fell back
-        fall_back_to_global_stepping(simulation, trial.lts_stability)
-    if simulation.node_levels is not None:  # whole global steps of local time stepping
-        ratio = 2 ** int(simulation.node_levels.max())
-        trial_steps = ratio * max(1, -(-trial_steps // ratio))
-    n = simulation.stiffness.shape[0]
-    u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    start = time.perf_counter()
-    stepper.run(u, v, a, trial_steps, 0.0)
-    per_step = (time.perf_counter() - start) / trial_steps
-    phases = phase_split(stepper.phase_seconds(), per_step * trial_steps)
-    del stepper
-    if nonlinear is not None:
-        nonlinear.components = kept
-    model = simulation.model
-    ts = simulation.time_step
-    element_loop = element_loop_plan(simulation.nonlinear, per_step, simulation.time_step,
-                                     phases.get("element_loop", {}).get("ms_per_step", 0.0) * 1e-3)
-    return {
-        **model_lines(scene, element_name(model, scene["mesh"]["order"]), model.n_cells, len(simulation.mass)),
-        **({"free field": free_field_words(scene)} if "seismic_input" in scene.effects else {}),
-        **({"contact pairs": len(simulation.contact_arrays["area"])} if simulation.contact_arrays else {}),
-        **({"interface wear": wear_words(simulation.contact_arrays["deterioration"],
-                                         run_origin(simulation.lead_in, ts) + simulation.n_steps * ts.dt)["note"]}
-           if simulation.contact_arrays and simulation.contact_arrays["deterioration"] is not None else {}),
-        **face_lines(face_report(model), model.free_surfaces),
-        "dt": f"{ts.dt:.6g} s ({ts.reason})",
-        **({"local stepping (auto)": simulation.lts_decision} if simulation.lts_decision else {}),
-        **({"local stepping": lts_stability_line(simulation.lts_stability)} if simulation.lts_stability else {}),
-        **({"local stepping": deferred_check_line(int(simulation.node_levels.max()), per_step)}
-           if simulation.lts_stability is None and simulation.node_levels is not None else {}),
-        **lts_preview_plan(simulation, {name: entry["ms_per_step"] for name, entry in phases.items()}),
-        **element_loop,
-        **({"static stage": plan_report(scene, model)} if "static" in scene else {}),
-        **({"support": support_plan(simulation)} if simulation.support else {}),
-        **interface_slip_plan(scene, model),
-        **resolution_plan(scene, model),
-        "steps": simulation.n_steps,
-        "memory": f"{memory_estimate(simulation) / 2**20:.1f} MiB",
-        **time_lines(scene, per_step, trial_steps, phases, simulation.n_steps, simulation.lead_in),
-    }
-
-
-def lts_preview_plan(simulation: Simulation, phases_ms: dict) -> dict:
-    """check's line with local stepping off where the scene allows it: the speed-up its rate levels
-    and this step's measured phases predict (local_stepping.predicted_speed_up), and how to turn it on."""
-    if simulation.lts_preview is None:
-        return {}
-    from pyfem import local_stepping
-
-    model = simulation.model
-    cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
-    pairs = simulation.contact_arrays["pairs"] if simulation.contact_arrays is not None else None
-    rows = local_stepping.row_split(simulation.nonlinear, pairs is not None)
-    p = local_stepping.predicted_speed_up(simulation.lts_preview, cell_nodes, simulation.nonlinear,
-                                          simulation.stiffness, pairs, simulation.time_step, phases_ms, rows)
-    return lts_preview_lines(p, simulation.scene, simulation.lts_decision, simulation.nonlinear is not None,
-                             pairs is not None, rows)
+    return distributed_model.check(scene)
 
 
 def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False) -> dict:
@@ -590,190 +472,6 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     Returns:
         The run summary (also written to run.json).
     """
-    from pyfem.ranks import distributed
+    from pyfem import distributed_model  # every rank builds and steps its part; one rank: the whole model
 
-    if distributed():  # under mpirun each rank builds and steps its part only
-        from pyfem import distributed_model
-
-        return distributed_model.run(scene, out_dir, on_plan=on_plan, progress=progress, resume=resume)
-    from tqdm import tqdm
-
-    from pyfem import checkpoint as checkpoints
-    from pyfem.interrupts import RunInterrupted, StopSignals
-    from pyfem.output import RunWriter
-
-    wall_start = time.perf_counter()
-    saved = checkpoints.read_checkpoint(out_dir, state=False) if resume else None  # refused before any work
-    if saved is not None and saved.meta.get("model") == "distributed":
-        raise SceneError("--resume", str(out_dir), "the checkpoint of a run of the serial path",
-                         f"--resume {saved.path}: written by the distributed model (each rank's state in its own "
-                         "file, keyed by position); resume it under mpirun on any number of ranks, or on one rank "
-                         "with PYFEM_ONE_MODEL=1")
-    if saved is not None:
-        saved = checkpoints.read_checkpoint(out_dir)
-    if saved is not None:
-        saved.check_scene(scene)  # another scene is refused before the model is built
-    with StopSignals() as signals:
-        from pyfem import static_output
-
-        # A resumed run takes the stage from static/hand_over.npz instead of solving it again.
-        stage = static_output.read_hand_over(out_dir) if saved is not None and "static" in scene else None
-        report = saved.meta.get("lts_stability") if saved is not None else None
-
-        def as_first_sitting(simulation):
-            # "auto" fell back to global stepping in the first sitting: the same now, before the
-            # stage's hand-over (which holds the first sitting's dt) is compared with the model
-            if (report and not report["stable"] and simulation.node_levels is not None
-                    and scene["time"].get("local_stepping") == "auto"):
-                fall_back_to_global_stepping(simulation, report)
-            return simulation
-
-        try:
-            simulation = as_first_sitting(prepare(scene, solve_static=stage is None))  # scene/mesh errors surface here
-        except RunInterrupted as error:  # the set-up keeps nothing: say what was lost
-            error.setup_seconds = time.perf_counter() - wall_start
-            error.setup_words = "mesh, matrices" + (" and the static stage" if "static" in scene and stage is None
-                                                    else "")
-            raise
-        if saved is not None:
-            saved.check_model(simulation)  # before a stage is solved again for a checkpoint it would refuse
-            saved.check_end(run_origin(simulation.lead_in, simulation.time_step)
-                            + simulation.n_steps * simulation.time_step.dt, scene["time"]["duration"])
-        restored = stage is not None and static_output.restore_hand_over(simulation, stage)
-        if stage is not None and not restored:
-            simulation = as_first_sitting(prepare(scene))  # the file is of another model: the stage is solved again
-        if saved is not None:
-            if report and simulation.node_levels is not None:
-                # The same model and levels (the fingerprint): the LTS map's check is not run again
-                # (852 s on the paper-scale case 1); run.json keeps the first sitting's report.
-                simulation.lts_stability = saved.meta["lts_stability"]
-        if on_plan is not None:
-            plan = simulation_plan(simulation)
-            if saved is not None:  # the plan's estimates are a whole run's: say what this sitting does
-                stage_words = ("" if "static" not in scene else
-                               "; the static stage read from static/hand_over.npz, not solved again" if restored
-                               else "; the static stage solved again (no hand-over file of this model)")
-                plan = {"resuming": f"from the checkpoint at t = {saved.t:.6g} s of {scene['time']['duration']:g} s"
-                                    f"{stage_words}", **plan}
-                if restored:  # not solved in this sitting: no estimate of its time (issue 51)
-                    plan.pop("static stage estimate", None)
-            on_plan(plan)
-        writer = RunWriter(out_dir, simulation)
-        # the set-up counts towards the first checkpoint (a long stage is not solved twice)
-        clock = checkpoints.CheckpointClock(scene["output"]["checkpoint_interval"],
-                                            elapsed=time.perf_counter() - wall_start)
-        write_checkpoint = None  # set once the state (u, v, a, t, kernel, writer) is whole
-        stepper = None
-        try:
-            stepper = make_stepper(simulation)
-            n = simulation.stiffness.shape[0]
-            ts = simulation.time_step
-            n_outputs = simulation.n_steps // ts.steps_per_output
-            previous = {"wall_seconds": 0.0, "loop_seconds": 0.0, "output_seconds": 0.0, "phases": {}}
-            if saved is None:
-                with signals.deferred():
-                    writer.start()
-                    if simulation.static is not None:  # static/ and the stage's stress in the fields
-                        from pyfem.static_output import write_static_outputs
-
-                        write_static_outputs(writer)
-                u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-                origin = run_origin(simulation.lead_in, ts)
-                t = origin
-                done = 0
-                stepper.reset_energy(u, v, a, t)
-                with signals.deferred():
-                    writer.sample(t, u, v, a, stepper.energy())
-            else:
-                with signals.deferred():
-                    writer.resume(saved.meta["writer"], saved.writer, saved.t)
-                    if simulation.static is not None:
-                        static_output.static_stress_in_fields(writer)
-                        if not isinstance(simulation.static, static_output.SavedStage):  # solved again:
-                            static_output.write_hand_over(Path(out_dir) / "static", simulation)  # once
-                stepper.load_state(saved.kernel)
-                u, v, a = saved.u.copy(), saved.v.copy(), saved.a.copy()
-                t, done = saved.t, saved.outputs_done
-                origin = run_origin(simulation.lead_in, ts)
-                previous = saved.meta["timing"]
-            stepper.reset_phase_seconds()
-            output_seconds = 0.0
-            loop_start = time.perf_counter()
-
-            def timing() -> dict:
-                """Wall time so far, over every sitting of this run."""
-                now = time.perf_counter()
-                phases = dict(stepper.phase_seconds())
-                return {"wall_seconds": previous["wall_seconds"] + now - wall_start,
-                        "loop_seconds": previous["loop_seconds"] + now - loop_start,
-                        "output_seconds": previous["output_seconds"] + output_seconds,
-                        "phases": {key: previous["phases"].get(key, 0.0) + value for key, value in phases.items()}}
-
-            def checkpoint_now(final: bool = False) -> None:
-                """The state at the last sample to checkpoint.npz; final: the finished run's (kept, so
-                that a longer time.duration extends the run; not counted with the periodic ones)."""
-                began = time.perf_counter()
-                writer_meta, writer_arrays = writer.checkpoint_state()
-                meta = {"fingerprint": checkpoints.model_fingerprint(simulation), "t": t, "outputs_done": done,
-                        "timing": timing(), "writer": writer_meta}
-                if final:
-                    meta["final"] = True
-                if simulation.lts_stability:
-                    meta["lts_stability"] = simulation.lts_stability
-                checkpoints.write_checkpoint(out_dir, meta, u, v, a, stepper.save_state(), writer_arrays)
-                if not final:
-                    clock.written(time.perf_counter() - began)
-
-            write_checkpoint = checkpoint_now
-            if progress is not None:
-                progress.start(t)
-            with tqdm(total=n_outputs, initial=done, desc=scene["title"][:30], unit="out", leave=False,
-                      disable=progress is not None or not writer.show_progress) as bar:
-                while done < n_outputs:
-                    # One block: a stop signal waits for the sample, so the state is whole for a checkpoint.
-                    with signals.deferred():
-                        # The block's start and end times as products, not sums: no drift over a
-                        # long record (2.0 is written 2.0, not 1.9999999999999793), the same on resume.
-                        stepper.run(u, v, a, ts.steps_per_output, origin + done * ts.steps_per_output * ts.dt)
-                        done += 1
-                        t = origin + done * ts.steps_per_output * ts.dt
-                        reactions = stepper.reactions() if simulation.constraints is not None else None
-                        if not np.isfinite(u).all():
-                            raise FloatingPointError(f"the solution became non-finite at t = {t:.6g} s")
-                        output_start = time.perf_counter()
-                        writer.sample(t, u, v, a, stepper.energy(), reactions)
-                        output_seconds += time.perf_counter() - output_start
-                        if clock.due() and done < n_outputs:
-                            write_checkpoint()
-                    bar.update()
-                    if progress is not None:
-                        progress(t)
-            with signals.deferred():  # the final state, kept: a longer time.duration and --resume extend the run
-                write_checkpoint(final=True)
-            total = timing()
-            phases = phase_split(total["phases"], total["loop_seconds"], total["output_seconds"])
-            return writer.finish(wall_seconds=total["wall_seconds"], loop_seconds=total["loop_seconds"],
-                                 phases=phases, checkpoints={"written": clock.count, "seconds": clock.seconds,
-                                                             "interval": clock.interval})
-        except KeyboardInterrupt as error:
-            interrupted = error if isinstance(error, RunInterrupted) else RunInterrupted()
-            if writer.started:
-                with signals.deferred(reraise=False):  # a second Ctrl-C must not cut the files short
-                    if write_checkpoint is not None:
-                        try:
-                            write_checkpoint()
-                        except Exception as problem:  # the interruption must still be reported
-                            writer.checkpoint_problem = f"{type(problem).__name__}: {problem}"
-                    writer.fail(f"interrupted by {interrupted.signal_name}", interrupted=True)
-                interrupted.time_reached = writer.times[-1] if writer.times else None
-                interrupted.out_dir = writer.out_dir
-            if interrupted is error:
-                raise
-            raise interrupted from error
-        except BaseException as error:
-            if writer.started:
-                with signals.deferred(reraise=False):
-                    writer.fail(f"{type(error).__name__}: {error}")
-                reached = f"t = {writer.times[-1]:.6g} s" if writer.times else "no sample"
-                error.add_note(f"run failed; the results up to {reached} are kept in {writer.out_dir}")
-            raise
+    return distributed_model.run(scene, out_dir, on_plan=on_plan, progress=progress, resume=resume)

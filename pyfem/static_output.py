@@ -20,55 +20,14 @@ fields' stress starts from the stage's (RunWriter.cell_strain).
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from pyfem.output import _write_json, tensor6
+from pyfem.output import tensor6
 
 # Monitor stress names of monitors/NAME.csv and their tensor components.
 VOIGT_NAMES = {"sxx": (0, 0), "syy": (1, 1), "szz": (2, 2), "sxy": (0, 1), "syz": (1, 2), "sxz": (0, 2)}
-
-
-def write_static_outputs(writer) -> None:
-    """Writes static/ into the run directory of a started RunWriter and makes the stage's stress the
-    static part of the dynamic fields' stress.
-
-    Args:
-        writer: pyfem.output.RunWriter whose simulation has a solved stage (simulation.static).
-    """
-    simulation = writer.simulation
-    folder = Path(writer.out_dir) / "static"
-    folder.mkdir(parents=True, exist_ok=True)
-    static_stress_in_fields(writer)
-    from pyfem.static_plots import write_static_plots
-
-    report = static_report(simulation)
-    report["plots"] = write_static_plots(folder, simulation)
-    states = getattr(simulation.static, "support_states", None)
-    if states:  # static/support.png and static/support.xdmf: the bolts as the stage leaves them
-        from pyfem.support_output import write_outputs
-
-        drawn = write_outputs(folder, states, simulation.scene, simulation.model, 0.0, "support.png",
-                              "after the static stage")
-        if drawn:
-            report["plots"]["support"] = drawn
-    _write_json(folder / "static.json", report)
-    write_static_fields(folder, simulation)
-    write_hand_over(folder, simulation)
-    rows = getattr(simulation.static, "support_rows", None)
-    if rows:  # the bolts and cables of static.support as the stage leaves them
-        from pyfem.support import write_csv
-
-        write_csv(folder / "support.csv", rows, peak=False)
-
-
-def static_stress_in_fields(writer) -> None:
-    """Makes the stage's stress the static part of the dynamic fields' stress (a resumed run does
-    this without writing static/ again)."""
-    if writer.cell_strain is not None:
-        writer.cell_strain.static = writer.simulation.static.cell_stress
 
 
 def static_report(simulation) -> dict:
@@ -173,79 +132,3 @@ def write_static_fields(folder: Path, simulation) -> None:
 # ---------------------------------------------------------------------------------------------
 
 HAND_OVER_NAME = "hand_over.npz"
-_HAND_OVER_ARRAYS = ("hand_over_force", "cell_stress", "monitor_stress", "pair_forces")
-
-
-class SavedStage:
-    """The stage as a resumed run holds it (read from static/hand_over.npz, nothing solved): what the
-    dynamic run takes from it outside the kernel's checkpointed state. The element-loop components
-    and contact pairs are built fresh (components = contact = None) and then receive the
-    checkpoint's state, which holds their committed points, sigma0 and pair states.
-
-    Attributes:
-        hand_over_force: (n_dofs,) the constant out-of-balance force (N).
-        cell_stress: (n_cells, 3, 3) the stage's stress, the static part of the fields' (Pa).
-        monitor_stress: (m, 3, 3) or None: the monitors' static stress (Pa).
-        pair_forces: (n_pairs, 3) or None: the pairs' static forces F0 (N).
-        saved_summary: run.json's "static" of the sitting that solved the stage.
-    """
-
-    components = None
-    contact = None
-
-    def __init__(self, arrays: dict, summary: dict):
-        self.hand_over_force = arrays["hand_over_force"]
-        self.cell_stress = arrays["cell_stress"]
-        self.monitor_stress = arrays.get("monitor_stress")
-        self.pair_forces = arrays.get("pair_forces")
-        self.saved_summary = summary
-
-    def summary(self) -> dict:
-        return self.saved_summary
-
-
-def write_hand_over(folder: Path, simulation) -> Path:
-    """static/hand_over.npz: the stage's hand-over force, cell and monitor stress, pair forces,
-    run.json summary and the model's fingerprint, so that `--resume` need not solve the stage again
-    (18 min on the paper-scale mesh). Written atomically, like the checkpoint."""
-    from pyfem.checkpoint import model_fingerprint, write_atomically
-
-    state = simulation.static
-    arrays = {name: np.asarray(getattr(state, name)) for name in _HAND_OVER_ARRAYS if getattr(state, name) is not None}
-    meta = {"fingerprint": model_fingerprint(simulation), "summary": state.summary()}
-    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    return write_atomically(Path(folder) / HAND_OVER_NAME, arrays)
-
-
-def read_hand_over(out_dir) -> tuple[dict, dict] | None:
-    """(arrays, meta) of a run directory's static/hand_over.npz, or None when there is none or it
-    cannot be read (a run begun before the file existed: the stage is solved again)."""
-    path = Path(out_dir) / "static" / HAND_OVER_NAME
-    if not path.exists():
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            meta = json.loads(bytes(data["meta"]).decode())
-            return {name: np.array(data[name]) for name in _HAND_OVER_ARRAYS if name in data}, meta
-    except (OSError, ValueError, KeyError):
-        return None
-
-
-def restore_hand_over(simulation, saved: tuple[dict, dict]) -> bool:
-    """Makes a saved hand-over the stage of `simulation`, prepared with solve_static=False: the
-    monitors' static stress and the pairs' static forces as `pyfem.static.hand_over` leaves them.
-    Returns False (nothing changed) when the file is of another model than this one."""
-    from pyfem.checkpoint import _drop_decided, _first_difference, model_fingerprint
-
-    arrays, meta = saved
-    fingerprint = json.loads(json.dumps(meta["fingerprint"]))  # a copy, without the keys written
-    _drop_decided(fingerprint.get("scene", {}))                # before the fingerprint left them out
-    if _first_difference(fingerprint, model_fingerprint(simulation)) is not None:
-        return False
-    stage = SavedStage(arrays, meta["summary"])
-    if simulation.monitor_stress is not None and stage.monitor_stress is not None:
-        simulation.monitor_stress.static = stage.monitor_stress
-    if simulation.contact_arrays is not None and stage.pair_forces is not None:
-        simulation.contact_arrays["static_force"] = np.ascontiguousarray(stage.pair_forces, dtype=np.float64)
-    simulation.static = stage
-    return True

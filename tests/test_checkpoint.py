@@ -156,22 +156,28 @@ def test_resume_refuses_another_scene_a_finished_run_and_no_checkpoint(tmp_path)
     assert finished.returncode == 2 and len(errors) == 1 and "finished" in errors[0], finished.stderr
 
 
-def test_each_execution_path_refuses_the_other_s_checkpoint_in_one_line(tmp_path):
-    """Until the serial path goes (issue 47): a finished one-rank run of each path, extended with
-    --resume by the other (PYFEM_ONE_MODEL=1 sends a one-rank run to the distributed model), is refused
-    in one line naming --resume and the way that resumes it, exit 2, its files untouched."""
-    one_model = dict(ENV, PYFEM_ONE_MODEL="1")
-    serial = {key: value for key, value in ENV.items() if key != "PYFEM_ONE_MODEL"}
-    for written, resumed, words in ((serial, one_model, "without PYFEM_ONE_MODEL=1"),
-                                    (one_model, serial, "on one rank with PYFEM_ONE_MODEL=1")):
-        out = tmp_path / ("serial" if written is serial else "one_model")
-        pyfem_run(out, "--set", "time.duration=0.02", env=written)
-        before = history_files(out)
-        refused = pyfem_run(out, "--set", "time.duration=0.04", "--resume", check=False, env=resumed)
-        errors = [line for line in refused.stderr.splitlines() if line.startswith("error: ")]
-        assert refused.returncode == 2 and len(errors) == 1, refused.stderr
-        assert "--resume" in errors[0] and words in errors[0] and "Traceback" not in refused.stderr, errors[0]
-        assert history_files(out) == before
+def test_a_checkpoint_of_the_former_serial_path_is_refused_in_one_line(tmp_path):
+    """One model (issue 47): the serial path and its one-file checkpoint layout are gone. A run
+    directory holding such a checkpoint (its state in one file, no "model" in its record), continued
+    with --resume, is refused in one line naming --resume and what to do, exit 2, its files untouched."""
+    import json as json_module
+
+    import numpy as np
+
+    from pyfem.checkpoint import CHECKPOINT_NAME, FORMAT, write_atomically
+
+    out = tmp_path / "former"
+    pyfem_run(out, "--set", "time.duration=0.02")
+    meta = {"format": FORMAT, "t": 0.02, "outputs_done": 2, "fingerprint": {}, "kernel_blocks": [],
+            "writer_arrays": []}
+    write_atomically(out / CHECKPOINT_NAME, {"u": np.zeros(3), "v": np.zeros(3), "a": np.zeros(3),
+                                             "meta": np.frombuffer(json_module.dumps(meta).encode(), dtype=np.uint8)})
+    before = history_files(out)
+    refused = pyfem_run(out, "--set", "time.duration=0.04", "--resume", check=False)
+    errors = [line for line in refused.stderr.splitlines() if line.startswith("error: ")]
+    assert refused.returncode == 2 and len(errors) == 1, refused.stderr
+    assert "--resume" in errors[0] and "serial path of an earlier version" in errors[0], errors[0]
+    assert "Traceback" not in refused.stderr and history_files(out) == before
 
 
 def test_a_refused_resume_names_every_changed_key_with_both_values_or_another_scene():
@@ -400,24 +406,25 @@ def test_checkpoint_of_another_model_is_refused_before_anything_is_touched(refer
 
 
 
+def fingerprint(deterioration=None, steps: int = 10) -> dict:
+    """A model's fingerprint as the model writes it (DistributedRun._fingerprint), without its scene."""
+    return {"dofs": 6, "dt": 1e-3, "steps": steps, "ranks": 1, "time_origin": 0.0, "levels": None,
+            **({"deterioration": list(deterioration)} if deterioration is not None else {})}
+
+
 def test_a_checkpoint_of_the_old_wear_clock_is_refused():
     """The wear clock's start (the record's lead-in) is not a scene key but changes what the pairs do:
     a checkpoint whose fingerprint lacks it (written before 2026-11-27, the clock from the run's
     start) or holds another start is refused by name; the same deterioration continues."""
-    from types import SimpleNamespace
-
-    simulation = SimpleNamespace(scene=stateful_scene(), stiffness=np.zeros((6, 6)), time_step=SimpleNamespace(dt=1e-3),
-                                 n_steps=10, mass=np.ones(2), node_levels=None,
-                                 contact_arrays={"deterioration": (0.75, 5.0, 20.0, 0.883, 0.02, 0.032, 1.0)})
-    saved = checkpoint.model_fingerprint(simulation)
-    assert saved["deterioration"][-1] == 1.0
-    checkpoint.Checkpoint(path=Path("run/checkpoint.npz"), meta={"fingerprint": saved}, u=None, v=None,
-                          a=None).check_model(simulation)
-    for old in ({key: value for key, value in saved.items() if key != "deterioration"},
-                dict(saved, deterioration=[0.75, 5.0, 20.0, 0.883, 0.02, 0.032, 0.0])):
+    scene = stateful_scene()
+    ours = fingerprint((0.75, 5.0, 20.0, 0.883, 0.02, 0.032, 1.0))
+    checkpoint.Checkpoint(path=Path("run/checkpoint.npz"), meta={"fingerprint": ours, "t": 0.0}, u=None, v=None,
+                          a=None).check_model(ours, scene, 0.01)
+    for old in ({key: value for key, value in ours.items() if key != "deterioration"},
+                dict(ours, deterioration=[0.75, 5.0, 20.0, 0.883, 0.02, 0.032, 0.0])):
         with pytest.raises(SceneError, match="deterioration differs from the checkpoint's .*lead-in included"):
-            checkpoint.Checkpoint(path=Path("run/checkpoint.npz"), meta={"fingerprint": old}, u=None, v=None,
-                                  a=None).check_model(simulation)
+            checkpoint.Checkpoint(path=Path("run/checkpoint.npz"), meta={"fingerprint": old, "t": 0.0}, u=None, v=None,
+                                  a=None).check_model(ours, scene, 0.01)
 
 
 def test_a_checkpoint_knows_its_files_by_content_not_by_path(tmp_path):
@@ -592,19 +599,14 @@ def test_a_finished_run_with_every_state_extends_bit_for_bit(tmp_path):
 def test_without_a_record_another_duration_is_another_wear_and_refused():
     """With deterioration and no record t_s = time.duration: an extension would change the wear of the
     part already run, so it is refused in one line naming time.duration."""
-    from types import SimpleNamespace
+    def wear(t_s):
+        return fingerprint((0.75, 5.0, t_s, 0.883, 0.02, 0.032, 0.0))
 
-    def simulation(t_s):
-        return SimpleNamespace(scene=stateful_scene(), stiffness=np.zeros((6, 6)), time_step=SimpleNamespace(dt=1e-3),
-                               n_steps=10, mass=np.ones(2), node_levels=None,
-                               contact_arrays={"deterioration": (0.75, 5.0, t_s, 0.883, 0.02, 0.032, 0.0)})
-
-    saved = checkpoint.Checkpoint(path=Path("run/checkpoint.npz"),
-                                  meta={"fingerprint": checkpoint.model_fingerprint(simulation(0.30))},
+    saved = checkpoint.Checkpoint(path=Path("run/checkpoint.npz"), meta={"fingerprint": wear(0.30), "t": 0.0},
                                   u=None, v=None, a=None)
-    saved.check_model(simulation(0.30))
+    saved.check_model(wear(0.30), stateful_scene(), 0.01)
     with pytest.raises(SceneError, match=r"wear time t_s .* is time\.duration"):
-        saved.check_model(simulation(0.45))
+        saved.check_model(wear(0.45), stateful_scene(), 0.01)
 
 
 def test_a_layered_ricker_input_follows_the_duration_and_is_refused():
@@ -613,23 +615,18 @@ def test_a_layered_ricker_input_follows_the_duration_and_is_refused():
     (workflows/scenes/layered_site_sv30.toml, measured). Another duration is refused in one line naming
     time.duration; the same duration (an interrupted run resumed) continues; a record through the
     same layers does not depend on the duration."""
-    from types import SimpleNamespace
-
     from pyfem.scene import load_scene
 
-    def simulation(duration, steps):
-        scene = load_scene(REPO / "workflows/scenes/layered_site_sv30.toml", [f"time.duration={duration}"])
-        return SimpleNamespace(scene=scene, stiffness=np.zeros((6, 6)), time_step=SimpleNamespace(dt=1e-3),
-                               n_steps=steps, mass=np.ones(2), node_levels=None, contact_arrays=None)
+    def scene(duration):
+        return load_scene(REPO / "workflows/scenes/layered_site_sv30.toml", [f"time.duration={duration}"])
 
-    assert checkpoint.input_follows_duration(simulation(0.3, 300).scene)
-    saved = checkpoint.Checkpoint(path=Path("run/checkpoint.npz"),
-                                  meta={"fingerprint": checkpoint.model_fingerprint(simulation(0.3, 300))},
+    assert checkpoint.input_follows_duration(scene(0.3))
+    saved = checkpoint.Checkpoint(path=Path("run/checkpoint.npz"), meta={"fingerprint": fingerprint(steps=300), "t": 0.0},
                                   u=None, v=None, a=None)
-    saved.check_model(simulation(0.3, 300))
+    saved.check_model(fingerprint(steps=300), scene(0.3), 0.3)
     with pytest.raises(SceneError, match=r"wave\.layers.* time\.duration = 0\.6 s is another input") as refused:
-        saved.check_model(simulation(0.6, 600))
+        saved.check_model(fingerprint(steps=600), scene(0.6), 0.6)
     assert refused.value.key == "time.duration" and "\n" not in str(refused.value)
-    recorded = simulation(0.3, 300).scene
+    recorded = scene(0.3)
     recorded["wave"]["motion"] = {"record": {"file": "elcentro.txt"}}
     assert not checkpoint.input_follows_duration(recorded)

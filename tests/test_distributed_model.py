@@ -437,26 +437,15 @@ def test_sigterm_to_one_rank_stops_both_with_a_checkpoint_that_resumes(tmp_path)
 
 @pytest.mark.parametrize("written_on, resumed_on", [(2, 1), (1, 2)])
 def test_a_checkpoint_resumes_on_any_rank_count_of_the_one_model(tmp_path, uninterrupted, written_on, resumed_on):
-    """One model (a one-rank run is the distributed model's, PYFEM_ONE_MODEL=1): the layers scene
-    killed (kill -9) after its first checkpoint on 2 ranks resumes on 1, killed on 1 resumes on 2,
-    each to the uninterrupted 2-rank run's histories within 1e-10 (the sums of another partition).
-    Until the serial path goes, it refuses such a checkpoint in one line naming --resume and the
-    way that resumes it, exit 2, the checkpoint kept."""
-    one_model = dict(ENV, PYFEM_ONE_MODEL="1")
-    serial = {key: value for key, value in ENV.items() if key != "PYFEM_ONE_MODEL"}
+    """One model (a run without mpirun is its one-rank case): the layers scene killed (kill -9) after
+    its first checkpoint on 2 ranks resumes on 1, killed on 1 resumes on 2, each to the uninterrupted
+    2-rank run's histories within 1e-10 (the sums of another partition)."""
     out = tmp_path / "killed"
-    kill_after_first_checkpoint(written_on, SCENES["layers"], out, 0.5, env=one_model)
-    if written_on > 1:
-        command = [PYTHON, "-m", "pyfem", "run", SCENES["layers"], "--out", str(out), *CHECKPOINTED, "--resume"]
-        refused = subprocess.run(command, cwd=REPO, env=serial, capture_output=True, text=True, timeout=600)
-        assert refused.returncode == 2, refused.stderr[-2000:]
-        lines = [line for line in refused.stderr.splitlines() if line.startswith("error:")]
-        assert len(lines) == 1 and "--resume" in lines[0] and "PYFEM_ONE_MODEL=1" in lines[0], refused.stderr
-        assert "Traceback" not in refused.stderr and (out / "checkpoint.npz").exists()
+    kill_after_first_checkpoint(written_on, SCENES["layers"], out, 0.5, env=ENV)
     command = [PYTHON, "-m", "pyfem", "run", SCENES["layers"], "--out", str(out), *CHECKPOINTED, "--resume"]
     if resumed_on > 1:
         command = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(resumed_on)] + command
-    result = subprocess.run(command, cwd=REPO, env=one_model, capture_output=True, text=True, timeout=600)
+    result = subprocess.run(command, cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]
     resumed = summary(out)
     assert resumed["status"] == "finished" and 0.0 < resumed["resumed"][0]["t"] < 3.0

@@ -158,14 +158,13 @@ def test_sigterm_mid_run_is_an_interrupt_too(tmp_path):
 def test_a_stop_in_the_set_up_says_what_was_lost(tmp_path, monkeypatch, capsys):
     """A stop while the model is built or its static stage solved (minutes on the case scenes) keeps
     nothing: one line says so and that the next run does the set-up again; no directory is made."""
-    from pyfem import cli, distributed_model, solver
+    from pyfem import cli, distributed_model
     from pyfem.interrupts import RunInterrupted
 
     def stopped(*args, **kwargs):
         raise RunInterrupted(signal.SIGINT)
 
-    monkeypatch.setattr(solver, "prepare", stopped)  # the serial path's set-up
-    monkeypatch.setattr(distributed_model, "build", stopped)  # the distributed model's (PYFEM_ONE_MODEL=1)
+    monkeypatch.setattr(distributed_model, "build", stopped)  # the model's set-up
     status = cli.main(["run", str(REPO / SCENE), "--out", str(tmp_path / "run")])
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 130

@@ -790,10 +790,8 @@ def test_auto_steps_globally_when_the_check_finds_the_map_unstable_also_after_a_
     plans = []
     fell_back = solver.run(scene_with("auto"), tmp_path / "auto", on_plan=plans.append)
     assert len(checks) == 1  # in the printed plan's trial stepper; the run's stepper did not check again
-    if fell_back.get("model") == "distributed":  # (PYFEM_ONE_MODEL=1) its plan comes before the stage and
-        assert plans[0]["local stepping (auto)"] == '"auto": on: forced by the test'  # the check, whose line follows
-    else:
-        assert plans[0]["local stepping (auto)"].startswith('"auto": off: its set-up check found')
+    # its plan comes before the stage and the check, whose line follows
+    assert plans[0]["local stepping (auto)"] == '"auto": on: forced by the test'
     print(fell_back["local_stepping"])
     assert fell_back["local_stepping"].startswith('"auto": off: its set-up check found the local time stepping '
                                                   "map unstable")

@@ -10,7 +10,6 @@ import pytest
 
 from pyfem import solver
 from pyfem.clock import DISTRIBUTED_PHASES, PHASES
-from pyfem.ranks import distributed
 from test_contact import block_scene
 from test_run_outputs import two_layer_scene
 
@@ -37,8 +36,6 @@ def test_phases_account_for_the_time_loop(tmp_path, scene_name):
     assert 0.0 < kernel + split["output"]["ms_per_step"] <= loop_ms * (1 + 1e-9)
     assert split["stiffness"]["ms_per_step"] > 0.0 and split["update"]["ms_per_step"] > 0.0
     assert split["element_loop"]["ms_per_step"] == 0.0, "no nonlinear material: no element loop"
-    if not distributed():  # no ghosts to exchange on the serial path (the distributed model's one rank: its timer)
-        assert split["exchange"]["ms_per_step"] == 0.0
     if scene_name == "wave, no contact":
         assert split["contact"]["ms_per_step"] == 0.0, "no contact: no contact time"
         assert split["input_forces"]["ms_per_step"] > 0.0

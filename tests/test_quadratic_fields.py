@@ -1,9 +1,10 @@
 """fields.xdmf of a second-order model holds every node (issue 47, one model; pyfem/quadratic_fields.py):
-the distributed model writes a Q2 box and a P2 tetrahedral box on its node mesh (the same cells with a
-second-order geometry: Hexahedron_27 / Tetrahedron_10), on one rank (PYFEM_ONE_MODEL=1) and on two
-(mpirun). Every node of the function space is a point of the file and its values are the serial run's
-(whose RunWriter splits each cell into 8 linear ones over the same nodes) within 1e-12 m; the cell
-data (stress, region) is per cell, the serial run's sub-cells' value.
+the model writes a Q2 box and a P2 tetrahedral box on its node mesh (the same cells with a
+second-order geometry: Hexahedron_27 / Tetrahedron_10), on one rank and on two (mpirun). Every node of
+the function space is a point of the file, in VTK's node order; a mid-edge node holds its own value,
+not the mean of the edge's ends (the field is not interpolated to Q1); two ranks write the one-rank
+file's values within 1e-12 m and its cell data (stress, region) per cell. (Before the serial path went,
+the one-rank file equalled the serial writer's, which split each cell into 8 linear ones, to 1e-12 m.)
 """
 import os
 import shutil
@@ -57,11 +58,8 @@ GEO = ('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 20, 10, 20};\nPhysical Vo
        "Mesh.MeshSizeMax = 10;\nMesh.MeshSizeMin = 10;\n")
 
 
-def run(scene: Path, out: Path, ranks: int, one_model: bool) -> Path:
+def run(scene: Path, out: Path, ranks: int) -> Path:
     env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1")
-    env.pop("PYFEM_ONE_MODEL", None)
-    if one_model:
-        env["PYFEM_ONE_MODEL"] = "1"
     command = [PYTHON, "-m", "pyfem", "run", str(scene), "--out", str(out)]
     if ranks > 1:
         mpirun = shutil.which("mpirun")
@@ -78,8 +76,7 @@ def files(request, tmp_path_factory):
     (base / "box.geo").write_text(GEO)
     scene = base / "scene.toml"
     scene.write_text(BOX if request.param == "box" else TET)
-    return request.param, {label: run(scene, base / label, ranks, one)
-                           for label, ranks, one in (("serial", 1, False), ("one", 1, True), ("two", 2, True))}
+    return request.param, {label: run(scene, base / label, ranks) for label, ranks in (("one", 1), ("two", 2))}
 
 
 def by_position(points: np.ndarray) -> np.ndarray:
@@ -89,13 +86,15 @@ def by_position(points: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("path", ["one", "two"])
 def test_every_node_of_a_second_order_model_is_in_the_fields_file(files, path):
     kind, paths = files
-    serial, fields = read_fields(paths["serial"]), read_fields(paths[path])
+    fields = read_fields(paths[path])
     assert fields.cells.shape[1] == (27 if kind == "box" else 10)  # quadratic cells, not their corners
     text = paths[path].read_text()
     assert ("Hexahedron_27" if kind == "box" else "Tetrahedron_10") in text
     # Every node of the function space: a Q2 box of 2 x 1 x 2 cells has 5 x 3 x 5 nodes; a P2 mesh
-    # its vertices and edge midpoints (the serial file's points: every node).
-    n_nodes = 5 * 3 * 5 if kind == "box" else len(serial.points)
+    # its vertices and edge midpoints.
+    vertices = np.unique(fields.cells[:, :8 if kind == "box" else 4])
+    n_nodes = 5 * 3 * 5 if kind == "box" else vertices.size + len({tuple(sorted(edge)) for cell in fields.cells.tolist()
+                                                                   for edge in _tet_edges(cell)})
     assert len(fields.points) == n_nodes == len(np.unique(np.round(fields.points, 6), axis=0))
     assert np.unique(fields.cells).size == n_nodes
     # VTK's node order (ParaView's): edge midpoints, then (Q2) face centres and the cell centre.
@@ -107,29 +106,39 @@ def test_every_node_of_a_second_order_model_is_in_the_fields_file(files, path):
             np.testing.assert_allclose(x[:, 20 + k], x[:, list(face)].mean(axis=1), atol=1e-9)
         np.testing.assert_allclose(x[:, 26], x[:, :8].mean(axis=1), atol=1e-9)
     else:
-        edges = [(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)]
+        edges = TET_EDGES
     first = 8 if kind == "box" else 4
     for k, (a, b) in enumerate(edges):
         np.testing.assert_allclose(x[:, first + k], 0.5 * (x[:, a] + x[:, b]), atol=1e-9)
-    mine, theirs = by_position(fields.points), by_position(serial.points)
-    assert np.array_equal(np.round(fields.points[mine], 9), np.round(serial.points[theirs], 9))
-    assert fields.times == serial.times and len(fields.times) >= 3
-    for (t, point, cell), (_, serial_point, serial_cell) in zip(fields.steps, serial.steps):
-        for name in ("displacement", "velocity"):
-            assert point[name].shape == (n_nodes, 3)
-            np.testing.assert_allclose(point[name][mine], serial_point[name][theirs], rtol=0, atol=1e-12)
-    last, serial_last = fields.steps[-1], serial.steps[-1]
-    assert np.abs(serial_last[1]["displacement"]).max() > 1e-6  # the wave arrived
-    # Cell data per cell: each serial sub-cell's value is its parent's (the cell holding its nodes).
-    serial_in_mine = np.empty(n_nodes, dtype=np.int64)  # serial point -> this file's point
-    serial_in_mine[theirs] = mine
-    cell_sets = [set(nodes) for nodes in fields.cells.tolist()]
+    assert len(fields.times) >= 3
+    last = fields.steps[-1]
+    u = last[1]["displacement"]
+    assert u.shape == (n_nodes, 3) and np.abs(u).max() > 1e-6  # the wave arrived
+    # A mid-edge node holds its own value: the quadratic field, not its linear interpolation.
+    u_cells = u[fields.cells]
+    bent = max(np.abs(u_cells[:, first + k] - 0.5 * (u_cells[:, a] + u_cells[:, b])).max() for k, (a, b) in enumerate(edges))
+    assert bent > 1e-3 * np.abs(u).max(), bent
     assert last[2]["stress"].shape == (len(fields.cells), 6) and np.abs(last[2]["stress"]).max() > 0
-    for sub, nodes in enumerate(serial_in_mine[serial.cells].tolist()):
-        parents = [c for c, cell in enumerate(cell_sets) if set(nodes) <= cell]
-        assert len(parents) == 1
-        np.testing.assert_allclose(last[2]["stress"][parents[0]], serial_last[2]["stress"][sub], rtol=1e-9, atol=1e-3)
-        assert last[2]["region"][parents[0]] == serial_last[2]["region"][sub]
+    if path == "one":
+        return
+    one = read_fields(paths["one"])  # two ranks write the one-rank file's values, node by node and cell by cell
+    mine, theirs = by_position(fields.points), by_position(one.points)
+    assert np.array_equal(np.round(fields.points[mine], 9), np.round(one.points[theirs], 9))
+    assert fields.times == one.times
+    for (t, point, cell), (_, one_point, one_cell) in zip(fields.steps, one.steps):
+        for name in ("displacement", "velocity"):
+            np.testing.assert_allclose(point[name][mine], one_point[name][theirs], rtol=0, atol=1e-12)
+    centres = by_position(fields.points[fields.cells].mean(axis=1))
+    one_centres = by_position(one.points[one.cells].mean(axis=1))
+    np.testing.assert_allclose(last[2]["stress"][centres], one.steps[-1][2]["stress"][one_centres], rtol=1e-9, atol=1e-3)
+    assert np.array_equal(last[2]["region"][centres], one.steps[-1][2]["region"][one_centres])
+
+
+TET_EDGES = [(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)]
+
+
+def _tet_edges(cell):
+    return [(cell[a], cell[b]) for a, b in TET_EDGES]
 
 
 def test_the_file_is_an_hdf5_xdmf_time_series(files):
@@ -151,17 +160,14 @@ def test_the_file_is_an_hdf5_xdmf_time_series(files):
 def test_the_pair_fields_of_a_q2_contact_model_at_every_node(tmp_path):
     """A Q2 model with split interfaces in contact (tests/scenes/mpi_hard_contact.toml, coarser and
     shorter) on 2 ranks: displacement and the pair fields at every node (the two nodes of a pair
-    apart), the serial file's (the pairs slid: pair_slip > 0)."""
+    apart), the one-rank file's (the pairs slid: pair_slip > 0)."""
     from test_distributed_model import last_fields
 
     scene = REPO / "tests" / "scenes" / "mpi_hard_contact.toml"
     overrides = ["mesh.order=2", "mesh.h=8.0", "time.duration=0.3", "output.xdmf_interval=0.1"]
     fields = {}
-    for label, ranks, one in (("serial", 1, False), ("two", 2, True)):
+    for label, ranks in (("serial", 1), ("two", 2)):
         env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1")
-        env.pop("PYFEM_ONE_MODEL", None)
-        if one:
-            env["PYFEM_ONE_MODEL"] = "1"
         command = [PYTHON, "-m", "pyfem", "run", str(scene), "--out", str(tmp_path / label)]
         command += [item for key in overrides for item in ("--set", key)]
         if ranks > 1:

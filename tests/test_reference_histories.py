@@ -1,6 +1,7 @@
 """Today's histories, recorded (workflows/reference_histories.py, records in
 workflows/results/reference_histories/): the net under the merge of the serial and the
-distributed-model MPI paths into one (issue "One model, one time loop, one writer").
+distributed-model MPI paths into one (issue "One model, one time loop, one writer"); the serial
+path is gone, and its records are the net that a one-rank run of the one model still reproduces.
 
 Each scene is rerun with the command line its record was made with and every column of every
 monitor, pair monitor and energy history must equal the recorded one within 1e-10 of the column's
@@ -9,8 +10,8 @@ of run.json's key numbers and of the static stage's static.json. The MPI paths' 
 and why: the workflow's docstring and `Entry.mpi`.
 - default tier: the records are complete and were made with today's scene settings, and the three
   cheap scenes (the free-field box, the contact layers, the yielding layer under cracking concrete)
-  rerun serially (20 s in all, measured);
-- slow tier: the other three serially, and every scene on the distributed model on 2 and 3 ranks
+  rerun on one rank (20 s in all, measured);
+- slow tier: the other three on one rank, and every scene on the distributed model on 2 and 3 ranks
   (`mpirun`; a missing launcher fails; the whole-model MPI path these records also covered is gone).
 """
 import json
@@ -56,9 +57,13 @@ SERIAL = [pytest.param(name, marks=() if entry.cheap else pytest.mark.slow) for 
 
 
 @pytest.mark.parametrize("name", SERIAL)
-def test_the_serial_run_reproduces_its_record(name, tmp_path):
+def test_a_run_on_one_rank_reproduces_the_serial_record(name, tmp_path):
+    """One model (issue 47): a run without mpirun is the distributed model's one-rank case, and it
+    reproduces the records of the serial path it replaced, every summary key included (its
+    pictures' numbers, dt_critical, the local stepping check, case3_small's stage and static.json)."""
     out = tmp_path / name
     rh.run(name, out)
+    assert json.loads((out / "run.json").read_text())["model"] == "distributed"  # the one model
     assert_reproduces(name, out, None, 1)
 
 
@@ -77,18 +82,3 @@ def test_the_mpi_paths_reproduce_the_serial_record(name, model, ranks, tmp_path,
     out = tmp_path / name
     rh.run(name, out, ranks, model)
     assert_reproduces(name, out, model, ranks)
-
-
-# The one-model port (issue 47): the distributed model on one rank (PYFEM_ONE_MODEL=1) reproduces the
-# serial records to the serial rule, every summary key included (its pictures' numbers, dt_critical,
-# the local stepping check, case3_small's stage and its static.json); the cheap scenes in the default tier.
-ONE_MODEL = [pytest.param(name, marks=() if entry.cheap else pytest.mark.slow) for name, entry in rh.SCENES.items()]
-
-
-@pytest.mark.parametrize("name", ONE_MODEL)
-def test_the_distributed_model_on_one_rank_reproduces_the_serial_record(name, tmp_path, monkeypatch):
-    monkeypatch.setenv("PYFEM_ONE_MODEL", "1")
-    out = tmp_path / name
-    rh.run(name, out)
-    assert json.loads((out / "run.json").read_text())["model"] == "distributed"  # the path it is meant to test
-    assert_reproduces(name, out, None, 1)

@@ -188,9 +188,8 @@ def grid(spacing: float) -> np.ndarray:
 def test_fields_hold_every_node_and_clean_times(two_layer_run):
     """Every vertex of the mesh, at its coordinates, each once; cells of positive, equal volumes that
     fill the box. Q1 (h = 5): the 5 x 3 x 5 nodes. Q2 (h = 10): also the 5 x 3 x 5 nodes, every node
-    (the serial writer: each cell's 8 sub-hexahedra; the distributed model: 27-node hexahedra). (The
-    values at the nodes: the monitors' in tests/test_run.py, the serial run's in
-    tests/test_distributed_model.py and tests/test_quadratic_fields.py.)"""
+    (27-node hexahedra). (The values at the nodes: the monitors' in tests/test_run.py; every node of a
+    second-order mesh in tests/test_quadratic_fields.py.)"""
     out, scene = two_layer_run
     order = scene["mesh"]["order"]
     fields = read_fields(out / "fields.xdmf")
@@ -314,57 +313,3 @@ def test_monitor_plot_draws_the_stress_history_when_the_file_has_stress(tmp_path
         plots.monitor(png, csv)
         heights[label] = image.imread(png).shape[0]
     assert heights["stress"] > 1.2 * heights["plain"]  # 9 in against 7 in: the stress panel is there
-
-
-def test_the_distributed_model_writes_the_serial_runs_summaries_and_fields(tmp_path, monkeypatch):
-    """One rank of the distributed model (what `pyfem run` becomes) against the serial run on a weak
-    layer that yields under a concrete layer that cracks: run.json's regions, monitors' peaks (with
-    damage_max and plastic_strain_max), input_motion, nonlinear_regions and energy, and the last
-    fields (nodes and cells matched by position), equal to round-off."""
-    from pyfem import distributed_model
-    from pyfem.scene import load_scene
-
-    scene_file = REPOSITORY / "tests" / "scenes" / "distributed_layers.toml"
-    monkeypatch.delenv("PYFEM_ONE_MODEL", raising=False)
-    serial = solver.run(load_scene(scene_file), tmp_path / "serial")
-    ours = distributed_model.run(load_scene(scene_file), tmp_path / "ranks")
-    assert json.loads((tmp_path / "ranks" / "run.json").read_text())["model"] == "distributed"
-    # Something happened: the layer yielded, the concrete cracked, at the monitors too.
-    assert serial["nonlinear_regions"]["weak"]["yielded_volume"] > 0.0
-    assert serial["nonlinear_regions"]["concrete"]["peak_damage"] > 0.5
-    assert serial["monitors"]["layer"]["plastic_strain_max"] > 0.0 and serial["monitors"]["concrete"]["damage_max"] > 0.5
-    missing = set(serial) - set(ours)
-    assert not missing, missing
-    assert ours["regions"] == serial["regions"]
-    assert ours["input_motion"] == serial["input_motion"]  # the same tables, the same arithmetic
-    assert (tmp_path / "ranks" / "plots" / "input.png").stat().st_size > 10_000
-
-    def close(got, expected, where):
-        if isinstance(expected, dict):
-            assert set(got) == set(expected), where
-            for key in expected:
-                close(got[key], expected[key], f"{where}.{key}")
-        elif isinstance(expected, float):
-            assert got == pytest.approx(expected, rel=1e-10, abs=1e-300), where
-        else:
-            assert got == expected, where
-
-    for key in ("monitors", "nonlinear_regions"):
-        close(ours[key], serial[key], key)
-    assert ours["energy"]["balance_error"] == pytest.approx(serial["energy"]["balance_error"], abs=1e-12)
-    assert ours["peak_memory_mib"] > 0.0
-    # The last fields: every field of the serial run's, the same values at the same nodes and cells.
-    expected, got = (read_fields(tmp_path / name / "fields.xdmf") for name in ("serial", "ranks"))
-    assert got.times == expected.times and len(got.points) == len(expected.points)
-    for fields in (expected, got):
-        fields.point_order = np.lexsort(np.round(fields.points, 6).T)
-        fields.cell_order = np.lexsort(np.round(fields.points[fields.cells].mean(axis=1), 6).T)
-    (_, expected_points, expected_cells), (_, got_points, got_cells) = expected.steps[-1], got.steps[-1]
-    assert set(expected_points) == set(got_points) and set(expected_cells) == set(got_cells)
-    assert expected_cells["damage"].max() > 0.5
-    for data_expected, data_got, order in ((expected_points, got_points, "point_order"),
-                                           (expected_cells, got_cells, "cell_order")):
-        for name, values in data_expected.items():
-            mine = data_got[name][getattr(got, order)]
-            values = values[getattr(expected, order)]
-            assert np.abs(mine - values).max() <= 1e-10 * max(np.abs(values).max(), 1e-300), name

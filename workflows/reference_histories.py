@@ -126,8 +126,9 @@ code, summed in another order). Reports: dt_critical differs on the distributed 
 (another start state); everything else as in the last column. Since then both paths start both from
 the node coordinates: the records' dt_critical, local_stepping_stability and deformed_section were
 taken again (commit message "reference records: ..."; the histories unchanged), and the distributed
-model on one rank (PYFEM_ONE_MODEL=1) reproduces every summary number of the five scenes besides
-case3_small to the bit.
+model on one rank reproduced every summary number of the six scenes to the bit. The serial path is
+gone since: a run without mpirun is the distributed model's one-rank case, and `run` checks it
+against these records.
 """
 from __future__ import annotations
 
