@@ -1046,6 +1046,19 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
     return _ending_every_rank(work)
 
 
+def model_in_memory(scene: Scene, solve_stage: bool = True) -> "DistributedRun":
+    """The model of `scene` built in this process on its ranks (one without mpirun), with its [static]
+    stage solved and handed over (`solve_stage`), nothing written: what tests and studies inspect or
+    step directly instead of a run. `.part` (RankModel: matrix, mass, coords, faces, pairs), `.loop`
+    (element-loop regions), `.stage` (distributed_stage.RankStage: its report, displacements, forces),
+    `.time_step`, `.n_steps`, `.input_arrays`, `.monitors`; `.stepper()` builds the kernel's stepper
+    (global or local) with its exchange, as a run steps it (call it once: it takes the stage's pairs)."""
+    model = DistributedRun(scene, Path("model-in-memory"), MPI.COMM_WORLD)  # (its out directory is never made)
+    if solve_stage:
+        model.solve_stage()
+    return model
+
+
 def stage_rank_file(rank: int) -> str:
     """One rank's part of a relaxed stage's hand-over (static/hand_over.npz names the rank count)."""
     return f"hand_over.rank{rank}.npz"
@@ -1880,9 +1893,14 @@ class DistributedRun:
 
     # -- the run --------------------------------------------------------------------------------------
     def _set_up_stage(self, stage_file: dict | None = None) -> tuple:
-        """The [static] stage, solved and handed over, or on a resume read from static/hand_over.npz
-        (`stage_file`: `_stage_file`'s meta; the checkpoint's state is loaded over it), then
-        `stepper()`: (stepper, exchange)."""
+        """`solve_stage`, then `stepper()`: (stepper, exchange)."""
+        self.solve_stage(stage_file)
+        return self.stepper()
+
+    def solve_stage(self, stage_file: dict | None = None) -> None:
+        """The [static] stage, solved and handed over (`self.stage`), or on a resume read from
+        static/hand_over.npz (`stage_file`: `_stage_file`'s meta; the checkpoint's state is loaded
+        over it). Writes nothing."""
         part, comm = self.part, self.comm
         self.stage_read = stage_file is not None
         if stage_file is not None:
@@ -1903,7 +1921,6 @@ class DistributedRun:
             distributed_stage.hand_over(self.stage, part, self.loop, self.monitors, self.contact_arrays)
             self.stage.report["monitors"] = distributed_stage.monitor_report(self.stage, self.monitors, self.names,
                                                                              comm)
-        return self.stepper()
 
     def go(self, on_plan, progress, signals) -> dict:
         """The time loop from the set-up to the summary (rank 0's; {} elsewhere); `signals`: the
