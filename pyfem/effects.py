@@ -278,8 +278,8 @@ def warn_input_medium(scene: Scene, model, comm=None) -> None:
     from pyfem.material import Material
     from pyfem.seismic.forces import INPUT_TYPES
 
-    if "seismic_input" not in scene.effects:
-        return
+    if "seismic_input" not in scene.effects or scene["wave"]["free_field"]["method"] == "drm":
+        return  # (the domain-reduction method's input is the auxiliary model's, whatever the rock)
     wave = scene["wave"]
     medium = wave["medium"]
 

@@ -596,6 +596,9 @@ def run(scene: Scene, out_dir, on_plan=None, progress=None, resume: bool = False
         from pyfem import distributed_model
 
         return distributed_model.run(scene, out_dir, on_plan=on_plan, progress=progress, resume=resume)
+    if (scene.get("wave") or {}).get("free_field", {}).get("method") == "drm":
+        raise SceneError("wave.free_field.method", "drm", "\"half_space\" on the serial path: the domain-reduction "
+                         "method runs on the distributed model (PYFEM_ONE_MODEL=1 on one rank, or mpirun)")
     from tqdm import tqdm
 
     from pyfem import checkpoint as checkpoints
