@@ -141,15 +141,21 @@ def effective_input(part, drm_layer: DrmLayer, motion: np.ndarray, dt: float, t0
     position = np.minimum(position, len(drm_layer.nodes) - 1)
     in_layer = drm_layer.nodes[position] == part.local_nodes
     side = np.where(in_layer, np.where(drm_layer.on_face[position], 1, -1), 0)  # e: 1, b: -1, else 0
+    import scipy.sparse as sp
+
     rows = np.flatnonzero(side[:n_owned] != 0)
     n_samples = motion.shape[0]
-    forces = np.zeros((len(rows), 3, n_samples))
-    for r, i in enumerate(rows):
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            if side[j] == -side[i]:  # b row, e column: -K u0_e; e row, b column: +K u0_b
-                forces[r] += side[i] * (blocks[k] @ motion[:, position[j]].T)
-    g = np.ascontiguousarray(forces.reshape(3 * len(rows), n_samples))
+    entry_row = np.repeat(np.arange(n_owned), np.diff(indptr)[:n_owned])
+    entry_col = indices[:indptr[n_owned]]
+    # b row, e column: -K u0_e; e row, b column: +K u0_b (the sign of the row's side)
+    coupling = np.flatnonzero((side[entry_row] != 0) & (side[entry_col] == -side[entry_row]))
+    row_of = np.full(n_owned, -1)
+    row_of[rows] = np.arange(len(rows))
+    matrix = sp.bsr_matrix((side[entry_row[coupling], None, None] * blocks[coupling],
+                            position[entry_col[coupling]], np.searchsorted(row_of[entry_row[coupling]],
+                                                                            np.arange(len(rows) + 1))),
+                           shape=(3 * len(rows), 3 * len(drm_layer.nodes)))
+    g = np.ascontiguousarray(matrix @ motion.reshape(n_samples, -1).T)  # (3 rows, samples)
     dg = np.ascontiguousarray(np.gradient(g, dt, axis=1)) if n_samples > 1 else np.zeros_like(g)
     ddg = np.ascontiguousarray(np.gradient(dg, dt, axis=1)) if n_samples > 1 else np.zeros_like(g)
     n_rows = len(rows)
