@@ -235,3 +235,18 @@ def test_drm_on_two_ranks_is_the_one_rank_run(tmp_path):
     _, two = monitor_displacements(tmp_path / "two")
     assert np.abs(one).max() > 0.5 * AMPLITUDE
     assert np.abs(two - one).max() < 1e-12
+
+
+def test_drm_refuses_element_loop_rock(tmp_path):
+    from pyfem.scene import SceneError
+
+    rock = lambda x, z: "rock"  # noqa: E731
+    write_slab(tmp_path / "main.msh", 0.0, 100.0, 100.0, 200.0, rock, ["rock"])
+    write_scene(tmp_path / "aux.toml", tmp_path / "main.msh", ["rock"], 0.03, 50.0, monitors=[])
+    main = write_scene(tmp_path / "main.toml", tmp_path / "main.msh", ["rock"], 0.03, 50.0, tmp_path / "aux.toml")
+    text = Path(main).read_text().replace("rho = 2600.0\n", "rho = 2600.0\nplasticity = {cohesion = 1.0e6, "
+                                          "friction_angle = 35.0, tensile_strength = 1.0e6}\n", 1)
+    Path(main).write_text(text)
+    with pytest.raises(SceneError) as error:
+        run(main, tmp_path / "out")
+    assert "wave.free_field.method" in str(error.value) and "linear elastic" in str(error.value)
