@@ -142,6 +142,9 @@ def test_drm_refusals(tmp_path):
         (f'free_field = {{method = "drm", auxiliary = "{tmp_path / "none.toml"}"}}', "wave.free_field.auxiliary"),
         ('free_field = {method = "dr"}', "wave.free_field.method"),
     ]
+    from pyfem.effects import free_field_words
+
+    assert free_field_words(load_scene(base)).startswith("domain-reduction method: the auxiliary scene")  # `check`'s line
     text = Path(base).read_text()
     line = next(x for x in text.splitlines() if x.startswith("free_field"))
     for replacement, key in cases:
