@@ -1164,7 +1164,10 @@ class DistributedRun:
         # The element loop's columns also carry the bolts' stored energy and dissipation (pyfem/support.py).
         self.energy_columns = energy_columns(part.pairs is not None, loop is not None or bool(part.support))
         self.freefield = input_arrays = None
-        if "seismic_input" in scene.effects:
+        self.drm = None  # the domain-reduction method's report (its forces are made by go, _drm_input)
+        if "seismic_input" in scene.effects and scene["wave"]["free_field"]["method"] == "drm":
+            self.drm = {"method": "drm", "auxiliary": scene["wave"]["free_field"]["auxiliary"]}
+        elif "seismic_input" in scene.effects:
             model = part.model
             view = _InputView(model.faces, part.coords, model.bounds)
             points = None
@@ -1946,6 +1949,8 @@ class DistributedRun:
                         shown.pop("static stage estimate", None)
                 on_plan(shown)
         try:
+            if self.drm is not None and self.input_arrays is None:
+                self.input_arrays = self._drm_input()
             stepper, exchange = self._set_up_stage(stage_file)
         except RunInterrupted as error:  # (one rank: under mpirun a stop waits for the first sample)
             raise set_up_lost(error, self.wall_start, "mesh, matrices" + (" and the static stage"
@@ -2061,6 +2066,7 @@ class DistributedRun:
                 ("owned_nodes", "ghost_nodes", "extra_ghost_nodes", "bytes_sent_per_step", "element_loop_cells",
                  "halo_cells", "peak_memory_mib"))}},
             **({"nonlinear_regions": nonlinear} if nonlinear is not None else {}),
+            **({"free_field": self.drm} if self.drm is not None else {}),
         })
         from pyfem.clock import DISTRIBUTED_PHASES, PHASES, phase_split
 
@@ -2084,6 +2090,39 @@ class DistributedRun:
             self._support_outputs(bolts, bounds)
         _write_json(self.out / "run.json", self.summary)
         return self.summary
+
+    def _drm_input(self) -> dict:
+        """The domain-reduction method's input forces (pyfem/seismic/drm.py): the auxiliary scene stepped
+        at this model's time step, its motion on the DRM layer, the forces on this rank's layer nodes."""
+        from pyfem.scene import load_scene
+        from pyfem.seismic import drm
+
+        began, comm = time.perf_counter(), self.comm
+        if self.lts is not None:
+            raise SceneError("time.local_stepping", self.scene["time"].get("local_stepping"),
+                             "false with wave.free_field.method = \"drm\" (its forces are tabulated at the global step)")
+        drm_layer = drm.layer(self.part)
+        try:  # the auxiliary scene's own errors, said as of this key
+            aux_scene = load_scene(self.drm["auxiliary"])
+            if "wave" not in aux_scene or aux_scene["wave"]["free_field"]["method"] == "drm":
+                raise SceneError("wave.free_field.method", "drm", "a scene with a [wave] of method \"half_space\"")
+            aux = DistributedRun(aux_scene, self.out / "auxiliary", comm)
+        except SceneError as error:
+            raise SceneError(drm.KEY, self.drm["auxiliary"], f"a valid auxiliary scene; in it: {error}") from None
+        dt = self.time_step.dt
+        if dt > aux.time_step.critical:
+            raise SceneError(drm.KEY, self.drm["auxiliary"], f"a model stable at the main model's step {dt:.6g} s "
+                             f"(its critical step is {aux.time_step.critical:.6g} s)")
+        stepper, _ = _stepper(aux.part, dt, aux.input_arrays, aux.loop)
+        origin = run_origin(self.lead_in, self.time_step)
+        motion = drm.record(aux.part, stepper, drm_layer.coords, dt, self.n_steps, origin)
+        arrays = drm.effective_input(self.part, drm_layer, motion, dt, origin)
+        self.drm.update({"auxiliary_nodes": aux.part.n_dofs_global // 3, "layer_nodes": len(drm_layer.nodes),
+                         "face_nodes": int(drm_layer.on_face.sum()),
+                         "auxiliary_seconds": comm.allreduce(time.perf_counter() - began, op=MPI.MAX),
+                         "table_bytes": comm.allreduce(drm.table_bytes(arrays)),
+                         "motion_bytes": int(motion.nbytes)})
+        return arrays
 
     def _support_outputs(self, groups: list, bounds: tuple) -> None:
         """support.csv, support.xdmf (+ .h5), plots/support.png and run.json's "support" and

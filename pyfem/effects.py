@@ -278,8 +278,8 @@ def warn_input_medium(scene: Scene, model, comm=None) -> None:
     from pyfem.material import Material
     from pyfem.seismic.forces import INPUT_TYPES
 
-    if "seismic_input" not in scene.effects:
-        return
+    if "seismic_input" not in scene.effects or scene["wave"]["free_field"]["method"] == "drm":
+        return  # (the domain-reduction method's input is the auxiliary model's, whatever the rock)
     wave = scene["wave"]
     medium = wave["medium"]
 
@@ -390,6 +390,9 @@ def free_field_words(scene: Scene) -> str:
     """Which free field the input faces get: the homogeneous half-space of wave.medium, or the layered
     site of [[wave.layers]] over it (the rock of each face against it: warn_input_medium)."""
     wave = scene["wave"]
+    if wave["free_field"]["method"] == "drm":
+        return (f"domain-reduction method: the auxiliary scene {wave['free_field']['auxiliary']} is run first and its "
+                "motion on the layer of cells inside the input faces gives their forces (pyfem.seismic.drm)")
     surface = "no free surface" if wave.get("surface") is None else f"free surface at z = {wave['surface']:g} m"
     layers = wave.get("layers") or []
     if not layers:

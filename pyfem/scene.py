@@ -596,6 +596,16 @@ SCHEMA = Table({
             "medium": Text("layer material (a [materials] table)"),
             "thickness": Number("layer thickness (m)", POSITIVE),
         }, "a free-field layer"), "[[wave.layers]] (top down from wave.surface)", default=None),
+        # Where the free field comes from (pyfem/seismic/drm.py, docs/boundaries.md): the closed form on
+        # the truncation faces, or the domain-reduction method's forces from an auxiliary run.
+        "free_field": Table({
+            "method": Choice("how the free field enters: \"half_space\" (the closed form of wave.medium or "
+                             "[[wave.layers]] on the truncation faces) or \"drm\" (the domain-reduction method: "
+                             "the motion of `auxiliary` on the layer of cells inside the truncation faces)",
+                             ("half_space", "drm"), default="half_space"),
+            "auxiliary": FilePath("the auxiliary scene of method \"drm\": the same rock without the cavern on a "
+                                  "larger mesh whose nodes include the main model's", default=None),
+        }, "the free field's method"),
         "motion": Table({
             "ricker": Table({
                 "f0": Number("Ricker peak frequency (Hz)", POSITIVE),
@@ -849,6 +859,9 @@ def _check_rules(settings: dict, base_dirs: Sequence[Path], warnings: list[str])
     _check_boundary(settings)
     if "damping" in settings:
         _check_damping(settings["damping"])
+        if settings.get("wave", {}).get("free_field", {}).get("method") == "drm" and settings["damping"]["beta"]:
+            raise SceneError("damping.beta", settings["damping"]["beta"], "0 with wave.free_field.method = \"drm\" "
+                             "(its forces hold no stiffness-damping term; mass-proportional alpha is allowed)")
     if "contact" in settings:
         contact = settings["contact"]
         if settings["mesh"]["builder"] == "box" and settings["mesh"]["layers"]:
@@ -1419,6 +1432,18 @@ def _check_wave(settings: dict) -> None:
                              "must name a material of [materials]: " + ", ".join(materials))
     if wave["layers"] and wave["surface"] is None:
         raise _missing("wave.surface", "[[wave.layers]] hang from the free surface: give its z (m)")
+    free_field = wave["free_field"]
+    if free_field["method"] == "drm":
+        if free_field["auxiliary"] is None:
+            raise _missing("wave.free_field.auxiliary", "method \"drm\" records the free field on an auxiliary "
+                           "scene's run: give its TOML file")
+        if wave["layers"]:
+            raise SceneError("wave.layers", [layer["thickness"] for layer in wave["layers"]],
+                             "wave.free_field.method = \"drm\" takes the free field from the auxiliary scene: "
+                             "give [[wave.layers]] there, not here")
+    elif free_field["auxiliary"] is not None:
+        raise SceneError("wave.free_field.auxiliary", free_field["auxiliary"],
+                         "read by wave.free_field.method = \"drm\" only (method is \"half_space\")")
 
 
 def _check_boundary(settings: dict) -> None:
@@ -1484,6 +1509,9 @@ def _resolve_files(settings: dict, base_dirs: Sequence[Path]) -> None:
     record = settings.get("wave", {}).get("motion", {}).get("record")
     if record is not None:
         entries.append(("wave.motion.record.file", record, "file"))
+    free_field = settings.get("wave", {}).get("free_field")
+    if free_field is not None:
+        entries.append(("wave.free_field.auxiliary", free_field, "auxiliary"))
     for key, table, name in entries:
         if table[name] is None:
             continue

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyfem import checkpoint, distributed_stage, solver, static, static_output
+from pyfem import checkpoint, distributed_stage, solver, static_output
 from pyfem.interrupts import RunInterrupted
 from pyfem.scene import SceneError, parse_scene
 
@@ -273,9 +273,7 @@ def solve_again(*args, **kwargs):
 
 
 def never_solve_the_stage(patched) -> None:
-    """A relaxation stage solved from here on fails the test: the serial path's solver and the
-    distributed model's (PYFEM_ONE_MODEL=1: a one-rank run is the distributed model's)."""
-    patched.setattr(static, "solve_relaxation_stage", solve_again)
+    """A relaxation stage solved from here on fails the test (the model's stage driver)."""
     patched.setattr(distributed_stage, "solve", solve_again)
 
 
@@ -348,8 +346,7 @@ def test_a_set_up_longer_than_the_interval_checkpoints_at_the_first_sample(refer
     scene["output"]["checkpoint_interval"] = interval
     out = tmp_path / "crashed"
     with monkeypatch.context() as patched:
-        patched.setattr(static, "solve_relaxation_stage", slow(static.solve_relaxation_stage))
-        patched.setattr(distributed_stage, "solve", slow(distributed_stage.solve))  # (PYFEM_ONE_MODEL=1)
+        patched.setattr(distributed_stage, "solve", slow(distributed_stage.solve))
         with pytest.raises(RuntimeError, match="simulated crash"):  # 2 samples in, well within an interval
             solver.run(scene, out, progress=StopAt(0.02, RuntimeError("simulated crash")))
     saved = checkpoint.read_checkpoint(out)
