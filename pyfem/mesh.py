@@ -26,7 +26,7 @@ from pyfem.geometry import build_box, build_layered_box, build_layered_cavern, g
 from pyfem.geometry.file import volume_problem
 from pyfem.interface_split import incidence, split_topology
 from pyfem.errors import SceneError
-from pyfem.scene import model_excavation
+from pyfem.excavation_steps import model_excavation
 
 # gmsh element type numbers of the volume elements accepted as cells.
 GMSH_HEXAHEDRON_8 = 5

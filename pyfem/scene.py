@@ -28,13 +28,14 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
 from pyfem import material as _material
 from pyfem.material import DENSITY_RANGE, NONLINEAR_TABLES, YOUNG_MODULUS_RANGE
 from pyfem.errors import SceneError, _show  # noqa: F401  (SceneError: the public name is pyfem.scene.SceneError)
+from pyfem.excavation_steps import ONE_STEP_KEYS, model_excavation, static_steps  # noqa: F401  (the scene's API)
 
 EFFECT_ORDER = ("seismic_input", "damping", "initial_stress", "contact", "deterioration")
 """Every effect a scene can switch on, in the order `Scene.effects` lists them."""
@@ -1188,9 +1189,6 @@ def _check_static(settings: dict) -> None:
                          "installed (static.install), not both")
 
 
-ONE_STEP_KEYS = ("excavate", "relaxation", "install", "support")
-
-
 def one_step_form(settings: dict, raw: dict) -> dict:
     """[[static.step]] entries or the one-step keys (ONE_STEP_KEYS), not both; one step is the
     one-step form (written back into [static], so the two give the same run)."""
@@ -1207,24 +1205,6 @@ def one_step_form(settings: dict, raw: dict) -> dict:
     if len(steps) == 1:
         static.update(steps[0], step=None)
     return settings
-
-
-def static_steps(static: Mapping) -> list[dict]:
-    """The stage's steps, each with ONE_STEP_KEYS: the [[static.step]] entries, or the one-step form's."""
-    if static.get("step"):
-        return [dict(step) for step in static["step"]]
-    return [{key: static[key] for key in ONE_STEP_KEYS}]
-
-
-def model_excavation(scene: Mapping, stage_model: bool = False) -> list[str]:
-    """The regions the model is built without (pyfem/mesh.py): static.excavate, or with
-    [[static.step]] every step's (the dynamic run's model); `stage_model`: the first step's only
-    (the sequence's model, pyfem/distributed_sequence.py)."""
-    static = scene.get("static") or {}
-    steps = static_steps(static) if static else []
-    if stage_model:
-        steps = steps[:1]
-    return [name for step in steps for name in step["excavate"]]
 
 
 def _check_steps(settings: dict) -> None:

@@ -264,3 +264,33 @@ def test_check_prints_the_sequence_and_refuses_an_install_before_its_excavation(
     errors = [line for line in done.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and refused in errors[0] and "later step excavates" in errors[0], done.stderr
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.slow
+def test_a_run_after_a_sequence_killed_resumes_from_the_sequences_state(benches, tmp_path):
+    """kill -9 of a run after a Mohr-Coulomb sequence (2 ranks) once it has written a checkpoint;
+    resumed on one rank, it reads the sequence's hand-over (static/hand_over.npz, keyed by position:
+    not solved again) and the checkpoint's element-loop state: it finishes with the sequence's plastic
+    zone (the yielded volume and peak plastic strain of static.json)."""
+    from test_mpi import CHECKPOINTED_RUN, kill_after_first_checkpoint
+
+    path = tmp_path / "scene.toml"
+    text = SCENE_TOML.format(msh=benches, install="").replace(
+        "[materials.rock]\n", "[materials.rock]\nplasticity = {cohesion = 1.5e6, friction_angle = 30.0, "
+        "dilation_angle = 0.0, tensile_strength = 0.5e6}\n", 1)
+    path.write_text(text)
+    out = tmp_path / "killed"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1", PYFEM_ONE_MODEL="1")
+    kill_after_first_checkpoint(2, str(path), out, 0.5, ("--set", "time.duration=30.0"), env=env)
+    assert (out / "static" / "hand_over.rank1.npz").exists()
+    resumed = subprocess.run([sys.executable, "-m", "pyfem", "run", str(path), "--out", str(out), *CHECKPOINTED_RUN,
+                              "--set", "time.duration=30.0", "--resume"], cwd=ROOT, env=env, capture_output=True,
+                             text=True, timeout=900)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "the static stage read from static/hand_over.npz, not solved again" in resumed.stdout, resumed.stdout
+    run = json.loads((out / "run.json").read_text())
+    stage = json.loads((out / "static" / "static.json").read_text())
+    assert run["status"] == "finished" and run["resumed"][0]["t"] > 0.0
+    assert [step["step"] for step in stage["steps"]] == [1, 2] and stage["regions"]["rock"]["yielded_volume"] > 0.0
+    for key in ("yielded_volume", "peak_plastic_strain"):
+        assert run["nonlinear_regions"]["rock"][key] == pytest.approx(stage["regions"]["rock"][key], rel=1e-12)
