@@ -31,14 +31,17 @@ MONITORS = {"crown": [8.0, 1.0, 10.0], "floor": [8.0, 1.0, 4.0], "wall": [10.0, 
             "shoulder": [10.0, 1.0, 9.0], "far": [13.0, 1.0, 12.0]}
 
 
-def write_benches_msh(path):
+def write_benches_msh(path, shotcrete: bool = False):
     """Sixteen boxes meshed as 1 m hexahedra: "heading" (x 6-10, z 7-10) and "bench" (x 6-10, z 4-7)
-    among the blocks of "rock"."""
+    among the blocks of "rock"; with `shotcrete` the heading's top metre (z 9-10) is the region
+    "shotcrete", a layer under the roof."""
     from pyfem._gmsh import gmsh
     from pyfem.geometry import gmsh_session
 
     columns = ((0.0, 6.0), (6.0, 10.0), (10.0, 16.0))
     rows = ((0.0, 4.0), BENCH, HEADING, (10.0, 16.0))
+    if shotcrete:
+        rows = ((0.0, 4.0), BENCH, (HEADING[0], HEADING[1] - 1.0), (HEADING[1] - 1.0, HEADING[1]), (10.0, 16.0))
     with gmsh_session("benches"):
         blocks = [gmsh.model.occ.addBox(x0, 0.0, z0, x1 - x0, 2.0, z1 - z0) for (x0, x1) in columns
                   for (z0, z1) in rows]
@@ -53,11 +56,12 @@ def write_benches_msh(path):
             gmsh.model.mesh.setRecombine(2, tag)
         for _, tag in gmsh.model.getEntities(3):
             gmsh.model.mesh.setTransfiniteVolume(tag)
-        regions = {"rock": [], "heading": [], "bench": []}
+        regions = {"rock": [], "heading": [], "bench": []} | ({"shotcrete": []} if shotcrete else {})
         for _, tag in gmsh.model.getEntities(3):
             box = gmsh.model.getBoundingBox(3, tag)
             x, z = 0.5 * (box[0] + box[3]), 0.5 * (box[2] + box[5])
-            name = ("rock" if not 6.0 < x < 10.0 else "heading" if HEADING[0] < z < HEADING[1]
+            name = ("rock" if not 6.0 < x < 10.0 else "shotcrete" if shotcrete and HEADING[1] - 1.0 < z < HEADING[1]
+                    else "heading" if HEADING[0] < z < HEADING[1]
                     else "bench" if BENCH[0] < z < BENCH[1] else "rock")
             regions[name].append(tag)
         for name, tags in regions.items():
@@ -294,3 +298,85 @@ def test_a_run_after_a_sequence_killed_resumes_from_the_sequences_state(benches,
     assert [step["step"] for step in stage["steps"]] == [1, 2] and stage["regions"]["rock"]["yielded_volume"] > 0.0
     for key in ("yielded_volume", "peak_plastic_strain"):
         assert run["nonlinear_regions"]["rock"][key] == pytest.approx(stage["regions"]["rock"][key], rel=1e-12)
+
+
+SHOTCRETE = {"preset": "concrete", "damage": {}}  # the lining's concrete damage law (C25-like defaults)
+
+
+@pytest.fixture(scope="module")
+def shotcrete_benches(tmp_path_factory):
+    path = tmp_path_factory.mktemp("shotcrete") / "benches.msh"
+    write_benches_msh(path, shotcrete=True)
+    return path
+
+
+@pytest.mark.slow
+def test_shotcrete_of_a_mesh_file_is_installed_like_the_lining(shotcrete_benches, tmp_path):
+    """A named region of a `file` mesh ("shotcrete", a 1 m layer under the heading's roof, the lining's
+    damage law) installed in step 1 after its relaxation share: absent from step 1's first sub-stage,
+    stress-free when it joins, it carries the rest of step 1's load and step 2's. Released before it
+    joins: 0.5 or all (relaxation 1) of step 1's load; with all, it carries step 2's only, less."""
+    reports = {}
+    for relaxation in (0.5, 1.0):
+        data = benches_scene(shotcrete_benches, {"step": [
+            {"excavate": ["heading"], "relaxation": relaxation, "install": ["shotcrete"]},
+            {"excavate": ["bench"]}]})
+        data["materials"]["shotcrete"] = dict(SHOTCRETE)
+        reports[relaxation] = run_stage(data, tmp_path / str(relaxation))
+    stages = reports[0.5]["stages"]
+    assert [stage["name"] for stage in stages] == ["step 1 excavation", "step 1 support", "step 2 excavation"]
+    assert "shotcrete" not in stages[0]["active_regions"] and "shotcrete" in stages[1]["active_regions"]
+    assert stages[0]["regions"].get("shotcrete", {}).get("volume", 0.0) == 0.0  # not there yet
+    assert reports[0.5]["steps"][0]["installed"] == ["shotcrete"]
+    energy = {lam: report["regions"]["shotcrete"] for lam, report in reports.items()}
+    print({lam: (r["volume"], r["damaged_volume"], r["peak_damage"]) for lam, r in energy.items()})
+    assert energy[0.5]["volume"] == pytest.approx(4.0 * 2.0 * 1.0)
+    crown = {lam: report["monitors"]["crown"]["stress"] for lam, report in reports.items()}
+    print("shotcrete crown stress (Pa):", crown)
+    # the crown monitor lies on the shotcrete's face: its stress is the shotcrete's, zero when it joined
+    assert reports[0.5]["monitors"]["crown"]["region"] == "shotcrete"
+    assert abs(crown[0.5]["sxx"]) > abs(crown[1.0]["sxx"]) > 0.0
+
+
+def test_the_layered_cavern_builder_lays_shotcrete_on_the_rock_face():
+    """mesh.parameters.shotcrete = 0.2: a region "shotcrete" one element thick between the lining and the
+    rock, 0.2 m at the wall's mid-height; the rock face (cavern_surface) and the lining's inner face
+    are where they were, and the lining and the shotcrete fill the lining's former ring (volumes to
+    round-off); a layer as thick as the lining's thinnest side is refused naming the key."""
+    import gmsh
+
+    from pyfem.geometry import gmsh_session
+    from pyfem.geometry.layered_cavern import build_layered_cavern
+
+    small = {"preset": "coarse", "half_width_x": 60.0, "below": 40.0, "above": 40.0, "margin_y": 40.0, "h_far": 15.0}
+    faces = {}
+    for t in (0.0, 0.2):
+        with gmsh_session("shotcrete"):
+            summary = build_layered_cavern(dict(small, shotcrete=t))
+            tags, coords, _ = gmsh.model.mesh.getNodes()
+            x = np.empty((int(tags.max()), 3))
+            x[tags.astype(np.int64) - 1] = coords.reshape(-1, 3)
+            groups = {gmsh.model.getPhysicalName(d, g): (d, g) for d, g in gmsh.model.getPhysicalGroups()}
+            nodes = {}
+            for name in ("cavern_surface", "lining_inner", "shotcrete"):
+                if name not in groups:
+                    continue
+                dim, tag = groups[name]
+                found = [gmsh.model.mesh.getElements(dim, e)[2] for e in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)]
+                nodes[name] = np.unique(np.concatenate([np.concatenate(f) for f in found]).astype(np.int64) - 1)
+        faces[t] = {name: np.unique(np.round(x[n], 9), axis=0) for name, n in nodes.items()}
+        faces[t]["summary"] = summary
+    plain, shot = faces[0.0]["summary"], faces[0.2]["summary"]
+    assert "shotcrete" not in plain["regions"] and "shotcrete" in shot["regions"]
+    for name in ("cavern_surface", "lining_inner"):
+        np.testing.assert_array_equal(faces[0.0][name], faces[0.2][name])
+    lined = plain["region_volumes"]["lining"]
+    assert shot["region_volumes"]["lining"] + shot["region_volumes"]["shotcrete"] == pytest.approx(lined, rel=1e-12)
+    assert 0.0 < shot["region_volumes"]["shotcrete"] < 0.25 * lined
+    shotcrete = faces[0.2]["shotcrete"]
+    wall = shotcrete[(np.abs(shotcrete[:, 2] - 30.0) < 4.0) & (shotcrete[:, 0] > 0.0), 0]
+    assert np.unique(np.round(wall, 9)).tolist() == pytest.approx([12.45 - 0.2, 12.45])
+    assert set(np.round(faces[0.2]["cavern_surface"][:, 0], 9)) >= {12.45}
+    with pytest.raises(ValueError, match="mesh.parameters.shotcrete"):
+        with gmsh_session("shotcrete"):
+            build_layered_cavern(dict(small, shotcrete=1.0))
