@@ -23,7 +23,9 @@ stage's: the path does not matter (tests/test_static_sequence.py); with plastic 
 Each sub-stage is dynamic relaxation with `relax`'s arithmetic on the ranks (pyfem/distributed_stage.py:
 the scaled mass of every cell, the load ramp of the first step's probe, the components rebased and
 the out-of-balance carried between sub-stages). A step without `install` is one sub-stage (its whole
-load). Contact pairs and support groups in a sequence are refused by the scene (not written yet).
+load). A step's `support` groups (rock bolts) join unloaded with its installs and are carried to the
+run's model by position (pyfem.distributed_support.load_state, the checkpoint's reader). Contact pairs
+in a sequence are refused by the scene (not written yet).
 
 The hand-over gathers every rank's node keys and element-loop states on every rank once (as a resume
 reads every rank's checkpoint file): the whole model's keys on each rank for a moment, fine at the
@@ -125,7 +127,18 @@ def solve(part, loop) -> Sequence:
     laws, _ = scene_laws(scene)
     factor = max([plastic_frequency_factor(p["poisson_ratio"], p["friction_angle"], p["dilation_angle"])
                   for p in laws.values() if p["law"] == "mohr_coulomb"], default=1.0)
-    mass = scaled_mass(part, stage_matrix(part, np.zeros(0, dtype=np.int32)), factor)
+    # Rock bolts and cables of the steps' `support` join in their step's support sub-stage; the mass bounds
+    # their condensed stiffness too (as the one-step stage's).
+    bolts = [rank_group for rank_group in part.support if rank_group.stage == "static"]
+    supports = [list(step["support"]) for step in steps]
+    everything = stage_matrix(part, np.zeros(0, dtype=np.int32))
+    if bolts:
+        from pyfem.distributed_support import add_rows, bound_rows
+
+        everything = add_rows(everything, part.n_owned, bound_rows(bolts, part.n_owned, part.n_local))
+    mass = scaled_mass(part, everything, factor)
+    del everything
+    joined_bolts = []  # the rank groups installed so far
 
     counted_names = [] if loop is None else list(loop.counted.arrays)
     halo_names = [] if loop is None or loop.halo is None else list(loop.halo.arrays)
@@ -138,7 +151,7 @@ def solve(part, loop) -> Sequence:
     for k, step in enumerate(steps):
         pending = [name for names in installs[k:] for name in names]
         later = [name for names in installs[k + 1:] for name in names]
-        if installs[k]:
+        if installs[k] or supports[k]:
             plan.append((k, "excavation", dead_after[k] + pending, step["relaxation"], []))
             plan.append((k, "support", dead_after[k] + later, 1.0 - step["relaxation"], installs[k]))
         else:
@@ -150,7 +163,7 @@ def solve(part, loop) -> Sequence:
     active0[np.repeat(np.arange(part.n_owned), np.diff(elastic[0][:part.n_owned + 1]))] = True
     check_held_on_ranks(part, boundary, constraints, active0)
     ramp, probe_steps = 0.0, 0
-    if comm.allreduce(bool(loop is not None), op=MPI.LOR):  # path dependent: the load rises slowly
+    if comm.allreduce(bool(loop is not None or bolts), op=MPI.LOR):  # path dependent: the load rises slowly
         probe_load = f_rock[0].copy()
         probe_load[owned][~active0.repeat(3)] = 0.0
         probe = _stage_stepper(part, elastic, mass, constraints, probe_load, [], [], None, 0.0)
@@ -182,6 +195,10 @@ def solve(part, loop) -> Sequence:
                 for region in names:
                     if region in joining:
                         table[region] = regions_of.new_component(region, initial_stress=None)
+            for rank_group in bolts:  # the step's bolts, unloaded
+                if rank_group.name in supports[k]:
+                    rank_group.fresh()
+                    joined_bolts.append(rank_group)
         inactive_cells = _cells(model, inactive)
         matrix = stage_matrix(part, np.union1d(element_cells, inactive_cells).astype(np.int32), hourglass_but=inactive)
         active_counted = [c for name, c in counted.items() if c is not None and name not in inactive]
@@ -190,6 +207,9 @@ def solve(part, loop) -> Sequence:
                   [loop.halo.arrays[n] for n, c in halo.items() if c is not None and n not in inactive]
                   if loop is not None else [])
         active = _active_nodes(part, matrix, arrays)
+        for rank_group in joined_bolts:  # (after the element loop's components, as the one-step stage)
+            active_counted += [b.component for b in rank_group.parts if b.kind == "counted"]
+            active_halo += [b.component for b in rank_group.parts if b.kind == "halo"]
         load = fraction * step_load + carried + (weights[k] if kind == "support" else 0.0)
         load[owned][~active.repeat(3)] = 0.0  # (the nodes only removed or pending cells use stay still)
         applied += load - carried
@@ -229,6 +249,7 @@ def solve(part, loop) -> Sequence:
         if index == len(plan) - 1 or plan[index + 1][0] != k:  # the step's end
             step_reports.append({
                 "step": k + 1, "excavated": list(steps[k]["excavate"]), "installed": list(installs[k]),
+                "support": list(supports[k]),
                 "relaxation": steps[k]["relaxation"], "residual": result.residual,
                 "out_of_balance": global_norm(carried) / max(global_norm(applied), floor),
                 "max_displacement": largest, "max_displacement_point": point,
@@ -249,6 +270,13 @@ def solve(part, loop) -> Sequence:
                            "applied",
               "load_ramp_steps": ramp,
               **({"regions": stages[-1]["regions"]} if loop is not None else {})}
+    if bolts:  # the bolts as the sequence leaves them (rank 0; run.json and static.json "support")
+        from pyfem.distributed_support import gather_groups
+        from pyfem.support import group_summary
+
+        groups = gather_groups(comm, bolts)
+        if root:
+            report["support"] = {group.name: group_summary(group) for group in groups}
     u_support = u_total - u_join if u_join is not None else np.zeros_like(u_total)
     return Sequence(u_total=u_total, u_support=u_support, counted=counted, report=report,
                     installed_regions=installed_regions)
@@ -335,9 +363,34 @@ def carry(sequence: Sequence, stage_part, stage_loop, part, loop):
                     component.load_state(state)
                 out.append(component)
     averages = {} if loop is None else loop.counted.cell_averages(counted)
+    groups = _carry_bolts(stage_part, part)
+    with_bolts = comm.allreduce(sum(rank_group.stage == "static" for rank_group in part.support), op=MPI.MAX) > 0
     return RankStage(counted=counted, halo=halo, contact=None, u_total=u_total, u_support=u_support,
                      installed_regions=list(sequence.installed_regions), report=sequence.report,
-                     cell_averages=[averages, averages], u_first=u_total.copy())
+                     cell_averages=[averages, averages], u_first=u_total.copy(), support_groups=groups,
+                     bounds=part.model.bounds if with_bolts else None)  # (bounds: a collective)
+
+
+def _carry_bolts(stage_part, part):
+    """The sequence's bolts (the steps' support groups, rebased) onto the run's part: fresh components of
+    its groups loaded by position with the checkpoint's reader (pyfem.distributed_support.load_state);
+    returns the whole groups as the sequence leaves them (rank 0; None elsewhere and without bolts). A
+    collective."""
+    from pyfem.distributed_support import gather_groups, load_state, rank_state
+
+    bolts = [rank_group for rank_group in part.support if rank_group.stage == "static"]
+    if not part.comm.allreduce(len(bolts), op=MPI.MAX):
+        return None
+    files = part.comm.allgather(rank_state([g for g in stage_part.support if g.stage == "static"]))
+    state = {}
+    for rank_group in bolts:
+        rank_group.fresh()
+        for i, bolt_part in enumerate(rank_group.parts):
+            bolt_part.prefix = f"carry/{rank_group.index}/{i}/"  # (the stepper sets its own later)
+    for prefix, component in load_state(bolts, state, files, part.comm).items():
+        own = component.save_state()
+        component.load_state({name: state.get(prefix + name, block) for name, block in own.items()})
+    return gather_groups(part.comm, bolts)
 
 
 def sequence_lines(scene) -> dict:
@@ -349,9 +402,10 @@ def sequence_lines(scene) -> dict:
     lines = {}
     for k, step in enumerate(steps):
         removed = ", ".join(step["excavate"]) + (" removed (absent from the model)" if k == 0 else " removed")
-        if step["install"]:
+        if step["install"] or step["support"]:
+            joining = ", ".join(step["install"] + [f"support group {name}" for name in step["support"]])
             lines[f"step {k + 1}"] = (f"{removed}; {step['relaxation']:g} of its load released, then "
-                                      f"{', '.join(step['install'])} installed stress-free and the remaining "
+                                      f"{joining} installed stress-free and the remaining "
                                       f"{1.0 - step['relaxation']:g} released")
         else:
             lines[f"step {k + 1}"] = f"{removed}; all of its load released (nothing installed)"

@@ -1209,7 +1209,7 @@ def one_step_form(settings: dict, raw: dict) -> dict:
 
 def _check_steps(settings: dict) -> None:
     """[[static.step]]: each step excavates; a region excavated or installed once, never both; a
-    group installed once; solved by dynamic relaxation; no contact pairs or support groups yet."""
+    support group of the scene, installed once; solved by dynamic relaxation; no contact pairs yet."""
     static = settings["static"]
     steps = static.get("step")
     if not steps:
@@ -1220,20 +1220,22 @@ def _check_steps(settings: dict) -> None:
     if "contact" in settings:
         raise SceneError("static.step", f"{len(steps)} steps", "an excavation sequence of several steps with contact "
                          "pairs is not written yet: one step (the one-step form), or no [contact]")
-    seen: dict[str, str] = {}
+    seen: dict[tuple, str] = {}
+    groups = settings.get("support") or {}
     for k, step in enumerate(steps):
         key = f"static.step.{k}"
         if not step["excavate"]:
             raise SceneError(f"{key}.excavate", [], "each step of a sequence excavates at least one region")
         for part in ("excavate", "install", "support"):
             for index, name in enumerate(step[part]):
-                if part == "support":
-                    raise SceneError(f"{key}.support.{index}", name, "support groups in an excavation sequence "
-                                     "of several steps are not written yet: one step (the one-step form)")
-                if name in seen:
-                    raise SceneError(f"{key}.{part}.{index}", name, f"a region is excavated or installed once "
-                                     f"in a sequence: {seen[name]} names it already")
-                seen[name] = f"{key}.{part}"
+                if part == "support" and name not in groups:
+                    raise SceneError(f"{key}.support.{index}", name, "must name a [support.NAME] group: "
+                                     + (", ".join(groups) or "the scene has none"))
+                what = "group" if part == "support" else "region"
+                if (what, name) in seen:
+                    raise SceneError(f"{key}.{part}.{index}", name, f"a {what} is excavated or installed once "
+                                     f"in a sequence: {seen[what, name]} names it already")
+                seen[what, name] = f"{key}.{part}"
                 material = settings["materials"].get(name)
                 if part == "excavate" and k > 0 and material is None:
                     raise SceneError(f"{key}.excavate.{index}", name, "a region excavated after the first step is "

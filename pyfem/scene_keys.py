@@ -222,8 +222,9 @@ RULES = {
         "`materials.NAME.plasticity` or `materials.NAME.damage`)",
         "linear elastic `static.step.0.install` regions in one step only (in other steps they have a law)",
         "an install region touches no region a later step excavates (checked once the model is built)",
+        "`static.step.0.support` names groups of `support`, each installed in one step",
         "a sequence of several steps is solved by dynamic relaxation (`static.solver` \"relaxation\" or "
-        "\"auto\"); `contact` and `static.step.0.support` groups in it are not written yet (refused)",
+        "\"auto\"); `contact` in it is not written yet (refused)",
     ],
     "contact": [
         "in a layered box, `contact.interfaces` are interface_1, interface_2, ... (bottom up)",

@@ -189,6 +189,8 @@ def test_two_ranks_run_the_sequence_of_one(benches, tmp_path):
     ({"step": [{"excavate": ["heading"]}, {"excavate": ["bench"]}], "solver": "direct"}, "static.solver",
      "dynamic relaxation"),
     ({"step": []}, "static.step", "at least one"),
+    ({"step": [{"excavate": ["heading"], "support": ["roof"]}, {"excavate": ["bench"]}]}, "static.step.0.support.0",
+     "must name a [support.NAME] group"),
 ])
 def test_bad_sequence_keys_are_refused_naming_the_key(benches, static, key, words):
     data = benches_scene(benches, {})
@@ -380,3 +382,35 @@ def test_the_layered_cavern_builder_lays_shotcrete_on_the_rock_face():
     with pytest.raises(ValueError, match="mesh.parameters.shotcrete"):
         with gmsh_session("shotcrete"):
             build_layered_cavern(dict(small, shotcrete=1.0))
+
+
+ROOF = {"type": "bolt", "lines": [[8.0, 1.0, 10.0, 8.0, 1.0, 14.0], [7.0, 1.0, 10.0, 7.0, 1.0, 14.0]],
+        "diameter": 0.032, "yield_force": 3.2e5, "bond_stiffness": 1.0e9, "bond_strength": 4.0e5}
+
+
+def bolted_scene(msh, relaxation: float) -> dict:
+    """Two 4 m roof bolts up from the heading's crown, installed in step 1 after `relaxation` of its load."""
+    data = benches_scene(msh, {"step": [{"excavate": ["heading"], "relaxation": relaxation, "support": ["roof"]},
+                                        {"excavate": ["bench"]}]})
+    data["support"] = {"roof": dict(ROOF)}
+    return data
+
+
+@pytest.mark.slow
+def test_roof_bolts_installed_in_the_first_step_carry_what_follows(benches, tmp_path):
+    """Roof bolts of step 1's `support` join unloaded after its relaxation share: installed after half of
+    the heading's load they end at 58.5 kN (tension), after all of it only at 2.6 kN (the bench's load
+    alone); the run after the sequence starts with them (run.json's peak force is static.json's) and
+    static/support.csv holds them; 2 ranks give the forces of one."""
+    reports = {lam: run_stage(bolted_scene(benches, lam), tmp_path / str(lam)) for lam in (0.5, 1.0)}
+    assert [s["name"] for s in reports[0.5]["stages"]] == ["step 1 excavation", "step 1 support", "step 2 excavation"]
+    assert reports[0.5]["steps"][0]["support"] == ["roof"]
+    peak = {lam: report["support"]["roof"]["peak_axial_force"] for lam, report in reports.items()}
+    print("roof bolts' peak axial force (N):", peak)
+    assert peak[0.5] > 10.0 * peak[1.0] > 0.0
+    for lam in peak:
+        run = json.loads((tmp_path / str(lam) / "run" / "run.json").read_text())
+        assert run["support"]["roof"]["peak_axial_force"] == pytest.approx(peak[lam], rel=1e-12)
+        assert (tmp_path / str(lam) / "run" / "static" / "support.csv").exists()
+    two = run_stage(bolted_scene(benches, 0.5), tmp_path / "two ranks", ranks=2)
+    assert two["support"]["roof"]["peak_axial_force"] == pytest.approx(peak[0.5], rel=1e-10)
