@@ -998,7 +998,7 @@ def check(scene: Scene) -> dict:
 
 def sequence_part(scene: Scene, comm: MPI.Comm) -> RankModel:
     """The rank's part of an excavation sequence's model: the scene's without the first step's regions
-    only (pyfem.scene.model_excavation; pyfem/distributed_sequence.py). A collective."""
+    only (pyfem.excavation_steps.model_excavation; pyfem/distributed_sequence.py). A collective."""
     stage_scene = Scene(dict(scene), scene.source)
     stage_scene.warnings, stage_scene.on_warning = scene.warnings, scene.on_warning
     stage_scene.stage_model = True

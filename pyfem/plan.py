@@ -99,7 +99,7 @@ def static_stage_estimate(scene: Scene, per_step: float) -> dict:
     from pyfem.excavation_steps import static_steps
 
     max_steps = int(scene["static"]["max_steps"])
-    stages = (sum(2 if step["install"] else 1 for step in static_steps(scene["static"]))
+    stages = (sum(2 if step["install"] or step["support"] else 1 for step in static_steps(scene["static"]))
               if scene["static"].get("step") else 2)  # (an excavation sequence's sub-stages)
     return {"static stage estimate": f"{stages} stages of at most {max_steps} relaxation steps each (and a frequency probe) "
                                      f"before the motion: {stages * max_steps * per_step:.0f} s at this step's cost from "
