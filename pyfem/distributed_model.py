@@ -851,6 +851,11 @@ def plan(run: "DistributedRun", per_step: float, trial: int, phase_seconds: dict
     stage = None
     if "static" in scene:
         stage = plan_report(scene, part.model, comm)
+        if scene["static"].get("step"):  # an excavation sequence: its steps instead of the two stages
+            from pyfem.distributed_sequence import sequence_lines
+
+            stage = {key: value for key, value in stage.items() if not key.startswith("stage ")}
+            stage = dict(list(stage.items())[:1] + list(sequence_lines(scene).items()) + list(stage.items())[1:])
         if not uses_relaxation(scene):
             stage["solver"] = stage_words(scene)
     slip = {}
@@ -991,6 +996,15 @@ def check(scene: Scene) -> dict:
     return _ending_every_rank(lambda: _check(scene))
 
 
+def sequence_part(scene: Scene, comm: MPI.Comm) -> RankModel:
+    """The rank's part of an excavation sequence's model: the scene's without the first step's regions
+    only (pyfem.excavation_steps.model_excavation; pyfem/distributed_sequence.py). A collective."""
+    stage_scene = Scene(dict(scene), scene.source)
+    stage_scene.warnings, stage_scene.on_warning = scene.warnings, scene.on_warning
+    stage_scene.stage_model = True
+    return build(stage_scene, comm)
+
+
 def _check(scene: Scene) -> dict:
     from pyfem.effects import kernel_threads
 
@@ -1001,6 +1015,10 @@ def _check(scene: Scene) -> dict:
 
         stage_boundary(scene, run.part.model)
         _install_cells(scene, run.part.model)
+        if scene["static"].get("step"):  # the sequence's regions, on its own model
+            from pyfem.distributed_sequence import check_steps
+
+            check_steps(sequence_part(scene, comm))
     kernel_threads()
     return run.measured_plan(fresh=False)
 
@@ -1912,7 +1930,9 @@ class DistributedRun:
             from pyfem import distributed_stage
             from pyfem.static import uses_relaxation
 
-            if uses_relaxation(self.scene):
+            if self.scene["static"].get("step"):  # an excavation sequence, on its own model (pyfem/distributed_sequence.py)
+                self.stage = self._sequence()
+            elif uses_relaxation(self.scene):
                 self.stage = distributed_stage.solve(part, self.loop, self.contact_arrays)
             else:  # the linear stage: PETSc's solves across the ranks
                 from pyfem.distributed_linear import solve_linear
@@ -1924,6 +1944,16 @@ class DistributedRun:
             distributed_stage.hand_over(self.stage, part, self.loop, self.monitors, self.contact_arrays)
             self.stage.report["monitors"] = distributed_stage.monitor_report(self.stage, self.monitors, self.names,
                                                                              comm)
+
+    def _sequence(self):
+        """The [[static.step]] sequence solved on the model without the first step's regions only, its
+        end carried over by position to this run's part (pyfem/distributed_sequence.py). A collective."""
+        from pyfem import distributed_sequence
+
+        stage_part = sequence_part(self.scene, self.comm)
+        stage_loop = rank_regions(stage_part)
+        sequence = distributed_sequence.solve(stage_part, stage_loop)
+        return distributed_sequence.carry(sequence, stage_part, stage_loop, self.part, self.loop)
 
     def go(self, on_plan, progress, signals) -> dict:
         """The time loop from the set-up to the summary (rank 0's; {} elsewhere); `signals`: the

@@ -479,6 +479,7 @@ def brief(report: dict) -> dict:
             "max_displacement": report["max_displacement"]["value"], "out_of_balance": report["out_of_balance"],
             "seconds": report["seconds"],
             "outputs": "static/static.json, static/fields.xdmf" + (", static/support.csv" if "support" in report else ""),
+            **({"steps": report["steps"]} if "steps" in report else {}),
             **({"support": report["support"]} if "support" in report else {})}
 
 

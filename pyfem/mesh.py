@@ -26,6 +26,7 @@ from pyfem.geometry import build_box, build_layered_box, build_layered_cavern, g
 from pyfem.geometry.file import volume_problem
 from pyfem.interface_split import incidence, split_topology
 from pyfem.errors import SceneError
+from pyfem.excavation_steps import model_excavation
 
 # gmsh element type numbers of the volume elements accepted as cells.
 GMSH_HEXAHEDRON_8 = 5
@@ -78,8 +79,8 @@ def create_mesh_with_interfaces(scene: typing.Mapping, comm: MPI.Comm = MPI.COMM
                 load_msh(mesh_settings["file"])
             else:
                 raise ValueError(f"mesh.builder = {builder!r}: allowed here are 'box', 'layered_cavern' and 'file'")
-            problem = volume_problem((scene.get("static") or {}).get("excavate") or []) if builder == "file" \
-                else None
+            problem = volume_problem(model_excavation(scene, getattr(scene, "stage_model", False))) \
+                if builder == "file" else None
             model_facts = (*_physical_groups_and_cell_types(), _height_range(), problem, _shared_surfaces())
         model_facts = comm.bcast(model_facts, root=model_rank)
         regions, boundaries, cell_types, heights, problem, shared = model_facts
@@ -271,11 +272,14 @@ def _excavated_regions(scene: typing.Mapping, regions: dict[str, int]) -> dict[s
     Raises:
         SceneError naming static.excavate.i for a name that is no region, or when nothing would remain.
     """
-    names = list((scene.get("static") or {}).get("excavate") or [])
-    for index, name in enumerate(names):
+    names = model_excavation(scene, getattr(scene, "stage_model", False))  # (the sequence's: the first step's)
+    static = scene.get("static") or {}
+    keys = ([f"static.step.{k}.excavate.{i}" for k, step in enumerate(static["step"]) for i in range(len(step["excavate"]))]
+            if static.get("step") else [f"static.excavate.{i}" for i in range(len(names))])
+    for key, name in zip(keys, names):
         if name not in regions:
-            raise SceneError(f"static.excavate.{index}", name, "must name a region (physical volume) of the "
-                             "mesh: " + (", ".join(sorted(regions)) or "none"))
+            raise SceneError(key, name, "must name a region (physical volume) of the mesh: "
+                             + (", ".join(sorted(regions)) or "none"))
     if names and len(names) == len(regions):
         raise SceneError("static.excavate", names, "must leave at least one region of the mesh: "
                          + ", ".join(sorted(regions)))

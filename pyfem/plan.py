@@ -96,9 +96,13 @@ def static_stage_estimate(scene: Scene, per_step: float) -> dict:
 
     if "static" not in scene or not uses_relaxation(scene):
         return {}
+    from pyfem.excavation_steps import static_steps
+
     max_steps = int(scene["static"]["max_steps"])
-    return {"static stage estimate": f"2 stages of at most {max_steps} relaxation steps each (and a frequency probe) "
-                                     f"before the motion: {2 * max_steps * per_step:.0f} s at this step's cost from "
+    stages = (sum(2 if step["install"] or step["support"] else 1 for step in static_steps(scene["static"]))
+              if scene["static"].get("step") else 2)  # (an excavation sequence's sub-stages)
+    return {"static stage estimate": f"{stages} stages of at most {max_steps} relaxation steps each (and a frequency probe) "
+                                     f"before the motion: {stages * max_steps * per_step:.0f} s at this step's cost from "
                                      f"rest, several times that where the rock yields in the stage (a point on the "
                                      f"yield surface costs about 5x one at rest); a stage stops once its "
                                      f"out-of-balance ratio is reached (the coarse case study's after 1 000-2 000 steps)"}

@@ -35,6 +35,7 @@ import numpy as np
 from pyfem import material as _material
 from pyfem.material import DENSITY_RANGE, NONLINEAR_TABLES, YOUNG_MODULUS_RANGE
 from pyfem.errors import SceneError, _show  # noqa: F401  (SceneError: the public name is pyfem.scene.SceneError)
+from pyfem.excavation_steps import ONE_STEP_KEYS, model_excavation, static_steps  # noqa: F401  (the scene's API)
 
 EFFECT_ORDER = ("seismic_input", "damping", "initial_stress", "contact", "deterioration")
 """Every effect a scene can switch on, in the order `Scene.effects` lists them."""
@@ -688,6 +689,15 @@ SCHEMA = Table({
         "install": TextList("regions activated stress-free after the first release", default=[]),
         "support": TextList("support groups ([support.NAME]) installed with the install regions, after the "
                             "first release", default=[]),
+        # An excavation sequence (benches top down) instead of the four keys above (docs/static.md).
+        "step": TableList(Table({
+            "excavate": TextList("regions this step removes", default=[]),
+            "relaxation": Number("fraction lambda of this step's excavation load released before its install and "
+                                 "support", "[0, 1]", default=0.5),
+            "install": TextList("regions activated stress-free after this step's first release", default=[]),
+            "support": TextList("support groups ([support.NAME]) installed with this step's install regions",
+                                default=[]),
+        }, "an excavation step"), "[[static.step]] (an excavation sequence, in order)", default=None),
         "gravity": Flag("the materials' weight as a body force of the stage", default=False),
         "tolerance": Number("relative residual ||f - f_int|| / ||f|| the stage must reach (default 1e-8 for "
                             "the linear solve, 1e-5 for dynamic relaxation)", "(0, 0.1]", default=None),
@@ -884,6 +894,7 @@ def _check_rules(settings: dict, base_dirs: Sequence[Path], warnings: list[str])
         _check_initial_stress(settings["initial_stress"], warnings)
     if "static" in settings:
         _check_static(settings)
+        _check_steps(settings)
     _check_support(settings)
     _check_output(settings, warnings)
     _check_points_inside(settings)
@@ -1189,6 +1200,71 @@ def _check_static(settings: dict) -> None:
         index = static["install"].index(both[0])
         raise SceneError(f"static.install.{index}", both[0], "a region is excavated (static.excavate) or "
                          "installed (static.install), not both")
+
+
+def one_step_form(settings: dict, raw: dict) -> dict:
+    """[[static.step]] entries or the one-step keys (ONE_STEP_KEYS), not both; one step is the
+    one-step form (written back into [static], so the two give the same run)."""
+    static = settings.get("static")
+    steps = (static or {}).get("step")
+    if steps is None:
+        return settings
+    given = [key for key in ONE_STEP_KEYS if key in (raw.get("static") or {})]
+    if given:
+        raise SceneError(f"static.{given[0]}", static[given[0]], "a key of the one-step form: give "
+                         "static.excavate, relaxation, install and support, or [[static.step]] entries, not both")
+    if not steps:
+        raise SceneError("static.step", [], "an excavation sequence needs at least one [[static.step]] entry")
+    if len(steps) == 1:
+        static.update(steps[0], step=None)
+    return settings
+
+
+def _check_steps(settings: dict) -> None:
+    """[[static.step]]: each step excavates; a region excavated or installed once, never both; a
+    support group of the scene, installed once; solved by dynamic relaxation; no contact pairs yet."""
+    static = settings["static"]
+    steps = static.get("step")
+    if not steps:
+        return
+    if static["solver"] in ("direct", "iterative"):
+        raise SceneError("static.solver", static["solver"], "an excavation sequence ([[static.step]]) is solved by "
+                         "dynamic relaxation: \"relaxation\" or \"auto\"")
+    if "contact" in settings:
+        raise SceneError("static.step", f"{len(steps)} steps", "an excavation sequence of several steps with contact "
+                         "pairs is not written yet: one step (the one-step form), or no [contact]")
+    seen: dict[tuple, str] = {}
+    groups = settings.get("support") or {}
+    for k, step in enumerate(steps):
+        key = f"static.step.{k}"
+        if not step["excavate"]:
+            raise SceneError(f"{key}.excavate", [], "each step of a sequence excavates at least one region")
+        for part in ("excavate", "install", "support"):
+            for index, name in enumerate(step[part]):
+                if part == "support" and name not in groups:
+                    raise SceneError(f"{key}.support.{index}", name, "must name a [support.NAME] group: "
+                                     + (", ".join(groups) or "the scene has none"))
+                what = "group" if part == "support" else "region"
+                if (what, name) in seen:
+                    raise SceneError(f"{key}.{part}.{index}", name, f"a {what} is excavated or installed once "
+                                     f"in a sequence: {seen[what, name]} names it already")
+                seen[what, name] = f"{key}.{part}"
+                material = settings["materials"].get(name)
+                if part == "excavate" and k > 0 and material is None:
+                    raise SceneError(f"{key}.excavate.{index}", name, "a region excavated after the first step is "
+                                     f"in the model until then: it needs its [materials.{name}] table")
+                if part == "excavate" and k > 0 and any(material.get(t) is not None for t in NONLINEAR_TABLES):
+                    raise SceneError(f"{key}.excavate.{index}", name, "a region excavated after the first step "
+                                     "is linear elastic until then (its stress sigma0 + C : eps(u) is what its "
+                                     "excavation releases): no [plasticity] or [damage] table")
+    elastic_installs = [k for k, step in enumerate(steps) for name in step["install"] if not any(
+        (settings["materials"].get(name) or {}).get(t) is not None for t in NONLINEAR_TABLES)]
+    if len(set(elastic_installs)) > 1:
+        k = sorted(set(elastic_installs))[1]
+        raise SceneError(f"static.step.{k}.install", steps[k]["install"], "linear elastic regions are installed in "
+                         f"one step of a sequence (static.step.{elastic_installs[0]} installs one already); a "
+                         "region installed in another step needs a [damage] or [plasticity] law (its stress is "
+                         "then its law's)")
 
 
 def _check_support(settings: dict) -> None:
@@ -1604,7 +1680,7 @@ def parse_scene(data: dict, source: str = "<dict>", overrides: Iterable[str] = (
     warnings: list[str] = []
     try:
         raw = apply_overrides(data, overrides)
-        settings = SCHEMA.check(raw, "")
+        settings = one_step_form(SCHEMA.check(raw, ""), raw)
         _check_rules(settings, base_dirs, warnings)
     except SceneError as error:
         error.source = str(source)

@@ -60,6 +60,7 @@ DIMENSIONLESS = (
     "damping.ratio",
     "initial_stress.k",
     "static.relaxation",
+    "static.step.0.relaxation",
     "static.tolerance",
     "static.max_steps",
     "contact.deterioration.R0",
@@ -114,6 +115,7 @@ UNSET = {
     "initial_stress.rho": "none; required by the geostatic form",
     "initial_stress.stress": "none: the geostatic form",
     "static.boundary.face": "every truncation face has `static.boundary.type`",
+    "static.step": "none: the one-step form (`static.excavate`, `static.relaxation`, `static.install`, `static.support`)",
     "materials.NAME.plasticity.zone": "the whole region",
     "static.tolerance": "1e-8 for the linear solve (relative residual), 1e-5 for dynamic relaxation "
                         "(out-of-balance force ratio)",
@@ -212,6 +214,18 @@ RULES = {
         "installed at the start of the dynamic run; a stage with support is solved by dynamic relaxation "
         "(`static.solver` \"direct\" and \"iterative\" refuse it)",
         "a region is in `static.excavate` or in `static.install`, not both",
+        "`static.step` entries or the one-step keys `static.excavate`, `static.relaxation`, `static.install`, "
+        "`static.support`, not both; one entry is the one-step form",
+    ],
+    "static.step.0": [
+        "each step excavates at least one region; a region is excavated or installed once in a sequence",
+        "a region excavated after the first step is linear elastic (its `materials.NAME` table has no "
+        "`materials.NAME.plasticity` or `materials.NAME.damage`)",
+        "linear elastic `static.step.0.install` regions in one step only (in other steps they have a law)",
+        "an install region touches no region a later step excavates (checked once the model is built)",
+        "`static.step.0.support` names groups of `support`, each installed in one step",
+        "a sequence of several steps is solved by dynamic relaxation (`static.solver` \"relaxation\" or "
+        "\"auto\"); `contact` in it is not written yet (refused)",
     ],
     "contact": [
         "in a layered box, `contact.interfaces` are interface_1, interface_2, ... (bottom up)",
@@ -304,6 +318,8 @@ PURPOSE = {
     "damping": "Rayleigh damping",
     "initial_stress": "the initial stress: geostatic or uniform",
     "static": "a static stage before the dynamic run (docs/static.md)",
+    "static.step.0": "one step of an excavation sequence, in order (benches top down; docs/static.md, "
+                     "\"An excavation sequence\")",
     "static.boundary": "the truncation faces during the static stage",
     "static.boundary.face.NAME": "the type of one truncation face during the static stage",
     "contact": "contact on the named interfaces (docs/method.md section 9)",

@@ -187,7 +187,7 @@ def uses_relaxation(scene: typing.Mapping) -> bool:
     solver = scene["static"]["solver"]
     if solver in ("direct", "iterative"):
         return False
-    return solver == "relaxation" or bool(scene["static"].get("support")) or any(material.get(table) is not None for material in scene["materials"].values()
+    return solver == "relaxation" or bool(scene["static"].get("support") or scene["static"].get("step")) or any(material.get(table) is not None for material in scene["materials"].values()
                                          for table in ("plasticity", "damage"))
 
 
@@ -1090,6 +1090,8 @@ def hand_over(simulation, solve: bool = True) -> None:
         solve: False only checks the scene's stage (pyfem.solver.plan): nothing is solved.
     """
     scene, model = simulation.scene, simulation.model
+    if scene["static"].get("step"):  # (pyfem/distributed_sequence.py; this serial path is being retired)
+        raise SceneError("static.step", f"{len(scene['static']['step'])} steps", "an excavation sequence runs on the distributed model (PYFEM_ONE_MODEL=1 on one rank, or mpirun)")
     check_linear(scene)
     stage_boundary(scene, model)
     _install_cells(scene, model)

@@ -16,6 +16,7 @@ import scipy.sparse as sp
 
 from pyfem import _kernels
 from pyfem.errors import SceneError
+from pyfem.excavation_steps import static_steps
 
 
 @dataclasses.dataclass
@@ -211,8 +212,9 @@ def scene_groups(scene, model) -> list[SupportGroup]:
     from pyfem.operators import PointOutsideMesh
 
     tables = scene.get("support") or {}
-    static_groups = set((scene.get("static") or {}).get("support") or [])
-    installed_regions = list((scene.get("static") or {}).get("install") or [])
+    steps = static_steps(scene["static"]) if scene.get("static") else []  # (a sequence's: every step's)
+    static_groups = {name for step in steps for name in step["support"]}
+    installed_regions = [name for step in steps for name in step["install"]]
     groups = []
     for name, settings in tables.items():
         if settings["lines"] is not None:

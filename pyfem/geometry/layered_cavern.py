@@ -33,7 +33,9 @@ How the mesh is made ("sheared extrusion", docs/method.md section 12):
    gmsh model.
 
 Physical groups: volumes named by the layer materials (default "sandstone",
-"non_sandstone"), "lining", and "excavation" (only with excavated = False);
+"non_sandstone"), "lining", "shotcrete" (only with shotcrete > 0: a layer that
+thick, one element, on the rock face, the outer part of the lining's thickness)
+and "excavation" (only with excavated = False);
 surfaces "xmin", "xmax", "ymin", "ymax", "zmin", "zmax", "cavern_surface"
 (the excavation surface along the cavern: the lining's outer face, in
 contact with the rock), "lining_inner" (the lining's inner face),
@@ -92,6 +94,7 @@ GMSH_HEXAHEDRON_8 = 5
 
 LINING_REGION = "lining"
 EXCAVATION_REGION = "excavation"
+SHOTCRETE_REGION = "shotcrete"
 OUTER_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 CAVERN_SURFACES = ("cavern_surface", "lining_inner", "cavern_ends")
 
@@ -107,6 +110,8 @@ COMMON_PARAMETERS = {
     "lining_wall": 1.0,       # m
     "lining_floor": 1.0,      # m, floor slab
     "lining_elements": 2,     # elements through the lining thickness
+    "shotcrete": 0.0,         # m, a shotcrete layer on the rock face (region "shotcrete", one element thick;
+                              # the outer part of the lining's thickness); 0: none
     "h_near": None,           # m, first rock cell normal to the cavern; default lining_wall / lining_elements
     "layers": [{"material": "non_sandstone", "thickness": 8.0},   # layers[0] is centred on Y = 0
                {"material": "sandstone", "thickness": 12.0}],     # 60 % / 40 % by thickness
@@ -172,6 +177,12 @@ def layered_cavern_parameters(parameters: typing.Mapping | None = None) -> dict:
                 "half_width_x", "below", "above", "margin_y", "h_cavern", "h_far"):
         p[key] = _positive(key, p[key])
     p["floor_z"] = _finite("floor_z", p["floor_z"])
+    p["shotcrete"] = _finite("shotcrete", p["shotcrete"])
+    thinnest = min(p["lining_wall"], p["lining_crown"], p["lining_floor"])
+    if not 0.0 <= p["shotcrete"] < thinnest:
+        raise ValueError(f"{_PREFIX}shotcrete = {p['shotcrete']!r}: the shotcrete layer's thickness (m) must lie in "
+                         f"[0, {thinnest:g}) (0: none; it is the outer part of the lining's thinnest side, "
+                         "lining_wall, lining_crown, lining_floor)")
     p["layer_offset"] = _finite("layer_offset", p["layer_offset"])
     if not isinstance(p["lining_elements"], numbers.Integral) or isinstance(p["lining_elements"], bool) \
             or p["lining_elements"] < 2:
@@ -258,9 +269,9 @@ def _check_layers(layers) -> None:
         if not isinstance(layer, typing.Mapping) or set(layer) != {"material", "thickness"}:
             raise ValueError(f"{_PREFIX}{key} = {layer!r}: a table with exactly the keys material, thickness")
         name = layer["material"]
-        if not isinstance(name, str) or not name or name in (LINING_REGION, EXCAVATION_REGION):
+        if not isinstance(name, str) or not name or name in (LINING_REGION, EXCAVATION_REGION, SHOTCRETE_REGION):
             raise ValueError(f"{_PREFIX}{key}.material = {name!r}: a non-empty name other than "
-                             f"{LINING_REGION!r} and {EXCAVATION_REGION!r}")
+                             f"{LINING_REGION!r}, {EXCAVATION_REGION!r} and {SHOTCRETE_REGION!r}")
         _positive(f"{key}.thickness", layer["thickness"])
 
 
@@ -286,7 +297,7 @@ class _Section(typing.NamedTuple):
     counts: dict              # n_floor, n_wall, n_rock, perimeter
 
 
-ZONE_LINING, ZONE_ROCK, ZONE_EXCAVATION = 0, 1, 2
+ZONE_LINING, ZONE_ROCK, ZONE_EXCAVATION, ZONE_SHOTCRETE = 0, 1, 2, 3
 
 
 def _contour(half_width: float, z_floor: float, z_spring: float, z_apex: float, n_floor: int,
@@ -352,6 +363,11 @@ def _cross_section(p: dict) -> _Section:
     outer = _contour(half, z0, z_spring, z0 + p["height"], n_floor, n_wall)
     inner = _contour(half - p["lining_wall"], z0 + p["lining_floor"], z_spring,
                      z0 + p["height"] - p["lining_crown"], n_floor, n_wall)
+    t = p["shotcrete"]
+    # With shotcrete the lining's rings end on the shotcrete's inner face, t inside the rock face.
+    lining_outer = (_contour(half - t, z0 + t, z_spring, z0 + p["height"] - t, n_floor, n_wall) if t > 0.0
+                    else outer)
+    n_face = n_lining + (1 if t > 0.0 else 0)  # the ring on the rock face (the excavation surface)
     perimeter = len(outer)
 
     # The model's rectangle, with the same division as the contour: each side of the
@@ -372,12 +388,14 @@ def _cross_section(p: dict) -> _Section:
     fractions, n_rock = _graded_fractions(p["h_near"], p["grading"], p["h_far"], lengths)
     radial = lengths[:, None] * np.diff(fractions, axis=1)
 
-    n_rings = n_lining + n_rock + 1
+    n_rings = n_face + n_rock + 1
     ring_xz = np.empty((n_rings, perimeter, 2))
     for j in range(n_lining + 1):
-        ring_xz[j] = inner + (j / n_lining) * (outer - inner)
+        ring_xz[j] = inner + (j / n_lining) * (lining_outer - inner)
+    if t > 0.0:
+        ring_xz[n_face] = outer
     for m in range(1, n_rock + 1):
-        ring_xz[n_lining + m] = outer + fractions[:, m, None] * (rectangle - outer)
+        ring_xz[n_face + m] = outer + fractions[:, m, None] * (rectangle - outer)
     ring = np.arange(n_rings * perimeter).reshape(n_rings, perimeter)
 
     # Excavation: Coons patch on the inner contour, a along x (floor/arc), b along z (walls).
@@ -408,7 +426,8 @@ def _cross_section(p: dict) -> _Section:
         following = (i + 1) % perimeter
         quads.append(np.column_stack([ring[j, i], ring[j, following],
                                       ring[j + 1, following], ring[j + 1, i]]))
-        zones.append(np.full(perimeter, ZONE_LINING if j < n_lining else ZONE_ROCK))
+        zones.append(np.full(perimeter, ZONE_LINING if j < n_lining else ZONE_SHOTCRETE if j < n_face
+                             else ZONE_ROCK))
     aa, bb = np.meshgrid(np.arange(n_floor), np.arange(n_wall), indexing="ij")
     aa, bb = aa.ravel(), bb.ravel()
     quads.append(np.column_stack([grid[aa, bb], grid[aa, bb + 1], grid[aa + 1, bb + 1], grid[aa + 1, bb]]))
@@ -431,7 +450,7 @@ def _cross_section(p: dict) -> _Section:
         "xmax": ring_edges(outer_ring, n_floor, n_floor + n_wall),
         "zmax": ring_edges(outer_ring, n_floor + n_wall, 2 * n_floor + n_wall),
         "xmin": ring_edges(outer_ring, 2 * n_floor + n_wall, perimeter),
-        "cavern_surface": ring_edges(n_lining, 0, perimeter),
+        "cavern_surface": ring_edges(n_face, 0, perimeter),
         "lining_inner": ring_edges(0, 0, perimeter),
     }
     counts = {"n_floor": n_floor, "n_wall": n_wall, "n_rock": n_rock, "perimeter": perimeter,
@@ -601,6 +620,8 @@ def build_layered_cavern(parameters: typing.Mapping | None = None) -> dict:
     # Hexahedra interval by interval, with their region names.
     region_names = list(dict.fromkeys(layer["material"] for layer in p["layers"]))
     region_names.append(LINING_REGION)
+    if p["shotcrete"] > 0.0:
+        region_names.append(SHOTCRETE_REGION)
     if not p["excavated"]:
         region_names.append(EXCAVATION_REGION)
     cells_of: dict[str, list] = {name: [] for name in region_names}
@@ -608,6 +629,8 @@ def build_layered_cavern(parameters: typing.Mapping | None = None) -> dict:
         hexahedra = np.hstack([k * n2 + section.quads, (k + 1) * n2 + section.quads])
         if stations.in_cavern[k]:
             cells_of[LINING_REGION].append(hexahedra[section.zone == ZONE_LINING])
+            if p["shotcrete"] > 0.0:
+                cells_of[SHOTCRETE_REGION].append(hexahedra[section.zone == ZONE_SHOTCRETE])
             cells_of[stations.material[k]].append(hexahedra[section.zone == ZONE_ROCK])
             if not p["excavated"]:
                 cells_of[EXCAVATION_REGION].append(hexahedra[section.zone == ZONE_EXCAVATION])
@@ -629,7 +652,7 @@ def build_layered_cavern(parameters: typing.Mapping | None = None) -> dict:
     surfaces["ymin"] = section.quads
     surfaces["ymax"] = (n_stations - 1) * n2 + section.quads
     surfaces.update({name: extruded(section.edges[name], all_intervals) for name in ("zmin", "zmax")})
-    lining_quads = section.quads[section.zone == ZONE_LINING]
+    lining_quads = section.quads[(section.zone == ZONE_LINING) | (section.zone == ZONE_SHOTCRETE)]
     excavation_quads = section.quads[section.zone == ZONE_EXCAVATION]
     cap_quads = np.vstack([lining_quads, excavation_quads])
     surfaces["cavern_surface"] = extruded(section.edges["cavern_surface"], cavern_intervals)
@@ -666,6 +689,8 @@ def build_layered_cavern(parameters: typing.Mapping | None = None) -> dict:
                     for name, c in cells.items()}
     p_wave_speeds = {name: Material.from_scene(name, table).p_wave_speed
                      for name, table in p["materials"].items()}
+    if SHOTCRETE_REGION in region_names and SHOTCRETE_REGION not in p_wave_speeds and LINING_REGION in p_wave_speeds:
+        p_wave_speeds[SHOTCRETE_REGION] = p_wave_speeds[LINING_REGION]  # (concrete too, when not given)
     time_steps = {name: float(edge_lengths[name].min()) / p_wave_speeds[name]
                   for name in region_names if name in p_wave_speeds}
 
