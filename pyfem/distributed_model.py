@@ -891,8 +891,8 @@ def plan(run: "DistributedRun", per_step: float, trial: int, phase_seconds: dict
     ratio = 1 if lts is None else lts.ratio
     shown = {
         **model_lines(scene, element_name(part.model, scene["mesh"]["order"]), n_cells, part.n_dofs_global // 3),
-        "model": "distributed: each rank builds and steps its part (docs/scaling.md \"The distributed model\")",
-        "ranks": comm.size,
+        **({"ranks": f"{comm.size}: each builds and steps its part (docs/scaling.md \"The distributed model\")"}
+           if comm.size > 1 else {}),
         **({"free field": free_field_words(scene)} if "seismic_input" in scene.effects else {}),
         **({"contact pairs": part.n_pairs} if part.pairs is not None else {}),
         **({"interface wear": wear_words(contact_arrays["deterioration"],
@@ -1468,7 +1468,7 @@ class DistributedRun:
                     figures = stage_pictures(self.pictures, part, self.stage, stage_stress, self.in_situ_forces,
                                              self.contact_arrays, out / "static", self.scene.get("title", ""))
                     if self.root:
-                        self.stage.report["plots"] = figures
+                        self.stage.report["plots"] = {**figures, **self.stage.report.get("plots", {})}  # (the bolts' "support")
                         _write_json(out / "static" / "static.json", self.stage.report)
                 self.pictures.add_contours(part, self.stage, self.scene)
             if not self.stage_read:

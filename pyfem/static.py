@@ -1091,7 +1091,7 @@ def hand_over(simulation, solve: bool = True) -> None:
     """
     scene, model = simulation.scene, simulation.model
     if scene["static"].get("step"):  # (pyfem/distributed_sequence.py; this serial path is being retired)
-        raise SceneError("static.step", f"{len(scene['static']['step'])} steps", "an excavation sequence runs on the distributed model (PYFEM_ONE_MODEL=1 on one rank, or mpirun)")
+        raise SceneError("static.step", f"{len(scene['static']['step'])} steps", "an excavation sequence runs on the model (pyfem run), not in the in-memory solver.prepare")
     check_linear(scene)
     stage_boundary(scene, model)
     _install_cells(scene, model)

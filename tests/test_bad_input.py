@@ -334,12 +334,12 @@ def test_a_directory_as_the_scene_file_is_an_error_line(capsys, tmp_path):
 
 
 def test_a_value_error_that_names_no_key_is_a_bug_and_keeps_its_traceback(monkeypatch, tmp_path):
-    from pyfem import solver
+    from pyfem import distributed_model
 
     def broken(scene):
         raise ValueError("operands could not be broadcast together")
 
-    monkeypatch.setattr(solver, "plan", broken)
+    monkeypatch.setattr(distributed_model, "check", broken)
     scene = tmp_path / "scene.toml"
     scene.write_text(BOX)
     with pytest.raises(ValueError, match="broadcast"):

@@ -101,7 +101,7 @@ def run_stage(data: dict, out: pathlib.Path, ranks: int = 1) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     scene_file = out / "scene.json"
     scene_file.write_text(json.dumps(data))
-    env = dict(os.environ, PYFEM_ONE_MODEL="1", OMP_NUM_THREADS="1")
+    env = dict(os.environ, OMP_NUM_THREADS="1")
     command = [sys.executable, "-c", "import json, sys; from pyfem.scene import parse_scene; "
                "from pyfem.distributed_model import run; "
                "run(parse_scene(json.load(open(sys.argv[1]))), sys.argv[2])", str(scene_file), str(out / "run")]
@@ -257,7 +257,7 @@ def test_check_prints_the_sequence_and_refuses_an_install_before_its_excavation(
     excavates (cast against rock not yet removed) is refused in one line naming the key, exit 2."""
     path = tmp_path / "scene.toml"
     path.write_text(SCENE_TOML.format(msh=benches, install=install))
-    env = dict(os.environ, PYFEM_ONE_MODEL="1", OMP_NUM_THREADS="1")
+    env = dict(os.environ, OMP_NUM_THREADS="1")
     done = subprocess.run([sys.executable, "-m", "pyfem", "check", str(path)], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=600)
     if refused is None:
@@ -286,7 +286,7 @@ def test_a_run_after_a_sequence_killed_resumes_from_the_sequences_state(benches,
         "dilation_angle = 0.0, tensile_strength = 0.5e6}\n", 1)
     path.write_text(text)
     out = tmp_path / "killed"
-    env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1", PYFEM_ONE_MODEL="1")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1")
     kill_after_first_checkpoint(2, str(path), out, 0.5, ("--set", "time.duration=30.0"), env=env)
     assert (out / "static" / "hand_over.rank1.npz").exists()
     resumed = subprocess.run([sys.executable, "-m", "pyfem", "run", str(path), "--out", str(out), *CHECKPOINTED_RUN,
