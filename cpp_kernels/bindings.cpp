@@ -804,7 +804,13 @@ Returns:
                                return elements.options().mean_dilatation;
                              })
       .def_property_readonly("owned_bytes", &HexahedronElementsBase::owned_bytes,
-                             "Bytes of state and buffers owned (the borrowed geometry excluded).");
+                             "Bytes of state and buffers owned (the borrowed geometry excluded).")
+      .def_property_readonly("state_bytes", &HexahedronElementsBase::state_bytes,
+                             "Bytes of the law's state of one point (one copy; the loop keeps a "
+                             "committed and a trial copy).")
+      .def_property_readonly("geometry_bytes", &HexahedronElementsBase::geometry_bytes,
+                             "Bytes of geometry the loop reads per point: the gradients (dense "
+                             "form) or J^-1 (double or float32), and the weight.");
 
   def_state_methods(py::class_<GroutedBolts, InternalForceComponent, std::shared_ptr<GroutedBolts>>(
       m, "GroutedBolts",

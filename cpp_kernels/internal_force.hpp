@@ -168,6 +168,15 @@ class HexahedronElementsBase : public InternalForceComponent {
   const double* weights() const { return geometry_.weights; }
   /// Bytes of the state, buffers and adjacency this component owns (geometry is borrowed).
   virtual std::int64_t owned_bytes() const;
+  /// sizeof the law's state of one point (one copy).
+  virtual std::int64_t state_bytes() const = 0;
+  /// Bytes of geometry the loop reads per point: 3 k doubles of gradients (dense form) or the 9
+  /// of J^-1 (double or float), and the weight.
+  std::int64_t geometry_bytes() const {
+    const std::int64_t weight = sizeof(double);
+    if (geometry_.gradients) return 3 * geometry_.n_basis * sizeof(double) + weight;
+    return 9 * (single_inverses_.empty() ? sizeof(double) : sizeof(float)) + weight;
+  }
 
  protected:
   // Adds the element forces of the last cell loop to out_force, node by node, in a fixed order.
@@ -276,6 +285,8 @@ class HexahedronElements final : public HexahedronElementsBase {
     return HexahedronElementsBase::owned_bytes() +
            static_cast<std::int64_t>(2 * committed_.size() * sizeof(typename Law::State));
   }
+
+  std::int64_t state_bytes() const override { return sizeof(typename Law::State); }
 
   std::string name() const override {
     return std::string(geometry_.n_basis == 4 || geometry_.n_basis == 10 ? "tetrahedra/" : "hexahedra/") +
