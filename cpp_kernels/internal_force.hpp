@@ -380,10 +380,9 @@ class HexahedronElements final : public HexahedronElementsBase {
 
   // f_a = sum_q w_q [s_q grad phi_a + (mean dilatation) 1/3 tr(s_q) (mean grad phi_a -
   // grad phi_a)] into element_force_ of the cell, with s_q = stress_of(q, eps_q) (Voigt).
-  // Dense form: grad phi_a read per point. Reference form: with R_a = dphi_a/dX (shared by the
-  // cells) and J^-1 = dX/dx at the point,
-  //   du_i/dx_l = sum_m (sum_a u_a,i R_a,m) J^-1_ml,  f_a,i += sum_m R_a,m t_im,
-  //   t_im = sum_l s_il J^-1_ml.
+  // Dense form: grad phi_a read per point. Reference form: grad phi_a = R_a J^-1 formed per point
+  // (R_a = dphi_a/dX, the same for every cell, J^-1 = dX/dx of the point): 9 numbers streamed per
+  // point instead of 3 k.
   template <int kBasis, int kForm, class StressOf>
   void integrate_cell(std::int64_t cell, const double* x, StressOf&& stress_of) {
     using Inverse = std::conditional_t<kForm == kSingleInverse, float, double>;
@@ -396,7 +395,7 @@ class HexahedronElements final : public HexahedronElementsBase {
       }
     }
     const std::int32_t* nodes = geometry_.cell_nodes + cell * kBasis;
-    [[maybe_unused]] const double* cell_gradients =
+    const double* cell_gradients =
         kForm == kDense ? geometry_.gradients + cell * n_points * kBasis * 3 : nullptr;
     const double* weights = geometry_.weights + cell * n_points;
     double x_cell[kBasis][3];
@@ -416,26 +415,26 @@ class HexahedronElements final : public HexahedronElementsBase {
     double force[kBasis][3] = {};
     double trace_sum = 0.0;  // mean dilatation: sum_q 1/3 tr(s_q), the weight of the mean gradient
     for (std::int64_t q = 0; q < n_points; ++q) {
-      // dphi_a/dx_l (dense) or dphi_a/dX_m (reference) of the point.
-      const double* G = kForm == kDense ? cell_gradients + q * kBasis * 3
-                                        : reference_gradients_.data() + q * kBasis * 3;
+      // dphi_a/dx_l of the point: read (dense form), or R_a J^-1 formed in L1 from the
+      // reference gradients, shared by the cells, and the point's J^-1 (reference form).
+      [[maybe_unused]] double formed[kBasis * 3];
+      const double* G = formed;
+      if constexpr (kForm == kDense) {
+        G = cell_gradients + q * kBasis * 3;
+      } else {
+        const double* R = reference_gradients_.data() + q * kBasis * 3;
+        const Inverse* inverse = cell_inverses + 9 * q;
+        double J[9];
+        for (int j = 0; j < 9; ++j) J[j] = inverse[j];
+        for (int a = 0; a < kBasis; ++a)
+          for (int l = 0; l < 3; ++l)
+            formed[3 * a + l] = R[3 * a] * J[l] + R[3 * a + 1] * J[3 + l] + R[3 * a + 2] * J[6 + l];
+      }
       // H_il = dx_i/dx_l = sum_a x_a,i dphi_a/dx_l
       double H[3][3] = {};
       for (int a = 0; a < kBasis; ++a)
         for (int i = 0; i < 3; ++i)
           for (int l = 0; l < 3; ++l) H[i][l] += x_cell[a][i] * G[3 * a + l];
-      [[maybe_unused]] double inverse[3][3];
-      if constexpr (kForm != kDense) {
-        for (int m = 0; m < 3; ++m)
-          for (int l = 0; l < 3; ++l) inverse[m][l] = cell_inverses[9 * q + 3 * m + l];
-        const double reference[3][3] = {{H[0][0], H[0][1], H[0][2]},
-                                        {H[1][0], H[1][1], H[1][2]},
-                                        {H[2][0], H[2][1], H[2][2]}};
-        for (int i = 0; i < 3; ++i)
-          for (int l = 0; l < 3; ++l)
-            H[i][l] = reference[i][0] * inverse[0][l] + reference[i][1] * inverse[1][l] +
-                      reference[i][2] * inverse[2][l];
-      }
       // Engineering shear (material_law.hpp).
       double strain[6] = {H[0][0],           H[1][1],           H[2][2],
                           H[0][1] + H[1][0], H[1][2] + H[2][1], H[0][2] + H[2][0]};
@@ -459,15 +458,6 @@ class HexahedronElements final : public HexahedronElementsBase {
         const double third_trace = (s[0][0] + s[1][1] + s[2][2]) / 3.0;
         trace_sum += third_trace;
         for (int i = 0; i < 3; ++i) s[i][i] -= third_trace;
-      }
-      if constexpr (kForm != kDense) {  // the flux t = s J^-T against dphi/dX
-        const double stress[3][3] = {{s[0][0], s[0][1], s[0][2]},
-                                     {s[1][0], s[1][1], s[1][2]},
-                                     {s[2][0], s[2][1], s[2][2]}};
-        for (int i = 0; i < 3; ++i)
-          for (int m = 0; m < 3; ++m)
-            s[i][m] = stress[i][0] * inverse[m][0] + stress[i][1] * inverse[m][1] +
-                      stress[i][2] * inverse[m][2];
       }
       for (int a = 0; a < kBasis; ++a)
         for (int i = 0; i < 3; ++i)
