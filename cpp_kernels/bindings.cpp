@@ -612,7 +612,10 @@ Deterministic: the same bits for any number of threads.
 Args:
     cell_nodes: int32 (c, k) node of each basis function, k = 8 (Q1) or 27 (Q2) hexahedra,
         4 (P1) or 10 (P2) tetrahedra. Borrowed.
-    gradients: float64 (c, q, k, 3) basis gradients dphi/dx at the points (1/m), or for Q2
+    gradients: float64 (c, q, k, 3) basis gradients dphi/dx at the points (1/m); or the
+        reference form, a tuple (inverse_jacobians float64 (c, q, 3, 3) dX_m/dx_l,
+        reference_gradients float64 (q, k, 3) dphi/dX, the same for every cell): 9 numbers per
+        point streamed instead of 3 k; or for Q2
         cells with the 27-point Gauss rule the tensor form, a tuple (inverse_jacobians float64
         (c, q, 3, 3) dX_m/dx_l, node_order int32 (27,), point_order int32 (27,), basis float64
         (3, 3), derivative float64 (3, 3)): lexicographic node/point 9 i + 3 j + k -> element
@@ -633,25 +636,39 @@ Args:
         strength is returned (damaged) at construction and released from t = 0.
     mean_dilatation: replace the volumetric strain by its cell mean (B-bar, for Q1 plasticity).
     min_cells_for_threads: below this many cells the loops run on one thread.
+    single_geometry: the reference or tensor form's inverse Jacobians held as float32 (a copy,
+        36 B per point instead of 72; the strain and force carry ~6e-8 relative error).
 Borrowed arrays are kept alive by this object and must not be modified while it is in use.)"))
       .def(py::init([](const py::object& cell_nodes_object, const py::object& gradients_object,
                        const py::object& weights_object, const std::string& law,
                        const ParameterMap& parameters, const py::object& initial_stress_object,
-                       bool mean_dilatation, std::int64_t min_cells_for_threads) {
+                       bool mean_dilatation, std::int64_t min_cells_for_threads,
+                       bool single_geometry) {
              auto cell_nodes = checked_array<std::int32_t>(cell_nodes_object, "cell_nodes",
                                                            {kAny, kAny});
              const py::ssize_t n_cells = cell_nodes.shape(0), n_basis = cell_nodes.shape(1);
              auto weights = checked_array<double>(weights_object, "weights", {n_cells, kAny});
              const py::ssize_t n_points = weights.shape(1);
-             // Dense (c, q, k, 3), or the tensor form of Q2 (internal_force.hpp).
-             const bool tensor_form = py::isinstance<py::tuple>(gradients_object);
-             py::array_t<double> gradients, inverse_jacobians;
+             // Dense (c, q, k, 3), the reference form or the tensor form of Q2
+             // (internal_force.hpp).
+             const bool tuple_form = py::isinstance<py::tuple>(gradients_object);
+             const bool reference_form =
+                 tuple_form && gradients_object.cast<py::tuple>().size() == 2;
+             const bool tensor_form = tuple_form && !reference_form;
+             py::array_t<double> gradients, inverse_jacobians, reference_gradients;
              TensorQ2 tensor{};
-             if (tensor_form) {
+             if (reference_form) {
+               const auto parts = gradients_object.cast<py::tuple>();
+               inverse_jacobians = checked_array<double>(parts[0], "inverse_jacobians",
+                                                         {n_cells, n_points, 3, 3});
+               reference_gradients = checked_array<double>(parts[1], "reference_gradients",
+                                                           {n_points, n_basis, 3});
+             } else if (tensor_form) {
                const auto parts = gradients_object.cast<py::tuple>();
                if (parts.size() != 5)
                  throw std::invalid_argument(
-                     "gradients: a (c, q, k, 3) array or the tensor form (inverse_jacobians, "
+                     "gradients: a (c, q, k, 3) array, the reference form (inverse_jacobians, "
+                     "reference_gradients) or the tensor form (inverse_jacobians, "
                      "node_order, point_order, basis, derivative)");
                inverse_jacobians = checked_array<double>(parts[0], "inverse_jacobians",
                                                          {n_cells, n_points, 3, 3});
@@ -678,19 +695,22 @@ Borrowed arrays are kept alive by this object and must not be modified while it 
                                          n_points,
                                          n_basis,
                                          cell_nodes.data(),
-                                         tensor_form ? nullptr : gradients.data(),
+                                         tuple_form ? nullptr : gradients.data(),
                                          weights.data(),
                                          tensor_form ? &tensor : nullptr,
-                                         tensor_form ? inverse_jacobians.data() : nullptr};
+                                         tuple_form ? inverse_jacobians.data() : nullptr,
+                                         reference_form ? reference_gradients.data() : nullptr};
              ElementOptions options;
              options.mean_dilatation = mean_dilatation;
              options.min_cells_for_threads = min_cells_for_threads;
+             options.single_geometry = single_geometry;
              return make_hexahedron_elements(law, parameters, geometry, options, initial_stress);
            }),
            py::arg("cell_nodes"), py::arg("gradients"), py::arg("weights"),
            py::arg("law"), py::arg("parameters"),
            py::arg("initial_stress") = py::none(), py::arg("mean_dilatation") = false,
            py::arg("min_cells_for_threads") = ElementOptions{}.min_cells_for_threads,
+           py::arg("single_geometry") = false,
            py::keep_alive<1, 2>(), py::keep_alive<1, 3>(), py::keep_alive<1, 4>())
       .def(
           "stress",
@@ -784,7 +804,13 @@ Returns:
                                return elements.options().mean_dilatation;
                              })
       .def_property_readonly("owned_bytes", &HexahedronElementsBase::owned_bytes,
-                             "Bytes of state and buffers owned (the borrowed geometry excluded).");
+                             "Bytes of state and buffers owned (the borrowed geometry excluded).")
+      .def_property_readonly("state_bytes", &HexahedronElementsBase::state_bytes,
+                             "Bytes of the law's state of one point (one copy; the loop keeps a "
+                             "committed and a trial copy).")
+      .def_property_readonly("geometry_bytes", &HexahedronElementsBase::geometry_bytes,
+                             "Bytes of geometry the loop reads per point: the gradients (dense "
+                             "form) or J^-1 (double or float32), and the weight.");
 
   def_state_methods(py::class_<GroutedBolts, InternalForceComponent, std::shared_ptr<GroutedBolts>>(
       m, "GroutedBolts",

@@ -21,6 +21,11 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
     geometry_.tensor = &tensor_;
   }
   const std::int64_t n_cells = geometry.n_cells, n_points = geometry.n_points, k = geometry.n_basis;
+  if (geometry.reference_gradients) {  // owned: the same for every cell, read from cache
+    reference_gradients_.assign(geometry.reference_gradients,
+                                geometry.reference_gradients + n_points * k * 3);
+    geometry_.reference_gradients = reference_gradients_.data();
+  }
   if (k != 4 && k != 10 && k != 8 && k != 27)
     throw std::invalid_argument("cell_nodes: " + std::to_string(k) +
                                 " nodes per cell; tetrahedra have 4 (P1) or 10 (P2), hexahedra 8 "
@@ -43,7 +48,7 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
           "gradients: the tensor form is for Q2 cells with 27 points, given with the inverse "
           "Jacobians and without dense gradients");
     if (options.mean_dilatation)
-      throw std::invalid_argument("mean_dilatation needs the dense gradients (Q1)");
+      throw std::invalid_argument("mean_dilatation needs the dense or the reference form, not the tensor form");
     const TensorQ2& t = *geometry.tensor;
     require_finite(t.basis, 9, "tensor basis");
     require_finite(t.derivative, 9, "tensor derivative");
@@ -55,8 +60,26 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
       node_seen[t.node_order[j]] = point_seen[t.point_order[j]] = true;
     }
     require_finite(geometry.inverse_jacobians, n_cells * n_points * 9, "inverse_jacobians");
+  } else if (geometry.reference_gradients) {
+    if (!geometry.inverse_jacobians || geometry.gradients)
+      throw std::invalid_argument(
+          "gradients: the reference form is the inverse Jacobians with the reference gradients, "
+          "without dense gradients");
+    require_finite(geometry.reference_gradients, n_points * k * 3, "reference_gradients");
+    require_finite(geometry.inverse_jacobians, n_cells * n_points * 9, "inverse_jacobians");
   } else {
+    if (!geometry.gradients || geometry.inverse_jacobians)
+      throw std::invalid_argument(
+          "gradients: dense gradients, or the inverse Jacobians with the reference gradients or "
+          "the tensor tables");
     require_finite(geometry.gradients, n_cells * n_points * k * 3, "gradients");
+  }
+  if (options.single_geometry) {
+    if (!geometry.inverse_jacobians)
+      throw std::invalid_argument(
+          "single_geometry: needs the inverse Jacobians (the reference or tensor form)");
+    single_inverses_.assign(geometry.inverse_jacobians,
+                            geometry.inverse_jacobians + n_cells * n_points * 9);
   }
   characteristic_length_.assign(n_cells, 0.0);
   std::vector<double> volumes(n_cells);  // sum_q w_q of each cell
@@ -81,14 +104,29 @@ HexahedronElementsBase::HexahedronElementsBase(const HexahedronGeometry& geometr
   }
   element_force_.assign(3 * n_cells * k, 0.0);
   cell_energy_.assign(2 * n_cells, 0.0);
-  if (options.mean_dilatation && geometry.gradients) {
-    // Cell means of the basis gradients, sum_q w_q grad phi_a(x_q) / sum_q w_q: geometry, once.
+  if (options.mean_dilatation && !geometry.tensor) {
+    // Cell means of the basis gradients, sum_q w_q grad phi_a(x_q) / sum_q w_q: geometry, once
+    // (reference form: grad phi_a = R_a J^-1 with J^-1 as the loop holds it).
     mean_gradients_.assign(3 * n_cells * k, 0.0);
+    std::vector<double> G(3 * k);
     for (std::int64_t cell = 0; cell < n_cells; ++cell) {
       double* mean = mean_gradients_.data() + 3 * cell * k;
       for (std::int64_t q = 0; q < n_points; ++q) {
-        const double w = geometry.weights[cell * n_points + q];
-        const double* G = geometry.gradients + (cell * n_points + q) * k * 3;
+        const std::int64_t point = cell * n_points + q;
+        const double w = geometry.weights[point];
+        if (geometry.gradients) {
+          std::copy_n(geometry.gradients + point * k * 3, 3 * k, G.begin());
+        } else {
+          const double* R = reference_gradients_.data() + q * k * 3;
+          double inverse[9];
+          for (int j = 0; j < 9; ++j)
+            inverse[j] = single_inverses_.empty() ? geometry.inverse_jacobians[9 * point + j]
+                                                  : single_inverses_[9 * point + j];
+          for (std::int64_t a = 0; a < k; ++a)
+            for (int l = 0; l < 3; ++l)
+              G[3 * a + l] = R[3 * a] * inverse[l] + R[3 * a + 1] * inverse[3 + l] +
+                             R[3 * a + 2] * inverse[6 + l];
+        }
         for (std::int64_t j = 0; j < 3 * k; ++j) mean[j] += w * G[j];
       }
       for (std::int64_t j = 0; j < 3 * k; ++j) mean[j] /= volumes[cell];
@@ -177,7 +215,8 @@ std::int64_t HexahedronElementsBase::owned_bytes() const {
   return static_cast<std::int64_t>(sizeof(double) *
                                        (initial_stress_.size() + characteristic_length_.size() +
                                         element_force_.size() + cell_energy_.size() +
-                                        mean_gradients_.size()) +
+                                        mean_gradients_.size() + reference_gradients_.size()) +
+                                   sizeof(float) * single_inverses_.size() +
                                    sizeof(std::int32_t) * unique_nodes_.size() +
                                    sizeof(std::int64_t) * (node_ptr_.size() + node_slots_.size()));
 }

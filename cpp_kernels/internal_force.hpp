@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -81,13 +82,17 @@ class InternalForceComponent {
 
 /// Borrowed element arrays of hexahedral cells (Q1: k = 8, Q2: k = 27) or tetrahedral cells (P1:
 /// k = 4 with one point, P2: k = 10 with four), from pyfem/elements.py.
-/// The basis gradients dphi_a/dx at the points come in one of two forms:
-///   dense:    gradients (c, q, k, 3);
-///   tensor:   (Q2 with its 27-point Gauss rule) the cell type's TensorQ2 (tensor_q2.hpp) and
-///             the inverse Jacobians (c, q, 3, 3) dX_m/dx_l: the element loop sum-factorises
-///             the reference gradients and applies J^-1 per point, about a third of the dense
-///             arithmetic, and streams 9 numbers per point instead of 81.
-/// Exactly one of gradients and (tensor, inverse_jacobians) is set.
+/// The basis gradients dphi_a/dx at the points come in one of three forms:
+///   dense:     gradients (c, q, k, 3) (one-point cells with their mean gradients);
+///   reference: the reference gradients dphi_a/dX (q, k, 3), the same for every cell (copied),
+///              and the inverse Jacobians (c, q, 3, 3) dX_m/dx_l: the element loop streams 9
+///              numbers per point instead of 3 k (72 B against 192 B for Q1, 648 B for Q2) and
+///              applies J^-1 to the 3x3 reference gradient of u and to the point's flux;
+///   tensor:    (Q2 with its 27-point Gauss rule) the cell type's TensorQ2 (tensor_q2.hpp) and
+///              the inverse Jacobians: the reference gradients by sum factorisation, about a
+///              third of the dense arithmetic.
+/// Exactly one of gradients, (reference_gradients, inverse_jacobians) and (tensor,
+/// inverse_jacobians) is set.
 struct HexahedronGeometry {
   std::int64_t n_cells = 0;
   std::int64_t n_points = 0;                 // q, quadrature points per cell
@@ -96,7 +101,8 @@ struct HexahedronGeometry {
   const double* gradients = nullptr;         // (c, q, k, 3) dphi/dx at the points (1/m), or null
   const double* weights = nullptr;           // (c, q) quadrature weight x det J (m^3), > 0
   const TensorQ2* tensor = nullptr;          // the tensor form, or null
-  const double* inverse_jacobians = nullptr;  // (c, q, 3, 3) dX_m/dx_l (1/m), tensor form
+  const double* inverse_jacobians = nullptr;  // (c, q, 3, 3) dX_m/dx_l (1/m), reference/tensor form
+  const double* reference_gradients = nullptr;  // (q, k, 3) dphi/dX, reference form, or null
 };
 
 /// Options of the element loop.
@@ -109,6 +115,10 @@ struct ElementOptions {
   bool mean_dilatation = false;
   /// Below this many cells the loop runs on one thread (a parallel region costs more).
   std::int64_t min_cells_for_threads = 512;
+  /// Reference and tensor forms: the inverse Jacobians held as float32 (36 B per point instead of
+  /// 72; the component owns the rounded copy). The strain and the force then carry a relative
+  /// error of about 6e-8 (float32's unit round-off) of the geometry; the state stays double.
+  bool single_geometry = false;
 };
 
 /// The law-independent part of the hexahedron loop: geometry, the node gather, energies.
@@ -158,6 +168,15 @@ class HexahedronElementsBase : public InternalForceComponent {
   const double* weights() const { return geometry_.weights; }
   /// Bytes of the state, buffers and adjacency this component owns (geometry is borrowed).
   virtual std::int64_t owned_bytes() const;
+  /// sizeof the law's state of one point (one copy).
+  virtual std::int64_t state_bytes() const = 0;
+  /// Bytes of geometry the loop reads per point: 3 k doubles of gradients (dense form) or the 9
+  /// of J^-1 (double or float), and the weight.
+  std::int64_t geometry_bytes() const {
+    const std::int64_t weight = sizeof(double);
+    if (geometry_.gradients) return 3 * geometry_.n_basis * sizeof(double) + weight;
+    return 9 * (single_inverses_.empty() ? sizeof(double) : sizeof(float)) + weight;
+  }
 
  protected:
   // Adds the element forces of the last cell loop to out_force, node by node, in a fixed order.
@@ -180,10 +199,14 @@ class HexahedronElementsBase : public InternalForceComponent {
   bool threaded() const { return geometry_.n_cells >= options_.min_cells_for_threads; }
 
   static constexpr double kZeroStress[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+  // Forms of the geometry in the cell loop: dense gradients, or J^-1 in double or float.
+  static constexpr int kDense = 0, kDoubleInverse = 1, kSingleInverse = 2;
   static constexpr int kMaxBasis = 27;
 
-  HexahedronGeometry geometry_;  // its tensor, if any, points to tensor_
+  HexahedronGeometry geometry_;  // its tensor and reference gradients, if any, point to the copies
   TensorQ2 tensor_{};
+  std::vector<double> reference_gradients_;   // (q, k, 3) of the reference form, or empty
+  std::vector<float> single_inverses_;        // (c, q, 9) single_geometry's J^-1, or empty
   ElementOptions options_;
   std::vector<double> initial_stress_;         // (c, q, 6) or empty
   std::vector<double> characteristic_length_;  // (c)
@@ -263,6 +286,8 @@ class HexahedronElements final : public HexahedronElementsBase {
            static_cast<std::int64_t>(2 * committed_.size() * sizeof(typename Law::State));
   }
 
+  std::int64_t state_bytes() const override { return sizeof(typename Law::State); }
+
   std::string name() const override {
     return std::string(geometry_.n_basis == 4 || geometry_.n_basis == 10 ? "tetrahedra/" : "hexahedra/") +
            Law::kName;
@@ -290,17 +315,25 @@ class HexahedronElements final : public HexahedronElementsBase {
     trial_ = committed_;
   }
 
-  // The cell loop compiled for the cell's node count: P1 and P2 tetrahedra, Q1 and Q2 hexahedra.
+  // The cell loop compiled for the cell's node count (P1 and P2 tetrahedra, Q1 and Q2
+  // hexahedra) and the form of its geometry (kDense, or J^-1 in double or float).
   void dispatch(const double* x, bool damping) {
     switch (geometry_.n_basis) {
-      case 4: return cell_loop<4>(x, damping);
-      case 10: return cell_loop<10>(x, damping);
-      case 8: return cell_loop<8>(x, damping);
-      default: return cell_loop<27>(x, damping);
+      case 4: return dispatch_form<4>(x, damping);
+      case 10: return dispatch_form<10>(x, damping);
+      case 8: return dispatch_form<8>(x, damping);
+      default: return dispatch_form<27>(x, damping);
     }
   }
 
   template <int kBasis>
+  void dispatch_form(const double* x, bool damping) {
+    if (geometry_.gradients) return cell_loop<kBasis, kDense>(x, damping);
+    if (!single_inverses_.empty()) return cell_loop<kBasis, kSingleInverse>(x, damping);
+    return cell_loop<kBasis, kDoubleInverse>(x, damping);
+  }
+
+  template <int kBasis, int kForm>
   void cell_loop(const double* x, bool damping) {
     const std::int64_t n_cells = geometry_.n_cells;
     // Dynamic chunks: a yielding point costs ~6x an elastic one and the yielding cells cluster
@@ -309,17 +342,17 @@ class HexahedronElements final : public HexahedronElementsBase {
 #pragma omp parallel for schedule(dynamic, 64) if (threaded())
     for (std::int64_t cell = 0; cell < n_cells; ++cell) {
       if (damping)
-        cell_damping<kBasis>(cell, x);
+        cell_damping<kBasis, kForm>(cell, x);
       else
-        cell_force<kBasis>(cell, x);
+        cell_force<kBasis, kForm>(cell, x);
     }
   }
 
   // Trial states, energies and element force of one cell at the displacement u.
-  template <int kBasis>
+  template <int kBasis, int kForm>
   void cell_force(std::int64_t cell, const double* u) {
     double stored = 0.0, dissipation = 0.0;
-    integrate_cell<kBasis>(cell, u, [&](std::int64_t q, const double* strain, double* s) {
+    integrate_cell<kBasis, kForm>(cell, u, [&](std::int64_t q, const double* strain, double* s) {
       const std::int64_t p = cell * geometry_.n_points + q;
       const double* sigma0 = initial_stress_of(cell, q);
       const PointStrain point{strain, sigma0, characteristic_length_[cell]};
@@ -334,11 +367,11 @@ class HexahedronElements final : public HexahedronElementsBase {
   }
 
   // Element force beta C0 : eps(v) of one cell (C0 the law's initial elastic moduli).
-  template <int kBasis>
+  template <int kBasis, int kForm>
   void cell_damping(std::int64_t cell, const double* v) {
     const double beta_lambda = beta_ * moduli_.lame_lambda;
     const double beta_G = beta_ * moduli_.shear_modulus;
-    integrate_cell<kBasis>(cell, v, [&](std::int64_t, const double* strain, double* s) {
+    integrate_cell<kBasis, kForm>(cell, v, [&](std::int64_t, const double* strain, double* s) {
       const double trace_term = beta_lambda * (strain[0] + strain[1] + strain[2]);
       for (int c = 0; c < 3; ++c) s[c] = trace_term + 2.0 * beta_G * strain[c];
       for (int c = 3; c < 6; ++c) s[c] = beta_G * strain[c];  // engineering shear
@@ -347,14 +380,23 @@ class HexahedronElements final : public HexahedronElementsBase {
 
   // f_a = sum_q w_q [s_q grad phi_a + (mean dilatation) 1/3 tr(s_q) (mean grad phi_a -
   // grad phi_a)] into element_force_ of the cell, with s_q = stress_of(q, eps_q) (Voigt).
-  template <int kBasis, class StressOf>
+  // Dense form: grad phi_a read per point. Reference form: grad phi_a = R_a J^-1 formed per point
+  // (R_a = dphi_a/dX, the same for every cell, J^-1 = dX/dx of the point): 9 numbers streamed per
+  // point instead of 3 k.
+  template <int kBasis, int kForm, class StressOf>
   void integrate_cell(std::int64_t cell, const double* x, StressOf&& stress_of) {
-    if constexpr (kBasis == 27) {
-      if (geometry_.tensor) return integrate_cell_tensor(cell, x, stress_of);
-    }
+    using Inverse = std::conditional_t<kForm == kSingleInverse, float, double>;
     const std::int64_t n_points = geometry_.n_points;
+    [[maybe_unused]] const Inverse* cell_inverses = nullptr;
+    if constexpr (kForm != kDense) {
+      cell_inverses = inverse_table<Inverse>() + cell * n_points * 9;
+      if constexpr (kBasis == 27) {
+        if (geometry_.tensor) return integrate_cell_tensor(cell, x, cell_inverses, stress_of);
+      }
+    }
     const std::int32_t* nodes = geometry_.cell_nodes + cell * kBasis;
-    const double* cell_gradients = geometry_.gradients + cell * n_points * kBasis * 3;
+    const double* cell_gradients =
+        kForm == kDense ? geometry_.gradients + cell * n_points * kBasis * 3 : nullptr;
     const double* weights = geometry_.weights + cell * n_points;
     double x_cell[kBasis][3];
     for (int a = 0; a < kBasis; ++a)
@@ -373,7 +415,21 @@ class HexahedronElements final : public HexahedronElementsBase {
     double force[kBasis][3] = {};
     double trace_sum = 0.0;  // mean dilatation: sum_q 1/3 tr(s_q), the weight of the mean gradient
     for (std::int64_t q = 0; q < n_points; ++q) {
-      const double* G = cell_gradients + q * kBasis * 3;
+      // dphi_a/dx_l of the point: read (dense form), or R_a J^-1 formed in L1 from the
+      // reference gradients, shared by the cells, and the point's J^-1 (reference form).
+      [[maybe_unused]] double formed[kBasis * 3];
+      const double* G = formed;
+      if constexpr (kForm == kDense) {
+        G = cell_gradients + q * kBasis * 3;
+      } else {
+        const double* R = reference_gradients_.data() + q * kBasis * 3;
+        const Inverse* inverse = cell_inverses + 9 * q;
+        double J[9];
+        for (int j = 0; j < 9; ++j) J[j] = inverse[j];
+        for (int a = 0; a < kBasis; ++a)
+          for (int l = 0; l < 3; ++l)
+            formed[3 * a + l] = R[3 * a] * J[l] + R[3 * a + 1] * J[3 + l] + R[3 * a + 2] * J[6 + l];
+      }
       // H_il = dx_i/dx_l = sum_a x_a,i dphi_a/dx_l
       double H[3][3] = {};
       for (int a = 0; a < kBasis; ++a)
@@ -419,12 +475,12 @@ class HexahedronElements final : public HexahedronElementsBase {
   // sum factorisation (tensor_q2.hpp) and J^-1 = dX/dx at the point,
   //   du_i/dx_l = sum_m (dU_i/dX_m) J^-1_ml,  f_n,i = sum_q sum_m dphi_n/dX_m(q) t_im(q),
   //   t_im = w_q sum_l s_il J^-1_ml.
-  template <class StressOf>
-  void integrate_cell_tensor(std::int64_t cell, const double* x, StressOf& stress_of) {
+  template <class Inverse, class StressOf>
+  void integrate_cell_tensor(std::int64_t cell, const double* x, const Inverse* inverses,
+                             StressOf& stress_of) {
     const TensorQ2& tensor = *geometry_.tensor;
     const std::int32_t* nodes = geometry_.cell_nodes + cell * 27;
     const double* weights = geometry_.weights + cell * 27;
-    const double* inverses = geometry_.inverse_jacobians + cell * 27 * 9;
     double U[3][27];
     for (int n = 0; n < 27; ++n) {
       const std::int64_t node = nodes[tensor.node_order[n]];
@@ -435,7 +491,8 @@ class HexahedronElements final : public HexahedronElementsBase {
     double flux[3][3][27];  // [i][m][point] t_im
     for (int p = 0; p < 27; ++p) {
       const int q = tensor.point_order[p];
-      const double* inverse = inverses + 9 * q;
+      double inverse[9];
+      for (int j = 0; j < 9; ++j) inverse[j] = inverses[9 * q + j];
       double H[3][3];
       for (int i = 0; i < 3; ++i)
         for (int l = 0; l < 3; ++l)
@@ -459,6 +516,15 @@ class HexahedronElements final : public HexahedronElementsBase {
     double* out = element_force_.data() + cell * 27 * 3;
     for (int n = 0; n < 27; ++n)
       for (int i = 0; i < 3; ++i) out[3 * tensor.node_order[n] + i] = force[i][n];
+  }
+
+  // The inverse Jacobians of the reference and tensor forms, as held.
+  template <class Inverse>
+  const Inverse* inverse_table() const {
+    if constexpr (std::is_same_v<Inverse, float>)
+      return single_inverses_.data();
+    else
+      return geometry_.inverse_jacobians;
   }
 
   typename Law::Parameters parameters_;

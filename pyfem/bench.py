@@ -208,6 +208,139 @@ def element_loop_rows(target_dofs: int, steps: int, threads: int = 2) -> list[di
     return rows
 
 
+LAW_STATES = ("at rest", "near the surface", "yielding")
+"""The states of `element_law_rows`."""
+
+GEOMETRY_FORMS = {"dense gradients": {"dense": True}, "J^-1 double": {}, "J^-1 float32": {"single_geometry": True}}
+"""Geometry forms of `element_law_rows`: the kernel's gradients argument (pyfem.elements.ElementArrays.kernel_gradients)
+and options; a form the kernel does not take (an older build) is skipped."""
+
+
+def loop_bytes_per_point(state_bytes: int, geometry_bytes: int, n_basis: int, points_per_cell: int,
+                         initial_stress: bool = True) -> int:
+    """Bytes the element loop must move per quadrature point per step (compute + commit), at rest:
+    the committed state read and the trial state written (3 state copies: read, write allocate,
+    write; the commit swaps pointers), the geometry (`geometry_bytes`: gradients or J^-1, and the
+    weight), sigma0 (48), and per cell the element force written and read back by the node gather
+    (2 x 24 k), its node numbers (4 k), its slots in the gather (8 k), the displacement's gather
+    (24 k, counted once per cell: neighbours' reuse in cache ignored) and its two energies (16)."""
+    per_cell = 2 * 24 * n_basis + 4 * n_basis + 8 * n_basis + 24 * n_basis + 16
+    return int(3 * state_bytes + geometry_bytes + (48 if initial_stress else 0) + per_cell / points_per_cell)
+
+
+def element_law_rows(target_dofs: int, steps: int, bandwidth: dict, threads_list=(1, 2)) -> list[dict]:
+    """The element loop per law, geometry form and thread count on one Q1 box (docs/scaling.md "The
+    element loop per law"): ns per point per step (compute + commit of the component alone, best of
+    three batches) with the points at rest, near the surface and yielding, beside the roofline bound
+    of the same run, `loop_bytes_per_point` / the triad bandwidth of that thread count
+    (`stream_triad_bandwidth`), and the fraction of it reached.
+
+    Every law starts from an isotropic sigma0 of -5 MPa and is driven by the uniform strain
+    eps = k (1e-3, 3e-4, -3e-3): at rest k = 0; near the surface k = 0.9 k_y (k_y the first multiple
+    of 1/40 at which a point turns inelastic, up to 10, found by a ramp of its own component); yielding
+    k = k_y (1.02 + 0.01 j) at step j, so every step loads beyond the surface. Each state also adds
+    random increments of 1e-9 m. `returning` is the share of points whose plastic strain or damage
+    grew in one more step of the state's driving."""
+    from pyfem import _kernels, solver
+    from pyfem.elements import nonlinear_component
+
+    scene = _box_scene(target_dofs)
+    simulation = solver.prepare(scene)
+    model = simulation.model
+    coords = model.node_coords
+    drive = np.zeros_like(coords)
+    drive[:, 0], drive[:, 1], drive[:, 2] = 1.0e-3 * coords[:, 0], 3.0e-4 * coords[:, 1], -3.0e-3 * coords[:, 2]
+    drive = drive.ravel()
+    laws = {
+        "linear_elastic": {"law": "linear_elastic", "lame_lambda": 2.8e9, "shear_modulus": 3.2e9},
+        "mohr_coulomb": {"law": "mohr_coulomb", "young_modulus": 8.0e9, "poisson_ratio": 0.24, "cohesion": 1.1e6,
+                         "friction_angle": 42.0, "tensile_strength": 1.95e6},
+        "concrete_damage": {"law": "concrete_damage", "young_modulus": 8.0e9, "poisson_ratio": 0.24,
+                            "cohesion": 1.8e6, "friction_angle": 46.0, "tensile_strength": 1.27e6},
+    }
+    rng = np.random.default_rng(1)
+    rows = []
+    for name, parameters in laws.items():
+        regions = nonlinear_component(model, ["rock"], {"rock": parameters})
+        arrays = regions.arrays["rock"]
+        law, law_parameters = regions.laws["rock"]
+        sigma0 = np.zeros(arrays.weights.shape + (6,))
+        sigma0[..., :3] = -5.0e6
+        points = int(arrays.weights.size)
+
+        def build(form):
+            options = dict(GEOMETRY_FORMS[form])
+            gradients = arrays.kernel_gradients(dense=options.pop("dense", False))
+            return _kernels.HexahedronElements(arrays.cell_nodes, gradients, arrays.weights, law, law_parameters,
+                                               initial_stress=sigma0, **options)
+
+        def inelastic(component) -> np.ndarray:
+            return (np.asarray(component.plastic_strain()).ravel() > 0.0) | (np.asarray(component.damage()).ravel() > 0.0)
+
+        onset = None
+        if name != "linear_elastic":
+            ramp = build("dense gradients")
+            out = np.zeros(drive.size)
+            for k in range(1, 401):
+                ramp.compute(drive * k / 40, out)
+                ramp.commit()
+                if inelastic(ramp).any():
+                    onset = k / 40
+                    break
+        for form in GEOMETRY_FORMS:
+            try:
+                probe = build(form)
+            except (TypeError, ValueError):  # a build without this form
+                continue
+            if form != "dense gradients" and not hasattr(probe, "geometry_bytes"):
+                continue  # a build before the reference form: kernel_gradients gave dense gradients
+            for state in LAW_STATES if onset is not None else LAW_STATES[:1]:
+                for threads in threads_list:
+                    _kernels.set_num_threads(threads)
+                    component = build(form)
+                    out = np.zeros(drive.size)
+                    if state == "at rest":
+                        loads = [1.0e-9 * rng.standard_normal(drive.size) for _ in range(3 * steps + 1)]
+                    elif state == "near the surface":
+                        for k in range(1, 10):
+                            component.compute(drive * 0.1 * k * onset, out)
+                            component.commit()
+                        loads = [drive * 0.9 * onset + 1.0e-9 * rng.standard_normal(drive.size)
+                                 for _ in range(3 * steps + 1)]
+                    else:
+                        for k in range(1, 21):
+                            component.compute(drive * 0.05 * k * onset, out)
+                            component.commit()
+                        loads = [drive * onset * (1.02 + 0.01 * j) + 1.0e-9 * rng.standard_normal(drive.size)
+                                 for j in range(3 * steps + 1)]
+                    best = math.inf
+                    for batch in range(3):
+                        start = time.perf_counter()
+                        for j in range(batch * steps, (batch + 1) * steps):
+                            component.compute(loads[j], out)
+                            component.commit()
+                        best = min(best, (time.perf_counter() - start) / steps)
+                    before = inelastic(component), np.asarray(component.plastic_strain()).ravel().copy(), \
+                        np.asarray(component.damage()).ravel().copy()
+                    component.compute(loads[-1], out)
+                    component.commit()
+                    grew = (np.asarray(component.plastic_strain()).ravel() > before[1]) | \
+                        (np.asarray(component.damage()).ravel() > before[2])
+                    state_bytes = getattr(component, "state_bytes", None)
+                    geometry_bytes = getattr(component, "geometry_bytes", None)
+                    moved = (None if state_bytes is None else
+                             loop_bytes_per_point(state_bytes, geometry_bytes, arrays.cell_nodes.shape[1],
+                                                  arrays.weights.shape[1]))
+                    ns = 1e9 * best / points
+                    bound = None if moved is None else 1e9 * moved / bandwidth[threads]
+                    rows.append({"law": name, "geometry": form, "state": state, "threads": threads, "points": points,
+                                 "ns_per_point": ns, "returning": float(np.mean(grew)),
+                                 "bytes_per_point": moved, "bound_ns_per_point": bound,
+                                 "fraction_of_bound": None if bound is None else bound / ns})
+    _kernels.set_num_threads(2)
+    return rows
+
+
 def yield_surface_seconds(component, node_coords: np.ndarray, steps: int) -> tuple[float, float]:
     """Best of three batches: seconds per compute + commit of a Mohr-Coulomb component whose points
     sit on its yield surface, as the case study's zone does after its static stage (its rock yields
@@ -300,6 +433,8 @@ def main(argv=None) -> int:
     parser.add_argument("--case-study", nargs="*", default=["coarse"], choices=["coarse", "paper"],
                         help="case-3 scenes whose step is split into phases (default coarse; paper builds "
                              "the 500 000-dof model, minutes); none: --case-study with no value")
+    parser.add_argument("--element-loop", action="store_true",
+                        help="only the element loop per law (element_law_rows) on the first size's box")
     args = parser.parse_args(argv)
 
     from pyfem import _kernels
@@ -308,6 +443,14 @@ def main(argv=None) -> int:
 
     rows = []
     bandwidth = {threads: stream_triad_bandwidth(threads=threads) for threads in (1, 2)}
+    if args.element_loop:
+        result = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.node()} {platform.processor()}",
+                  "cpu_count": __import__("os").cpu_count(), "triad_GBps": {t: b / 1e9 for t, b in bandwidth.items()},
+                  "element_laws": element_law_rows(args.sizes[0], args.steps, bandwidth)}
+        with open(args.out, "w") as stream:
+            json.dump(result, stream, indent=2)
+        print(markdown_table(result))
+        return 0
     for target in args.sizes:
         scene = _box_scene(target)
         model = build_model(scene)
@@ -344,11 +487,12 @@ def main(argv=None) -> int:
                     "ns_per_dof": 1e9 * seconds / n,
                 })
     element_rows = element_loop_rows(args.sizes[0], args.steps)
+    law_rows = element_law_rows(args.sizes[0], args.steps, bandwidth)
     case_rows = case_study_rows(args.case_study, args.steps)
     _kernels.set_num_threads(2)
     result = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.node()} {platform.processor()}",
               "cpu_count": __import__("os").cpu_count(), "rows": rows, "element_loop": element_rows,
-              "case_study": case_rows}
+              "element_laws": law_rows, "case_study": case_rows}
     with open(args.out, "w") as stream:
         json.dump(result, stream, indent=2)
     print(markdown_table(result))
@@ -362,8 +506,8 @@ def markdown_table(result: dict) -> str:
              f"matrix as BAIJ (3x3 blocks) and as AIJ (dolfinx's format).", "",
              "| dofs | kernel storage | threads | kernel ms/step | petsc4py BAIJ ms/step | speed-up vs BAIJ | "
              "petsc4py AIJ ms/step | speed-up vs AIJ | bandwidth bound ms | fraction of bound | ns/dof | triad GB/s |",
-             "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for r in result["rows"]:
+             "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"] if result.get("rows") else []
+    for r in result.get("rows", []):
         lines.append(f"| {r['dofs']} | {r['storage']} | {r['threads']} | {r['kernel_ms']:.3f} | {r['petsc_ms']:.3f} | "
                      f"{r['speedup_vs_petsc']:.2f}x | {r['petsc_aij_ms']:.3f} | {r['speedup_vs_petsc_aij']:.2f}x | "
                      f"{r['bandwidth_bound_ms']:.3f} | "
@@ -376,6 +520,15 @@ def markdown_table(result: dict) -> str:
             per_point = "" if r["ns_per_point"] is None else f"{r['ns_per_point']:.0f}"
             lines.append(f"| {r['case']} | {r['dofs']} | {r['threads']} | {r['ms']:.3f} | {r['reference_ms']:.3f} | "
                          f"{r['ratio']:.2f} | {per_point} |")
+    if result.get("element_laws"):
+        lines += ["", "The element loop per law (compute + commit, Q1 box, same run; bound = bytes per point / triad "
+                  "bandwidth):", "", "| law | geometry | state | threads | ns per point | returning | bytes per point | "
+                  "bound ns | fraction of bound |", "|---|---|---|---:|---:|---:|---:|---:|---:|"]
+        for r in result["element_laws"]:
+            bound = "" if r["bytes_per_point"] is None else (f"{r['bytes_per_point']} | {r['bound_ns_per_point']:.0f} | "
+                                                             f"{100 * r['fraction_of_bound']:.0f} %")
+            lines.append(f"| {r['law']} | {r['geometry']} | {r['state']} | {r['threads']} | {r['ns_per_point']:.0f} | "
+                         f"{100 * r['returning']:.0f} % | " + (bound or " | | ") + " |")
     if result.get("case_study"):
         from pyfem.clock import PHASES
 

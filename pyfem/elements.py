@@ -92,13 +92,16 @@ class ElementArrays:
             return self.uniform_gradients[:, None]
         return np.einsum("qkm,cqml->cqkl", self.reference_gradients, self.inverse_jacobians)
 
-    def kernel_gradients(self, dense: bool = False):
+    def kernel_gradients(self, dense: bool = False, mean_dilatation: bool = False):
         """The `gradients` argument of pyfem._kernels.HexahedronElements: the tensor form
-        (inverse Jacobians + tables) where there is one and `dense` is false, else the dense
-        (c, q, k, 3) array (mean dilatation needs it)."""
-        if self.tensor is not None and not dense:
+        (inverse Jacobians + tables) where there is one and mean dilatation is off, else the
+        reference form (inverse Jacobians + the reference gradients, 72 B per point); the dense
+        (c, q, k, 3) array for one-point cells with their mean gradients, or with `dense`."""
+        if dense or self.uniform_gradients is not None:
+            return np.ascontiguousarray(self.gradients)
+        if self.tensor is not None and not mean_dilatation:
             return (self.inverse_jacobians, *self.tensor)
-        return np.ascontiguousarray(self.gradients)
+        return (self.inverse_jacobians, self.reference_gradients)
 
     def subset(self, rows: np.ndarray, node_numbers: np.ndarray | None = None) -> "ElementArrays":
         """The arrays of the cells at `rows` (indices into `cells`); node_numbers: the new number of
@@ -202,7 +205,7 @@ class NonlinearRegions:
             arrays = arrays.subset(rows, node_numbers)
             sigma0 = None if sigma0 is None else np.ascontiguousarray(sigma0[rows])
         options = self.options.get(name, {})
-        gradients = arrays.kernel_gradients(dense=bool(options.get("mean_dilatation")))
+        gradients = arrays.kernel_gradients(mean_dilatation=bool(options.get("mean_dilatation")))
         return _kernels.HexahedronElements(arrays.cell_nodes, gradients, arrays.weights, *self.laws[name],
                                            initial_stress=sigma0, **options)
 

@@ -278,6 +278,60 @@ def test_q2_tensor_form_equals_the_dense_gradients_on_distorted_cells_through_yi
     assert yielded > 0.2                                                          # the region did yield
 
 
+@pytest.mark.parametrize("cell, order", [("hexahedron", 1), ("hexahedron", 2), ("tetrahedron", 1),
+                                         ("tetrahedron", 2)])
+def test_reference_form_equals_the_dense_gradients_and_float32_costs_its_round_off(cell, order):
+    """The geometry as per-point inverse Jacobians with the reference gradients shared by the cells
+    (kernel_gradients' default for Q1, P1, P2, and for Q2 with mean dilatation) gives the dense
+    gradients' forces, stresses and plastic strains to round-off, through yield, with and without mean
+    dilatation; held as float32 (single_geometry) it differs, by float32's round-off of the geometry
+    (~6e-8 relative; bounded at 3e-7)."""
+    from mpi4py import MPI
+    import dolfinx.fem
+    import dolfinx.mesh
+
+    mesh = dolfinx.mesh.create_box(MPI.COMM_WORLD, [[0.0, 0.0, 0.0], [4.0, 6.0, 8.0]], [2, 3, 4],
+                                   getattr(dolfinx.mesh.CellType, cell))
+    x = mesh.geometry.x
+    x[:, :] += 0.3 * np.sin(1.3 * x[:, [1, 2, 0]] + 0.4)                       # non-affine cells
+    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", order))
+    arrays = element_arrays(V, np.arange(mesh.topology.index_map(3).size_local, dtype=np.int32))
+    rock = {"young_modulus": 10e9, "poisson_ratio": 0.25, "cohesion": 1e6, "friction_angle": 30.0,
+            "tensile_strength": 0.5e6, "dilation_angle": 10.0}
+    sigma0 = np.zeros(arrays.weights.shape + (6,))
+    sigma0[..., :3] = [-6e6, -6e6, -9e6]
+    n_dofs = 3 * V.dofmap.index_map.size_local
+    for mean_dilatation in (False, True):
+        reference = arrays.kernel_gradients(mean_dilatation=mean_dilatation)
+        assert isinstance(reference, tuple) and (len(reference) == 2) == (cell != "hexahedron" or order == 1
+                                                                          or mean_dilatation)
+        forms = {"dense": (arrays.kernel_gradients(dense=True), False), "reference": (reference, False),
+                 "float32": (reference, True)}
+        components = {name: _kernels.HexahedronElements(arrays.cell_nodes, g, arrays.weights, "mohr_coulomb", rock,
+                                                        initial_stress=sigma0, mean_dilatation=mean_dilatation,
+                                                        single_geometry=single)
+                      for name, (g, single) in forms.items()}
+        assert components["float32"].geometry_bytes == 9 * 4 + 8
+        assert components["reference"].geometry_bytes == 9 * 8 + 8
+        assert components["dense"].geometry_bytes == 3 * arrays.cell_nodes.shape[1] * 8 + 8
+        rng = np.random.default_rng(5)
+        for scale in (1e-5, 1e-3):                                              # elastic, then yielding
+            u = scale * rng.standard_normal(n_dofs)
+            results = {}
+            for name, component in components.items():
+                force = np.zeros(n_dofs)
+                component.compute(u, force)
+                component.commit()
+                results[name] = force, component.stress(), np.asarray(component.plastic_strain())
+            (f_dense, s_dense, k_dense), (f_ref, s_ref, k_ref), (f_single, s_single, _) = results.values()
+            assert np.abs(f_dense).max() > 0.0
+            assert rel_error(f_ref, f_dense) < 1e-11 and rel_error(s_ref, s_dense) < 1e-11
+            assert np.abs(k_ref - k_dense).max() <= 1e-11 * max(np.abs(k_dense).max(), 1e-30)
+            assert 1e-9 < rel_error(f_single, f_dense) < 3e-7
+            assert rel_error(s_single, s_dense) < 3e-7
+        assert (k_dense > 0).mean() > 0.5                                       # the region did yield
+
+
 @pytest.mark.parametrize("u_ref", [0.0, 2.0e-3])
 def test_rock_damage_crack_band_scales_with_each_cells_size(u_ref):
     """The rock law's crack band in the element loop (docs/materials.md "Crack band of the rock"):
@@ -341,6 +395,11 @@ def test_bad_arguments_are_value_errors_naming_the_parameter():
     with pytest.raises(ValueError, match="permutations"):
         _kernels.HexahedronElements(q2_nodes, (tensor[0], np.zeros(27, dtype=np.int32), *tensor[2:]), q2_weights,
                                     "linear_elastic", elastic)
+    with pytest.raises(ValueError, match="reference_gradients"):
+        _kernels.HexahedronElements(nodes, (np.zeros((2, 8, 3, 3)), np.zeros((8, 4, 3))), weights, "linear_elastic",
+                                    elastic)
+    with pytest.raises(ValueError, match="single_geometry"):
+        _kernels.HexahedronElements(nodes, gradients, weights, "linear_elastic", elastic, single_geometry=True)
     with pytest.raises(ValueError, match="tensor form is for Q2"):
         _kernels.HexahedronElements(nodes, (np.zeros((2, 8, 3, 3)), order, order, np.eye(3), np.eye(3)), weights,
                                     "linear_elastic", elastic)
