@@ -21,7 +21,11 @@ def solved(scene, solve_stage: bool = True) -> SimpleNamespace:
         cell_stress, cell_stress_first: (n_cells, 3, 3) the stage's stress at the end and after stage 1 (Pa).
         cell_state: {"plastic_strain", "damage", "damage_type"}: (n_cells,) the laws' cell means at the end.
         face_support_forces: face name -> (3,) the held faces' support force beyond the in-situ traction (N).
-        pair_forces: (p, 3) the pairs' F0 handed to the dynamic run (None: no pairs).
+        pair_forces: (p, 3) the pairs' F0 handed to the dynamic run, the kernel's pairs' order
+            (`part.pairs`; None: no pairs).
+        static: the answer itself, for pyfem.analytic's readers of a model and its stage (`.model`,
+            `.static.displacement`, `.static.cell_stress`: salencon.compare_to_stage,
+            elliptical_opening.wall_errors).
     """
     from pyfem.distributed_model import model_in_memory
     from pyfem.distributed_stage import cell_static_stress
@@ -32,6 +36,7 @@ def solved(scene, solve_stage: bool = True) -> SimpleNamespace:
     assert run.comm.size == 1, "the tests read the whole model from one rank"
     part = run.part
     state = SimpleNamespace(run=run, part=part, model=part.model, scene=scene, stage=None)
+    state.static = state
     if not solve_stage or "static" not in scene:
         return state
     stage = run.stage
