@@ -23,6 +23,8 @@ def solved(scene, solve_stage: bool = True) -> SimpleNamespace:
         face_support_forces: face name -> (3,) the held faces' support force beyond the in-situ traction (N).
         pair_forces: (p, 3) the pairs' F0 handed to the dynamic run, the kernel's pairs' order
             (`part.pairs`; None: no pairs).
+        support: the whole support groups (pyfem.support.SupportGroup, their component the bolts'
+            arrays now: the stage's for those it installs, zero for the others).
         static: the answer itself, for pyfem.analytic's readers of a model and its stage (`.model`,
             `.static.displacement`, `.static.cell_stress`: salencon.compare_to_stage,
             elliptical_opening.wall_errors).
@@ -37,6 +39,9 @@ def solved(scene, solve_stage: bool = True) -> SimpleNamespace:
     part = run.part
     state = SimpleNamespace(run=run, part=part, model=part.model, scene=scene, stage=None)
     state.static = state
+    from pyfem.distributed_support import gather_groups
+
+    state.support = gather_groups(run.comm, part.support)
     if not solve_stage or "static" not in scene:
         return state
     stage = run.stage
