@@ -23,6 +23,9 @@ def solved(scene, solve_stage: bool = True) -> SimpleNamespace:
         face_support_forces: face name -> (3,) the held faces' support force beyond the in-situ traction (N).
         pair_forces: (p, 3) the pairs' F0 handed to the dynamic run, the kernel's pairs' order
             (`part.pairs`; None: no pairs).
+        installed_cells: the cells of the regions the stage installs; excavation_load: non-zero when
+            the stage excavates (the readers of pyfem.static_plots find the wall from the mesh, as
+            pyfem.distributed_view.stage_pictures: any non-zero load will do).
         support: the whole support groups (pyfem.support.SupportGroup, their component the bolts'
             arrays now: the stage's for those it installs, zero for the others).
         static: the answer itself, for pyfem.analytic's readers of a model and its stage (`.model`,
@@ -60,6 +63,10 @@ def solved(scene, solve_stage: bool = True) -> SimpleNamespace:
         for key in cell_state:
             cell_state[key][region["cells"]] = region[key]
     report = stage.report
+    from pyfem.elements import region_cells
+
+    installed_cells = np.concatenate([region_cells(model, name) for name in stage.installed_regions]
+                                     or [np.zeros(0, dtype=np.int64)]).astype(np.int64)
     pair_forces = (None if run.contact_arrays is None
                    else np.asarray(run.contact_arrays["static_force"], dtype=np.float64))
     state.__dict__.update(
@@ -67,5 +74,6 @@ def solved(scene, solve_stage: bool = True) -> SimpleNamespace:
         displacement=part.dolfinx_order(stage.u_total), displacement_first=part.dolfinx_order(stage.u_first),
         cell_stress=final, cell_stress_first=first, cell_state=cell_state,
         face_support_forces={name: np.asarray(value) for name, value in report["support_forces"].items()},
-        pair_forces=pair_forces)
+        pair_forces=pair_forces, installed_cells=installed_cells,
+        excavation_load=np.ones(1) if scene["static"].get("excavate") else np.zeros(0))
     return state
