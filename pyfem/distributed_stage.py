@@ -544,14 +544,17 @@ def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | Non
     if contact_arrays is not None and stage.contact is not None:
         contact_arrays["static_force"] = np.ascontiguousarray(stage.contact.static_force())
         if welded(part.scene):  # split after the stage: new bonded pairs with the real strengths and F0
-            from pyfem.static import warn_pairs_over_strength
-
             stage.contact = None
-            warn_pairs_over_strength(part.scene, contact_arrays, part.comm)  # (as the whole model's hand_over)
         elif contact_arrays["deterioration"] is not None:  # the wear's clock starts with the record
             stage.contact.set_deterioration(*contact_arrays["deterioration"])
         if stage.contact is not None and contact_arrays.get("release_time") is not None:
             stage.contact.set_release_time(contact_arrays["release_time"])
+    if contact_arrays is not None and stage.pair_forces is None and welded(part.scene):
+        from pyfem.static import warn_pairs_over_strength
+
+        # The welded relaxed stage's F0 beyond the pairs' strength, as the whole model's hand_over warned
+        # (every rank: a collective; a rank may hold no pair, or no stage pairs)
+        warn_pairs_over_strength(part.scene, contact_arrays, part.comm)
     stress = monitors.stress
     if stress is not None and len(monitors.index):
         stress.static = monitor_static_stress(stress, stage.installed_regions, stage.u_total, stage.u_support,
