@@ -1070,7 +1070,9 @@ def model_in_memory(scene: Scene, solve_stage: bool = True) -> "DistributedRun":
     step directly instead of a run. `.part` (RankModel: matrix, mass, coords, faces, pairs), `.loop`
     (element-loop regions), `.stage` (distributed_stage.RankStage: its report, displacements, forces),
     `.time_step`, `.n_steps`, `.input_arrays`, `.monitors`; `.stepper()` builds the kernel's stepper
-    (global or local) with its exchange, as a run steps it (call it once: it takes the stage's pairs)."""
+    (global or local) with its exchange, as a run steps it (call it once: it takes the stage's pairs).
+    Refuses what a run refuses (`check_supported`)."""
+    check_supported(scene)
     model = DistributedRun(scene, Path("model-in-memory"), MPI.COMM_WORLD)  # (its out directory is never made)
     if solve_stage:
         model.solve_stage()

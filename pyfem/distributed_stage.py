@@ -550,6 +550,12 @@ def hand_over(stage: RankStage, part, loop, monitors, contact_arrays: dict | Non
             stage.contact.set_deterioration(*contact_arrays["deterioration"])
         if stage.contact is not None and contact_arrays.get("release_time") is not None:
             stage.contact.set_release_time(contact_arrays["release_time"])
+    if contact_arrays is not None and stage.pair_forces is None and welded(part.scene):
+        from pyfem.static import warn_pairs_over_strength
+
+        # The welded relaxed stage's F0 beyond the pairs' strength, as the whole model's hand_over warned
+        # (every rank: a collective; a rank may hold no pair, or no stage pairs)
+        warn_pairs_over_strength(part.scene, contact_arrays, part.comm)
     stress = monitors.stress
     if stress is not None and len(monitors.index):
         stress.static = monitor_static_stress(stress, stage.installed_regions, stage.u_total, stage.u_support,

@@ -288,7 +288,6 @@ def test_slip_advice_reads_the_interface_resolution_and_the_rocks_on_its_sides(t
     elements) is 9.06 elements per shortest wavelength, dissimilar, where the slip study measured the
     peak slip 25 % low; the same interface between layers of one rock is called alike. slip_error_at
     interpolates in log(resolution) between the rows of a table and holds its ends."""
-    from pyfem import solver
     from pyfem.scene import load_scene
 
     columns = ["contrast", "order", "safety", "per_wavelength", "peak_error", "history_error"]
@@ -311,19 +310,21 @@ def test_slip_advice_reads_the_interface_resolution_and_the_rocks_on_its_sides(t
     with pytest.raises(ValueError, match="bimaterial, lag"):
         accuracy.slip_error_at(20.0, True, path, lag=True)
 
+    from pyfem.operators import build_model
+
     scene_path = ROOT / "workflows" / "scenes" / "contact_two_layer_sv.toml"
     scene = load_scene(scene_path)
-    advice = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model)
+    advice = accuracy.interface_slip_advice(scene, build_model(scene))
     (names, text), = advice.items()
     print(names, text)
     assert names == "interface_1" and "sandstone | mudstone (dissimilar rocks), h ~ 5 m" in text
     assert "9.06 elements per shortest wavelength" in text and "peak slip -25 %" in text
     scene["materials"]["mudstone"] = dict(scene["materials"]["sandstone"])
-    (_, text), = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model).items()
+    (_, text), = accuracy.interface_slip_advice(scene, build_model(scene)).items()
     assert "(alike rocks)" in text and "converges slowly" not in text and "(homogeneous, Q1)" in text
     scene["materials"]["mudstone"]["E"] = 2.0e9
     scene["contact"]["normal_lag"] = {"length": 0.01, "velocity": 1.0}
-    (_, text), = accuracy.interface_slip_advice(scene, solver.prepare(scene, solve_static=False).model).items()
+    (_, text), = accuracy.interface_slip_advice(scene, build_model(scene)).items()
     assert "(bimaterial, lag, Q1)" in text and "converges slowly" not in text
 
 
@@ -333,6 +334,7 @@ def test_a_mesh_files_cells_are_measured_against_the_advice(tmp_path):
     advice that read "scene h = set by the mesh builder" and never looked at a mesh file's cells."""
     from pyfem import solver
     from pyfem.accuracy import region_cell_sizes
+    from pyfem.operators import build_model
     from pyfem.scene import parse_scene
 
     geo = tmp_path / "box.geo"
@@ -355,6 +357,6 @@ def test_a_mesh_files_cells_are_measured_against_the_advice(tmp_path):
     solver.plan(fine)
     assert not [w for w in fine.warnings if w.startswith("mesh: region")]
     # The measure: a tetrahedron's longest edge, within gmsh's size field.
-    simulation = solver.prepare(fine, solve_static=False)
-    count, smallest, largest = region_cell_sizes(simulation.model)["rock"]
-    assert count == simulation.model.n_cells and 10.0 < smallest < 25.0 * 1.1 < largest < 60.0
+    model = build_model(fine)
+    count, smallest, largest = region_cell_sizes(model)["rock"]
+    assert count == model.n_cells and 10.0 < smallest < 25.0 * 1.1 < largest < 60.0

@@ -8,6 +8,7 @@ import pytest
 
 from conftest import rel_error
 from pyfem import solver
+from pyfem.distributed_model import model_in_memory
 from pyfem.geometry import BOX_FACES
 from pyfem.scene import parse_scene
 
@@ -53,9 +54,9 @@ def test_plane_strain_slab_with_rollers_follows_the_free_field_and_reacts_its_st
     assert np.max(np.abs(monitor["uy"])) <= 1e-12 * np.max(np.abs(monitor["uz"])), "plane strain: uy = 0"
 
     reactions = read_csv(tmp_path / "run" / "reactions.csv")
-    simulation = solver.prepare(scene)
-    face = next(f for f in simulation.model.faces if f.name == "ymax")
-    points = simulation.model.node_coords[face.nodes]
+    simulation = model_in_memory(scene, solve_stage=False)  # (one rank, no contact: the kernel's numbering is the mesh's)
+    face = next(f for f in simulation.part.model.faces if f.name == "ymax")
+    points = simulation.part.coords[face.nodes]
     stress = simulation.freefield.stress(points, reactions["t"])       # (nt, k, 3, 3)
     expected = np.einsum("k,tk->t", face.area, stress[:, :, 1, 1])     # sum A sigma_yy (n = +y)
     assert np.max(np.abs(expected)) > 1e5, "the rollers are loaded"
@@ -86,8 +87,9 @@ def test_layered_cavern_walls_are_traction_free():
     model = build_model(scene)
     assert [face.name for face in model.faces] == list(BOX_FACES)
     assert {"lining_inner", "cavern_ends"} <= set(model.free_surfaces)
-    simulation = solver.prepare(scene)
-    carrying = set(simulation.input_arrays["nodes"].tolist()) | set(simulation.dashpot_nodes.tolist())
+    simulation = model_in_memory(scene, solve_stage=False)  # (one rank, no contact: the kernel's numbering is the mesh's)
+    assert simulation.part.kernel_of_dolfinx is None
+    carrying = set(simulation.input_arrays["nodes"].tolist()) | set(simulation.part.dashpot_nodes.tolist())
     tags = model.facet_tags
     for name in ("lining_inner", "cavern_ends"):
         facets = tags.indices[tags.values == model.boundaries[name]]

@@ -194,8 +194,9 @@ def test_coarse_case3_after_its_stage_stays_at_rest_until_the_record_starts(tmp_
 
 
 def test_the_set_up_processes_the_record_once_for_the_input_and_the_wear_clock(monkeypatch):
-    """prepare() processes case 3's record once: the input forces are driven with it and the
+    """The model's set-up processes case 3's record once: the input forces are driven with it and the
     interfaces' wear clock starts at its window (before, each read and filtered it anew)."""
+    from pyfem.distributed_model import model_in_memory
     from pyfem.seismic import records
     from pyfem.seismic.setup import scene_record
 
@@ -203,7 +204,7 @@ def test_the_set_up_processes_the_record_once_for_the_input_and_the_wear_clock(m
     calls = []
     process = records.process_record
     monkeypatch.setattr(records, "process_record", lambda *args, **kwargs: calls.append(1) or process(*args, **kwargs))
-    simulation = solver.prepare(scene, solve_static=False)
+    simulation = model_in_memory(scene, solve_stage=False)
     assert len(calls) == 1
     processed = scene_record(scene)  # the same processing again, for comparison
     assert np.array_equal(simulation.freefield.tables.ddg[0], processed.acceleration)

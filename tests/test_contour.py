@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from pyfem import solver
+from stage_state import solved
 from pyfem.contour import Contours
 from pyfem.output import cell_strain_operator
 from test_static import (CENTRE, RADIUS, STRESS_TOLERANCE, DISPLACEMENT_TOLERANCE, centroids, kirsch_radial_displacement,
@@ -20,8 +20,8 @@ from test_static import (CENTRE, RADIUS, STRESS_TOLERANCE, DISPLACEMENT_TOLERANC
 
 
 def test_contour_hoop_stress_and_convergence_follow_kirsch(meshes, tmp_path):
-    simulation = solver.prepare(tunnel_scene(meshes["filled"]))
-    contours = Contours(simulation.model, simulation.static,
+    simulation = solved(tunnel_scene(meshes["filled"]))
+    contours = Contours(simulation.model, simulation,
                         lambda cells: cell_strain_operator(simulation.scene, simulation.model, cells))
     assert len(contours.openings) == 1 and not contours.pillars
     opening = contours.openings[0]
@@ -52,7 +52,7 @@ def test_contour_hoop_stress_and_convergence_follow_kirsch(meshes, tmp_path):
     assert (tmp_path / "contour.png").stat().st_size > 10_000
     assert summary["openings"][0]["end_hoop_min"] == pytest.approx(float(opening["stage_hoop"].min()))
     # A run's displacement: a rigid translation changes no convergence and no stress.
-    u = np.tile([1e-3, 0.0, -2e-3], len(simulation.mass))
+    u = np.tile([1e-3, 0.0, -2e-3], len(simulation.model.node_coords))
     contours.update(0.1, u)
     assert np.allclose(opening["end_displacement"], opening["stage_displacement"], atol=1e-12)
     assert np.allclose(opening["end_hoop"], opening["stage_hoop"], rtol=1e-9, atol=1e-3)
@@ -94,20 +94,20 @@ def test_the_pillar_between_two_openings_widens_by_the_difference_of_its_walls(t
     path = tmp_path / "two_holes.msh"
     subprocess.run([sys.executable, "-c", TWO_HOLES, str(path)], check=True, timeout=300)
     p = 10.0e6
-    simulation = solver.prepare(tunnel_scene(path, stress=[-p, -p, -p, 0.0, 0.0, 0.0]))
-    contours = Contours(simulation.model, simulation.static,
+    simulation = solved(tunnel_scene(path, stress=[-p, -p, -p, 0.0, 0.0, 0.0]))
+    contours = Contours(simulation.model, simulation,
                         lambda cells: cell_strain_operator(simulation.scene, simulation.model, cells))
     assert len(contours.openings) == 2 and len(contours.pillars) == 1
     pillar = contours.pillars[0]
     assert pillar["width"] == pytest.approx(20.0, rel=1e-6)   # the walls at x = 50 and x = 70, z = 40
-    u = simulation.static.displacement.reshape(-1, 3)
+    u = simulation.displacement.reshape(-1, 3)
     i, j = pillar["nodes"]
     assert simulation.model.node_coords[i][[0, 2]] == pytest.approx([50.0, 40.0], abs=1e-6)
     by_hand = u[j, 0] - u[i, 0]          # the pillar's width change along x
     assert by_hand > 0                   # under all-round compression each wall moves into its opening
     assert pillar["stage"] == pytest.approx(by_hand, rel=1e-12)
     # A run's displacement adds its own difference across the pillar.
-    extra = np.zeros_like(simulation.static.displacement).reshape(-1, 3)
+    extra = np.zeros_like(simulation.displacement).reshape(-1, 3)
     extra[j, 0] = 1e-3
     contours.update(0.5, extra.ravel())
     assert pillar["change"][-1] == pytest.approx(by_hand + 1e-3, rel=1e-12)
@@ -137,10 +137,10 @@ def test_both_openings_of_a_tetrahedral_mesh_are_found_with_their_pillar(tmp_pat
     finds both openings, their whole contours and the pillar between them (walls at x = 40 and x = 60)."""
     path = tmp_path / "two_caverns.geo"
     path.write_text(TWO_CAVERNS_GEO)
-    simulation = solver.prepare(tunnel_scene(path))
+    simulation = solved(tunnel_scene(path))
     assert simulation.model.mesh.topology.cell_type.name == "tetrahedron"
     coords = simulation.model.node_coords
-    contours = Contours(simulation.model, simulation.static,
+    contours = Contours(simulation.model, simulation,
                         lambda cells: cell_strain_operator(simulation.scene, simulation.model, cells), y0=4.3)
     assert len(contours.openings) == 2 and len(contours.pillars) == 1
     arched, box = sorted(contours.openings, key=lambda o: o["xz"][:, 0].mean())

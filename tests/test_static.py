@@ -20,12 +20,14 @@ import json
 import math
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from conftest import observed_orders
 from pyfem import solver, static
+from stage_state import solved
 from pyfem.scene import SceneError, parse_scene
 
 RADIUS = 5.0
@@ -135,11 +137,11 @@ def test_kirsch_excavation(meshes, order):
     """Excavation of the filled tunnel: hoop and radial stress at the cell centroids nearest
     r = 1.05 a and 2 a (crown and sidewall) and the displacement of the wall and 2 a nodes against
     Kirsch's solution. sigma_rr at the wall, where it vanishes, is compared with p."""
-    simulation = solver.prepare(tunnel_scene(meshes["filled"], order))
-    state, model = simulation.static, simulation.model
+    state = solved(tunnel_scene(meshes["filled"], order))
+    model = state.model
     assert "excavation" not in model.regions and "tunnel_wall" in model.free_surfaces
-    tolerance = static.stage_tolerance(simulation.scene)  # Q1: MUMPS; Q2 (51 698 unknowns): CG + GAMG
-    assert state.stages[1].residual < tolerance and state.out_of_balance < tolerance
+    tolerance = static.stage_tolerance(state.scene)  # Q1: MUMPS; Q2 (51 698 unknowns): CG + GAMG
+    assert state.stages[1]["residual"] < tolerance and state.report["out_of_balance"] < tolerance
     cell_points = centroids(model)
     checks = 0
     for where, degrees in TARGETS.items():
@@ -203,8 +205,8 @@ def kirsch_order_errors(folder, h_wall, h_far, young=ROCK["E"]):
     """(wall u_r error, stress error) of the filled tunnel excavated on the 480 m slab (relative L2)."""
     scene = tunnel_scene(kirsch_order_mesh(folder, h_wall, h_far))
     scene["materials"]["rock"]["E"] = young
-    simulation = solver.prepare(scene)
-    state, model = simulation.static, simulation.model
+    state = solved(scene)
+    model = state.model
     centre = np.array([KIRSCH_ORDER_SECTION / 2, THICKNESS / 2, KIRSCH_ORDER_SECTION / 2])
 
     def polar_of(points):
@@ -262,14 +264,13 @@ def test_kirsch_excavation_converges_in_h_on_three_meshes(kirsch_order_folder):
 def test_iterative_solver_gives_the_direct_solution(meshes):
     """CG + GAMG (to tolerance 1e-9) and MUMPS give the same stage."""
     static = {"excavate": ["excavation"], "relaxation": 0.3}
-    direct = solver.prepare(tunnel_scene(meshes["filled"], static=dict(static, solver="direct"))).static
-    iterative = solver.prepare(tunnel_scene(meshes["filled"], static=dict(static, solver="iterative",
-                                                                           tolerance=1e-9))).static
-    assert direct.stages[0].solver.startswith("direct") and iterative.stages[0].solver.startswith("iterative")
-    assert iterative.stages[0].iterations > 1 and iterative.stages[0].residual < 1e-9
+    direct = solved(tunnel_scene(meshes["filled"], static=dict(static, solver="direct")))
+    iterative = solved(tunnel_scene(meshes["filled"], static=dict(static, solver="iterative", tolerance=1e-9)))
+    assert direct.stages[0]["solver"].startswith("direct") and iterative.stages[0]["solver"].startswith("iterative")
+    assert iterative.stages[0]["iterations"] > 1 and iterative.stages[0]["residual"] < 1e-9
     difference = (np.max(np.abs(iterative.displacement - direct.displacement))
                   / np.max(np.abs(direct.displacement)))
-    print(f"CG + GAMG in {iterative.stages[0].iterations} + {iterative.stages[1].iterations} iterations; "
+    print(f"CG + GAMG in {iterative.stages[0]['iterations']} + {iterative.stages[1]['iterations']} iterations; "
           f"differs from MUMPS by {difference:.1e}")
     assert difference < 1e-6
 
@@ -277,7 +278,8 @@ def test_iterative_solver_gives_the_direct_solution(meshes):
 def test_hand_over_keeps_the_model_at_rest(meshes, tmp_path):
     """After the stage (relaxation 0.4, viscoelastic x and z faces in the dynamic run), a run with no
     wave stays at rest; the t = 0 row of the monitors is the stage's stress; static/ and run.json
-    report the stages. Without the stage's support forces held (the control), the model moves."""
+    report the stages. With the stage's support forces let go (the control: their opposite added, the
+    held part of K u - f_exc, whose face sums are static.json's), the model moves."""
     from pyfem.static import hand_over_force_provider
 
     monitors = [{"name": "crown", "point": list(CENTRE + [0.0, 0.0, 1.05 * RADIUS])},
@@ -299,27 +301,54 @@ def test_hand_over_keeps_the_model_at_rest(meshes, tmp_path):
         assert np.allclose(stress, [expected[k] for k in ("sxx", "syy", "szz", "sxy", "syz", "sxz")],
                            rtol=1e-9, atol=1e-3)
         assert summary["monitors"][name]["velocity"] < REST_VELOCITY
-    # The whole field, and the control.
-    simulation = solver.prepare(scene)
+    # The whole field, and the control: the one model built in this process, stepped as the run steps it.
+    from pyfem.distributed_model import model_in_memory
+
     rock_mass = ROCK["rho"] * THICKNESS * (SECTION ** 2 - math.pi * RADIUS ** 2)
-    assert np.sum(simulation.mass) == pytest.approx(rock_mass, rel=1e-3), "no excavated cell is left"
     peaks = {}
     for control in (False, True):
-        stepper = solver.make_stepper(simulation)
+        model = model_in_memory(scene)  # (a stepper takes the stage's state: one model per stepping)
+        part = model.part
+        assert np.sum(part.mass[:part.n_owned]) == pytest.approx(rock_mass, rel=1e-3), "no excavated cell is left"
+        stepper, _ = model.stepper()
         if control:
-            stepper.add_provider(hand_over_force_provider(-simulation.static.support_force))
-        n = simulation.stiffness.shape[0]
+            stepper.add_provider(hand_over_force_provider(-stage_support_force(model, report)))
+        n = 3 * part.n_local
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
         peak_v = peak_u = 0.0
         t = 0.0
         for _ in range(30):
-            t = stepper.run(u, v, a, simulation.time_step.steps_per_output, t)
+            t = stepper.run(u, v, a, model.time_step.steps_per_output, t)
             peak_v, peak_u = max(peak_v, np.max(np.abs(v))), max(peak_u, np.max(np.abs(u)))
         peaks[control] = (peak_v, peak_u)
     print(f"at rest: peak |v| {peaks[False][0]:.2e} m/s, |u| {peaks[False][1]:.2e} m "
           f"(stage {static_max:.3e} m); without the support forces: |v| {peaks[True][0]:.2e} m/s")
     assert peaks[False][0] < REST_VELOCITY and peaks[False][1] < 1e-6 * static_max
     assert peaks[True][0] > 1e3 * REST_VELOCITY, "the control moves: the held support forces matter"
+
+
+def stage_support_force(model, report):
+    """(3 n,) the stage's support forces on its held faces (kernel numbering, N): the held part of
+    K (u1 + u2) - f_exc, K every remaining cell's elastic stiffness (the stage installs nothing), as
+    pyfem/distributed_linear.py finds them; checked against static.json's face resultants."""
+    from pyfem.distributed_stage import kernel_nodal, owned_force, owned_rows, stage_matrix
+    from pyfem.static import _stage_constraints, stage_boundary, stage_loads
+
+    part, stage = model.part, model.stage
+    assert not stage.installed_regions
+    K = owned_rows(part, stage_matrix(part, np.zeros(0, dtype=np.int32)))
+    f_exc = owned_force(part, kernel_nodal(part, stage_loads(part.scene, part.model, np.zeros(0, np.int32)).excavation))
+    residual = (K @ stage.u_total - f_exc[:3 * part.n_owned]).reshape(-1, 3)
+    _, _, constraints = _stage_constraints(part.model, stage_boundary(part.scene, part.model))
+    held = np.zeros_like(residual)
+    nodes = np.asarray(constraints.nodes, dtype=np.int64)
+    held[nodes] = residual[nodes] - np.einsum("nab,nb->na", constraints.projection, residual[nodes])
+    for face in part.model.faces:
+        if face.name in report["support_forces"]:
+            assert np.allclose(held[face.nodes].sum(axis=0), report["support_forces"][face.name], rtol=1e-6,
+                               atol=1e-6 * np.abs(held).sum()), face.name
+    assert np.abs(held).max() > 0.0
+    return held.reshape(-1)
 
 
 def test_check_prints_the_stages(meshes):
@@ -342,10 +371,10 @@ def test_lining_stress_follows_relaxation(meshes):
     C_l = (1 + nu_l) * ((1 - 2 * nu_l) * b * b + a_i * a_i) / (LINING["E"] * (b * b - a_i * a_i))
     means = {}
     for relaxation in (0.3, 0.7):
-        simulation = solver.prepare(tunnel_scene(
+        state = solved(tunnel_scene(
             meshes["lined"], lined=True, stress=[-P, -P, -P, 0.0, 0.0, 0.0],
             static={"excavate": ["excavation"], "install": ["lining"], "relaxation": relaxation}))
-        state, model = simulation.static, simulation.model
+        model = state.model
         cells = region_cells(model, "lining")
         r, theta = in_plane(centroids(model)[cells])
         hoop = np.array([polar(sigma, angle)[1] for sigma, angle in zip(state.cell_stress[cells], theta)])
@@ -372,13 +401,13 @@ def test_lining_bends_as_the_closed_form_under_a_biaxial_far_field(meshes):
     from pyfem.analytic.lined_tunnel import LinedTunnel
 
     relaxation = 0.5
-    simulation = solver.prepare(tunnel_scene(
+    state = solved(tunnel_scene(
         meshes["lined"], lined=True,
         static={"excavate": ["excavation"], "install": ["lining"], "relaxation": relaxation}))
-    model = simulation.model
+    model = state.model
     cells = region_cells(model, "lining")
     r, theta = in_plane(centroids(model)[cells])
-    hoop = np.array([polar(sigma, angle)[1] for sigma, angle in zip(simulation.static.cell_stress[cells], theta)])
+    hoop = np.array([polar(sigma, angle)[1] for sigma, angle in zip(state.cell_stress[cells], theta)])
     closed_form = LinedTunnel(RADIUS, LINING_THICKNESS, LINING["E"], LINING["nu"], ROCK["E"], ROCK["nu"])
     exact = closed_form.hoop_stress(RADIUS * r, theta, (-K * P, -P, 0.0), relaxation)
     error = np.abs(hoop - exact).max() / np.abs(exact).max()
@@ -408,8 +437,8 @@ def lined_order_errors(folder, h_wall, h_far):
                         str(KIRSCH_ORDER_SECTION), "--lining", str(LINING_THICKNESS), "--h-wall", str(h_wall),
                         "--h-far", str(h_far)], check=True, timeout=300)
     relaxation = 0.5
-    simulation = solver.prepare(tunnel_scene(path, lined=True, static={"excavate": ["excavation"],
-                                                                       "install": ["lining"], "relaxation": relaxation}))
+    simulation = solved(tunnel_scene(path, lined=True, static={"excavate": ["excavation"],
+                                                               "install": ["lining"], "relaxation": relaxation}))
     model = simulation.model
     x = centroids(model) - np.array([KIRSCH_ORDER_SECTION / 2, THICKNESS / 2, KIRSCH_ORDER_SECTION / 2])
     r, theta = np.hypot(x[:, 0], x[:, 2]), np.arctan2(x[:, 2], x[:, 0])
@@ -419,7 +448,7 @@ def lined_order_errors(folder, h_wall, h_far):
         exact = closed_form.stresses(r[cells], theta[cells], (-K * P, -P, 0.0), relaxation)
         exact = np.column_stack([exact["rr"], exact["tt"], exact["rt"]])
         c, s = np.cos(theta[cells])[:, None], np.sin(theta[cells])[:, None]
-        sigma = simulation.static.cell_stress[cells]
+        sigma = simulation.cell_stress[cells]
         sxx, szz, sxz = sigma[:, 0, 0][:, None], sigma[:, 2, 2][:, None], sigma[:, 0, 2][:, None]
         found = np.column_stack([sxx * c * c + szz * s * s + 2 * sxz * s * c, sxx * s * s + szz * c * c - 2 * sxz * s * c,
                                  (szz - sxx) * s * c + sxz * (c * c - s * s)])
@@ -477,13 +506,14 @@ def test_equilibrated_stress_moves_nothing_and_gives_the_pair_forces():
     from pyfem.initial_stress import pair_static_forces, stress_field_from_scene
 
     scene = layered_box()
-    simulation = solver.prepare(scene)
-    state, pairs = simulation.static, simulation.model.pairs
+    state = solved(scene)
+    pairs = state.part.pairs  # (the pairs the kernel steps, in the order of the model's F0)
     expected = pair_static_forces(pairs.coords, pairs.area, pairs.normal, stress_field_from_scene(scene))
     scale = 5.0e6 * 6.0 / 2.0e9
+    assert len(expected) > 0 and np.max(np.abs(expected)) > 0.0
     assert np.max(np.abs(state.displacement)) < 1e-12 * scale
-    assert np.max(np.abs(state.pair_forces - expected)) < 1e-10 * np.max(np.abs(expected))
-    assert np.array_equal(simulation.contact_arrays["static_force"], state.pair_forces)
+    assert np.max(np.abs(state.stage.pair_forces - expected)) < 1e-10 * np.max(np.abs(expected))
+    assert np.array_equal(state.pair_forces, state.stage.pair_forces), "the hand-over makes them the run's F0"
 
 
 @pytest.mark.parametrize("order", [1, 2])
@@ -498,18 +528,18 @@ def test_gravity_column_settles_as_the_closed_form(order):
     box = {"mesh": {"size": [2.0, 2.0, height], "h": 1.0, "order": order}, "materials": {"rock": dict(ROCK)},
            "time": {"duration": 0.01}}
     scene = parse_scene(dict(box, static={"gravity": True, "boundary": {"face": {"zmax": {"type": "free"}}}}))
-    simulation = solver.prepare(scene)
+    simulation = solved(scene)
     lame_lambda, G = lame_parameters(ROCK["E"], ROCK["nu"])
     z = simulation.model.node_coords[:, 2]
     exact = rho * STANDARD_GRAVITY / (lame_lambda + 2 * G) * (0.5 * z * z - height * z)
-    u = simulation.static.displacement.reshape(-1, 3)
+    u = simulation.displacement.reshape(-1, 3)
     assert np.max(np.abs(u[:, 2] - exact)) < 1e-10 * np.max(np.abs(exact))
     weight = rho * STANDARD_GRAVITY * 2.0 * 2.0 * height
-    assert simulation.static.face_support_forces["zmin"][2] == pytest.approx(weight, rel=1e-10)
+    assert simulation.face_support_forces["zmin"][2] == pytest.approx(weight, rel=1e-10)
     for gravity in (False, True):
         initial = {"surface": 100.0 + height, "rho": rho, "k": [1.4, 1.2, 1.0]}
         geostatic = parse_scene(dict(box, initial_stress=initial, static={"gravity": gravity}))
-        state = solver.prepare(geostatic).static
+        state = solved(geostatic)
         assert np.max(np.abs(state.displacement)) < 1e-12 * np.max(np.abs(exact))
 
 
@@ -520,11 +550,11 @@ def test_bad_static_scenes(meshes):
     with pytest.raises(SceneError, match="static.excavate.0"):
         build_model(tunnel_scene(meshes["filled"], static={"excavate": ["nowhere"]}))
     with pytest.raises(SceneError, match="static.install.0"):
-        solver.prepare(tunnel_scene(meshes["filled"], static={"excavate": ["excavation"],
+        solved(tunnel_scene(meshes["filled"], static={"excavate": ["excavation"],
                                                                "install": ["nowhere"]}))
     wall_fixed = {"excavate": ["excavation"], "boundary": {"face": {"tunnel_wall": {"type": "fixed"}}}}
     with pytest.raises(SceneError, match="static.boundary.face.tunnel_wall"):
-        solver.prepare(tunnel_scene(meshes["filled"], static=wall_fixed))
+        solved(tunnel_scene(meshes["filled"], static=wall_fixed))
     with pytest.raises(SceneError, match='static.solver = "direct" solves linear elastic stages only'):
         check_linear({"materials": {"rock": {"E": 8e9, "plasticity": {"cohesion": 1e6}}},
                       "static": {"solver": "direct"}})
@@ -533,7 +563,7 @@ def test_bad_static_scenes(meshes):
         parse_scene({"mesh": {"size": [2.0, 2.0, 2.0], "h": 1.0}, "materials": {"rock": dict(ROCK)},
                      "time": {"duration": 0.01}, "static": {}})
     with pytest.raises(SceneError, match="hold more faces"):
-        solver.prepare(tunnel_scene(meshes["filled"], static={"excavate": ["excavation"],
+        solved(tunnel_scene(meshes["filled"], static={"excavate": ["excavation"],
                                                                "boundary": {"type": "free"}}))
 
 
@@ -622,10 +652,15 @@ def test_interface_distance_from_the_excavation_is_the_hand_computed_one(tmp_pat
         "contact": {"interfaces": ["interface_1"], "cohesion": 1.0e6, "friction_angle": 30.0},
         "output": {"xdmf_interval": 0.0},
     })
-    simulation = solver.prepare(scene)
-    model, state = simulation.model, simulation.static
+    from mpi4py import MPI
+
+    from pyfem.operators import build_model
+
+    simulation = state = solved(scene)
+    model = build_model(scene, MPI.COMM_SELF)  # (the mesh's faces and pairs in the function space's numbering)
     assert model.n_cells == 16 * 2 * 16 - 4 * 2 * 4
-    surface = excavation_surface(state, model)
+    # (the wall is found from the mesh, pyfem.distributed_view.stage_pictures: any excavation load will do)
+    surface = excavation_surface(SimpleNamespace(excavation_load=np.ones(1), installed_cells=np.zeros(0, int)), model)
     (x0, x1), (z0, z1) = EXCAVATION_BOX
     x, z = surface[:, 0], surface[:, 2]
     on_wall = ((np.isclose(x, x0) | np.isclose(x, x1)) & (z >= z0 - 1e-9) & (z <= z1 + 1e-9)) | \
@@ -637,7 +672,9 @@ def test_interface_distance_from_the_excavation_is_the_hand_computed_one(tmp_pat
     by_hand = np.hypot(beyond, BEDDING_Z - z1)
     distance, _ = cKDTree(surface).query(pairs)
     np.testing.assert_allclose(distance, by_hand, rtol=0.0, atol=1e-9)
-    arrays = simulation.contact_arrays
+    arrays, part = simulation.run.contact_arrays, simulation.part
+    assert np.allclose(part.pairs.coords, pairs), "one rank: the kernel's pairs are the model's, in its order"
+    assert np.abs(simulation.run.in_situ_forces).max() > 0.0 and np.abs(state.pair_forces).max() > 0.0
     figure = interface_stress(tmp_path / "interface_stress.png", pairs, arrays["normal"], arrays["area"],
-                              state.pair_forces_in_situ, state.pair_forces, surface, near_wall=4.2)
+                              simulation.run.in_situ_forces, state.pair_forces, surface, near_wall=4.2)
     assert figure["pairs"] == 51 and figure["pairs_near_wall"] == int(np.sum(by_hand <= 4.2)) == 3 * 7

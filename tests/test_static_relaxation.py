@@ -1,5 +1,5 @@
 """The nonlinear static stage: dynamic relaxation with the kernel (pyfem/relaxation.py,
-pyfem/static.py solve_relaxation_stage; docs/static.md "The nonlinear stage").
+pyfem/distributed_stage.py on the one model; docs/static.md "The nonlinear stage").
 
 - Linear materials relaxed equal the linear solve (Kirsch tunnel; lined tunnel with install).
 - Salencon's cavity (Mohr-Coulomb, hydrostatic P0): plastic radius, wall convergence (psi = 0 and
@@ -19,6 +19,7 @@ from pyfem import solver, static
 from pyfem.scene import parse_scene
 from pyfem.analytic.salencon import compare_to_stage, salencon
 from conftest import observed_orders
+from stage_state import solved
 from test_static import (CENTRE, KIRSCH_ORDER_MESHES, KIRSCH_ORDER_SECTION, LINING, P, RADIUS, ROCK, THICKNESS,
                          centroids, in_plane, kirsch_order_folder, kirsch_order_mesh, layered_box, meshes, polar,
                          tunnel_scene)
@@ -60,17 +61,18 @@ def salencon_scene(mesh_file, dilation, **extra):
 def test_relaxation_of_linear_materials_is_the_linear_solve(meshes):
     """solver = "relaxation" on the Kirsch tunnel (linear rock) gives the direct solve's displacement
     and stress to the relaxation's tolerance."""
-    direct = solver.prepare(tunnel_scene(meshes["filled"]))
-    relaxed = solver.prepare(tunnel_scene(meshes["filled"], static={"excavate": ["excavation"], "relaxation": 0.0,
-                                                                    "solver": "relaxation"}))
-    stage = relaxed.static.stages[1]
-    assert stage.solver == "dynamic relaxation" and stage.converged and stage.iterations > 100
-    assert stage.residual <= static.RELAXATION_TOLERANCE
-    u_error = (np.linalg.norm(relaxed.static.displacement - direct.static.displacement)
-               / np.linalg.norm(direct.static.displacement))
-    stress_error = (np.abs(relaxed.static.cell_stress - direct.static.cell_stress).max()
-                    / np.abs(direct.static.cell_stress).max())
-    print(f"relaxation vs direct: {stage.iterations} steps, {stage.seconds:.2f} s, displacement "
+    direct = solved(tunnel_scene(meshes["filled"]))
+    relaxed = solved(tunnel_scene(meshes["filled"], static={"excavate": ["excavation"], "relaxation": 0.0,
+                                                            "solver": "relaxation"}))
+    stage = relaxed.stages[1]
+    assert direct.stages[1]["solver"].startswith("direct")
+    assert stage["solver"].startswith("dynamic relaxation") and stage["converged"] and stage["iterations"] > 100
+    assert stage["residual"] <= static.RELAXATION_TOLERANCE
+    u_error = (np.linalg.norm(relaxed.displacement - direct.displacement)
+               / np.linalg.norm(direct.displacement))
+    stress_error = (np.abs(relaxed.cell_stress - direct.cell_stress).max()
+                    / np.abs(direct.cell_stress).max())
+    print(f"relaxation vs direct: {stage['iterations']} steps, {stage['seconds']:.2f} s, displacement "
           f"{u_error:.2e}, stress {stress_error:.2e}")
     # catches the relaxation stopped short (a looser out-of-balance tolerance) or a wrong load
     assert u_error < RELAXED_DISPLACEMENT and stress_error < RELAXED_STRESS
@@ -82,21 +84,22 @@ def test_relaxation_with_an_installed_lining_is_the_linear_solve(meshes):
     from pyfem.elements import region_cells
 
     settings = {"excavate": ["excavation"], "install": ["lining"], "relaxation": 0.4}
-    direct = solver.prepare(tunnel_scene(meshes["lined"], lined=True, static=settings))
-    relaxed = solver.prepare(tunnel_scene(meshes["lined"], lined=True, static=dict(settings, solver="relaxation")))
+    direct = solved(tunnel_scene(meshes["lined"], lined=True, static=settings))
+    relaxed = solved(tunnel_scene(meshes["lined"], lined=True, static=dict(settings, solver="relaxation")))
+    assert relaxed.stages[1]["solver"].startswith("dynamic relaxation") and direct.stages[1]["solver"].startswith("direct")
     cells = region_cells(relaxed.model, "lining")
-    assert np.abs(direct.static.cell_stress[cells]).max() > 1e6, "the lining carries load"
+    assert np.abs(direct.cell_stress[cells]).max() > 1e6, "the lining carries load"
     for name in ("displacement_first", "displacement"):
-        a, b = getattr(relaxed.static, name), getattr(direct.static, name)
+        a, b = getattr(relaxed, name), getattr(direct, name)
         print(f"{name} relaxed vs direct: {np.linalg.norm(a - b) / np.linalg.norm(b):.2e}")
         # measured 9.3e-5 (first stage) and 7.9e-5: catches a stage relaxed short or a wrong relaxation share
         assert np.linalg.norm(a - b) / np.linalg.norm(b) < RELAXED_LINED_DISPLACEMENT, name
-    lining_error = (np.abs(relaxed.static.cell_stress[cells] - direct.static.cell_stress[cells]).max()
-                    / np.abs(direct.static.cell_stress[cells]).max())
+    lining_error = (np.abs(relaxed.cell_stress[cells] - direct.cell_stress[cells]).max()
+                    / np.abs(direct.cell_stress[cells]).max())
     print(f"lining stress relaxed vs direct: {lining_error:.2e}")
     # catches the lining loaded by a wrong share of the relaxation (or installed a stage off)
     assert lining_error < RELAXED_LINING_STRESS
-    assert np.abs(relaxed.static.cell_stress_first[cells]).max() == 0.0
+    assert np.abs(relaxed.cell_stress_first[cells]).max() == 0.0
 
 
 @pytest.mark.parametrize("dilation", [0.0, 30.0])
@@ -105,7 +108,7 @@ def test_salencon_cavity(meshes, dilation):
     / 3 % (psi = 30 deg), the wall convergence within 2.5 % / 5 %, the hoop stress at the cells nearest
     the wall and nearest R0 against the closed form at their own radius within 3 % (SALENCON_*); the
     elastic rock beyond R0 stays elastic and the zone inside yields."""
-    simulation = solver.prepare(salencon_scene(meshes["filled"], dilation))
+    simulation = solved(salencon_scene(meshes["filled"], dilation))
     found = salencon_comparison(simulation, dilation, f"psi {dilation:g}")
     # the wall catches a yield surface off by 2 % (cohesion x 1.02: wall -2.8 % (psi 0), -6.1 % (psi 30))
     assert abs(found["radius_error"]) < SALENCON_RADIUS[dilation]
@@ -123,7 +126,7 @@ def salencon_comparison(simulation, dilation: float, label: str) -> dict:
     the plastic radius, the wall convergence and the hoop stress at the cells nearest the wall and
     R0 ({"wall", "R0"}), and the stage's `result` (compare_to_stage) and plastic strain per cell."""
     state = simulation.static
-    assert all(stage.converged for stage in state.stages)
+    assert all(stage["converged"] for stage in state.stages)
     plastic = state.cell_state["plastic_strain"]
     exact = salencon(np.array([RADIUS]), RADIUS, P0, SHEAR_MODULUS, BULK_MODULUS, COHESION, FRICTION, dilation)
     R0 = float(exact["R0"])
@@ -134,7 +137,7 @@ def salencon_comparison(simulation, dilation: float, label: str) -> dict:
     assert np.all(plastic[r_cells > 1.15 * R0] == 0.0), "nothing beyond 1.15 R0 yields"
     radius_error = result["plastic_radius"] / R0 - 1
     wall_error = result["wall_displacement"] / float(exact["u_r"][0]) - 1
-    print(f"{label}: steps {[s.iterations for s in state.stages]}, {state.seconds:.1f} s; plastic "
+    print(f"{label}: steps {[s['iterations'] for s in state.stages]}, {state.report['seconds']:.1f} s; plastic "
           f"radius {result['plastic_radius'] / RADIUS:.3f} a vs {R0 / RADIUS:.3f} a ({radius_error:+.2%}); wall "
           f"convergence {result['wall_displacement'] * 1e3:.2f} mm vs {float(exact['u_r'][0]) * 1e3:.2f} mm "
           f"({wall_error:+.2%})")
@@ -170,10 +173,10 @@ def salencon_order_errors(folder, h_wall, h_far, cohesion=COHESION):
     the wall and not far out."""
     scene = salencon_scene(kirsch_order_mesh(folder, h_wall, h_far), 0.0)
     scene["materials"]["rock"]["plasticity"]["cohesion"] = cohesion
-    simulation = solver.prepare(scene)
-    assert all(stage.converged for stage in simulation.static.stages)
+    simulation = solved(scene)
+    assert all(stage["converged"] for stage in simulation.stages)
     centre = np.array([KIRSCH_ORDER_SECTION / 2, THICKNESS / 2, KIRSCH_ORDER_SECTION / 2])
-    plastic = simulation.static.cell_state["plastic_strain"]
+    plastic = simulation.cell_state["plastic_strain"]
     result = compare_to_stage(simulation, centre, RADIUS, cell_plastic_strain=plastic)
     exact = salencon(np.array([RADIUS]), RADIUS, P0, SHEAR_MODULUS, BULK_MODULUS, COHESION, FRICTION, 0.0)
     R0, r = float(exact["R0"]), result["cell_r"]
@@ -253,12 +256,12 @@ def test_salencon_cavity_written_with_the_strengths_only_is_perfectly_plastic(me
                                                phi=FRICTION, s=-P0))
     scene = load_scene(path)
     assert scene["materials"]["rock"]["plasticity"]["damage_max"] == 0.0
-    simulation = solver.prepare(scene)
+    simulation = solved(scene)
     found = salencon_comparison(simulation, 0.0, "strengths only")
     # It yielded (salencon_comparison checks where), through the wall ring, and did not soften.
     plastic, result = found["plastic"], found["result"]
     assert np.max(plastic[result["cells_wall"]]) > 1e-3
-    assert np.max(np.abs(simulation.static.cell_state["damage"])) == 0.0
+    assert np.max(np.abs(simulation.cell_state["damage"])) == 0.0
     # the same closed form at the same tolerances as the table written with every key
     assert abs(found["radius_error"]) < SALENCON_RADIUS[0.0]
     assert abs(found["wall_error"]) < SALENCON_WALL[0.0]
@@ -295,12 +298,13 @@ def test_plastic_stage_hands_over_at_rest(meshes, tmp_path):
 def test_relaxed_contact_stage_keeps_the_equilibrium_pair_forces():
     """A uniform stress with shear and a bonded interface, nothing excavated: the relaxed stage does
     not move and the pair forces are A sigma0 n (the linear stage's answer)."""
-    linear = solver.prepare(layered_box())
-    relaxed = solver.prepare(layered_box(solver="relaxation"))
-    assert relaxed.static.contact is not None
-    scale = np.abs(linear.static.pair_forces).max()
-    assert np.abs(relaxed.static.pair_forces - linear.static.pair_forces).max() < 1e-6 * scale
-    assert np.abs(relaxed.static.displacement).max() < 1e-12
+    linear = solved(layered_box())
+    relaxed = solved(layered_box(solver="relaxation"))
+    assert relaxed.stage.contact is not None and linear.stage.contact is None  # (the relaxed stage's pairs go on)
+    scale = np.abs(linear.pair_forces).max()
+    assert scale > 0.0
+    assert np.abs(relaxed.pair_forces - linear.pair_forces).max() < 1e-6 * scale
+    assert np.abs(relaxed.displacement).max() < 1e-12
 
 
 def test_rebase_keeps_the_state_and_zeroes_the_force():
@@ -385,9 +389,9 @@ def test_mean_dilatation_removes_q1_locking_in_plastic_flow(meshes):
     for mean_dilatation in (False, True):
         scene = salencon_scene(meshes["filled"], 0.0)
         scene["materials"]["rock"]["plasticity"]["mean_dilatation"] = mean_dilatation
-        simulation = solver.prepare(scene)
+        simulation = solved(scene)
         result = compare_to_stage(simulation, CENTRE, RADIUS,
-                                  cell_plastic_strain=simulation.static.cell_state["plastic_strain"])
+                                  cell_plastic_strain=simulation.cell_state["plastic_strain"])
         errors[mean_dilatation] = result["wall_displacement"] / exact - 1
     print(f"Q1 wall convergence vs Salencon: without mean dilatation {errors[False]:+.2%}, with {errors[True]:+.2%}")
     assert abs(errors[True]) < 0.05
@@ -447,10 +451,10 @@ def spreading_layers(split=None, contact=True, stage_solver="relaxation"):
 
 @pytest.fixture(scope="module")
 def spreading():
-    """{"unsplit", "before_static", "after_static"}: the prepared simulations (stage solved)."""
-    runs = {"unsplit": solver.prepare(spreading_layers(contact=False))}
+    """{"unsplit", "before_static", "after_static"}: the one models in memory, stage solved (stage_state.solved)."""
+    runs = {"unsplit": solved(spreading_layers(contact=False))}
     for split in ("before_static", "after_static"):
-        runs[split] = solver.prepare(spreading_layers(split))
+        runs[split] = solved(spreading_layers(split))
     return runs
 
 
@@ -475,18 +479,18 @@ def test_a_stage_split_after_static_is_the_unsplit_mesh_stage(spreading):
     errors = {}
     for split in ("before_static", "after_static"):
         state = spreading[split].static
-        assert all(stage.converged for stage in state.stages)
+        assert all(stage["converged"] for stage in state.stages)
         nodes, cells = on_unsplit(spreading["unsplit"], spreading[split])
         u = state.displacement.reshape(-1, 3)
         errors[split] = (np.abs(u - unsplit.displacement.reshape(-1, 3)[nodes]).max() / scale_u,
                          np.abs(state.cell_stress - unsplit.cell_stress[cells]).max() / scale_s)
-    states = np.bincount(spreading["before_static"].static.contact.state(), minlength=4)
+    states = np.bincount(spreading["before_static"].stage.contact.state(), minlength=4)
     print(f"split stages vs unsplit (displacement, stress): {errors}; before_static pair states {states}")
     assert states[2] + states[3] > 0, "before_static: pairs slid or opened in the stage"
     assert min(errors["before_static"]) > 0.05, "the control differs from the unsplit stage"
     # Measured: before_static 0.74 / 0.15, after_static 4.9e-7 / 1.3e-7 (2026-12-07).
     assert max(errors["after_static"]) < 1e-5
-    assert spreading["after_static"].static.contact is None, "the dynamic run gets new pairs"
+    assert spreading["after_static"].stage.contact is None, "the dynamic run gets new pairs"
 
 
 def test_a_stage_split_after_static_hands_over_the_welded_traction(spreading):
@@ -499,9 +503,10 @@ def test_a_stage_split_after_static_hands_over_the_welded_traction(spreading):
     from pyfem.initial_stress import STANDARD_GRAVITY
 
     split, unsplit = spreading["after_static"], spreading["unsplit"]
-    pairs, F0 = split.model.pairs, split.static.pair_forces
-    assert np.array_equal(split.contact_arrays["static_force"], F0)
-    assert split.contact_arrays["cohesion"] == 0.0 and split.contact_arrays["tensile_strength"] == 0.0
+    pairs, F0 = split.part.pairs, split.pair_forces  # (the kernel's pairs and their F0, in one order)
+    arrays = split.run.contact_arrays
+    assert np.array_equal(arrays["static_force"], F0)
+    assert arrays["cohesion"] == 0.0 and arrays["tensile_strength"] == 0.0
     weight = 2400.0 * STANDARD_GRAVITY * 8.0 * 4.0 * 4.0
     assert np.abs(F0).max() > 0.0, "the stage loaded the pairs"
     assert F0[:, 2].sum() == pytest.approx(-weight, rel=1e-6)
@@ -511,7 +516,7 @@ def test_a_stage_split_after_static_hands_over_the_welded_traction(spreading):
     x = pairs.coords
     interior = (x[:, 0] > 0.5) & (x[:, 0] < 7.5) & (x[:, 1] > 0.5) & (x[:, 1] < 3.5)
     error = np.abs(F0 - expected)[interior].max() / np.abs(F0).max()
-    sliding = static.pairs_over_strength(split.contact_arrays)["sliding"]
+    sliding = static.pairs_over_strength(arrays)["sliding"]
     print(f"F0 vs unsplit A sigma n on {interior.sum()} interior pairs: {error:.2e}; {sliding} pairs beyond "
           f"their strength at the hand-over")
     assert error < 0.1  # measured 5.4e-2: cell-centroid stress against the nodal balance
@@ -522,8 +527,7 @@ def test_a_stage_split_after_static_hands_over_the_welded_traction(spreading):
 def test_a_linear_stage_keeps_pairs_bonded_either_way():
     """The linear stage ties the pairs whatever contact.split says: the two values give the same
     stage bit for bit."""
-    states = [solver.prepare(spreading_layers(split, stage_solver="direct")).static
-              for split in ("before_static", "after_static")]
+    states = [solved(spreading_layers(split, stage_solver="direct")) for split in ("before_static", "after_static")]
     assert np.abs(states[0].displacement).max() > 1e-4
     assert np.array_equal(states[0].displacement, states[1].displacement)
     assert np.array_equal(states[0].pair_forces, states[1].pair_forces)

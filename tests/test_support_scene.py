@@ -25,6 +25,7 @@ import pytest
 
 from pyfem import solver
 from pyfem.scene import SceneError, parse_scene
+from stage_state import solved
 
 REPO = Path(__file__).resolve().parents[1]
 E_ROCK, NU_ROCK, P = 8.0e9, 0.24, 5.0e6
@@ -71,16 +72,18 @@ def bar_equation_force(s, g, length, EA, k):
 
 
 def test_a_bolt_installed_after_relaxation_follows_the_bar_equation():
+    from pyfem.distributed_support import gather_groups
+
     # A thin bolt on a soft bond (lambda = 2.5 1/m): its pull on the rock changes the rock's field by
     # about 1e-4 of the bolt's own slip, so the rock's uniform strain is the bolt's field.
     EA_thin, k = 2.0e11 * math.pi * 0.002**2 / 4.0, 4.0e6
     thin = support_table(diameter=0.002, bond_stiffness=k, bond_strength=1e12, yield_force=1e12, segment=0.05)
-    simulation = solver.prepare(excavated_box(0.4, thin))
+    simulation = solved(excavated_box(0.4, thin))
     group = simulation.support[0]
     N = group.component.axial_force()
     assert group.stage == "static" and np.max(N) > 1.0  # installed in the stage and loaded (tension)
     eps = 0.6 * P / M_ROCK  # the strain after installation
-    u = simulation.static.displacement - simulation.static.displacement_first
+    u = simulation.displacement - simulation.displacement_first
     top = np.isclose(simulation.model.node_coords[:, 2], 6.0)
     assert np.allclose(u.reshape(-1, 3)[top, 2], eps * 6.0, rtol=1e-4)  # the column's closed form
     s = 0.5 * (group.bolts.arc_length[1:] + group.bolts.arc_length[:-1])
@@ -89,10 +92,13 @@ def test_a_bolt_installed_after_relaxation_follows_the_bar_equation():
     print(f"axial force against the bar equation: {error:.2e} of its peak {np.max(exact):.4g} N")
     assert error < 3e-3
     # Not in static.support: not installed in the stage (nothing carried), but at the dynamic run's start.
-    later = solver.prepare(excavated_box(0.4, thin, static_support=())).support[0]
-    assert later.stage == "start" and not np.any(later.component.axial_force())
+    later = solved(excavated_box(0.4, thin, static_support=()))
+    later.run.stepper()  # (the run's stepper installs it: fresh, unloaded)
+    group_later = gather_groups(later.run.comm, later.part.support)[0]
+    assert group_later.stage == "start" and len(group_later.component.axial_force()) == len(N)
+    assert not np.any(group_later.component.axial_force())
     # Installed after the relaxation: 0.6 of what the same bolt carries when nothing is released first.
-    before = solver.prepare(excavated_box(0.0, thin)).support[0].component.axial_force()
+    before = solved(excavated_box(0.0, thin)).support[0].component.axial_force()
     ratio = np.max(N) / np.max(before)
     print(f"peak force with relaxation 0.4 / with 0: {ratio:.8f}")
     assert abs(ratio - 0.6) < 1e-4
@@ -193,33 +199,33 @@ def test_an_interrupted_run_with_slipping_bolts_resumes_to_the_uninterrupted_run
 
 def test_a_pattern_on_a_box_face_and_on_a_tunnel_wall(tmp_path):
     """Rows along the surface's axis, bolts around each row's section, normal to the surface."""
-    from pyfem.support import support_plan
+    from pyfem.distributed_support import plan_lines
 
     pattern = dict(BOLT, surface="zmax", spacing=[3.0, 2.0], length=4.0)
-    simulation = solver.prepare(parse_scene({
+    simulation = solved(parse_scene({
         "mesh": {"size": [10.0, 10.0, 10.0], "h": 2.5}, "materials": {"rock": {"E": E_ROCK, "nu": NU_ROCK, "rho": 2600.0}},
-        "time": {"duration": 0.01}, "support": {"roof": pattern}}), solve_static=False)
+        "time": {"duration": 0.01}, "support": {"roof": pattern}}), solve_stage=False)
     lines = simulation.support[0].lines
     # 10 m / 3 m: 3 bolts at x = 2, 5, 8; 10 m / 2 m: 5 rows at y = 1, 3, ..., 9; heads on z = 10, down.
     assert len(lines) == 15
     assert sorted(set(np.round(lines[:, 0], 9))) == [2.0, 5.0, 8.0]
     assert sorted(set(np.round(lines[:, 1], 9))) == [1.0, 3.0, 5.0, 7.0, 9.0]
     assert np.allclose(lines[:, 2], 10.0) and np.allclose(lines[:, 3:] - lines[:, :3], [0.0, 0.0, -4.0])
-    check = support_plan(simulation)["roof"]
+    check = plan_lines(simulation.run.comm, simulation.part.support)["roof"]  # (`check`'s line)
     print(check)
     assert check.startswith("15 bolts installed at the start of the dynamic run, 60 m in all")
 
     mesh = tmp_path / "tunnel.msh"
     subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(mesh), "--radius", "3", "--size", "30",
                     "--h-wall", "0.75", "--h-far", "6", "--filled"], check=True, timeout=300, capture_output=True)
-    simulation = solver.prepare(parse_scene({
+    simulation = solved(parse_scene({
         "mesh": {"builder": "file", "file": str(mesh)},
         "materials": {"rock": {"E": E_ROCK, "nu": NU_ROCK, "rho": 2600.0}}, "time": {"duration": 0.01},
         "initial_stress": {"stress": [-P, -P, -P, 0.0, 0.0, 0.0]},
         "boundary": {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}},
         "static": {"excavate": ["excavation"], "relaxation": 0.5, "support": ["radial"]},
         "support": {"radial": dict(BOLT, surface="tunnel_wall", spacing=[1.5, 1.0], length=4.0)}}),
-        solve_static=False)
+        solve_stage=False)
     group = simulation.support[0]
     heads, axes = group.lines[:, :3], (group.lines[:, 3:] - group.lines[:, :3]) / 4.0
     radius = np.hypot(heads[:, 0] - 15.0, heads[:, 2] - 15.0)
@@ -290,7 +296,7 @@ MODEL_ERRORS = [  # found once the mesh is built
 @pytest.mark.parametrize("scene, key, allowed", MODEL_ERRORS, ids=[case[1] for case in MODEL_ERRORS])
 def test_bolts_off_the_model_and_what_does_not_run_them_are_one_line(scene, key, allowed):
     with pytest.raises(SceneError) as raised:
-        solver.prepare(parse_scene(scene))
+        solved(parse_scene(scene))
     message = str(raised.value)
     print(message)
     assert raised.value.key == key and allowed in message and "\n" not in message
@@ -392,7 +398,7 @@ def test_radial_bolts_in_a_tunnel_follow_the_bar_equation_in_kirschs_field(tmp_p
     subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(mesh), "--radius", "3", "--size", "60",
                     "--h-wall", "0.5", "--h-far", "8", "--filled"], check=True, timeout=300, capture_output=True)
     relaxation, a, length = 0.5, 3.0, 4.0
-    simulation = solver.prepare(parse_scene({
+    simulation = solved(parse_scene({
         "mesh": {"builder": "file", "file": str(mesh)},
         "materials": {"rock": {"E": E_ROCK, "nu": NU_ROCK, "rho": 2600.0}}, "time": {"duration": 0.01},
         "initial_stress": {"stress": [-P, -P, -P, 0.0, 0.0, 0.0]},
@@ -406,7 +412,7 @@ def test_radial_bolts_in_a_tunnel_follow_the_bar_equation_in_kirschs_field(tmp_p
     EA = 2.0e11 * math.pi * 0.016**2
     middles, exact = bar_equation_in_field(lambda s: -C / (a + s), length, EA, BOLT["bond_stiffness"])
     # The rock's own error on this mesh (60 m box, rollers): its wall moves within a few per cent of Kirsch.
-    u = (simulation.static.displacement - simulation.static.displacement_first).reshape(-1, 3)
+    u = (simulation.displacement - simulation.displacement_first).reshape(-1, 3)
     x = simulation.model.node_coords
     radius = np.hypot(x[:, 0] - 30.0, x[:, 2] - 30.0)
     wall = np.abs(radius - a) < 1e-6
@@ -431,7 +437,7 @@ def test_a_cable_installed_after_the_whole_release_holds_its_pretension_in_the_f
     pretension less the rock's elastic shortening between plate and anchor (no bond there: the same
     force in every free segment), and the grouted anchor hands it to the rock."""
     cable = support_table(type="cable", pretension=1.0e5, free_length=2.0, segment=0.5)
-    simulation = solver.prepare(excavated_box(1.0, cable))
+    simulation = solved(excavated_box(1.0, cable))
     N = simulation.support[0].component.axial_force()
     free, anchor = N[:4], N[4:]
     print(f"free length {free[0]:.6g} N (pretension 1e5 N), anchor {anchor[0]:.4g} .. {anchor[-1]:.4g} N")
@@ -443,7 +449,7 @@ def test_default_segments_cut_a_bolt_in_coarse_cells_into_several(tmp_path):
     """8 m cells and 6 m bolts: the default segment is the bolt / 4 (the cells' 8 m node spacing gave
     one segment, a constant force head to tip); the force of a bolt on a soft bond (lambda L = 0.76)
     rises from its free head and falls to its free tip, as the bar equation's."""
-    from pyfem.support import support_plan
+    from pyfem.distributed_support import plan_lines
 
     EA_thin, k = 2.0e11 * math.pi * 0.002**2 / 4.0, 1.0e4
     scene = parse_scene({
@@ -458,11 +464,12 @@ def test_default_segments_cut_a_bolt_in_coarse_cells_into_several(tmp_path):
         "support": {"bolt": dict(BOLT, diameter=0.002, bond_stiffness=k, bond_strength=1e12, yield_force=1e12,
                                  lines=[[x, 8.0, 16.0, x, 8.0, 10.0] for x in (4.0, 12.0)])},
         "output": {"xdmf_interval": 0.0, "checkpoint_interval": 0.0}})
-    simulation = solver.prepare(scene)
+    simulation = solved(scene)
     group = simulation.support[0]
-    check = support_plan(simulation)["bolt"]
+    check = plan_lines(simulation.run.comm, simulation.part.support)["bolt"]  # (`check`'s line)
     print(check)
-    assert group.segment == 1.5 and "segments of 1.5 m (the default" in check
+    assert "segment" not in scene["support"]["bolt"] or scene["support"]["bolt"]["segment"] is None  # the default
+    assert group.segment == 1.5 and "segments of 1.5 m;" in check
     offsets = group.bolts.bolt_offsets
     assert np.all(np.diff(offsets) - 1 >= 4)  # nodes - 1 segments per bolt
     N = group.component.axial_force()
@@ -525,7 +532,7 @@ def test_a_pattern_on_a_curved_wall_meshed_with_tetrahedra(tmp_path, groups, clo
     rms; the pattern was refused, wanting none); the axis is found all the same, and the bolts are
     normal to the wall (the radius) within a degree (measured 0.46 deg on the whole wall, 0.50 on the
     crown; their facet's own normal was up to 5.9 deg off)."""
-    simulation = solver.prepare(tet_tunnel(tmp_path, groups, "tunnel_wall"), solve_static=False)
+    simulation = solved(tet_tunnel(tmp_path, groups, "tunnel_wall"), solve_stage=False)
     group = simulation.support[0]
     heads, axes = group.lines[:, :3], (group.lines[:, 3:] - group.lines[:, :3]) / 4.0
     radius = np.hypot(heads[:, 0] - 15.0, heads[:, 2] - 15.0)
@@ -567,7 +574,7 @@ def test_a_surface_in_two_physical_groups_is_one_line_naming_both(tmp_path):
               'Physical Surface("crown") = {ex[8], ex[9]};\n')
     for surface, other in (("crown", "tunnel_wall"), ("tunnel_wall", "crown")):
         with pytest.raises(SceneError) as error:
-            solver.prepare(tet_tunnel(tmp_path, groups, surface), solve_static=False)
+            solved(tet_tunnel(tmp_path, groups, surface), solve_stage=False)
         assert error.value.key == "support.radial.surface" and error.value.value == surface
         assert f'its facets are also in the mesh\'s physical surface "{other}"' in str(error.value)
     (tmp_path / "tunnel.geo").write_text(TET_TUNNEL + groups)

@@ -23,6 +23,7 @@ import pytest
 
 from conftest import observed_orders
 from pyfem import solver
+from stage_state import solved
 from pyfem.scene import SceneError, parse_scene
 from test_cavity import (ANGLES, RADII, free_field_shear, kirsch, monitor_points, polar_stress, read_monitor,
                          tunnel_scene)
@@ -198,8 +199,8 @@ def test_kirsch_excavation_on_tetrahedra(tmp_path, order, wall_size):
 
     geo = tmp_path / "filled_tunnel.geo"
     geo.write_text(FILLED_TUNNEL_GEO.replace("WALL", f"{wall_size:g}"))
-    simulation = solver.prepare(kirsch_static.tunnel_scene(geo, order))
-    state, model = simulation.static, simulation.model
+    state = solved(kirsch_static.tunnel_scene(geo, order))
+    model = state.model
     assert model.mesh.topology.cell_type.name == "tetrahedron"
     assert "excavation" not in model.regions and "(unnamed)" in model.free_surfaces  # the cut wall is free
     assert np.max(np.abs(state.displacement)) > 1e-4  # the opening converged
@@ -260,8 +261,8 @@ def kirsch_errors_on_tetrahedra(folder: Path, scale: float, order: int = 1, youn
     scene = kirsch_static.tunnel_scene(geo, order)
     if young is not None:
         scene["materials"]["rock"]["E"] = young
-    simulation = solver.prepare(scene)
-    state, model = simulation.static, simulation.model
+    state = solved(scene)
+    model = state.model
     n_basis = model.V.element.basix_element.dim
     points = model.node_coords[model.V.dofmap.list.array.reshape(-1, n_basis)[:, :4]].mean(axis=1)
     r, theta = kirsch_static.in_plane(points)
@@ -357,7 +358,7 @@ def test_a_run_with_a_static_stage_on_tetrahedra_writes_the_stages_fields(tmp_pa
     geo.write_text(FILLED_TUNNEL_GEO.replace("WALL", "1.6"))
     summary = solver.run(kirsch_static.tunnel_scene(geo, order), tmp_path / "run")
     assert summary["status"] == "finished"
-    simulation = solver.prepare(kirsch_static.tunnel_scene(geo, order))
+    simulation = solved(kirsch_static.tunnel_scene(geo, order))  # (the stage's stress as the model holds it)
     model = simulation.model
     fields = read_fields(tmp_path / "run" / "static" / "fields.xdmf")
     # 4-node tetrahedra, or (a P2 model on the distributed model) 10-node ones: their corners first.
@@ -382,7 +383,7 @@ def test_a_run_with_a_static_stage_on_tetrahedra_writes_the_stages_fields(tmp_pa
     assert np.all(parent >= 0)
     stress = fields.steps[-1][2]["stress"]
     assert stress.shape == (len(fields.cells), 6), "the stages' stress is written per cell (Tensor6)"
-    final = tensor6(simulation.static.cell_stress)[parent]
+    final = tensor6(simulation.cell_stress)[parent]
     assert np.abs(final).max() > 1e6  # MPa: the excavation's stress concentration
     assert np.allclose(stress, final, rtol=1e-9, atol=1e-9 * np.abs(final).max())
 

@@ -20,11 +20,11 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pyfem import solver  # noqa: E402
 from pyfem.analytic.elliptical_opening import EllipticalOpening, wall_errors  # noqa: E402
 from pyfem.scene import parse_scene  # noqa: E402
 from study_csv import run_study_main  # noqa: E402  (this script's folder is on sys.path)
@@ -63,7 +63,23 @@ def excavate(mesh_file: Path, order: int):
         "static": {"excavate": ["excavation"], "relaxation": 0.0},
         "output": {"xdmf_interval": 0.0},
     })
-    return solver.prepare(scene)
+    return stage_on_the_model(scene)
+
+
+def stage_on_the_model(scene):
+    """The scene's [static] stage solved on the one model in this process (one rank, nothing written:
+    pyfem.distributed_model.model_in_memory): `.model` (pyfem.operators.Model), `.cell_stress` (n_cells,
+    3, 3) at the centroids (Pa, as static/fields.xdmf writes it: pyfem.distributed_stage.cell_static_stress;
+    linear materials) and `.displacement` (3 n,) u1 + u2 (m), in the function space's numbering."""
+    from pyfem.distributed_model import model_in_memory
+    from pyfem.distributed_stage import cell_static_stress
+    from pyfem.output import cell_strain_operator
+
+    solved = model_in_memory(scene)
+    part, stage = solved.part, solved.stage
+    model = part.model
+    return SimpleNamespace(model=model, displacement=part.dolfinx_order(stage.u_total),
+                           cell_stress=cell_static_stress(stage, part, cell_strain_operator(scene, model))[:model.n_cells])
 
 
 def run(work: Path) -> list[dict]:

@@ -158,7 +158,7 @@ class EllipticalOpening:
         return total
 
 
-def wall_errors(simulation, opening: EllipticalOpening, far_field) -> dict:
+def wall_errors(stage, opening: EllipticalOpening, far_field) -> dict:
     """A static stage's excavation of the opening against the closed form, at its wall.
 
     The cells with a face on the wall (four vertices on it), their hoop stress at the centroid (the
@@ -166,8 +166,10 @@ def wall_errors(simulation, opening: EllipticalOpening, far_field) -> dict:
     the wall against the exact excavation displacement.
 
     Args:
-        simulation: a prepared simulation (pyfem.solver.prepare) whose static stage excavated the
-            opening, its section the x-z plane.
+        stage: a static stage that excavated the opening, its section the x-z plane: `.model` (the
+            pyfem.operators.Model), `.cell_stress` (n_cells, 3, 3) at the centroids (Pa) and
+            `.displacement` (3 n,) (m), in the function space's numbering (the one model's stage on one
+            rank: workflows/elliptical_opening.py `stage_on_the_model`).
         opening: the closed form, centred where the mesh has the opening.
         far_field: (sigma_xx, sigma_zz, sigma_xz) of the scene's initial stress (Pa).
 
@@ -178,7 +180,7 @@ def wall_errors(simulation, opening: EllipticalOpening, far_field) -> dict:
         Pa), peak (the exact peak at the wall, Pa), displacement (largest error of the wall nodes'
         displacement / the largest exact one) and largest_displacement (m).
     """
-    model = simulation.model
+    model = stage.model
     xyz = model.node_coords
     on_wall = np.abs(np.abs(opening.zeta(xyz[:, 0], xyz[:, 2])) - 1.0) < 1e-6
     n_basis = model.V.element.basix_element.dim
@@ -187,7 +189,7 @@ def wall_errors(simulation, opening: EllipticalOpening, far_field) -> dict:
     if len(cells) == 0:
         raise ValueError("wall_errors: no cell has a face on the opening's wall (is the opening where the mesh has it?)")
     centroids = xyz[vertices[cells]].mean(axis=1)
-    stress = simulation.static.cell_stress[cells]
+    stress = stage.cell_stress[cells]
     normal, _ = opening.directions(centroids[:, 0], centroids[:, 2])
     nx, nz = normal.real, normal.imag
     hoop = stress[:, 0, 0] * nz * nz + stress[:, 2, 2] * nx * nx - 2.0 * stress[:, 0, 2] * nx * nz
@@ -195,7 +197,7 @@ def wall_errors(simulation, opening: EllipticalOpening, far_field) -> dict:
     peak = float(np.abs(opening.wall_hoop_stress(np.linspace(0.0, 2.0 * math.pi, 3601), far_field)).max())
     top = int(np.argmax(np.abs(exact)))
     nodes = np.flatnonzero(on_wall)
-    u = simulation.static.displacement.reshape(-1, 3)[nodes]
+    u = stage.displacement.reshape(-1, 3)[nodes]
     ux, uz = opening.displacement(xyz[nodes, 0], xyz[nodes, 2], far_field)
     largest = float(np.hypot(ux, uz).max())
     return {"cells": len(cells), "worst": float(np.abs(hoop - exact).max() / peak),
