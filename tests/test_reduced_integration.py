@@ -13,7 +13,6 @@
 import math
 import subprocess
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -21,6 +20,7 @@ import scipy.sparse
 from mpi4py import MPI
 
 from conftest import EXACT
+from stage_state import solved
 from pyfem import _kernels, solver
 from pyfem.distributed_model import model_in_memory
 from pyfem.elements import element_arrays, linear_stiffness, region_cells
@@ -42,27 +42,6 @@ def assembled(arrays, matrices, n_nodes):
     return scipy.sparse.csr_matrix((matrices.reshape(c, 24, 24).ravel(),
                                     (np.repeat(dofs, 24, axis=1).ravel(), np.tile(dofs, (1, 24)).ravel())),
                                    shape=(3 * n_nodes, 3 * n_nodes))
-
-
-def stage_end(model):
-    """The solved [static] stage of `model` (pyfem.distributed_model.model_in_memory, one rank) as
-    compare_to_stage reads it: `.model` (the mesh), `.static.displacement` (u1 + u2, the function
-    space's order) and `.static.cell_stress` (the stage's final cell stress, the laws' cell means in
-    the element loop: what static/fields.xdmf holds at t = 2), `.report` (static/static.json); and
-    the plastic strain per cell (0 outside the element loop)."""
-    from pyfem.distributed_stage import cell_static_stress
-    from pyfem.elements import voigt_tensor
-    from pyfem.output import cell_strain_operator
-
-    part, stage = model.part, model.stage
-    n_cells = part.model.n_cells
-    stress = cell_static_stress(stage, part, cell_strain_operator(part.scene, part.model))[:n_cells].copy()
-    plastic = np.zeros(n_cells)
-    for region in stage.cell_averages[-1].values():
-        stress[region["cells"]] = voigt_tensor(region["stress"])
-        plastic[region["cells"]] = region["plastic_strain"]
-    static = SimpleNamespace(displacement=part.dolfinx_order(stage.u_total), cell_stress=stress)
-    return SimpleNamespace(model=part.model, static=static, report=stage.report), plastic
 
 
 def test_one_point_stiffness_plus_hourglass_is_the_full_element_on_distorted_cells(meshes):
@@ -208,8 +187,9 @@ def test_salencon_cavity_with_one_point_cells_converges(meshes, tmp_path):
     for mesh_file in (coarse, meshes["filled"]):
         data = salencon_scene(mesh_file, 0.0).to_json()
         data["materials"]["rock"]["plasticity"]["integration"] = "reduced"
-        state, plastic = stage_end(model_in_memory(parse_scene(data, source="test")))
-        assert all(stage["converged"] for stage in state.report["stages"])
+        state = solved(parse_scene(data, source="test"))
+        assert all(stage["converged"] for stage in state.stages)
+        plastic = state.cell_state["plastic_strain"]
         assert np.count_nonzero(plastic > 0.0) > 50  # the ring yielded
         result = compare_to_stage(state, CENTRE, RADIUS, cell_plastic_strain=plastic)
         radius_error = result["plastic_radius"] / float(exact["R0"]) - 1
