@@ -153,31 +153,33 @@ def stepper_seconds_per_step(stepper, n: int, steps: int, amplitude: float = 1.0
 
 def element_loop_rows(target_dofs: int, steps: int, threads: int = 2) -> list[dict]:
     """"Simulate only what a scene calls for", measured in one run on one Q1 box:
-    - the stepper `pyfem.solver.make_stepper` builds for a scene without nonlinear tables against a
-      bare kernel Stepper on the same matrix (ratio 1: the run is the matrix path, nothing else);
+    - the stepper the model builds (`pyfem.distributed_model.model_in_memory(...).stepper()`, as a
+      run steps it) for a scene without nonlinear tables against a bare kernel Stepper on the same
+      matrix (ratio 1: the run is the matrix path, nothing else);
     - the whole box in the element loop with the linear elastic law, Mohr-Coulomb at rest
       (screened elastic: Table 1 sandstone under a small strain), Mohr-Coulomb on its yield surface
       (`yield_surface_seconds`: the case study's yielded zone) and concrete at rest, per step and
       per quadrature point (ns), against the matrix product.
     """
-    from pyfem import _kernels, solver
+    from pyfem import _kernels
+    from pyfem.distributed_model import model_in_memory
     from pyfem.elements import nonlinear_component
     from pyfem.effects import bsr_arrays
 
     _kernels.set_num_threads(threads)
     scene = _box_scene(target_dofs)
-    simulation = solver.prepare(scene)
+    built = model_in_memory(scene, solve_stage=False)
     _kernels.set_num_threads(threads)
-    n = simulation.stiffness.shape[0]
-    dt = simulation.time_step.dt
-    mass = simulation.mass
-    indptr, indices, blocks = bsr_arrays(simulation.stiffness)
+    n = 3 * built.part.n_local
+    dt = built.time_step.dt
+    mass = built.part.mass
+    indptr, indices, blocks = built.part.matrix
     bare = stepper_seconds_per_step(_kernels.Stepper(indptr, indices, blocks, mass, dt, 0.0, 0.0), n, steps,
                                     amplitude=1.0e-9)
-    stepper = solver.make_stepper(simulation)
+    stepper, _ = built.stepper()
     _kernels.set_num_threads(threads)
     scene_path = stepper_seconds_per_step(stepper, n, steps, amplitude=1.0e-9)
-    rows = [{"case": "scene without nonlinear tables (make_stepper) vs bare Stepper", "dofs": n,
+    rows = [{"case": "scene without nonlinear tables (the model's stepper) vs bare Stepper", "dofs": n,
              "threads": threads, "ms": 1e3 * scene_path, "reference_ms": 1e3 * bare,
              "ratio": scene_path / bare, "ns_per_point": None}]
     laws = {
@@ -187,7 +189,7 @@ def element_loop_rows(target_dofs: int, steps: int, threads: int = 2) -> list[di
         "concrete_damage": {"law": "concrete_damage", "young_modulus": 8.0e9, "poisson_ratio": 0.24,
                             "cohesion": 1.8e6, "friction_angle": 46.0, "tensile_strength": 1.27e6},
     }
-    model = simulation.model
+    model = built.part.model  # (one rank: the kernel's numbering is the function space's)
     for name, parameters in laws.items():
         regions = nonlinear_component(model, ["rock"], None if parameters is None else {"rock": parameters})
         indptr, indices, blocks = bsr_arrays(regions.stiffness)
@@ -401,13 +403,14 @@ def case_study_rows(presets, steps: int, threads: int = 2, one_point: bool = Tru
 
 def _case_row(scene, preset: str, one_point: bool, steps: int, threads: int) -> dict:
     """One row of `case_study_rows`."""
-    from pyfem import _kernels, solver
+    from pyfem import _kernels
     from pyfem.clock import phase_split
+    from pyfem.distributed_model import model_in_memory
 
-    simulation = solver.prepare(scene, solve_static=False)
-    stepper = solver.make_stepper(simulation)
+    built = model_in_memory(scene, solve_stage=False)
+    stepper, _ = built.stepper()
     _kernels.set_num_threads(threads)
-    n = simulation.stiffness.shape[0]
+    n = 3 * built.part.n_local
     stepper_seconds_per_step(stepper, n, 2, amplitude=1.0e-9)  # warm-up
     stepper.reset_phase_seconds()
     rng = np.random.default_rng(0)
@@ -419,8 +422,8 @@ def _case_row(scene, preset: str, one_point: bool, steps: int, threads: int) -> 
     rock = "one-point Mohr-Coulomb zone" if one_point else "Mohr-Coulomb zone"
     return {"case": f"case 3 {preset} (contact, {rock}, concrete lining, oblique input)",
             "dofs": n, "threads": threads, "ms": 1e3 * seconds / steps,
-            "points": simulation.nonlinear.n_points if simulation.nonlinear is not None else 0,
-            "pairs": len(simulation.contact_arrays["area"]) if simulation.contact_arrays else 0,
+            "points": built.loop.counted.n_points if built.loop is not None else 0,
+            "pairs": len(built.contact_arrays["area"]) if built.contact_arrays else 0,
             "phases": {name: entry["ms_per_step"] for name, entry in split.items()}}
 
 

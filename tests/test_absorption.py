@@ -10,7 +10,7 @@ wave at a monitor near the face is compared with the reflection coefficient of t
 Normal incidence, 1D columns one element wide, the face zmin: no side dashpots; rollers on the
 side faces for P (the uniaxial-strain column), and for S a constraint that leaves only u_x free at
 every node (the side faces of a shear column must hold u_z and free u_x, which no face type does;
-the projection goes to the kernel through solver.BoundaryConstraints, as the rollers' does). The
+the projection goes to the kernel through pyfem.effects.BoundaryConstraints, as the rollers' does). The
 pulse is put in as the initial state of a downward-travelling Ricker wave, so zmin is the only
 source of a reflection. Viscous: R = 0; viscoelastic: R(omega) = -K/(K + 2 i omega rho c).
 
@@ -19,7 +19,7 @@ degrees against the Lysmer-Kuhlemeyer coefficients (a 2x2 solve below, checked a
 normal-incidence limits, the energy balance and as the analytic field's traction on the face).
 
 Each case has a negative control: the same run with the face's dashpots scaled by 0.5 and 2 (the
-arrays solver.prepare hands to the kernel, scaled before solver.make_stepper) must miss the
+arrays the model hands to the kernel, scaled before its stepper is built) must miss the
 analytic answer of the correct boundary by far more than the tolerance; the control also
 matches its own analytic coefficient, so the measurement itself is sound.
 
@@ -34,7 +34,8 @@ import pytest
 import scipy.sparse as sp
 
 from conftest import REFLECTION_1D, REFLECTION_HISTORY_1D, REFLECTION_OBLIQUE, ROUNDOFF
-from pyfem import solver
+from pyfem.distributed_model import model_in_memory
+from pyfem.effects import BoundaryConstraints
 from pyfem.scene import parse_scene
 from pyfem.seismic.waveforms import ricker
 
@@ -146,7 +147,7 @@ def test_analytic_coefficients_have_their_limits():
 
 
 def column(wave, face_type):
-    """(simulation, component, speed, monitor height) of a column one element wide whose bottom face
+    """(the model in memory, component, speed, monitor height) of a column one element wide whose bottom face
     zmin is `face_type`, top face free; P: roller side faces; S: only u_x free at every node."""
     speed = C_P if wave == "P" else C_S
     wavelength = speed / F0_1D
@@ -163,16 +164,34 @@ def column(wave, face_type):
         "boundary": {"type": face_type, "face": faces, "centre": [H_1D / 2, H_1D / 2, R_SPRING]},
         "output": {"interval": 0.01, "xdmf_interval": 0.0},
     })
-    simulation = solver.prepare(scene)
+    model = model_in_memory(scene)
+    assert model.part.kernel_of_dolfinx is None  # one rank: the kernel's numbering is the function space's
     component = 2 if wave == "P" else 0
     if wave == "S":
-        n = len(simulation.mass)
+        n = model.part.n_local
         projection = np.zeros((n, 3, 3))
         projection[:, 0, 0] = 1.0
-        simulation.constraints = solver.BoundaryConstraints(
+        model.part.constraints = BoundaryConstraints(
             nodes=np.arange(n, dtype=np.int32), projection=projection, face_names=[],
             face_weights=sp.csr_matrix((0, n)))
-    return simulation, component, speed, monitor
+    return model, component, speed, monitor
+
+
+def matrix_with_blocks(matrix, nodes, blocks):
+    """The kernel's (indptr, indices, blocks) with `blocks` (k, 3, 3) added to the diagonal blocks of
+    `nodes` (a copy)."""
+    indptr, indices, values = matrix
+    values = values.copy()
+    for node, block in zip(nodes, blocks):
+        row = np.arange(indptr[node], indptr[node + 1])
+        values[row[indices[row] == node][0]] += block
+    return indptr, indices, values
+
+
+def scipy_matrix(matrix):
+    indptr, indices, values = matrix
+    n = len(indptr) - 1
+    return sp.bsr_matrix((values, indices, indptr), shape=(3 * n, 3 * n))
 
 
 def column_pulse(wave, face_type, dashpot_scale=1.0, spring_scale=1.0):
@@ -182,27 +201,32 @@ def column_pulse(wave, face_type, dashpot_scale=1.0, spring_scale=1.0):
     Returns dict: t, measured (monitor history of the wave's component), incident (analytic at the
     monitor), delay (monitor -> face -> monitor), energy.
     """
-    simulation, component, speed, monitor = column(wave, face_type)
-    simulation.dashpot_matrices = simulation.dashpot_matrices * dashpot_scale
-    if spring_scale != 1.0:  # K = elastic + springs, as solver.prepare adds them
-        spring_nodes, springs, *_ = solver.boundary_operators(simulation.scene, simulation.model)
-        simulation.stiffness = solver.add_block_diagonal(simulation.model.stiffness, spring_nodes,
-                                                         spring_scale * springs)
-    stepper = solver.make_stepper(simulation)
-    z = simulation.model.node_coords[:, 2]
+    from pyfem.seismic.forces import boundary_springs_and_dashpots
+
+    model, component, speed, monitor = column(wave, face_type)
+    part = model.part
+    part.dashpot_matrices = part.dashpot_matrices * dashpot_scale
+    if spring_scale != 1.0:  # K = elastic + springs, as the model's build adds them: (scale - 1) K_b more
+        boundary = model.scene["boundary"]
+        spring_nodes, springs, *_ = boundary_springs_and_dashpots(part.model.faces, part.n_owned, None,
+                                                                  boundary["alpha_N"], boundary["alpha_T"])
+        assert len(spring_nodes)  # (the face has springs to scale)
+        part.matrix = matrix_with_blocks(part.matrix, spring_nodes, (spring_scale - 1.0) * springs)
+    stepper, _ = model.stepper()
+    z = part.coords[:, 2]
     t0 = 1.5 / F0_1D
     g, dg, _ = ricker((z - monitor) / speed, F0_1D, AMPLITUDE, t0)
     u = np.zeros(3 * len(z))
     v = np.zeros_like(u)
     u[component::3] = g
     v[component::3] = dg
-    a = -(simulation.stiffness @ u) / np.repeat(simulation.mass, 3)
-    held = simulation.constraints
+    a = -(scipy_matrix(part.matrix) @ u) / np.repeat(part.mass, 3)
+    held = part.constraints
     for state in (u, v, a):
         nodes = state.reshape(-1, 3)
         nodes[held.nodes] = np.einsum("kij,kj->ki", held.projection, nodes[held.nodes])
     stepper.reset_energy(u, v, a, 0.0)
-    dt = simulation.time_step.dt
+    dt = model.time_step.dt
     delay = 2.0 * monitor / speed
     steps = int(math.ceil((2.0 * t0 + delay) / dt))
     at = np.flatnonzero(np.isclose(z, monitor))
@@ -364,7 +388,7 @@ def oblique(request):
     coefficients of a 'surface' at the top face). They are transparent to that field, and no edge
     of theirs diffracts into the monitor: with the incident alone on them (a surface 100 km up),
     the upstream corner's diffraction put the SV case's R_SP off by 0.01-0.04 at monitors 300-700 m
-    from it. The incident alone (prepare's own free field) is what the reflection is measured from.
+    from it. The incident alone (the model's own free field) is what the reflection is measured from.
 
     Returns dict: wave, runs {dashpot scale of zmax: t, measured, energy}, incident (analytic at
     the monitor), lk_residual (the analytic field's traction residual on the top face).
@@ -375,14 +399,16 @@ def oblique(request):
 
     wave = request.param
     angle, height, depth = OBLIQUE[wave]
-    simulation = solver.prepare(slab_scene(wave, height + 1.0e5))  # incident only in the window
-    model = simulation.model
+    in_memory = model_in_memory(slab_scene(wave, height + 1.0e5))  # incident only in the window
+    part = in_memory.part
+    assert part.kernel_of_dolfinx is None  # one rank: the kernel's numbering is the function space's
+    model = part.model
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(reflection, "free_surface_coefficients", lysmer_as_free_surface)
         analytic, _ = seismic_input_from_scene(slab_scene(wave, height), model)
     others = [face for face in model.faces if face.name != "zmax"]
     top = next(face for face in model.faces if face.name == "zmax")
-    simulation.input_arrays = equivalent_input_forces(others, model.node_coords, analytic, None,
+    in_memory.input_arrays = equivalent_input_forces(others, model.node_coords, analytic, None,
                                                       ALPHA_N, ALPHA_T)
     x = model.node_coords
     monitor = np.flatnonzero(np.isclose(x[:, 0], MONITOR_X) & np.isclose(x[:, 2], height - depth))
@@ -404,12 +430,12 @@ def oblique(request):
     for scale in (1.0,) + CONTROL_SCALES:
         scaled = dataclasses.replace(top, rho_cp=scale * np.asarray(top.rho_cp),
                                      rho_cs=scale * np.asarray(top.rho_cs))
-        _, _, simulation.dashpot_nodes, simulation.dashpot_matrices = boundary_springs_and_dashpots(
-            others + [scaled], len(simulation.mass), None, ALPHA_N, ALPHA_T)
-        stepper = solver.make_stepper(simulation)
-        u, v, a = (np.zeros(3 * len(simulation.mass)) for _ in range(3))
+        _, _, part.dashpot_nodes, part.dashpot_matrices = boundary_springs_and_dashpots(
+            others + [scaled], part.n_owned, None, ALPHA_N, ALPHA_T)
+        stepper, _ = in_memory.stepper()
+        u, v, a = (np.zeros(3 * part.n_local) for _ in range(3))
         stepper.reset_energy(u, v, a, 0.0)
-        dt = simulation.time_step.dt
+        dt = in_memory.time_step.dt
         steps = int(math.ceil(t_end / dt))
         history = np.zeros((steps + 1, 3))
         t = 0.0
@@ -417,7 +443,7 @@ def oblique(request):
             t = stepper.run(u, v, a, 1, t)
             history[k + 1] = u.reshape(-1, 3)[monitor].mean(axis=0)
         runs[scale] = {"t": dt * np.arange(steps + 1), "measured": history, "energy": stepper.energy()}
-    incident = simulation.freefield.displacement(x[monitor[:1]], runs[1.0]["t"])[:, 0]
+    incident = in_memory.freefield.displacement(x[monitor[:1]], runs[1.0]["t"])[:, 0]
     return {"wave": wave, "runs": runs, "incident": incident,
             "lk_residual": np.abs(residual).max() / np.abs(traction).max()}
 

@@ -24,7 +24,8 @@ from conftest import ENERGY_BALANCE, LOCAL_STEPPING_BALANCE, ROUNDOFF, rel_error
 from pyfem.initial_stress import STANDARD_GRAVITY
 from pyfem.output import PAIR_COLUMNS, PAIR_STATES
 from pyfem.scene import SceneError, parse_scene
-from pyfem.solver import make_stepper, prepare, run
+from pyfem.distributed_model import model_in_memory
+from pyfem.solver import run
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 # The normal lag's slip history on h = 5, 2.5, 1.25 m (test_slip_between_dissimilar_rocks_converges_with_the_normal_lag):
@@ -68,21 +69,23 @@ def test_bonded_pairs_reproduce_the_unsplit_mesh_to_roundoff(order):
     unsplit = scene_from(data, common + [("contact", None), ("pair_monitor", None)])
     histories = []
     for scene in (bonded, unsplit):
-        simulation = prepare(scene)
-        stepper = make_stepper(simulation)
-        n = 3 * len(simulation.mass)
+        model = model_in_memory(scene)
+        stepper, _ = model.stepper()
+        n = 3 * model.part.n_local
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
         t, samples = 0.0, []
-        steps = round(0.05 / simulation.time_step.dt)
+        steps = round(0.05 / model.time_step.dt)
         for _ in range(12):
             t = stepper.run(u, v, a, steps, t)
             samples.append(u.copy())
-        histories.append((simulation, np.array(samples)))
+        histories.append((model, np.array(samples)))
     (split_sim, split_u), (whole_sim, whole_u) = histories
     assert split_sim.time_step.dt == whole_sim.time_step.dt
-    assert split_sim.contact_pairs.state_counts()[0] == len(split_sim.model.pairs)  # all bonded
-    # Every node of the split mesh against the unsplit node at its coordinates (both copies of a pair).
-    distance, unsplit_node = cKDTree(whole_sim.model.node_coords).query(split_sim.model.node_coords)
+    assert len(split_sim.part.pairs) > 0 and whole_sim.contact is None
+    assert split_sim.contact.state_counts()[0] == len(split_sim.part.pairs)  # all bonded
+    # Every node of the split mesh against the unsplit node at its coordinates (both copies of a pair;
+    # the kernel's numbering of each model).
+    distance, unsplit_node = cKDTree(whole_sim.part.coords).query(split_sim.part.coords)
     assert np.max(distance) < 1e-9
     split_nodal = split_u.reshape(len(split_u), -1, 3)
     whole_nodal = whole_u.reshape(len(whole_u), -1, 3)[:, unsplit_node]
@@ -90,14 +93,16 @@ def test_bonded_pairs_reproduce_the_unsplit_mesh_to_roundoff(order):
     assert rel_error(split_nodal, whole_nodal) < ROUNDOFF
     # Monitors interpolate the same fields.
     checks = 0
-    for j, name in enumerate(split_sim.monitor_names):
-        k = whole_sim.monitor_names.index(name)
-        monitor_split = np.einsum("m,tmc->tc", split_sim.monitor_weights[j], split_nodal[:, split_sim.monitor_nodes[j]])
+    split_monitors, whole_monitors = split_sim.monitors, whole_sim.monitors
+    for j, index in enumerate(split_monitors.index):
+        name = split_sim.names[index]
+        k = list(whole_monitors.index).index(whole_sim.names.index(name))
+        monitor_split = np.einsum("m,tmc->tc", split_monitors.weights[j], split_nodal[:, split_monitors.nodes[j]])
         whole_full = whole_u.reshape(len(whole_u), -1, 3)
-        monitor_whole = np.einsum("m,tmc->tc", whole_sim.monitor_weights[k], whole_full[:, whole_sim.monitor_nodes[k]])
+        monitor_whole = np.einsum("m,tmc->tc", whole_monitors.weights[k], whole_full[:, whole_monitors.nodes[k]])
         assert rel_error(monitor_split, monitor_whole) < ROUNDOFF
         checks += 1
-    assert checks == len(split_sim.monitor_names) == 3
+    assert checks == len(split_sim.names) == 3
     # Bonded pairs constrain the split system to the unsplit one (u_i = u_j), so by the Rayleigh
     # quotient omega_max(split) >= omega_max(unsplit): the split step is safe for bonded pairs.
     # (Equal here up to the power iteration's convergence: the top mode does not open the interface.
@@ -130,15 +135,17 @@ def shake_block(simulation, acceleration, direction, table_dt=1.0e-4):
     """Holds the base layer and adds the inertial force -M_i a_g(t) direction on every block node.
 
     Args:
-        simulation: prepared block scene (modified: base masses raised, input arrays set).
+        simulation: the block scene's model in memory (pyfem.distributed_model.model_in_memory, one
+            rank; modified before its stepper is built: base masses raised, input arrays set).
         acceleration: a_g(t) (m/s^2), vectorised; its table runs over the scene's duration.
         direction: unit vector of the base acceleration.
     """
-    model = simulation.model
+    part = simulation.part
+    model = part.model
     base = model.cell_tags.indices[model.cell_tags.values == model.regions["base"]]
-    base_nodes = np.unique(model.V.dofmap.list.array.reshape(model.n_cells, -1)[base])
-    block_nodes = np.setdiff1d(np.arange(model.n_nodes), base_nodes).astype(np.int32)
-    simulation.mass[base_nodes] *= HELD_MASS_FACTOR
+    base_nodes = part.kernel_nodes(np.unique(model.V.dofmap.list.array.reshape(model.n_cells, -1)[base]))
+    block_nodes = np.setdiff1d(np.arange(part.n_local), base_nodes).astype(np.int32)
+    part.mass[base_nodes] *= HELD_MASS_FACTOR
     n_samples = math.ceil(simulation.scene["time"]["duration"] / table_dt) + 4
     t = table_dt * np.arange(n_samples)
     g = acceleration(t)
@@ -148,7 +155,7 @@ def shake_block(simulation, acceleration, direction, table_dt=1.0e-4):
         "ddg": np.gradient(dg, table_dt)[None, :].copy(),
         "node_ptr": np.arange(len(block_nodes) + 1, dtype=np.int64), "nodes": block_nodes,
         "table": np.zeros(len(block_nodes), dtype=np.int32), "tau": np.zeros(len(block_nodes)),
-        "P": np.ascontiguousarray(-simulation.mass[block_nodes, None] * np.asarray(direction, float)[None, :]),
+        "P": np.ascontiguousarray(-part.mass[block_nodes, None] * np.asarray(direction, float)[None, :]),
         "Q": np.zeros((len(block_nodes), 3)),
     }
     return block_nodes
@@ -179,9 +186,9 @@ def newmark_sliding_block(acceleration, yield_acceleration, duration, dt=1.0e-5)
 
 
 def run_block(simulation, n_outputs=None, observe=None):
-    """Steps a prepared simulation over its duration in output chunks; returns (stepper, energy samples)."""
-    stepper = make_stepper(simulation)
-    n = 3 * len(simulation.mass)
+    """Steps the model in memory over its duration in output chunks; returns (stepper, energy samples, u)."""
+    stepper, _ = simulation.stepper()
+    n = 3 * simulation.part.n_local
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
     t = 0.0
     stepper.reset_energy(u, v, a, t)
@@ -206,11 +213,11 @@ def test_sliding_block_matches_newmark_rigid_block_displacement():
         t = np.asarray(t, dtype=float)
         return np.where(t < 0.5 / frequency, amplitude * np.sin(2 * np.pi * frequency * t), 0.0)
 
-    simulation = prepare(block_scene(math.degrees(math.atan(mu))))
+    simulation = model_in_memory(block_scene(math.degrees(math.atan(mu))))
     shake_block(simulation, acceleration, [1.0, 0.0, 0.0])
     stepper, energies, u = run_block(simulation)
-    pairs = simulation.model.pairs
-    slip = simulation.contact_pairs.relative_displacement(u)[:, 0].mean()
+    pairs = simulation.part.pairs
+    slip = simulation.contact.relative_displacement(u)[:, 0].mean()
     # The weight is in the static forces: sum N = m g, so the yield acceleration is mu g.
     _, reference = newmark_sliding_block(lambda t: float(acceleration(t)), mu * STANDARD_GRAVITY,
                                          simulation.scene["time"]["duration"])
@@ -219,7 +226,7 @@ def test_sliding_block_matches_newmark_rigid_block_displacement():
     assert abs(reference[-1]) > 0.05  # a real permanent displacement
     # measured 6.7e-4 (0.070283 against 0.070236 m): catches the friction coefficient off by 0.2 %
     assert abs(slip - reference[-1]) < SLIDING_BLOCK_TOLERANCE * abs(reference[-1])
-    assert np.allclose(np.asarray(simulation.contact_pairs.normal_force()).sum(),
+    assert np.allclose(np.asarray(simulation.contact.normal_force()).sum(),
                        2500.0 * 2.0 * 1.0 * STANDARD_GRAVITY, rtol=0.05)
     # Energy: balance including contact work closes; friction dissipates.
     final = energies[-1]
@@ -240,13 +247,13 @@ def test_contact_chatter_interface_opens_and_closes_thousands_of_times():
     def acceleration(t):
         return amplitude * np.sin(2 * np.pi * frequency * np.asarray(t, dtype=float))
 
-    simulation = prepare(block_scene(30.0, duration=duration, output_interval=0.0005))
+    simulation = model_in_memory(block_scene(30.0, duration=duration, output_interval=0.0005))
     shake_block(simulation, acceleration, [0.0, 0.0, 1.0])
     previous = {"open": None, "transitions": 0}
     peak = {"u": 0.0}
 
     def observe(t, u):
-        is_open = np.asarray(simulation.contact_pairs.state()) == 3
+        is_open = np.asarray(simulation.contact.state()) == 3
         if previous["open"] is not None:
             previous["transitions"] += int(np.count_nonzero(is_open != previous["open"]))
         previous["open"] = is_open
@@ -326,8 +333,8 @@ def test_hard_case_stiffness_contrast_thin_layer_slides_and_stays_stable(tmp_pat
 def test_hard_case_mass_ratio_100_across_pairs(tmp_path):
     # Pair masses ~ rho x element height: 1 m elements in the thin layer, 3.9 m in the soft ones.
     scene = hard_scene(materials__stiff={"E": 28.0e9, "nu": 0.167, "rho": 100.0 * 2400.0 * 3.9})
-    simulation = prepare(scene)
-    ratio = simulation.model.pairs.mass[:, 1] / simulation.model.pairs.mass[:, 0]
+    pairs = model_in_memory(scene, solve_stage=False).part.pairs
+    ratio = pairs.mass[:, 1] / pairs.mass[:, 0]
     assert np.isclose(np.max(np.maximum(ratio, 1 / ratio)), 100.0, rtol=1e-9)
     summary = run(scene, tmp_path / "run")
     assert_stable_run(summary, tmp_path / "run")
@@ -341,10 +348,10 @@ def test_hard_case_rayleigh_damping_20_percent(tmp_path):
 
 
 def test_user_dt_above_the_stable_step_is_a_scene_error():
-    simulation = prepare(hard_scene())
+    simulation = model_in_memory(hard_scene(), solve_stage=False)
     too_large = 1.5 * simulation.time_step.critical
     with pytest.raises(SceneError) as caught:
-        prepare(hard_scene(time={"duration": 1.0, "dt": too_large}))
+        model_in_memory(hard_scene(time={"duration": 1.0, "dt": too_large}), solve_stage=False)
     assert caught.value.key == "time.dt"
     assert f"{simulation.time_step.critical:.6g}" in str(caught.value)
 
@@ -398,13 +405,11 @@ def test_pair_updates_do_not_depend_on_the_pair_order():
     node, so they are independent): pairs in the given order or reversed, the same bits, while pairs
     slide and open. (One thread against two for the correction alone: tests/cpp/test_contact.cpp;
     a whole run differs between thread counts in the last bits of the stiffness product's sums.)"""
-    import dataclasses
-
     scene = hard_scene(mesh__size=[100.0, 10.0, 20.0], mesh__h=1.0,
                        mesh__layers=[{"material": "soft", "thickness": 8.0}, {"material": "stiff", "thickness": 12.0}],
                        contact__interfaces=["interface_1"], wave__motion={"ricker": {"f0": 10.0, "amplitude": 0.02}},
                        wave__surface=25.0, initial_stress__surface=25.0, pair_monitor=[])
-    simulation = prepare(scene)
+    simulation = model_in_memory(scene)
     arrays = simulation.contact_arrays
     n_pairs = len(arrays["area"])
     assert n_pairs >= 1024  # the threaded path
@@ -413,12 +418,12 @@ def test_pair_updates_do_not_depend_on_the_pair_order():
                              and value.shape[:1] == (n_pairs,) else value) for key, value in arrays.items()}
     results = []
     for contact_arrays, order in ((arrays, np.arange(n_pairs)), (reversed_arrays, reverse)):
-        run_simulation = dataclasses.replace(simulation, contact_arrays=contact_arrays, contact_pairs=None)
-        stepper = make_stepper(run_simulation)
-        n = 3 * len(simulation.mass)
+        simulation.contact_arrays = contact_arrays  # (the model's stepper makes its pairs from them)
+        stepper, _ = simulation.stepper()
+        n = 3 * simulation.part.n_local
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
         stepper.run(u, v, a, round(0.14 / simulation.time_step.dt), 0.0)
-        contact = run_simulation.contact_pairs
+        contact = simulation.contact
         states = np.empty(n_pairs, dtype=np.int8)
         states[order] = np.asarray(contact.state())
         forces = np.empty(n_pairs)
@@ -503,7 +508,7 @@ def test_a_pair_monitor_far_from_every_interface_is_warned_about():
     layer of another material than wave.medium on the input faces is warned about."""
     data = tomllib.loads((REPOSITORY / "tests" / "scenes" / "mpi_hard_contact.toml").read_text())
     data["time"]["duration"] = 0.001
-    near = prepare(parse_scene(data, source="test"))
+    near = model_in_memory(parse_scene(data, source="test"), solve_stage=False)
     assert not any("pair_monitor" in warning for warning in near.scene.warnings)
     # The 1 m stiff layer reaches the side faces: 1 / 40 of their height, 2 % of the input area,
     # which receives the soft medium's free field (a homogeneous box warns nothing: test_bad_input).
@@ -511,7 +516,7 @@ def test_a_pair_monitor_far_from_every_interface_is_warned_about():
                for warning in near.scene.warnings), near.scene.warnings
     data["pair_monitor"][0]["point"] = [20.0, 2.0, 35.0]
     far = parse_scene(data, source="test")
-    prepare(far)
+    model_in_memory(far, solve_stage=False)
     warning = next(warning for warning in far.warnings if "pair_monitor 'upper'" in warning)
     assert "14.6 m from the nearest contact pair" in warning
 
@@ -521,10 +526,11 @@ def test_release_time_reaches_the_dynamic_runs_pairs_only_and_a_bad_one_is_a_sce
 
     data = workflow_data()
     data["contact"]["release_time"] = 0.02
-    simulation = prepare(parse_scene(data, source="test"))
+    simulation = model_in_memory(parse_scene(data, source="test"), solve_stage=False)
     assert simulation.contact_arrays["release_time"] == 0.02
     assert stage_pair_arrays(simulation.scene, simulation.contact_arrays)["release_time"] is None
-    make_stepper(simulation)  # the kernel takes it
+    simulation.stepper()  # the kernel takes it
+    assert simulation.contact is not None  # (the pairs were made, with it)
     for bad in (0.0, -1.0):
         data["contact"]["release_time"] = bad
         with pytest.raises(SceneError, match="contact.release_time"):

@@ -11,7 +11,6 @@
 - zero cost when off: a component with no cells leaves the run bitwise unchanged;
 - reset_energy computes without committing: a reset in the middle leaves the run bitwise unchanged.
 """
-import dataclasses
 import pathlib
 import tomllib
 
@@ -20,24 +19,28 @@ import pytest
 
 from conftest import EXACT, rel_error
 from pyfem import _kernels
-from pyfem.elements import element_arrays, nonlinear_component, quadrature_rule, region_cells
+from pyfem.distributed_model import model_in_memory
+from pyfem.elements import element_arrays, nonlinear_component, quadrature_rule, region_cells, region_elastic_parameters
 from pyfem.operators import lame_parameters
 from pyfem.scene import parse_scene
-from pyfem.solver import add_block_diagonal, boundary_operators, make_stepper, prepare
 
 CONTACT_WORKFLOW = pathlib.Path(__file__).resolve().parents[1] / "workflows" / "scenes" / "contact_two_layer_sv.toml"
 UPPER = {"E": 2.0e9, "nu": 0.3, "rho": 2400.0}
 LOWER = {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}
 
 
-def two_layer_scene(order: int):
+def two_layer_scene(order: int, loop=()):
     """A 40 x 20 x 40 m box of two layers under a vertical SV Ricker pulse, viscoelastic faces,
-    Rayleigh damping with both coefficients."""
+    Rayleigh damping with both coefficients. `loop`: materials given a [plasticity] table, which puts
+    their cells in the model's element loop (`split_stepper` gives them the linear elastic law)."""
+    materials = {"lower": dict(LOWER), "upper": dict(UPPER)}
+    for name in loop:
+        materials[name]["plasticity"] = NEVER_YIELDS
     return parse_scene({
         "title": f"two layers Q{order}",
         "mesh": {"builder": "box", "origin": [0.0, 0.0, 0.0], "size": [40.0, 20.0, 40.0], "h": 5.0, "order": order,
                  "layers": [{"material": "lower", "thickness": 20.0}, {"material": "upper", "thickness": 20.0}]},
-        "materials": {"lower": LOWER, "upper": UPPER},
+        "materials": materials,
         "time": {"duration": 0.3},
         "wave": {"type": "SV", "angle": 0.0, "surface": 60.0, "medium": "lower",
                  "motion": {"ricker": {"f0": 8.0, "amplitude": 1.0e-3}}},
@@ -47,25 +50,43 @@ def two_layer_scene(order: int):
     })
 
 
-_SIMULATIONS = {}
+# A [plasticity] table only to put a region in the element loop: split_stepper replaces its law.
+NEVER_YIELDS = {"cohesion": 1.0e12, "friction_angle": 30.0, "tensile_strength": 1.0e12}
+_MODELS = {}
 
 
-def simulation_of(order):
-    """prepare() of the two-layer scene, once per order."""
-    if order not in _SIMULATIONS:
-        _SIMULATIONS[order] = prepare(two_layer_scene(order))
-    return _SIMULATIONS[order]
+def model_of(order, loop=()):
+    """The one model of the two-layer scene in memory (pyfem.distributed_model.model_in_memory, one
+    rank), once per order and element-loop regions: the all-matrix model (loop ()), or the model
+    with `loop`'s cells out of the matrix and in the element loop."""
+    key = (order, tuple(loop))
+    if key not in _MODELS:
+        _MODELS[key] = model_in_memory(two_layer_scene(order, loop))
+    return _MODELS[key]
 
 
-def split_stepper(simulation, regions=("upper",), **options):
-    """The kernel stepper with `regions` in the element loop and the other cells in the matrix."""
-    nonlinear = nonlinear_component(simulation.model, list(regions), **options)
-    spring_nodes, springs, *_ = boundary_operators(simulation.scene, simulation.model)
-    split = dataclasses.replace(simulation, stiffness=add_block_diagonal(nonlinear.stiffness, spring_nodes, springs))
-    stepper = make_stepper(split)
-    for component in nonlinear.components:
-        stepper.add_internal_force(component)
-    return stepper, nonlinear
+def matrix_stepper(model):
+    """The kernel stepper the model builds (a fresh one at every call), and its dofs."""
+    stepper, _ = model.stepper()
+    return stepper, 3 * model.part.n_local
+
+
+def split_stepper(model, **options):
+    """The kernel stepper of a model built with element-loop regions (`model_of(order, loop)`), each
+    region's law replaced by the linear elastic law of its material (fresh components; no initial
+    stress), the other cells in the model's matrix. Returns (stepper, the element loop's
+    NonlinearRegions)."""
+    regions = model.loop.counted
+    assert model.loop.halo is None and model.part.kernel_of_dolfinx is None  # one rank, one numbering
+    for name in regions.arrays:
+        regions.laws[name] = ("linear_elastic", region_elastic_parameters(model.part.model, name))
+        regions.options[name] = {"mean_dilatation": bool(options.get("mean_dilatation", False)),
+                                 **({"min_cells_for_threads": int(options["min_cells_for_threads"])}
+                                    if "min_cells_for_threads" in options else {})}
+        regions.initial_stress[name] = None
+    regions.new_components()
+    stepper, _ = model.stepper()
+    return stepper, regions
 
 
 def history(stepper, n_dofs, chunks=6, steps=50):
@@ -85,14 +106,15 @@ def energy_scale(energy):
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_element_loop_region_equals_the_all_matrix_run(order):
-    simulation = simulation_of(order)
-    n = simulation.model.n_dofs
-    reference, reference_energy = history(make_stepper(simulation), n)
-    stepper, nonlinear = split_stepper(simulation)
+    whole, layer = model_of(order), model_of(order, ("upper",))
+    assert layer.time_step.dt == whole.time_step.dt  # (the same stable step: every cell's bound)
+    reference_stepper, n = matrix_stepper(whole)
+    reference, reference_energy = history(reference_stepper, n)
+    stepper, nonlinear = split_stepper(layer)
     split, energy = history(stepper, n)
     cells = nonlinear.components[0].n_cells
-    assert 0 < cells < simulation.model.n_cells
-    assert nonlinear.stiffness.indices.size < simulation.model.stiffness.indices.size  # cells left the matrix
+    assert 0 < cells < whole.part.model.n_cells
+    assert layer.part.matrix[1].size < whole.part.matrix[1].size  # cells left the matrix
     assert np.max(np.abs(reference[:, :n])) > 1e-6  # the wave is in the box
     # Relative to the largest value of each field over the run: the pulse leaves through the
     # faces, and round-off from its peak stays in the small field left behind.
@@ -111,9 +133,9 @@ def test_element_loop_region_equals_the_all_matrix_run(order):
 
 @pytest.mark.parametrize("order, mean_dilatation", [(1, False), (2, False), (1, True)])
 def test_energy_balance_closes_with_the_elastic_component(order, mean_dilatation):
-    simulation = simulation_of(order)
-    stepper, _ = split_stepper(simulation, mean_dilatation=mean_dilatation)
-    _, energy = history(stepper, simulation.model.n_dofs)
+    model = model_of(order, ("upper",))
+    stepper, _ = split_stepper(model, mean_dilatation=mean_dilatation)
+    _, energy = history(stepper, 3 * model.part.n_local)
     scale = energy_scale(energy)
     assert energy["external_work"] > 1e-3 * scale and energy["damping_work"] > 1e-3 * scale
     assert abs(energy["balance"]) < EXACT * scale, energy
@@ -124,10 +146,11 @@ def test_energy_balance_closes_with_the_elastic_component(order, mean_dilatation
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_stress_at_the_quadrature_points_is_C_eps_of_the_displacement(order):
-    simulation = simulation_of(order)
-    stepper, nonlinear = split_stepper(simulation)
-    samples, _ = history(stepper, simulation.model.n_dofs, chunks=4)
-    u = samples[-1, :simulation.model.n_dofs]
+    model = model_of(order, ("upper",))
+    stepper, nonlinear = split_stepper(model)
+    n = 3 * model.part.n_local
+    samples, _ = history(stepper, n, chunks=4)
+    u = samples[-1, :n]
     arrays = nonlinear.arrays["upper"]
     nodal = u.reshape(-1, 3)[arrays.cell_nodes]                                 # (c, k, 3)
     gradient = np.einsum("cki,cqkl->cqil", nodal, arrays.gradients)             # du_i/dx_l
@@ -143,7 +166,7 @@ def test_stress_at_the_quadrature_points_is_C_eps_of_the_displacement(order):
 
 
 def test_element_arrays_integrate_the_region_volume_with_dolfinx_quadrature():
-    model = simulation_of(2).model
+    model = model_of(2).part.model
     arrays = element_arrays(model.V, region_cells(model, "upper"))
     assert arrays.weights.shape[1] == len(quadrature_rule(2)[1]) == 27
     assert abs(arrays.weights.sum() - model.volume_of_region("upper")) < EXACT * arrays.weights.sum()
@@ -160,10 +183,13 @@ def test_element_loop_beside_sliding_contact_equals_the_matrix_run_and_closes_th
     data["time"].update(dt=1.0e-3, duration=0.6)
     data["contact"].update(cohesion=2.0e4, tensile_strength=2.0e4)
     data["wave"]["motion"]["ricker"]["amplitude"] = 0.05
-    simulation = prepare(parse_scene(data, source="test", base_dir=CONTACT_WORKFLOW.parent))
-    n = simulation.model.n_dofs
-    reference, reference_energy = history(make_stepper(simulation), n, chunks=6, steps=100)
-    stepper, _ = split_stepper(simulation, regions=("mudstone",))
+    whole = model_in_memory(parse_scene(data, source="test", base_dir=CONTACT_WORKFLOW.parent))
+    data["materials"]["mudstone"]["plasticity"] = NEVER_YIELDS
+    layer = model_in_memory(parse_scene(data, source="test", base_dir=CONTACT_WORKFLOW.parent))
+    assert list(layer.loop.counted.arrays) == ["mudstone"] and whole.loop is None
+    reference_stepper, n = matrix_stepper(whole)
+    reference, reference_energy = history(reference_stepper, n, chunks=6, steps=100)
+    stepper, _ = split_stepper(layer)
     split, energy = history(stepper, n, chunks=6, steps=100)
     assert energy["friction_dissipation"] > 1e-3 * energy_scale(energy)  # pairs slid
     peak = np.max(np.linalg.norm(reference[:, :n], axis=1))
@@ -172,14 +198,14 @@ def test_element_loop_beside_sliding_contact_equals_the_matrix_run_and_closes_th
 
 
 def test_one_and_two_threads_give_the_same_bits():
-    simulation = simulation_of(2)
+    model = model_of(2, ("upper",))
     previous = _kernels.max_threads()
     runs = []
     try:
         for threads in (1, 2):
             _kernels.set_num_threads(threads)
-            stepper, nonlinear = split_stepper(simulation, min_cells_for_threads=0)
-            samples, energy = history(stepper, simulation.model.n_dofs, chunks=2)
+            stepper, nonlinear = split_stepper(model, min_cells_for_threads=0)
+            samples, energy = history(stepper, 3 * model.part.n_local, chunks=2)
             runs.append((samples, nonlinear.components[0].stress(), energy["internal_stored"]))
     finally:
         _kernels.set_num_threads(previous)
@@ -189,10 +215,10 @@ def test_one_and_two_threads_give_the_same_bits():
 
 
 def test_a_component_without_cells_leaves_the_run_bitwise_unchanged():
-    simulation = simulation_of(1)
-    n = simulation.model.n_dofs
-    reference, reference_energy = history(make_stepper(simulation), n)
-    stepper = make_stepper(simulation)
+    model = model_of(1)
+    reference_stepper, n = matrix_stepper(model)
+    reference, reference_energy = history(reference_stepper, n)
+    stepper, _ = matrix_stepper(model)
     empty = _kernels.HexahedronElements(np.zeros((0, 8), dtype=np.int32), np.zeros((0, 8, 8, 3)), np.zeros((0, 8)),
                                         "linear_elastic", {"lame_lambda": 1e9, "shear_modulus": 1e9})
     stepper.add_internal_force(empty)
@@ -203,10 +229,10 @@ def test_a_component_without_cells_leaves_the_run_bitwise_unchanged():
 
 
 def test_reset_energy_does_not_commit_the_component_state():
-    simulation = simulation_of(1)
-    n = simulation.model.n_dofs
-    reference, _ = history(split_stepper(simulation)[0], n, chunks=4)
-    stepper, nonlinear = split_stepper(simulation)
+    model = model_of(1, ("upper",))
+    n = 3 * model.part.n_local
+    reference, _ = history(split_stepper(model)[0], n, chunks=4)
+    stepper, nonlinear = split_stepper(model)
     component = nonlinear.components[0]
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
     stepper.reset_energy(u, v, a, 0.0)
@@ -411,16 +437,16 @@ def test_bad_arguments_are_value_errors_naming_the_parameter():
     with pytest.raises(ValueError, match="not a node"):
         stepper.add_internal_force(component)
     with pytest.raises(ValueError, match="not among region_names"):
-        nonlinear_component(simulation_of(1).model, ["upper"], {"lower": {"law": "linear_elastic"}})
+        nonlinear_component(model_of(1).part.model, ["upper"], {"lower": {"law": "linear_elastic"}})
 
 
 def test_a_samples_state_leaves_the_points_out_and_as_they_were():
     """Stepper.save_state(points=False), what the MPI ranks merge at every sample: the energy
     account and the components' energies, not their points or the nodal internal force; loading
     it restores the account and leaves every point's state as it was."""
-    simulation = simulation_of(1)
-    n = simulation.model.n_dofs
-    stepper, nonlinear = split_stepper(simulation)
+    model = model_of(1, ("upper",))
+    n = 3 * model.part.n_local
+    stepper, nonlinear = split_stepper(model)
     component = nonlinear.components[0]
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
     stepper.reset_energy(u, v, a, 0.0)

@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from conftest import ENERGY_BALANCE, LOCAL_STEPPING_BALANCE
-from pyfem import local_stepping, solver
+from pyfem import distributed_lts, local_stepping, solver
+from pyfem.distributed_model import model_in_memory
 from pyfem.scene import SceneError, parse_scene
 
 GRADED_GEO = """SetFactory("OpenCASCADE");
@@ -53,13 +54,26 @@ def graded_scene(geo: pathlib.Path, local: bool, **extra):
     return parse_scene(data, source="test")
 
 
-def run_to_the_end(simulation) -> np.ndarray:
-    """u (m) after the simulation's steps from rest, by the stepper `solver.make_stepper` builds."""
-    stepper = solver.make_stepper(simulation)
-    n = simulation.stiffness.shape[0]
+def run_to_the_end(model) -> np.ndarray:
+    """u (m) after the model's steps from rest, by the stepper the model builds (`model_in_memory`'s
+    `.stepper()`: global or local stepping as a run; the set-up check of the LTS map left out)."""
+    stepper, _ = model.stepper(check_stability=False)
+    n = 3 * model.part.n_local
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-    stepper.run(u, v, a, simulation.n_steps, 0.0)
+    stepper.run(u, v, a, model.n_steps, 0.0)
     return u
+
+
+def levels_of(scene) -> np.ndarray:
+    """The rate level of every node (one rank: the kernel's numbering is the function space's) that a
+    run of `scene` with local stepping on steps at."""
+    return model_in_memory(scene, solve_stage=False).lts.levels
+
+
+def set_levels(model, levels: np.ndarray) -> None:
+    """The model's local stepping at `levels` (by hand) from here on, its fine step kept."""
+    model.lts = distributed_lts.RankLevels(np.ascontiguousarray(levels, dtype=np.int32), np.bincount(levels),
+                                           model.lts.global_step, model.lts.time_step)
 
 
 def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_stepping(tmp_path, unfitted_levels):
@@ -69,7 +83,7 @@ def test_graded_mesh_with_several_rates_follows_the_free_field_as_global_steppin
     local = summaries[True]
     assert "local time stepping: 3 rate levels" in local["dt_reason"]
     assert local["dt_reason"].endswith("the row split")  # a linear model (pyfem/local_stepping.py row_split)
-    levels = solver.prepare(graded_scene(geo, True)).node_levels
+    levels = levels_of(graded_scene(geo, True))
     counts = np.bincount(levels)
     assert len(counts) == 3 and np.all(counts > 100)  # three rates, each with cells in it
     for name in ("centre", "upper", "lower"):
@@ -93,10 +107,12 @@ def test_one_rate_level_is_global_stepping(tmp_path):
                              monitor=[{"name": "centre", "point": [30.0, 5.0, 30.0]}])
         scene["wave"]["surface"] = 100.0
         scene["time"]["duration"] = 0.4
-        simulation = solver.prepare(scene)
+        model = model_in_memory(scene)
         if local:
-            assert simulation.node_levels.max() == 0  # a uniform mesh: one rate
-        runs[local] = run_to_the_end(simulation)
+            assert model.lts.levels.max() == 0  # a uniform mesh: one rate
+        else:
+            assert model.lts is None
+        runs[local] = run_to_the_end(model)
     assert np.max(np.abs(runs[False])) > 1e-5
     assert np.linalg.norm(runs[True] - runs[False]) <= 1e-12 * np.linalg.norm(runs[False])
 
@@ -118,9 +134,11 @@ def test_check_predicts_what_local_stepping_would_save_where_the_scene_allows_it
 
     geo = tmp_path / "graded.geo"
     geo.write_text(GRADED_GEO)
-    preview = solver.prepare(graded_scene(geo, False), solve_static=False, preview_levels=True)
-    assert preview.node_levels is None  # off: the run steps globally
-    assert np.array_equal(preview.lts_preview, solver.prepare(graded_scene(geo, True)).node_levels)
+    off = model_in_memory(graded_scene(geo, False), solve_stage=False)
+    assert off.lts is None  # off: the run steps globally
+    on = model_in_memory(graded_scene(geo, True), solve_stage=False)
+    _, preview_counts = distributed_lts.preview(off.part, off.loop, off.time_step)  # (nodes per level)
+    assert len(preview_counts) == 3 and np.array_equal(preview_counts, on.lts.counts)
     graded = solver.plan(graded_scene(geo, False))["local stepping (off)"]
     print(graded)
     assert "3 rate levels" in graded and "not worth it" in graded
@@ -145,7 +163,7 @@ def test_what_local_stepping_does_not_do_yet_is_refused_by_key(change, named):
     box = {"builder": "box", "size": [40.0, 10.0, 40.0], "h": 10.0}
     scene = graded_scene(pathlib.Path("unused.geo"), True, mesh=box, monitor=[], **change)
     with pytest.raises(SceneError, match=r"time\.local_stepping") as error:
-        solver.prepare(scene)
+        model_in_memory(scene, solve_stage=False)
     assert named in str(error.value)
 
 
@@ -158,21 +176,22 @@ def test_stability_check_passes_the_levels_and_catches_levels_too_coarse(tmp_pat
 
     geo = tmp_path / "graded.geo"
     geo.write_text(GRADED_GEO)
-    simulation = solver.prepare(graded_scene(geo, True))
-    indptr, indices, blocks = solver.bsr_arrays(simulation.stiffness)
+    model = model_in_memory(graded_scene(geo, True), solve_stage=False)
+    part, node_levels = model.part, model.lts.levels
+    indptr, indices, blocks = part.matrix
 
-    def kernel(levels, dt=simulation.time_step.dt):
+    def kernel(levels, dt=model.time_step.dt):
         def make():
-            stepper = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass,
+            stepper = _kernels.LocalStepper(indptr, indices, blocks, part.mass,
                                             np.ascontiguousarray(levels, dtype=np.int32), dt, 0.0)
-            stepper.set_dashpots(np.ascontiguousarray(simulation.dashpot_nodes, dtype=np.int32),
-                                 np.ascontiguousarray(simulation.dashpot_matrices, dtype=np.float64))
+            stepper.set_dashpots(np.ascontiguousarray(part.dashpot_nodes, dtype=np.int32),
+                                 np.ascontiguousarray(part.dashpot_matrices, dtype=np.float64))
             return stepper
         return make
 
-    n = len(simulation.mass) * 3
-    good = check_stability(kernel(simulation.node_levels), n)
-    coarse = check_stability(kernel(simulation.node_levels + 1), n)
+    n = part.n_local * 3
+    good = check_stability(kernel(node_levels), n)
+    coarse = check_stability(kernel(node_levels + 1), n)
     print(f"levels as set: growth {good['growth']:.3g}; one level coarser: {coarse['growth']:.3g} "
           f"(amplitude x{coarse['growth_per_step']:.4f} per global step)")
     assert good["stable"] and good["growth"] < 2.0
@@ -183,10 +202,10 @@ def test_stability_check_passes_the_levels_and_catches_levels_too_coarse(tmp_pat
     # 1.02 and 1.022, as at 0.99; at 1.025 it grew 7.2e3-fold, 2.8 % of amplitude per global step; at
     # 1.02 over 1 200 steps it fell to 0.46). Bracketed at 1.02 / 1.025 (0.97 / 1.07 before): catches a
     # map whose limit moved by half a percent, e.g. below the critical step a safety factor relies on.
-    critical = simulation.time_step.critical
-    at_critical = check_stability(kernel(simulation.node_levels, critical), n)
-    near = check_stability(kernel(simulation.node_levels, 1.02 * critical), n)
-    above = check_stability(kernel(simulation.node_levels, 1.025 * critical), n)
+    critical = model.time_step.critical
+    at_critical = check_stability(kernel(node_levels, critical), n)
+    near = check_stability(kernel(node_levels, 1.02 * critical), n)
+    above = check_stability(kernel(node_levels, 1.025 * critical), n)
     print(f"finest step 1.0 x critical: growth {at_critical['growth']:.3g}; 1.02 x: {near['growth']:.3g}; "
           f"1.025 x: {above['growth']:.3g}")
     assert at_critical["stable"] and near["stable"] and not above["stable"]
@@ -201,28 +220,30 @@ def test_kernel_local_stepper_takes_yielding_cells_at_their_level():
     from pyfem.elements import nonlinear_component
     from pyfem.effects import bsr_arrays
 
-    simulation = solver.prepare(bench._box_scene(3000))
+    model = model_in_memory(bench._box_scene(3000), solve_stage=False)
+    mass = model.part.mass
+    assert model.part.kernel_of_dolfinx is None  # one rank: the kernel's numbering is the function space's
     law = {"law": "mohr_coulomb", "young_modulus": 8.0e9, "poisson_ratio": 0.24, "cohesion": 1.0e4,
            "friction_angle": 30.0, "tensile_strength": 5.0e3}
-    regions = nonlinear_component(simulation.model, ["rock"], {"rock": law}, mean_dilatation=True)
+    regions = nonlinear_component(model.part.model, ["rock"], {"rock": law}, mean_dilatation=True)
     indptr, indices, blocks = bsr_arrays(regions.stiffness)
-    dt, n = simulation.time_step.dt, simulation.stiffness.shape[0]
+    dt, n = model.time_step.dt, 3 * model.part.n_local
     v0 = 0.5 * np.sin(np.arange(n) * 0.37)  # from u = 0, where a = 0 is both steppers' start
     runs = []
     for local in (False, True):
         component = regions.new_component("rock")
         if local:
-            stepper = _kernels.LocalStepper(indptr, indices, blocks, simulation.mass,
+            stepper = _kernels.LocalStepper(indptr, indices, blocks, mass,
                                             np.zeros(n // 3, dtype=np.int32), dt, 0.0)
             stepper.add_internal_force(component, 0)
         else:
-            stepper = _kernels.Stepper(indptr, indices, blocks, simulation.mass, dt, 0.0, 0.0)
+            stepper = _kernels.Stepper(indptr, indices, blocks, mass, dt, 0.0, 0.0)
             stepper.add_internal_force(component)
         u, v, a = np.zeros(n), v0.copy(), np.zeros(n)
         stepper.run(u, v, a, 60, 0.0)
         runs.append((u, component.dissipation()))
     (u_global, dissipated_global), (u_local, dissipated_local) = runs
-    kinetic = 0.5 * np.sum(np.repeat(simulation.mass, 3) * v0 ** 2)
+    kinetic = 0.5 * np.sum(np.repeat(mass, 3) * v0 ** 2)
     assert dissipated_global > 0.1 * kinetic  # the rock yielded: a fair share of the energy dissipated
     assert np.abs(u_local - u_global).max() <= 1e-11 * np.abs(u_global).max()
     assert dissipated_local == pytest.approx(dissipated_global, rel=1e-9)
@@ -252,9 +273,9 @@ def test_yielding_layer_at_its_own_rate_follows_global_stepping(tmp_path, unfitt
     run.json, against global stepping of the same scene."""
     from pyfem.local_stepping import cell_levels
 
-    prepared = solver.prepare(two_layer_plastic_scene(True))
-    cells = cell_levels(prepared.node_levels, prepared.nonlinear.arrays["soft"].cell_nodes)
-    print("nodes per level:", np.bincount(prepared.node_levels), "soft cells per level:", np.bincount(cells))
+    prepared = model_in_memory(two_layer_plastic_scene(True), solve_stage=False)
+    cells = cell_levels(prepared.lts.levels, prepared.loop.counted.arrays["soft"].cell_nodes)
+    print("nodes per level:", np.bincount(prepared.lts.levels), "soft cells per level:", np.bincount(cells))
     assert np.count_nonzero(cells > 0) >= 20  # soft cells at a coarser rate than the finest
     runs = {local: solver.run(two_layer_plastic_scene(local), tmp_path / f"run_{local}") for local in (False, True)}
     glob, loc = runs[False], runs[True]
@@ -299,30 +320,25 @@ def two_layer_contact_scene(local: bool, contact: bool, cohesion: float = 1.0e15
 
 
 def split_and_unsplit_under_the_same_levels(split, whole):
-    """Runs the prepared split mesh (contact pairs) and the prepared unsplit mesh to the end under
-    the split mesh's levels and split (a pair's two copies share one level; in the column split the
-    unsplit node's row steps at its drift level, as LocalStepper.add_contact makes the pair nodes'):
-    the same arithmetic while every pair stays bonded. Returns (split u, unsplit u, each split node's
-    unsplit node), u as (nodes, 3)."""
+    """Runs the split mesh (contact pairs) and the unsplit mesh (models in memory, one rank) to the
+    end under the split mesh's levels (a pair's two copies share one level) by the row split: the
+    same arithmetic while every pair stays bonded. Returns (split u, unsplit u, each split node's
+    unsplit node), u as (nodes, 3), in the kernel's numbering of each."""
     from scipy.spatial import cKDTree
 
-    distance, unsplit_node = cKDTree(whole.model.node_coords).query(split.model.node_coords)
+    distance, unsplit_node = cKDTree(whole.part.coords).query(split.part.coords)
     assert np.max(distance) < 1e-9
-    mapped = np.zeros(len(whole.mass), dtype=np.int32)
-    mapped[unsplit_node] = split.node_levels  # both copies of a pair node have one level
-    whole.node_levels = mapped
-    whole.lts_split = split.lts_split
+    mapped = np.zeros(whole.part.n_local, dtype=np.int32)
+    mapped[unsplit_node] = split.lts.levels  # both copies of a pair node have one level
+    set_levels(whole, mapped)
     assert split.time_step.dt == whole.time_step.dt
     histories = []
-    for simulation in (split, whole):
-        stepper = solver.make_stepper(simulation)
-        assert stepper.kernel.row_split == (split.lts_split == "row")
-        if simulation is whole and split.lts_split == "column":
-            pair_nodes = np.unique(unsplit_node[split.contact_arrays["pairs"]]).astype(np.int32)
-            stepper.kernel.step_rows_at_drift_level(pair_nodes)
-        n = simulation.stiffness.shape[0]
+    for model in (split, whole):
+        stepper, _ = model.stepper(check_stability=False)
+        assert stepper.kernel.row_split  # (the one model's split)
+        n = 3 * model.part.n_local
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-        stepper.run(u, v, a, simulation.n_steps, 0.0)
+        stepper.run(u, v, a, model.n_steps, 0.0)
         histories.append(u.reshape(-1, 3))
     return histories[0], histories[1], unsplit_node
 
@@ -332,44 +348,25 @@ def test_bonded_pairs_in_the_row_split_reproduce_the_unsplit_mesh():
     nodes of a pair at the finer of their levels and nothing else lowered (equalize_pair_levels), each
     pair at its nodes' own level (level_pairs); with every pair bonded the split mesh is the unsplit
     mesh under the same levels, both by the row split."""
-    split = solver.prepare(two_layer_contact_scene(True, True))
-    whole = solver.prepare(two_layer_contact_scene(True, False))
-    assert split.lts_split == whole.lts_split == "row"
-    levels, pairs = split.node_levels, split.contact_arrays["pairs"]
+    split = model_in_memory(two_layer_contact_scene(True, True))
+    whole = model_in_memory(two_layer_contact_scene(True, False))
+    assert split.time_step.reason.endswith("the row split") and whole.time_step.reason.endswith("the row split")
+    levels, pairs = split.lts.levels, split.contact_arrays["pairs"]
     assert levels.max() >= 1 and np.all(levels[pairs[:, 0]] == levels[pairs[:, 1]])
     split_u, whole_u, unsplit_node = split_and_unsplit_under_the_same_levels(split, whole)
     assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
-    assert split.contact_pairs.state_counts()[0] == len(pairs)  # all bonded
-    assert np.abs(np.asarray(split.contact_pairs.contact_force())).max() > 0.0  # the correction acted
+    assert split.contact.state_counts()[0] == len(pairs)  # all bonded
+    assert np.abs(np.asarray(split.contact.contact_force())).max() > 0.0  # the correction acted
     assert np.abs(split_u - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
 
 
-def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path, monkeypatch):
+def test_a_sliding_interface_under_local_stepping_follows_global_stepping(tmp_path):
     """Contact pairs at their own rate (LocalStepper.add_contact: an impulse before each drift of
-    the pair's drift level), by the column split (local_stepping.equalize_pair_drift; forced here,
-    the row split is the default and has its own test above): with every pair bonded, the split
-    mesh under local stepping is the unsplit mesh under local stepping with the same levels, to
-    round-off, while the soft layer steps at a coarser rate. Then by the default split: a weak
+    the pair's drift level; bonded pairs against the unsplit mesh: the row-split test above): a weak
     interface that slides follows global stepping at second order in dt; the scene path end to end,
     its energy account included (docs/local_stepping.md "Contact pairs", "The contact
-    work under local stepping")."""
-    monkeypatch.setattr(local_stepping, "row_split", lambda *_: False)
-    split = solver.prepare(two_layer_contact_scene(True, True))
-    whole = solver.prepare(two_layer_contact_scene(True, False))
-    levels = split.node_levels
-    pairs = split.contact_arrays["pairs"]
-    print("nodes per level:", np.bincount(levels), "pair levels:", np.unique(levels[pairs]))
-    assert levels.max() >= 1 and np.count_nonzero(levels > 0) > 100  # several rates
-    assert np.all(levels[pairs[:, 0]] == levels[pairs[:, 1]])
-    split_u, whole_u, unsplit_node = split_and_unsplit_under_the_same_levels(split, whole)
-    assert split.lts_split == "column"
-    assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
-    assert np.abs(split_u - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
-    counts = split.contact_pairs.state_counts()
-    assert counts[0] == len(pairs)  # all bonded
-    assert np.abs(np.asarray(split.contact_pairs.contact_force())).max() > 0.0  # the correction acted
-    monkeypatch.undo()  # the default split from here on
-
+    work under local stepping"). (Its first half, the column split's bonded pairs, went with the
+    serial stepper builder, the column split's only user: the one model steps the row split.)"""
     # A weak interface (no cohesion, 5 deg) slides: against global stepping at two steps, the
     # difference falls at second order (the row split: 0.179 % / 0.045 %, order 2.00; the column
     # split with the pair rows at their drift level too; with a coarse neighbour's force as kicks it
@@ -380,8 +377,8 @@ def test_bonded_pairs_under_local_stepping_reproduce_the_unsplit_mesh(tmp_path, 
         for local in (False, True):
             scene = two_layer_contact_scene(local, True, cohesion=0.0, friction_angle=5.0)
             scene["time"]["dt"] = dt
-            simulation = solver.prepare(scene)
-            finals.append((run_to_the_end(simulation), simulation.contact_pairs.state_counts()))
+            model = model_in_memory(scene)
+            finals.append((run_to_the_end(model), model.contact.state_counts()))
         (u_global, counts_global), (u_local, counts_local) = finals
         assert counts_local[2] > 0 and counts_global[2] > 0  # pairs sliding at the end in both
         differences.append(np.abs(u_local - u_global).max() / np.abs(u_global).max())
@@ -427,13 +424,13 @@ def lagged_sliding(local: bool, dt: float, normal_lag: dict | None, deterioratio
     scene["time"]["dt"] = dt
     if deterioration is not None:
         scene["contact"]["deterioration"] = deterioration
-    simulation = solver.prepare(scene)
+    model = model_in_memory(scene)
     if one_level:
-        simulation.node_levels = np.zeros_like(simulation.node_levels)
+        set_levels(model, np.zeros_like(model.lts.levels))
     elif local:
-        assert simulation.node_levels.max() >= 1  # several rates
-    u = run_to_the_end(simulation)
-    assert simulation.contact_pairs.state_counts()[2] > 0  # pairs sliding at the end
+        assert model.lts.levels.max() >= 1  # several rates
+    u = run_to_the_end(model)
+    assert model.contact.state_counts()[2] > 0  # pairs sliding at the end
     return u
 
 
@@ -487,22 +484,13 @@ def three_layer_pairs_scene(local: bool, dt: float, cohesion: float, normal_lag:
     return scene
 
 
-def pairs_at_a_coarse_level(simulation) -> np.ndarray:
+def pairs_at_a_coarse_level(model) -> np.ndarray:
     """Two rate levels by hand: level 1 (2 dt) above z = 22.5 m, truncation faces included, level 0
-    below, made consistent for the pairs (the row split: local_stepping.equalize_pair_levels; the
-    column split: equalize_pair_drift). In the column split an interface that reaches a truncation
-    face steps at the finest rate (its pairs share one drift level along the interface, and the
-    faces' dashpot nodes are pinned at level 0), so its automatic levels never put these pairs at a
-    coarser level; the row split's do only where the pair's own cells allow it. The levels by hand
-    are the case of an interface inside coarse rock either way."""
-    from pyfem import local_stepping
-
-    cell_nodes = simulation.model.V.dofmap.list.array.reshape(simulation.model.n_cells, -1)
-    levels = np.where(simulation.model.node_coords[:, 2] >= 22.5, 1, 0).astype(np.int32)
-    pairs = simulation.contact_arrays["pairs"]
-    if simulation.lts_split == "row":
-        return local_stepping.equalize_pair_levels(levels, pairs)
-    return local_stepping.equalize_pair_drift(levels, cell_nodes, pairs, None)
+    below, made consistent for the pairs (the row split: local_stepping.equalize_pair_levels). The
+    row split's automatic levels put these pairs at a coarser level only where the pair's own cells
+    allow it; the levels by hand are the case of an interface inside coarse rock."""
+    levels = np.where(model.part.coords[:, 2] >= 22.5, 1, 0).astype(np.int32)
+    return local_stepping.equalize_pair_levels(levels, model.contact_arrays["pairs"])
 
 
 @pytest.mark.parametrize("normal_lag", [None, LAG], ids=["instant", "lagged"])
@@ -515,13 +503,13 @@ def test_pairs_at_a_coarser_level_than_the_finest_are_global_stepping_at_their_o
     first order in dt under global stepping too). So local stepping against global stepping at the
     same dt falls at first order here, not second: the pairs' own step, not the level split."""
     def prepared(local, dt, cohesion=0.0):
-        simulation = solver.prepare(three_layer_pairs_scene(local, dt, cohesion, normal_lag))
+        model = model_in_memory(three_layer_pairs_scene(local, dt, cohesion, normal_lag))
         if local:
-            levels = pairs_at_a_coarse_level(simulation)
-            pair_levels = np.unique(levels[simulation.contact_arrays["pairs"]])
+            levels = pairs_at_a_coarse_level(model)
+            pair_levels = np.unique(levels[model.contact_arrays["pairs"]])
             assert list(pair_levels) == [1] and np.count_nonzero(levels == 0) > 100  # coarser than the finest
-            simulation.node_levels = levels
-        return simulation
+            set_levels(model, levels)
+        return model
 
     def final(local, dt):
         return run_to_the_end(prepared(local, dt))
@@ -530,9 +518,9 @@ def test_pairs_at_a_coarser_level_than_the_finest_are_global_stepping_at_their_o
     split = prepared(True, 2.0e-4, cohesion=1.0e15)
     whole_scene = three_layer_pairs_scene(True, 2.0e-4, 1.0e15, normal_lag).to_json()
     del whole_scene["contact"], whole_scene["pair_monitor"]
-    whole = solver.prepare(parse_scene(whole_scene, source="test"))
+    whole = model_in_memory(parse_scene(whole_scene, source="test"))
     split_u, whole_u, unsplit_node = split_and_unsplit_under_the_same_levels(split, whole)
-    assert split.contact_pairs.state_counts()[0] == len(split.contact_arrays["pairs"])  # all bonded
+    assert split.contact.state_counts()[0] == len(split.contact_arrays["pairs"])  # all bonded
     assert np.abs(whole_u).max() > 1e-4  # the wave passed the interface
     assert np.abs(split_u - whole_u[unsplit_node]).max() <= 1e-10 * np.abs(whole_u).max()
     bonded = split_u.reshape(-1)
@@ -572,7 +560,7 @@ def test_a_local_stepping_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_p
     reference = tmp_path / "reference"
     summary = solver.run(scene, reference)
     assert "local_stepping_stability" in summary
-    levels = solver.prepare(scene).node_levels
+    levels = levels_of(scene)
     assert levels.max() >= 1 and np.count_nonzero(levels > 0) > 100  # several rates
 
     checkpoint_t = 0.20  # the soft layer is yielding (0.18-0.22 s), the interface slides (0.14 s on)
@@ -608,10 +596,10 @@ def test_contact_pairs_on_roller_faces_are_refused_by_key():
     data = two_layer_contact_scene(True, True).to_json()
     data["boundary"] = {"face": {"ymin": {"type": "roller"}, "ymax": {"type": "roller"}}}
     with pytest.raises(SceneError, match=r"time\.local_stepping") as error:
-        solver.prepare(parse_scene(data, source="test"))
+        model_in_memory(parse_scene(data, source="test"), solve_stage=False)
     assert "contact pairs on fixed or roller faces" in str(error.value) and "node" in str(error.value)
     data["time"]["local_stepping"] = False  # without local stepping the same scene is a model
-    assert solver.prepare(parse_scene(data, source="test"), solve_static=False).constraints is not None
+    assert model_in_memory(parse_scene(data, source="test"), solve_stage=False).part.constraints is not None
 
 
 def test_interface_rows_are_the_fine_side_of_each_level_boundary():
@@ -646,7 +634,7 @@ def test_local_stepping_after_a_static_stage_resumes_without_solving_it_again(tm
     reference = tmp_path / "reference"
     summary = solver.run(scene, reference)
     assert summary["static"]["stages"][-1]["converged"]
-    assert np.count_nonzero(solver.prepare(scene, solve_static=False).node_levels > 0) > 100  # several rates
+    assert np.count_nonzero(levels_of(scene) > 0) > 100  # several rates
     checkpoint_t = 0.16
     energy = np.genfromtxt(reference / "energy.csv", delimiter=",", names=True)
     at = int(np.argmin(np.abs(energy["t"] - checkpoint_t)))
@@ -660,30 +648,6 @@ def test_local_stepping_after_a_static_stage_resumes_without_solving_it_again(tm
     never_solve_the_stage(monkeypatch)
     solver.run(scene, out, resume=True)
     assert_same_run(out, reference)
-
-
-def test_the_kernel_refuses_a_coarser_element_loop_cell_on_a_pair_node(monkeypatch):
-    """The kernel's own check (LocalStepper::check_contacts) of what pyfem/local_stepping.py's
-    pair_cell_cap guarantees: an element-loop component at a level coarser than the pairs it touches
-    would load their nodes with kicks at the ends of its coarse step. With the cap switched off the
-    soft layer's yielding cells at the interface fall to their own coarser level, and the first run
-    is refused with one line naming the node and both levels. The column split's check (forced here;
-    the row split puts every cell at the finest level of its nodes, and refuses otherwise)."""
-    from pyfem import local_stepping
-
-    monkeypatch.setattr(local_stepping, "row_split", lambda *_: False)
-    MPa = 1.0e6
-    scene = two_layer_contact_scene(True, True, cohesion=0.0, friction_angle=5.0,
-                                    soft_plasticity={"cohesion": 0.05 * MPa, "friction_angle": 25.0,
-                                                     "tensile_strength": 0.02 * MPa, "damage_max": 0.9, "damage_plastic_strain": 0.005})
-    simulation = solver.prepare(scene)
-    monkeypatch.setattr(local_stepping, "pair_cell_cap",
-                        lambda levels, cell_nodes, pairs, loop_cells: np.full(len(cell_nodes), local_stepping.UNCAPPED))
-    stepper = solver.make_stepper(simulation)
-    n = simulation.stiffness.shape[0]
-    with pytest.raises(ValueError, match=r"contact pair node \d+ \(pairs at level 0\) is loaded by an element-loop "
-                                         r"component at the coarser level [1-9]"):
-        stepper.run(np.zeros(n), np.zeros(n), np.zeros(n), 2 ** int(simulation.node_levels.max()), 0.0)
 
 
 def test_levels_fit_the_output_interval_where_a_deep_hierarchy_costs_more_than_it_saves():
@@ -728,19 +692,18 @@ def test_auto_turns_local_stepping_on_where_it_pays_over_the_whole_run():
     from pyfem.scene import load_scene
 
     path = pathlib.Path(__file__).resolve().parents[1] / "workflows" / "scenes" / "case1_vertical_coarse.toml"
-    whole = solver.prepare(load_scene(path), solve_static=False)
+    whole = model_in_memory(load_scene(path), solve_stage=False)
     print(whole.lts_decision)
     assert whole.lts_decision.startswith('"auto": on: predicted ')
-    assert whole.node_levels is not None and whole.node_levels.max() >= 2
+    assert whole.lts is not None and whole.lts.levels.max() >= 2
     assert whole.time_step.reason.endswith("the row split")
-    assert whole.time_step.dt < whole.lts_global_step.dt  # the fitted fine step, below the scene's
+    assert whole.time_step.dt < whole.lts.global_step.dt  # the fitted fine step, below the scene's
     speed_up = float(whole.lts_decision.split("predicted ")[1].split("x")[0])
     assert local_stepping.AUTO_PAYS <= speed_up < 2.5
 
-    model = whole.model  # the same model and levels for 0.05 s
-    cell_nodes = model.V.dofmap.list.array.reshape(model.n_cells, -1)
-    on, short = local_stepping.auto_decision(whole.node_levels, cell_nodes, whole.nonlinear, whole.stiffness,
-                                             None, whole.lts_global_step, 0.05)
+    # the same model and levels for 0.05 s (distributed_lts.choose's decision)
+    on, short = local_stepping.decision_of(distributed_lts.work_sums_on_ranks(whole.part, whole.loop, whole.lts.levels),
+                                           whole.lts.counts, whole.lts.global_step, 0.05)
     print(short)
     assert not on and short.startswith('"auto": off: predicted ')
     per_step = float(short.split("(")[1].split("x per step")[0])
@@ -748,19 +711,19 @@ def test_auto_turns_local_stepping_on_where_it_pays_over_the_whole_run():
     assert float(short.split("predicted ")[1].split("x")[0]) < local_stepping.AUTO_PAYS <= per_step
 
     box = {"builder": "box", "size": [60.0, 10.0, 60.0], "h": 5.0}
-    uniform = solver.prepare(graded_scene(pathlib.Path("unused.geo"), "auto", mesh=box,
-                                          monitor=[{"name": "centre", "point": [30.0, 5.0, 30.0]}]))
-    assert uniform.node_levels is None and "one rate level" in uniform.lts_decision
+    uniform = model_in_memory(graded_scene(pathlib.Path("unused.geo"), "auto", mesh=box,
+                                           monitor=[{"name": "centre", "point": [30.0, 5.0, 30.0]}]), solve_stage=False)
+    assert uniform.lts is None and "one rate level" in uniform.lts_decision
 
     data = two_layer_contact_scene("auto", False).to_json()  # two rate levels
     data["damping"] = {"alpha": 0.0, "beta": 1.0e-4}
-    damped = solver.prepare(parse_scene(data, source="test"), solve_static=False)
+    damped = model_in_memory(parse_scene(data, source="test"), solve_stage=False)
     print(damped.lts_decision)
-    assert damped.node_levels is None
+    assert damped.lts is None
     assert damped.lts_decision.startswith('"auto": off: not available for scenes with stiffness-proportional')
     data["time"]["local_stepping"] = False
-    off = solver.prepare(parse_scene(data, source="test"), solve_static=False)
-    assert off.node_levels is None and off.lts_decision is None
+    off = model_in_memory(parse_scene(data, source="test"), solve_stage=False)
+    assert off.lts is None and off.lts_decision is None
 
 
 def test_auto_steps_globally_when_the_check_finds_the_map_unstable_also_after_a_resume(tmp_path, monkeypatch):

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from pyfem import _kernels, output, solver
+from pyfem.distributed_model import model_in_memory
 from pyfem.fields_file import read_fields
 from pyfem.scene import parse_scene
 
@@ -337,11 +338,12 @@ def test_a_scene_without_nonlinear_tables_runs_the_matrix_path(tmp_path):
     scene = lining_scene(False)
     scene["time"]["duration"] = 0.1
     scene["output"]["fields"] = ["displacement", "stress"]
-    simulation = solver.prepare(scene)
-    assert simulation.nonlinear is None and simulation.monitor_stress.kernel_points is None
+    model = model_in_memory(scene)
+    assert model.loop is None and model.monitors.stress.kernel_points is None
+    assert len(model.monitors.index) == len(DEPTHS)  # (the monitors were located: their stress read from the matrix)
     assert "none" in solver.plan(scene)["element loop"] and "nonlinear regions" not in solver.plan(scene)
-    stepper = solver.make_stepper(simulation)
-    n = simulation.stiffness.shape[0]
+    stepper, _ = model.stepper()
+    n = 3 * model.part.n_local
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
     stepper.run(u, v, a, 10, 0.0)
     assert "internal_stored" not in stepper.energy()  # no component in the stepper

@@ -143,7 +143,7 @@ from pathlib import Path
 sys.path.insert(0, "tests")
 import numpy as np
 from mpi4py import MPI
-from pyfem import distributed_lts, distributed_model, local_stepping, solver
+from pyfem import distributed_lts, distributed_model, local_stepping
 from test_local_stepping import GRADED_GEO, graded_scene
 
 local_stepping.fit_levels_to_output = lambda levels, steps_per_output: levels  # (conftest's unfitted_levels)
@@ -153,24 +153,24 @@ geo = Path(sys.argv[1])
 if comm.rank == 0:
     geo.write_text(GRADED_GEO)
 comm.barrier()
-simulation = solver.prepare(graded_scene(geo, True))  # (the serial model, built on every rank alone)
+whole = distributed_model.build(graded_scene(geo, True), MPI.COMM_SELF)  # (the one-rank model, on every rank alone)
 """
 """The graded mesh of tests/test_local_stepping.py under local stepping (its levels not capped), the
-serial model on every rank: the start of the script the ranks run below."""
+one-rank model (a run without mpirun) on every rank: the start of the script the ranks run below."""
 
 DISTRIBUTED_LEVELS = GRADED_ON_RANKS + """
-whole = simulation
+whole_levels, whole_step = distributed_lts.node_levels(whole), distributed_model.choose_time_step(whole)
 part = distributed_model.build(graded_scene(geo, True), comm)
 levels = distributed_lts.node_levels(part)
-expected = {tuple(x): int(k) for x, k in zip(np.round(whole.model.node_coords, 6), whole.node_levels)}
+expected = {tuple(x): int(k) for x, k in zip(np.round(whole.coords, 6), whole_levels)}
 differ = sum(expected[tuple(x)] != int(k) for x, k in zip(np.round(part.coords, 6), levels))
 found = {"differ": comm.allreduce(differ), "nodes": comm.allreduce(part.n_local),
          "counts": distributed_lts.level_counts(comm, levels, part.n_owned).tolist(),
-         "whole_counts": np.bincount(whole.node_levels).tolist()}
+         "whole_counts": np.bincount(whole_levels).tolist()}
 # (one level coarser the energy overflows within the default 240 global steps: 60 keep it finite)
 for name, shift, steps in (("as set", 0, 240), ("one coarser", 1, 60)):
-    rank_levels = distributed_lts.RankLevels(levels + shift, np.array([0] * shift + found["counts"]), whole.time_step,
-                                             whole.time_step)
+    rank_levels = distributed_lts.RankLevels(levels + shift, np.array([0] * shift + found["counts"]), whole_step,
+                                             whole_step)
     found[name] = distributed_lts.check_stability_on_ranks(part, rank_levels, None, steps=steps)
 if comm.rank == 0:
     print("REPORT " + json.dumps(found))
@@ -181,7 +181,8 @@ if comm.rank == 0:
 def test_the_distributed_models_levels_and_set_up_check_are_the_serial_runs(tmp_path, ranks):
     """pyfem.distributed_lts.node_levels (each rank its owned rows and cells, a node the finest of its
     cells over the ranks) on the graded mesh of tests/test_local_stepping.py: every local node, owned
-    or ghost, at the serial run's level; the set-up check on the ranks' parts finds the map stable
+    or ghost, at the one-rank model's level (the model built on one rank alone, as a run without
+    mpirun builds it); the set-up check on the ranks' parts finds the map stable
     with these levels, and unstable (growth above 1e3) with every node one rate coarser."""
     import json
     import subprocess
@@ -198,7 +199,7 @@ def test_the_distributed_models_levels_and_set_up_check_are_the_serial_runs(tmp_
     good, coarse = found["as set"], found["one coarser"]
     assert good["ranks"] == ranks and good["stable"] and good["growth"] < 1.5
     assert not coarse["stable"] and coarse["growth"] > 1e3
-    print(f"{ranks} ranks: {found['nodes']} local nodes at the serial run's levels {found['counts']}; check growth "
+    print(f"{ranks} ranks: {found['nodes']} local nodes at the one-rank model's levels {found['counts']}; check growth "
           f"{good['growth']:.4g}, one level coarser {coarse['growth']:.4g}")
 
 

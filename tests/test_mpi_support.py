@@ -199,9 +199,10 @@ from pyfem.scene import parse_scene
 from test_support_scene import tet_tunnel
 from pathlib import Path
 scene = tet_tunnel(Path({tmp!r}), 'Physical Surface("tunnel_wall") = {{ex[6], ex[7], ex[8], ex[9]}};', "tunnel_wall")
-if MPI.COMM_WORLD.size == 1 and {serial}:
-    from pyfem import solver
-    groups = solver.prepare(scene, solve_static=False).support
+if MPI.COMM_WORLD.size == 1 and {serial}:  # the whole mesh in one piece, placed as one surface
+    from pyfem.operators import build_model
+    from pyfem.support import scene_groups
+    groups = scene_groups(scene, build_model(scene, MPI.COMM_SELF))
 else:
     from pyfem import distributed_model
     groups = [rank_group.group for rank_group in distributed_model.build(scene, MPI.COMM_WORLD).support]
@@ -215,7 +216,8 @@ if MPI.COMM_WORLD.rank == 0:
 @pytest.mark.slow
 def test_a_pattern_is_placed_alike_on_any_rank_count(tmp_path, mpi_launcher):
     """A closed pattern (a tetrahedral tunnel's wall, 13 bolts a row, where the first bolt of a row
-    follows from the order the surface's triangles are read in) placed by the serial model and by 2
+    follows from the order the surface's triangles are read in) placed on the whole mesh in one piece
+    (pyfem.support.scene_groups on operators.build_model's model, as the serial model placed it) and by 2
     and 3 ranks (each its part of the surface, gathered and ordered by position): the same bolts in
     the same order, their nodes' host weights the same (the whole model's preferred cell)."""
     found = {}

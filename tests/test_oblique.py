@@ -20,6 +20,7 @@ import pytest
 
 from conftest import ENERGY_BALANCE, observed_orders, rel_error
 from pyfem import solver
+from pyfem.distributed_model import model_in_memory
 from pyfem.scene import parse_scene
 from pyfem.seismic import reflection
 from pyfem.seismic.freefield import FreeField, IncidentWave
@@ -137,8 +138,7 @@ def test_post_critical_sv_reproduces_free_field(tmp_path):
     assert 35.7 < critical < 35.9 and angle > critical
 
     scene = oblique_scene("SV", angle, duration=1.4)
-    simulation = solver.prepare(scene)
-    field = simulation.freefield
+    field = model_in_memory(scene, solve_stage=False).freefield
     table_parts = [c for c in field.components if "evanescent" in c.name or "quadrature" in c.name]
     assert len(table_parts) == 3  # SV->SV quadrature, SV->P evanescent and its quadrature
     assert all(c.table > 0 or (c.depth_tables is not None and np.all(c.depth_tables > 0))
@@ -231,10 +231,10 @@ def test_oblique_sv_converges_at_order_two_in_h(tmp_path):
 
 
 # ---------------------------------------------------------------- reference point
-def _prepare_with_reference(reference_point, wave_type="SV", angle=30.0):
+def _model_with_reference(reference_point, wave_type="SV", angle=30.0):
     scene = dict(oblique_scene(wave_type, angle, h=20.0))
     scene["wave"] = {**scene["wave"], "reference_point": reference_point}
-    return solver.prepare(parse_scene(scene))
+    return model_in_memory(parse_scene(scene), solve_stage=False)
 
 
 def test_default_reference_point_cuts_nothing():
@@ -245,9 +245,10 @@ def test_default_reference_point_cuts_nothing():
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", ReferencePointWarning)
-        simulation = solver.prepare(oblique_scene("SV", 30.0, h=20.0))
-    assert simulation.input_arrays["tau"].min() >= -1e-12
-    assert simulation.freefield.start_cut(simulation.model.node_coords)["fraction"] == 0.0
+        model = model_in_memory(oblique_scene("SV", 30.0, h=20.0), solve_stage=False)
+    assert len(model.input_arrays["tau"])  # (the faces carry input)
+    assert model.input_arrays["tau"].min() >= -1e-12
+    assert model.freefield.start_cut(model.part.model.node_coords)["fraction"] == 0.0
 
 
 def test_reference_point_that_cuts_the_wave_warns_by_how_much():
@@ -261,7 +262,7 @@ def test_reference_point_that_cuts_the_wave_warns_by_how_much():
     from pyfem.seismic.freefield import ReferencePointWarning
 
     with pytest.warns(ReferencePointWarning) as record:
-        _prepare_with_reference([80.0, 80.0, 200.0])
+        _model_with_reference([80.0, 80.0, 200.0])
     assert len(record) == 1
     message = str(record[0].message)
     th = math.radians(30.0)
@@ -283,8 +284,8 @@ def test_reference_point_with_a_negligible_cut_does_not_warn():
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", ReferencePointWarning)
-        simulation = _prepare_with_reference([0.0, 0.0, 5.0])
-    cut = simulation.freefield.start_cut(simulation.model.node_coords)
+        model = _model_with_reference([0.0, 0.0, 5.0])
+    cut = model.freefield.start_cut(model.part.model.node_coords)
     assert cut["delay"] == pytest.approx(-5.0 * math.cos(math.radians(30.0)) / SHEAR_SPEED, rel=1e-9)
     assert 0.0 < cut["fraction"] < 1e-5
 
@@ -306,8 +307,9 @@ def test_reference_point_warning_reaches_the_command_line(tmp_path):
 def test_wave_scale_multiplies_the_motion_of_every_component():
     """wave.scale (the scene's factor on g) reaches the free field and the input forces linearly."""
     base = dict(oblique_scene("P", 30.0, h=40.0))
-    scaled = solver.prepare(parse_scene({**base, "wave": {**base["wave"], "scale": 2.5}}))
-    reference = solver.prepare(parse_scene(base))
+    scaled = model_in_memory(parse_scene({**base, "wave": {**base["wave"], "scale": 2.5}}), solve_stage=False)
+    reference = model_in_memory(parse_scene(base), solve_stage=False)
+    assert np.abs(reference.input_arrays["P"]).max() > 0.0  # (the faces carry input)
     points, t = monitor_points(), np.linspace(0.0, 1.2, 61)
     assert rel_error(scaled.freefield.displacement(points, t), 2.5 * reference.freefield.displacement(points, t)) \
         < 1e-14

@@ -17,10 +17,13 @@ import sys
 import numpy as np
 import pytest
 import scipy.sparse
+from mpi4py import MPI
 
 from conftest import EXACT
 from pyfem import _kernels, solver
+from pyfem.distributed_model import model_in_memory
 from pyfem.elements import element_arrays, linear_stiffness, region_cells
+from pyfem.operators import build_model
 from pyfem.reduced_integration import element_matrices, hourglass_stiffness, one_point_arrays
 from pyfem.scene import SceneError, parse_scene
 from pyfem.analytic.salencon import compare_to_stage, salencon
@@ -45,12 +48,11 @@ def test_one_point_stiffness_plus_hourglass_is_the_full_element_on_distorted_cel
     V B_bar^T C B_bar + K_hg equals the stiffness dolfinx assembles for those cells to round-off;
     with mean dilatation it equals the kernel's B-bar element loop (linear elastic law) on a
     random displacement. K_hg is symmetric, positive semi-definite and not zero."""
-    simulation = solver.prepare(parse_scene({
+    model = build_model(parse_scene({
         "title": "tunnel cells", "mesh": {"builder": "file", "file": str(meshes["filled"]), "order": 1},
         "materials": {"rock": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0},
                       "excavation": {"E": 8.0e9, "nu": 0.24, "rho": 2600.0}}, "time": {"duration": 0.01},
-        "output": {"xdmf_interval": 0.0}}, source="test"))
-    model = simulation.model
+        "output": {"xdmf_interval": 0.0}}, source="test"), MPI.COMM_SELF)
     cells = region_cells(model, "rock")
     full = element_arrays(model.V, cells)
     G, nu = 8.0e9 / (2 * 1.24), 0.24
@@ -123,13 +125,13 @@ def test_a_layer_at_rest_with_one_point_cells_is_the_full_integration_run():
     round-off with an eighth of the law's points (its stable step is the same: the same K)."""
     finals = {}
     for integration in ("full", "reduced"):
-        simulation = solver.prepare(layer_scene(integration, strong=True))
-        points = simulation.nonlinear.arrays["soft"].weights.shape
-        stepper = solver.make_stepper(simulation)
-        n = simulation.stiffness.shape[0]
+        model = model_in_memory(layer_scene(integration, strong=True))
+        points = model.loop.counted.arrays["soft"].weights.shape
+        stepper, _ = model.stepper()
+        n = 3 * model.part.n_local
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-        stepper.run(u, v, a, simulation.n_steps, 0.0)
-        finals[integration] = (u, points, simulation.time_step.dt)
+        stepper.run(u, v, a, model.n_steps, 0.0)
+        finals[integration] = (u, points, model.time_step.dt)
     (u_full, points_full, dt_full), (u_one, points_one, dt_one) = finals["full"], finals["reduced"]
     assert points_full == (points_one[0], 8) and points_one[1] == 1
     assert dt_one == dt_full
@@ -176,6 +178,8 @@ def test_salencon_cavity_with_one_point_cells_converges(meshes, tmp_path):
     closed form, the tolerances of the full element (tests/test_static_relaxation.py); the wall
     convergence's error falls at order > 1.4 from 1.2 m to 0.6 m at the wall (measured 1.67, and
     1.64 on to 0.3 m: -14.1, -4.4, -1.4 %; the full element -4.4, -1.2, -0.0 %)."""
+    from stage_state import solved  # (tests/stage_state.py: the stage as the static-stage tests read it)
+
     coarse = tmp_path / "coarse.msh"
     subprocess.run([sys.executable, "meshes/tunnel_in_box.py", str(coarse), "--radius", str(RADIUS), "--size",
                     "240.0", "--filled", "--h-wall", "1.2"], check=True, timeout=300)
@@ -184,16 +188,15 @@ def test_salencon_cavity_with_one_point_cells_converges(meshes, tmp_path):
     for mesh_file in (coarse, meshes["filled"]):
         data = salencon_scene(mesh_file, 0.0).to_json()
         data["materials"]["rock"]["plasticity"]["integration"] = "reduced"
-        simulation = solver.prepare(parse_scene(data, source="test"))
-        state = simulation.static
-        assert all(stage.converged for stage in state.stages)
+        state = solved(parse_scene(data, source="test"))
+        assert all(stage["converged"] for stage in state.stages)
         plastic = state.cell_state["plastic_strain"]
         assert np.count_nonzero(plastic > 0.0) > 50  # the ring yielded
-        result = compare_to_stage(simulation, CENTRE, RADIUS, cell_plastic_strain=plastic)
+        result = compare_to_stage(state, CENTRE, RADIUS, cell_plastic_strain=plastic)
         radius_error = result["plastic_radius"] / float(exact["R0"]) - 1
         wall_error = result["wall_displacement"] / float(exact["u_r"][0]) - 1
         print(f"one point, {mesh_file.name}: plastic radius {radius_error:+.2%}, wall convergence "
-              f"{wall_error:+.2%}, {state.seconds:.1f} s")
+              f"{wall_error:+.2%}, {state.report['seconds']:.1f} s")
         errors.append(abs(wall_error))
     assert abs(radius_error) < 0.03
     assert abs(wall_error) < 0.05
@@ -222,13 +225,13 @@ def test_a_one_point_lining_is_warned_about():
     """[damage] with integration = "reduced" (a concrete box) prepares, with one point per cell, and the scene carries
     one line saying that bending within a cell does not crack it; "full" carries no such line."""
     def prepared(integration):
-        return solver.prepare(parse_scene({
+        return model_in_memory(parse_scene({
             "title": "one-point concrete", "mesh": {"builder": "box", "size": [10.0, 10.0, 10.0], "h": 5.0, "order": 1},
             "materials": {"rock": {"preset": "concrete", "damage": {"integration": integration}}},
             "time": {"duration": 0.01}, "output": {"xdmf_interval": 0.0}}, source="test"))
 
     one_point = prepared("reduced")
-    assert one_point.nonlinear.arrays["rock"].weights.shape == (8, 1)
+    assert one_point.loop.counted.arrays["rock"].weights.shape == (8, 1)
     lines = [line for line in one_point.scene.warnings if "materials.rock.damage.integration" in line]
     assert len(lines) == 1 and "bending within a cell does not crack it" in lines[0]
     assert not any("integration" in line for line in prepared("full").scene.warnings)

@@ -13,6 +13,7 @@ import pytest
 
 from conftest import ENERGY_BALANCE, ROUNDOFF, observed_orders, rel_error
 from pyfem import solver
+from pyfem.distributed_model import model_in_memory
 from pyfem.fields_file import read_fields
 from pyfem.scene import SceneError, parse_scene
 
@@ -133,9 +134,9 @@ def _pulse_energy_left(tmp_path, boundary):
 
     scene = column_scene("SV", boundary=boundary, extra={})
     scene = parse_scene({**{k: v for k, v in scene.items() if k != "wave"}, "title": f"pulse {boundary}"})
-    simulation = solver.prepare(scene)
-    stepper = solver.make_stepper(simulation)
-    z = simulation.model.node_coords[:, 2]
+    model = model_in_memory(scene)
+    stepper, _ = model.stepper()
+    z = model.part.coords[:, 2]
     # Downward-travelling Gaussian shear pulse u_x = f(z + c t), centred at mid-height.
     width = 15.0
     shape = np.exp(-((z - 100.0) / width) ** 2)
@@ -143,9 +144,9 @@ def _pulse_energy_left(tmp_path, boundary):
     v = np.zeros_like(u)
     u[0::3] = 1e-3 * shape
     v[0::3] = 1e-3 * SHEAR_SPEED * (-2 * (z - 100.0) / width**2) * shape
-    if simulation.constraints is not None:
+    if model.part.constraints is not None:
         # Held nodes start where the supports hold them.
-        held = simulation.constraints.nodes
+        held = model.part.constraints.nodes
         u.reshape(-1, 3)[held] = 0.0
         v.reshape(-1, 3)[held] = 0.0
     a = np.zeros_like(u)
@@ -153,7 +154,7 @@ def _pulse_energy_left(tmp_path, boundary):
     start = stepper.energy()
     initial = start["kinetic"] + start["strain"]
     # Two transit times of the whole column.
-    steps = int(math.ceil(2 * 200.0 / SHEAR_SPEED / simulation.time_step.dt))
+    steps = int(math.ceil(2 * 200.0 / SHEAR_SPEED / model.time_step.dt))
     stepper.run(u, v, a, steps, 0.0)
     end = stepper.energy()
     return (end["kinetic"] + end["strain"]) / initial, end

@@ -276,7 +276,11 @@ def test_deformed_section_keeps_the_most_deformed_sample(two_layer_run):
     assert 0.0 < kept["t"] <= summary["time_reached"] + 1e-12
     assert (out / "plots" / "deformed_section.png").stat().st_size > 20000
 
-    model = solver.prepare(scene, solve_static=False).model
+    from mpi4py import MPI
+
+    from pyfem.operators import build_model
+
+    model = build_model(scene, MPI.COMM_SELF)
     section = DeformedSection(model.node_coords, vertex_nodes(model), None, cell_regions(model))
     assert set(np.unique(section.regions)) == set(summary["regions"].values())  # both layers cut
     tracker = DeformedSection(model.node_coords, vertex_nodes(model), None, np.zeros(model.n_cells, dtype=np.int32))

@@ -19,9 +19,9 @@ import pytest
 from scipy.spatial import cKDTree
 
 from conftest import ROUNDOFF, rel_error
+from pyfem.distributed_model import model_in_memory
 from pyfem.initial_stress import STANDARD_GRAVITY
 from pyfem.scene import parse_scene
-from pyfem.solver import make_stepper, prepare
 from test_contact import newmark_sliding_block, run_block, shake_block
 
 
@@ -66,9 +66,9 @@ def test_bonded_pairs_on_triangles_reproduce_the_unsplit_tetrahedra_to_roundoff(
     geo = two_layer_geo(tmp_path, (60.0, 10.0, 60.0), 30.0, h)
     histories = []
     for contact in (True, False):
-        simulation = prepare(layered_scene(geo, order, contact, dt))
-        stepper = make_stepper(simulation)
-        n = 3 * len(simulation.mass)
+        simulation = model_in_memory(layered_scene(geo, order, contact, dt))
+        stepper, _ = simulation.stepper()
+        n = 3 * simulation.part.n_local
         u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
         t, samples = 0.0, []
         steps = round(0.05 / dt)
@@ -77,20 +77,20 @@ def test_bonded_pairs_on_triangles_reproduce_the_unsplit_tetrahedra_to_roundoff(
             samples.append(u.copy())
         histories.append((simulation, np.array(samples)))
     (split_sim, split_u), (whole_sim, whole_u) = histories
-    assert split_sim.model.mesh.topology.cell_type.name == "tetrahedron"
-    pairs = split_sim.model.pairs
+    assert split_sim.part.model.mesh.topology.cell_type.name == "tetrahedron"
+    pairs = split_sim.part.pairs
     assert len(pairs) > 10
-    assert split_sim.model.n_nodes == whole_sim.model.n_nodes + len(pairs)  # one copy per interface node
+    assert split_sim.part.n_local == whole_sim.part.n_local + len(pairs)  # one copy per interface node
     # The lumped areas tile the 60 x 10 m interface, every share positive.
     assert np.all(pairs.area > 0.0)
     assert abs(pairs.area.sum() - 600.0) < 1e-9 * 600.0
     assert np.allclose(pairs.normal, [0.0, 0.0, 1.0], atol=1e-12)
-    assert split_sim.contact_pairs.state_counts()[0] == len(pairs)  # all bonded
-    distance, unsplit_node = cKDTree(whole_sim.model.node_coords).query(split_sim.model.node_coords)
+    assert split_sim.contact.state_counts()[0] == len(pairs)  # all bonded
+    distance, unsplit_node = cKDTree(whole_sim.part.coords).query(split_sim.part.coords)  # (the kernel's numbering)
     assert np.max(distance) < 1e-9
     split_nodal = split_u.reshape(len(split_u), -1, 3)
     whole_nodal = whole_u.reshape(len(whole_u), -1, 3)[:, unsplit_node]
-    upper = split_sim.model.node_coords[:, 2] > 35.0
+    upper = split_sim.part.coords[:, 2] > 35.0
     assert np.max(np.abs(whole_nodal[:, upper])) > 5e-4  # the pulse has crossed the interface
     error = rel_error(split_nodal, whole_nodal)
     print(f"P{order}: {len(pairs)} pairs, bonded vs unsplit {error:.2e}")
@@ -122,18 +122,18 @@ def test_block_of_tetrahedra_slides_as_newmark_rigid_block(tmp_path):
                     "tensile_strength": 0.0},
         "output": {"interval": 0.01, "xdmf_interval": 0.0},
     }, source="test")
-    simulation = prepare(scene)
-    assert simulation.model.mesh.topology.cell_type.name == "tetrahedron"
+    simulation = model_in_memory(scene)
+    assert simulation.part.model.mesh.topology.cell_type.name == "tetrahedron"
     shake_block(simulation, acceleration, [1.0, 0.0, 0.0])
     stepper, energies, u = run_block(simulation)
-    slip = simulation.contact_pairs.relative_displacement(u)[:, 0].mean()
+    slip = simulation.contact.relative_displacement(u)[:, 0].mean()
     _, reference = newmark_sliding_block(lambda t: float(acceleration(t)), mu * STANDARD_GRAVITY,
                                          simulation.scene["time"]["duration"])
     print(f"tetrahedra: slip {slip:.6f} m, Newmark rigid block {reference[-1]:.6f} m")
     assert abs(reference[-1]) > 0.05  # a real permanent displacement
     assert abs(slip - reference[-1]) < 0.05 * abs(reference[-1])
     # The weight m g is carried by the pairs' static normal forces.
-    assert np.isclose(np.asarray(simulation.contact_pairs.normal_force()).sum(),
+    assert np.isclose(np.asarray(simulation.contact.normal_force()).sum(),
                       2500.0 * 2.0 * 1.0 * STANDARD_GRAVITY, rtol=0.05)
     final = energies[-1]
     scale = max(max(abs(e["external_work"]) for e in energies), max(e["kinetic"] + e["strain"] for e in energies))

@@ -20,6 +20,7 @@ import pytest
 
 from conftest import ENERGY_BALANCE, EXACT
 from pyfem import _kernels, solver
+from pyfem.distributed_model import model_in_memory
 from pyfem.elements import element_arrays, nonlinear_component
 from pyfem.scene import parse_scene
 
@@ -306,13 +307,14 @@ def test_yielding_tetrahedra_at_their_own_rate_follow_global_stepping(tmp_path, 
 
     geo = tmp_path / "two_layers.geo"
     geo.write_text(TWO_LAYERS_GEO)
-    prepared = solver.prepare(two_layer_plastic_scene(geo, True))
-    cells = cell_levels(prepared.node_levels, prepared.nonlinear.arrays["soft"].cell_nodes)
-    print("nodes per level:", np.bincount(prepared.node_levels), "soft cells per level:", np.bincount(cells))
+    prepared = model_in_memory(two_layer_plastic_scene(geo, True), solve_stage=False)
+    soft = prepared.loop.counted.arrays["soft"]
+    cells = cell_levels(prepared.lts.levels, soft.cell_nodes)
+    print("nodes per level:", np.bincount(prepared.lts.levels), "soft cells per level:", np.bincount(cells))
     assert np.count_nonzero(cells > 0) >= 20  # soft cells at a coarser rate than the finest
     runs = {local: solver.run(two_layer_plastic_scene(geo, local), tmp_path / f"run_{local}") for local in (False, True)}
     soft_global, soft_local = runs[False]["nonlinear_regions"]["soft"], runs[True]["nonlinear_regions"]["soft"]
-    assert soft_local["points"] == soft_global["points"] == len(prepared.nonlinear.arrays["soft"].cells)
+    assert soft_local["points"] == soft_global["points"] == len(soft.cells)
     print(f"yielded volume global / local {soft_global['yielded_volume']:.1f} / {soft_local['yielded_volume']:.1f} m3, "
           f"dissipated {soft_global['dissipated_energy']:.4e} / {soft_local['dissipated_energy']:.4e} J; balance "
           f"global {runs[False]['energy']['balance_error']:.1e}, local {runs[True]['energy']['balance_error']:.1e}; "
@@ -367,6 +369,7 @@ def test_salencon_cavity_on_tetrahedra(tmp_path, order, wall_size):
     psi = 0, unsupported) cut out of the 240 m plane-strain slab of tests/test_tetrahedra.py's .geo
     meshed to tetrahedra; the comparison asserts the stage yielded where the closed form does
     (everything inside 0.9 R0, nothing beyond 1.15 R0) before the errors are read."""
+    from stage_state import solved
     from test_static_relaxation import salencon_comparison, salencon_scene
     from test_tetrahedra import FILLED_TUNNEL_GEO
 
@@ -374,7 +377,7 @@ def test_salencon_cavity_on_tetrahedra(tmp_path, order, wall_size):
     geo.write_text(FILLED_TUNNEL_GEO.replace("WALL", f"{wall_size:g}"))
     scene = salencon_scene(geo, 0.0)
     scene["mesh"]["order"] = order
-    simulation = solver.prepare(scene)
+    simulation = solved(scene)
     assert simulation.model.mesh.topology.cell_type.name == "tetrahedron"
     found = salencon_comparison(simulation, 0.0, f"P{order} tetrahedra, {wall_size:g} m at the wall")
     tolerance = SALENCON_TETRAHEDRA[order, wall_size]

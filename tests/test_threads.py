@@ -9,9 +9,11 @@ from pyfem import _kernels, solver
 from pyfem.scene import parse_scene
 
 
-def test_stepper_uses_every_core_after_gmsh(monkeypatch):
+def test_stepper_uses_every_core_after_gmsh(monkeypatch, tmp_path):
     """Catches a stepper left on gmsh's one thread. On a one-core machine (where the right count is
-    gmsh's own 1) the process is told it may use two cores, so the reset still shows: run, never skip."""
+    gmsh's own 1) the process is told it may use two cores, so the reset still shows: run, never skip.
+    The run (the one model on one rank) meshes its box with gmsh itself and then steps: the threads
+    are read after it, as its time loop left them."""
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
     cores = len(os.sched_getaffinity(0))
     if cores < 2:
@@ -30,9 +32,9 @@ def test_stepper_uses_every_core_after_gmsh(monkeypatch):
     scene = parse_scene({"mesh": {"size": [2.0, 2.0, 2.0], "h": 1.0}, "materials": {"rock": {"E": 8e9, "nu": 0.24,
                                                                                           "rho": 2600.0}},
                          "time": {"duration": 0.001}})
-    simulation = solver.prepare(scene)
-    solver.make_stepper(simulation)
+    solver.run(scene, tmp_path / "every_core")
+    assert (tmp_path / "every_core" / "run.json").exists()  # (it ran)
     assert _kernels.max_threads() == cores
     monkeypatch.setenv("OMP_NUM_THREADS", "1")
-    solver.make_stepper(simulation)
+    solver.run(scene, tmp_path / "one_thread")
     assert _kernels.max_threads() == 1

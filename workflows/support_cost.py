@@ -4,9 +4,10 @@ The coarse case 3 (workflows/scenes/case3_contact_coarse.toml: 43 904 Q1 cells, 
 pairs, plasticity in a 12.5 m zone, the lining's damage law, oblique P + SV input) with a bolt
 pattern on the excavation's rock face (`cavern_surface`): fully grouted 32 mm bolts, 9 m at
 1.5 m x 1.5 m, cut into segments of `--segments` m (0: the default, about the cells' node spacing).
-The model is prepared once (the static stage is not solved: the cost of a step does not depend on
-it); the same bolts are cut at each segment length. Steppers without bolts and with each cut (the
-same model, operators and time step; fresh components, from rest, as `pyfem check` measures a step)
+The model is built once in this process (pyfem.distributed_model.model_in_memory, one rank; the
+static stage is not solved: the cost of a step does not depend on it); the same bolts are cut at
+each segment length. The model's steppers without bolts and with each cut (the same model,
+operators and time step; fresh components and pairs, from rest, as `pyfem check` measures a step)
 run `--steps` steps each, one after the other in every one of `--repeats` rounds, on one kernel
 thread (the machine's load changes between minutes: compare within a round). Prints the ms per
 step (the fastest round, and the median over the rounds of each cut's ratio to the run without
@@ -37,15 +38,19 @@ PATTERN = {  # [support.walls]: a powerhouse's systematic bolting
 }
 
 
-def measure(simulation, groups: list, steps: int) -> tuple[dict, np.ndarray]:
-    """ms per step and the kernel's phases of `steps` steps from rest of a fresh stepper with the
-    groups (fresh components); the rock's u at the end."""
-    from pyfem.solver import make_stepper, phase_split
+def measure(model, groups: list, steps: int) -> tuple[dict, np.ndarray]:
+    """ms per step and the kernel's phases of `steps` steps from rest of a fresh stepper of the model
+    in memory with the groups (fresh components: the element loop's, the pairs', the bolts'); the
+    rock's u at the end."""
+    from pyfem.clock import phase_split
+    from pyfem.distributed_support import rank_groups
 
-    trial = dataclasses.replace(simulation, static=None, contact_pairs=None,
-                                support=[group.fresh() for group in groups])
-    stepper = make_stepper(trial)
-    n = simulation.stiffness.shape[0]
+    part = model.part
+    part.support = rank_groups([group.fresh() for group in groups], part.ownership, part.comm.rank, part.local_nodes)
+    if model.loop is not None:
+        model.loop.counted.new_components()
+    stepper, _ = model.stepper()  # (its pairs made afresh from the contact arrays: no stage)
+    n = 3 * part.n_local
     u, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
     start = time.perf_counter()
     stepper.run(u, v, a, steps, 0.0)
@@ -96,17 +101,21 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     from pyfem import _kernels
+    from pyfem.distributed_model import model_in_memory
     from pyfem.scene import load_scene
-    from pyfem.solver import prepare
     from pyfem.support import _default_segment, bolt_group
 
     _kernels.set_num_threads(args.threads)
     start = time.perf_counter()
-    scene = load_scene(SCENE, [f"support.walls.{key}={value}" for key, value in PATTERN.items()])
-    simulation = prepare(scene, solve_static=False)
-    placed = simulation.support[0]
-    model = simulation.model
-    print(f"prepared in {time.perf_counter() - start:.0f} s: {model.n_cells} cells, {simulation.stiffness.shape[0]} "
+    scene = load_scene(SCENE, [f"support.walls.{key}={value}" for key, value in PATTERN.items()]
+                       + ["time.local_stepping=false"])  # (global steps, as measured: a step's cost)
+    simulation = model_in_memory(scene, solve_stage=False)
+    _kernels.set_num_threads(args.threads)
+    assert simulation.comm.size == 1, "one rank: the model in memory is the whole model"
+    placed = simulation.part.support[0].group
+    model = simulation.part.model
+    n_dofs = 3 * simulation.part.n_local
+    print(f"built in {time.perf_counter() - start:.0f} s: {model.n_cells} cells, {n_dofs} "
           f"dofs, {placed.component.n_bolts} bolts, {placed.total_length:.0f} m; dt = {simulation.time_step.dt:.4g} s",
           flush=True)
     variants = {"without": []}
@@ -130,7 +139,7 @@ def main(argv=None) -> int:
     report = {"scene": str(SCENE.relative_to(ROOT)), "pattern": PATTERN, "threads": args.threads,
               "steps": args.steps, "repeats": args.repeats, "bolts": int(placed.component.n_bolts),
               "total_length_m": placed.total_length, "cells": int(model.n_cells),
-              "dofs": int(simulation.stiffness.shape[0]), "runs": runs, "variants": {}}
+              "dofs": int(n_dofs), "runs": runs, "variants": {}}
     fastest = min(r["ms_per_step"] for r in base)
     print(f"without bolts: fastest round {fastest:.2f} ms/step, median {np.median([r['ms_per_step'] for r in base]):.2f}")
     for label, groups in variants.items():
