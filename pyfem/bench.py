@@ -243,12 +243,14 @@ def element_law_rows(target_dofs: int, steps: int, bandwidth: dict, threads_list
     k = k_y (1.02 + 0.01 j) at step j, so every step loads beyond the surface. Each state also adds
     random increments of 1e-9 m. `returning` is the share of points whose plastic strain or damage
     grew in one more step of the state's driving."""
-    from pyfem import _kernels, solver
+    from mpi4py import MPI
+
+    from pyfem import _kernels
     from pyfem.elements import nonlinear_component
+    from pyfem.operators import build_model
 
     scene = _box_scene(target_dofs)
-    simulation = solver.prepare(scene)
-    model = simulation.model
+    model = build_model(scene, MPI.COMM_SELF)
     coords = model.node_coords
     drive = np.zeros_like(coords)
     drive[:, 0], drive[:, 1], drive[:, 2] = 1.0e-3 * coords[:, 0], 3.0e-4 * coords[:, 1], -3.0e-3 * coords[:, 2]
