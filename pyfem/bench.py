@@ -36,6 +36,39 @@ def _box_scene(target_dofs: int):
     })
 
 
+def upper_triangle_blocks(stiffness) -> int:
+    """Blocks the kernel's symmetric storage keeps: the diagonal and those above it."""
+    n_block_rows = stiffness.shape[0] // 3
+    rows = np.repeat(np.arange(n_block_rows), np.diff(stiffness.indptr))
+    return int(np.count_nonzero(stiffness.indices > rows)) + n_block_rows
+
+
+def choose_time_step(scene, stiffness, mass: np.ndarray, beta: float,
+                     coords: np.ndarray):
+    """Stable step of central differences for M^-1 K, with stiffness-proportional damping.
+
+    omega_max^2 is bounded above by Gershgorin row sums of M^-1 K (guaranteed); power
+    iteration sharpens it (an estimate from below, so it is raised by 5 % before use and
+    never exceeds the bound). With damping ratio xi = beta omega/2 at omega_max the limit is
+    dt_crit = (2/omega)(sqrt(1 + xi^2) - xi). Mass-proportional damping and dashpots are
+    implicit and do not restrict the step. The power iteration starts from a function of the node
+    coordinates (`coords`, (n, 3) m; pyfem.distributed_parts.power_iteration), as the distributed
+    model's does: the same estimate for any numbering and rank count.
+    """
+    from pyfem import _kernels
+    from pyfem.clock import POWER_ITERATIONS, time_step_from
+    from pyfem.distributed_parts import power_iteration
+    from pyfem.effects import bsr_arrays
+
+    indptr, indices, blocks = bsr_arrays(stiffness)
+    omega2_bound = _kernels.gershgorin_bound(indptr, indices, blocks, mass)
+    omega2_power = None
+    if scene["time"].get("power_iteration", True):
+        omega2_power = power_iteration((indptr, indices, blocks), mass, np.asarray(coords, dtype=np.float64),
+                                       len(mass), POWER_ITERATIONS)
+    return time_step_from(scene, omega2_bound, omega2_power, beta)
+
+
 def stream_triad_bandwidth(n: int = 20_000_000, repeats: int = 5, threads: int = 1) -> float:
     """Best bandwidth (bytes/s) of a[i] = b[i] + s c[i] over `repeats` (24 bytes per element)."""
     from pyfem import _kernels
@@ -127,7 +160,6 @@ def bytes_moved_per_step(stiffness, symmetric_storage: bool = True, single: bool
     the diagonal and the blocks above it (72 + 4 bytes each; 36 + 4 as float32 blocks) and adds
     the K u buffer (written, then read: 2 vectors).
     """
-    from pyfem.solver import upper_triangle_blocks
 
     if not symmetric_storage:
         return int(stiffness.data.nbytes + stiffness.indices.nbytes + stiffness.indptr.nbytes
@@ -444,7 +476,6 @@ def main(argv=None) -> int:
 
     from pyfem import _kernels
     from pyfem.operators import build_model
-    from pyfem.solver import choose_time_step
 
     rows = []
     bandwidth = {threads: stream_triad_bandwidth(threads=threads) for threads in (1, 2)}

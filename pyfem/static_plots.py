@@ -15,7 +15,6 @@ exterior facets off the truncation faces and the interfaces (`excavation_surface
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 import matplotlib
 
@@ -228,24 +227,6 @@ def fit_title(ax, text: str, fontsize: float = 10.0) -> None:
     width_pt = ax.figure.get_figwidth() * 72.0
     chars = max(20, int(0.9 * width_pt / (0.6 * fontsize)))  # a character is about 0.6 em wide at most
     ax.set_title(textwrap.fill(text, chars), fontsize=fontsize)
-
-
-def write_static_plots(folder: Path, simulation) -> dict:
-    """static/section_stress.png and, with contact, static/interface_stress.png; returns their figures
-    for static.json ("plots")."""
-    state = simulation.static
-    model = simulation.model
-    vertices = cell_vertices(model)
-    surface = excavation_surface(state, model)
-    title = simulation.scene.get("title", "")
-    figures = {"section_stress": section_stress(folder / "section_stress.png", vertices, state.cell_stress,
-                                                surface, state.cell_state, title)}
-    arrays = simulation.contact_arrays
-    if arrays is not None and state.pair_forces is not None and state.pair_forces_in_situ is not None:
-        figures["interface_stress"] = interface_stress(
-            folder / "interface_stress.png", model.pairs.coords, arrays["normal"], arrays["area"],
-            state.pair_forces_in_situ, state.pair_forces, surface, title)
-    return figures
 
 
 def drawn_damage_type(damage: np.ndarray, kind: np.ndarray) -> np.ndarray:

@@ -164,7 +164,7 @@ def test_case3_wear_starts_with_the_record_window_not_the_lead_in():
     kernel gets both (docs/method.md section 9). Before, the lead-in's second wore the interfaces
     by 5.5 % with nothing shaking them."""
     from pyfem.effects import contact_arguments, earthquake_clock
-    from pyfem.solver import wear_words
+    from pyfem.interfaces import wear_words
 
     scene = load_scene(REPOSITORY / "workflows" / "scenes" / "case3_contact_coarse.toml")
     start, duration = earthquake_clock(scene)

@@ -70,7 +70,7 @@ def test_p2_tetrahedra_masses_are_positive_and_sum_to_the_mass(tmp_path):
 
     model = build_model(box_scene(box_geo(tmp_path, 20.0), order=2))
     assert model.mesh.topology.cell_type.name == "tetrahedron" and uses_diagonal_scaling(model.V)
-    from pyfem.solver import element_name
+    from pyfem.plan import element_name
 
     assert element_name(model, 2) == "P2 tetrahedra"  # what `check` prints for the mesh
     body = 2600.0 * 160.0 * 20.0 * 160.0  # sandstone, kg
