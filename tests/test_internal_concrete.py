@@ -6,6 +6,7 @@ the excavation's grid: measured from the gmsh model the builder fills and compar
 form of the stated dimensions (written out here, not taken from the builder); the region shares
 its nodes with the lining; off by default; a bad value is one line, exit 2.
 """
+import json
 import math
 import os
 import pathlib
@@ -159,10 +160,11 @@ def test_a_small_model_with_the_concrete_checks_and_runs(tmp_path):
     run = subprocess.run(["/usr/bin/python3", "-m", "pyfem", "run", str(SCENE), "--out", str(out), *sets],
                          cwd=REPOSITORY, env=env, capture_output=True, text=True, timeout=3600)
     assert run.returncode == 0, run.stderr
-    import json
     summary = json.loads((out / "run.json").read_text())
     assert summary["status"] == "finished"
-    assert "internal_concrete" in json.dumps(summary["static"])
+    assert "internal_concrete" in summary["regions"]
+    assert summary["scene"]["static"]["install"] == ["lining", "internal_concrete"]
+    assert [stage["converged"] for stage in summary["static"]["stages"]] == [True, True]
 
 
 def test_an_excavated_regions_law_is_not_looked_for():
