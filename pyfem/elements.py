@@ -609,7 +609,10 @@ def scene_laws(scene: typing.Mapping) -> tuple[dict, dict]:
         `nonlinear_component` takes them, and region -> bool (B-bar). Empty without such tables.
     """
     law_parameters, mean_dilatation = {}, {}
+    excavated = set((scene.get("static") or {}).get("excavate") or ())  # gone from the model: no law
     for name, material in scene["materials"].items():
+        if name in excavated:
+            continue
         for table, law in LAW_OF_TABLE.items():
             settings = material.get(table)
             if settings is None:

@@ -340,7 +340,11 @@ LAYERED_CAVERN_DERIVED = {"h_near": "lining_wall / lining_elements",
 
 LAYERED_CAVERN_NOTE = ("Lengths in m, `dip` in deg; `preset` picks the extents and element sizes "
                        "(\"coarse\" or \"paper\"), given keys win; `materials` here only sizes the time-step "
-                       "estimate (the run uses the scene's `materials`).")
+                       "estimate (the run uses the scene's `materials`). `internal_concrete = true` adds region "
+                       "\"internal_concrete\" (machine piers, turbine and generator floor slabs, wind covers; "
+                       "dimensions: `INTERNAL_CONCRETE` in `pyfem/geometry/layered_cavern.py`, our assumption, "
+                       "docs/case_study.md) for the scene to give a material and to install with the lining; "
+                       "its grid lines refine the whole mesh, so the default (false) keeps the old mesh.")
 
 WAVE_CONVENTIONS = """\
 ## Wave conventions
