@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyfem import checkpoint, distributed_stage, solver, static_output
+from pyfem import checkpoint, distributed_model, distributed_stage, solver, static_output
 from pyfem.interrupts import RunInterrupted
 from pyfem.scene import SceneError, parse_scene
 
@@ -392,7 +392,7 @@ def test_checkpoint_of_another_model_is_refused_before_anything_is_touched(refer
         raise AssertionError("the model was built (and its static stage solved) before the refusal")
 
     with monkeypatch.context() as patched:
-        patched.setattr(solver, "prepare", not_built)
+        patched.setattr(distributed_model, "build", not_built)
         with pytest.raises(SceneError, match=r"contact\.deterioration\.R0"):
             solver.run(other, out, resume=True)
     assert history_files(out) == before
