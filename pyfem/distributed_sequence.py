@@ -85,9 +85,9 @@ def solve(part, loop) -> Sequence:
     the scene built with `stage_model`; `loop`: its RankRegions or None). A collective."""
     from pyfem.distributed_parts import element_loop_cells, region_summary
     from pyfem.distributed_stage import (_largest_displacement, _stage_stepper, check_held_on_ranks, kernel_nodal,
-                                         owned_force, owned_rows, scaled_mass, stage_matrix)
+                                         owned_force, owned_rows, relax_on_ranks, scaled_mass, stage_matrix)
     from pyfem.elements import plastic_frequency_factor, scene_laws
-    from pyfem.relaxation import probe_frequency, ramp_length, relax
+    from pyfem.relaxation import probe_frequency, ramp_length
     from pyfem.scene import static_steps
     from pyfem.static import _stage_constraints, stage_boundary, stage_loads, stage_tolerance, unconverged_warning
 
@@ -213,18 +213,9 @@ def solve(part, loop) -> Sequence:
         load = fraction * step_load + carried + (weights[k] if kind == "support" else 0.0)
         load[owned][~active.repeat(3)] = 0.0  # (the nodes only removed or pending cells use stay still)
         applied += load - carried
-        stepper = _stage_stepper(part, matrix, mass, constraints, load, active_counted, active_halo, None, ramp)
         name = f"step {k + 1} {kind}"
-
-        def report(n_steps, ratio, seconds, name=name):
-            if root:
-                print(f"static stage '{name}': {n_steps} relaxation steps (load ramp {ramp:.0f}), out-of-balance "
-                      f"{ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True)
-
-        u_owned, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor, report=report,
-                                space=stepper)
-        for component in active_counted + active_halo:
-            component.rebase()
+        stepper, u_owned, result = relax_on_ranks(part, matrix, mass, constraints, load, active_counted, active_halo,
+                                                  None, ramp, tolerance, max_steps, floor, name)
         u_total = u_total + stepper.u
         carried = np.zeros(3 * part.n_local)
         carried[owned] = result.out_of_balance

@@ -237,6 +237,31 @@ def check_held_on_ranks(part, boundary: dict, constraints, active: np.ndarray) -
     check_held(free_basis(n, held_nodes, projection, pairs, inactive), coords, inactive, boundary, comm, centre)
 
 
+def relax_on_ranks(part, matrix: tuple, mass: np.ndarray, constraints, load: np.ndarray, counted: list, halo: list,
+                   contact, ramp: float, tolerance: float, max_steps: int, floor: float, name: str) -> tuple:
+    """One sub-stage of dynamic relaxation on the ranks: this rank's stage stepper (`_stage_stepper`)
+    relaxed from rest under `load` with `relax`'s arithmetic (rank 0 prints its progress line as
+    stage `name`), then its element-loop components and pairs rebased to the end state. A collective.
+    Returns (stepper, u of the owned dofs, relax's result)."""
+    from pyfem.relaxation import relax
+
+    root = part.comm.rank == 0
+    stepper = _stage_stepper(part, matrix, mass, constraints, load, counted, halo, contact, ramp)
+
+    def report(steps, ratio, seconds):
+        if root:
+            print(f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), out-of-balance "
+                  f"{ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True)
+
+    u_owned, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor, report=report,
+                            space=stepper)
+    for component in counted + halo:
+        component.rebase()
+    if contact is not None:
+        contact.rebase(stepper.u)
+    return stepper, u_owned, result
+
+
 def _largest_displacement(comm: MPI.Comm, u_owned: np.ndarray, coords: np.ndarray) -> tuple:
     """(the largest nodal displacement over the ranks (m), its node's position, its vector)."""
     nodal = u_owned.reshape(-1, 3)
@@ -256,7 +281,7 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
         contact_arrays: `pyfem.effects.contact_arguments` of the rank's pairs or None.
     """
     from pyfem.elements import plastic_frequency_factor, scene_laws
-    from pyfem.relaxation import probe_frequency, ramp_length, relax
+    from pyfem.relaxation import probe_frequency, ramp_length
     from pyfem.effects import make_contact_pairs
     from pyfem.static import (_install_cells, _pair_force_vector, _stage_constraints, face_support_resultants,
                               stage_boundary, stage_loads, stage_pair_arrays, stage_tolerance, unconverged_warning)
@@ -363,19 +388,9 @@ def solve(part, loop, contact_arrays: dict | None) -> RankStage:
                 rank_group.fresh()
                 active_counted += [bolts.component for bolts in rank_group.parts if bolts.kind == "counted"]
                 active_halo += [bolts.component for bolts in rank_group.parts if bolts.kind == "halo"]
-        stepper = _stage_stepper(part, matrix, mass, constraints, load, active_counted, active_halo, contact, ramp)
-
-        def report(steps, ratio, seconds, name=name):
-            if root:
-                print(f"static stage '{name}': {steps} relaxation steps (load ramp {ramp:.0f}), out-of-balance "
-                      f"{ratio:.2e} (tolerance {tolerance:g}), {seconds:.0f} s", flush=True)
-
-        u_owned, result = relax(stepper, mass, load, tolerance, max_steps, ramp=ramp, floor=floor, report=report,
-                                space=stepper)
-        for component in active_counted + active_halo:  # (the bolts' too: the run's zero of their energy)
-            component.rebase()
-        if contact is not None:
-            contact.rebase(stepper.u)
+        # (the bolts' components rebased too: the run's zero of their energy)
+        stepper, u_owned, result = relax_on_ranks(part, matrix, mass, constraints, load, active_counted, active_halo,
+                                                  contact, ramp, tolerance, max_steps, floor, name)
         carried = np.zeros(3 * part.n_local)
         carried[owned] = result.out_of_balance
         support = np.zeros((part.n_local, 3))
